@@ -1,0 +1,119 @@
+"""The console command ``radiance-probes`` (also ``python -m app``)."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .scene import Scene, SceneError, default_scene, load_scene
+
+
+def _scene_from_arg(arg: str | None) -> Scene:
+    if arg is None:
+        return default_scene()
+    p = Path(arg)
+    if p.suffix.lower() == ".json":
+        return load_scene(p)
+    # A volume file: the default scene with that volume.
+    from .scene import parse_scene
+    return parse_scene({"volume": {"path": str(p)}})
+
+
+def _progress(label: str):
+    interactive = sys.stderr.isatty()
+    last = [-1]
+
+    def report(done: int, total: int) -> None:
+        pct = int(100 * done / max(total, 1))
+        if interactive:
+            print(f"\r{label}: {done}/{total} ({pct}%)", end="" if done < total else "\n",
+                  file=sys.stderr, flush=True)
+        elif pct // 10 != last[0] // 10 or done == total:
+            print(f"{label}: {done}/{total} ({pct}%)", file=sys.stderr, flush=True)
+        last[0] = pct
+    return report
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from .gl.context import create_headless_context, describe
+    from .imageio import save_exr, save_npy, save_png
+    from .render.renderer import Renderer
+
+    scene = _scene_from_arg(args.scene)
+    if args.width or args.height:
+        cam = scene.camera
+        w = args.width or cam.width
+        h = args.height or cam.height
+        from dataclasses import replace
+        scene = scene.replace(camera=replace(cam, width=w, height=h))
+    ctx = create_headless_context()
+    renderer = Renderer(ctx, scene)
+    spp = args.spp
+    result = renderer.render(args.method, spp=spp, seed=args.seed,
+                             samples_per_pass=args.samples_per_pass,
+                             progress=_progress(f"{args.method} samples"))
+    out = save_png(args.out, result.image, args.exposure)
+    print(f"device: {describe(ctx)}")
+    cam = scene.camera
+    print(f"method: {result.method}  image: {cam.width}x{cam.height}  spp: {result.spp}")
+    if result.bake_ms:
+        print(f"bake GPU time: {result.bake_ms:.1f} ms")
+    print(f"render GPU time: {result.render_ms:.1f} ms  ({result.ms_per_sample:.3f} ms per sample "
+          "per pixel of the whole image)")
+    if result.stats.get("truncated_paths") or result.stats.get("nonfinite_samples"):
+        print(f"warning: {result.stats['truncated_paths']} paths ran out of their step budget and "
+              f"{result.stats['nonfinite_samples']} samples were not finite; both were left out",
+              file=sys.stderr)
+    if args.linear:
+        print(f"linear image: {save_npy(args.linear, result.image)}")
+    if args.exr:
+        print(f"EXR image: {save_exr(args.exr, result.image)}")
+    print(f"wrote {out.resolve()}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="radiance-probes",
+                                     description="Volume rendering with radiance probes and a "
+                                                 "reference volumetric path tracer.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    from .render.renderer import METHODS
+    r = sub.add_parser("render", help="render a scene headless to a PNG (and linear .npy/.exr)")
+    r.add_argument("scene", nargs="?", help="scene JSON or a volume file (default: built-in scene)")
+    r.add_argument("--method", choices=METHODS, default="pt")
+    r.add_argument("--spp", type=_positive_int, default=64, help="samples per pixel (default 64)")
+    r.add_argument("--samples-per-pass", type=_positive_int, default=1,
+                   help="samples per pixel in one GPU dispatch (default 1)")
+    r.add_argument("--out", default="render.png", help="PNG path (default render.png)")
+    r.add_argument("--linear", help="also write the linear float32 (H, W, 3) image as .npy")
+    r.add_argument("--exr", help="also write the linear image as OpenEXR")
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--width", type=_positive_int)
+    r.add_argument("--height", type=_positive_int)
+    r.add_argument("--exposure", type=float, default=1.0, help="PNG exposure (default 1)")
+    r.set_defaults(func=cmd_render)
+    return parser
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return v
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from .gl.context import ContextError
+    from .gl.shaders import ShaderError
+    from .volume import VolumeError
+    try:
+        return args.func(args)
+    except (SceneError, VolumeError, ContextError, ShaderError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2

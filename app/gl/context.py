@@ -1,0 +1,88 @@
+"""OpenGL 4.3 core contexts: headless (EGL, then OSMesa, then GLX) and, in the viewer, GLFW.
+
+Headless code imports neither glfw nor imgui. ``RP_GL_BACKEND=egl|osmesa|x11`` forces one backend.
+"""
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+
+import moderngl
+
+GL_VERSION = 430
+
+INSTALL_HINT = (
+    "No OpenGL 4.3 context could be made. On Debian/Ubuntu install Mesa's EGL and software "
+    "rasteriser: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgles2 (or libosmesa6 for "
+    "OSMesa); on an NVIDIA machine, the driver's EGL library (libEGL_nvidia). Tried: {tried}"
+)
+
+
+class ContextError(RuntimeError):
+    """No OpenGL 4.3 context could be made; the message says what to install."""
+
+
+def _egl() -> moderngl.Context:
+    return moderngl.create_context(standalone=True, backend="egl", require=GL_VERSION)
+
+
+def _x11() -> moderngl.Context:
+    if not os.environ.get("DISPLAY"):
+        raise RuntimeError("DISPLAY is not set")
+    return moderngl.create_context(standalone=True, require=GL_VERSION)
+
+
+_osmesa_keepalive: list = []
+
+
+def _osmesa() -> moderngl.Context:
+    name = ctypes.util.find_library("OSMesa") or "libOSMesa.so.8"
+    lib = ctypes.CDLL(name)
+    OSMESA_FORMAT, OSMESA_RGBA = 0x22, 0x1908
+    OSMESA_PROFILE, OSMESA_CORE_PROFILE = 0x33, 0x34
+    OSMESA_CONTEXT_MAJOR_VERSION, OSMESA_CONTEXT_MINOR_VERSION = 0x36, 0x37
+    attribs = (ctypes.c_int * 9)(OSMESA_FORMAT, OSMESA_RGBA, OSMESA_PROFILE, OSMESA_CORE_PROFILE,
+                                 OSMESA_CONTEXT_MAJOR_VERSION, 4, OSMESA_CONTEXT_MINOR_VERSION, 3, 0)
+    lib.OSMesaCreateContextAttribs.restype = ctypes.c_void_p
+    lib.OSMesaCreateContextAttribs.argtypes = [ctypes.POINTER(ctypes.c_int), ctypes.c_void_p]
+    handle = lib.OSMesaCreateContextAttribs(attribs, None)
+    if not handle:
+        raise RuntimeError("OSMesaCreateContextAttribs failed")
+    buf = (ctypes.c_ubyte * (4 * 4 * 4))()
+    lib.OSMesaMakeCurrent.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_uint, ctypes.c_int,
+                                      ctypes.c_int]
+    if not lib.OSMesaMakeCurrent(handle, buf, 0x1401, 4, 4):
+        raise RuntimeError("OSMesaMakeCurrent failed")
+    _osmesa_keepalive.append((lib, handle, buf))
+    ctx = moderngl.create_context(require=GL_VERSION)
+    return ctx
+
+
+_BACKENDS = {"egl": _egl, "osmesa": _osmesa, "x11": _x11}
+
+
+def create_headless_context() -> moderngl.Context:
+    """An OpenGL 4.3 core context with no window; raises :class:`ContextError` naming what to install."""
+    forced = os.environ.get("RP_GL_BACKEND")
+    order = [forced] if forced else ["egl", "osmesa", "x11"]
+    tried = []
+    for name in order:
+        if name not in _BACKENDS:
+            raise ContextError(f"RP_GL_BACKEND={name!r}: expected one of {', '.join(_BACKENDS)}")
+        try:
+            ctx = _BACKENDS[name]()
+        except Exception as exc:  # each backend fails in its own way
+            tried.append(f"{name} ({str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__})")
+            continue
+        if ctx.version_code < GL_VERSION:
+            tried.append(f"{name} (only OpenGL {ctx.version_code})")
+            ctx.release()
+            continue
+        return ctx
+    raise ContextError(INSTALL_HINT.format(tried="; ".join(tried)))
+
+
+def describe(ctx: moderngl.Context) -> str:
+    info = ctx.info
+    return f"{info.get('GL_RENDERER', '?')} (OpenGL {ctx.version_code})"

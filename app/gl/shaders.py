@@ -1,0 +1,96 @@
+"""Shader sources from glsl/: ``#include "lib/x.glsl"`` (each file once), defines, and compile
+errors reported with the real file names and lines.
+
+Every included file gets its own GLSL source-string number through ``#line``; a compile log's
+``0(12)`` is translated back to ``lib/medium.glsl:12``.
+"""
+from __future__ import annotations
+
+import re
+from typing import Mapping
+
+import moderngl
+
+from ..paths import GLSL_DIR
+
+GLSL_VERSION = "#version 430 core"
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
+
+
+class ShaderError(RuntimeError):
+    """A shader failed to compile or link; the message names the files and lines."""
+
+
+def _expand(name: str, files: list[str], seen: set[str]) -> list[str]:
+    if name in seen:
+        return []
+    seen.add(name)
+    path = GLSL_DIR / name
+    if not path.is_file():
+        raise ShaderError(f"shader include not found: {name} (looked in {GLSL_DIR})")
+    index = len(files)
+    files.append(name)
+    out = [f"#line 1 {index}"]
+    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+        m = _INCLUDE.match(line)
+        if m:
+            out.extend(_expand(m.group(1), files, seen))
+            out.append(f"#line {lineno + 1} {index}")
+        elif line.lstrip().startswith("#version"):
+            out.append("")  # the loader writes the one #version line
+        else:
+            out.append(line)
+    return out
+
+
+def _define_lines(defines: Mapping[str, object] | None) -> list[str]:
+    lines = []
+    for key, value in (defines or {}).items():
+        if isinstance(value, bool):
+            value = int(value)
+        lines.append(f"#define {key} {value}")
+    return lines
+
+
+def load_source(name: str, defines: Mapping[str, object] | None = None) -> tuple[str, list[str]]:
+    """The full source of a main file with its includes, and the list of files by source number."""
+    files: list[str] = []
+    body = _expand(name, files, set())
+    return "\n".join([GLSL_VERSION, *_define_lines(defines), *body]) + "\n", files
+
+
+def _translate(log: str, files: list[str]) -> str:
+    def repl(m: re.Match) -> str:
+        idx, line = int(m.group(1)), m.group(2)
+        return f"{files[idx]}:{line}" if idx < len(files) else m.group(0)
+    return re.sub(r"\b(\d+)[:(](\d+)\)?", repl, log)
+
+
+def compute_program(ctx: moderngl.Context, name: str,
+                    defines: Mapping[str, object] | None = None) -> moderngl.ComputeShader:
+    source, files = load_source(name, defines)
+    try:
+        return ctx.compute_shader(source)
+    except moderngl.Error as exc:
+        raise ShaderError(f"{name} failed to compile:\n{_translate(str(exc), files)}") from None
+
+
+def render_program(ctx: moderngl.Context, vertex: str, fragment: str,
+                   defines: Mapping[str, object] | None = None) -> moderngl.Program:
+    vs, vfiles = load_source(vertex, defines)
+    fs, ffiles = load_source(fragment, defines)
+    try:
+        return ctx.program(vertex_shader=vs, fragment_shader=fs)
+    except moderngl.Error as exc:
+        raise ShaderError(f"{vertex}+{fragment} failed to compile:\n"
+                          f"{_translate(str(exc), ffiles)}") from None
+
+
+def set_uniforms(program, values: Mapping[str, object]) -> None:
+    """Set the uniforms a program uses; ones the compiler optimised away are skipped."""
+    for key, value in values.items():
+        if key in program:
+            member = program[key]
+            if hasattr(value, "tolist"):
+                value = value.tolist()
+            member.value = value

@@ -1,0 +1,99 @@
+"""GPU time from OpenGL timestamp queries (glQueryCounter), never a CPU clock around GPU work.
+
+moderngl exposes only GL_TIME_ELAPSED queries, which Mesa's llvmpipe does not fill for compute
+dispatches; timestamps work on llvmpipe and NVIDIA alike, so we call glQueryCounter through the
+GLVND dispatch library (libOpenGL), which forwards to whatever context is current (EGL or GLX).
+"""
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+
+GL_TIMESTAMP = 0x8E28
+GL_QUERY_RESULT = 0x8866
+
+_gl = None
+
+
+def _lib():
+    global _gl
+    if _gl is None:
+        for name in (ctypes.util.find_library("OpenGL"), "libOpenGL.so.0", ctypes.util.find_library("GL"),
+                     "libGL.so.1"):
+            if not name:
+                continue
+            try:
+                lib = ctypes.CDLL(name)
+                lib.glQueryCounter  # noqa: B018 (raises AttributeError when missing)
+            except (OSError, AttributeError):
+                continue
+            lib.glGenQueries.argtypes = [ctypes.c_int, ctypes.POINTER(ctypes.c_uint)]
+            lib.glDeleteQueries.argtypes = [ctypes.c_int, ctypes.POINTER(ctypes.c_uint)]
+            lib.glQueryCounter.argtypes = [ctypes.c_uint, ctypes.c_uint]
+            lib.glGetQueryObjectui64v.argtypes = [ctypes.c_uint, ctypes.c_uint,
+                                                  ctypes.POINTER(ctypes.c_uint64)]
+            _gl = lib
+            break
+        else:
+            _gl = False
+    return _gl or None
+
+
+class GpuTimer:
+    """Brackets GPU work with two timestamps; ``elapsed_ms`` waits for the result.
+
+    >>> t = GpuTimer(); t.start(); ...dispatch...; t.stop(); t.elapsed_ms
+    Falls back to moderngl's GL_TIME_ELAPSED query when libOpenGL is not available.
+    """
+
+    def __init__(self, ctx=None):
+        self._gl = _lib()
+        self._ctx = ctx
+        self._fallback = None
+        if self._gl is not None:
+            self._ids = (ctypes.c_uint * 2)()
+            self._gl.glGenQueries(2, self._ids)
+        elif ctx is not None:
+            self._fallback = ctx.query(time=True)
+        self._running = False
+
+    @property
+    def available(self) -> bool:
+        return self._gl is not None or self._fallback is not None
+
+    def start(self) -> None:
+        if self._gl is not None:
+            self._gl.glQueryCounter(self._ids[0], GL_TIMESTAMP)
+        elif self._fallback is not None:
+            self._fallback.__enter__()
+        self._running = True
+
+    def stop(self) -> None:
+        if self._gl is not None:
+            self._gl.glQueryCounter(self._ids[1], GL_TIMESTAMP)
+        elif self._fallback is not None:
+            self._fallback.__exit__(None, None, None)
+        self._running = False
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    @property
+    def elapsed_ms(self) -> float:
+        if self._gl is not None:
+            a, b = ctypes.c_uint64(), ctypes.c_uint64()
+            self._gl.glGetQueryObjectui64v(self._ids[0], GL_QUERY_RESULT, ctypes.byref(a))
+            self._gl.glGetQueryObjectui64v(self._ids[1], GL_QUERY_RESULT, ctypes.byref(b))
+            return (b.value - a.value) / 1e6
+        if self._fallback is not None:
+            return self._fallback.elapsed / 1e6
+        return float("nan")
+
+    def release(self) -> None:
+        if self._gl is not None:
+            self._gl.glDeleteQueries(2, self._ids)
+            self._gl = None

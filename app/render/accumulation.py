@@ -1,0 +1,32 @@
+"""The running-mean image every progressive method writes: RGBA32F, rgb the mean, a the count."""
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+
+class Accumulation:
+    def __init__(self, ctx: moderngl.Context, width: int, height: int):
+        self.ctx = ctx
+        self.width, self.height = width, height
+        self.texture = ctx.texture((width, height), 4, dtype="f4")
+        self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.samples = 0  # samples per pixel accumulated so far
+
+    def reset(self) -> None:
+        self.samples = 0
+
+    def bind_image(self, unit: int = 0, read: bool = True) -> None:
+        self.texture.bind_to_image(unit, read=read, write=True)
+
+    def read_rgba(self) -> np.ndarray:
+        """(height, width, 4) float32, row 0 at the top (the shaders store pixel (c, r) at texel (c, r))."""
+        raw = np.frombuffer(self.texture.read(), np.float32)
+        return raw.reshape(self.height, self.width, 4).copy()
+
+    def read(self) -> np.ndarray:
+        """The linear RGB image of SPEC.md: float32 (height, width, 3), row 0 at the top."""
+        return self.read_rgba()[..., :3].copy()
+
+    def release(self) -> None:
+        self.texture.release()

@@ -1,0 +1,98 @@
+"""The scene on the GPU: volume and transfer function textures, the uniforms every pass shares,
+and the tracking statistics buffer. Re-uploads only what a scene change touches."""
+from __future__ import annotations
+
+import struct
+
+import moderngl
+import numpy as np
+
+from ..gl.textures import transfer_texture, volume_texture
+from ..medium import majorant
+from ..scene import Scene
+from ..transfer import transfer_table
+from ..volume import Volume, load_scene_volume
+
+VOLUME_UNIT = 0
+TRANSFER_UNIT = 1
+STATS_BINDING = 7
+
+
+class SceneResources:
+    def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None):
+        self.ctx = ctx
+        self.scene: Scene | None = None
+        self.volume: Volume | None = None
+        self.volume_tex = None
+        self.transfer_tex = None
+        self.table: np.ndarray | None = None
+        self.stats = ctx.buffer(reserve=16)
+        self.update(scene, volume)
+
+    def update(self, scene: Scene, volume: Volume | None = None) -> set[str]:
+        """Adopt a new scene; returns which parts changed ('volume', 'transfer', 'medium', ...)."""
+        changed: set[str] = set()
+        old = self.scene
+        if volume is not None and volume is not self.volume:
+            changed.add("volume")
+        elif old is None or scene.volume != old.volume or scene.base_dir != old.base_dir:
+            volume = load_scene_volume(scene)
+            changed.add("volume")
+        if "volume" in changed:
+            tex = volume_texture(self.ctx, volume)
+            if self.volume_tex is not None:
+                self.volume_tex.release()
+            self.volume, self.volume_tex = volume, tex
+        if old is None or scene.transfer_function != old.transfer_function:
+            self.table = transfer_table(scene.transfer_function)
+            if self.transfer_tex is not None:
+                self.transfer_tex.release()
+            self.transfer_tex = transfer_texture(self.ctx, self.table)
+            changed.add("transfer")
+        if old is None or (scene.density_scale, scene.albedo, scene.anisotropy, scene.max_bounces) != (
+                old.density_scale, old.albedo, old.anisotropy, old.max_bounces):
+            changed.add("medium")
+        if old is None or scene.light != old.light or scene.environment != old.environment:
+            changed.add("light")
+        if old is None or scene.camera != old.camera:
+            changed.add("camera")
+        self.scene = scene
+        return changed
+
+    @property
+    def majorant(self) -> float:
+        return majorant(self.table, self.scene.density_scale)
+
+    def uniforms(self) -> dict:
+        s = self.scene
+        return {
+            "volume_density": VOLUME_UNIT,
+            "transfer_function": TRANSFER_UNIT,
+            "transfer_size": int(len(self.table)),
+            "density_scale": float(s.density_scale),
+            "albedo": float(s.albedo),
+            "box_half_extent": tuple(float(v) for v in self.volume.half_extent),
+            "majorant": self.majorant,
+            "sun_direction": tuple(s.light.direction),
+            "sun_irradiance": tuple(s.light.irradiance),
+            "environment": tuple(s.environment),
+            "max_bounces": int(s.max_bounces),
+            "anisotropy": float(s.anisotropy),
+        }
+
+    def bind(self) -> None:
+        self.volume_tex.use(VOLUME_UNIT)
+        self.transfer_tex.use(TRANSFER_UNIT)
+        self.stats.bind_to_storage_buffer(STATS_BINDING)
+
+    def reset_stats(self) -> None:
+        self.stats.write(bytes(16))
+
+    def read_stats(self) -> dict:
+        truncated, nonfinite, _, _ = struct.unpack("4I", self.stats.read())
+        return {"truncated_paths": truncated, "nonfinite_samples": nonfinite}
+
+    def release(self) -> None:
+        for obj in (self.volume_tex, self.transfer_tex, self.stats):
+            if obj is not None:
+                obj.release()

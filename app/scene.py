@@ -1,0 +1,346 @@
+"""The scene of SPEC.md: frozen, validated dataclasses, parsed once from JSON and written back.
+
+Every field has a default, so ``{}`` is the built-in default scene. Unknown fields and bad values
+raise :class:`SceneError` naming the field by its JSON path (``camera.fov_y``).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+
+class SceneError(ValueError):
+    """A scene file or dictionary that does not follow SPEC.md; the message names the field."""
+
+
+# Largest values we accept; beyond them a scene is almost surely a typo and would only hang.
+MAX_BOUNCES_LIMIT = 1_000_000
+MAX_IMAGE_SIDE = 16384
+MAX_PROBE_AXIS = 256
+MAX_PROBE_SAMPLES = 1 << 20
+SH_WINDOWS = ("none", "hann", "lanczos")
+PROBE_PRECISIONS = ("rgba32f", "rgba16f")
+
+
+@dataclass(frozen=True)
+class VolumeSpec:
+    path: str | None = None
+    builtin: str | None = "cloud"
+    size: tuple[int, int, int] = (64, 64, 64)
+    spacing: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    value_range: tuple[float, float] | None = None
+    dims: tuple[int, int, int] | None = None  # for .raw files not in the Open SciVis naming
+    dtype: str | None = None
+    replace_nonfinite: float | None = None  # None: NaN/Inf in the data are an error
+
+
+@dataclass(frozen=True)
+class TransferFunctionSpec:
+    colormap: str = "plasma"
+    opacity: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.2, 0.0), (1.0, 1.0))
+    rgba: tuple[tuple[float, float, float, float], ...] | None = None
+    resolution: int = 256
+
+
+@dataclass(frozen=True)
+class LightSpec:
+    direction: tuple[float, float, float] = (0.5, 0.8, 0.3)  # normalised on parse
+    irradiance: tuple[float, float, float] = (3.0, 3.0, 3.0)
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    eye: tuple[float, float, float] = (0.0, 0.3, 2.2)
+    target: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    fov_y: float = 35.0
+    width: int = 512
+    height: int = 512
+
+
+@dataclass(frozen=True)
+class ProbeSpec:
+    grid: tuple[int, int, int] = (16, 16, 16)
+    samples: int = 256
+    sh_window: str = "hann"
+    precision: str = "rgba32f"
+
+
+@dataclass(frozen=True)
+class Scene:
+    volume: VolumeSpec = field(default_factory=VolumeSpec)
+    transfer_function: TransferFunctionSpec = field(default_factory=TransferFunctionSpec)
+    density_scale: float = 100.0
+    albedo: float = 0.9
+    anisotropy: float = 0.0
+    light: LightSpec = field(default_factory=LightSpec)
+    environment: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    max_bounces: int = 64
+    camera: CameraSpec = field(default_factory=CameraSpec)
+    probes: ProbeSpec = field(default_factory=ProbeSpec)
+    # Folder that relative volume paths are also looked up in (the scene file's folder).
+    base_dir: str | None = field(default=None, compare=False)
+
+    def replace(self, **changes: Any) -> "Scene":
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        return scene_to_dict(self)
+
+
+# --------------------------------------------------------------------------------------------
+# Value checks. Each names the field by its dotted JSON path.
+
+def _number(value: Any, name: str, lo: float | None = None, hi: float | None = None,
+            lo_open: bool = False, hi_open: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{name}: expected a number, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise SceneError(f"{name}: must be finite, got {value!r}")
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        raise SceneError(f"{name}: must be {'>' if lo_open else '>='} {lo}, got {value!r}")
+    if hi is not None and (v > hi or (hi_open and v == hi)):
+        raise SceneError(f"{name}: must be {'<' if hi_open else '<='} {hi}, got {value!r}")
+    return v
+
+
+def _integer(value: Any, name: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not (isinstance(value, int) or
+                                       (isinstance(value, float) and value.is_integer())):
+        raise SceneError(f"{name}: expected an integer, got {value!r}")
+    v = int(value)
+    if not lo <= v <= hi:
+        raise SceneError(f"{name}: must be in [{lo}, {hi}], got {value!r}")
+    return v
+
+
+def _vector(value: Any, name: str, n: int, **limits: Any) -> tuple:
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise SceneError(f"{name}: expected a list of {n} numbers, got {value!r}")
+    return tuple(_number(v, f"{name}[{i}]", **limits) for i, v in enumerate(value))
+
+
+def _choice(value: Any, name: str, choices: tuple[str, ...]) -> str:
+    if not isinstance(value, str) or value.lower() not in choices:
+        raise SceneError(f"{name}: expected one of {', '.join(choices)}, got {value!r}")
+    return value.lower()
+
+
+def _object(value: Any, name: str, allowed: set[str]) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise SceneError(f"{name or 'scene'}: expected a JSON object, got {type(value).__name__}")
+    unknown = sorted(set(value) - allowed)
+    if unknown:
+        where = f"{name}." if name else ""
+        raise SceneError(f"unknown field {where}{unknown[0]} (allowed: {', '.join(sorted(allowed))})")
+    return value
+
+
+def _fields(cls) -> set[str]:
+    return {f.name for f in dataclasses.fields(cls)}
+
+
+def _parse_volume(d: Any) -> VolumeSpec:
+    d = _object(d, "volume", _fields(VolumeSpec))
+    if "path" in d and "builtin" in d:
+        raise SceneError("volume: give either volume.path or volume.builtin, not both")
+    kw: dict[str, Any] = {}
+    if "path" in d:
+        if not isinstance(d["path"], str) or not d["path"]:
+            raise SceneError(f"volume.path: expected a file path, got {d['path']!r}")
+        kw["path"], kw["builtin"] = d["path"], None
+    if "builtin" in d:
+        from .volume import BUILTIN_VOLUMES
+        kw["builtin"] = _choice(d["builtin"], "volume.builtin", tuple(BUILTIN_VOLUMES))
+    if "size" in d:
+        if kw.get("path"):
+            raise SceneError("volume.size: only for built-in volumes (use volume.dims for files)")
+        kw["size"] = tuple(_integer(v, f"volume.size[{i}]", 1, 2048)
+                           for i, v in enumerate(_vector(d["size"], "volume.size", 3)))
+    if "spacing" in d:
+        kw["spacing"] = _vector(d["spacing"], "volume.spacing", 3, lo=0.0, lo_open=True)
+    if d.get("value_range") is not None:
+        lo, hi = _vector(d["value_range"], "volume.value_range", 2)
+        if not hi > lo:
+            raise SceneError(f"volume.value_range: needs min < max, got {[lo, hi]}")
+        kw["value_range"] = (lo, hi)
+    if d.get("dims") is not None:
+        kw["dims"] = tuple(_integer(v, f"volume.dims[{i}]", 1, 1 << 20)
+                           for i, v in enumerate(_vector(d["dims"], "volume.dims", 3)))
+    if d.get("dtype") is not None:
+        from .volume import RAW_DTYPES
+        kw["dtype"] = _choice(d["dtype"], "volume.dtype", tuple(RAW_DTYPES))
+    if d.get("replace_nonfinite") is not None:
+        kw["replace_nonfinite"] = _number(d["replace_nonfinite"], "volume.replace_nonfinite")
+    return VolumeSpec(**kw)
+
+
+def _parse_transfer(d: Any) -> TransferFunctionSpec:
+    d = _object(d, "transfer_function", _fields(TransferFunctionSpec))
+    kw: dict[str, Any] = {}
+    if "rgba" in d and ("colormap" in d or "opacity" in d):
+        raise SceneError("transfer_function: give either rgba rows or colormap/opacity, not both")
+    if "colormap" in d:
+        from .transfer import COLORMAPS
+        kw["colormap"] = _choice(d["colormap"], "transfer_function.colormap", tuple(COLORMAPS))
+    if "opacity" in d:
+        pts = d["opacity"]
+        if not isinstance(pts, (list, tuple)) or len(pts) < 1:
+            raise SceneError("transfer_function.opacity: expected a list of [density, opacity] points")
+        parsed = tuple(_vector(p, f"transfer_function.opacity[{i}]", 2, lo=0.0, hi=1.0)
+                       for i, p in enumerate(pts))
+        xs = [p[0] for p in parsed]
+        if any(b < a for a, b in zip(xs, xs[1:])):
+            raise SceneError("transfer_function.opacity: densities must not decrease")
+        kw["opacity"] = parsed
+    if "rgba" in d:
+        rows = d["rgba"]
+        if not isinstance(rows, (list, tuple)) or len(rows) < 2:
+            raise SceneError("transfer_function.rgba: expected at least 2 rows of [r, g, b, a]")
+        kw["rgba"] = tuple(_vector(r, f"transfer_function.rgba[{i}]", 4, lo=0.0, hi=1.0)
+                           for i, r in enumerate(rows))
+    if "resolution" in d:
+        kw["resolution"] = _integer(d["resolution"], "transfer_function.resolution", 2, 4096)
+    return TransferFunctionSpec(**kw)
+
+
+def _parse_light(d: Any) -> LightSpec:
+    d = _object(d, "light", _fields(LightSpec))
+    kw: dict[str, Any] = {}
+    if "direction" in d:
+        v = _vector(d["direction"], "light.direction", 3)
+        n = math.sqrt(sum(c * c for c in v))
+        if n < 1e-9:
+            raise SceneError("light.direction: must not be the zero vector")
+        kw["direction"] = tuple(c / n for c in v)
+    else:
+        v = LightSpec.direction
+        n = math.sqrt(sum(c * c for c in v))
+        kw["direction"] = tuple(c / n for c in v)
+    if "irradiance" in d:
+        kw["irradiance"] = _vector(d["irradiance"], "light.irradiance", 3, lo=0.0)
+    return LightSpec(**kw)
+
+
+def _parse_camera(d: Any) -> CameraSpec:
+    d = _object(d, "camera", _fields(CameraSpec))
+    kw: dict[str, Any] = {}
+    for key in ("eye", "target", "up"):
+        if key in d:
+            kw[key] = _vector(d[key], f"camera.{key}", 3)
+    if "fov_y" in d:
+        kw["fov_y"] = _number(d["fov_y"], "camera.fov_y", 0.0, 179.0, lo_open=True)
+    for key in ("width", "height"):
+        if key in d:
+            kw[key] = _integer(d[key], f"camera.{key}", 1, MAX_IMAGE_SIDE)
+    cam = CameraSpec(**kw)
+    forward = [t - e for t, e in zip(cam.target, cam.eye)]
+    if math.sqrt(sum(c * c for c in forward)) < 1e-9:
+        raise SceneError("camera.target: must differ from camera.eye")
+    up = cam.up
+    cross = (forward[1] * up[2] - forward[2] * up[1], forward[2] * up[0] - forward[0] * up[2],
+             forward[0] * up[1] - forward[1] * up[0])
+    if math.sqrt(sum(c * c for c in cross)) < 1e-9 * max(1e-9, math.sqrt(sum(c * c for c in up))):
+        raise SceneError("camera.up: must not be zero or parallel to the view direction")
+    return cam
+
+
+def _parse_probes(d: Any) -> ProbeSpec:
+    d = _object(d, "probes", _fields(ProbeSpec))
+    kw: dict[str, Any] = {}
+    if "grid" in d:
+        g = d["grid"]
+        if isinstance(g, (int, float)) and not isinstance(g, bool):
+            g = [g, g, g]
+        if not isinstance(g, (list, tuple)) or len(g) != 3:
+            raise SceneError(f"probes.grid: expected an integer or a list of 3, got {g!r}")
+        kw["grid"] = tuple(_integer(v, f"probes.grid[{i}]", 1, MAX_PROBE_AXIS) for i, v in enumerate(g))
+    if "samples" in d:
+        kw["samples"] = _integer(d["samples"], "probes.samples", 1, MAX_PROBE_SAMPLES)
+    if "sh_window" in d:
+        kw["sh_window"] = _choice(d["sh_window"], "probes.sh_window", SH_WINDOWS)
+    if "precision" in d:
+        kw["precision"] = _choice(d["precision"], "probes.precision", PROBE_PRECISIONS)
+    return ProbeSpec(**kw)
+
+
+def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
+    """Validate a JSON-like dictionary into a :class:`Scene`."""
+    d = _object(data, "", _fields(Scene) - {"base_dir"})
+    kw: dict[str, Any] = {}
+    if "volume" in d:
+        kw["volume"] = _parse_volume(d["volume"])
+    if "transfer_function" in d:
+        kw["transfer_function"] = _parse_transfer(d["transfer_function"])
+    if "density_scale" in d:
+        kw["density_scale"] = _number(d["density_scale"], "density_scale", 0.0, 1e7)
+    if "albedo" in d:
+        kw["albedo"] = _number(d["albedo"], "albedo", 0.0, 1.0)
+    if "anisotropy" in d:
+        kw["anisotropy"] = _number(d["anisotropy"], "anisotropy", -1.0, 1.0, lo_open=True, hi_open=True)
+    kw["light"] = _parse_light(d.get("light", {}))
+    if "environment" in d:
+        kw["environment"] = _vector(d["environment"], "environment", 3, lo=0.0)
+    if "max_bounces" in d:
+        kw["max_bounces"] = _integer(d["max_bounces"], "max_bounces", 0, MAX_BOUNCES_LIMIT)
+    kw["camera"] = _parse_camera(d.get("camera", {}))
+    if "probes" in d:
+        kw["probes"] = _parse_probes(d["probes"])
+    if base_dir is not None:
+        kw["base_dir"] = str(base_dir)
+    return Scene(**kw)
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene JSON file."""
+    p = Path(path)
+    if not p.is_file():
+        raise SceneError(f"scene file not found: {p}")
+    try:
+        data = json.loads(p.read_text())
+    except json.JSONDecodeError as exc:
+        raise SceneError(f"{p}: not valid JSON ({exc})") from None
+    try:
+        return parse_scene(data, base_dir=p.resolve().parent)
+    except SceneError as exc:
+        raise SceneError(f"{p}: {exc}") from None
+
+
+def default_scene() -> Scene:
+    return parse_scene({})
+
+
+def scene_to_dict(scene: Scene) -> dict:
+    """The scene as JSON-ready data; ``parse_scene(scene_to_dict(s)) == s``."""
+    def conv(x):
+        if isinstance(x, tuple):
+            return [conv(v) for v in x]
+        return x
+
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(scene):
+        if f.name == "base_dir":
+            continue
+        v = getattr(scene, f.name)
+        if dataclasses.is_dataclass(v):
+            sub = {k.name: conv(getattr(v, k.name)) for k in dataclasses.fields(v)}
+            if f.name == "volume":
+                sub = {k: val for k, val in sub.items() if val is not None}
+                if v.path:
+                    sub.pop("builtin", None)
+                    sub.pop("size", None)
+            if f.name == "transfer_function":
+                if v.rgba is not None:
+                    sub.pop("colormap")
+                    sub.pop("opacity")
+                else:
+                    sub.pop("rgba")
+            out[f.name] = sub
+        else:
+            out[f.name] = conv(v)
+    return out

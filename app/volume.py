@@ -1,0 +1,275 @@
+"""Volumes: file loaders (.raw, .nrrd, .npy), built-in procedural volumes, normalisation.
+
+A :class:`Volume` holds the density normalised to [0, 1] as SPEC.md says (``data[z, y, x]``,
+x fastest) and the world box it fills: centred at the origin, extent ``dims * spacing`` scaled so
+that the longest side is 1.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .scene import Scene, VolumeSpec
+
+
+class VolumeError(ValueError):
+    """A volume that cannot be used; the message names the file and the problem."""
+
+
+RAW_DTYPES = {
+    "uint8": np.uint8, "int8": np.int8, "uint16": np.uint16, "int16": np.int16,
+    "uint32": np.uint32, "int32": np.int32, "float32": np.float32, "float64": np.float64,
+}
+_RAW_NAME = re.compile(r"_(\d+)x(\d+)x(\d+)_([a-z]+\d+)\.raw$", re.IGNORECASE)
+
+
+@dataclass(frozen=True, eq=False)
+class Volume:
+    data: np.ndarray                    # float32 [z, y, x], normalised density in [0, 1]
+    spacing: tuple[float, float, float]  # voxel size along x, y, z (any unit)
+    name: str
+    value_range: tuple[float, float]     # raw values mapped to 0 and 1
+    raw_dtype: str
+    raw_min: float
+    raw_max: float
+
+    @property
+    def dims(self) -> tuple[int, int, int]:
+        """Voxel counts along x, y, z."""
+        z, y, x = self.data.shape
+        return (x, y, z)
+
+    @property
+    def half_extent(self) -> np.ndarray:
+        """Half the world box size along x, y, z; the longest side of the box is 1."""
+        size = np.asarray(self.dims, np.float64) * np.asarray(self.spacing, np.float64)
+        return (0.5 * size / size.max()).astype(np.float32)
+
+    @property
+    def exact_uint8(self) -> bool:
+        """True when the data is 8-bit with the default range, so an R8 texture stores it exactly."""
+        return self.raw_dtype == "uint8" and self.value_range == (0.0, 255.0)
+
+    def histogram(self, bins: int = 128) -> np.ndarray:
+        counts, _ = np.histogram(self.data, bins=bins, range=(0.0, 1.0))
+        return counts
+
+
+# --------------------------------------------------------------------------------------------
+# Built-in procedural volumes: deterministic, smooth, any size.
+
+def _grid(size: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cell-centred coordinates in [-1, 1] along each axis, broadcastable as [z, y, x]."""
+    nx, ny, nz = size
+    x = ((np.arange(nx) + 0.5) / nx * 2 - 1).astype(np.float32)
+    y = ((np.arange(ny) + 0.5) / ny * 2 - 1).astype(np.float32)
+    z = ((np.arange(nz) + 0.5) / nz * 2 - 1).astype(np.float32)
+    return x[None, None, :], y[None, :, None], z[:, None, None]
+
+
+def _smoothstep(e0: float, e1: float, v: np.ndarray) -> np.ndarray:
+    t = np.clip((v - e0) / (e1 - e0), 0.0, 1.0)
+    return t * t * (3 - 2 * t)
+
+
+def builtin_cloud(size: tuple[int, int, int]) -> np.ndarray:
+    """A soft cumulus-like cloud: overlapping Gaussian puffs modulated by smooth sine noise."""
+    x, y, z = _grid(size)
+    rng = np.random.default_rng(7)
+    d = np.zeros(np.broadcast_shapes(x.shape, y.shape, z.shape), np.float32)
+    for _ in range(14):
+        c = rng.uniform([-0.45, -0.3, -0.45], [0.45, 0.35, 0.45])
+        r = rng.uniform(0.18, 0.38)
+        d += np.exp(-(((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2) / (r * r))).astype(np.float32)
+    noise = np.zeros_like(d)
+    for octave in range(3):
+        f = 3.0 * 2 ** octave
+        ph = rng.uniform(0, 2 * np.pi, 3)
+        noise += (np.sin(f * x + ph[0]) * np.sin(f * y + ph[1]) * np.sin(f * z + ph[2])) / 2 ** octave
+    d = d * (1.0 + 0.35 * noise)
+    d = _smoothstep(0.35, 1.6, d)
+    d *= _smoothstep(1.0, 0.8, np.maximum(np.maximum(abs(x), abs(y)), abs(z)))  # zero at the box
+    return (d / max(float(d.max()), 1e-6)).astype(np.float32)
+
+
+def builtin_hydrogen(size: tuple[int, int, int]) -> np.ndarray:
+    """Probability density of a hydrogen-like 3d_z2 orbital, |psi|^2 with psi ~ r^2 e^(-r/3)(3cos^2-1)."""
+    x, y, z = _grid(size)
+    s = 14.0  # Bohr radii from the centre to a face
+    X, Y, Z = x * s, y * s, z * s
+    r = np.sqrt(X * X + Y * Y + Z * Z) + 1e-6
+    cos_t = Y / r  # orbital axis along world +y
+    psi = r * r * np.exp(-r / 3.0) * (3 * cos_t * cos_t - 1)
+    p = (psi * psi).astype(np.float32)
+    return np.sqrt(p / p.max()).astype(np.float32)  # sqrt keeps the outer lobes visible
+
+
+def builtin_sphere(size: tuple[int, int, int]) -> np.ndarray:
+    """A solid ball of radius 0.6 (of the half box) with a one-voxel soft edge."""
+    x, y, z = _grid(size)
+    r = np.sqrt(x * x + y * y + z * z)
+    edge = 2.0 / max(size)
+    return (1.0 - _smoothstep(0.6 - edge, 0.6 + edge, r)).astype(np.float32)
+
+
+def builtin_constant(size: tuple[int, int, int]) -> np.ndarray:
+    """Density 1 everywhere: a homogeneous medium filling the box."""
+    return np.ones(size[::-1], np.float32)
+
+
+def builtin_empty(size: tuple[int, int, int]) -> np.ndarray:
+    """Density 0 everywhere: vacuum."""
+    return np.zeros(size[::-1], np.float32)
+
+
+def builtin_sheet(size: tuple[int, int, int]) -> np.ndarray:
+    """A thin slab one voxel thick across the middle of the box (normal along y)."""
+    d = np.zeros(size[::-1], np.float32)
+    d[:, size[1] // 2, :] = 1.0
+    return d
+
+
+BUILTIN_VOLUMES: dict[str, Callable[[tuple[int, int, int]], np.ndarray]] = {
+    "cloud": builtin_cloud,
+    "hydrogen": builtin_hydrogen,
+    "sphere": builtin_sphere,
+    "constant": builtin_constant,
+    "empty": builtin_empty,
+    "sheet": builtin_sheet,
+}
+
+
+# --------------------------------------------------------------------------------------------
+# Files
+
+def _resolve(path: str, base_dir: str | None) -> Path:
+    p = Path(path).expanduser()
+    if p.is_file() or p.is_absolute() or base_dir is None:
+        return p
+    alt = Path(base_dir) / p
+    return alt if alt.is_file() else p
+
+
+def _read_raw(p: Path, dims: tuple[int, int, int] | None, dtype: str | None) -> np.ndarray:
+    m = _RAW_NAME.search(p.name)
+    if dims is None:
+        if not m:
+            raise VolumeError(f"{p}: cannot tell the dimensions from the name; expected "
+                              "'name_XxYxZ_dtype.raw' or give volume.dims and volume.dtype")
+        dims = (int(m.group(1)), int(m.group(2)), int(m.group(3)))
+    if dtype is None:
+        if not m:
+            raise VolumeError(f"{p}: cannot tell the data type from the name; give volume.dtype")
+        dtype = m.group(4).lower()
+    if dtype not in RAW_DTYPES:
+        raise VolumeError(f"{p}: unknown data type '{dtype}' (known: {', '.join(RAW_DTYPES)})")
+    if min(dims) < 1:
+        raise VolumeError(f"{p}: dimensions must be at least 1, got {dims}")
+    np_dtype = np.dtype(RAW_DTYPES[dtype]).newbyteorder("<")
+    expected = int(np.prod(dims)) * np_dtype.itemsize
+    actual = p.stat().st_size
+    if actual != expected:
+        raise VolumeError(f"{p}: file has {actual} bytes but {dims[0]}x{dims[1]}x{dims[2]} {dtype} "
+                          f"needs {expected}")
+    return np.fromfile(p, dtype=np_dtype).reshape(dims[2], dims[1], dims[0])
+
+
+def _read_nrrd(p: Path) -> tuple[np.ndarray, tuple[float, float, float] | None]:
+    import nrrd
+    try:
+        data, header = nrrd.read(str(p), index_order="C")
+    except Exception as exc:  # pynrrd raises several types for malformed files
+        raise VolumeError(f"{p}: cannot read NRRD ({exc})") from None
+    if data.ndim != 3:
+        raise VolumeError(f"{p}: expected a 3D volume, the NRRD has {data.ndim} dimensions")
+    spacing = None
+    if "spacings" in header:
+        spacing = tuple(float(s) for s in header["spacings"])
+    elif "space directions" in header:
+        dirs = np.asarray(header["space directions"], dtype=np.float64)
+        spacing = tuple(float(np.linalg.norm(v)) for v in dirs)
+    return data, spacing
+
+
+def _read_npy(p: Path) -> np.ndarray:
+    try:
+        data = np.load(p, allow_pickle=False)
+    except Exception as exc:
+        raise VolumeError(f"{p}: cannot read .npy ({exc})") from None
+    if data.ndim != 3:
+        raise VolumeError(f"{p}: expected a 3D array [z, y, x], got shape {data.shape}")
+    return data
+
+
+def normalise(raw: np.ndarray, value_range: tuple[float, float] | None, where: str,
+              replace_nonfinite: float | None = None) -> tuple[np.ndarray, tuple[float, float]]:
+    """Map raw values to [0, 1] as SPEC.md says; returns the float32 data and the range used."""
+    if raw.dtype.kind not in "uif":
+        raise VolumeError(f"{where}: unsupported data type {raw.dtype}")
+    if raw.dtype.kind == "f":
+        bad = ~np.isfinite(raw)
+        if bad.any():
+            if replace_nonfinite is None:
+                raise VolumeError(f"{where}: {int(bad.sum())} voxels are NaN or Inf; give "
+                                  "volume.replace_nonfinite to replace them")
+            raw = np.where(bad, raw.dtype.type(replace_nonfinite), raw)
+    if value_range is None:
+        if raw.dtype == np.uint8:
+            value_range = (0.0, 255.0)
+        elif raw.dtype == np.int8:
+            value_range = (-128.0, 127.0)
+        else:
+            lo, hi = float(raw.min()), float(raw.max())
+            if not hi > lo:
+                raise VolumeError(f"{where}: every voxel is {lo}; give volume.value_range to say "
+                                  "what density that is")
+            value_range = (lo, hi)
+    lo, hi = value_range
+    data = (raw.astype(np.float64) - lo) / (hi - lo)
+    return np.clip(data, 0.0, 1.0).astype(np.float32), (float(lo), float(hi))
+
+
+def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
+    """Load the volume a scene names: a built-in or a file; errors name the file and the problem."""
+    spacing = spec.spacing
+    if spec.path is None:
+        name = spec.builtin or "cloud"
+        if name not in BUILTIN_VOLUMES:
+            raise VolumeError(f"unknown built-in volume '{name}' (known: {', '.join(BUILTIN_VOLUMES)})")
+        data = BUILTIN_VOLUMES[name](tuple(spec.size))
+        vr = spec.value_range or (0.0, 1.0)
+        norm, vr = normalise(data, vr, f"built-in '{name}'")
+        return Volume(norm, tuple(spacing), f"builtin:{name}", vr, "float32",
+                      float(data.min()), float(data.max()))
+
+    p = _resolve(spec.path, base_dir)
+    if not p.is_file():
+        raise VolumeError(f"{p}: volume file not found")
+    suffix = p.suffix.lower()
+    if suffix == ".raw":
+        raw = _read_raw(p, spec.dims, spec.dtype)
+    elif suffix in (".nrrd", ".nhdr"):
+        raw, file_spacing = _read_nrrd(p)
+        if file_spacing is not None and spec.spacing == VolumeSpec.spacing:
+            spacing = file_spacing  # the header's spacing unless the scene overrides it
+    elif suffix == ".npy":
+        raw = _read_npy(p)
+    else:
+        raise VolumeError(f"{p}: unknown volume format '{suffix}' (known: .raw, .nrrd, .npy)")
+    if min(raw.shape) < 1:
+        raise VolumeError(f"{p}: volume has zero size, shape {raw.shape[::-1]} (x, y, z)")
+    if any(not (s > 0 and np.isfinite(s)) for s in spacing):
+        raise VolumeError(f"{p}: spacing must be positive, got {spacing}")
+    norm, vr = normalise(raw, spec.value_range, str(p), spec.replace_nonfinite)
+    finite = raw[np.isfinite(raw)] if raw.dtype.kind == "f" else raw
+    return Volume(norm, tuple(float(s) for s in spacing), p.name, vr, raw.dtype.name,
+                  float(finite.min()) if finite.size else 0.0,
+                  float(finite.max()) if finite.size else 0.0)
+
+
+def load_scene_volume(scene: Scene) -> Volume:
+    return load_volume(scene.volume, scene.base_dir)

@@ -1,0 +1,49 @@
+// The participating medium of SPEC.md (post-classification): density from a 3D texture
+// (cell-centred, trilinear, clamped to the edge voxel), a transfer function table, and the box.
+// NumPy twin: app/medium.py.
+uniform sampler3D volume_density;     // normalised density in [0, 1]
+uniform sampler2D transfer_function;  // N x 1 RGBA32F, entries at densities linspace(0, 1, N)
+uniform int transfer_size;            // N
+uniform float density_scale;
+uniform float albedo;
+uniform vec3 box_half_extent;
+uniform float majorant;               // >= sigma_t everywhere in the box
+
+float density_at(vec3 p)
+{
+    return texture(volume_density, p / (2.0 * box_half_extent) + 0.5).r;
+}
+
+// Exact linear interpolation between table entries (no filtering-precision loss).
+vec4 transfer_at(float d)
+{
+    float x = clamp(d, 0.0, 1.0) * float(transfer_size - 1);
+    int i0 = min(int(x), transfer_size - 2);
+    vec4 a = texelFetch(transfer_function, ivec2(i0, 0), 0);
+    vec4 b = texelFetch(transfer_function, ivec2(i0 + 1, 0), 0);
+    return mix(a, b, x - float(i0));
+}
+
+float sigma_t_at(vec3 p)
+{
+    return density_scale * transfer_at(density_at(p)).a;
+}
+
+// Single-scattering albedo per channel (sigma_s / sigma_t) at p.
+vec3 albedo_at(vec3 p)
+{
+    return albedo * transfer_at(density_at(p)).rgb;
+}
+
+// Slab test against the volume box; robust to zero direction components.
+bool box_intersect(vec3 origin, vec3 direction, out float t_near, out float t_far)
+{
+    vec3 inv = 1.0 / mix(direction, vec3(1e-30), equal(direction, vec3(0.0)));
+    vec3 ta = (-box_half_extent - origin) * inv;
+    vec3 tb = (box_half_extent - origin) * inv;
+    vec3 tmin = min(ta, tb);
+    vec3 tmax = max(ta, tb);
+    t_near = max(max(tmin.x, tmin.y), max(tmin.z, 0.0));
+    t_far = min(min(tmax.x, tmax.y), tmax.z);
+    return t_far > t_near;
+}

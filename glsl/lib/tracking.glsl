@@ -1,0 +1,72 @@
+// Free-flight sampling and transmittance against a majorant (Woodcock delta tracking and ratio
+// tracking). Unbiased as long as majorant >= sigma_t. Every loop draws on a per-path step budget,
+// so a dense or pathological volume cannot hang the GPU; a path that runs out is dropped and
+// counted in tracking_stats.truncated_paths (the renderers report it, the tests assert it is 0).
+#ifndef MAX_PATH_STEPS
+#define MAX_PATH_STEPS 4194304
+#endif
+
+layout(std430, binding = 7) buffer TrackingStats
+{
+    uint truncated_paths;
+    uint nonfinite_samples;
+} tracking_stats;
+
+const int TRACK_ESCAPED = 0;
+const int TRACK_COLLIDED = 1;
+const int TRACK_OUT_OF_STEPS = 2;
+
+// Samples the distance to the next real collision on origin + t * direction, t in [t_min, t_max].
+int delta_track(vec3 origin, vec3 direction, float t_min, float t_max, inout uint rng,
+                inout int steps_left, out float t_collision)
+{
+    t_collision = t_max;
+    if (majorant <= 0.0)
+        return TRACK_ESCAPED;
+    float t = t_min;
+    while (steps_left > 0) {
+        --steps_left;
+        t -= log(1.0 - rng_next(rng)) / majorant;
+        if (t >= t_max)
+            return TRACK_ESCAPED;
+        if (rng_next(rng) * majorant < sigma_t_at(origin + t * direction)) {
+            t_collision = t;
+            return TRACK_COLLIDED;
+        }
+    }
+    return TRACK_OUT_OF_STEPS;
+}
+
+// Unbiased transmittance estimate along origin + t * direction, t in [t_min, t_max]; Russian
+// roulette ends low estimates early without bias. Returns -1 when the step budget ran out.
+float ratio_track(vec3 origin, vec3 direction, float t_min, float t_max, inout uint rng,
+                  inout int steps_left)
+{
+    if (majorant <= 0.0)
+        return 1.0;
+    float transmittance = 1.0;
+    float t = t_min;
+    while (steps_left > 0) {
+        --steps_left;
+        t -= log(1.0 - rng_next(rng)) / majorant;
+        if (t >= t_max)
+            return transmittance;
+        transmittance *= max(0.0, 1.0 - sigma_t_at(origin + t * direction) / majorant);
+        if (transmittance < 0.1) {
+            float survive = transmittance * 10.0;
+            if (rng_next(rng) >= survive)
+                return 0.0;
+            transmittance = 0.1;
+        }
+    }
+    return -1.0;
+}
+
+// Transmittance from p to the box boundary along direction (a shadow ray), or -1 if out of steps.
+float transmittance_to_boundary(vec3 p, vec3 direction, inout uint rng, inout int steps_left)
+{
+    float t0, t1;
+    if (!box_intersect(p, direction, t0, t1))
+        return 1.0;
+    return ratio_track(p, direction, t0, t1, rng, steps_left);
+}
