@@ -9,7 +9,7 @@ INV_4PI = 1.0 / (4.0 * np.pi)
 def phase_hg(cos_theta, g: float) -> np.ndarray:
     """HG density over the sphere; cos_theta between propagation directions before and after."""
     cos_theta = np.asarray(cos_theta, np.float64)
-    denom = 1.0 + g * g - 2.0 * g * cos_theta
+    denom = (1.0 - g) ** 2 + 2.0 * g * (1.0 - cos_theta)
     return INV_4PI * (1.0 - g * g) / (denom * np.sqrt(np.maximum(denom, 1e-12)))
 
 

@@ -18,7 +18,7 @@ class SceneError(ValueError):
 
 
 # Largest values we accept; beyond them a scene is almost surely a typo and would only hang.
-MAX_BOUNCES_LIMIT = 1_000_000
+MAX_BOUNCES_LIMIT = 1_000_000_000
 MAX_IMAGE_SIDE = 16384
 MAX_PROBE_AXIS = 256
 MAX_PROBE_SAMPLES = 1 << 20
@@ -31,7 +31,9 @@ class VolumeSpec:
     path: str | None = None
     builtin: str | None = "cloud"
     size: tuple[int, int, int] = (64, 64, 64)
-    spacing: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    # None: the file's own spacing (an NRRD header's), else 1, 1, 1. A value given here always wins,
+    # even [1, 1, 1], which is why the default is None rather than (1, 1, 1).
+    spacing: tuple[float, float, float] | None = None
     value_range: tuple[float, float] | None = None
     dims: tuple[int, int, int] | None = None  # for .raw files not in the Open SciVis naming
     dtype: str | None = None
@@ -46,10 +48,25 @@ class TransferFunctionSpec:
     resolution: int = 256
 
 
+def _unit(v: tuple, name: str) -> tuple[float, float, float]:
+    """``v`` scaled to unit length; idempotent, so a vector already of unit length is kept bit for bit
+    (re-normalising one can change its last bits, which would break the JSON round trip)."""
+    n = math.sqrt(sum(float(c) * float(c) for c in v))
+    if not n >= 1e-9 or not math.isfinite(n):
+        raise SceneError(f"{name}: must be a finite, non-zero vector, got {list(v)!r}")
+    if abs(n - 1.0) <= 4e-16:
+        return tuple(float(c) for c in v)
+    return tuple(float(c) / n for c in v)
+
+
 @dataclass(frozen=True)
 class LightSpec:
-    direction: tuple[float, float, float] = (0.5, 0.8, 0.3)  # normalised on parse
+    direction: tuple[float, float, float] = (0.5, 0.8, 0.3)  # normalised in __post_init__
     irradiance: tuple[float, float, float] = (3.0, 3.0, 3.0)
+
+    def __post_init__(self) -> None:
+        # A unit vector however the spec was made (parse_scene, LightSpec(), dataclasses.replace).
+        object.__setattr__(self, "direction", _unit(self.direction, "light.direction"))
 
 
 @dataclass(frozen=True)
@@ -99,7 +116,10 @@ def _number(value: Any, name: str, lo: float | None = None, hi: float | None = N
             lo_open: bool = False, hi_open: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SceneError(f"{name}: expected a number, got {value!r}")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:  # a JSON integer too large for a float
+        raise SceneError(f"{name}: must be finite, got {value!r}") from None
     if not math.isfinite(v):
         raise SceneError(f"{name}: must be finite, got {value!r}")
     if lo is not None and (v < lo or (lo_open and v == lo)):
@@ -217,11 +237,7 @@ def _parse_light(d: Any) -> LightSpec:
         n = math.sqrt(sum(c * c for c in v))
         if n < 1e-9:
             raise SceneError("light.direction: must not be the zero vector")
-        kw["direction"] = tuple(c / n for c in v)
-    else:
-        v = LightSpec.direction
-        n = math.sqrt(sum(c * c for c in v))
-        kw["direction"] = tuple(c / n for c in v)
+        kw["direction"] = v  # LightSpec normalises it
     if "irradiance" in d:
         kw["irradiance"] = _vector(d["irradiance"], "light.irradiance", 3, lo=0.0)
     return LightSpec(**kw)
@@ -245,7 +261,10 @@ def _parse_camera(d: Any) -> CameraSpec:
     up = cam.up
     cross = (forward[1] * up[2] - forward[2] * up[1], forward[2] * up[0] - forward[0] * up[2],
              forward[0] * up[1] - forward[1] * up[0])
-    if math.sqrt(sum(c * c for c in cross)) < 1e-9 * max(1e-9, math.sqrt(sum(c * c for c in up))):
+    # |forward x up| = |forward| |up| sin(angle): reject sin(angle) < 1e-6 whatever the lengths.
+    norm_f = math.sqrt(sum(c * c for c in forward))
+    norm_u = math.sqrt(sum(c * c for c in up))
+    if norm_u < 1e-12 or math.sqrt(sum(c * c for c in cross)) < 1e-6 * norm_f * norm_u:
         raise SceneError("camera.up: must not be zero or parallel to the view direction")
     return cam
 
@@ -302,9 +321,15 @@ def load_scene(path: str | Path) -> Scene:
     if not p.is_file():
         raise SceneError(f"scene file not found: {p}")
     try:
-        data = json.loads(p.read_text())
+        data = json.loads(p.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
         raise SceneError(f"{p}: not valid JSON ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{p}: not a UTF-8 text file ({exc})") from None
+    except OSError as exc:
+        raise SceneError(f"{p}: cannot read the scene file ({exc})") from None
+    except RecursionError:
+        raise SceneError(f"{p}: not valid JSON (nested too deeply)") from None
     try:
         return parse_scene(data, base_dir=p.resolve().parent)
     except SceneError as exc:

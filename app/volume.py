@@ -228,14 +228,16 @@ def normalise(raw: np.ndarray, value_range: tuple[float, float] | None, where: s
                 raise VolumeError(f"{where}: every voxel is {lo}; give volume.value_range to say "
                                   "what density that is")
             value_range = (lo, hi)
-    lo, hi = value_range
+    lo, hi = (float(v) for v in value_range)
+    if not (np.isfinite(lo) and np.isfinite(hi) and np.isfinite(hi - lo) and hi > lo):
+        raise VolumeError(f"{where}: value range needs finite min < max, got {[lo, hi]}")
     data = (raw.astype(np.float64) - lo) / (hi - lo)
     return np.clip(data, 0.0, 1.0).astype(np.float32), (float(lo), float(hi))
 
 
 def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
     """Load the volume a scene names: a built-in or a file; errors name the file and the problem."""
-    spacing = spec.spacing
+    spacing = spec.spacing if spec.spacing is not None else (1.0, 1.0, 1.0)
     if spec.path is None:
         name = spec.builtin or "cloud"
         if name not in BUILTIN_VOLUMES:
@@ -243,7 +245,7 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
         data = BUILTIN_VOLUMES[name](tuple(spec.size))
         vr = spec.value_range or (0.0, 1.0)
         norm, vr = normalise(data, vr, f"built-in '{name}'")
-        return Volume(norm, tuple(spacing), f"builtin:{name}", vr, "float32",
+        return Volume(norm, tuple(float(v) for v in spacing), f"builtin:{name}", vr, "float32",
                       float(data.min()), float(data.max()))
 
     p = _resolve(spec.path, base_dir)
@@ -254,8 +256,8 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
         raw = _read_raw(p, spec.dims, spec.dtype)
     elif suffix in (".nrrd", ".nhdr"):
         raw, file_spacing = _read_nrrd(p)
-        if file_spacing is not None and spec.spacing == VolumeSpec.spacing:
-            spacing = file_spacing  # the header's spacing unless the scene overrides it
+        if file_spacing is not None and spec.spacing is None:
+            spacing = file_spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
     elif suffix == ".npy":
         raw = _read_npy(p)
     else:

@@ -1,4 +1,6 @@
-// Reference path tracer: one pass adds samples_per_pass samples per pixel to the running mean.
+// Reference path tracer. Each invocation owns one pixel: it continues the pixel's path in flight,
+// starts new samples until the pixel has target_samples of them, and stops when the dispatch's loop
+// budget runs low (the host dispatches again while pixels_with_work > 0).
 layout(local_size_x = 8, local_size_y = 8) in;
 
 #include "lib/rng.glsl"
@@ -10,9 +12,19 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #include "lib/integrator.glsl"
 
 layout(rgba32f, binding = 0) uniform image2D accumulation;  // rgb: running mean, a: sample count
+
+struct PixelState {
+    PathState path;
+    uint next_sample;   // samples started so far; keys the random stream of the next one
+    uint pad0, pad1, pad2;
+};
+layout(std430, binding = 1) buffer PixelStates { PixelState pixel_states[]; };
+layout(std430, binding = 2) buffer Progress { uint pixels_with_work; };
+
 uniform uint seed;
-uniform uint first_sample;      // index of this pass's first sample (keys the random streams)
-uniform int samples_per_pass;
+uniform uint target_samples;   // samples per pixel this render wants in all
+uniform int loop_budget;       // loop iterations one invocation may run in this dispatch
+uniform int loop_reserve;      // suspend a path when the budget falls to this
 
 void main()
 {
@@ -20,21 +32,27 @@ void main()
     if (any(greaterThanEqual(pixel, image_size)))
         return;
     uint key = uint(pixel.y * image_size.x + pixel.x);
-    vec3 sum = vec3(0.0);
-    uint count = 0u;
-    for (int s = 0; s < samples_per_pass; ++s) {
-        uint rng = rng_seed(key, first_sample + uint(s), seed);
-        vec2 jitter = vec2(rng_next(rng), rng_next(rng));  // box filter over the pixel's area
-        vec3 direction = camera_ray_direction(vec2(pixel) + jitter);
-        vec3 radiance;
-        bool valid = path_radiance(camera_eye, direction, rng, radiance);
-        accumulate_sample(sum, count, radiance, valid);
+    PixelState state = pixel_states[key];
+    vec4 mean_and_count = imageLoad(accumulation, pixel);
+    int budget = loop_budget;
+    while (budget > loop_reserve) {
+        budget -= 1;
+        if (state.path.status == PATH_IDLE) {
+            if (state.next_sample >= target_samples)
+                break;
+            uint rng = rng_seed(key, state.next_sample, seed);
+            vec2 jitter = vec2(rng_next(rng), rng_next(rng));  // box filter over the pixel's area
+            path_begin(state.path, camera_eye, camera_ray_direction(vec2(pixel) + jitter), rng);
+            state.next_sample += 1u;
+        }
+        int result = path_continue(state.path, budget, loop_reserve);
+        if (result == PATH_SUSPENDED)
+            break;
+        state.path.status = PATH_IDLE;
+        path_finish(mean_and_count, state.path, result);
     }
-    vec4 previous = imageLoad(accumulation, pixel);
-    float n_before = first_sample == 0u ? 0.0 : previous.a;
-    float n_after = n_before + float(count);
-    vec3 mean = first_sample == 0u ? vec3(0.0) : previous.rgb;
-    if (count > 0u)
-        mean += (sum / float(count) - mean) * (float(count) / n_after);  // stable running mean
-    imageStore(accumulation, pixel, vec4(mean, n_after));
+    if (state.path.status != PATH_IDLE || state.next_sample < target_samples)
+        atomicAdd(pixels_with_work, 1u);
+    pixel_states[key] = state;
+    imageStore(accumulation, pixel, mean_and_count);
 }

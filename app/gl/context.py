@@ -86,3 +86,22 @@ def create_headless_context() -> moderngl.Context:
 def describe(ctx: moderngl.Context) -> str:
     info = ctx.info
     return f"{info.get('GL_RENDERER', '?')} (OpenGL {ctx.version_code})"
+
+
+# Mesa's llvmpipe (and lavapipe/softpipe) end a SIMD batch's loops after 65535 iterations in all
+# (gallivm's loop limiter), counted over the batch, whose lanes diverge: a lane's own count times
+# the lanes in a batch must stay below it. The shaders keep their own count and resume in the next
+# dispatch. Hardware drivers have no such limit.
+SOFTWARE_LOOP_LIMIT = 65535
+
+
+def loop_budget(ctx: moderngl.Context) -> tuple[int, int]:
+    """(loop iterations one invocation may run per dispatch, reserve kept for one more flight)."""
+    import re
+    renderer = ctx.info.get("GL_RENDERER", "").lower()
+    if any(name in renderer for name in ("llvmpipe", "softpipe", "lavapipe")):
+        m = re.search(r"(\d+) bits", renderer)
+        lanes = max(int(m.group(1)) // 32, 1) if m else 16
+        budget = SOFTWARE_LOOP_LIMIT // lanes - 256
+        return budget, budget // 2
+    return (1 << 30), 0

@@ -21,17 +21,19 @@ class ShaderError(RuntimeError):
     """A shader failed to compile or link; the message names the files and lines."""
 
 
-def _expand(name: str, files: list[str], seen: set[str]) -> list[str]:
+def _expand(name: str, files: list[str], seen: set[str], text: str | None = None) -> list[str]:
     if name in seen:
         return []
     seen.add(name)
-    path = GLSL_DIR / name
-    if not path.is_file():
-        raise ShaderError(f"shader include not found: {name} (looked in {GLSL_DIR})")
+    if text is None:
+        path = GLSL_DIR / name
+        if not path.is_file():
+            raise ShaderError(f"shader include not found: {name} (looked in {GLSL_DIR})")
+        text = path.read_text()
     index = len(files)
     files.append(name)
     out = [f"#line 1 {index}"]
-    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+    for lineno, line in enumerate(text.splitlines(), start=1):
         m = _INCLUDE.match(line)
         if m:
             out.extend(_expand(m.group(1), files, seen))
@@ -52,10 +54,14 @@ def _define_lines(defines: Mapping[str, object] | None) -> list[str]:
     return lines
 
 
-def load_source(name: str, defines: Mapping[str, object] | None = None) -> tuple[str, list[str]]:
-    """The full source of a main file with its includes, and the list of files by source number."""
+def load_source(name: str, defines: Mapping[str, object] | None = None,
+                text: str | None = None) -> tuple[str, list[str]]:
+    """The full source of a main file with its includes, and the list of files by source number.
+
+    With `text`, that text is the main file (tests use this) and `name` only labels it.
+    """
     files: list[str] = []
-    body = _expand(name, files, set())
+    body = _expand(name, files, set(), text)
     return "\n".join([GLSL_VERSION, *_define_lines(defines), *body]) + "\n", files
 
 
@@ -67,8 +73,9 @@ def _translate(log: str, files: list[str]) -> str:
 
 
 def compute_program(ctx: moderngl.Context, name: str,
-                    defines: Mapping[str, object] | None = None) -> moderngl.ComputeShader:
-    source, files = load_source(name, defines)
+                    defines: Mapping[str, object] | None = None,
+                    text: str | None = None) -> moderngl.ComputeShader:
+    source, files = load_source(name, defines, text)
     try:
         return ctx.compute_shader(source)
     except moderngl.Error as exc:

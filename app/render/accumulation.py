@@ -1,4 +1,5 @@
-"""The running-mean image every progressive method writes: RGBA32F, rgb the mean, a the count."""
+"""The running-mean image every progressive method writes: RGBA32F, rgb the mean, a the count of
+samples averaged into that pixel."""
 from __future__ import annotations
 
 import moderngl
@@ -11,9 +12,10 @@ class Accumulation:
         self.width, self.height = width, height
         self.texture = ctx.texture((width, height), 4, dtype="f4")
         self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.samples = 0  # samples per pixel accumulated so far
+        self.samples = 0  # samples per pixel asked for so far
 
     def reset(self) -> None:
+        self.texture.write(bytes(self.width * self.height * 16))
         self.samples = 0
 
     def bind_image(self, unit: int = 0, read: bool = True) -> None:

@@ -1,14 +1,18 @@
 """The reference volumetric path tracer pass (glsl/pathtrace.comp)."""
 from __future__ import annotations
 
+import struct
+
 import moderngl
 
 from ..camera import CameraFrame
+from ..gl.context import loop_budget
 from ..gl.shaders import compute_program, set_uniforms
 from .accumulation import Accumulation
 from .resources import SceneResources
 
 LOCAL_SIZE = 8
+PIXEL_STATE_BYTES = 80  # PathState (64) + next_sample and padding, std430
 
 
 def groups(width: int, height: int) -> tuple[int, int]:
@@ -19,21 +23,52 @@ class PathTracer:
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
         self.program = compute_program(ctx, "pathtrace.comp")
+        self.loop_budget, self.loop_reserve = loop_budget(ctx)
+        self.states: moderngl.Buffer | None = None
+        self.progress = ctx.buffer(reserve=4)
+        self.dispatches = 0
 
-    def run(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
-            samples: int, seed: int = 0, samples_per_pass: int = 1) -> None:
-        """Adds `samples` samples per pixel to `acc`, `samples_per_pass` per dispatch."""
+    def _states_for(self, acc: Accumulation) -> moderngl.Buffer:
+        size = acc.width * acc.height * PIXEL_STATE_BYTES
+        if self.states is None or self.states.size != size:
+            if self.states is not None:
+                self.states.release()
+            self.states = self.ctx.buffer(reserve=size)
+        return self.states
+
+    def dispatch(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
+                 target_samples: int, seed: int = 0) -> None:
+        """One dispatch towards `target_samples` per pixel; starts afresh when acc was reset."""
+        states = self._states_for(acc)
+        if acc.samples == 0:
+            states.clear()
         resources.bind()
         set_uniforms(self.program, resources.uniforms())
         set_uniforms(self.program, camera.uniforms())
+        set_uniforms(self.program, {"seed": seed & 0xFFFFFFFF, "target_samples": target_samples,
+                                    "loop_budget": self.loop_budget, "loop_reserve": self.loop_reserve})
         acc.bind_image(0)
-        gx, gy = groups(acc.width, acc.height)
-        done = 0
-        while done < samples:
-            n = min(samples_per_pass, samples - done)
-            set_uniforms(self.program, {"seed": seed & 0xFFFFFFFF, "first_sample": acc.samples,
-                                        "samples_per_pass": n})
-            self.program.run(gx, gy)
-            self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
-            acc.samples += n
-            done += n
+        states.bind_to_storage_buffer(1)
+        self.progress.bind_to_storage_buffer(2)
+        self.program.run(*groups(acc.width, acc.height))
+        self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT
+                                | moderngl.SHADER_STORAGE_BARRIER_BIT)
+        acc.samples = target_samples
+        self.dispatches += 1
+
+    def run(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
+            target_samples: int, seed: int = 0) -> None:
+        """Dispatches until every pixel holds `target_samples` samples (one dispatch where the
+        driver has no loop limit; more on llvmpipe, where long paths resume across dispatches)."""
+        while True:
+            self.progress.write(bytes(4))
+            self.dispatch(resources, camera, acc, target_samples, seed)
+            (pending,) = struct.unpack("I", self.progress.read())
+            if pending == 0:
+                return
+
+    def release(self) -> None:
+        self.program.release()
+        self.progress.release()
+        if self.states is not None:
+            self.states.release()

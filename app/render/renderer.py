@@ -77,16 +77,20 @@ class Renderer:
         while done < spp:
             n = min(chunk, spp - done)
             self.timer.start()
-            self.pathtracer.run(self.resources, cam, acc, n, seed, samples_per_pass=n)
+            self.pathtracer.run(self.resources, cam, acc, done + n, seed)
             self.timer.stop()
             render_ms += self.timer.elapsed_ms
             done += n
             if progress is not None:
                 progress(done, spp)
-        image = acc.read()
-        return RenderResult(image, method, spp, render_ms, stats=self.resources.read_stats())
+        rgba = acc.read_rgba()
+        stats = self.resources.read_stats()
+        stats["min_samples"] = int(rgba[..., 3].min())
+        return RenderResult(rgba[..., :3].copy(), method, spp, render_ms, stats=stats)
 
     def release(self) -> None:
+        if self._pathtracer is not None:
+            self._pathtracer.release()
         if self._acc is not None:
             self._acc.release()
         self.resources.release()

@@ -16,6 +16,10 @@ from ..volume import Volume, load_scene_volume
 VOLUME_UNIT = 0
 TRANSFER_UNIT = 1
 STATS_BINDING = 7
+# Tracking steps (null and real collisions, shadow-ray steps) one path may take before it is
+# dropped and counted as truncated. Far beyond what max_bounces = 64 needs even at sigma_t = 1e4;
+# it only stops a pathological scene from hanging the GPU.
+DEFAULT_MAX_PATH_STEPS = 1 << 24
 
 
 class SceneResources:
@@ -27,6 +31,7 @@ class SceneResources:
         self.transfer_tex = None
         self.table: np.ndarray | None = None
         self.stats = ctx.buffer(reserve=16)
+        self.max_path_steps = DEFAULT_MAX_PATH_STEPS
         self.update(scene, volume)
 
     def update(self, scene: Scene, volume: Volume | None = None) -> set[str]:
@@ -78,6 +83,7 @@ class SceneResources:
             "environment": tuple(s.environment),
             "max_bounces": int(s.max_bounces),
             "anisotropy": float(s.anisotropy),
+            "max_path_steps": int(self.max_path_steps),
         }
 
     def bind(self) -> None:

@@ -1,74 +1,144 @@
-// Volumetric path tracing: the radiance arriving at `origin` from the direction -direction, i.e.
-// carried by light that travels towards origin along -direction. Full multiple scattering, at most
-// max_bounces scattering events, next-event estimation towards the sun with ratio tracking,
-// environment for paths that leave the box, throughput-based Russian roulette.
-// The probe bake calls this too: a walk starts at the probe and continues from each scattering
-// point. Directly seen sunlight (a delta) never enters; only scattered sun and the environment do.
+// Volumetric path tracing as a resumable state machine.
+//
+// A path estimates the radiance arriving at its origin from the direction -direction (light that
+// travels towards the origin along -direction): full multiple scattering, at most max_bounces
+// scattering events, next-event estimation towards the sun with ratio tracking, the environment for
+// paths that leave the box, throughput-based Russian roulette. The probe bake runs the same paths
+// from each probe (a walk continues from each scattering point). Directly seen sunlight (a delta
+// light) never enters; only scattered sun and the environment do.
+//
+// Why resumable: a dispatch may only run a bounded number of loop iterations (Mesa's llvmpipe ends
+// any invocation's loops after 65535 iterations in all; desktop drivers reset the GPU after a few
+// seconds). A path therefore runs until its dispatch's loop budget is low, then its state is saved
+// at a scattering event and the next dispatch continues it. Where the budget is unbounded (the
+// lent NVIDIA GPU) a path simply runs to its end. A flight cut short is continued from where
+// tracking stopped (free flight is memoryless); a shadow ray cut short loses the path (counted).
 uniform int max_bounces;
-uniform float anisotropy;  // Henyey-Greenstein g
+uniform float anisotropy;     // Henyey-Greenstein g
+uniform int max_path_steps;   // hang guard: tracking steps one path may take in all
 
 #ifndef RR_START_BOUNCE
 #define RR_START_BOUNCE 3
 #endif
 
-// Returns false when the path ran out of its step budget (its estimate is then discarded).
-bool path_radiance(vec3 origin, vec3 direction, inout uint rng, out vec3 radiance)
+const int PATH_IDLE = 0;
+const int PATH_ACTIVE = 1;
+
+const int PATH_DONE = 0;
+const int PATH_SUSPENDED = 1;
+const int PATH_TRUNCATED = 2;
+
+// std430-friendly: four 16-byte rows.
+struct PathState {
+    vec3 x;             // current vertex (origin, then each scattering point)
+    int bounce;         // scattering events so far
+    vec3 w;             // direction the path travels from x
+    uint rng;
+    vec3 throughput;
+    int steps_used;     // tracking steps so far (against max_path_steps)
+    vec3 radiance;      // estimate so far
+    int status;         // PATH_IDLE or PATH_ACTIVE
+};
+
+void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
 {
-    radiance = vec3(0.0);
-    vec3 throughput = vec3(1.0);
-    int steps_left = MAX_PATH_STEPS;
-    vec3 x = origin;
-    vec3 w = direction;
-    for (int bounce = 0; ; ++bounce) {
-        float t0, t1;
-        if (!box_intersect(x, w, t0, t1)) {
-            radiance += throughput * environment;
-            return true;
-        }
-        float t;
-        int event = delta_track(x, w, t0, t1, rng, steps_left, t);
-        if (event == TRACK_ESCAPED) {
-            radiance += throughput * environment;
-            return true;
-        }
-        if (event == TRACK_OUT_OF_STEPS)
-            return false;
-        if (bounce >= max_bounces)
-            return true;  // this would be scattering event bounce + 1 > max_bounces
-        x += t * w;
-        throughput *= albedo_at(x);
-        if (all(equal(throughput, vec3(0.0))))
-            return true;
-        // Next-event estimation towards the sun.
-        if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
-            float tr = transmittance_to_boundary(x, sun_direction, rng, steps_left);
-            if (tr < 0.0)
-                return false;
-            radiance += throughput * sun_irradiance * (tr * phase_hg(dot(sun_direction, w), anisotropy));
-        }
-        w = sample_hg(w, anisotropy, rng_next(rng), rng_next(rng));
-        if (bounce + 1 >= RR_START_BOUNCE) {
-            float q = max(throughput.r, max(throughput.g, throughput.b));
-            if (q < 1.0) {
-                if (rng_next(rng) >= q)
-                    return true;
-                throughput /= q;
-            }
-        }
-    }
+    p.x = origin;
+    p.bounce = 0;
+    p.w = direction;
+    p.rng = rng;
+    p.throughput = vec3(1.0);
+    p.steps_used = 0;
+    p.radiance = vec3(0.0);
+    p.status = PATH_ACTIVE;
 }
 
-// Adds one sample to a running sum unless it is not finite (then it is counted, never averaged).
-void accumulate_sample(inout vec3 sum, inout uint count, vec3 value, bool valid)
+const int STEP_CONTINUE = 0;
+const int STEP_DONE = 1;
+const int STEP_FLIGHT_CUT = 2;     // steps ran out mid-flight; p.x moved to where tracking stopped
+const int STEP_OUT_OF_STEPS = 3;   // steps ran out in a shadow ray; the estimate is lost
+
+// One flight to the next scattering event, its sun estimate and the choice of the next direction.
+int path_step(inout PathState p, inout int steps_left)
 {
-    if (!valid) {
+    float t0, t1;
+    if (!box_intersect(p.x, p.w, t0, t1)) {
+        p.radiance += p.throughput * environment;
+        return STEP_DONE;
+    }
+    float t;
+    int event = delta_track(p.x, p.w, t0, t1, p.rng, steps_left, t);
+    if (event == TRACK_ESCAPED) {
+        p.radiance += p.throughput * environment;
+        return STEP_DONE;
+    }
+    if (event == TRACK_OUT_OF_STEPS) {
+        p.x += t * p.w;
+        return STEP_FLIGHT_CUT;
+    }
+    if (p.bounce >= max_bounces)
+        return STEP_DONE;  // this event would be scattering number max_bounces + 1
+    p.bounce += 1;
+    p.x += t * p.w;
+    p.throughput *= albedo_at(p.x);
+    if (all(equal(p.throughput, vec3(0.0))))
+        return STEP_DONE;
+    if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
+        float tr = transmittance_to_boundary(p.x, sun_direction, p.rng, steps_left);
+        if (tr < 0.0)
+            return STEP_OUT_OF_STEPS;
+        p.radiance += p.throughput * sun_irradiance * (tr * phase_hg(dot(sun_direction, p.w), anisotropy));
+    }
+    p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
+    if (p.bounce >= RR_START_BOUNCE) {
+        float q = max(p.throughput.r, max(p.throughput.g, p.throughput.b));
+        if (q < 1.0) {
+            if (rng_next(p.rng) >= q)
+                return STEP_DONE;
+            p.throughput /= q;
+        }
+    }
+    return STEP_CONTINUE;
+}
+
+// Runs the path until it ends (PATH_DONE), its budgets run out (PATH_TRUNCATED), or the dispatch's
+// loop budget falls to the reserve one more flight may need (PATH_SUSPENDED, state kept in p).
+int path_continue(inout PathState p, inout int loop_budget, int reserve)
+{
+    for (;;) {
+        if (loop_budget <= reserve)
+            return PATH_SUSPENDED;
+        loop_budget -= 1;
+        int path_left = max_path_steps - p.steps_used;
+        if (path_left <= 0)
+            return PATH_TRUNCATED;
+        bool dispatch_bound = loop_budget < path_left;
+        int steps_left = min(path_left, loop_budget);
+        int before = steps_left;
+        int result = path_step(p, steps_left);
+        p.steps_used += before - steps_left;
+        loop_budget -= before - steps_left;
+        if (result == STEP_DONE)
+            return PATH_DONE;
+        if (result == STEP_FLIGHT_CUT)
+            return dispatch_bound ? PATH_SUSPENDED : PATH_TRUNCATED;
+        if (result == STEP_OUT_OF_STEPS)
+            return PATH_TRUNCATED;
+    }
+    return PATH_TRUNCATED;  // reached only if a driver cut the loop short
+}
+
+// Adds a finished path to a running mean (rgb mean, a count); truncated and non-finite estimates
+// are counted in tracking_stats and left out, never averaged.
+void path_finish(inout vec4 mean_and_count, PathState p, int result)
+{
+    if (result == PATH_TRUNCATED) {
         atomicAdd(tracking_stats.truncated_paths, 1u);
         return;
     }
-    if (any(isnan(value)) || any(isinf(value))) {
+    if (any(isnan(p.radiance)) || any(isinf(p.radiance))) {
         atomicAdd(tracking_stats.nonfinite_samples, 1u);
         return;
     }
-    sum += value;
-    count += 1u;
+    mean_and_count.a += 1.0;
+    mean_and_count.rgb += (p.radiance - mean_and_count.rgb) / mean_and_count.a;
 }

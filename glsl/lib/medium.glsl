@@ -14,14 +14,15 @@ float density_at(vec3 p)
     return texture(volume_density, p / (2.0 * box_half_extent) + 0.5).r;
 }
 
-// Exact linear interpolation between table entries (no filtering-precision loss).
+// Linear interpolation between table entries, written a + (b - a) f so that equal entries give
+// exactly that entry (an albedo of exactly 1 must stay 1 over millions of bounces).
 vec4 transfer_at(float d)
 {
     float x = clamp(d, 0.0, 1.0) * float(transfer_size - 1);
     int i0 = min(int(x), transfer_size - 2);
     vec4 a = texelFetch(transfer_function, ivec2(i0, 0), 0);
     vec4 b = texelFetch(transfer_function, ivec2(i0 + 1, 0), 0);
-    return mix(a, b, x - float(i0));
+    return a + (b - a) * (x - float(i0));
 }
 
 float sigma_t_at(vec3 p)

@@ -7,7 +7,8 @@ const float INV_4PI = 0.07957747154594767;
 
 float phase_hg(float cos_theta, float g)
 {
-    float denom = 1.0 + g * g - 2.0 * g * cos_theta;
+    // 1 + g^2 - 2 g cos written without cancellation near cos = 1 for g -> 1
+    float denom = (1.0 - g) * (1.0 - g) + 2.0 * g * (1.0 - cos_theta);
     return INV_4PI * (1.0 - g * g) / (denom * sqrt(max(denom, 1e-12)));
 }
 

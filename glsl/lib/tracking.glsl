@@ -1,10 +1,7 @@
 // Free-flight sampling and transmittance against a majorant (Woodcock delta tracking and ratio
-// tracking). Unbiased as long as majorant >= sigma_t. Every loop draws on a per-path step budget,
-// so a dense or pathological volume cannot hang the GPU; a path that runs out is dropped and
-// counted in tracking_stats.truncated_paths (the renderers report it, the tests assert it is 0).
-#ifndef MAX_PATH_STEPS
-#define MAX_PATH_STEPS 4194304
-#endif
+// tracking). Unbiased as long as majorant >= sigma_t. Every loop draws on a step budget, so a dense
+// or pathological volume cannot hang the GPU; a path that runs out is dropped and counted in
+// tracking_stats.truncated_paths (the renderers report it, the tests assert it is 0).
 
 layout(std430, binding = 7) buffer TrackingStats
 {
@@ -17,6 +14,8 @@ const int TRACK_COLLIDED = 1;
 const int TRACK_OUT_OF_STEPS = 2;
 
 // Samples the distance to the next real collision on origin + t * direction, t in [t_min, t_max].
+// When the steps run out, t_collision is where tracking stopped: free flight is memoryless, so a
+// flight continued from there (same majorant) is distributed exactly as one never interrupted.
 int delta_track(vec3 origin, vec3 direction, float t_min, float t_max, inout uint rng,
                 inout int steps_left, out float t_collision)
 {
@@ -34,6 +33,7 @@ int delta_track(vec3 origin, vec3 direction, float t_min, float t_max, inout uin
             return TRACK_COLLIDED;
         }
     }
+    t_collision = t;
     return TRACK_OUT_OF_STEPS;
 }
 

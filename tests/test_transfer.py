@@ -1,0 +1,88 @@
+"""Transfer function tables (SPEC.md "Optical model")."""
+import numpy as np
+import pytest
+
+from app.scene import TransferFunctionSpec, parse_scene
+from app.transfer import ALIASES, COLORMAPS, colormap_rgb, lookup, opacity_curve, transfer_table
+
+
+@pytest.mark.parametrize("n", [2, 7, 256, 1000])
+def test_table_shape_and_range(n):
+    t = transfer_table(TransferFunctionSpec(resolution=n))
+    assert t.shape == (n, 4) and t.dtype == np.float32
+    assert np.isfinite(t).all() and t.min() >= 0.0 and t.max() <= 1.0
+
+
+def test_opacity_through_control_points_and_constant_beyond():
+    pts = ((0.25, 0.2), (0.5, 0.9), (0.75, 0.4))
+    n = 101  # entries at multiples of 0.01, so every control point is an entry
+    a = transfer_table(TransferFunctionSpec(opacity=pts, resolution=n))[:, 3]
+    d = np.linspace(0, 1, n)
+    for x, y in pts:
+        assert a[round(x * (n - 1))] == pytest.approx(y, abs=1e-7)
+    assert np.all(a[d <= 0.25] == np.float32(0.2))
+    assert np.all(a[d >= 0.75] == np.float32(0.4))
+    # linear in between
+    np.testing.assert_allclose(a[35], 0.2 + 0.7 * 0.4, atol=1e-6)
+    np.testing.assert_allclose(a[60], 0.9 - 0.5 * 0.4, atol=1e-6)
+
+
+def test_default_opacity():
+    a = transfer_table(TransferFunctionSpec(resolution=11))[:, 3]
+    np.testing.assert_allclose(a, np.clip((np.linspace(0, 1, 11) - 0.2) / 0.8, 0, 1), atol=1e-6)
+
+
+def test_single_control_point_is_constant():
+    np.testing.assert_array_equal(opacity_curve(((0.3, 0.6),), 5), np.full(5, 0.6))
+
+
+@pytest.mark.parametrize("name", COLORMAPS)
+def test_every_colormap(name):
+    spec = parse_scene({"transfer_function": {"colormap": name}}).transfer_function
+    t = transfer_table(spec)
+    assert t.shape == (256, 4)
+    rgb = t[:, :3]
+    assert rgb.min() >= 0 and rgb.max() <= 1
+    assert np.ptp(rgb, axis=0).max() > 0.3  # not a constant colour
+    if name in ALIASES:
+        np.testing.assert_array_equal(rgb, colormap_rgb(ALIASES[name], 256).astype(np.float32))
+
+
+def test_aliases_present():
+    for alias in ("cool-warm", "gray", "rainbow"):
+        assert alias in COLORMAPS
+    assert np.allclose(colormap_rgb("gray", 5), np.linspace(0, 1, 5)[:, None].repeat(3, 1), atol=1e-3)
+
+
+def test_colormap_endpoints_are_the_preset_endpoints():
+    from app.transfer import _colormap_tables
+    for name, table in _colormap_tables().items():
+        c = colormap_rgb(name, 17)
+        np.testing.assert_allclose(c[0], table[0])
+        np.testing.assert_allclose(c[-1], table[-1])
+
+
+def test_explicit_rgba_rows_verbatim():
+    rows = [[0.0, 0.1, 0.2, 0.0], [0.3, 0.4, 0.5, 0.25], [1.0, 0.9, 0.8, 1.0]]
+    spec = parse_scene({"transfer_function": {"rgba": rows}}).transfer_function
+    t = transfer_table(spec)
+    assert t.shape == (3, 4)
+    np.testing.assert_array_equal(t, np.asarray(rows, np.float32))
+
+
+def test_lookup_interpolates_linearly():
+    rng = np.random.default_rng(5)
+    table = rng.uniform(size=(9, 4)).astype(np.float32)
+    n = len(table)
+    entries = np.linspace(0, 1, n)
+    np.testing.assert_allclose(lookup(table, entries), table, atol=1e-7)
+    mids = (entries[:-1] + entries[1:]) / 2
+    np.testing.assert_allclose(lookup(table, mids), (table[:-1].astype(np.float64) + table[1:]) / 2,
+                               atol=1e-7)
+    quarter = entries[:-1] + 0.25 / (n - 1)
+    np.testing.assert_allclose(lookup(table, quarter),
+                               0.75 * table[:-1].astype(np.float64) + 0.25 * table[1:], atol=1e-7)
+    # clamped outside [0, 1]
+    np.testing.assert_allclose(lookup(table, np.array([-1.0, 2.0])), table[[0, -1]], atol=0)
+    # shape (..., 4)
+    assert lookup(table, np.zeros((2, 3))).shape == (2, 3, 4)
