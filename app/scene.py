@@ -22,6 +22,7 @@ MAX_BOUNCES_LIMIT = 1_000_000_000
 MAX_IMAGE_SIDE = 16384
 MAX_PROBE_AXIS = 256
 MAX_PROBE_SAMPLES = 1 << 20
+MAX_TRANSFER_ROWS = 4096  # the table is an N x 1 texture; GL guarantees widths up to 16384
 SH_WINDOWS = ("none", "hann", "lanczos")
 PROBE_PRECISIONS = ("rgba32f", "rgba16f")
 
@@ -220,12 +221,14 @@ def _parse_transfer(d: Any) -> TransferFunctionSpec:
         kw["opacity"] = parsed
     if "rgba" in d:
         rows = d["rgba"]
-        if not isinstance(rows, (list, tuple)) or len(rows) < 2:
-            raise SceneError("transfer_function.rgba: expected at least 2 rows of [r, g, b, a]")
+        if not isinstance(rows, (list, tuple)) or not 2 <= len(rows) <= MAX_TRANSFER_ROWS:
+            raise SceneError(f"transfer_function.rgba: expected 2 to {MAX_TRANSFER_ROWS} rows of "
+                             "[r, g, b, a]")
         kw["rgba"] = tuple(_vector(r, f"transfer_function.rgba[{i}]", 4, lo=0.0, hi=1.0)
                            for i, r in enumerate(rows))
     if "resolution" in d:
-        kw["resolution"] = _integer(d["resolution"], "transfer_function.resolution", 2, 4096)
+        kw["resolution"] = _integer(d["resolution"], "transfer_function.resolution", 2,
+                                    MAX_TRANSFER_ROWS)
     return TransferFunctionSpec(**kw)
 
 

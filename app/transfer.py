@@ -58,4 +58,6 @@ def lookup(table: np.ndarray, density: np.ndarray) -> np.ndarray:
     x = np.clip(np.asarray(density, np.float64), 0.0, 1.0) * (n - 1)
     i0 = np.minimum(np.floor(x).astype(np.int64), n - 2)
     f = (x - i0)[..., None]
-    return table[i0] * (1 - f) + table[i0 + 1] * f
+    a = np.asarray(table[i0], np.float64)
+    # a + (b - a) f as in glsl/lib/medium.glsl: equal entries give exactly that entry.
+    return a + (table[i0 + 1] - a) * f

@@ -10,9 +10,11 @@ Tolerances
   involved, so we allow 3/256 * (max - min of those 8 voxels) + 2e-6 (float32 coordinates).
   Where the driver is Mesa llvmpipe (the CI context), which filters float textures with float
   weights, we also require the error to stay below 2e-6.
-* medium, exact-uint8 (R8) volume: the filter result itself is an 8-bit unorm on llvmpipe (we
-  measured results on the 1/255 grid), so we allow another 0.5/255 + 1e-6 on top of the weight bound.
-  At voxel centres the weights are 0 or 1 and the result is exact for both formats.
+* medium, exact-uint8 (R8) volume: llvmpipe filters unorm8 textures in 8-bit fixed point: every
+  result lies on the 1/255 grid and the three lerp stages (x, then y, then z) each round, so we allow
+  another 3 * 0.5/255 on top of the weight bound (measured: at most 1.44/255 from exact trilinear,
+  0.59/255 beyond the weight bound). At voxel centres the weights are 0 or 1 and the result is
+  exact for both formats.
 * sigma_t and albedo: at the density the GLSL code itself sampled, the transfer lookup is exact
   linear interpolation in float32 (texelFetch + mix): rtol 1e-5. Against the full NumPy twin the
   density tolerance above is carried through the table's steepest slope.
@@ -150,8 +152,8 @@ CAMERAS = [
     CameraSpec(),
     CameraSpec(eye=(1.5, -0.7, 2.0), target=(0.1, 0.2, -0.3), up=(0.2, 1.0, 0.1), fov_y=60.0,
                width=37, height=21),
-    CameraSpec(eye=(0.0, 0.0, -3.0), target=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0 + 1e-3) if False else (1.0, 0.0, 0.0),
-               fov_y=20.0, width=8, height=30),
+    CameraSpec(eye=(0.0, 0.0, -3.0), target=(0.0, 0.0, 0.0), up=(1.0, 0.0, 0.0), fov_y=20.0,
+               width=8, height=30),
 ]
 
 
@@ -275,14 +277,14 @@ def _voxel_centres(volume):
     return (uvw - 0.5) * 2 * volume.half_extent.astype(np.float64)
 
 
-def _run_medium(ctx, volume, table, points):
+def _run_medium(ctx, volume, table, points, albedo=ALBEDO):
     vt = volume_texture(ctx, volume)
     tt = transfer_texture(ctx, table)
     try:
         vt.use(0)
         tt.use(1)
         uniforms = {"volume_density": 0, "transfer_function": 1, "transfer_size": len(table),
-                    "density_scale": DENSITY_SCALE, "albedo": ALBEDO,
+                    "density_scale": DENSITY_SCALE, "albedo": albedo,
                     "box_half_extent": tuple(float(v) for v in volume.half_extent)}
         pts = np.ascontiguousarray(points, np.float32)
         out = run_kernel(ctx, MEDIUM_KERNEL, [pts.ravel()], (len(pts), 5), uniforms=uniforms,
@@ -314,7 +316,7 @@ def test_medium_matches_numpy(ctx, kind):
     spread = _corner_spread(volume, pts)
     tol = 3 / 256 * spread + 2e-6
     if kind == "uint8":
-        tol += 0.5 / 255 + 1e-6
+        tol += 1.5 / 255
     err = np.abs(d - want_d)
     assert np.all(err <= tol), (err.max(), np.argmax(err - tol))
     if kind == "float" and "llvmpipe" in ctx.info["GL_RENDERER"]:
@@ -333,6 +335,17 @@ def test_medium_matches_numpy(ctx, kind):
     assert np.all(np.abs(sigma_t - ws) <= DENSITY_SCALE * (slope[3] * tol + 1e-5))
     wa = albedo_at(volume, table, ALBEDO, pts)
     assert np.all(np.abs(alb - wa) <= ALBEDO * (slope[:3] * tol[:, None] + 1e-5))
+
+
+def test_constant_table_is_exact(ctx):
+    # Equal table entries give exactly that entry: an albedo of 1 stays exactly 1 (a white furnace
+    # over millions of bounces depends on it), and sigma_t is exactly density_scale * alpha.
+    volume = _float_volume()
+    table = np.tile(np.array([[1.0, 1.0, 1.0, 0.75]], np.float32), (5, 1))
+    d, sigma_t, alb = _run_medium(ctx, volume, table, _points(volume, n=1000), albedo=1.0)
+    assert np.all(alb == 1.0)
+    assert np.all(sigma_t == np.float32(DENSITY_SCALE * 0.75))
+    assert d.min() < 0.2 and d.max() > 0.8  # the densities did vary
 
 
 def test_density_twin_follows_spec():

@@ -95,6 +95,8 @@ def test_scene_replace():
 def _with(path: str, value):
     """FULL with the dotted path set to value."""
     d = copy.deepcopy(FULL)
+    if path == "transfer_function.rgba":  # rgba rows replace colormap and opacity
+        d["transfer_function"] = {}
     keys = path.split(".")
     node = d
     for k in keys[:-1]:
@@ -151,6 +153,10 @@ BAD = [
     ("transfer_function.colormap", "nope", "transfer_function.colormap"),
     ("transfer_function.opacity", [[0.5, 0.0], [0.2, 1.0]], "transfer_function.opacity"),
     ("transfer_function.opacity", [[0.5, 1.5]], r"transfer_function.opacity\[0\]"),
+    ("transfer_function.rgba", [[0, 0, 0, 0]], "transfer_function.rgba"),
+    ("transfer_function.rgba", [[0, 0, 0, 0]] * 4097, "transfer_function.rgba"),
+    ("transfer_function.rgba", [[0, 0, 0, 0], [0, 0, 2, 0]], r"transfer_function.rgba\[1\]\[2\]"),
+    ("transfer_function.resolution", 1, "transfer_function.resolution"),
     ("volume.spacing", [1, 0, 1], r"volume.spacing\[1\]"),
     ("volume.value_range", [5, 5], "volume.value_range"),
     ("volume.dims", [4, 0, 2], r"volume.dims\[1\]"),

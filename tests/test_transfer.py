@@ -54,6 +54,17 @@ def test_aliases_present():
     assert np.allclose(colormap_rgb("gray", 5), np.linspace(0, 1, 5)[:, None].repeat(3, 1), atol=1e-3)
 
 
+def test_alias_character():
+    grey = colormap_rgb("gray", 9)
+    np.testing.assert_array_equal(grey[:, 0], grey[:, 1])
+    np.testing.assert_array_equal(grey[:, 1], grey[:, 2])
+    cw = colormap_rgb("cool-warm", 9)
+    assert cw[0, 2] > cw[0, 0] and cw[-1, 0] > cw[-1, 2]  # blue to red
+    rb = colormap_rgb("rainbow", 9)
+    assert rb[0, 2] > rb[0, 0] and rb[-1, 0] > rb[-1, 2]  # blue to red
+    assert rb[4, 1] > 0.8 and rb[4, 1] > rb[4, 2]  # through green-yellow in the middle
+
+
 def test_colormap_endpoints_are_the_preset_endpoints():
     from app.transfer import _colormap_tables
     for name, table in _colormap_tables().items():
@@ -86,3 +97,10 @@ def test_lookup_interpolates_linearly():
     np.testing.assert_allclose(lookup(table, np.array([-1.0, 2.0])), table[[0, -1]], atol=0)
     # shape (..., 4)
     assert lookup(table, np.zeros((2, 3))).shape == (2, 3, 4)
+
+
+def test_lookup_equal_entries_exact():
+    # An albedo of exactly 1 must stay exactly 1 (glsl/lib/medium.glsl writes a + (b - a) f).
+    table = np.array([[1.0, 0.3, 0.7, 1.0]] * 5, np.float32)
+    d = np.random.default_rng(0).uniform(size=10000)
+    np.testing.assert_array_equal(lookup(table, d), np.broadcast_to(table[0].astype(np.float64), (10000, 4)))

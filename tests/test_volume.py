@@ -77,6 +77,20 @@ def test_npy(tmp_path):
     np.testing.assert_allclose(v.data, (raw + 2) / 5, atol=1e-7)
 
 
+@pytest.mark.parametrize("layout", ["fortran", "big-endian"])
+def test_npy_layouts(tmp_path, ctx, layout):
+    raw = np.arange(60, dtype=np.float32).reshape(3, 4, 5)
+    arr = np.asfortranarray(raw) if layout == "fortran" else raw.astype(">f4")
+    f = tmp_path / "vol.npy"
+    np.save(f, arr)
+    v = load_volume(file_spec(f))
+    assert v.dims == (5, 4, 3)
+    np.testing.assert_allclose(v.data, raw / 59, atol=1e-7)
+    t = volume_texture(ctx, v)  # texel order x fastest whatever the array's memory layout
+    np.testing.assert_allclose(np.frombuffer(t.read(), np.float32), (raw / 59).ravel(), atol=1e-7)
+    t.release()
+
+
 def _write_nrrd(path, data, header):
     nrrd.write(str(path), data, header, index_order="C")
 
