@@ -77,22 +77,28 @@ def _smoothstep(e0: float, e1: float, v: np.ndarray) -> np.ndarray:
 
 
 def builtin_cloud(size: tuple[int, int, int]) -> np.ndarray:
-    """A soft cumulus-like cloud: overlapping Gaussian puffs modulated by smooth sine noise."""
+    """A cumulus-like cloud: many Gaussian puffs over a flattened base, eroded by smooth noise."""
     x, y, z = _grid(size)
     rng = np.random.default_rng(7)
-    d = np.zeros(np.broadcast_shapes(x.shape, y.shape, z.shape), np.float32)
-    for _ in range(14):
-        c = rng.uniform([-0.45, -0.3, -0.45], [0.45, 0.35, 0.45])
-        r = rng.uniform(0.18, 0.38)
-        d += np.exp(-(((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2) / (r * r))).astype(np.float32)
-    noise = np.zeros_like(d)
-    for octave in range(3):
-        f = 3.0 * 2 ** octave
-        ph = rng.uniform(0, 2 * np.pi, 3)
-        noise += (np.sin(f * x + ph[0]) * np.sin(f * y + ph[1]) * np.sin(f * z + ph[2])) / 2 ** octave
-    d = d * (1.0 + 0.35 * noise)
-    d = _smoothstep(0.35, 1.6, d)
-    d *= _smoothstep(1.0, 0.8, np.maximum(np.maximum(abs(x), abs(y)), abs(z)))  # zero at the box
+    shape = np.broadcast_shapes(x.shape, y.shape, z.shape)
+    puffs = np.zeros(shape, np.float32)
+    for _ in range(36):
+        c = rng.normal(0.0, [0.3, 0.15, 0.27])
+        c[1] = abs(c[1]) - 0.15  # towers rise from a common base
+        r = rng.uniform(0.16, 0.34)
+        puffs = np.maximum(puffs, np.exp(-(((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2)
+                                           / (r * r))).astype(np.float32))
+    noise = np.zeros(shape, np.float32)
+    for octave in range(4):
+        f = 5.0 * 2.0 ** octave
+        for _ in range(3):
+            k = rng.normal(size=3)
+            k *= f / np.linalg.norm(k)
+            noise += (np.sin(k[0] * x + k[1] * y + k[2] * z + rng.uniform(0, 2 * np.pi))
+                      / (3 * 1.8 ** octave)).astype(np.float32)
+    d = _smoothstep(0.3, 0.95, puffs + 0.35 * noise)
+    d *= _smoothstep(0.95, 0.75, np.maximum(np.maximum(abs(x), abs(y)), abs(z)))  # zero at the box
+    d *= _smoothstep(-0.45, -0.3, y)  # flat cloud base
     return (d / max(float(d.max()), 1e-6)).astype(np.float32)
 
 

@@ -16,14 +16,16 @@ def _check_gl(ctx: moderngl.Context, what: str) -> None:
 
 
 def volume_texture(ctx: moderngl.Context, volume: Volume) -> moderngl.Texture3D:
-    """A one-channel 3D texture (R8 for exact 8-bit data, else R32F): linear, clamped to edge."""
+    """A one-channel 3D texture, linear, clamped to edge: R16 for exact 8-bit data (k * 257 / 65535
+    is exactly k / 255, and llvmpipe filters 8-bit textures with 8-bit intermediate rounding), else
+    R32F."""
     limit = ctx.info["GL_MAX_3D_TEXTURE_SIZE"]
     if max(volume.dims) > limit:
         raise VolumeError(f"{volume.name}: dimensions {volume.dims} exceed this GPU's "
                           f"GL_MAX_3D_TEXTURE_SIZE of {limit}")
     if volume.exact_uint8:
-        payload = np.round(volume.data * 255.0).astype(np.uint8)
-        dtype = "f1"
+        payload = (np.round(volume.data * 255.0).astype(np.uint16) * 257).astype(np.uint16)
+        dtype = "nu2"
     else:
         payload = np.ascontiguousarray(volume.data, np.float32)
         dtype = "f4"
