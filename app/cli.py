@@ -40,6 +40,20 @@ def cmd_render(args: argparse.Namespace) -> int:
     from .render.renderer import Renderer
 
     scene = _scene_from_arg(args.scene)
+    probe_changes = {}
+    if args.probe_grid:
+        probe_changes["grid"] = args.probe_grid
+    if args.probe_samples:
+        probe_changes["samples"] = args.probe_samples
+    if args.sh_window:
+        probe_changes["sh_window"] = args.sh_window
+    if args.probe_precision:
+        probe_changes["precision"] = args.probe_precision
+    if probe_changes:
+        from .scene import parse_scene, scene_to_dict
+        data = scene_to_dict(scene)
+        data["probes"].update(probe_changes)
+        scene = parse_scene(data, base_dir=scene.base_dir)
     if args.width or args.height:
         cam = scene.camera
         w = args.width or cam.width
@@ -49,15 +63,26 @@ def cmd_render(args: argparse.Namespace) -> int:
     ctx = create_headless_context()
     renderer = Renderer(ctx, scene)
     spp = args.spp
+    bake_report = _progress("probe bake passes")
+
+    def on_bake_pass(grid) -> None:
+        bake_report(grid.passes_done, grid.passes_total)
+
     result = renderer.render(args.method, spp=spp, seed=args.seed,
                              samples_per_pass=args.samples_per_pass,
-                             progress=_progress(f"{args.method} samples"))
+                             progress=_progress(f"{args.method} samples"), bake_progress=on_bake_pass)
     out = save_png(args.out, result.image, args.exposure)
     print(f"device: {describe(ctx)}")
     cam = scene.camera
     print(f"method: {result.method}  image: {cam.width}x{cam.height}  spp: {result.spp}")
-    if result.bake_ms:
-        print(f"bake GPU time: {result.bake_ms:.1f} ms")
+    if renderer.probe_grid is not None and args.method != "pt":
+        g = renderer.probe_grid
+        rep = g.progress_report()
+        print(f"probes: {g.grid[0]}x{g.grid[1]}x{g.grid[2]}, {g.samples} walks each, "
+              f"{g.precision}, window {scene.probes.sh_window}; textures {g.gpu_bytes / 2**20:.1f} MiB; "
+              f"bake GPU time: {result.bake_ms:.1f} ms; last pass changed the probes by "
+              f"{100 * rep.relative_change:.2f}% (est. standard error "
+              f"{'n/a, one pass' if rep.passes_done < 2 else f'{100 * rep.standard_error:.2f}%'})")
     print(f"render GPU time: {result.render_ms:.1f} ms  ({result.ms_per_sample:.3f} ms per sample "
           "per pixel of the whole image)")
     if result.stats.get("truncated_paths") or result.stats.get("nonfinite_samples"):
@@ -88,12 +113,24 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", default="render.png", help="PNG path (default render.png)")
     r.add_argument("--linear", help="also write the linear float32 (H, W, 3) image as .npy")
     r.add_argument("--exr", help="also write the linear image as OpenEXR")
+    r.add_argument("--probe-grid", type=_grid_arg, help="probes per axis: N or NX,NY,NZ (1..256)")
+    r.add_argument("--probe-samples", type=_positive_int, help="walks per probe")
+    r.add_argument("--sh-window", choices=("none", "hann", "lanczos"))
+    r.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"))
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--width", type=_positive_int)
     r.add_argument("--height", type=_positive_int)
     r.add_argument("--exposure", type=float, default=1.0, help="PNG exposure (default 1)")
     r.set_defaults(func=cmd_render)
     return parser
+
+
+def _grid_arg(text: str) -> list[int]:
+    parts = text.split(",")
+    if len(parts) not in (1, 3):
+        raise argparse.ArgumentTypeError(f"expected N or NX,NY,NZ, got {text!r}")
+    values = [_positive_int(p) for p in parts]
+    return values * 3 if len(values) == 1 else values
 
 
 def _positive_int(text: str) -> int:

@@ -84,7 +84,7 @@ class CameraSpec:
 class ProbeSpec:
     grid: tuple[int, int, int] = (16, 16, 16)
     samples: int = 256
-    sh_window: str = "hann"
+    sh_window: str = "none"
     precision: str = "rgba32f"
 
 

@@ -1,6 +1,7 @@
-// Reference path tracer. Each invocation owns one pixel: it continues the pixel's path in flight,
-// starts new samples until the pixel has target_samples of them, and stops when the dispatch's loop
-// budget runs low (the host dispatches again while pixels_with_work > 0).
+// Reference path tracer, and with PROBE_LIGHTING the probe renderers (1: probes, the sun by a
+// shadow ray; 2: probes-only). Each invocation owns one pixel: it continues the pixel's path in
+// flight, starts new samples until the pixel has target_samples of them, and stops when the
+// dispatch's loop budget runs low (the host dispatches again while pixels_with_work > 0).
 layout(local_size_x = 8, local_size_y = 8) in;
 
 #include "lib/rng.glsl"
@@ -9,6 +10,12 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #include "lib/lights.glsl"
 #include "lib/phase.glsl"
 #include "lib/tracking.glsl"
+#if defined(PROBE_LIGHTING)
+#define PROBE_SAMPLING
+#include "lib/sh.glsl"
+#include "lib/directions.glsl"
+#include "lib/probes.glsl"
+#endif
 #include "lib/integrator.glsl"
 
 layout(rgba32f, binding = 0) uniform image2D accumulation;  // rgb: running mean, a: sample count

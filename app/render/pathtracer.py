@@ -20,9 +20,9 @@ def groups(width: int, height: int) -> tuple[int, int]:
 
 
 class PathTracer:
-    def __init__(self, ctx: moderngl.Context):
+    def __init__(self, ctx: moderngl.Context, defines: dict | None = None):
         self.ctx = ctx
-        self.program = compute_program(ctx, "pathtrace.comp")
+        self.program = compute_program(ctx, "pathtrace.comp", defines)
         self.loop_budget, self.loop_reserve = loop_budget(ctx)
         self.states: moderngl.Buffer | None = None
         self.progress = ctx.buffer(reserve=4)
@@ -37,13 +37,14 @@ class PathTracer:
         return self.states
 
     def dispatch(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
-                 target_samples: int, seed: int = 0) -> None:
+                 target_samples: int, seed: int = 0, extra_uniforms: dict | None = None) -> None:
         """One dispatch towards `target_samples` per pixel; starts afresh when acc was reset."""
         states = self._states_for(acc)
         if acc.samples == 0:
             states.clear()
         resources.bind()
         set_uniforms(self.program, resources.uniforms())
+        set_uniforms(self.program, extra_uniforms or {})
         set_uniforms(self.program, camera.uniforms())
         set_uniforms(self.program, {"seed": seed & 0xFFFFFFFF, "target_samples": target_samples,
                                     "loop_budget": self.loop_budget, "loop_reserve": self.loop_reserve})
@@ -57,12 +58,14 @@ class PathTracer:
         self.dispatches += 1
 
     def run(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
-            target_samples: int, seed: int = 0) -> None:
+            target_samples: int, seed: int = 0, extra_uniforms: dict | None = None) -> None:
         """Dispatches until every pixel holds `target_samples` samples (one dispatch where the
         driver has no loop limit; more on llvmpipe, where long paths resume across dispatches)."""
         while True:
             self.progress.write(bytes(4))
-            self.dispatch(resources, camera, acc, target_samples, seed)
+            self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms)
+            if self.loop_budget >= (1 << 30):
+                return  # no driver loop limit: every pixel finished in this dispatch
             (pending,) = struct.unpack("I", self.progress.read())
             if pending == 0:
                 return

@@ -14,9 +14,12 @@ from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation
 from .pathtracer import PathTracer
+from .probes import ProbeGrid
 from .resources import SceneResources
 
-METHODS = ("pt",)
+METHODS = ("pt", "probes", "probes-only")
+# Variants of glsl/pathtrace.comp: the probe renderers stop at the first scattering event.
+PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
 
 
 @dataclass
@@ -37,9 +40,11 @@ class Renderer:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None):
         self.ctx = ctx
         self.resources = SceneResources(ctx, scene, volume)
-        self._pathtracer: PathTracer | None = None
+        self._passes: dict[str, PathTracer] = {}
         self._acc: Accumulation | None = None
         self.timer = GpuTimer(ctx)
+        self.probe_grid: ProbeGrid | None = None
+        self._baked_key: tuple | None = None
 
     @property
     def scene(self) -> Scene:
@@ -48,11 +53,53 @@ class Renderer:
     def set_scene(self, scene: Scene, volume: Volume | None = None) -> set[str]:
         return self.resources.update(scene, volume)
 
+    def pass_for(self, method: str) -> PathTracer:
+        """The compiled pass of a method (compiled once, on first use)."""
+        if method not in self._passes:
+            defines = {"PROBE_LIGHTING": PROBE_LIGHTING[method]} if method in PROBE_LIGHTING else None
+            self._passes[method] = PathTracer(self.ctx, defines)
+        return self._passes[method]
+
     @property
     def pathtracer(self) -> PathTracer:
-        if self._pathtracer is None:
-            self._pathtracer = PathTracer(self.ctx)
-        return self._pathtracer
+        return self.pass_for("pt")
+
+    # ---- probes -------------------------------------------------------------------------------
+    def probes_current(self) -> bool:
+        return (self.probe_grid is not None and self.probe_grid.done
+                and self._baked_key == self.resources.bake_key())
+
+    def start_bake(self, seed: int = 0) -> ProbeGrid:
+        """(Re)starts the bake for the current scene; reuses the textures when the grid is unchanged."""
+        spec = self.scene.probes
+        g = self.probe_grid
+        if g is None or (g.grid, g.samples, g.precision) != (spec.grid, spec.samples, spec.precision):
+            if g is not None:
+                g.release()
+            self.probe_grid = ProbeGrid(self.ctx, spec.grid, spec.samples, spec.precision)
+        self.probe_grid.restart(seed)
+        self._baked_key = self.resources.bake_key()
+        return self.probe_grid
+
+    def bake(self, seed: int = 0, progress: Callable | None = None) -> float:
+        """Bakes the probes to completion if they are stale; returns the GPU time in ms."""
+        if self.probes_current():
+            return 0.0
+        grid = self.start_bake(seed)
+        total = 0.0
+        while not grid.done:
+            self.timer.start()
+            grid.bake_pass(self.resources)
+            self.timer.stop()
+            total += self.timer.elapsed_ms
+            if progress is not None:
+                progress(grid)
+        self.last_bake_ms = total
+        return total
+
+    def probe_uniforms(self) -> dict:
+        self.probe_grid.bind()
+        return self.probe_grid.uniforms(self.scene.anisotropy, self.scene.probes.sh_window)
 
     def accumulation(self, width: int, height: int) -> Accumulation:
         if self._acc is None or (self._acc.width, self._acc.height) != (width, height):
@@ -63,21 +110,27 @@ class Renderer:
 
     def render(self, method: str = "pt", spp: int = 64, seed: int = 0,
                width: int | None = None, height: int | None = None, samples_per_pass: int = 1,
-               progress: Callable[[int, int], None] | None = None) -> RenderResult:
+               progress: Callable[[int, int], None] | None = None,
+               bake_progress: Callable | None = None) -> RenderResult:
         """Renders the current scene from scratch with `spp` samples per pixel."""
         if method not in METHODS:
             raise ValueError(f"unknown method '{method}' (known: {', '.join(METHODS)})")
         cam = camera_frame(self.scene.camera, width, height)
+        self.resources.reset_stats()
+        bake_ms = 0.0
+        extra = None
+        if method in PROBE_LIGHTING:
+            bake_ms = self.bake(seed, progress=bake_progress)
+            extra = self.probe_uniforms()
         acc = self.accumulation(cam.width, cam.height)
         acc.reset()
-        self.resources.reset_stats()
         render_ms = 0.0
         chunk = max(samples_per_pass, 1)
         done = 0
         while done < spp:
             n = min(chunk, spp - done)
             self.timer.start()
-            self.pathtracer.run(self.resources, cam, acc, done + n, seed)
+            self.pass_for(method).run(self.resources, cam, acc, done + n, seed, extra)
             self.timer.stop()
             render_ms += self.timer.elapsed_ms
             done += n
@@ -86,11 +139,13 @@ class Renderer:
         rgba = acc.read_rgba()
         stats = self.resources.read_stats()
         stats["min_samples"] = int(rgba[..., 3].min())
-        return RenderResult(rgba[..., :3].copy(), method, spp, render_ms, stats=stats)
+        return RenderResult(rgba[..., :3].copy(), method, spp, render_ms, bake_ms, stats=stats)
 
     def release(self) -> None:
-        if self._pathtracer is not None:
-            self._pathtracer.release()
+        for p in self._passes.values():
+            p.release()
+        if self.probe_grid is not None:
+            self.probe_grid.release()
         if self._acc is not None:
             self._acc.release()
         self.resources.release()

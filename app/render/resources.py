@@ -68,6 +68,19 @@ class SceneResources:
     def majorant(self) -> float:
         return majorant(self.table, self.scene.density_scale)
 
+    @property
+    def march_step(self) -> float:
+        """Half the smallest voxel side in world units: the deterministic marches' step."""
+        he = self.volume.half_extent
+        return float(min(2.0 * he[i] / self.volume.dims[i] for i in range(3)) / 2.0)
+
+    def bake_key(self) -> tuple:
+        """What the probes depend on: everything but the camera (camera moves never re-bake)."""
+        s = self.scene
+        return (id(self.volume), s.transfer_function, s.density_scale, s.albedo, s.anisotropy,
+                s.light, s.environment, s.max_bounces, s.probes.grid, s.probes.samples,
+                s.probes.precision)
+
     def uniforms(self) -> dict:
         s = self.scene
         return {

@@ -82,12 +82,27 @@ int path_step(inout PathState p, inout int steps_left)
     p.throughput *= albedo_at(p.x);
     if (all(equal(p.throughput, vec3(0.0))))
         return STEP_DONE;
+#if defined(PROBE_LIGHTING)
+    // Render from probes: at the first scattering event, light arriving by further bounces comes
+    // from the probes (convolved with the phase function); the sun from a shadow ray (probes) or
+    // from the probes' stored sun transmittance (probes-only). The path ends here.
+    float probe_sun_transmittance;
+    p.radiance += p.throughput * probe_inscattered(p.x, p.w, probe_sun_transmittance);
+#if PROBE_LIGHTING == 2
+    p.radiance += p.throughput * sun_irradiance
+                  * (probe_sun_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy));
+    return STEP_DONE;
+#endif
+#endif
     if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
         float tr = transmittance_to_boundary(p.x, sun_direction, p.rng, steps_left);
         if (tr < 0.0)
             return STEP_OUT_OF_STEPS;
         p.radiance += p.throughput * sun_irradiance * (tr * phase_hg(dot(sun_direction, p.w), anisotropy));
     }
+#if defined(PROBE_LIGHTING)
+    return STEP_DONE;
+#endif
     p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
     if (p.bounce >= RR_START_BOUNCE) {
         float q = max(p.throughput.r, max(p.throughput.g, p.throughput.b));

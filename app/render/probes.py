@@ -1,0 +1,172 @@
+"""The radiance-probe grid: its seven RGBA 3D textures and the progressive bake that fills them.
+
+A bake is a sequence of passes; each pass sends `directions` walks from every probe (a rotated
+spherical Fibonacci set, lib/probes.glsl), projects them onto order-2 SH and folds them into each
+probe's running mean, then publishes the textures, so a viewer can show probes that improve while
+it stays interactive. Walks are resumable paths (lib/integrator.glsl); probes are processed in
+chunks so the walk state stays within WALKS_PER_CHUNK whatever the grid size.
+"""
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from ..gl.context import loop_budget
+from ..gl.shaders import compute_program, set_uniforms
+from .resources import SceneResources
+
+PROBE_TEXTURES = 7
+PROBE_UNIT = 2                # probe textures bind to texture units 2..8
+DIRECTIONS_PER_PASS = 64
+WALKS_PER_CHUNK = 1 << 20     # 64 MiB of walk state at most
+PATH_STATE_BYTES = 64
+PROBE_ACCUM_BYTES = 128
+SH_WINDOW_IDS = {"none": 0, "hann": 1, "lanczos": 2}
+
+
+def band_factors(g: float, window: str) -> tuple[float, float, float]:
+    """Per-band multipliers g^l * window_l (NumPy twin of sh_band_factors in lib/sh.glsl)."""
+    from ..sh import sh_band_factors
+    return tuple(float(v) for v in sh_band_factors(g, SH_WINDOW_IDS[window]))
+
+
+@dataclass
+class BakeProgress:
+    passes_done: int
+    passes_total: int
+    samples_per_probe: int
+    relative_change: float   # rms change of probe radiance in the last pass / rms radiance
+    standard_error: float    # estimated relative standard error of the probe radiance mean
+
+
+class ProbeGrid:
+    def __init__(self, ctx: moderngl.Context, grid: tuple[int, int, int], samples: int,
+                 precision: str = "rgba32f"):
+        self.ctx = ctx
+        self.grid = tuple(int(v) for v in grid)
+        self.samples = int(samples)
+        self.precision = precision
+        self.count = self.grid[0] * self.grid[1] * self.grid[2]
+        self.directions = min(self.samples, DIRECTIONS_PER_PASS)
+        self.passes_total = math.ceil(self.samples / self.directions)
+        dtype = "f4" if precision == "rgba32f" else "f2"
+        self.textures = []
+        for _ in range(PROBE_TEXTURES):
+            tex = ctx.texture3d(self.grid, 4, dtype=dtype)
+            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+            self.textures.append(tex)
+        self.chunk_probes = max(1, min(self.count, WALKS_PER_CHUNK // self.directions))
+        walks = self.chunk_probes * self.directions
+        self.walk_states = ctx.buffer(reserve=walks * PATH_STATE_BYTES)
+        self.walk_radiance = ctx.buffer(reserve=walks * 16)
+        self.accums = ctx.buffer(reserve=self.count * PROBE_ACCUM_BYTES)
+        self.progress = ctx.buffer(reserve=4)
+        defines = {"PROBE_IMAGE_FORMAT": precision}
+        self.walk_program = compute_program(ctx, "probe_walks.comp")
+        self.project_program = compute_program(ctx, "probe_project.comp", defines)
+        self.loop_budget, self.loop_reserve = loop_budget(ctx)
+        self.passes_done = 0
+        self.seed = 0
+
+    @property
+    def gpu_bytes(self) -> int:
+        """GPU memory of the probe textures (what rendering reads)."""
+        texel = 16 if self.precision == "rgba32f" else 8
+        return PROBE_TEXTURES * self.count * texel
+
+    @property
+    def bake_bytes(self) -> int:
+        """GPU memory the bake uses besides the textures (walk state, running means)."""
+        return self.walk_states.size + self.walk_radiance.size + self.accums.size
+
+    @property
+    def done(self) -> bool:
+        return self.passes_done >= self.passes_total
+
+    def restart(self, seed: int = 0) -> None:
+        self.passes_done = 0
+        self.seed = seed
+
+    def _pass_directions(self) -> int:
+        remaining = self.samples - self.passes_done * self.directions
+        return min(self.directions, remaining)
+
+    def bake_pass(self, resources: SceneResources) -> None:
+        """Runs one pass over all probes (several dispatches on llvmpipe; see lib/integrator.glsl)."""
+        if self.done:
+            return
+        directions = self._pass_directions()
+        scene = resources.scene
+        uniforms = resources.uniforms()
+        uniforms["max_bounces"] = max(scene.max_bounces - 1, 0)  # the render's first event is one
+        uniforms.update({"probe_grid": self.grid, "directions": directions,
+                         "pass_index": self.passes_done, "seed": self.seed & 0xFFFFFFFF,
+                         "loop_budget": self.loop_budget, "loop_reserve": self.loop_reserve,
+                         "march_step": resources.march_step})
+        resources.bind()
+        set_uniforms(self.walk_program, uniforms)
+        set_uniforms(self.project_program, uniforms)
+        self.walk_states.bind_to_storage_buffer(1)
+        self.progress.bind_to_storage_buffer(2)
+        self.walk_radiance.bind_to_storage_buffer(3)
+        self.accums.bind_to_storage_buffer(4)
+        for i, tex in enumerate(self.textures):
+            tex.bind_to_image(i, read=False, write=True)
+        for first in range(0, self.count, self.chunk_probes):
+            n = min(self.chunk_probes, self.count - first)
+            self.walk_states.clear()
+            self.walk_radiance.clear()
+            set_uniforms(self.walk_program, {"first_probe": first, "chunk_probes": n})
+            set_uniforms(self.project_program, {"first_probe": first})
+            groups = (n * directions + 63) // 64
+            while True:
+                self.progress.write(bytes(4))
+                self.walk_program.run(groups)
+                self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+                if self.loop_budget >= (1 << 30):
+                    break  # no driver loop limit: every walk ran to its end in one dispatch
+                (pending,) = struct.unpack("I", self.progress.read())
+                if pending == 0:
+                    break
+            self.project_program.run(n)
+            self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT
+                                    | moderngl.TEXTURE_FETCH_BARRIER_BIT
+                                    | moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
+        self.passes_done += 1
+
+    def progress_report(self) -> BakeProgress:
+        """Reads each probe's last change (a small read; call it between passes, not per frame)."""
+        data = np.frombuffer(self.accums.read(), np.float32).reshape(self.count, 32)
+        change, magnitude = data[:, 29].sum(), data[:, 30].sum()
+        rel = float(np.sqrt(change / magnitude)) if magnitude > 0 else 0.0
+        # The mean of P pass estimates moves by (X_P - M_(P-1)) / P, whose mean square is
+        # sigma^2 / (P (P - 1)); so the mean's standard error sigma / sqrt(P) is rms * sqrt(P - 1).
+        p = self.passes_done
+        se = rel * math.sqrt(p - 1) if p > 1 else float("nan")
+        return BakeProgress(self.passes_done, self.passes_total, min(self.samples,
+                            self.passes_done * self.directions), rel, se)
+
+    def coefficients(self) -> np.ndarray:
+        """The probes' channels as float32 (nz, ny, nx, 28) in texture packing order (for tests)."""
+        data = np.frombuffer(self.accums.read(), np.float32).reshape(self.count, 32)[:, :28]
+        return data.reshape(self.grid[2], self.grid[1], self.grid[0], 28).copy()
+
+    def bind(self) -> None:
+        for i, tex in enumerate(self.textures):
+            tex.use(PROBE_UNIT + i)
+
+    def uniforms(self, anisotropy: float, window: str) -> dict:
+        u = {f"probe_sh{i}": PROBE_UNIT + i for i in range(PROBE_TEXTURES)}
+        u["probe_grid"] = self.grid
+        u["probe_band_factors"] = band_factors(anisotropy, window)
+        return u
+
+    def release(self) -> None:
+        for obj in (*self.textures, self.walk_states, self.walk_radiance, self.accums, self.progress,
+                    self.walk_program, self.project_program):
+            obj.release()

@@ -1,0 +1,62 @@
+// Radiance probes: an nx x ny x nz grid over the volume box. Probe (i, j, k) sits at the texel
+// centre ((i + 0.5) / nx, ...) of seven RGBA 3D textures, so hardware trilinear filtering blends the
+// 8 nearest probes (and clamps to the outer probes beyond them).
+//
+// Packing of the 28 channels: channel f = 4 * texture + component (texture 0..6, component rgba).
+// For f < 27: SH coefficient k = f / 3 (order of lib/sh.glsl), colour = f % 3 (r, g, b).
+// f = 27 (texture 6, alpha): the sun's transmittance from the probe to the box boundary, which the
+// probes-only mode multiplies with the exact phase function instead of tracing a shadow ray.
+//
+// A probe stores incident radiance L_in(omega), arriving from omega, of light that scattered at
+// least once on its way plus the attenuated environment; the unscattered sun beam is left out (it
+// is direct light, added at render time).
+uniform ivec3 probe_grid;
+
+vec3 probe_position(uint probe_index)
+{
+    uint nx = uint(probe_grid.x), ny = uint(probe_grid.y);
+    uvec3 ijk = uvec3(probe_index % nx, (probe_index / nx) % ny, probe_index / (nx * ny));
+    return ((2.0 * (vec3(ijk) + 0.5)) / vec3(probe_grid) - 1.0) * box_half_extent;
+}
+
+// Direction `slot` of a pass's spherical Fibonacci set, turned by a random rotation drawn per probe
+// and per pass, so that passes and neighbouring probes sample different directions.
+vec3 probe_walk_direction(uint probe_index, uint pass_index, uint slot, uint directions, uint seed)
+{
+    uint rng = rng_seed(probe_index, pass_index, seed ^ 0x5bd1e995u);
+    mat3 rotation = random_rotation(rng_next(rng), rng_next(rng), rng_next(rng));
+    return rotation * fibonacci_direction(slot, directions);
+}
+
+#ifdef PROBE_SAMPLING
+uniform sampler3D probe_sh0, probe_sh1, probe_sh2, probe_sh3, probe_sh4, probe_sh5, probe_sh6;
+uniform vec3 probe_band_factors;  // per SH band: g^l (phase convolution) times the SH window
+
+// Trilinearly interpolated SH coefficients and sun transmittance at world point x.
+void probe_fetch(vec3 x, out vec3 coeffs[9], out float sun_transmittance)
+{
+    vec3 uvw = x / (2.0 * box_half_extent) + 0.5;
+    vec4 t0 = texture(probe_sh0, uvw), t1 = texture(probe_sh1, uvw), t2 = texture(probe_sh2, uvw);
+    vec4 t3 = texture(probe_sh3, uvw), t4 = texture(probe_sh4, uvw), t5 = texture(probe_sh5, uvw);
+    vec4 t6 = texture(probe_sh6, uvw);
+    coeffs[0] = t0.rgb;
+    coeffs[1] = vec3(t0.a, t1.rg);
+    coeffs[2] = vec3(t1.ba, t2.r);
+    coeffs[3] = t2.gba;
+    coeffs[4] = t3.rgb;
+    coeffs[5] = vec3(t3.a, t4.rg);
+    coeffs[6] = vec3(t4.ba, t5.r);
+    coeffs[7] = t5.gba;
+    coeffs[8] = t6.rgb;
+    sun_transmittance = clamp(t6.a, 0.0, 1.0);
+}
+
+// Radiance in-scattered towards a ray travelling along d at x, from the probes' radiance convolved
+// with the phase function, never negative (SH ringing is clamped).
+vec3 probe_inscattered(vec3 x, vec3 d, out float sun_transmittance)
+{
+    vec3 coeffs[9];
+    probe_fetch(x, coeffs, sun_transmittance);
+    return sh_clamp_nonnegative(sh_evaluate_convolved(coeffs, d, probe_band_factors));
+}
+#endif

@@ -1,0 +1,16 @@
+// Deterministic transmittance towards the sun: midpoint quadrature of sigma_t from x to the box
+// boundary, at most 4096 steps (exp(-tau) is 0 in float32 past tau = 104, so it stops there).
+uniform float march_step;  // world units between quadrature points
+
+float sun_transmittance_march(vec3 x)
+{
+    float t0, t1;
+    if (!box_intersect(x, sun_direction, t0, t1))
+        return 1.0;
+    int n = clamp(int(ceil((t1 - t0) / march_step)), 1, 4096);
+    float dt = (t1 - t0) / float(n);
+    float tau = 0.0;
+    for (int i = 0; i < n && tau < 104.0; ++i)
+        tau += sigma_t_at(x + (t0 + (float(i) + 0.5) * dt) * sun_direction) * dt;
+    return exp(-tau);
+}

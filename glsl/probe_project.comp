@@ -1,0 +1,117 @@
+// Probe bake, step 2: project this pass's walks onto SH (equal weights 4 pi / n over the rotated
+// Fibonacci set), fold them into each probe's running mean and publish the seven probe textures.
+// One work group per probe; the group's invocations share its walks and reduce in shared memory.
+layout(local_size_x = 64) in;
+
+#include "lib/rng.glsl"
+#include "lib/medium.glsl"
+#include "lib/lights.glsl"
+#include "lib/sh.glsl"
+#include "lib/directions.glsl"
+#include "lib/probes.glsl"
+#include "lib/shadow_march.glsl"
+
+layout(std430, binding = 3) readonly buffer WalkRadiance { vec4 walk_radiance[]; };
+struct ProbeAccum {
+    vec4 channels[7];   // the 28 channels in texture packing order (see lib/probes.glsl)
+    float samples;      // walks averaged so far
+    float change;       // squared change of the radiance mean (L00) this pass, summed over rgb
+    float magnitude;    // squared L00, summed over rgb
+    float pad;
+};
+layout(std430, binding = 4) buffer ProbeAccums { ProbeAccum probes[]; };
+
+layout(PROBE_IMAGE_FORMAT, binding = 0) uniform writeonly image3D probe_image0;
+layout(PROBE_IMAGE_FORMAT, binding = 1) uniform writeonly image3D probe_image1;
+layout(PROBE_IMAGE_FORMAT, binding = 2) uniform writeonly image3D probe_image2;
+layout(PROBE_IMAGE_FORMAT, binding = 3) uniform writeonly image3D probe_image3;
+layout(PROBE_IMAGE_FORMAT, binding = 4) uniform writeonly image3D probe_image4;
+layout(PROBE_IMAGE_FORMAT, binding = 5) uniform writeonly image3D probe_image5;
+layout(PROBE_IMAGE_FORMAT, binding = 6) uniform writeonly image3D probe_image6;
+
+uniform uint first_probe;
+uniform uint directions;
+uniform uint pass_index;
+uniform uint seed;
+
+shared vec3 partial[64][9];
+shared uint partial_count[64];
+
+void main()
+{
+    uint tid = gl_LocalInvocationID.x;
+    uint probe = first_probe + gl_WorkGroupID.x;
+    uint base = gl_WorkGroupID.x * directions;
+    vec3 sum[9];
+    for (int k = 0; k < 9; ++k)
+        sum[k] = vec3(0.0);
+    uint count = 0u;
+    for (uint slot = tid; slot < directions; slot += 64u) {
+        vec4 walk = walk_radiance[base + slot];
+        if (walk.a != 1.0)
+            continue;
+        float basis[9];
+        sh_basis(probe_walk_direction(probe, pass_index, slot, directions, seed), basis);
+        for (int k = 0; k < 9; ++k)
+            sum[k] += walk.rgb * basis[k];
+        count += 1u;
+    }
+    for (int k = 0; k < 9; ++k)
+        partial[tid][k] = sum[k];
+    partial_count[tid] = count;
+    barrier();
+    for (uint stride = 32u; stride > 0u; stride >>= 1u) {
+        if (tid < stride) {
+            for (int k = 0; k < 9; ++k)
+                partial[tid][k] += partial[tid + stride][k];
+            partial_count[tid] += partial_count[tid + stride];
+        }
+        barrier();
+    }
+    if (tid != 0u)
+        return;
+
+    ProbeAccum acc = probes[probe];
+    if (pass_index == 0u) {
+        for (int t = 0; t < 7; ++t)
+            acc.channels[t] = vec4(0.0);
+        acc.samples = 0.0;
+        acc.channels[6].a = sun_transmittance_march(probe_position(probe));
+    }
+    uint n = partial_count[0];
+    float[28] f;
+    for (int i = 0; i < 7; ++i) {
+        f[4 * i + 0] = acc.channels[i].r;
+        f[4 * i + 1] = acc.channels[i].g;
+        f[4 * i + 2] = acc.channels[i].b;
+        f[4 * i + 3] = acc.channels[i].a;
+    }
+    vec3 previous_l00 = vec3(f[0], f[1], f[2]);
+    if (n > 0u) {
+        float total = acc.samples + float(n);
+        float weight = float(n) / total;
+        for (int k = 0; k < 9; ++k) {
+            vec3 projected = partial[0][k] * (4.0 * 3.14159265358979 / float(n));
+            for (int c = 0; c < 3; ++c)
+                f[3 * k + c] += (projected[c] - f[3 * k + c]) * weight;
+        }
+        acc.samples = total;
+    }
+    for (int i = 0; i < 7; ++i)
+        acc.channels[i] = vec4(f[4 * i], f[4 * i + 1], f[4 * i + 2], f[4 * i + 3]);
+    vec3 l00 = vec3(f[0], f[1], f[2]);
+    vec3 delta = l00 - previous_l00;
+    acc.change = pass_index == 0u ? 0.0 : dot(delta, delta);
+    acc.magnitude = dot(l00, l00);
+    probes[probe] = acc;
+
+    uint nx = uint(probe_grid.x), ny = uint(probe_grid.y);
+    ivec3 texel = ivec3(probe % nx, (probe / nx) % ny, probe / (nx * ny));
+    imageStore(probe_image0, texel, acc.channels[0]);
+    imageStore(probe_image1, texel, acc.channels[1]);
+    imageStore(probe_image2, texel, acc.channels[2]);
+    imageStore(probe_image3, texel, acc.channels[3]);
+    imageStore(probe_image4, texel, acc.channels[4]);
+    imageStore(probe_image5, texel, acc.channels[5]);
+    imageStore(probe_image6, texel, acc.channels[6]);
+}
