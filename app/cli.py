@@ -62,6 +62,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         scene = scene.replace(camera=replace(cam, width=w, height=h))
     ctx = create_headless_context()
     renderer = Renderer(ctx, scene)
+    renderer.raymarch_stage = args.raymarch_stage
+    renderer.raymarch_step_voxels = args.raymarch_step
     spp = args.spp
     bake_report = _progress("probe bake passes")
 
@@ -117,6 +119,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--probe-samples", type=_positive_int, help="walks per probe")
     r.add_argument("--sh-window", choices=("none", "hann", "lanczos"))
     r.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"))
+    r.add_argument("--raymarch-stage", choices=("compute", "fragment"), default="compute",
+                   help="raymarch as a compute (default) or fragment shader")
+    r.add_argument("--raymarch-step", type=float, default=0.5,
+                   help="raymarch step in voxels (default 0.5)")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--width", type=_positive_int)
     r.add_argument("--height", type=_positive_int)

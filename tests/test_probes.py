@@ -138,3 +138,32 @@ def test_camera_moves_never_rebake(ctx):
     r.set_scene(moved.replace(albedo=0.5))
     assert r.render("probes", spp=1).bake_ms > 0
     r.release()
+
+
+@pytest.mark.parametrize("g", [-0.5, 0.0, 0.8])
+def test_furnace_raymarch_returns_the_environment(ctx, g):
+    env = [0.3, 0.6, 0.9]
+    r = _renderer(ctx, transfer_function=WHITE, albedo=1.0, anisotropy=g, density_scale=40.0,
+                  environment=env, max_bounces=100000, light={"irradiance": [0, 0, 0]})
+    result = r.render("raymarch", spp=2)
+    np.testing.assert_allclose(result.image, np.broadcast_to(env, result.image.shape), rtol=1e-2)
+    r.release()
+
+
+def test_raymarch_fragment_equals_compute(ctx):
+    images = {}
+    for stage in ("compute", "fragment"):
+        r = _renderer(ctx, probes={"grid": [4, 4, 4], "samples": 32})
+        r.raymarch_stage = stage
+        images[stage] = r.render("raymarch", spp=2).image
+        r.release()
+    assert images["compute"].max() > 0
+    np.testing.assert_allclose(images["fragment"], images["compute"], rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("case", list(HARD_CASES))
+def test_hard_cases_raymarch_finite(ctx, case):
+    r = _renderer(ctx, **HARD_CASES[case])
+    image = r.render("raymarch", spp=1).image
+    assert np.isfinite(image).all() and (image >= 0).all()
+    r.release()

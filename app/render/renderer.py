@@ -14,10 +14,12 @@ from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation
 from .pathtracer import PathTracer
+from .light_transmittance import LightTransmittance
 from .probes import ProbeGrid
+from .raymarch import Raymarcher
 from .resources import SceneResources
 
-METHODS = ("pt", "probes", "probes-only")
+METHODS = ("pt", "probes", "probes-only", "raymarch")
 # Variants of glsl/pathtrace.comp: the probe renderers stop at the first scattering event.
 PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
 
@@ -45,6 +47,11 @@ class Renderer:
         self.timer = GpuTimer(ctx)
         self.probe_grid: ProbeGrid | None = None
         self._baked_key: tuple | None = None
+        self.raymarch_stage = "compute"   # or "fragment" (the design card's)
+        self.raymarch_step_voxels = 0.5   # raymarch step in voxels of the smallest spacing
+        self._raymarchers: dict[str, Raymarcher] = {}
+        self._light: LightTransmittance | None = None
+        self._light_key: tuple | None = None
 
     @property
     def scene(self) -> Scene:
@@ -97,6 +104,26 @@ class Renderer:
         self.last_bake_ms = total
         return total
 
+    def raymarcher(self) -> Raymarcher:
+        if self.raymarch_stage not in self._raymarchers:
+            self._raymarchers[self.raymarch_stage] = Raymarcher(self.ctx, self.raymarch_stage)
+        self._light.bind()
+        return self._raymarchers[self.raymarch_stage]
+
+    def bake_light(self) -> float:
+        """Bakes the sun's transmittance grid for the raymarcher if stale; GPU ms."""
+        s = self.scene
+        key = (id(self.resources.volume), s.transfer_function, s.density_scale, s.light.direction)
+        if self._light is None:
+            self._light = LightTransmittance(self.ctx)
+        if key == self._light_key:
+            return 0.0
+        self.timer.start()
+        self._light.bake(self.resources)
+        self.timer.stop()
+        self._light_key = key
+        return self.timer.elapsed_ms
+
     def probe_uniforms(self) -> dict:
         self.probe_grid.bind()
         return self.probe_grid.uniforms(self.scene.anisotropy, self.scene.probes.sh_window)
@@ -119,9 +146,11 @@ class Renderer:
         self.resources.reset_stats()
         bake_ms = 0.0
         extra = None
-        if method in PROBE_LIGHTING:
+        if method in PROBE_LIGHTING or method == "raymarch":
             bake_ms = self.bake(seed, progress=bake_progress)
             extra = self.probe_uniforms()
+        if method == "raymarch":
+            bake_ms += self.bake_light()
         acc = self.accumulation(cam.width, cam.height)
         acc.reset()
         render_ms = 0.0
@@ -130,7 +159,11 @@ class Renderer:
         while done < spp:
             n = min(chunk, spp - done)
             self.timer.start()
-            self.pass_for(method).run(self.resources, cam, acc, done + n, seed, extra)
+            if method == "raymarch":
+                self.raymarcher().run(self.resources, cam, acc, n, seed,
+                                      self.raymarch_step_voxels * 2 * self.resources.march_step, extra)
+            else:
+                self.pass_for(method).run(self.resources, cam, acc, done + n, seed, extra)
             self.timer.stop()
             render_ms += self.timer.elapsed_ms
             done += n
@@ -142,8 +175,10 @@ class Renderer:
         return RenderResult(rgba[..., :3].copy(), method, spp, render_ms, bake_ms, stats=stats)
 
     def release(self) -> None:
-        for p in self._passes.values():
+        for p in (*self._passes.values(), *self._raymarchers.values()):
             p.release()
+        if self._light is not None:
+            self._light.release()
         if self.probe_grid is not None:
             self.probe_grid.release()
         if self._acc is not None:

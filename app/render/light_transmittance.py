@@ -1,0 +1,45 @@
+"""The sun's transmittance baked on a grid over the box (glsl/light_transmittance.comp), which the
+raymarcher reads instead of tracing a shadow ray per step."""
+from __future__ import annotations
+
+import moderngl
+
+from ..gl.shaders import compute_program, set_uniforms
+from .resources import SceneResources
+
+LIGHT_UNIT = 9
+MAX_SIDE = 128  # per axis; the volume's own resolution when smaller
+
+
+class LightTransmittance:
+    def __init__(self, ctx: moderngl.Context):
+        self.ctx = ctx
+        self.program = compute_program(ctx, "light_transmittance.comp")
+        self.texture: moderngl.Texture3D | None = None
+
+    def bake(self, resources: SceneResources) -> None:
+        grid = tuple(min(d, MAX_SIDE) for d in resources.volume.dims)
+        if self.texture is None or self.texture.size != grid:
+            if self.texture is not None:
+                self.texture.release()
+            self.texture = self.ctx.texture3d(grid, 1, dtype="f4")
+            self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self.texture.repeat_x = self.texture.repeat_y = self.texture.repeat_z = False
+        resources.bind()
+        set_uniforms(self.program, resources.uniforms())
+        set_uniforms(self.program, {"grid": grid, "march_step": resources.march_step})
+        self.texture.bind_to_image(0, read=False, write=True)
+        self.program.run(*((g + 3) // 4 for g in grid))
+        self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
+
+    @property
+    def gpu_bytes(self) -> int:
+        return 0 if self.texture is None else 4 * self.texture.width * self.texture.height * self.texture.depth
+
+    def bind(self) -> None:
+        self.texture.use(LIGHT_UNIT)
+
+    def release(self) -> None:
+        self.program.release()
+        if self.texture is not None:
+            self.texture.release()

@@ -1,0 +1,64 @@
+"""The raymarcher (glsl/lib/raymarch.glsl) as a compute pass or as the design card's fragment
+pass; both are built from the same source and write the same accumulation image."""
+from __future__ import annotations
+
+import moderngl
+
+from ..camera import CameraFrame
+from ..gl.shaders import compute_program, render_program, set_uniforms
+from .accumulation import Accumulation
+from .light_transmittance import LIGHT_UNIT
+from .pathtracer import groups
+from .resources import SceneResources
+
+STAGES = ("compute", "fragment")
+
+
+class Raymarcher:
+    def __init__(self, ctx: moderngl.Context, stage: str = "compute"):
+        if stage not in STAGES:
+            raise ValueError(f"raymarch stage must be one of {STAGES}, got {stage!r}")
+        self.ctx = ctx
+        self.stage = stage
+        if stage == "compute":
+            self.program = compute_program(ctx, "raymarch.comp")
+        else:
+            self.program = render_program(ctx, "fullscreen.vert", "raymarch.frag")
+            self.vao = ctx.vertex_array(self.program, [])
+        self._fbo = None
+
+    def _framebuffer(self, width: int, height: int):
+        if self._fbo is None or self._fbo.size != (width, height):
+            if self._fbo is not None:
+                self._fbo.release()
+            self._fbo = self.ctx.framebuffer(
+                color_attachments=[self.ctx.renderbuffer((width, height), 1)])
+        return self._fbo
+
+    def run(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation, frames: int,
+            seed: int, step: float, uniforms: dict) -> None:
+        """Adds `frames` jittered frames to acc's running mean."""
+        resources.bind()
+        set_uniforms(self.program, resources.uniforms())
+        set_uniforms(self.program, camera.uniforms())
+        set_uniforms(self.program, uniforms)
+        set_uniforms(self.program, {"raymarch_step": step, "light_transmittance": LIGHT_UNIT,
+                                    "seed": seed & 0xFFFFFFFF})
+        acc.bind_image(0)
+        for _ in range(frames):
+            set_uniforms(self.program, {"frame_index": acc.samples})
+            if self.stage == "compute":
+                self.program.run(*groups(acc.width, acc.height))
+            else:
+                fbo = self._framebuffer(acc.width, acc.height)
+                fbo.use()
+                self.vao.render(moderngl.TRIANGLES, vertices=3)
+            self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
+            acc.samples += 1
+
+    def release(self) -> None:
+        self.program.release()
+        if self.stage == "fragment":
+            self.vao.release()
+        if self._fbo is not None:
+            self._fbo.release()
