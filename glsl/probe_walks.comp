@@ -48,10 +48,5 @@ void main()
     }
     p.status = PATH_IDLE;
     walks[local] = p;
-    bool finite = !(any(isnan(p.radiance)) || any(isinf(p.radiance)));
-    if (result == PATH_TRUNCATED)
-        atomicAdd(tracking_stats.truncated_paths, 1u);
-    else if (!finite)
-        atomicAdd(tracking_stats.nonfinite_samples, 1u);
-    walk_radiance[local] = (result == PATH_DONE && finite) ? vec4(p.radiance, 1.0) : vec4(0.0, 0.0, 0.0, 2.0);
+    walk_radiance[local] = path_estimate_valid(p, result) ? vec4(p.radiance, 1.0) : vec4(0.0, 0.0, 0.0, 2.0);
 }

@@ -93,6 +93,12 @@ def describe(ctx: moderngl.Context) -> str:
 # the lanes in a batch must stay below it. The shaders keep their own count and resume in the next
 # dispatch. Hardware drivers have no such limit.
 SOFTWARE_LOOP_LIMIT = 65535
+UNBOUNDED_LOOP_BUDGET = 1 << 30
+
+
+def loop_budget_unbounded(budget: int) -> bool:
+    """True where the driver has no loop limit: a dispatch then runs every path to its end."""
+    return budget >= UNBOUNDED_LOOP_BUDGET
 
 
 def loop_budget(ctx: moderngl.Context) -> tuple[int, int]:
@@ -104,4 +110,4 @@ def loop_budget(ctx: moderngl.Context) -> tuple[int, int]:
         lanes = max(int(m.group(1)) // 32, 1) if m else 16
         budget = SOFTWARE_LOOP_LIMIT // lanes - 256
         return budget, budget // 2
-    return (1 << 30), 0
+    return UNBOUNDED_LOOP_BUDGET, 0

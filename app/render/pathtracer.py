@@ -6,7 +6,7 @@ import struct
 import moderngl
 
 from ..camera import CameraFrame
-from ..gl.context import loop_budget
+from ..gl.context import loop_budget, loop_budget_unbounded
 from ..gl.shaders import compute_program, set_uniforms
 from .accumulation import Accumulation
 from .resources import SceneResources
@@ -64,7 +64,7 @@ class PathTracer:
         while True:
             self.progress.write(bytes(4))
             self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms)
-            if self.loop_budget >= (1 << 30):
+            if loop_budget_unbounded(self.loop_budget):
                 return  # no driver loop limit: every pixel finished in this dispatch
             (pending,) = struct.unpack("I", self.progress.read())
             if pending == 0:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from ..gl.context import loop_budget
+from ..gl.context import loop_budget, loop_budget_unbounded
 from ..gl.shaders import compute_program, set_uniforms
 from .resources import SceneResources
 
@@ -128,7 +128,7 @@ class ProbeGrid:
                 self.progress.write(bytes(4))
                 self.walk_program.run(groups)
                 self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
-                if self.loop_budget >= (1 << 30):
+                if loop_budget_unbounded(self.loop_budget):
                     break  # no driver loop limit: every walk ran to its end in one dispatch
                 (pending,) = struct.unpack("I", self.progress.read())
                 if pending == 0:

@@ -142,18 +142,26 @@ int path_continue(inout PathState p, inout int loop_budget, int reserve)
     return PATH_TRUNCATED;  // reached only if a driver cut the loop short
 }
 
-// Adds a finished path to a running mean (rgb mean, a count); truncated and non-finite estimates
-// are counted in tracking_stats and left out, never averaged.
-void path_finish(inout vec4 mean_and_count, PathState p, int result)
+// Whether a finished path's estimate may be averaged; truncated and non-finite estimates are
+// counted in tracking_stats instead, never averaged.
+bool path_estimate_valid(PathState p, int result)
 {
     if (result == PATH_TRUNCATED) {
         atomicAdd(tracking_stats.truncated_paths, 1u);
-        return;
+        return false;
     }
     if (any(isnan(p.radiance)) || any(isinf(p.radiance))) {
         atomicAdd(tracking_stats.nonfinite_samples, 1u);
-        return;
+        return false;
     }
+    return true;
+}
+
+// Adds a finished path to a running mean (rgb mean, a count) if its estimate is valid.
+void path_finish(inout vec4 mean_and_count, PathState p, int result)
+{
+    if (!path_estimate_valid(p, result))
+        return;
     mean_and_count.a += 1.0;
     mean_and_count.rgb += (p.radiance - mean_and_count.rgb) / mean_and_count.a;
 }
