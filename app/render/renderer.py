@@ -52,6 +52,11 @@ class Renderer:
         self._raymarchers: dict[str, Raymarcher] = {}
         self._light: LightTransmittance | None = None
         self._light_key: tuple | None = None
+        self.method = "pt"
+        self.seed = 0
+        self.camera = None
+        self.last_bake_ms = 0.0
+        self.last_light_ms = 0.0
 
     @property
     def scene(self) -> Scene:
@@ -135,40 +140,77 @@ class Renderer:
             self._acc = Accumulation(self.ctx, width, height)
         return self._acc
 
+    # ---- progressive rendering (the viewer calls these once per frame) -------------------------
+    def begin(self, method: str = "pt", width: int | None = None, height: int | None = None,
+              seed: int = 0) -> Accumulation:
+        """Starts a fresh accumulation for `method` with the scene's current camera."""
+        if method not in METHODS:
+            raise ValueError(f"unknown method '{method}' (known: {', '.join(METHODS)})")
+        self.method = method
+        self.seed = seed
+        self.camera = camera_frame(self.scene.camera, width, height)
+        self.resources.reset_stats()
+        acc = self.accumulation(self.camera.width, self.camera.height)
+        acc.reset()
+        return acc
+
+    def needs_probes(self, method: str | None = None) -> bool:
+        return (method or self.method) in PROBE_LIGHTING or (method or self.method) == "raymarch"
+
+    def bake_step(self, seed: int = 0) -> float:
+        """One progressive bake pass if the probes are stale or unfinished (GPU ms; 0 when
+        nothing was done). Starts a new bake when the scene's bake inputs changed."""
+        if self.probes_current():
+            return 0.0
+        if self.probe_grid is None or self._baked_key != self.resources.bake_key():
+            self.start_bake(seed)
+        self.timer.start()
+        self.probe_grid.bake_pass(self.resources)
+        self.timer.stop()
+        return self.timer.elapsed_ms
+
+    def add_samples(self, n: int = 1) -> float:
+        """Adds n samples per pixel to the accumulation begun by begin(); returns GPU ms.
+        Probe methods use the probes as they are now (bake them first for a final image)."""
+        method, acc = self.method, self._acc
+        extra = None
+        if self.needs_probes(method):
+            if self.probe_grid is None:
+                raise RuntimeError("probe methods need a bake first (bake() or bake_step())")
+            extra = self.probe_uniforms()
+        light_ms = self.bake_light() if method == "raymarch" else 0.0
+        self.timer.start()
+        if method == "raymarch":
+            self.raymarcher().run(self.resources, self.camera, acc, n, self.seed,
+                                  self.raymarch_step_voxels * 2 * self.resources.march_step, extra)
+        else:
+            self.pass_for(method).run(self.resources, self.camera, acc, acc.samples + n,
+                                      self.seed, extra)
+        self.timer.stop()
+        self.last_light_ms = light_ms
+        return self.timer.elapsed_ms
+
+    @property
+    def samples(self) -> int:
+        return 0 if self._acc is None else self._acc.samples
+
     def render(self, method: str = "pt", spp: int = 64, seed: int = 0,
                width: int | None = None, height: int | None = None, samples_per_pass: int = 1,
                progress: Callable[[int, int], None] | None = None,
                bake_progress: Callable | None = None) -> RenderResult:
         """Renders the current scene from scratch with `spp` samples per pixel."""
-        if method not in METHODS:
-            raise ValueError(f"unknown method '{method}' (known: {', '.join(METHODS)})")
-        cam = camera_frame(self.scene.camera, width, height)
-        self.resources.reset_stats()
+        acc = self.begin(method, width, height, seed)
         bake_ms = 0.0
-        extra = None
-        if method in PROBE_LIGHTING or method == "raymarch":
+        if self.needs_probes(method):
             bake_ms = self.bake(seed, progress=bake_progress)
-            extra = self.probe_uniforms()
         if method == "raymarch":
             bake_ms += self.bake_light()
-        acc = self.accumulation(cam.width, cam.height)
-        acc.reset()
         render_ms = 0.0
         chunk = max(samples_per_pass, 1)
-        done = 0
-        while done < spp:
-            n = min(chunk, spp - done)
-            self.timer.start()
-            if method == "raymarch":
-                self.raymarcher().run(self.resources, cam, acc, n, seed,
-                                      self.raymarch_step_voxels * 2 * self.resources.march_step, extra)
-            else:
-                self.pass_for(method).run(self.resources, cam, acc, done + n, seed, extra)
-            self.timer.stop()
-            render_ms += self.timer.elapsed_ms
-            done += n
+        while acc.samples < spp:
+            render_ms += self.add_samples(min(chunk, spp - acc.samples))
             if progress is not None:
-                progress(done, spp)
+                progress(acc.samples, spp)
         rgba = acc.read_rgba()
         stats = self.resources.read_stats()
         stats["min_samples"] = int(rgba[..., 3].min())
