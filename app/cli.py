@@ -99,6 +99,33 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from .bench.config import PRESETS
+    from .bench.report import write_report
+    from .bench.scenes import ALL_SCENES
+    out = Path(args.out)
+    if not args.report_only:
+        from .bench.runner import run_bench
+        config = PRESETS[args.preset]
+        changes = {}
+        if args.scenes:
+            unknown = [s for s in args.scenes if s not in ALL_SCENES]
+            if unknown:
+                raise SystemExit(f"error: unknown bench scene(s) {', '.join(unknown)} "
+                                 f"(known: {', '.join(ALL_SCENES)})")
+            changes["scenes"] = tuple(args.scenes)
+        if args.ref_spp:
+            changes["ref_spp"] = args.ref_spp
+        config = config.scaled(**changes)
+        run_bench(config, out, command="radiance-probes " + " ".join(sys.argv[1:]))
+    results = out / "results.json"
+    if not results.is_file():
+        raise SystemExit(f"error: no results at {results}")
+    print(f"results: {results.resolve()}")
+    print(f"report: {write_report(results, out).resolve()}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="radiance-probes",
                                      description="Volume rendering with radiance probes and a "
@@ -128,6 +155,20 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--height", type=_positive_int)
     r.add_argument("--exposure", type=float, default=1.0, help="PNG exposure (default 1)")
     r.set_defaults(func=cmd_render)
+
+    from .bench.config import PRESETS
+    from .bench.scenes import ALL_SCENES
+    b = sub.add_parser("bench", help="speed against error for every method; writes results.json, "
+                                     "report.md and plots")
+    b.add_argument("--preset", choices=sorted(PRESETS), default="gpu",
+                   help="gpu: the full sweep for the lent GPU; quick: small sizes for llvmpipe")
+    b.add_argument("--scenes", type=lambda t: t.split(","), default=None,
+                   help=f"comma-separated subset of {','.join(ALL_SCENES)}")
+    b.add_argument("--out", default="bench/out", help="output folder (default bench/out)")
+    b.add_argument("--ref-spp", type=_positive_int, help="reference samples per pixel")
+    b.add_argument("--report-only", action="store_true",
+                   help="rewrite report.md and plots from an existing results.json")
+    b.set_defaults(func=cmd_bench)
     return parser
 
 

@@ -190,6 +190,10 @@ class Renderer:
         self.last_light_ms = light_ms
         return self.timer.elapsed_ms
 
+    def image(self) -> np.ndarray:
+        """The current accumulated linear RGB image (H, W, 3), row 0 at the top."""
+        return self._acc.read()
+
     @property
     def samples(self) -> int:
         return 0 if self._acc is None else self._acc.samples

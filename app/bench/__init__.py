@@ -1,0 +1,1 @@
+"""``radiance-probes bench``: speed against error for every method, written as JSON and Markdown."""

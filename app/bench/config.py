@@ -1,0 +1,40 @@
+"""What a benchmark run measures: the paper's Table 1 axes (probe grid x samples per probe), the path
+tracer's samples per pixel, the raymarcher's step and stage. Two presets: `gpu` for the lent GPU and
+`quick` for llvmpipe (small images and grids, the same code)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from .scenes import ALL_SCENES
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    scenes: tuple[str, ...] = ALL_SCENES
+    width: int = 512
+    height: int = 512
+    ref_spp: int = 32768                 # path-traced reference, split into two independent halves
+    ref_samples_per_pass: int = 128      # samples per pixel in one dispatch for the reference
+    pt_spp: tuple[int, ...] = (1, 4, 16, 64, 256)
+    probe_grids: tuple[int, ...] = (8, 16, 32, 64)
+    probe_samples: tuple[int, ...] = (16, 64, 128, 256, 512)
+    large_grids: tuple[tuple[int, int], ...] = ((128, 64), (128, 256))  # (grid, samples) extras
+    probe_frames: tuple[int, ...] = (1, 4, 16, 64, 256)  # probes / probes-only snapshots
+    raymarch_frames: tuple[int, ...] = (1, 16)
+    showcase: tuple[int, int] = (32, 256)   # grid, samples: images, step/stage/precision sweeps
+    raymarch_steps: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0)
+    flip_frames: tuple[int, ...] = (16, 256)   # FLIP only at these snapshots (it costs CPU time)
+    image_frames: int = 64                  # snapshot saved as PNG for the showcase images
+
+    def scaled(self, **changes) -> "BenchConfig":
+        return replace(self, **changes)
+
+
+PRESETS = {
+    "gpu": BenchConfig(),
+    "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
+                         pt_spp=(1, 4, 16), probe_grids=(4, 8), probe_samples=(16, 64),
+                         large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),
+                         showcase=(8, 64), raymarch_steps=(0.5, 1.0), flip_frames=(16,),
+                         image_frames=16),
+}

@@ -1,0 +1,236 @@
+"""Turns results.json into report.md and plots: error against time per scene with the Pareto front,
+time-to-error, equal-time error and a Table-1-style grid of bake times."""
+from __future__ import annotations
+
+import json
+import math
+from collections import defaultdict
+from pathlib import Path
+
+METHOD_ORDER = ("pt", "probes", "probes-only", "raymarch")
+COLOURS = {"pt": "#222222", "probes": "#1f77b4", "probes-only": "#2ca02c", "raymarch": "#d62728"}
+TARGETS = (0.20, 0.10, 0.05, 0.02)
+
+
+def load(path: str | Path) -> dict:
+    return json.loads(Path(path).read_text())
+
+
+def main_records(data: dict, scene: str) -> list[dict]:
+    """A scene's records of the main sweep (32F, no window, compute stage, default step) whose
+    error the reference can resolve (its noise at most a tenth of the error)."""
+    noise = data["references"].get(scene, {}).get("noise_rrmse", 0.0)
+    out = []
+    for r in data["records"]:
+        if r["scene"] != scene or r["rrmse"] < 10 * noise:
+            continue
+        if r.get("precision", "rgba32f") != "rgba32f" or r.get("sh_window", "none") != "none":
+            continue
+        if r["method"] == "raymarch" and (r.get("stage") != "compute" or r.get("raymarch_step") != 0.5):
+            continue
+        out.append(r)
+    return out
+
+
+def pareto(records: list[dict]) -> list[dict]:
+    """Records no other record beats in both total time and error, by increasing time."""
+    front, best = [], math.inf
+    for r in sorted(records, key=lambda r: (r["total_ms"], r["rrmse"])):
+        if r["rrmse"] < best:
+            front.append(r)
+            best = r["rrmse"]
+    return front
+
+
+def label(r: dict) -> str:
+    if r["method"] == "pt":
+        return f"pt {r['spp']} spp"
+    return f"{r['method']} {r['probe_grid']}^3x{r['probe_samples']}, {r['spp']} fr"
+
+
+def time_to_error(records: list[dict], target: float) -> dict | None:
+    ok = [r for r in records if r["rrmse"] <= target]
+    return min(ok, key=lambda r: r["total_ms"]) if ok else None
+
+
+def equal_time(records: list[dict], budget_ms: float) -> dict | None:
+    ok = [r for r in records if r["total_ms"] <= budget_ms]
+    return min(ok, key=lambda r: r["rrmse"]) if ok else None
+
+
+def _ms(v: float) -> str:
+    return f"{v:.3g} ms" if v < 1000 else f"{v / 1000:.3g} s"
+
+
+def _fmt(v, digits=4) -> str:
+    return "n/a" if v is None else f"{v:.{digits}f}"
+
+
+def plot(data: dict, scenes: list[str], path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    cols = min(3, len(scenes))
+    rows = math.ceil(len(scenes) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.2 * rows), squeeze=False)
+    for ax, scene in zip(axes.flat, scenes):
+        recs = main_records(data, scene)
+        for m in METHOD_ORDER:
+            pts = [r for r in recs if r["method"] == m]
+            if pts:
+                ax.scatter([r["total_ms"] for r in pts], [r["rrmse"] for r in pts], s=10,
+                           color=COLOURS[m], alpha=0.5, label=m)
+                f = pareto(pts)
+                ax.plot([r["total_ms"] for r in f], [r["rrmse"] for r in f], color=COLOURS[m], lw=1)
+        front = pareto(recs)
+        ax.plot([r["total_ms"] for r in front], [r["rrmse"] for r in front], "k--", lw=1.5,
+                label="Pareto front (all)")
+        noise = data["references"].get(scene, {}).get("noise_rrmse")
+        if noise:
+            ax.axhline(10 * noise, color="grey", lw=0.8, ls=":", label="10x reference noise")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(scene)
+        ax.set_xlabel("time to image, bake included (GPU ms)")
+        ax.set_ylabel("relative RMSE")
+        ax.grid(True, which="both", alpha=0.2)
+    for ax in list(axes.flat)[len(scenes):]:
+        ax.axis("off")
+    axes.flat[0].legend(fontsize=7)
+    fig.suptitle(f"Error against time: {data['meta']['device']}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_report(results_path: str | Path, out_dir: str | Path | None = None) -> Path:
+    data = load(results_path)
+    out = Path(out_dir or Path(results_path).parent)
+    out.mkdir(parents=True, exist_ok=True)
+    scenes = [s for s in dict.fromkeys(r["scene"] for r in data["records"])]
+    meta = data["meta"]
+    lines = [f"# Speed against error", "",
+             f"Device: **{meta['device']}**. Started {meta.get('started')}, finished "
+             f"{meta.get('finished', 'not finished (partial run)')}.", "",
+             f"Command: `{meta.get('command', '')}`", "",
+             f"Image {meta['config']['width']}x{meta['config']['height']}. Times are GPU times from "
+             "timestamp queries: bake is the sum over bake passes, frame is the median over a "
+             "progressive run's frames after a warm-up frame, total = bake + frames x frame. "
+             "Errors are relative RMSE over linear RGB and mean LDR-FLIP of the tone-mapped images "
+             "(SPEC.md) against a path-traced reference.", ""]
+    if scenes:
+        plot(data, scenes, out / "error_vs_time.png")
+        lines += ["![error against time](error_vs_time.png)", ""]
+    lines += ["## References", "",
+              "Each reference is two independent path-traced halves; its relative noise is "
+              "rRMSE(half A, half B) / 2. Records whose error is below ten times that noise are "
+              "left out of every table and plot below (the reference cannot resolve them).", "",
+              "| scene | spp | GPU time | relative noise | smallest error reported | ratio |",
+              "|---|---|---|---|---|---|"]
+    for s in scenes:
+        ref = data["references"].get(s, {})
+        recs = main_records(data, s)
+        smallest = min((r["rrmse"] for r in recs), default=None)
+        ratio = smallest / ref["noise_rrmse"] if smallest and ref.get("noise_rrmse") else None
+        lines.append(f"| {s} | {ref.get('spp')} | {_ms(ref.get('gpu_ms', 0))} | "
+                     f"{ref.get('noise_rrmse', 0):.2e} | {_fmt(smallest)} | "
+                     f"{'n/a' if ratio is None else f'{ratio:.0f}x'} |")
+    lines += ["", "## Time to reach an error (bake included)", "",
+              "| scene | target rRMSE | " + " | ".join(METHOD_ORDER) + " | fastest probe method vs pt |",
+              "|---|---|" + "---|" * (len(METHOD_ORDER) + 1)]
+    for s in scenes:
+        recs = main_records(data, s)
+        for t in TARGETS:
+            cells, best = [], {}
+            for m in METHOD_ORDER:
+                r = time_to_error([x for x in recs if x["method"] == m], t)
+                best[m] = r
+                cells.append("not reached" if r is None else f"{_ms(r['total_ms'])} ({label(r)})")
+            probe_best = min((best[m] for m in METHOD_ORDER[1:] if best[m]),
+                             key=lambda r: r["total_ms"], default=None)
+            if best["pt"] and probe_best:
+                verdict = f"{best['pt']['total_ms'] / probe_best['total_ms']:.1f}x faster" \
+                    if probe_best["total_ms"] < best["pt"]["total_ms"] else \
+                    f"{probe_best['total_ms'] / best['pt']['total_ms']:.1f}x slower"
+            elif probe_best:
+                verdict = "pt does not reach it"
+            elif best["pt"]:
+                verdict = "no probe method reaches it"
+            else:
+                verdict = "-"
+            lines.append(f"| {s} | {t:.0%} | " + " | ".join(cells) + f" | {verdict} |")
+    lines += ["", "## Equal-time error", "",
+              "At the time the path tracer needs for each of its sample counts: the lowest error "
+              "each method reaches within that time, bake included.", "",
+              "| scene | budget (pt spp) | " + " | ".join(METHOD_ORDER) + " |",
+              "|---|---|" + "---|" * len(METHOD_ORDER)]
+    for s in scenes:
+        recs = main_records(data, s)
+        for p in sorted((r for r in recs if r["method"] == "pt"), key=lambda r: r["spp"]):
+            cells = []
+            for m in METHOD_ORDER:
+                r = equal_time([x for x in recs if x["method"] == m], p["total_ms"])
+                cells.append("-" if r is None else f"{r['rrmse']:.4f} ({label(r)})")
+            lines.append(f"| {s} | {_ms(p['total_ms'])} ({p['spp']}) | " + " | ".join(cells) + " |")
+    lines += _table1(data, scenes)
+    lines += _sweeps(data, scenes)
+    lines += ["", "## Raw results", "", "`results.json`: one record per scene, method and setting "
+              "(`scene, method, probe_grid, probe_samples, spp, bake_ms, frame_ms, total_ms, rrmse, "
+              "flip, gpu_bytes, device`, and the sweep's own fields)."]
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _table1(data: dict, scenes: list[str]) -> list[str]:
+    """The paper's Table 1 axes: bake time and error per probe grid and samples per probe."""
+    lines = ["", "## Probe grid x samples per probe (the paper's Table 1 axes)", "",
+             "Bake GPU time; `probes` frame time and rRMSE after the most frames measured.", ""]
+    for s in scenes:
+        recs = [r for r in data["records"] if r["scene"] == s and r["method"] == "probes"
+                and r.get("precision") == "rgba32f" and r.get("sh_window") == "none"]
+        if not recs:
+            continue
+        frames = max(r["spp"] for r in recs)
+        recs = [r for r in recs if r["spp"] == frames]
+        grids = sorted({r["probe_grid"] for r in recs})
+        samples = sorted({r["probe_samples"] for r in recs})
+        cell = {(r["probe_grid"], r["probe_samples"]): r for r in recs}
+        lines += [f"### {s} ({frames} frames)", "",
+                  "| grid \\ samples | " + " | ".join(str(x) for x in samples) + " |",
+                  "|---|" + "---|" * len(samples)]
+        for g in grids:
+            row = []
+            for n in samples:
+                r = cell.get((g, n))
+                row.append("" if r is None else f"bake {_ms(r['bake_ms'])}, {r['frame_ms']:.3g} ms/fr, "
+                           f"{r['rrmse']:.4f}, {r.get('probe_bytes', 0) / 2**20:.1f} MiB probes")
+            lines.append(f"| {g}^3 | " + " | ".join(row) + " |")
+        lines.append("")
+    return lines
+
+
+def _sweeps(data: dict, scenes: list[str]) -> list[str]:
+    """Raymarch step and stage, 16F against 32F, SH window: at the showcase setting."""
+    lines = ["## Raymarch step and stage, precision and SH window (showcase setting)", "",
+             "| scene | variant | frame | bake | rRMSE | FLIP | GPU memory |", "|---|---|---|---|---|---|---|"]
+    for s in scenes:
+        by_variant = defaultdict(list)
+        for r in data["records"]:
+            if r["scene"] != s or r["method"] == "pt":
+                continue
+            if r["method"] == "raymarch":
+                key = f"raymarch {r.get('stage')} step {r.get('raymarch_step')} vox"
+            else:
+                key = f"{r['method']} {r.get('precision')} window {r.get('sh_window')}"
+            by_variant[(key, r["probe_grid"], r["probe_samples"])].append(r)
+        grids = {(g, n) for (_, g, n), rs in by_variant.items()
+                 if any(r.get("precision") == "rgba16f" or r.get("stage") == "fragment" for r in rs)}
+        for (key, g, n), rs in sorted(by_variant.items()):
+            if (g, n) not in grids:
+                continue
+            r = max(rs, key=lambda r: r["spp"])
+            lines.append(f"| {s} | {key}, {g}^3x{n}, {r['spp']} fr | {r['frame_ms']:.3g} ms | "
+                         f"{_ms(r['bake_ms'])} | {r['rrmse']:.4f} | {_fmt(r.get('flip'))} | "
+                         f"{r['gpu_bytes'] / 2**20:.1f} MiB |")
+    return lines

@@ -1,0 +1,208 @@
+"""Runs the benchmark: a converged reference per scene, then every method and setting measured
+against it. Each record is written to results.json as soon as it exists, so a partial run keeps
+what it measured. GPU times come from timestamp queries; frame times are medians over the frames
+of a progressive run after one warm-up frame."""
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import statistics
+import sys
+import time
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..imageio import save_png
+from ..render.pathtracer import PIXEL_STATE_BYTES
+from .config import BenchConfig
+from .metrics import flip, reference_noise, rrmse
+from .scenes import bench_scene
+
+PROBE_METHODS = ("probes", "probes-only")
+ACCUMULATION_BYTES = 16   # RGBA32F running mean per pixel
+
+
+def _log(msg: str) -> None:
+    print(f"[bench {time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
+
+
+class Results:
+    """The growing list of records, flushed to JSON after each change (FLIP fills in later)."""
+
+    def __init__(self, path: Path, meta: dict):
+        self.path = path
+        self.meta = meta
+        self.records: list[dict] = []
+        self.pending: list[tuple[dict, Future]] = []
+        self.references: dict[str, dict] = {}
+        workers = max(1, min(8, (os.cpu_count() or 2) - 1))
+        self.pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+
+    def add(self, record: dict, image: np.ndarray | None = None,
+            reference: np.ndarray | None = None) -> None:
+        record.setdefault("flip", None)
+        self.records.append(record)
+        if image is not None:
+            self.pending.append((record, self.pool.submit(flip, image, reference)))
+        self.flush()
+
+    def flush(self, wait: bool = False) -> None:
+        still = []
+        for record, fut in self.pending:
+            if wait or fut.done():
+                record["flip"] = fut.result()
+            else:
+                still.append((record, fut))
+        self.pending = still
+        data = {"meta": self.meta, "references": self.references, "records": self.records}
+        tmp = self.path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(data, indent=1))
+        tmp.replace(self.path)
+
+    def close(self) -> None:
+        self.flush(wait=True)
+        self.pool.shutdown()
+
+
+def _progressive(renderer, method: str, snapshots, seed: int):
+    """Yields (frames, image, median frame ms) at each snapshot of one progressive run."""
+    renderer.begin(method, seed=seed + 7919)   # warm-up frame, not timed
+    renderer.add_samples(1)
+    renderer.begin(method, seed=seed)
+    times: list[float] = []
+    for target in sorted(snapshots):
+        while renderer.samples < target:
+            times.append(renderer.add_samples(1))
+        yield target, renderer.image(), statistics.median(times)
+
+
+def _with_probes(scene, grid: int, samples: int, **changes):
+    probes = replace(scene.probes, grid=(grid, grid, grid), samples=samples, **changes)
+    return scene.replace(probes=probes)
+
+
+def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Path:
+    from ..gl.context import create_headless_context, describe
+    from ..render.renderer import Renderer
+    from ..volume import load_volume
+
+    out = Path(out_dir)
+    (out / "images").mkdir(parents=True, exist_ok=True)
+    (out / "refs").mkdir(parents=True, exist_ok=True)
+    ctx = create_headless_context()
+    device = describe(ctx)
+    meta = {"device": device, "command": command, "config": asdict(config),
+            "started": time.strftime("%Y-%m-%d %H:%M:%S")}
+    results = Results(out / "results.json", meta)
+    _log(f"device: {device}; writing {out / 'results.json'}")
+    try:
+        for si, name in enumerate(config.scenes):
+            scene = bench_scene(name, config.width, config.height)
+            if scene is None:
+                _log(f"scene {name}: dataset missing, skipped")
+                continue
+            _log(f"scene {si + 1}/{len(config.scenes)}: {name}")
+            volume = load_volume(scene.volume, scene.base_dir)
+            renderer = Renderer(ctx, scene, volume)
+            try:
+                _bench_scene(renderer, name, config, results, out, device)
+            finally:
+                renderer.release()
+            results.flush()
+    finally:
+        results.close()
+        meta["finished"] = time.strftime("%Y-%m-%d %H:%M:%S")
+        results.flush()
+    return out / "results.json"
+
+
+def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out: Path,
+                 device: str) -> None:
+    scene = renderer.scene
+    base = {"scene": name, "device": device, "width": config.width, "height": config.height}
+
+    # Reference: two independent halves; their difference measures the reference's own noise.
+    half = config.ref_spp // 2
+    halves = []
+    ref_ms = 0.0
+    for seed in (1_000_003, 2_000_003):
+        r = renderer.render("pt", spp=half, seed=seed, samples_per_pass=config.ref_samples_per_pass)
+        halves.append(r.image)
+        ref_ms += r.render_ms
+        _log(f"  reference half: {half} spp, {r.render_ms / 1000:.1f} s GPU, stats {r.stats}")
+    reference = 0.5 * (halves[0] + halves[1])
+    noise = reference_noise(*halves)
+    results.references[name] = {"spp": config.ref_spp, "gpu_ms": ref_ms, "noise_rrmse": noise}
+    np.save(out / "refs" / f"{name}.npy", reference.astype(np.float32))
+    save_png(out / "images" / f"{name}_reference.png", reference)
+    _log(f"  reference: {config.ref_spp} spp, relative noise {noise:.2e}")
+
+    def record(method: str, frames: int, image: np.ndarray, frame_ms: float, bake_ms: float = 0.0,
+               **extra) -> None:
+        rec = dict(base, method=method, spp=frames, frame_ms=frame_ms, bake_ms=bake_ms,
+                   total_ms=bake_ms + frames * frame_ms, rrmse=rrmse(image, reference),
+                   probe_grid=None, probe_samples=None, gpu_bytes=0)
+        rec.update(extra)
+        # Per-pixel buffers: the accumulation image and, for the path-state passes, PathState.
+        per_pixel = ACCUMULATION_BYTES + (0 if method == "raymarch" else PIXEL_STATE_BYTES)
+        rec["image_bytes"] = config.width * config.height * per_pixel
+        rec["gpu_bytes"] = rec["image_bytes"] + rec.get("probe_bytes", 0) + rec.get("light_bytes", 0)
+        results.add(rec, image if frames in config.flip_frames or method == "pt" else None,
+                    reference)
+
+    # Path tracer: one progressive run, snapshots at each spp.
+    for spp, image, frame_ms in _progressive(renderer, "pt", config.pt_spp, seed=5):
+        record("pt", spp, image, frame_ms)
+        if spp == config.image_frames:
+            save_png(out / "images" / f"{name}_pt_{spp}spp.png", image)
+    _log(f"  pt: {config.pt_spp[-1]} spp, {results.records[-1]['frame_ms']:.3f} ms per frame, "
+         f"rRMSE {results.records[-1]['rrmse']:.4f}")
+
+    settings = [(g, s) for g in config.probe_grids for s in config.probe_samples]
+    settings += [gs for gs in config.large_grids if gs not in settings]
+    for grid, samples in settings:
+        showcase = (grid, samples) == tuple(config.showcase)
+        bake_ms = 0.0
+        variants = [{}] + ([{"precision": "rgba16f"}] if showcase else [])
+        if showcase and scene.anisotropy != 0.0:
+            # With g = 0 the phase convolution zeroes bands 1 and 2: a window changes nothing.
+            variants.append({"sh_window": "hann"})
+        for variant in variants:
+            renderer.set_scene(_with_probes(scene, grid, samples, **variant))
+            baked_ms = renderer.bake(seed=11)
+            # An SH window is applied at render time: the probes stay, and so does their cost.
+            bake_ms = baked_ms if baked_ms > 0 else bake_ms
+            probe_info = {"probe_grid": grid, "probe_samples": samples,
+                          "precision": renderer.scene.probes.precision,
+                          "sh_window": renderer.scene.probes.sh_window,
+                          "probe_bytes": renderer.probe_grid.gpu_bytes}
+            for method in PROBE_METHODS:
+                for frames, image, frame_ms in _progressive(renderer, method, config.probe_frames, 13):
+                    record(method, frames, image, frame_ms, bake_ms, **probe_info)
+                    if showcase and not variant and frames == config.image_frames:
+                        save_png(out / "images" / f"{name}_{method}_{grid}x{samples}.png", image)
+            light_ms = renderer.bake_light()
+            steps = config.raymarch_steps if showcase and not variant else (0.5,)
+            stages = ("compute", "fragment") if showcase and not variant else ("compute",)
+            for stage in stages:
+                for step in (steps if stage == "compute" else (0.5,)):
+                    renderer.raymarch_stage, renderer.raymarch_step_voxels = stage, step
+                    for frames, image, frame_ms in _progressive(renderer, "raymarch",
+                                                                config.raymarch_frames, 17):
+                        record("raymarch", frames, image, frame_ms, bake_ms + light_ms,
+                               raymarch_step=step, stage=stage, light_bytes=renderer._light.gpu_bytes,
+                               **probe_info)
+                        if (showcase and not variant and stage == "compute" and step == 0.5
+                                and frames == config.raymarch_frames[-1]):
+                            save_png(out / "images" / f"{name}_raymarch_{grid}x{samples}.png", image)
+            renderer.raymarch_stage, renderer.raymarch_step_voxels = "compute", 0.5
+            last = {m: next(r for r in reversed(results.records) if r["method"] == m)
+                    for m in (*PROBE_METHODS, "raymarch")}
+            _log(f"  {grid}^3 x {samples} {variant or ''}: bake {bake_ms:.1f} ms, "
+                 + ", ".join(f"{m} {r['frame_ms']:.3f} ms/frame rRMSE {r['rrmse']:.4f}"
+                             for m, r in last.items()))
+    renderer.set_scene(scene)

@@ -1,0 +1,82 @@
+"""The benchmark's metrics against known values, and one tiny end-to-end run on llvmpipe that must
+write every required field (the benchmark itself is never a timed test)."""
+import json
+
+import numpy as np
+import pytest
+
+from app.bench.config import BenchConfig
+from app.bench.metrics import flip, reference_noise, rrmse
+from app.bench.report import pareto, time_to_error, write_report
+
+REQUIRED = ("scene", "method", "probe_grid", "probe_samples", "spp", "bake_ms", "frame_ms",
+            "total_ms", "rrmse", "flip", "gpu_bytes", "device")
+
+
+def test_rrmse_known_values():
+    ref = np.ones((4, 4, 3))
+    assert rrmse(ref, ref) == 0.0
+    assert rrmse(ref * 1.1, ref) == pytest.approx(0.1)
+    with pytest.raises(ValueError, match="black"):
+        rrmse(ref, np.zeros_like(ref))
+    with pytest.raises(ValueError, match="shape"):
+        rrmse(ref[:2], ref)
+
+
+def test_reference_noise_matches_the_mean_of_two_halves():
+    rng = np.random.default_rng(1)
+    truth = np.full((256, 256, 3), 2.0)
+    sigma_half = 0.2   # per-pixel noise of each half
+    a = truth + rng.normal(0, sigma_half, truth.shape)
+    b = truth + rng.normal(0, sigma_half, truth.shape)
+    measured = rrmse(0.5 * (a + b), truth)
+    assert reference_noise(a, b) == pytest.approx(measured, rel=0.02)
+    assert measured == pytest.approx(sigma_half / np.sqrt(2) / 2.0, rel=0.02)
+
+
+def test_flip_zero_for_identical_and_grows_with_difference():
+    rng = np.random.default_rng(2)
+    ref = rng.uniform(0.1, 0.8, (32, 32, 3)).astype(np.float32)
+    assert flip(ref, ref) == pytest.approx(0.0, abs=1e-6)
+    assert flip(ref * 1.5, ref) > flip(ref * 1.1, ref) > 0.0
+
+
+def test_pareto_and_time_to_error():
+    recs = [{"total_ms": 1, "rrmse": 0.5}, {"total_ms": 2, "rrmse": 0.6},
+            {"total_ms": 3, "rrmse": 0.1}, {"total_ms": 4, "rrmse": 0.2}]
+    assert [r["total_ms"] for r in pareto(recs)] == [1, 3]
+    assert time_to_error(recs, 0.3)["total_ms"] == 3
+    assert time_to_error(recs, 0.05) is None
+
+
+def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
+    from app.bench.runner import run_bench
+    config = BenchConfig(scenes=("anisotropic",), width=16, height=16, ref_spp=64,
+                         ref_samples_per_pass=32, pt_spp=(1, 4), probe_grids=(2,),
+                         probe_samples=(16,), large_grids=(), probe_frames=(1, 4),
+                         raymarch_frames=(1,), showcase=(2, 16), raymarch_steps=(0.5, 1.0),
+                         flip_frames=(4,), image_frames=4)
+    path = run_bench(config, tmp_path, command="test")
+    data = json.loads(path.read_text())
+    records = data["records"]
+    methods = {r["method"] for r in records}
+    assert methods == {"pt", "probes", "probes-only", "raymarch"}
+    for r in records:
+        for key in REQUIRED:
+            assert key in r, f"{key} missing from {r}"
+        assert np.isfinite(r["rrmse"]) and r["rrmse"] > 0
+        assert r["frame_ms"] >= 0 and r["total_ms"] >= r["bake_ms"]
+        assert r["gpu_bytes"] >= 16 * 16 * 16
+        if r["method"] == "pt" or r["spp"] in config.flip_frames:
+            assert r["flip"] is not None and 0.0 <= r["flip"] <= 1.0
+        if r["method"] != "pt":
+            assert r["probe_grid"] == 2 and r["probe_samples"] == 16
+    # the showcase setting's variants: 16F probes, a Hann window (g != 0), both raymarch stages
+    assert any(r.get("precision") == "rgba16f" for r in records)
+    assert any(r.get("sh_window") == "hann" for r in records)
+    assert {r.get("stage") for r in records if r["method"] == "raymarch"} == {"compute", "fragment"}
+    assert data["references"]["anisotropic"]["noise_rrmse"] > 0
+    assert (tmp_path / "images" / "anisotropic_reference.png").is_file()
+    report = write_report(path)
+    text = report.read_text()
+    assert "Time to reach an error" in text and (tmp_path / "error_vs_time.png").is_file()
