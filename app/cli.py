@@ -34,6 +34,11 @@ def _progress(label: str):
     return report
 
 
+def cmd_view(args: argparse.Namespace) -> int:
+    from .viewer.launch import run_view  # imports glfw and imgui only when a window may open
+    return run_view(args)
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from .gl.context import create_headless_context, describe
     from .imageio import save_exr, save_npy, save_png
@@ -104,7 +109,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from .bench.report import write_report
     from .bench.scenes import ALL_SCENES
     out = Path(args.out)
-    if not args.report_only:
+    if args.merge:
+        from .bench.report import merge
+        merge(args.merge, out / "results.json")
+    elif not args.report_only:
         from .bench.runner import run_bench
         config = PRESETS[args.preset]
         changes = {}
@@ -166,9 +174,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"comma-separated subset of {','.join(ALL_SCENES)}")
     b.add_argument("--out", default="bench/out", help="output folder (default bench/out)")
     b.add_argument("--ref-spp", type=_positive_int, help="reference samples per pixel")
+    b.add_argument("--merge", nargs="+", metavar="RESULTS_JSON",
+                   help="combine these results.json files into OUT/results.json, then report")
     b.add_argument("--report-only", action="store_true",
                    help="rewrite report.md and plots from an existing results.json")
     b.set_defaults(func=cmd_bench)
+
+    from .viewer.arguments import add_view_parser
+    add_view_parser(sub, cmd_view, _grid_arg, _positive_int)
     return parser
 
 

@@ -55,6 +55,7 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
                          ref_samples_per_pass=32, pt_spp=(1, 4), probe_grids=(2,),
                          probe_samples=(16,), large_grids=(), probe_frames=(1, 4),
                          raymarch_frames=(1,), showcase=(2, 16), raymarch_steps=(0.5, 1.0),
+                         samples_per_dispatch=2,
                          flip_frames=(4,), image_frames=4)
     path = run_bench(config, tmp_path, command="test")
     data = json.loads(path.read_text())

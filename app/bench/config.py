@@ -15,7 +15,8 @@ class BenchConfig:
     height: int = 512
     ref_spp: int = 32768                 # path-traced reference, split into two independent halves
     ref_samples_per_pass: int = 128      # samples per pixel in one dispatch for the reference
-    pt_spp: tuple[int, ...] = (1, 4, 16, 64, 256)
+    pt_spp: tuple[int, ...] = (1, 4, 16, 64, 256, 1024)
+    samples_per_dispatch: int = 16          # every progressive method, PT included
     probe_grids: tuple[int, ...] = (8, 16, 32, 64)
     probe_samples: tuple[int, ...] = (16, 64, 128, 256, 512)
     large_grids: tuple[tuple[int, int], ...] = ((128, 64), (128, 256))  # (grid, samples) extras
@@ -33,7 +34,7 @@ class BenchConfig:
 PRESETS = {
     "gpu": BenchConfig(),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
-                         pt_spp=(1, 4, 16), probe_grids=(4, 8), probe_samples=(16, 64),
+                         pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),
                          showcase=(8, 64), raymarch_steps=(0.5, 1.0), flip_frames=(16,),
                          image_frames=16),

@@ -9,36 +9,68 @@ from pathlib import Path
 
 METHOD_ORDER = ("pt", "probes", "probes-only", "raymarch")
 COLOURS = {"pt": "#222222", "probes": "#1f77b4", "probes-only": "#2ca02c", "raymarch": "#d62728"}
-TARGETS = (0.20, 0.10, 0.05, 0.02)
+TARGETS = (0.20, 0.10, 0.05, 0.02, 0.01)
 
 
 def load(path: str | Path) -> dict:
     return json.loads(Path(path).read_text())
 
 
+def merge(paths: list[str | Path], out: str | Path) -> Path:
+    """Combines results.json files of runs on one device (e.g. scenes split over several calls)."""
+    runs = [load(p) for p in paths]
+    devices = {r["meta"]["device"] for r in runs}
+    if len(devices) != 1:
+        raise ValueError(f"results come from different devices: {sorted(devices)}")
+    merged = {"meta": dict(runs[0]["meta"]), "references": {}, "records": []}
+    merged["meta"]["command"] = " ; ".join(r["meta"].get("command", "") for r in runs)
+    merged["meta"]["finished"] = runs[-1]["meta"].get("finished")
+    for r in runs:
+        merged["references"].update(r["references"])
+        merged["records"] += r["records"]
+    path = Path(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(merged, indent=1))
+    return path
+
+
+def floor(data: dict, scene: str) -> float:
+    """The smallest error the reference can resolve: ten times its own relative noise (SPEC.md).
+    Smaller measured errors are reported only as "below" this floor."""
+    return 10.0 * data["references"].get(scene, {}).get("noise_rrmse", 0.0)
+
+
 def main_records(data: dict, scene: str) -> list[dict]:
-    """A scene's records of the main sweep (32F, no window, compute stage, default step) whose
-    error the reference can resolve (its noise at most a tenth of the error)."""
-    noise = data["references"].get(scene, {}).get("noise_rrmse", 0.0)
+    """A scene's records of the main sweep (32F, no window, compute stage, default step), each with
+    `error`: its rRMSE raised to the reference's floor where it is below it."""
+    lo = floor(data, scene)
     out = []
     for r in data["records"]:
-        if r["scene"] != scene or r["rrmse"] < 10 * noise:
+        if r["scene"] != scene:
             continue
         if r.get("precision", "rgba32f") != "rgba32f" or r.get("sh_window", "none") != "none":
             continue
         if r["method"] == "raymarch" and (r.get("stage") != "compute" or r.get("raymarch_step") != 0.5):
             continue
-        out.append(r)
+        out.append(dict(r, error=max(r["rrmse"], lo), below_floor=r["rrmse"] < lo))
     return out
+
+
+def shown(rrmse: float, lo: float) -> str:
+    return f"<{lo:.4f}" if rrmse < lo else f"{rrmse:.4f}"
+
+
+def err(r: dict) -> str:
+    return f"<{r['error']:.4f}" if r.get("below_floor") else f"{r['rrmse']:.4f}"
 
 
 def pareto(records: list[dict]) -> list[dict]:
     """Records no other record beats in both total time and error, by increasing time."""
     front, best = [], math.inf
-    for r in sorted(records, key=lambda r: (r["total_ms"], r["rrmse"])):
-        if r["rrmse"] < best:
+    for r in sorted(records, key=lambda r: (r["total_ms"], r["error"])):
+        if r["error"] < best:
             front.append(r)
-            best = r["rrmse"]
+            best = r["error"]
     return front
 
 
@@ -49,13 +81,13 @@ def label(r: dict) -> str:
 
 
 def time_to_error(records: list[dict], target: float) -> dict | None:
-    ok = [r for r in records if r["rrmse"] <= target]
+    ok = [r for r in records if r["error"] <= target]
     return min(ok, key=lambda r: r["total_ms"]) if ok else None
 
 
 def equal_time(records: list[dict], budget_ms: float) -> dict | None:
     ok = [r for r in records if r["total_ms"] <= budget_ms]
-    return min(ok, key=lambda r: r["rrmse"]) if ok else None
+    return min(ok, key=lambda r: (r["error"], r["total_ms"])) if ok else None
 
 
 def _ms(v: float) -> str:
@@ -78,16 +110,20 @@ def plot(data: dict, scenes: list[str], path: Path) -> None:
         for m in METHOD_ORDER:
             pts = [r for r in recs if r["method"] == m]
             if pts:
-                ax.scatter([r["total_ms"] for r in pts], [r["rrmse"] for r in pts], s=10,
-                           color=COLOURS[m], alpha=0.5, label=m)
+                for below, marker in ((False, "o"), (True, "v")):
+                    sel = [r for r in pts if r["below_floor"] == below]
+                    if sel:
+                        ax.scatter([r["total_ms"] for r in sel], [r["error"] for r in sel], s=10,
+                                   marker=marker, color=COLOURS[m], alpha=0.5,
+                                   label=None if below else m)
                 f = pareto(pts)
-                ax.plot([r["total_ms"] for r in f], [r["rrmse"] for r in f], color=COLOURS[m], lw=1)
+                ax.plot([r["total_ms"] for r in f], [r["error"] for r in f], color=COLOURS[m], lw=1)
         front = pareto(recs)
-        ax.plot([r["total_ms"] for r in front], [r["rrmse"] for r in front], "k--", lw=1.5,
+        ax.plot([r["total_ms"] for r in front], [r["error"] for r in front], "k--", lw=1.5,
                 label="Pareto front (all)")
-        noise = data["references"].get(scene, {}).get("noise_rrmse")
-        if noise:
-            ax.axhline(10 * noise, color="grey", lw=0.8, ls=":", label="10x reference noise")
+        if floor(data, scene) > 0:
+            ax.axhline(floor(data, scene), color="grey", lw=0.8, ls=":",
+                       label="reference floor (10x its noise); v: below it")
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_title(scene)
@@ -114,8 +150,10 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
              f"{meta.get('finished', 'not finished (partial run)')}.", "",
              f"Command: `{meta.get('command', '')}`", "",
              f"Image {meta['config']['width']}x{meta['config']['height']}. Times are GPU times from "
-             "timestamp queries: bake is the sum over bake passes, frame is the median over a "
-             "progressive run's frames after a warm-up frame, total = bake + frames x frame. "
+             "timestamp queries: bake is the sum over bake passes; every progressive method adds "
+             f"{meta['config'].get('samples_per_dispatch', 1)} samples per pixel per dispatch; "
+             "frame is the median GPU time per sample per pixel over those dispatches after a "
+             "warm-up; total = bake + the summed GPU time of the dispatches up to that sample count. "
              "Errors are relative RMSE over linear RGB and mean LDR-FLIP of the tone-mapped images "
              "(SPEC.md) against a path-traced reference.", ""]
     if scenes:
@@ -123,24 +161,29 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
         lines += ["![error against time](error_vs_time.png)", ""]
     lines += ["## References", "",
               "Each reference is two independent path-traced halves; its relative noise is "
-              "rRMSE(half A, half B) / 2. Records whose error is below ten times that noise are "
-              "left out of every table and plot below (the reference cannot resolve them).", "",
-              "| scene | spp | GPU time | relative noise | smallest error reported | ratio |",
-              "|---|---|---|---|---|---|"]
+              "rRMSE(half A, half B) / 2. The report states no error below ten times that noise "
+              "(the floor): a smaller measured error is written `<floor` and plotted on the floor "
+              "as a triangle, and targets below the floor are not ranked.", "",
+              "| scene | spp | GPU time | relative noise | floor | smallest error measured | "
+              "records below the floor |", "|---|---|---|---|---|---|---|"]
     for s in scenes:
         ref = data["references"].get(s, {})
         recs = main_records(data, s)
-        smallest = min((r["rrmse"] for r in recs), default=None)
-        ratio = smallest / ref["noise_rrmse"] if smallest and ref.get("noise_rrmse") else None
+        smallest = min(recs, key=lambda r: r["rrmse"], default=None)
+        below = sum(r["below_floor"] for r in recs)
         lines.append(f"| {s} | {ref.get('spp')} | {_ms(ref.get('gpu_ms', 0))} | "
-                     f"{ref.get('noise_rrmse', 0):.2e} | {_fmt(smallest)} | "
-                     f"{'n/a' if ratio is None else f'{ratio:.0f}x'} |")
+                     f"{ref.get('noise_rrmse', 0):.2e} | {floor(data, s):.4f} | {'n/a' if smallest is None else err(smallest)} | "
+                     f"{below} of {len(recs)} |")
     lines += ["", "## Time to reach an error (bake included)", "",
               "| scene | target rRMSE | " + " | ".join(METHOD_ORDER) + " | fastest probe method vs pt |",
               "|---|---|" + "---|" * (len(METHOD_ORDER) + 1)]
     for s in scenes:
         recs = main_records(data, s)
         for t in TARGETS:
+            if t < floor(data, s):
+                lines.append(f"| {s} | {t:.0%} | " + " | ".join("-" for _ in METHOD_ORDER)
+                             + f" | below the reference floor {floor(data, s):.4f} |")
+                continue
             cells, best = [], {}
             for m in METHOD_ORDER:
                 r = time_to_error([x for x in recs if x["method"] == m], t)
@@ -170,7 +213,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
             cells = []
             for m in METHOD_ORDER:
                 r = equal_time([x for x in recs if x["method"] == m], p["total_ms"])
-                cells.append("-" if r is None else f"{r['rrmse']:.4f} ({label(r)})")
+                cells.append("-" if r is None else f"{err(r)} ({label(r)})")
             lines.append(f"| {s} | {_ms(p['total_ms'])} ({p['spp']}) | " + " | ".join(cells) + " |")
     lines += _table1(data, scenes)
     lines += _sweeps(data, scenes)
@@ -204,7 +247,8 @@ def _table1(data: dict, scenes: list[str]) -> list[str]:
             for n in samples:
                 r = cell.get((g, n))
                 row.append("" if r is None else f"bake {_ms(r['bake_ms'])}, {r['frame_ms']:.3g} ms/fr, "
-                           f"{r['rrmse']:.4f}, {r.get('probe_bytes', 0) / 2**20:.1f} MiB probes")
+                           f"{shown(r['rrmse'], floor(data, s))}, "
+                           f"{r.get('probe_bytes', 0) / 2**20:.1f} MiB probes")
             lines.append(f"| {g}^3 | " + " | ".join(row) + " |")
         lines.append("")
     return lines
@@ -231,6 +275,6 @@ def _sweeps(data: dict, scenes: list[str]) -> list[str]:
                 continue
             r = max(rs, key=lambda r: r["spp"])
             lines.append(f"| {s} | {key}, {g}^3x{n}, {r['spp']} fr | {r['frame_ms']:.3g} ms | "
-                         f"{_ms(r['bake_ms'])} | {r['rrmse']:.4f} | {_fmt(r.get('flip'))} | "
+                         f"{_ms(r['bake_ms'])} | {shown(r['rrmse'], floor(data, s))} | {_fmt(r.get('flip'))} | "
                          f"{r['gpu_bytes'] / 2**20:.1f} MiB |")
     return lines

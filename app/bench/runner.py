@@ -68,16 +68,24 @@ class Results:
         self.pool.shutdown()
 
 
-def _progressive(renderer, method: str, snapshots, seed: int):
-    """Yields (frames, image, median frame ms) at each snapshot of one progressive run."""
-    renderer.begin(method, seed=seed + 7919)   # warm-up frame, not timed
-    renderer.add_samples(1)
+def _progressive(renderer, method: str, snapshots, seed: int, per_dispatch: int):
+    """Yields (samples, image, GPU ms per sample, cumulative GPU ms) at each snapshot of one
+    progressive run that adds up to `per_dispatch` samples per pixel in each dispatch (1 sample
+    per dispatch leaves most of a big GPU idle behind the longest paths of each wave). The per-sample
+    time is the median over full-size dispatches after a warm-up dispatch."""
+    renderer.begin(method, seed=seed + 7919)   # warm-up, not timed
+    renderer.add_samples(per_dispatch)
     renderer.begin(method, seed=seed)
-    times: list[float] = []
+    per_sample: list[float] = []
+    cumulative = 0.0
     for target in sorted(snapshots):
         while renderer.samples < target:
-            times.append(renderer.add_samples(1))
-        yield target, renderer.image(), statistics.median(times)
+            n = min(per_dispatch, target - renderer.samples)
+            ms = renderer.add_samples(n)
+            cumulative += ms
+            if n == per_dispatch or not per_sample:
+                per_sample.append(ms / n)
+        yield target, renderer.image(), statistics.median(per_sample), cumulative
 
 
 def _with_probes(scene, grid: int, samples: int, **changes):
@@ -141,10 +149,12 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
     save_png(out / "images" / f"{name}_reference.png", reference)
     _log(f"  reference: {config.ref_spp} spp, relative noise {noise:.2e}")
 
-    def record(method: str, frames: int, image: np.ndarray, frame_ms: float, bake_ms: float = 0.0,
-               **extra) -> None:
+    def record(method: str, frames: int, image: np.ndarray, timing: tuple[float, float],
+               bake_ms: float = 0.0, **extra) -> None:
+        frame_ms, render_ms = timing
         rec = dict(base, method=method, spp=frames, frame_ms=frame_ms, bake_ms=bake_ms,
-                   total_ms=bake_ms + frames * frame_ms, rrmse=rrmse(image, reference),
+                   render_ms=render_ms, total_ms=bake_ms + render_ms, rrmse=rrmse(image, reference),
+                   samples_per_dispatch=config.samples_per_dispatch,
                    probe_grid=None, probe_samples=None, gpu_bytes=0)
         rec.update(extra)
         # Per-pixel buffers: the accumulation image and, for the path-state passes, PathState.
@@ -155,8 +165,9 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
                     reference)
 
     # Path tracer: one progressive run, snapshots at each spp.
-    for spp, image, frame_ms in _progressive(renderer, "pt", config.pt_spp, seed=5):
-        record("pt", spp, image, frame_ms)
+    k = config.samples_per_dispatch
+    for spp, image, *timing in _progressive(renderer, "pt", config.pt_spp, 5, k):
+        record("pt", spp, image, timing)
         if spp == config.image_frames:
             save_png(out / "images" / f"{name}_pt_{spp}spp.png", image)
     _log(f"  pt: {config.pt_spp[-1]} spp, {results.records[-1]['frame_ms']:.3f} ms per frame, "
@@ -181,8 +192,9 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
                           "sh_window": renderer.scene.probes.sh_window,
                           "probe_bytes": renderer.probe_grid.gpu_bytes}
             for method in PROBE_METHODS:
-                for frames, image, frame_ms in _progressive(renderer, method, config.probe_frames, 13):
-                    record(method, frames, image, frame_ms, bake_ms, **probe_info)
+                for frames, image, *timing in _progressive(renderer, method, config.probe_frames,
+                                                           13, k):
+                    record(method, frames, image, timing, bake_ms, **probe_info)
                     if showcase and not variant and frames == config.image_frames:
                         save_png(out / "images" / f"{name}_{method}_{grid}x{samples}.png", image)
             light_ms = renderer.bake_light()
@@ -191,9 +203,9 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
             for stage in stages:
                 for step in (steps if stage == "compute" else (0.5,)):
                     renderer.raymarch_stage, renderer.raymarch_step_voxels = stage, step
-                    for frames, image, frame_ms in _progressive(renderer, "raymarch",
-                                                                config.raymarch_frames, 17):
-                        record("raymarch", frames, image, frame_ms, bake_ms + light_ms,
+                    for frames, image, *timing in _progressive(renderer, "raymarch",
+                                                               config.raymarch_frames, 17, k):
+                        record("raymarch", frames, image, timing, bake_ms + light_ms,
                                raymarch_step=step, stage=stage, light_bytes=renderer._light.gpu_bytes,
                                **probe_info)
                         if (showcase and not variant and stage == "compute" and step == 0.5
