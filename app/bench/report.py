@@ -264,7 +264,8 @@ def _sweeps(data: dict, scenes: list[str]) -> list[str]:
             if r["scene"] != s or r["method"] == "pt":
                 continue
             if r["method"] == "raymarch":
-                key = f"raymarch {r.get('stage')} step {r.get('raymarch_step')} vox"
+                key = (f"raymarch {r.get('stage')} step {r.get('raymarch_step')} vox, "
+                       f"{r.get('precision')} window {r.get('sh_window')}")
             else:
                 key = f"{r['method']} {r.get('precision')} window {r.get('sh_window')}"
             by_variant[(key, r["probe_grid"], r["probe_samples"])].append(r)
