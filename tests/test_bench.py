@@ -42,11 +42,21 @@ def test_flip_zero_for_identical_and_grows_with_difference():
 
 
 def test_pareto_and_time_to_error():
-    recs = [{"total_ms": 1, "rrmse": 0.5}, {"total_ms": 2, "rrmse": 0.6},
-            {"total_ms": 3, "rrmse": 0.1}, {"total_ms": 4, "rrmse": 0.2}]
+    recs = [{"total_ms": t, "rrmse": e, "error": e} for t, e in ((1, 0.5), (2, 0.6), (3, 0.1),
+                                                                   (4, 0.2))]
     assert [r["total_ms"] for r in pareto(recs)] == [1, 3]
     assert time_to_error(recs, 0.3)["total_ms"] == 3
     assert time_to_error(recs, 0.05) is None
+
+
+def test_errors_below_the_reference_floor_are_never_stated():
+    from app.bench.report import err, main_records
+    data = {"references": {"s": {"noise_rrmse": 0.002}},
+            "records": [{"scene": "s", "method": "pt", "rrmse": 0.005, "total_ms": 1.0},
+                        {"scene": "s", "method": "pt", "rrmse": 0.05, "total_ms": 0.5}]}
+    low, high = main_records(data, "s")
+    assert low["below_floor"] and low["error"] == pytest.approx(0.02) and err(low) == "<0.0200"
+    assert not high["below_floor"] and err(high) == "0.0500"
 
 
 def test_tiny_benchmark_writes_every_field(ctx, tmp_path):

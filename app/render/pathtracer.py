@@ -12,7 +12,7 @@ from .accumulation import Accumulation
 from .resources import SceneResources
 
 LOCAL_SIZE = 8
-PIXEL_STATE_BYTES = 80  # PathState (64) + next_sample and padding, std430
+PIXEL_STATE_BYTES = 96  # PathState (80) + next_sample and padding, std430
 
 
 def groups(width: int, height: int) -> tuple[int, int]:

@@ -23,7 +23,7 @@ PROBE_TEXTURES = 7
 PROBE_UNIT = 2                # probe textures bind to texture units 2..8
 DIRECTIONS_PER_PASS = 64
 WALKS_PER_CHUNK = 1 << 20     # 64 MiB of walk state at most
-PATH_STATE_BYTES = 64
+PATH_STATE_BYTES = 80       # PathState of glsl/lib/integrator.glsl, std430
 PROBE_ACCUM_BYTES = 128
 SH_WINDOW_IDS = {"none": 0, "hann": 1, "lanczos": 2}
 

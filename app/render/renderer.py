@@ -118,7 +118,8 @@ class Renderer:
     def bake_light(self) -> float:
         """Bakes the sun's transmittance grid for the raymarcher if stale; GPU ms."""
         s = self.scene
-        key = (id(self.resources.volume), s.transfer_function, s.density_scale, s.light.direction)
+        key = (self.resources.volume_version, s.transfer_function, s.density_scale,
+               s.light.direction)
         if self._light is None:
             self._light = LightTransmittance(self.ctx)
         if key == self._light_key:

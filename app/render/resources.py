@@ -32,6 +32,9 @@ class SceneResources:
         self.table: np.ndarray | None = None
         self.stats = ctx.buffer(reserve=16)
         self.max_path_steps = DEFAULT_MAX_PATH_STEPS
+        # Counts volume changes; keys of what was computed from a volume use it, not id(volume):
+        # a freed volume's id can be reused by the next one, and baked data would look current.
+        self.volume_version = 0
         self.update(scene, volume)
 
     def update(self, scene: Scene, volume: Volume | None = None) -> set[str]:
@@ -48,6 +51,7 @@ class SceneResources:
             if self.volume_tex is not None:
                 self.volume_tex.release()
             self.volume, self.volume_tex = volume, tex
+            self.volume_version += 1
         if old is None or scene.transfer_function != old.transfer_function:
             self.table = transfer_table(scene.transfer_function)
             if self.transfer_tex is not None:
@@ -77,7 +81,7 @@ class SceneResources:
     def bake_key(self) -> tuple:
         """What the probes depend on: everything but the camera (camera moves never re-bake)."""
         s = self.scene
-        return (id(self.volume), s.transfer_function, s.density_scale, s.albedo, s.anisotropy,
+        return (self.volume_version, s.transfer_function, s.density_scale, s.albedo, s.anisotropy,
                 s.light, s.environment, s.max_bounces, s.probes.grid, s.probes.samples,
                 s.probes.precision)
 

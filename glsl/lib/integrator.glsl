@@ -11,8 +11,8 @@
 // any invocation's loops after 65535 iterations in all; desktop drivers reset the GPU after a few
 // seconds). A path therefore runs until its dispatch's loop budget is low, then its state is saved
 // at a scattering event and the next dispatch continues it. Where the budget is unbounded (the
-// lent NVIDIA GPU) a path simply runs to its end. A flight cut short is continued from where
-// tracking stopped (free flight is memoryless); a shadow ray cut short loses the path (counted).
+// lent NVIDIA GPU) a path simply runs to its end. A flight or a shadow ray cut short is continued
+// from where tracking stopped (free flight and ratio tracking's null collisions are memoryless).
 uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
 uniform int max_path_steps;   // hang guard: tracking steps one path may take in all
@@ -28,7 +28,7 @@ const int PATH_DONE = 0;
 const int PATH_SUSPENDED = 1;
 const int PATH_TRUNCATED = 2;
 
-// std430-friendly: four 16-byte rows.
+// std430-friendly: five 16-byte rows (80 bytes; app/render/probes.py PATH_STATE_BYTES).
 struct PathState {
     vec3 x;             // current vertex (origin, then each scattering point)
     int bounce;         // scattering events so far
@@ -38,6 +38,10 @@ struct PathState {
     int steps_used;     // tracking steps so far (against max_path_steps)
     vec3 radiance;      // estimate so far
     int status;         // PATH_IDLE or PATH_ACTIVE
+    float shadow_t;     // a shadow ray in progress at x: distance tracked so far (< 0: not begun)
+    float shadow_transmittance;  // and its ratio-tracking estimate so far
+    int shadow_pending; // 1 while the shadow ray of the event at x is unfinished
+    int pad;
 };
 
 void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
@@ -50,15 +54,21 @@ void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
     p.steps_used = 0;
     p.radiance = vec3(0.0);
     p.status = PATH_ACTIVE;
+    p.shadow_t = -1.0;
+    p.shadow_transmittance = 1.0;
+    p.shadow_pending = 0;
+    p.pad = 0;
 }
 
 const int STEP_CONTINUE = 0;
 const int STEP_DONE = 1;
 const int STEP_FLIGHT_CUT = 2;     // steps ran out mid-flight; p.x moved to where tracking stopped
-const int STEP_OUT_OF_STEPS = 3;   // steps ran out in a shadow ray; the estimate is lost
+const int STEP_SHADOW_CUT = 3;     // steps ran out in a shadow ray; its progress is kept in p
 
-// One flight to the next scattering event, its sun estimate and the choice of the next direction.
-int path_step(inout PathState p, inout int steps_left)
+// The flight to the next scattering event and what happens there before the shadow ray: returns
+// STEP_DONE, STEP_FLIGHT_CUT, or STEP_CONTINUE with p at the event (p.shadow_pending set when the
+// sun needs a shadow ray from there).
+int path_flight(inout PathState p, inout int steps_left)
 {
     float t0, t1;
     if (!box_intersect(p.x, p.w, t0, t1)) {
@@ -95,10 +105,29 @@ int path_step(inout PathState p, inout int steps_left)
 #endif
 #endif
     if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
-        float tr = transmittance_to_boundary(p.x, sun_direction, p.rng, steps_left);
-        if (tr < 0.0)
-            return STEP_OUT_OF_STEPS;
-        p.radiance += p.throughput * sun_irradiance * (tr * phase_hg(dot(sun_direction, p.w), anisotropy));
+        p.shadow_t = -1.0;
+        p.shadow_transmittance = 1.0;
+        p.shadow_pending = 1;
+    }
+    return STEP_CONTINUE;
+}
+
+// One flight to the next scattering event, its sun estimate and the choice of the next direction.
+// After STEP_SHADOW_CUT the next call resumes the shadow ray where it stopped, then goes on.
+int path_step(inout PathState p, inout int steps_left)
+{
+    if (p.shadow_pending == 0) {
+        int flight = path_flight(p, steps_left);
+        if (flight != STEP_CONTINUE)
+            return flight;
+    }
+    if (p.shadow_pending != 0) {
+        if (!transmittance_to_boundary_continue(p.x, sun_direction, p.shadow_t,
+                                                p.shadow_transmittance, p.rng, steps_left))
+            return STEP_SHADOW_CUT;
+        p.shadow_pending = 0;
+        p.radiance += p.throughput * sun_irradiance
+                      * (p.shadow_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy));
     }
 #if defined(PROBE_LIGHTING)
     return STEP_DONE;
@@ -134,10 +163,8 @@ int path_continue(inout PathState p, inout int loop_budget, int reserve)
         loop_budget -= before - steps_left;
         if (result == STEP_DONE)
             return PATH_DONE;
-        if (result == STEP_FLIGHT_CUT)
+        if (result == STEP_FLIGHT_CUT || result == STEP_SHADOW_CUT)
             return dispatch_bound ? PATH_SUSPENDED : PATH_TRUNCATED;
-        if (result == STEP_OUT_OF_STEPS)
-            return PATH_TRUNCATED;
     }
     return PATH_TRUNCATED;  // reached only if a driver cut the loop short
 }

@@ -37,36 +37,62 @@ int delta_track(vec3 origin, vec3 direction, float t_min, float t_max, inout uin
     return TRACK_OUT_OF_STEPS;
 }
 
-// Unbiased transmittance estimate along origin + t * direction, t in [t_min, t_max]; Russian
-// roulette ends low estimates early without bias. Returns -1 when the step budget ran out.
-float ratio_track(vec3 origin, vec3 direction, float t_min, float t_max, inout uint rng,
-                  inout int steps_left)
+// Unbiased transmittance estimate along origin + t * direction up to t_max (ratio tracking),
+// resumable: t and transmittance carry the progress (start with t = t_min, transmittance = 1).
+// Russian roulette ends low estimates early without bias. Returns true when the estimate is
+// complete; false when the step budget ran out first, and a later call with the same t and
+// transmittance continues it exactly as if never interrupted (null collisions are memoryless).
+bool ratio_track_continue(vec3 origin, vec3 direction, inout float t, float t_max,
+                          inout float transmittance, inout uint rng, inout int steps_left)
 {
     if (majorant <= 0.0)
-        return 1.0;
-    float transmittance = 1.0;
-    float t = t_min;
+        return true;
     while (steps_left > 0) {
         --steps_left;
         t -= log(1.0 - rng_next(rng)) / majorant;
         if (t >= t_max)
-            return transmittance;
+            return true;
         transmittance *= max(0.0, 1.0 - sigma_t_at(origin + t * direction) / majorant);
         if (transmittance < 0.1) {
             float survive = transmittance * 10.0;
-            if (rng_next(rng) >= survive)
-                return 0.0;
+            if (rng_next(rng) >= survive) {
+                transmittance = 0.0;
+                return true;
+            }
             transmittance = 0.1;
         }
     }
-    return -1.0;
+    return false;
+}
+
+// Unbiased transmittance estimate along origin + t * direction, t in [t_min, t_max], or -1 when the
+// step budget ran out.
+float ratio_track(vec3 origin, vec3 direction, float t_min, float t_max, inout uint rng,
+                  inout int steps_left)
+{
+    float t = t_min, transmittance = 1.0;
+    return ratio_track_continue(origin, direction, t, t_max, transmittance, rng, steps_left)
+        ? transmittance : -1.0;
+}
+
+// Transmittance from p to the box boundary along direction (a shadow ray), resumable like
+// ratio_track_continue: start with t < 0 (not begun) and transmittance 1.
+bool transmittance_to_boundary_continue(vec3 p, vec3 direction, inout float t,
+                                        inout float transmittance, inout uint rng,
+                                        inout int steps_left)
+{
+    float t0, t1;
+    if (!box_intersect(p, direction, t0, t1))
+        return true;
+    if (t < 0.0)
+        t = t0;
+    return ratio_track_continue(p, direction, t, t1, transmittance, rng, steps_left);
 }
 
 // Transmittance from p to the box boundary along direction (a shadow ray), or -1 if out of steps.
 float transmittance_to_boundary(vec3 p, vec3 direction, inout uint rng, inout int steps_left)
 {
-    float t0, t1;
-    if (!box_intersect(p, direction, t0, t1))
-        return 1.0;
-    return ratio_track(p, direction, t0, t1, rng, steps_left);
+    float t = -1.0, transmittance = 1.0;
+    return transmittance_to_boundary_continue(p, direction, t, transmittance, rng, steps_left)
+        ? transmittance : -1.0;
 }
