@@ -25,6 +25,7 @@ MAX_PROBE_SAMPLES = 1 << 20
 MAX_TRANSFER_ROWS = 4096  # the table is an N x 1 texture; GL guarantees widths up to 16384
 SH_WINDOWS = ("none", "hann", "lanczos")
 PROBE_PRECISIONS = ("rgba32f", "rgba16f")
+PROBE_FITS = ("visible", "box")
 
 
 @dataclass(frozen=True)
@@ -86,6 +87,11 @@ class ProbeSpec:
     samples: int = 256
     sh_window: str = "none"
     precision: str = "rgba32f"
+    # "auto": order 0 when g = 0 (the phase convolution zeroes bands 1 and 2: exact), else 2.
+    sh_order: str | int = "auto"
+    # "visible": the grid covers only where the transfer function makes the medium visible, and a
+    # cubic grid N puts N probes along that region's longest side; "box": the whole volume box.
+    fit: str = "visible"
 
 
 @dataclass(frozen=True)
@@ -288,6 +294,13 @@ def _parse_probes(d: Any) -> ProbeSpec:
         kw["sh_window"] = _choice(d["sh_window"], "probes.sh_window", SH_WINDOWS)
     if "precision" in d:
         kw["precision"] = _choice(d["precision"], "probes.precision", PROBE_PRECISIONS)
+    if "sh_order" in d:
+        order = d["sh_order"]
+        if order != "auto" and (isinstance(order, bool) or order not in (0, 1, 2)):
+            raise SceneError(f"probes.sh_order: expected \"auto\", 0, 1 or 2, got {order!r}")
+        kw["sh_order"] = order if order == "auto" else int(order)
+    if "fit" in d:
+        kw["fit"] = _choice(d["fit"], "probes.fit", PROBE_FITS)
     return ProbeSpec(**kw)
 
 

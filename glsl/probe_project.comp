@@ -22,12 +22,16 @@ struct ProbeAccum {
 layout(std430, binding = 4) buffer ProbeAccums { ProbeAccum probes[]; };
 
 layout(PROBE_IMAGE_FORMAT, binding = 0) uniform writeonly image3D probe_image0;
+layout(PROBE_IMAGE_FORMAT, binding = 6) uniform writeonly image3D probe_image6;
+#if PROBE_SH_ORDER >= 1
 layout(PROBE_IMAGE_FORMAT, binding = 1) uniform writeonly image3D probe_image1;
 layout(PROBE_IMAGE_FORMAT, binding = 2) uniform writeonly image3D probe_image2;
+#endif
+#if PROBE_SH_ORDER >= 2
 layout(PROBE_IMAGE_FORMAT, binding = 3) uniform writeonly image3D probe_image3;
 layout(PROBE_IMAGE_FORMAT, binding = 4) uniform writeonly image3D probe_image4;
 layout(PROBE_IMAGE_FORMAT, binding = 5) uniform writeonly image3D probe_image5;
-layout(PROBE_IMAGE_FORMAT, binding = 6) uniform writeonly image3D probe_image6;
+#endif
 
 uniform uint first_probe;
 uniform uint directions;
@@ -108,10 +112,14 @@ void main()
     uint nx = uint(probe_grid.x), ny = uint(probe_grid.y);
     ivec3 texel = ivec3(probe % nx, (probe / nx) % ny, probe / (nx * ny));
     imageStore(probe_image0, texel, acc.channels[0]);
+    imageStore(probe_image6, texel, acc.channels[6]);
+#if PROBE_SH_ORDER >= 1
     imageStore(probe_image1, texel, acc.channels[1]);
     imageStore(probe_image2, texel, acc.channels[2]);
+#endif
+#if PROBE_SH_ORDER >= 2
     imageStore(probe_image3, texel, acc.channels[3]);
     imageStore(probe_image4, texel, acc.channels[4]);
     imageStore(probe_image5, texel, acc.channels[5]);
-    imageStore(probe_image6, texel, acc.channels[6]);
+#endif
 }

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..gl.context import loop_budget, loop_budget_unbounded
 from ..gl.shaders import compute_program, set_uniforms
+from .probe_layout import TEXTURES_FOR_ORDER
 from .resources import SceneResources
 
 PROBE_TEXTURES = 7
@@ -45,17 +46,23 @@ class BakeProgress:
 
 class ProbeGrid:
     def __init__(self, ctx: moderngl.Context, grid: tuple[int, int, int], samples: int,
-                 precision: str = "rgba32f"):
+                 precision: str = "rgba32f", sh_order: int = 2,
+                 box: tuple | None = None):
+        """`box`: world (low, high) corners the probes cover (default: the volume box, given at
+        bake time); `sh_order` 0, 1 or 2 decides which of the seven textures exist."""
         self.ctx = ctx
         self.grid = tuple(int(v) for v in grid)
         self.samples = int(samples)
         self.precision = precision
+        self.sh_order = int(sh_order)
+        self.texture_ids = TEXTURES_FOR_ORDER[self.sh_order]
+        self.box = None if box is None else (tuple(map(float, box[0])), tuple(map(float, box[1])))
         self.count = self.grid[0] * self.grid[1] * self.grid[2]
         self.directions = min(self.samples, DIRECTIONS_PER_PASS)
         self.passes_total = math.ceil(self.samples / self.directions)
         dtype = "f4" if precision == "rgba32f" else "f2"
         self.textures = []
-        for _ in range(PROBE_TEXTURES):
+        for _ in self.texture_ids:
             tex = ctx.texture3d(self.grid, 4, dtype=dtype)
             tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
             tex.repeat_x = tex.repeat_y = tex.repeat_z = False
@@ -66,7 +73,7 @@ class ProbeGrid:
         self.walk_radiance = ctx.buffer(reserve=walks * 16)
         self.accums = ctx.buffer(reserve=self.count * PROBE_ACCUM_BYTES)
         self.progress = ctx.buffer(reserve=4)
-        defines = {"PROBE_IMAGE_FORMAT": precision}
+        defines = {"PROBE_IMAGE_FORMAT": precision, **self.defines()}
         self.walk_program = compute_program(ctx, "probe_walks.comp")
         self.project_program = compute_program(ctx, "probe_project.comp", defines)
         self.loop_budget, self.loop_reserve = loop_budget(ctx)
@@ -77,7 +84,7 @@ class ProbeGrid:
     def gpu_bytes(self) -> int:
         """GPU memory of the probe textures (what rendering reads)."""
         texel = 16 if self.precision == "rgba32f" else 8
-        return PROBE_TEXTURES * self.count * texel
+        return len(self.textures) * self.count * texel
 
     @property
     def bake_bytes(self) -> int:
@@ -108,6 +115,7 @@ class ProbeGrid:
                          "pass_index": self.passes_done, "seed": self.seed & 0xFFFFFFFF,
                          "loop_budget": self.loop_budget, "loop_reserve": self.loop_reserve,
                          "march_step": resources.march_step})
+        uniforms.update(self.box_uniforms(resources))
         resources.bind()
         set_uniforms(self.walk_program, uniforms)
         set_uniforms(self.project_program, uniforms)
@@ -115,7 +123,7 @@ class ProbeGrid:
         self.progress.bind_to_storage_buffer(2)
         self.walk_radiance.bind_to_storage_buffer(3)
         self.accums.bind_to_storage_buffer(4)
-        for i, tex in enumerate(self.textures):
+        for i, tex in zip(self.texture_ids, self.textures):
             tex.bind_to_image(i, read=False, write=True)
         for first in range(0, self.count, self.chunk_probes):
             n = min(self.chunk_probes, self.count - first)
@@ -156,13 +164,29 @@ class ProbeGrid:
         data = np.frombuffer(self.accums.read(), np.float32).reshape(self.count, 32)[:, :28]
         return data.reshape(self.grid[2], self.grid[1], self.grid[0], 28).copy()
 
+    def defines(self) -> dict:
+        """Compile-time settings every shader reading these probes needs (lib/probes.glsl)."""
+        return {"PROBE_SH_ORDER": self.sh_order}
+
+    def box_uniforms(self, resources: SceneResources | None = None) -> dict:
+        if self.box is None:
+            half = np.asarray(resources.volume.half_extent, np.float64)
+            low, high = -half, half
+        else:
+            low, high = np.asarray(self.box[0]), np.asarray(self.box[1])
+        size = np.maximum(high - low, 1e-6)
+        return {"probe_box_min": tuple(float(v) for v in low),
+                "probe_box_size": tuple(float(v) for v in size)}
+
     def bind(self) -> None:
-        for i, tex in enumerate(self.textures):
+        for i, tex in zip(self.texture_ids, self.textures):
             tex.use(PROBE_UNIT + i)
 
-    def uniforms(self, anisotropy: float, window: str) -> dict:
-        u = {f"probe_sh{i}": PROBE_UNIT + i for i in range(PROBE_TEXTURES)}
+    def uniforms(self, anisotropy: float, window: str,
+                 resources: SceneResources | None = None) -> dict:
+        u = {f"probe_sh{i}": PROBE_UNIT + i for i in self.texture_ids}
         u["probe_grid"] = self.grid
+        u.update(self.box_uniforms(resources))
         u["probe_band_factors"] = band_factors(anisotropy, window)
         return u
 

@@ -15,15 +15,15 @@ STAGES = ("compute", "fragment")
 
 
 class Raymarcher:
-    def __init__(self, ctx: moderngl.Context, stage: str = "compute"):
+    def __init__(self, ctx: moderngl.Context, stage: str = "compute", defines: dict | None = None):
         if stage not in STAGES:
             raise ValueError(f"raymarch stage must be one of {STAGES}, got {stage!r}")
         self.ctx = ctx
         self.stage = stage
         if stage == "compute":
-            self.program = compute_program(ctx, "raymarch.comp")
+            self.program = compute_program(ctx, "raymarch.comp", defines)
         else:
-            self.program = render_program(ctx, "fullscreen.vert", "raymarch.frag")
+            self.program = render_program(ctx, "fullscreen.vert", "raymarch.frag", defines)
             self.vao = ctx.vertex_array(self.program, [])
         self._fbo = None
 

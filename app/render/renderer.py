@@ -15,6 +15,7 @@ from ..volume import Volume
 from .accumulation import Accumulation
 from .pathtracer import PathTracer
 from .light_transmittance import LightTransmittance
+from .probe_layout import fitted_grid, resolve_sh_order, visible_region
 from .probes import ProbeGrid
 from .raymarch import Raymarcher
 from .resources import SceneResources
@@ -53,6 +54,8 @@ class Renderer:
         self._light: LightTransmittance | None = None
         self._light_key: tuple | None = None
         self.method = "pt"
+        self._region_key: tuple | None = None
+        self._region = None
         self.seed = 0
         self.camera = None
         self.last_bake_ms = 0.0
@@ -65,32 +68,69 @@ class Renderer:
     def set_scene(self, scene: Scene, volume: Volume | None = None) -> set[str]:
         return self.resources.update(scene, volume)
 
-    def pass_for(self, method: str) -> PathTracer:
-        """The compiled pass of a method (compiled once, on first use)."""
-        if method not in self._passes:
-            defines = {"PROBE_LIGHTING": PROBE_LIGHTING[method]} if method in PROBE_LIGHTING else None
-            self._passes[method] = PathTracer(self.ctx, defines)
-        return self._passes[method]
+    def pass_for(self, method: str, probe_defines: dict | None = None) -> PathTracer:
+        """The compiled pass of a method (compiled once per probe layout, on first use); the
+        layout is the given probe grid's, else the one the current scene will bake."""
+        defines = None
+        if method in PROBE_LIGHTING:
+            defines = {"PROBE_LIGHTING": PROBE_LIGHTING[method],
+                       **(probe_defines or self._probe_defines())}
+        key = (method, tuple(sorted((defines or {}).items())))
+        if key not in self._passes:
+            self._passes[key] = PathTracer(self.ctx, defines)
+        return self._passes[key]
+
+    def _probe_defines(self) -> dict:
+        return {"PROBE_SH_ORDER": resolve_sh_order(self.scene.probes.sh_order, self.scene.anisotropy)}
 
     @property
     def pathtracer(self) -> PathTracer:
         return self.pass_for("pt")
 
     # ---- probes -------------------------------------------------------------------------------
+    def bake_key(self) -> tuple:
+        spec = self.scene.probes
+        return (*self.resources.bake_key(), spec.sh_order, spec.fit)
+
     def probes_current(self) -> bool:
         return (self.probe_grid is not None and self.probe_grid.done
-                and self._baked_key == self.resources.bake_key())
+                and self._baked_key == self.bake_key())
+
+    def visible_region(self) -> tuple[np.ndarray, np.ndarray]:
+        """World corners of what the transfer function makes visible (cached: NumPy over the
+        whole volume, redone when the volume or the transfer function changes)."""
+        s = self.scene
+        key = (self.resources.volume_version, s.transfer_function, s.density_scale > 0)
+        if self._region_key != key:
+            self._region = visible_region(self.resources.volume.data, self.resources.volume.half_extent,
+                                          self.resources.table[:, 3], s.density_scale)
+            self._region_key = key
+        return self._region
+
+    def probe_plan(self) -> dict:
+        """The probe grid the current scene gets: its counts, box and SH order (probe_layout.py)."""
+        spec = self.scene.probes
+        order = resolve_sh_order(spec.sh_order, self.scene.anisotropy)
+        if spec.fit == "visible":
+            low, high = self.visible_region()
+            return {"grid": fitted_grid(spec.grid, low, high), "box": (tuple(low), tuple(high)),
+                    "sh_order": order}
+        return {"grid": tuple(spec.grid), "box": None, "sh_order": order}
 
     def start_bake(self, seed: int = 0) -> ProbeGrid:
-        """(Re)starts the bake for the current scene; reuses the textures when the grid is unchanged."""
+        """(Re)starts the bake for the current scene; reuses the textures when the layout is unchanged."""
         spec = self.scene.probes
+        plan = self.probe_plan()
         g = self.probe_grid
-        if g is None or (g.grid, g.samples, g.precision) != (spec.grid, spec.samples, spec.precision):
+        if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box) != (
+                plan["grid"], spec.samples, spec.precision, plan["sh_order"],
+                None if plan["box"] is None else tuple(tuple(map(float, c)) for c in plan["box"])):
             if g is not None:
                 g.release()
-            self.probe_grid = ProbeGrid(self.ctx, spec.grid, spec.samples, spec.precision)
+            self.probe_grid = ProbeGrid(self.ctx, plan["grid"], spec.samples, spec.precision,
+                                        plan["sh_order"], plan["box"])
         self.probe_grid.restart(seed)
-        self._baked_key = self.resources.bake_key()
+        self._baked_key = self.bake_key()
         return self.probe_grid
 
     def bake(self, seed: int = 0, progress: Callable | None = None) -> float:
@@ -110,10 +150,12 @@ class Renderer:
         return total
 
     def raymarcher(self) -> Raymarcher:
-        if self.raymarch_stage not in self._raymarchers:
-            self._raymarchers[self.raymarch_stage] = Raymarcher(self.ctx, self.raymarch_stage)
+        defines = self.probe_grid.defines()   # the layout of the textures it will read
+        key = (self.raymarch_stage, tuple(sorted(defines.items())))
+        if key not in self._raymarchers:
+            self._raymarchers[key] = Raymarcher(self.ctx, self.raymarch_stage, defines)
         self._light.bind()
-        return self._raymarchers[self.raymarch_stage]
+        return self._raymarchers[key]
 
     def bake_light(self) -> float:
         """Bakes the sun's transmittance grid for the raymarcher if stale; GPU ms."""
@@ -132,7 +174,8 @@ class Renderer:
 
     def probe_uniforms(self) -> dict:
         self.probe_grid.bind()
-        return self.probe_grid.uniforms(self.scene.anisotropy, self.scene.probes.sh_window)
+        return self.probe_grid.uniforms(self.scene.anisotropy, self.scene.probes.sh_window,
+                                        self.resources)
 
     def accumulation(self, width: int, height: int) -> Accumulation:
         if self._acc is None or (self._acc.width, self._acc.height) != (width, height):
@@ -163,7 +206,7 @@ class Renderer:
         nothing was done). Starts a new bake when the scene's bake inputs changed."""
         if self.probes_current():
             return 0.0
-        if self.probe_grid is None or self._baked_key != self.resources.bake_key():
+        if self.probe_grid is None or self._baked_key != self.bake_key():
             self.start_bake(seed)
         self.timer.start()
         self.probe_grid.bake_pass(self.resources)
@@ -185,8 +228,9 @@ class Renderer:
             self.raymarcher().run(self.resources, self.camera, acc, n, self.seed,
                                   self.raymarch_step_voxels * 2 * self.resources.march_step, extra)
         else:
-            self.pass_for(method).run(self.resources, self.camera, acc, acc.samples + n,
-                                      self.seed, extra)
+            defines = self.probe_grid.defines() if method in PROBE_LIGHTING else None
+            self.pass_for(method, defines).run(self.resources, self.camera, acc, acc.samples + n,
+                                               self.seed, extra)
         self.timer.stop()
         self.last_light_ms = light_ms
         return self.timer.elapsed_ms

@@ -1,6 +1,7 @@
-// Radiance probes: an nx x ny x nz grid over the volume box. Probe (i, j, k) sits at the texel
-// centre ((i + 0.5) / nx, ...) of seven RGBA 3D textures, so hardware trilinear filtering blends the
-// 8 nearest probes (and clamps to the outer probes beyond them).
+// Radiance probes: an nx x ny x nz grid over the probe box (the region the transfer function makes
+// visible, or the whole volume box). Probe (i, j, k) sits at the texel centre ((i + 0.5) / nx, ...)
+// of up to seven RGBA 3D textures, so hardware trilinear filtering blends the 8 nearest probes (and
+// clamps to the outer probes beyond them, where the medium is empty anyway).
 //
 // Packing of the 28 channels: channel f = 4 * texture + component (texture 0..6, component rgba).
 // For f < 27: SH coefficient k = f / 3 (order of lib/sh.glsl), colour = f % 3 (r, g, b).
@@ -10,13 +11,22 @@
 // A probe stores incident radiance L_in(omega), arriving from omega, of light that scattered at
 // least once on its way plus the attenuated environment; the unscattered sun beam is left out (it
 // is direct light, added at render time).
+//
+// PROBE_SH_ORDER (0, 1 or 2; default 2) keeps bands up to that order: order 0 uses textures 0 and 6,
+// order 1 textures 0, 1, 2 and 6 (app/render/probe_layout.py); the others are neither allocated
+// nor read, and their coefficients read as 0.
+#ifndef PROBE_SH_ORDER
+#define PROBE_SH_ORDER 2
+#endif
 uniform ivec3 probe_grid;
+uniform vec3 probe_box_min;    // world corner of the probe box
+uniform vec3 probe_box_size;   // its size (> 0 on every axis)
 
 vec3 probe_position(uint probe_index)
 {
     uint nx = uint(probe_grid.x), ny = uint(probe_grid.y);
     uvec3 ijk = uvec3(probe_index % nx, (probe_index / nx) % ny, probe_index / (nx * ny));
-    return ((2.0 * (vec3(ijk) + 0.5)) / vec3(probe_grid) - 1.0) * box_half_extent;
+    return probe_box_min + (vec3(ijk) + 0.5) / vec3(probe_grid) * probe_box_size;
 }
 
 // Direction `slot` of a pass's spherical Fibonacci set, turned by a random rotation drawn per probe
@@ -29,25 +39,38 @@ vec3 probe_walk_direction(uint probe_index, uint pass_index, uint slot, uint dir
 }
 
 #ifdef PROBE_SAMPLING
-uniform sampler3D probe_sh0, probe_sh1, probe_sh2, probe_sh3, probe_sh4, probe_sh5, probe_sh6;
+uniform sampler3D probe_sh0, probe_sh6;
+#if PROBE_SH_ORDER >= 1
+uniform sampler3D probe_sh1, probe_sh2;
+#endif
+#if PROBE_SH_ORDER >= 2
+uniform sampler3D probe_sh3, probe_sh4, probe_sh5;
+#endif
 uniform vec3 probe_band_factors;  // per SH band: g^l (phase convolution) times the SH window
 
 // Trilinearly interpolated SH coefficients and sun transmittance at world point x.
 void probe_fetch(vec3 x, out vec3 coeffs[9], out float sun_transmittance)
 {
-    vec3 uvw = x / (2.0 * box_half_extent) + 0.5;
-    vec4 t0 = texture(probe_sh0, uvw), t1 = texture(probe_sh1, uvw), t2 = texture(probe_sh2, uvw);
-    vec4 t3 = texture(probe_sh3, uvw), t4 = texture(probe_sh4, uvw), t5 = texture(probe_sh5, uvw);
+    vec3 uvw = (x - probe_box_min) / probe_box_size;
+    vec4 t0 = texture(probe_sh0, uvw);
     vec4 t6 = texture(probe_sh6, uvw);
+    for (int k = 1; k < 9; ++k)
+        coeffs[k] = vec3(0.0);
     coeffs[0] = t0.rgb;
+#if PROBE_SH_ORDER >= 1
+    vec4 t1 = texture(probe_sh1, uvw), t2 = texture(probe_sh2, uvw);
     coeffs[1] = vec3(t0.a, t1.rg);
     coeffs[2] = vec3(t1.ba, t2.r);
     coeffs[3] = t2.gba;
+#endif
+#if PROBE_SH_ORDER >= 2
+    vec4 t3 = texture(probe_sh3, uvw), t4 = texture(probe_sh4, uvw), t5 = texture(probe_sh5, uvw);
     coeffs[4] = t3.rgb;
     coeffs[5] = vec3(t3.a, t4.rg);
     coeffs[6] = vec3(t4.ba, t5.r);
     coeffs[7] = t5.gba;
     coeffs[8] = t6.rgb;
+#endif
     sun_transmittance = clamp(t6.a, 0.0, 1.0);
 }
 

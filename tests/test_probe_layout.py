@@ -1,0 +1,114 @@
+"""Probe layout that follows the scene (app/render/probe_layout.py): the visible region bounds
+every point where sigma_t > 0, a cubic request follows the region's aspect, SH order 0 gives the
+same images as order 2 when g = 0 (the phase convolution zeroes bands 1 and 2), and a fitted grid
+renders as well as the box grid."""
+import numpy as np
+import pytest
+
+from app.medium import sigma_t_at
+from app.render.probe_layout import (TEXTURES_FOR_ORDER, fitted_grid, resolve_sh_order,
+                                     visible_region)
+from app.render.renderer import Renderer
+from app.scene import SceneError, parse_scene
+from app.transfer import transfer_table
+from app.scene import TransferFunctionSpec
+from app.volume import Volume
+
+
+def _volume(data: np.ndarray, spacing=(1.0, 1.0, 1.0)) -> Volume:
+    return Volume(data.astype(np.float32), spacing, "test", (0.0, 1.0), "float32", 0.0, 1.0)
+
+
+def _table(opacity) -> np.ndarray:
+    return transfer_table(TransferFunctionSpec(colormap="grey", opacity=tuple(map(tuple, opacity))))
+
+
+@pytest.mark.parametrize("opacity", [
+    [[0, 0], [0.3, 0], [1, 1]],                       # a threshold
+    [[0, 0], [0.45, 0], [0.5, 1], [0.55, 0], [1, 0]],  # a narrow spike between two voxel values
+    [[0, 1], [0.1, 0], [1, 0]],                       # only the lowest densities are visible
+])
+def test_sigma_t_is_zero_outside_the_visible_region(opacity):
+    rng = np.random.default_rng(3)
+    data = np.zeros((12, 10, 14))
+    data[3:6, 2:5, 8:12] = rng.uniform(0.2, 1.0, (3, 3, 4))
+    data[7, 6, 2] = 1.0   # one bright voxel: between it and its 0 neighbours every value occurs
+    vol = _volume(data, spacing=(1.0, 2.0, 0.5))
+    table = _table(opacity)
+    low, high = visible_region(vol.data, vol.half_extent, table[:, 3], 10.0)
+    half = vol.half_extent.astype(np.float64)
+    assert np.all(low >= -half - 1e-9) and np.all(high <= half + 1e-9) and np.all(low <= high)
+    points = rng.uniform(-half, half, (200_000, 3))
+    outside = np.any((points < low - 1e-6) | (points > high + 1e-6), axis=1)
+    assert np.all(sigma_t_at(vol, table, 10.0, points[outside]) == 0.0)
+    if opacity[0][1] == 0:   # the region is tight: most of the box is left out
+        assert outside.sum() > 1000 and np.prod(high - low) < 0.8 * np.prod(2 * half)
+    else:                    # empty space itself is visible: the whole box
+        np.testing.assert_allclose(high - low, 2 * half)
+    assert np.any(sigma_t_at(vol, table, 10.0, points[~outside]) > 0.0)
+
+
+def test_nothing_visible_gives_the_whole_box():
+    vol = _volume(np.zeros((4, 4, 4)))
+    low, high = visible_region(vol.data, vol.half_extent, _table([[0, 0], [0.5, 0], [1, 1]])[:, 3], 5.0)
+    np.testing.assert_allclose(high, vol.half_extent)
+    np.testing.assert_allclose(low, -vol.half_extent)
+
+
+def test_fitted_grid_follows_the_region_aspect():
+    assert fitted_grid((16, 16, 16), np.array([0, 0, 0]), np.array([1.0, 0.25, 0.5])) == (16, 4, 8)
+    assert fitted_grid((16, 16, 16), np.array([0, 0, 0]), np.array([1.0, 0.001, 1.0])) == (16, 1, 16)
+    assert fitted_grid((4, 8, 2), np.array([0, 0, 0]), np.array([1.0, 0.2, 1.0])) == (4, 8, 2)
+
+
+def test_sh_order_choice_and_validation():
+    assert resolve_sh_order("auto", 0.0) == 0 and resolve_sh_order("auto", 0.3) == 2
+    assert resolve_sh_order(1, 0.0) == 1
+    assert len(TEXTURES_FOR_ORDER[0]) == 2 and len(TEXTURES_FOR_ORDER[2]) == 7
+    with pytest.raises(SceneError, match="probes.sh_order"):
+        parse_scene({"probes": {"sh_order": 3}})
+    with pytest.raises(SceneError, match="probes.fit"):
+        parse_scene({"probes": {"fit": "tight"}})
+
+
+BASE = {"volume": {"builtin": "cloud", "size": [24, 24, 24]}, "density_scale": 60.0,
+        "camera": {"eye": [0, 0.3, 2.2], "width": 20, "height": 20},
+        "probes": {"grid": 4, "samples": 64}}
+
+
+@pytest.mark.parametrize("method", ["probes", "probes-only", "raymarch"])
+def test_order_zero_renders_what_order_two_renders_when_g_is_zero(ctx, method):
+    images, nbytes = {}, {}
+    for order in (0, 2):
+        scene = parse_scene({**BASE, "probes": {**BASE["probes"], "sh_order": order}})
+        r = Renderer(ctx, scene)
+        try:
+            images[order] = r.render(method, spp=4, seed=3).image
+            nbytes[order] = r.probe_grid.gpu_bytes
+        finally:
+            r.release()
+    assert nbytes[0] * 7 == nbytes[2] * 2
+    np.testing.assert_allclose(images[0], images[2], rtol=1e-5, atol=1e-7)
+
+
+def test_fitted_grid_bakes_inside_the_visible_region(ctx):
+    scene = parse_scene(BASE)
+    r = Renderer(ctx, scene)
+    try:
+        r.bake()
+        low, high = r.visible_region()
+        grid = r.probe_grid
+        assert grid.box is not None and grid.grid == fitted_grid((4, 4, 4), low, high)
+        assert grid.grid != (4, 4, 4)   # the cloud is flatter than its box
+        np.testing.assert_allclose(grid.box[0], low)
+        # the camera never re-bakes; a transfer-function change that moves the region does
+        r.set_scene(scene.replace(camera=scene.camera.__class__(eye=(0.3, 0.3, 2.0), width=20,
+                                                                height=20)))
+        assert r.probes_current()
+        r.set_scene(scene.replace(probes=scene.probes.__class__(grid=(4, 4, 4), samples=64,
+                                                                fit="box")))
+        assert not r.probes_current()
+        r.bake()
+        assert r.probe_grid.box is None and r.probe_grid.grid == (4, 4, 4)
+    finally:
+        r.release()
