@@ -1,0 +1,49 @@
+"""The ``view`` subcommand's options (imports neither glfw nor imgui)."""
+from __future__ import annotations
+
+import argparse
+
+from ..render.renderer import METHODS
+
+
+def add_view_parser(sub, func, grid_arg, positive_int) -> argparse.ArgumentParser:
+    v = sub.add_parser("view", help="the interactive viewer: a window with panels over the same "
+                                    "renderers; with --screenshot/--frames/--script it runs unattended")
+    v.add_argument("scene", nargs="?", help="scene JSON or a volume file (default: built-in scene)")
+    v.add_argument("--method", choices=METHODS, default="pt")
+    v.add_argument("--split", choices=METHODS, metavar="METHOD",
+                   help="split view: --method on the left, this method on the right")
+    v.add_argument("--error-view", action="store_true",
+                   help="heat map of the per-pixel difference to the path tracer")
+    v.add_argument("--probe-view", nargs="?", const="over", choices=("over", "alone"),
+                   help="draw the probes as spheres, over the volume (default) or alone")
+    v.add_argument("--box", action="store_true", help="draw the volume's box")
+    v.add_argument("--screenshot", metavar="PNG", help="save the window's image (panels included) "
+                                                       "after the frames or the script, then exit")
+    v.add_argument("--frames", type=positive_int, help="render this many frames, then exit")
+    v.add_argument("--script", metavar="JSON", help="drive the viewer with a script of input "
+                                                    "events (app/viewer/script.py), then exit")
+    v.add_argument("--spp", type=positive_int, help="samples per pixel to stop at (default 1024)")
+    v.add_argument("--window", default="1280x800", type=_window_size,
+                   help="window size WxH (default 1280x800)")
+    v.add_argument("--render-scale", type=float,
+                   help="render pixels per window pixel (default 1; 0.5 on a software renderer)")
+    v.add_argument("--exposure", type=float, default=1.0)
+    v.add_argument("--probe-grid", type=grid_arg, help="probes per axis: N or NX,NY,NZ (1..256)")
+    v.add_argument("--probe-samples", type=positive_int, help="walks per probe")
+    v.add_argument("--sh-window", choices=("none", "hann", "lanczos"))
+    v.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"))
+    v.add_argument("--seed", type=int, default=0)
+    v.set_defaults(func=func)
+    return v
+
+
+def _window_size(text: str) -> tuple[int, int]:
+    w, sep, h = text.lower().partition("x")
+    try:
+        size = (int(w), int(h))
+    except ValueError:
+        size = (0, 0)
+    if not sep or min(size) < 64:
+        raise argparse.ArgumentTypeError(f"expected WxH (at least 64x64), got {text!r}")
+    return size

@@ -1,0 +1,200 @@
+"""Mouse and keyboard: the GLFW callbacks. Each event goes to Dear ImGui's GLFW backend first and
+then, unless ImGui wants it (a widget under the cursor, a text field with focus), to the viewer:
+orbit on left drag, pan on right or middle drag, zoom on the wheel, keyboard shortcuts, dropped
+files. Scripts and tests call these same methods with synthetic events."""
+from __future__ import annotations
+
+import ctypes
+from dataclasses import dataclass
+from typing import Callable
+
+from imgui_bundle import imgui
+
+from .glfw_lib import glfw
+
+from .state import PROBE_VIEWS
+
+
+@dataclass(frozen=True)
+class Shortcut:
+    keys: str                       # as shown in the help panel and accepted by scripts
+    what: str
+    action: Callable                # action(viewer)
+
+
+def _method(name: str) -> Callable:
+    return lambda v: v.state.set_method(name)
+
+
+SHORTCUTS = (
+    Shortcut("1", "method: path tracer (pt)", _method("pt")),
+    Shortcut("2", "method: probes", _method("probes")),
+    Shortcut("3", "method: probes-only", _method("probes-only")),
+    Shortcut("4", "method: raymarch", _method("raymarch")),
+    Shortcut("s", "split view on/off (method | split method)", lambda v: v.state.toggle_display("split")),
+    Shortcut("e", "error view on/off (heat map against pt)", lambda v: v.state.toggle_display("error")),
+    Shortcut("g", "probe grid: off, over the volume, alone", lambda v: v.state.cycle("probe_view", PROBE_VIEWS)),
+    Shortcut("b", "volume box on/off", lambda v: setattr(v.state, "show_box", not v.state.show_box)),
+    Shortcut("]", "probe grid finer", lambda v: v.state.step_probe_grid(+1)),
+    Shortcut("[", "probe grid coarser", lambda v: v.state.step_probe_grid(-1)),
+    Shortcut("left", "sun azimuth -15 deg", lambda v: v.state.turn_light(-15, 0)),
+    Shortcut("right", "sun azimuth +15 deg", lambda v: v.state.turn_light(15, 0)),
+    Shortcut("up", "sun elevation +10 deg", lambda v: v.state.turn_light(0, 10)),
+    Shortcut("down", "sun elevation -10 deg", lambda v: v.state.turn_light(0, -10)),
+    Shortcut("c", "next colormap", lambda v: v.state.cycle_colormap(+1)),
+    Shortcut("=", "exposure x1.25", lambda v: setattr(v.state, "exposure", v.state.exposure * 1.25)),
+    Shortcut("-", "exposure /1.25", lambda v: setattr(v.state, "exposure", v.state.exposure / 1.25)),
+    Shortcut("r", "reset camera", lambda v: v.state.reset_camera()),
+    Shortcut("tab", "hide/show the panels", lambda v: setattr(v.state, "show_ui", not v.state.show_ui)),
+    Shortcut("f1", "help on/off", lambda v: setattr(v.state, "show_help", not v.state.show_help)),
+    Shortcut("f12", "save a screenshot (PNG, with the panels)", lambda v: v.request_screenshot()),
+    Shortcut("ctrl+s", "save the scene JSON", lambda v: v.save_scene()),
+    Shortcut("ctrl+o", "open a scene or volume file", lambda v: v.files.open_dialog()),
+    Shortcut("ctrl+q", "quit", lambda v: v.request_close()),
+)
+MOUSE_HELP = (("left drag", "orbit"), ("right or middle drag", "pan"), ("wheel", "zoom"),
+              ("drop a file", "open a scene (.json) or a volume (.raw, .nrrd, .npy)"))
+
+_NAMED_KEYS = {
+    "left": glfw.KEY_LEFT, "right": glfw.KEY_RIGHT, "up": glfw.KEY_UP, "down": glfw.KEY_DOWN,
+    "tab": glfw.KEY_TAB, "escape": glfw.KEY_ESCAPE, "space": glfw.KEY_SPACE,
+    "enter": glfw.KEY_ENTER, "[": glfw.KEY_LEFT_BRACKET, "]": glfw.KEY_RIGHT_BRACKET,
+    "=": glfw.KEY_EQUAL, "-": glfw.KEY_MINUS, "+": glfw.KEY_KP_ADD,
+    **{f"f{i}": getattr(glfw, f"KEY_F{i}") for i in range(1, 13)},
+    **{c: getattr(glfw, f"KEY_{c.upper()}") for c in "abcdefghijklmnopqrstuvwxyz0123456789"},
+}
+_ALIASES = {glfw.KEY_KP_ADD: glfw.KEY_EQUAL, glfw.KEY_KP_SUBTRACT: glfw.KEY_MINUS,
+            **{getattr(glfw, f"KEY_KP_{i}"): getattr(glfw, f"KEY_{i}") for i in range(10)}}
+_MODS = {"ctrl": glfw.MOD_CONTROL, "shift": glfw.MOD_SHIFT, "alt": glfw.MOD_ALT}
+
+
+def parse_keys(text: str) -> tuple[int, int]:
+    """'ctrl+s' -> (glfw.KEY_S, glfw.MOD_CONTROL)."""
+    *mods, name = text.lower().split("+") if text != "+" else ["+"]
+    if name not in _NAMED_KEYS or any(m not in _MODS for m in mods):
+        raise ValueError(f"unknown key {text!r}")
+    mask = 0
+    for m in mods:
+        mask |= _MODS[m]
+    return _NAMED_KEYS[name], mask
+
+
+_BINDINGS = {parse_keys(s.keys): s for s in SHORTCUTS}
+
+
+DIVIDER_GRAB_PIXELS = 6.0
+
+
+@dataclass
+class Drag:
+    button: int
+    kind: str          # orbit, pan or divider
+
+
+class InputRouter:
+    """The GLFW callbacks of one window; ``viewer`` supplies the view rectangle and the actions."""
+
+    def __init__(self, window, viewer):
+        self.window = window
+        self.address = ctypes.cast(window, ctypes.c_void_p).value
+        self.viewer = viewer
+        self.cursor = (0.0, 0.0)
+        self.drag: Drag | None = None
+        self.orbit_pixels = [0.0, 0.0]   # pending since the last frame, window coordinates
+        self.pan_pixels = [0.0, 0.0]
+        self.zoom_steps = 0.0
+        self.divider_x: float | None = None  # where the split view's divider was dragged to
+        self.dropped: list[str] = []
+        self.real_input = True             # scripts turn the window system's events off
+
+    def install(self) -> None:
+        w = self.window
+        for setter, handler in ((glfw.set_key_callback, self.on_key),
+                                (glfw.set_char_callback, self.on_char),
+                                (glfw.set_mouse_button_callback, self.on_mouse_button),
+                                (glfw.set_cursor_pos_callback, self.on_cursor_pos),
+                                (glfw.set_scroll_callback, self.on_scroll),
+                                (glfw.set_cursor_enter_callback, self.on_cursor_enter),
+                                (glfw.set_window_focus_callback, self.on_focus),
+                                (glfw.set_drop_callback, self.on_drop)):
+            setter(w, self._from_glfw(handler))
+
+    def _from_glfw(self, handler):
+        """The handler as GLFW calls it; muted while a script owns the input, so that the X
+        server's own pointer (Xvfb's sits in the middle of the screen) cannot interfere."""
+        def callback(*args):
+            if self.real_input:
+                handler(*args)
+        return callback
+
+    # ---- callbacks (GLFW's signatures) ---------------------------------------------------------
+    def on_focus(self, window, focused) -> None:
+        imgui.backends.glfw_window_focus_callback(self.address, int(focused))
+
+    def on_cursor_enter(self, window, entered) -> None:
+        imgui.backends.glfw_cursor_enter_callback(self.address, int(entered))
+
+    def on_cursor_pos(self, window, x: float, y: float) -> None:
+        imgui.backends.glfw_cursor_pos_callback(self.address, float(x), float(y))
+        dx, dy = x - self.cursor[0], y - self.cursor[1]
+        self.cursor = (float(x), float(y))
+        if self.drag is None:
+            return
+        if self.drag.kind == "divider":
+            self.divider_x = float(x)
+            return
+        target = self.orbit_pixels if self.drag.kind == "orbit" else self.pan_pixels
+        target[0] += dx
+        target[1] += dy
+
+    def on_mouse_button(self, window, button: int, action: int, mods: int) -> None:
+        imgui.backends.glfw_mouse_button_callback(self.address, button, action, mods)
+        if action == glfw.PRESS and self.drag is None and self._over_view():
+            divider = self.viewer.divider_x_window()
+            if button == glfw.MOUSE_BUTTON_LEFT and divider is not None \
+                    and abs(self.cursor[0] - divider) <= DIVIDER_GRAB_PIXELS:
+                self.drag = Drag(button, "divider")
+            else:
+                self.drag = Drag(button, "orbit" if button == glfw.MOUSE_BUTTON_LEFT else "pan")
+        elif action == glfw.RELEASE and self.drag is not None and self.drag.button == button:
+            self.drag = None
+
+    def on_scroll(self, window, dx: float, dy: float) -> None:
+        imgui.backends.glfw_scroll_callback(self.address, float(dx), float(dy))
+        if self._over_view():
+            self.zoom_steps += dy
+
+    def on_key(self, window, key: int, scancode: int, action: int, mods: int) -> None:
+        imgui.backends.glfw_key_callback(self.address, key, scancode, action, mods)
+        if action not in (glfw.PRESS, glfw.REPEAT):
+            return
+        io = imgui.get_io()
+        if io.want_text_input or (io.want_capture_keyboard and not mods & glfw.MOD_CONTROL):
+            return
+        mods &= glfw.MOD_CONTROL | glfw.MOD_SHIFT | glfw.MOD_ALT
+        shortcut = _BINDINGS.get((_ALIASES.get(key, key), mods & ~glfw.MOD_SHIFT)) \
+            or _BINDINGS.get((_ALIASES.get(key, key), mods))
+        if shortcut is not None:
+            self.viewer.run_action(shortcut)
+
+    def on_char(self, window, codepoint: int) -> None:
+        imgui.backends.glfw_char_callback(self.address, codepoint)
+
+    def on_drop(self, window, paths) -> None:
+        self.dropped.extend(str(p) for p in paths)
+
+    # ---- the viewer takes what piled up since the last frame ------------------------------------
+    def _over_view(self) -> bool:
+        if imgui.get_io().want_capture_mouse:
+            return False
+        x, y, w, h = self.viewer.view_rect_window()
+        return x <= self.cursor[0] < x + w and y <= self.cursor[1] < y + h
+
+    def take_camera_moves(self) -> tuple[tuple[float, float], tuple[float, float], float]:
+        moves = (tuple(self.orbit_pixels), tuple(self.pan_pixels), self.zoom_steps)
+        self.orbit_pixels, self.pan_pixels, self.zoom_steps = [0.0, 0.0], [0.0, 0.0], 0.0
+        return moves
+
+    def take_dropped(self) -> list[str]:
+        paths, self.dropped = self.dropped, []
+        return paths

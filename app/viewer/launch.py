@@ -1,0 +1,124 @@
+"""``radiance-probes view``: opens the window, or runs a script or N frames and saves a
+screenshot; with no display at all it renders the scene headless and says so."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from ..scene import Scene
+from .state import ViewerState
+from .xvfb import Xvfb, XvfbError, has_display
+
+SOFTWARE_RENDER_SCALE = 0.5   # llvmpipe renders half the window's pixels per side by default
+
+
+def initial_state(scene: Scene, args: argparse.Namespace) -> ViewerState:
+    state = ViewerState.for_scene(scene)
+    state.set_method(args.method)
+    if args.split:
+        state.split_method = args.split
+        state.set_display("split")
+    if args.error_view:
+        state.set_display("error")
+    if args.probe_view:
+        state.probe_view = args.probe_view
+    state.show_box = args.box
+    state.exposure = args.exposure
+    if args.spp:
+        state.max_samples = args.spp
+    if args.scene and args.scene.lower().endswith(".json"):
+        state.scene_path = args.scene
+    return state
+
+
+def scene_from_args(args: argparse.Namespace) -> Scene:
+    """The scene argument (as `render` reads it) with the --probe-* options applied."""
+    from ..cli import _scene_from_arg
+    from ..scene import parse_scene, scene_to_dict
+    from .files import VOLUME_SUFFIXES, scene_for_path
+    if args.scene and Path(args.scene).suffix.lower() in VOLUME_SUFFIXES:
+        # A volume file opens as it does when dropped: with its bundled scene where there is one.
+        scene, _ = scene_for_path(args.scene, _scene_from_arg(None))
+    else:
+        scene = _scene_from_arg(args.scene)
+    changes = {key: value for key, value in (
+        ("grid", args.probe_grid), ("samples", args.probe_samples), ("sh_window", args.sh_window),
+        ("precision", args.probe_precision)) if value}
+    if not changes:
+        return scene
+    data = scene_to_dict(scene)
+    data["probes"].update(changes)
+    return parse_scene(data, base_dir=scene.base_dir)
+
+
+def run_view(args: argparse.Namespace) -> int:
+    scene = scene_from_args(args)
+    scripted = bool(args.screenshot or args.script or args.frames)
+    xvfb = None
+    if not has_display():
+        if not scripted:
+            return headless_fallback(args, "DISPLAY is not set")
+        xvfb = Xvfb(*args.window)
+        try:
+            os.environ["DISPLAY"] = xvfb.start()
+            print(f"view: no display; running in a private Xvfb ({os.environ['DISPLAY']})", file=sys.stderr)
+        except XvfbError as exc:
+            return headless_fallback(args, f"DISPLAY is not set and Xvfb could not be started ({exc})")
+    try:
+        return _run_window(args, scene, scripted)
+    finally:
+        if xvfb is not None:
+            xvfb.stop()
+
+
+def _run_window(args: argparse.Namespace, scene: Scene, scripted: bool) -> int:
+    from .script import ScriptError, ScriptRunner, load_script
+    from .window import ViewerWindow, WindowError
+    state = initial_state(scene, args)
+    width, height = args.window
+    try:
+        window = ViewerWindow(state, width, height, vsync=not scripted)
+    except WindowError as exc:
+        return headless_fallback(args, str(exc))
+    software = any(n in window.viewer.device.lower() for n in ("llvmpipe", "softpipe", "lavapipe"))
+    state.render_scale = args.render_scale or (SOFTWARE_RENDER_SCALE if software else 1.0)
+    print(f"view: {window.viewer.device}", file=sys.stderr)
+    try:
+        if args.script:
+            steps = load_script(args.script)
+            ScriptRunner(window, Path.cwd()).run(steps)
+        if args.frames:  # the screenshot's frame is the last of them
+            ScriptRunner(window, Path.cwd()).frame(args.frames - (1 if args.screenshot else 0))
+        if args.screenshot:
+            window.viewer.request_screenshot(args.screenshot)
+            window.poll()
+            window.frame()
+            print(f"wrote {Path(args.screenshot).resolve()}")
+        if not scripted:
+            window.run()
+        for text in state.errors:
+            print(f"view: error shown in the window: {text}", file=sys.stderr)
+    except ScriptError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 3
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        window.close()
+    return 0
+
+
+def headless_fallback(args: argparse.Namespace, reason: str) -> int:
+    """Renders the scene with the CLI's `render` when no window can be opened."""
+    from ..cli import cmd_render
+    out = args.screenshot or "view.png"
+    print(f"view: no display available ({reason}), so no window can open. Rendering the scene "
+          f"headless instead ({args.method}, {args.spp or 64} spp) to {out}.", file=sys.stderr)
+    render_args = argparse.Namespace(
+        scene=args.scene, method=args.method, spp=args.spp or 64, samples_per_pass=1, out=out,
+        linear=None, exr=None, probe_grid=args.probe_grid, probe_samples=args.probe_samples,
+        sh_window=args.sh_window, probe_precision=args.probe_precision, raymarch_stage="compute",
+        raymarch_step=0.5, seed=args.seed, width=None, height=None, exposure=args.exposure)
+    return cmd_render(render_args)

@@ -1,0 +1,36 @@
+"""Where the picture goes: the window minus the sidebar, in window coordinates (what the cursor
+reports, top-left origin) and in framebuffer pixels (GL's bottom-left origin). On a HiDPI
+screen the framebuffer has more pixels than the window has coordinates."""
+from __future__ import annotations
+
+
+def view_rect_window(window_size, sidebar_width: float) -> tuple[float, float, float, float]:
+    w, h = window_size
+    x = min(float(sidebar_width), w - 1.0)
+    return (x, 0.0, max(w - x, 1.0), float(h))
+
+
+def view_rect_framebuffer(window_size, framebuffer_size, sidebar_width: float) -> tuple[int, int, int, int]:
+    scale_x = framebuffer_size[0] / max(window_size[0], 1)
+    x, _, _, _ = view_rect_window(window_size, sidebar_width)
+    x0 = int(round(x * scale_x))
+    return (x0, 0, max(framebuffer_size[0] - x0, 1), max(framebuffer_size[1], 1))
+
+
+def render_size(view_rect, render_scale: float) -> tuple[int, int]:
+    _, _, w, h = view_rect
+    return max(int(round(w * render_scale)), 1), max(int(round(h * render_scale)), 1)
+
+
+def window_to_framebuffer(point, window_size, framebuffer_size) -> tuple[float, float]:
+    """A cursor position as framebuffer pixels, top-left origin."""
+    return (point[0] * framebuffer_size[0] / max(window_size[0], 1),
+            point[1] * framebuffer_size[1] / max(window_size[1], 1))
+
+
+def ui_scale(content_scale: float, window_width: int, framebuffer_width: int) -> float:
+    """How much larger the panels draw, in window coordinates. Where window coordinates are
+    pixels (X11, Windows: GLFW scales the window itself) that is the monitor's content scale;
+    where they are points (macOS: the framebuffer is already denser), it is what remains."""
+    pixels_per_coordinate = framebuffer_width / max(window_width, 1)
+    return max(content_scale / max(pixels_per_coordinate, 1e-6), 1.0)

@@ -1,0 +1,108 @@
+"""What floats over the picture: the method labels, the help window, the error panel and the
+built-in file browser."""
+from __future__ import annotations
+
+from imgui_bundle import ImVec2, imgui
+
+from .input import MOUSE_HELP, SHORTCUTS
+
+ERROR_COLOUR = (1.0, 0.45, 0.4, 1.0)
+
+
+def shortcut_table() -> None:
+    if imgui.begin_table("shortcuts", 2, imgui.TableFlags_.row_bg):
+        for keys, what in (*MOUSE_HELP, *((s.keys, s.what) for s in SHORTCUTS)):
+            imgui.table_next_row()
+            imgui.table_next_column()
+            imgui.text(keys)
+            imgui.table_next_column()
+            imgui.text(what)
+        imgui.end_table()
+
+
+def help_window(v) -> None:
+    if not v.state.show_help:
+        return
+    imgui.set_next_window_pos(ImVec2(v.view_rect_window()[0] + 20, 20), imgui.Cond_.appearing)
+    expanded, still_open = imgui.begin("Keyboard and mouse", True, imgui.WindowFlags_.always_auto_resize)
+    if expanded:
+        shortcut_table()
+    imgui.end()
+    if not still_open:
+        v.state.show_help = False
+
+
+def error_window(v) -> None:
+    state = v.state
+    if not state.errors:
+        return
+    x, y, w, h = v.view_rect_window()
+    imgui.set_next_window_pos(ImVec2(x + 10, y + h - 10), imgui.Cond_.always, ImVec2(0, 1))
+    imgui.set_next_window_size(ImVec2(max(w - 20, 200), 0))
+    imgui.push_style_color(imgui.Col_.title_bg, (0.5, 0.1, 0.1, 1.0))
+    imgui.push_style_color(imgui.Col_.title_bg_active, (0.6, 0.12, 0.12, 1.0))
+    imgui.begin("Errors", None, imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_move)
+    for text in state.errors:
+        imgui.push_style_color(imgui.Col_.text, ERROR_COLOUR)
+        imgui.text_wrapped(text)
+        imgui.pop_style_color()
+    if imgui.button("Dismiss"):
+        state.errors.clear()
+    v.widgets.note("Dismiss")
+    imgui.end()
+    imgui.pop_style_color(2)
+
+
+def file_browser(v) -> None:
+    files = v.files
+    if not files.browser_open:
+        return
+    imgui.set_next_window_size(ImVec2(460 * v.ui_scale, 380 * v.ui_scale), imgui.Cond_.appearing)
+    expanded, still_open = imgui.begin("Open a scene or a volume", True)
+    if expanded:
+        imgui.text_wrapped(str(files.browser_dir))
+        if imgui.button("Up"):
+            files.browser_dir = files.browser_dir.parent
+        imgui.same_line()
+        imgui.text_disabled("no system file dialog (zenity, kdialog) found; this is the built-in one")
+        imgui.begin_child("entries", ImVec2(0, 0))
+        for p in files.entries():
+            label = f"[{p.name}]" if p.is_dir() else p.name
+            clicked, _ = imgui.selectable(label, False)
+            v.widgets.note(f"browser {p.name}")
+            if clicked:
+                if p.is_dir():
+                    files.browser_dir = p
+                else:
+                    files.browser_open = False
+                    v.open_path(str(p))
+        imgui.end_child()
+    imgui.end()
+    if not still_open:
+        files.browser_open = False
+
+
+def view_labels(v) -> None:
+    """The methods and sample counts over the view (not over the sidebar)."""
+    state = v.state
+    x, y, w, _ = v.view_rect_window()
+    draw = imgui.get_foreground_draw_list()
+    shown = state.shown_methods()
+
+    def label(px: float, text: str) -> None:
+        size = imgui.calc_text_size(text)
+        draw.add_rect_filled(ImVec2(px - 4, y + 4), ImVec2(px + size.x + 4, y + 8 + size.y),
+                             imgui.get_color_u32((0.0, 0.0, 0.0, 0.55)))
+        draw.add_text(ImVec2(px, y + 6), imgui.get_color_u32((1.0, 1.0, 1.0, 1.0)), text)
+
+    if state.probe_view == "alone":
+        label(x + 8, "probe grid")
+    elif state.display == "split" and len(shown) > 1:
+        label(x + 8, f"{state.method}  {v.session.samples(state.method)} spp")
+        right = f"{state.split_method}  {v.session.samples(state.split_method)} spp"
+        label(x + w - imgui.calc_text_size(right).x - 12, right)
+    elif state.display == "error" and state.method != "pt":
+        rmse = v.error_meter.value
+        label(x + 8, f"|{state.method} - pt|  rel. RMSE {rmse:.4f}  (pt {v.session.samples('pt')} spp)")
+    else:
+        label(x + 8, f"{state.method}  {v.session.samples(state.method)} spp")

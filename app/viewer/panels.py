@@ -1,0 +1,285 @@
+"""The sidebar: ImGui sections for render, data, transfer function, light, probes, stats, camera
+and files, and help."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from imgui_bundle import ImVec2, imgui, implot
+
+from ..render.renderer import METHODS
+from ..scene import SH_WINDOWS, PROBE_PRECISIONS
+from ..volume import BUILTIN_VOLUMES
+from .overlays import shortcut_table
+from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
+from .tf_editor import heat_legend, transfer_panel
+
+SIDEBAR_WIDTH = 370           # logical pixels, before the UI scale
+RAYMARCH_STAGES = ("compute", "fragment")
+
+
+def sidebar(v) -> None:
+    s = v.ui_scale
+    height = imgui.get_io().display_size.y
+    imgui.set_next_window_pos(ImVec2(0, 0))
+    imgui.set_next_window_size(ImVec2(SIDEBAR_WIDTH * s, height))
+    flags = (imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse
+             | imgui.WindowFlags_.no_title_bar)
+    imgui.begin("Radiance probes", None, flags)
+    imgui.push_item_width(-150 * s)
+    for title, draw in SECTIONS:
+        imgui.set_next_item_open(title not in CLOSED_AT_START, imgui.Cond_.once)
+        if imgui.collapsing_header(title):
+            v.widgets.note(title)
+            draw(v)
+        else:
+            v.widgets.note(title)
+    imgui.pop_item_width()
+    if v.state.messages:
+        imgui.separator()
+        imgui.text_wrapped(v.state.messages[-1])
+    imgui.end()
+
+
+def _radio_row(v, label: str, choices, current: str, prefix: str = "") -> str | None:
+    imgui.text(label)
+    chosen = None
+    for i, choice in enumerate(choices):
+        if i:
+            imgui.same_line()
+        if imgui.radio_button(f"{choice}##{label}", current == choice):
+            chosen = choice
+        v.widgets.note(f"{prefix}{choice}")
+    return chosen
+
+
+def render_section(v) -> None:
+    state, ui, s = v.state, v.widgets, v.ui_scale
+    chosen = _radio_row(v, "Method", METHODS, state.method)
+    if chosen:
+        state.set_method(chosen)
+    chosen = _radio_row(v, "View", DISPLAY_MODES, state.display, "view ")
+    if chosen:
+        state.set_display(chosen)
+    if state.display == "split":
+        changed, i = imgui.combo("Right half", METHODS.index(state.split_method), list(METHODS))
+        ui.note("Right half")
+        if changed:
+            state.split_method = METHODS[i]
+        changed, value = imgui.slider_float("Divider", state.split_position, 0.0, 1.0, "%.2f")
+        if changed:
+            state.split_position = value
+    if state.display == "error":
+        _error_summary(v)
+        changed, value = imgui.slider_float("Heat max", state.heat_max, 0.01, 10.0, "%.2f",
+                                            imgui.SliderFlags_.logarithmic)
+        if changed:
+            state.heat_max = value
+        heat_legend(imgui.get_content_region_avail().x, 10 * s, state.heat_max)
+    chosen = _radio_row(v, "Probe grid", PROBE_VIEWS, state.probe_view, "probes ")
+    if chosen:
+        state.probe_view = chosen
+    changed, value = imgui.checkbox("Volume box", state.show_box)
+    ui.note("Volume box")
+    if changed:
+        state.show_box = value
+    changed, value = imgui.slider_float("Exposure", state.exposure, 0.05, 20.0, "%.2f",
+                                        imgui.SliderFlags_.logarithmic)
+    ui.note("Exposure")
+    if changed:
+        state.exposure = value
+    changed, value = imgui.slider_int("Max samples", state.max_samples, 1, 65536, "%d",
+                                      imgui.SliderFlags_.logarithmic)
+    if changed:
+        state.max_samples = max(1, value)
+    changed, value = imgui.slider_float("Render scale", state.render_scale, 0.125, 1.0, "%.3f")
+    if changed:
+        state.render_scale = value
+    r = v.session.renderer
+    changed, i = imgui.combo("Raymarch stage", RAYMARCH_STAGES.index(r.raymarch_stage), list(RAYMARCH_STAGES))
+    if changed:
+        r.raymarch_stage = RAYMARCH_STAGES[i]
+        v.session.restart(["raymarch"])
+    for method in state.shown_methods():
+        n = v.session.samples(method)
+        imgui.progress_bar(min(n / state.max_samples, 1.0), ImVec2(-1, 0),
+                           f"{method}: {n} / {state.max_samples} samples")
+
+
+def _error_summary(v) -> None:
+    state = v.state
+    if state.method == "pt":
+        imgui.text_wrapped("The error view compares a probe method with the path tracer: choose one.")
+        return
+    rmse = v.error_meter.value
+    text = "n/a" if not np.isfinite(rmse) else f"{rmse:.4f}"
+    imgui.text(f"relative RMSE {state.method} vs pt: {text}")
+    imgui.text_disabled(f"pt at {v.session.samples('pt')} spp (its own noise is included)")
+
+
+def data_section(v) -> None:
+    state, ui = v.state, v.widgets
+    vol = v.session.volume
+    if state.scene_path:
+        imgui.text_wrapped(f"scene {state.scene_path}")
+    imgui.text(f"{vol.name}")
+    imgui.text(f"dims {vol.dims[0]} x {vol.dims[1]} x {vol.dims[2]}   {vol.raw_dtype}")
+    sp = vol.spacing
+    imgui.text(f"spacing {sp[0]:g}, {sp[1]:g}, {sp[2]:g}")
+    imgui.text(f"values {vol.raw_min:g} .. {vol.raw_max:g}; 0..1 = {vol.value_range[0]:g} .. {vol.value_range[1]:g}")
+    xs, heights = v.histogram()
+    if implot.begin_plot("##histogram", ImVec2(-1, 70 * v.ui_scale),
+                         implot.Flags_.canvas_only | implot.Flags_.no_inputs):
+        implot.setup_axes_limits(0.0, 1.0, 0.0, 1.05, implot.Cond_.always)
+        implot.plot_bars("histogram", xs, heights, 1.0 / len(xs))
+        implot.end_plot()
+    imgui.text_disabled("histogram of normalised values (log counts)")
+    if imgui.button("Open file..."):
+        v.files.open_dialog()
+    ui.note("Open file...")
+    imgui.same_line()
+    imgui.text_disabled("or drop one on the window")
+    names = list(BUILTIN_VOLUMES)
+    for i, name in enumerate(names):
+        if i % 3:
+            imgui.same_line()
+        if imgui.button(f"{name}##builtin"):
+            v.open_builtin(name)
+        ui.note(f"builtin {name}")
+    for path in v.dataset_paths:
+        clicked, _ = imgui.selectable(f"{path.name}##dataset", False)
+        ui.note(f"dataset {path.name}")
+        if clicked:
+            v.open_path(str(path))
+
+
+def light_section(v) -> None:
+    state, ui = v.state, v.widgets
+    light = state.scene.light
+    az, el = angles_from_direction(light.direction)
+    changed_az, az = imgui.slider_float("Sun azimuth", az, -180.0, 180.0, "%.0f deg")
+    ui.note("Sun azimuth")
+    changed_el, el = imgui.slider_float("Sun elevation", el, -89.0, 89.0, "%.0f deg")
+    ui.note("Sun elevation")
+    if changed_az or changed_el:
+        state.set_light_angles(az, el)
+    d = state.scene.light.direction
+    imgui.text_disabled(f"towards the sun: ({d[0]:.2f}, {d[1]:.2f}, {d[2]:.2f})")
+    _colour_strength(v, "Sun", state.scene.light.irradiance, 100.0,
+                     lambda rgb: state.edit(light=replace(state.scene.light, irradiance=rgb)))
+    _colour_strength(v, "Environment", state.scene.environment, 10.0,
+                     lambda rgb: state.edit(environment=rgb))
+
+
+def _colour_strength(v, name: str, rgb, max_strength: float, apply) -> None:
+    key = f"{name} colour"
+    colour, strength = colour_and_strength(rgb)
+    colour = v.remembered_colours.get(key, colour) if strength == 0.0 else colour
+    changed_c, new_colour = imgui.color_edit3(f"{name} colour", list(colour), imgui.ColorEditFlags_.float)
+    changed_s, new_strength = imgui.slider_float(f"{name} strength", strength, 0.0, max_strength, "%.2f",
+                                                 imgui.SliderFlags_.logarithmic)
+    v.widgets.note(f"{name} strength")
+    if changed_c or changed_s:
+        v.remembered_colours[key] = tuple(new_colour)
+        apply(scaled(new_colour, new_strength))
+
+
+def probes_section(v) -> None:
+    state, ui = v.state, v.widgets
+    spec = state.scene.probes
+    changed, same = imgui.checkbox("Same on every axis", v.probe_axes_locked)
+    if changed:
+        v.probe_axes_locked = same
+    if v.probe_axes_locked:
+        changed, n = imgui.slider_int("Probes per axis", spec.grid[0], 1, 64)
+        ui.note("Probes per axis")
+        if changed:
+            state.set_probe_grid((n, n, n))
+    else:
+        changed, grid = imgui.slider_int3("Probes x, y, z", list(spec.grid), 1, 64)
+        ui.note("Probes x, y, z")
+        if changed:
+            state.set_probe_grid(tuple(grid))
+    changed, n = imgui.slider_int("Walks per probe", spec.samples, 1, 16384, "%d", imgui.SliderFlags_.logarithmic)
+    ui.note("Walks per probe")
+    if changed:
+        state.set_probes(samples=max(1, n))
+    changed, i = imgui.combo("SH window", SH_WINDOWS.index(spec.sh_window), list(SH_WINDOWS))
+    if changed:
+        state.set_probes(sh_window=SH_WINDOWS[i])
+    changed, i = imgui.combo("Precision", PROBE_PRECISIONS.index(spec.precision), list(PROBE_PRECISIONS))
+    if changed:
+        state.set_probes(precision=PROBE_PRECISIONS[i])
+    grid, session = v.session.probe_grid, v.session
+    if grid is None:
+        imgui.text_disabled("not baked yet (a probe method or the probe grid view bakes them)")
+        return
+    done = session.probes_ready()
+    fraction = grid.passes_done / max(grid.passes_total, 1)
+    label = "baked" if done else ("stale: bakes when a probe view is shown" if not state.wants_probes()
+                                  else f"baking pass {grid.passes_done} / {grid.passes_total}")
+    imgui.progress_bar(fraction if done or state.wants_probes() else 0.0, ImVec2(-1, 0), label)
+    ui.note("bake progress")
+    imgui.text(f"bake GPU time {session.bake_ms:.1f} ms over {grid.passes_done} passes")
+    imgui.text(f"probe textures {grid.gpu_bytes / 2**20:.2f} MiB  (bake buffers {grid.bake_bytes / 2**20:.1f} MiB)")
+    rep = session.bake_report
+    if rep is not None and rep.passes_done > 1:
+        imgui.text_disabled(f"est. standard error of the probes {100 * rep.standard_error:.2f}%")
+
+
+def stats_section(v) -> None:
+    session, t = v.session, v.session.last
+    imgui.text(f"{v.device}")
+    w, h = session.size
+    imgui.text(f"render {w} x {h} px, window {v.framebuffer_size[0]} x {v.framebuffer_size[1]}")
+    imgui.text(f"GPU frame {t.total_ms:.2f} ms (render {t.render_ms:.2f}, bake {t.bake_ms:.2f}, "
+               f"display {t.display_ms:.2f})")
+    history = np.asarray(session.history, np.float64)
+    if history.size and implot.begin_plot("##frame times", ImVec2(-1, 90 * v.ui_scale),
+                                          implot.Flags_.no_menus | implot.Flags_.no_box_select
+                                          | implot.Flags_.no_legend | implot.Flags_.no_inputs):
+        implot.setup_axes(None, "ms", implot.AxisFlags_.no_tick_labels, implot.AxisFlags_.auto_fit)
+        implot.setup_axis_limits(implot.ImAxis_.x1, 0, max(len(history), 2), implot.Cond_.always)
+        implot.plot_line("GPU ms", history)
+        implot.end_plot()
+    imgui.text_disabled("GPU time per frame from timestamp queries")
+    if session.probe_grid is not None:
+        imgui.text(f"bake {session.bake_ms:.1f} ms GPU, probes {session.probe_grid.gpu_bytes / 2**20:.2f} MiB")
+
+
+def camera_section(v) -> None:
+    state, ui = v.state, v.widgets
+    cam = state.scene.camera
+    if imgui.button("Reset camera"):
+        state.reset_camera()
+    ui.note("Reset camera")
+    changed, fov = imgui.slider_float("Field of view", cam.fov_y, 5.0, 120.0, "%.0f deg")
+    if changed:
+        state.set_camera(replace(cam, fov_y=float(fov)))
+    imgui.text_disabled(f"eye ({cam.eye[0]:.2f}, {cam.eye[1]:.2f}, {cam.eye[2]:.2f})")
+    changed, text = imgui.input_text("Screenshot", v.screenshot_path)
+    if changed:
+        v.screenshot_path = text
+    if imgui.button("Save PNG"):
+        v.request_screenshot()
+    ui.note("Save PNG")
+    changed, text = imgui.input_text("Scene file", v.scene_file)
+    if changed:
+        v.scene_file = text
+    if imgui.button("Save scene"):
+        v.save_scene()
+    ui.note("Save scene")
+    imgui.same_line()
+    if imgui.button("Load scene"):
+        v.open_path(v.scene_file)
+    ui.note("Load scene")
+
+
+def help_section(v) -> None:
+    shortcut_table()
+
+
+SECTIONS = (("Render", render_section), ("Data", data_section), ("Transfer function", transfer_panel),
+            ("Light", light_section), ("Probes", probes_section), ("Stats", stats_section),
+            ("Camera and files", camera_section), ("Help (F1)", help_section))
+CLOSED_AT_START = ("Help (F1)", "Data", "Camera and files")

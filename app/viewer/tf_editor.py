@@ -1,0 +1,109 @@
+"""The transfer function panel: colormap preset with a preview bar, the opacity curve edited by
+dragging its control points over the volume's histogram (ImPlot), density scale, albedo and
+anisotropy."""
+from __future__ import annotations
+
+import numpy as np
+from imgui_bundle import ImVec2, imgui, implot
+
+from ..transfer import ALIASES, COLORMAPS
+from .state import add_point, move_point, remove_point
+
+PRESETS = tuple(c for c in COLORMAPS if c not in ALIASES)
+POINT_COLOUR = (1.0, 0.85, 0.2, 1.0)
+HISTOGRAM_BINS = 128
+
+
+def histogram_curve(volume, bins: int = HISTOGRAM_BINS) -> tuple[np.ndarray, np.ndarray]:
+    """Bin centres and log-scaled counts in [0, 1] of the normalised density (for a backdrop)."""
+    counts = volume.histogram(bins).astype(np.float64)
+    logc = np.log1p(counts)
+    height = logc / logc.max() if logc.max() > 0 else logc
+    return (np.arange(bins) + 0.5) / bins, height
+
+
+def colour_bar(rgb: np.ndarray, width: float, height: float) -> None:
+    """A horizontal bar of colours (n, 3) at the cursor."""
+    draw = imgui.get_window_draw_list()
+    p = imgui.get_cursor_screen_pos()
+    n = len(rgb)
+    for i, c in enumerate(rgb):
+        col = imgui.get_color_u32((float(c[0]), float(c[1]), float(c[2]), 1.0))
+        draw.add_rect_filled(ImVec2(p.x + width * i / n, p.y), ImVec2(p.x + width * (i + 1) / n + 1, p.y + height), col)
+    imgui.dummy(ImVec2(width, height))
+
+
+def transfer_panel(v) -> None:
+    state, ui = v.state, v.widgets
+    tf = state.scene.transfer_function
+    width = imgui.get_content_region_avail().x
+    if tf.rgba is not None:
+        imgui.text_wrapped("The scene gives an explicit RGBA table; choosing a colormap or editing the "
+                           "curve replaces it.")
+    current = ALIASES.get(tf.colormap, tf.colormap)
+    changed, index = imgui.combo("Colormap", PRESETS.index(current) if current in PRESETS else 0, list(PRESETS))
+    ui.note("Colormap")
+    if changed:
+        state.set_transfer(colormap=PRESETS[index])
+    table = v.session.renderer.resources.table
+    colour_bar(table[:, :3], width, 14 * v.ui_scale)
+    _opacity_editor(v, width)
+    changed, value = imgui.slider_float("Density scale", state.scene.density_scale, 0.1, 10000.0, "%.1f",
+                                        imgui.SliderFlags_.logarithmic)
+    ui.note("Density scale")
+    if changed:
+        state.edit(density_scale=float(value))
+    changed, value = imgui.slider_float("Albedo", state.scene.albedo, 0.0, 1.0)
+    ui.note("Albedo")
+    if changed:
+        state.edit(albedo=float(value))
+    changed, value = imgui.slider_float("Anisotropy g", state.scene.anisotropy, -0.95, 0.95)
+    ui.note("Anisotropy g")
+    if changed:
+        state.edit(anisotropy=float(value))
+
+
+def _opacity_editor(v, width: float) -> None:
+    state, ui = v.state, v.widgets
+    tf = state.scene.transfer_function
+    points = tf.opacity if tf.rgba is None else ((0.0, 0.0), (1.0, 1.0))
+    xs, heights = v.histogram()
+    flags = (implot.Flags_.no_menus | implot.Flags_.no_box_select | implot.Flags_.no_legend
+             | implot.Flags_.no_mouse_text | implot.Flags_.no_title)
+    if not implot.begin_plot("##opacity", ImVec2(width, 150 * v.ui_scale), flags):
+        return
+    axis_flags = implot.AxisFlags_.no_menus | implot.AxisFlags_.no_label
+    implot.setup_axes("density", "opacity", axis_flags, axis_flags)
+    implot.setup_axes_limits(0.0, 1.0, 0.0, 1.05, implot.Cond_.always)
+    implot.plot_shaded("histogram", xs, heights, 0.0,
+                       spec=implot.Spec(fill_color=(0.45, 0.55, 0.7, 1.0), fill_alpha=0.45))
+    curve = np.array(points, np.float64)
+    line_x = np.concatenate([[0.0], curve[:, 0], [1.0]])
+    line_y = np.concatenate([[curve[0, 1]], curve[:, 1], [curve[-1, 1]]])
+    implot.plot_line("opacity", line_x, line_y, spec=implot.Spec(line_color=POINT_COLOUR, line_weight=2.0))
+    new_points, any_hovered = points, False
+    for i, (x, y) in enumerate(points):
+        moved, nx, ny, _, hovered, _ = implot.drag_point(i, float(x), float(y), POINT_COLOUR, 6.0,
+                                                         out_clicked=False, out_hovered=False, out_held=False)
+        pixel = implot.plot_to_pixels(implot.Point(float(x), float(y)))
+        ui.note_point(f"opacity point {i}", pixel.x, pixel.y)
+        any_hovered = any_hovered or bool(hovered)
+        if moved:
+            new_points = move_point(new_points, i, nx, ny)
+        if hovered and imgui.is_mouse_clicked(imgui.MouseButton_.right):
+            new_points = remove_point(new_points, i)
+            break
+    if implot.is_plot_hovered() and not any_hovered and imgui.is_mouse_double_clicked(imgui.MouseButton_.left):
+        m = implot.get_plot_mouse_pos()
+        new_points = add_point(new_points, m.x, m.y)
+    implot.end_plot()
+    ui.note("opacity curve")
+    if new_points != points:
+        state.set_transfer(opacity=new_points)
+    imgui.text_disabled("drag points; double-click adds one; right-click removes one")
+
+
+def heat_legend(width: float, height: float, heat_max: float) -> None:
+    from .display import heat_colours
+    colour_bar(heat_colours(64), width, height)
+    imgui.text_disabled(f"0{' ' * 6}per-pixel error / rms(pt){' ' * 6}{heat_max:g}")

@@ -1,0 +1,323 @@
+"""The viewer without its window: per frame it applies what the user changed, advances the
+renderers, draws the picture (display pass, probe spheres, volume box) and builds the panels.
+Errors (a scene that does not load, a shader that does not compile, a GL error) go to the error
+panel; the viewer keeps running with what last worked."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import moderngl
+import numpy as np
+
+from ..camera import camera_frame
+from ..gl.shaders import ShaderError
+from ..gl.timer import GpuTimer
+from ..scene import SceneError, scene_to_dict
+from ..volume import VolumeError, load_scene_volume
+from . import layout, orbit, overlays, panels
+from .display import BACKGROUND, DisplayPass, ErrorMeter
+from .files import FileDialogs, builtin_scene, datasets, scene_for_path
+from .probe_view import BoxOutline, ProbeSpheres, probe_centres
+from .session import FrameTimes, RenderSession
+from .state import ViewerState
+from .tf_editor import histogram_curve
+from .widgets import WidgetRects
+
+# What a bad scene, volume or shader raises; anything else is a bug and is not swallowed.
+RECOVERABLE = (SceneError, VolumeError, ShaderError, moderngl.Error, OSError, ValueError, RuntimeError)
+SAVED_SCENE_NAME = "viewer_scene.json"
+SNAPSHOT_MAX_PROBES = 512      # a snapshot carries the probes' coefficients for grids this small
+
+
+class Viewer:
+    def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = ""):
+        self.ctx = ctx
+        self.state = state
+        self.device = device
+        self.session = RenderSession(ctx, state.scene)
+        self.widgets = WidgetRects()
+        self.error_meter = ErrorMeter()
+        self.files = FileDialogs(self.open_path)
+        self.dataset_paths = datasets()
+        self.timer = GpuTimer(ctx)
+        self._passes: dict[str, object] = {}     # display, spheres, box: built on first use
+        self._broken: set[str] = set()           # passes whose shaders failed (errors shown)
+        self._halted_scene = None                # the scene whose rendering raised, until it changes
+        self._pending_volume = None
+        self.input = None                        # the window's InputRouter
+        self.ui_scale = 1.0
+        self.window_size = (1, 1)
+        self.framebuffer_size = (1, 1)
+        self.screenshot_path = "screenshot.png"
+        self.scene_file = SAVED_SCENE_NAME       # "save scene" never overwrites the one opened
+        self.remembered_colours: dict[str, tuple] = {}
+        self.probe_axes_locked = len(set(state.scene.probes.grid)) == 1
+        self.pending_screenshot: str | None = None
+        self.close_requested = False
+        self.frame_index = 0
+        self._histogram = (None, None)
+
+    # ---- geometry ------------------------------------------------------------------------------
+    def sidebar_width(self) -> float:
+        return panels.SIDEBAR_WIDTH * self.ui_scale if self.state.show_ui else 0.0
+
+    def view_rect_window(self) -> tuple[float, float, float, float]:
+        """The picture's rectangle in window coordinates (what the cursor reports), top-left origin."""
+        return layout.view_rect_window(self.window_size, self.sidebar_width())
+
+    def view_rect_framebuffer(self) -> tuple[int, int, int, int]:
+        """The same rectangle in framebuffer pixels with GL's bottom-left origin (HiDPI aware)."""
+        return layout.view_rect_framebuffer(self.window_size, self.framebuffer_size, self.sidebar_width())
+
+    def divider_x_window(self) -> float | None:
+        """The split view's divider in window coordinates, None when there is no split view."""
+        if self.state.display != "split" or self.state.probe_view == "alone":
+            return None
+        x, _, w, _ = self.view_rect_window()
+        return x + self.state.split_position * w
+
+    def render_size(self) -> tuple[int, int]:
+        return layout.render_size(self.view_rect_framebuffer(), self.state.render_scale)
+
+    def histogram(self):
+        volume = self.session.volume
+        if self._histogram[0] is not volume:
+            self._histogram = (volume, histogram_curve(volume))
+        return self._histogram[1]
+
+    # ---- actions (panels, shortcuts, scripts) --------------------------------------------------
+    def run_action(self, shortcut) -> None:
+        try:
+            shortcut.action(self)
+        except RECOVERABLE as exc:
+            self.state.error(f"{shortcut.what}: {exc}")
+
+    def request_screenshot(self, path: str | None = None) -> None:
+        self.pending_screenshot = path or _free_name(self.screenshot_path)
+
+    def request_close(self) -> None:
+        self.close_requested = True
+
+    def save_scene(self, path: str | None = None) -> Path | None:
+        """Writes the scene JSON, the camera's image size set to the current render size."""
+        target = Path(path or self.scene_file)
+        w, h = self.render_size()
+        scene = self.state.scene
+        data = scene_to_dict(scene.replace(camera=replace(scene.camera, width=w, height=h)))
+        volume = data.get("volume", {})
+        if volume.get("path") and scene.base_dir and not Path(volume["path"]).is_absolute():
+            candidate = Path(scene.base_dir) / volume["path"]
+            if candidate.is_file():
+                volume["path"] = str(candidate.resolve())
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_text(json.dumps(data, indent=2) + "\n")
+        except OSError as exc:
+            self.state.error(f"could not save the scene to {target}: {exc}")
+            return None
+        self.state.note(f"saved the scene to {target}")
+        return target
+
+    def open_path(self, path: str) -> bool:
+        """Opens a scene (.json) or a volume file; on failure the error panel says why."""
+        try:
+            scene, scene_path = scene_for_path(path, self.state.scene)
+            volume = load_scene_volume(scene)
+        except RECOVERABLE as exc:
+            self.state.error(f"could not open {path}: {exc}")
+            return False
+        self.state.load_scene(scene, scene_path)
+        self._pending_volume = volume
+        self.state.note(f"opened {path}")
+        return True
+
+    def open_builtin(self, name: str) -> None:
+        size = self.state.scene.volume.size if self.state.scene.volume.path is None else (64, 64, 64)
+        self.state.load_scene(builtin_scene(name, size, self.state.scene))
+
+    # ---- one frame -----------------------------------------------------------------------------
+    def apply_input(self) -> None:
+        if self.input is not None:
+            (ox, oy), (px, py), zoom_steps = self.input.take_camera_moves()
+            cam = self.state.scene.camera
+            if ox or oy:
+                cam = orbit.orbit(cam, ox, oy)
+            if px or py:
+                cam = orbit.pan(cam, px, py, self.view_rect_window()[3])
+            if zoom_steps:
+                cam = orbit.zoom(cam, zoom_steps)
+            if cam is not self.state.scene.camera:
+                self.state.set_camera(cam)
+            if self.input.divider_x is not None:
+                x, _, w, _ = self.view_rect_window()
+                self.state.split_position = float(np.clip((self.input.divider_x - x) / w, 0.0, 1.0))
+                self.input.divider_x = None
+            for path in self.input.take_dropped():
+                self.open_path(path)
+        self.files.poll()
+
+    def _sync(self) -> None:
+        """Hands the edited scene to the renderers; a scene that fails is reverted and reported."""
+        state = self.state
+        volume, self._pending_volume = self._pending_volume, None
+        try:
+            self.session.set_scene(state.scene, volume)
+        except RECOVERABLE as exc:
+            state.error(f"could not apply the scene: {exc}")
+            state.scene = self.session.scene
+        self.session.set_filter(linear=state.render_scale < 1.0)
+        self.session.resize(*self.render_size())
+        self.session.set_methods(state.shown_methods())
+
+    def render_frame(self) -> FrameTimes:
+        """Advances the renderers and draws the picture into the window's framebuffer."""
+        state = self.state
+        self._sync()
+        times = FrameTimes()
+        if self._halted_scene is not None and self._halted_scene is not state.scene:
+            self._halted_scene = None
+        if self._halted_scene is None:
+            try:
+                times = self.session.step(state.max_samples, state.wants_probes())
+            except RECOVERABLE as exc:
+                state.error(f"rendering stopped: {exc}")
+                self._halted_scene = state.scene
+        if state.display == "error" and state.method != "pt":
+            self.error_meter.update(self.session, state.method)
+        self.ctx.screen.use()
+        self.ctx.viewport = (0, 0, *self.framebuffer_size)
+        self.ctx.clear(*BACKGROUND, 1.0, depth=1.0)
+        self.timer.start()
+        self._draw_picture()
+        self.timer.stop()
+        times.display_ms = self.timer.elapsed_ms
+        self.session.last = times
+        self.session.record_frame(times)
+        error = self.ctx.error
+        if error != "GL_NO_ERROR":
+            state.error(f"OpenGL error {error} in frame {self.frame_index}")
+        self.frame_index += 1
+        return times
+
+    def _draw_picture(self) -> None:
+        state, session = self.state, self.session
+        rect = self.view_rect_framebuffer()
+        display = self._pass("display", DisplayPass)
+        if display is not None:
+            main = session.texture(state.method) if state.probe_view != "alone" else None
+            other = None
+            if state.display == "split":
+                other = session.texture(state.split_method)
+            elif state.display == "error" and state.method != "pt":
+                other = session.texture("pt")
+            mode = state.display if (state.display != "error" or state.method != "pt") else "image"
+            if state.probe_view == "alone":
+                mode = "image"
+            rms = self.error_meter.reference_rms
+            display.draw(rect, mode, main, other, state.split_position, state.exposure,
+                         1.0 / (state.heat_max * rms) if rms > 0 else 0.0)
+        matrix = self.view_projection()
+        grid = session.probe_grid
+        if state.probe_view != "off" and grid is not None and grid.passes_done > 0:
+            spheres = self._pass("spheres", ProbeSpheres)
+            if spheres is not None:
+                self.ctx.viewport = rect
+                spheres.draw(matrix, grid, session.renderer.resources, state.exposure)
+        if state.show_box:
+            box = self._pass("box", BoxOutline)
+            if box is not None:
+                self.ctx.viewport = rect
+                box.draw(matrix, session.volume.half_extent)
+
+    def _pass(self, name: str, cls):
+        """A drawing pass, built on first use; a shader that fails is reported once and skipped."""
+        if name in self._passes:
+            return self._passes[name]
+        if name in self._broken:
+            return None
+        try:
+            self._passes[name] = cls(self.ctx)
+        except (ShaderError, moderngl.Error) as exc:
+            self._broken.add(name)
+            self.state.error(f"the {name} pass is off: {exc}")
+            return None
+        return self._passes[name]
+
+    def view_projection(self) -> np.ndarray:
+        w, h = self.session.size
+        return orbit.view_projection(camera_frame(self.state.scene.camera, w, h))
+
+    def build_ui(self) -> None:
+        """The ImGui panels of this frame (between imgui.new_frame and imgui.render)."""
+        self.widgets.begin_frame()
+        if self.state.show_ui:
+            panels.sidebar(self)
+        overlays.view_labels(self)
+        overlays.help_window(self)
+        overlays.file_browser(self)
+        overlays.error_window(self)
+        self.widgets.end_frame()
+
+    # ---- for scripts and tests -----------------------------------------------------------------
+    def probe_pixels(self) -> list[list[float]]:
+        """Where each probe centre lands in a screenshot (framebuffer pixels, top-left origin)."""
+        grid = self.session.probe_grid
+        if grid is None:
+            return []
+        w, h = self.session.size
+        pixels = orbit.project(self.view_projection(), probe_centres(grid.grid, self.session.volume.half_extent,
+                                                                     grid.box), w, h)
+        x0, _, rw, rh = self.view_rect_framebuffer()
+        top = self.framebuffer_size[1] - rh
+        return [[x0 + px / w * rw, top + py / h * rh] for px, py in pixels.tolist()]
+
+    def snapshot(self) -> dict:
+        """The state a test asserts on, JSON-ready."""
+        s, session = self.state, self.session
+        grid = session.probe_grid
+        return {
+            "frame": self.frame_index, "method": s.method, "display": s.display,
+            "split_method": s.split_method, "split_position": s.split_position,
+            "probe_view": s.probe_view, "show_box": s.show_box, "exposure": s.exposure,
+            "show_ui": s.show_ui, "show_help": s.show_help, "scene_path": s.scene_path,
+            "scene": scene_to_dict(s.scene),
+            "samples": {m: session.samples(m) for m in session.views},
+            "restarts": session.restarts,
+            "render_size": list(session.size), "framebuffer_size": list(self.framebuffer_size),
+            "window_size": list(self.window_size), "view_rect_window": list(self.view_rect_window()),
+            "view_rect_framebuffer": list(self.view_rect_framebuffer()),
+            "bake_passes_run": session.bake_passes_run, "bakes_started": session.bake_generation,
+            "probes_ready": session.probes_ready(),
+            "probe_grid": list(grid.grid) if grid is not None else None,
+            "probe_bytes": grid.gpu_bytes if grid is not None else 0,
+            "bake_ms": session.bake_ms, "frame_ms": session.last.total_ms,
+            "rel_rmse": self.error_meter.value if s.display == "error" else None,
+            "probe_pixels": self.probe_pixels() if s.probe_view != "off" else [],
+            "probe_coefficients": (grid.coefficients().reshape(grid.count, 28).tolist()
+                                   if grid is not None and grid.count <= SNAPSHOT_MAX_PROBES
+                                   and s.probe_view != "off" else None),
+            "camera_eye": list(s.scene.camera.eye),
+            "half_extent": [float(x) for x in session.volume.half_extent],
+            "volume": {"name": session.volume.name, "dims": list(session.volume.dims)},
+            "errors": list(s.errors), "messages": list(s.messages),
+            "widgets": {k: list(v) for k, v in self.widgets.rects.items()},
+        }
+
+    def release(self) -> None:
+        for p in self._passes.values():
+            p.release()
+        self._passes.clear()
+        self.timer.release()
+        self.session.release()
+
+
+def _free_name(path: str) -> str:
+    p = Path(path)
+    if not p.exists():
+        return str(p)
+    i = 1
+    while (candidate := p.with_name(f"{p.stem}_{i:03d}{p.suffix}")).exists():
+        i += 1
+    return str(candidate)

@@ -1,0 +1,20 @@
+// A probe sphere's colour: the probe's SH radiance evaluated at the sphere's normal, i.e. the
+// radiance arriving at the probe from that direction, clamped to non-negative values, tone mapped.
+#define PROBE_SAMPLING
+#include "probe_common.glsl"
+
+uniform float exposure;
+flat in vec3 probe_centre;
+in vec3 normal;
+out vec4 frag_colour;
+
+#include "lib/tonemap.glsl"
+
+void main()
+{
+    vec3 coeffs[9];
+    float sun_transmittance;
+    probe_fetch(probe_centre, coeffs, sun_transmittance);  // at a texel centre: the probe itself
+    vec3 radiance = sh_clamp_nonnegative(sh_evaluate(coeffs, normalize(normal)));
+    frag_colour = vec4(srgb_encode(radiance * exposure), 1.0);
+}

@@ -1,0 +1,420 @@
+"""The viewer: its maths and state in NumPy, then the real viewer in a real window (GLFW, Dear
+ImGui, Mesa llvmpipe) on a private Xvfb, driven through its own input callbacks by scripts, with
+assertions on its screenshots and state dumps."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from app.camera import camera_frame
+from app.scene import CameraSpec, load_scene, parse_scene
+from app.sh import sh_evaluate
+from app.viewer import layout, orbit
+from app.viewer.probe_view import box_edges, probe_centres, uv_sphere
+from app.viewer.state import (ViewerState, add_point, angles_from_direction, direction_from_angles,
+                              move_point, remove_point)
+from viewer_harness import dump, png, srgb8, view, view_pixels, write_script
+from app.render.probe_layout import TEXTURES_FOR_ORDER
+
+# The test scene scatters isotropically (g = 0), so "auto" stores SH order 0: two textures.
+PROBE_TEXTURES_G0 = len(TEXTURES_FOR_ORDER[0])
+
+# ---- maths and state (no window) ------------------------------------------------------------------
+
+
+def _distance(cam: CameraSpec) -> float:
+    return float(np.linalg.norm(np.subtract(cam.eye, cam.target)))
+
+
+def test_view_projection_is_the_raytracers_camera():
+    frame = camera_frame(CameraSpec(eye=(0.4, 0.3, 2.0), target=(0.1, -0.1, 0.0), fov_y=40.0), 160, 90)
+    px, py = np.meshgrid(np.linspace(0.5, 159.5, 7), np.linspace(0.5, 89.5, 5))
+    points = frame.eye + frame.ray_directions(px, py) * np.linspace(0.5, 3.0, 5)[:, None, None]
+    pixels = orbit.project(orbit.view_projection(frame), points, 160, 90)
+    np.testing.assert_allclose(pixels[..., 0], px, atol=1e-3)
+    np.testing.assert_allclose(pixels[..., 1], py, atol=1e-3)
+
+
+def test_orbit_keeps_target_and_distance_and_turns_the_right_way():
+    cam = CameraSpec()
+    turned = orbit.orbit(cam, 50.0, 0.0)
+    assert turned.target == cam.target
+    assert math.isclose(_distance(turned), _distance(cam), rel_tol=1e-12)
+    assert turned.eye[0] < cam.eye[0]          # dragging right: the eye swings left
+    tilted = orbit.orbit(cam, 0.0, 50.0)
+    assert tilted.eye[1] > cam.eye[1]          # dragging down: the eye rises
+    assert orbit.orbit(cam, 0.0, 0.0).eye == pytest.approx(cam.eye)
+
+
+def test_orbit_never_crosses_the_pole():
+    cam = CameraSpec()
+    for _ in range(20):
+        cam = orbit.orbit(cam, 0.0, 400.0)
+    forward = np.subtract(cam.target, cam.eye) / _distance(cam)
+    assert np.degrees(np.arccos(np.clip(-forward[1], -1, 1))) >= orbit.POLE_MARGIN_DEGREES - 1e-6
+    parse_scene({"camera": {"eye": list(cam.eye), "target": list(cam.target)}})  # still valid
+
+
+def test_pan_moves_the_target_with_the_cursor():
+    cam = CameraSpec(width=200, height=100)
+    moved = orbit.pan(cam, 30.0, -10.0, viewport_height=100)
+    forward = np.subtract(cam.target, cam.eye)
+    np.testing.assert_allclose(np.subtract(moved.target, moved.eye), forward, atol=1e-12)
+    # The old target, seen from the moved camera, lands where the cursor went: 30 px right, 10 up.
+    frame = camera_frame(moved, 200, 100)
+    (x, y), = orbit.project(orbit.view_projection(frame), np.array([cam.target]), 200, 100)
+    assert (x, y) == pytest.approx((100 + 30, 50 - 10), abs=1e-6)
+
+
+def test_zoom_keeps_the_view_direction_and_limits():
+    cam = CameraSpec()
+    closer = orbit.zoom(cam, 2.0)
+    assert math.isclose(_distance(closer), _distance(cam) * orbit.ZOOM_PER_WHEEL_STEP ** 2)
+    np.testing.assert_allclose(np.subtract(closer.target, closer.eye) / _distance(closer),
+                               np.subtract(cam.target, cam.eye) / _distance(cam), atol=1e-12)
+    assert _distance(orbit.zoom(cam, 1000.0)) == pytest.approx(orbit.MIN_DISTANCE)
+
+
+def test_light_angles_round_trip():
+    for az, el in ((0.0, 0.0), (30.0, 45.0), (-120.0, -20.0), (179.0, 80.0)):
+        d = direction_from_angles(az, el)
+        assert np.linalg.norm(d) == pytest.approx(1.0)
+        assert angles_from_direction(d) == pytest.approx((az, el))
+
+
+def test_state_edits_replace_the_scene():
+    state = ViewerState.for_scene(parse_scene({"transfer_function": {"rgba": [[0, 0, 0, 0], [1, 1, 1, 1]]}}))
+    first = state.scene
+    state.step_probe_grid(+1)
+    assert state.scene.probes.grid == (24, 24, 24) and first.probes.grid == (16, 16, 16)
+    state.step_probe_grid(-1)
+    state.step_probe_grid(-1)
+    assert state.scene.probes.grid == (12, 12, 12)
+    state.cycle_colormap()
+    assert state.scene.transfer_function.rgba is None  # editing replaces an explicit table
+    state.turn_light(15.0, 0.0)
+    assert angles_from_direction(state.scene.light.direction)[0] == pytest.approx(
+        angles_from_direction(first.light.direction)[0] + 15.0)
+    state.set_camera(replace(state.scene.camera, fov_y=50.0))
+    state.reset_camera()
+    assert state.scene.camera == first.camera
+
+
+def test_shown_methods_and_probe_needs():
+    state = ViewerState.for_scene(parse_scene({}))
+    assert state.shown_methods() == ["pt"] and not state.wants_probes()
+    state.toggle_display("split")
+    assert state.split_method != state.method and state.shown_methods() == ["pt", "probes"]
+    state.set_method("probes")
+    state.set_display("error")
+    assert state.shown_methods() == ["probes", "pt"] and state.wants_probes()
+    state.set_method("pt")
+    state.probe_view = "alone"
+    assert state.shown_methods() == [] and state.wants_probes()
+
+
+def test_opacity_points_stay_ordered_and_in_range():
+    pts = ((0.0, 0.0), (0.3, 0.2), (1.0, 1.0))
+    assert move_point(pts, 1, 1.5, -1.0) == ((0.0, 0.0), (1.0, 0.0), (1.0, 1.0))
+    assert move_point(pts, 1, 0.5, 0.7)[1] == (0.5, 0.7)
+    assert add_point(pts, 0.6, 0.4) == ((0.0, 0.0), (0.3, 0.2), (0.6, 0.4), (1.0, 1.0))
+    assert remove_point(pts, 1) == ((0.0, 0.0), (1.0, 1.0))
+    assert remove_point(remove_point(pts, 1), 0) == ((0.0, 0.0), (1.0, 1.0))  # two stay
+
+
+def test_layout_on_normal_and_hidpi_screens():
+    assert layout.view_rect_window((1280, 800), 370) == (370, 0, 910, 800)
+    assert layout.view_rect_framebuffer((1280, 800), (1280, 800), 370) == (370, 0, 910, 800)
+    # A 2x framebuffer (macOS points): the picture keeps its place, with twice the pixels.
+    assert layout.view_rect_framebuffer((1280, 800), (2560, 1600), 370) == (740, 0, 1820, 1600)
+    assert layout.render_size((740, 0, 1820, 1600), 0.5) == (910, 800)
+    assert layout.ui_scale(2.0, 1280, 1280) == 2.0   # X11 / Windows: coordinates are pixels
+    assert layout.ui_scale(2.0, 1280, 2560) == 1.0   # macOS: the framebuffer is denser already
+
+
+def test_sphere_mesh_faces_outwards_and_probe_centres_follow_the_spec():
+    vertices, triangles = uv_sphere()
+    a, b, c = (vertices[triangles[:, i]] for i in range(3))
+    outward = np.einsum("ij,ij->i", np.cross(b - a, c - a), a + b + c)
+    assert (outward >= -1e-9).all() and (outward > 1e-9).sum() > len(triangles) * 0.8
+    centres = probe_centres((2, 3, 4), (0.5, 0.25, 0.4))
+    assert centres.shape == (24, 3)
+    np.testing.assert_allclose(centres[0], [-0.25, -0.25 * 2 / 3, -0.3])
+    np.testing.assert_allclose(centres[1], [0.25, -0.25 * 2 / 3, -0.3])  # x fastest
+    assert len(box_edges((0.5, 0.5, 0.5))) == 24
+
+
+def test_headless_commands_do_not_import_the_window_toolkit():
+    code = ("import sys, app.cli; app.cli.build_parser(); "
+            "print(any(m.split('.')[0] in ('glfw', 'imgui_bundle') for m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+# ---- the real viewer in a window --------------------------------------------------------------------
+
+SCENE = {"volume": {"builtin": "cloud", "size": [24, 24, 24]},
+         "probes": {"grid": [4, 4, 4], "samples": 64, "fit": "box"},
+         "camera": {"width": 64, "height": 64}}
+WINDOW = "720x440"
+SPP = 4
+
+
+@pytest.fixture(scope="session")
+def display():
+    """One private X server for the session's viewer runs."""
+    if shutil.which("Xvfb") is None and not os.path.exists("/usr/bin/Xvfb"):
+        pytest.skip("Xvfb is not installed (scripts/setup.sh installs it)")
+    from app.viewer.xvfb import Xvfb
+    with Xvfb(1280, 800) as name:
+        yield name
+
+
+def _is_background(pixels: np.ndarray, colour, tol: int = 6) -> np.ndarray:
+    return (np.abs(pixels - np.asarray(colour)) <= tol).all(axis=-1)
+
+
+ENVIRONMENT_SRGB = srgb8([0.1, 0.1, 0.1])
+
+
+@pytest.fixture(scope="module")
+def run(display, tmp_path_factory):
+    """One scripted session of the viewer; the tests below read what it left behind."""
+    out = tmp_path_factory.mktemp("viewer")
+    (out / "scene.json").write_text(json.dumps(SCENE))
+    z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in (12, 16, 20)), indexing="ij")
+    np.save(out / "blob.npy", np.clip(1.2 - 2 * np.sqrt(x * x + y * y + z * z), 0, 1).astype(np.float32))
+    steps = [
+        {"until": "done"}, {"screenshot": "pt.png"}, {"dump": "pt.json"},
+        {"key": "2"}, {"until": "done"}, {"screenshot": "probes.png"}, {"dump": "probes.json"},
+        {"key": "1"}, {"click": "view split"}, {"until": "done"},
+        {"screenshot": "split.png"}, {"dump": "split.json"},
+        {"drag": {"view": [0.5, 0.6]}, "to": {"view": [0.3, 0.6]}}, {"dump": "divider.json"},
+        {"key": "2"}, {"key": "e"}, {"until": "done"}, {"screenshot": "error.png"}, {"dump": "error.json"},
+        {"key": "e"}, {"drag": {"view": [0.5, 0.5]}, "by": [40, 15]}, {"dump": "orbit.json"},
+        {"until": "done"}, {"screenshot": "orbit.png"},
+        {"drag": {"view": [0.5, 0.5]}, "by": [30, 0], "button": "right"},
+        {"scroll": {"view": [0.5, 0.5]}, "steps": 2}, {"dump": "pan_zoom.json"}, {"key": "r"},
+        {"key": "g"}, {"until": "done"}, {"screenshot": "grid_over.png"}, {"dump": "grid_over.json"},
+        {"key": "g"}, {"frames": 2}, {"screenshot": "grid_alone.png"}, {"dump": "grid_alone.json"},
+        {"key": "g"}, {"key": "]"}, {"until": "baked"}, {"dump": "finer.json"},
+        {"key": "right"}, {"dump": "light_key.json"},
+        {"drag": "Sun elevation", "by": [-60, 0]}, {"dump": "light_slider.json"},
+        {"drag": "opacity point 1", "by": [0, -25]}, {"dump": "opacity.json"},
+        {"key": "c"}, {"dump": "colormap.json"}, {"until": "done"}, {"screenshot": "edited.png"},
+        {"resize": [640, 480]}, {"frames": 1}, {"screenshot": "resized.png"}, {"dump": "resized.json"},
+        {"drop": ["blob.npy"]}, {"frames": 1}, {"dump": "dropped.json"},
+        {"key": "ctrl+s"}, {"key": "f12"}, {"dump": "saved.json"},
+        {"key": "f1"}, {"screenshot": "help.png"}, {"dump": "help.json"}, {"key": "f1"},
+        {"click": "Data"}, {"click": "Open file..."}, {"click": "browser scene.json"},
+        {"dump": "browsed.json"},
+        {"close": True},
+    ]
+    script = write_script(out / "script.json", steps)
+    proc = view(["scene.json", "--script", str(script), "--window", WINDOW, "--spp", str(SPP),
+                 "--render-scale", "0.5"], out, display, harness=["--release-check"],
+                env={"RP_FILE_DIALOG": "builtin"})
+    return out, proc
+
+
+def test_pt_screenshot_shows_the_volume_and_the_panels(run):
+    out, _ = run
+    d, image = dump(out / "pt.json"), png(out / "pt.png")
+    assert image.shape == (440, 720, 3)
+    assert d["samples"] == {"pt": SPP} and d["frame_ms"] > 0
+    picture = view_pixels(image, d)
+    volume = ~_is_background(picture, ENVIRONMENT_SRGB, tol=12)
+    assert 0.05 < volume.mean() < 0.9                          # the cloud, not an empty frame
+    h, w = volume.shape
+    assert volume[h // 3: 2 * h // 3, w // 3: 2 * w // 3].mean() > 0.3
+    sidebar = image[:, : d["view_rect_framebuffer"][0]]
+    assert len(np.unique(sidebar.reshape(-1, 3), axis=0)) > 50  # text and widgets
+
+
+def test_probe_method_bakes_once_and_renders(run):
+    out, _ = run
+    d = dump(out / "probes.json")
+    assert d["method"] == "probes" and d["samples"] == {"probes": SPP}
+    assert d["probes_ready"] and d["bake_passes_run"] == 1 and d["probe_grid"] == [4, 4, 4]
+    assert d["probe_bytes"] == PROBE_TEXTURES_G0 * 64 * 16 and d["bake_ms"] > 0
+    a, b = view_pixels(png(out / "pt.png"), d), view_pixels(png(out / "probes.png"), d)
+    assert np.abs(a - b).mean() > 0.5                          # another method, another image
+
+
+def test_split_view_halves_are_the_two_methods(run):
+    out, _ = run
+    d = dump(out / "split.json")
+    assert d["display"] == "split" and d["method"] == "pt" and d["split_method"] == "probes"
+    assert d["samples"] == {"pt": SPP, "probes": SPP}
+    split = view_pixels(png(out / "split.png"), d)
+    pt, probes = view_pixels(png(out / "pt.png"), d), view_pixels(png(out / "probes.png"), d)
+    divider = int(round(d["split_position"] * split.shape[1]))
+    left, right = slice(0, divider - 2), slice(divider + 2, None)
+    np.testing.assert_array_equal(split[:, left], pt[:, left])
+    np.testing.assert_array_equal(split[:, right], probes[:, right])
+    assert np.abs(split[:, right] - pt[:, right]).mean() > 0.5
+    assert (split[:, divider - 1: divider + 1] == 255).all()   # the divider line
+    assert dump(out / "divider.json")["split_position"] == pytest.approx(0.3, abs=0.02)
+
+
+def test_error_view_is_a_heat_map_with_its_relative_rmse(run):
+    out, _ = run
+    d = dump(out / "error.json")
+    assert d["display"] == "error" and d["samples"] == {"probes": SPP, "pt": SPP}
+    assert 0.0 < d["rel_rmse"] < 1.5
+    heat = view_pixels(png(out / "error.png"), d)
+    from app.viewer.display import heat_colours
+    palette = np.round(heat_colours(256) * 255)
+    nearest = np.abs(heat.reshape(-1, 1, 3) - palette[None]).sum(-1).min(-1)
+    assert (nearest <= 12).mean() > 0.97                        # every pixel is a heat colour
+    assert (heat.sum(-1) > 60).mean() > 0.02                    # and the error is somewhere
+
+
+def test_orbit_restarts_the_image_but_never_rebakes(run):
+    out, _ = run
+    before, after = dump(out / "error.json"), dump(out / "orbit.json")
+    eye0, eye1 = np.array(before["scene"]["camera"]["eye"]), np.array(after["scene"]["camera"]["eye"])
+    target = np.array(after["scene"]["camera"]["target"])
+    assert np.linalg.norm(eye1 - eye0) > 0.1
+    assert np.linalg.norm(eye1 - target) == pytest.approx(np.linalg.norm(eye0 - target), rel=1e-9)
+    assert after["restarts"] >= before["restarts"] + 6          # every move restarted the image
+    assert after["bake_passes_run"] == before["bake_passes_run"] == 1
+    assert np.abs(png(out / "orbit.png") - png(out / "probes.png")).mean() > 0.5
+
+
+def _sphere_colours_checked(image: np.ndarray, d: dict) -> int:
+    """Compares the centre pixel of the nearest probes' spheres with the probe's SH radiance at
+    the normal facing the camera (app/sh.py, tone mapped); returns how many were compared."""
+    x0, _, w, h = d["view_rect_framebuffer"]
+    coeffs = np.array(d["probe_coefficients"])[:, :27].reshape(-1, 9, 3)
+    centres = probe_centres(tuple(d["probe_grid"]), d["half_extent"])
+    eye = np.array(d["camera_eye"])
+    checked = 0
+    for i in np.argsort(np.linalg.norm(centres - eye, axis=1))[:16]:  # nearest: not hidden
+        px, py = d["probe_pixels"][i]
+        if not (x0 + 5 < px < x0 + w - 5 and 40 < py < h - 5):
+            continue
+        normal = (eye - centres[i]) / np.linalg.norm(eye - centres[i])
+        expected = srgb8(np.maximum(sh_evaluate(coeffs[i], normal), 0.0) * d["exposure"])
+        got = image[int(py), int(px)]
+        assert np.abs(got - expected).max() <= 12, (i, got, expected)
+        checked += 1
+    return checked
+
+
+def test_pan_zoom_and_reset(run):
+    out, _ = run
+    orbited, moved = dump(out / "orbit.json"), dump(out / "pan_zoom.json")
+    cam0, cam1 = orbited["scene"]["camera"], moved["scene"]["camera"]
+    assert np.linalg.norm(np.subtract(cam1["target"], cam0["target"])) > 0.01   # right drag pans
+    d0 = np.linalg.norm(np.subtract(cam0["eye"], cam0["target"]))
+    d1 = np.linalg.norm(np.subtract(cam1["eye"], cam1["target"]))
+    assert d1 == pytest.approx(d0 * orbit.ZOOM_PER_WHEEL_STEP ** 2)           # two wheel notches
+    assert moved["bake_passes_run"] == orbited["bake_passes_run"]
+    assert dump(out / "grid_over.json")["scene"]["camera"] == dump(out / "pt.json")["scene"]["camera"]
+
+
+def test_probe_spheres_show_each_probes_sh_radiance(run):
+    out, _ = run
+    from app.viewer.display import BACKGROUND
+    alone = dump(out / "grid_alone.json")
+    image = png(out / "grid_alone.png")
+    assert alone["probe_view"] == "alone" and _sphere_colours_checked(image, alone) >= 4
+    spheres = ~_is_background(view_pixels(image, alone), np.round(np.array(BACKGROUND) * 255))
+    assert 0.05 < spheres.mean() < 0.9                         # spheres on an empty background
+    over = dump(out / "grid_over.json")
+    drawn = png(out / "grid_over.png")
+    assert over["probe_view"] == "over" and _sphere_colours_checked(drawn, over) >= 4
+    volume = view_pixels(png(out / "probes.png"), over)
+    assert np.abs(view_pixels(drawn, over) - volume).mean() > 1.0  # drawn over the volume
+
+
+def test_probe_density_key_rebakes_a_finer_grid(run):
+    out, _ = run
+    d = dump(out / "finer.json")
+    assert d["probe_grid"] == [6, 6, 6] and d["scene"]["probes"]["grid"] == [6, 6, 6]
+    assert d["probes_ready"] and d["bake_passes_run"] > 1
+    assert d["probe_bytes"] == PROBE_TEXTURES_G0 * 216 * 16
+
+
+def test_light_and_transfer_function_edits(run):
+    out, _ = run
+    before, key = dump(out / "finer.json"), dump(out / "light_key.json")
+    az0, el0 = angles_from_direction(before["scene"]["light"]["direction"])
+    az1, el1 = angles_from_direction(key["scene"]["light"]["direction"])
+    assert az1 == pytest.approx(az0 + 15.0) and el1 == pytest.approx(el0)
+    slider = dump(out / "light_slider.json")
+    assert angles_from_direction(slider["scene"]["light"]["direction"])[1] < el1 - 5.0
+    opacity = dump(out / "opacity.json")["scene"]["transfer_function"]["opacity"]
+    assert opacity[1][1] > 0.1 and opacity[0] == [0.0, 0.0] and opacity[2] == [1.0, 1.0]
+    d = dump(out / "colormap.json")
+    assert d["scene"]["transfer_function"]["colormap"] == "viridis"
+    assert d["bakes_started"] > before["bakes_started"]         # light and TF changes re-bake
+    assert np.abs(png(out / "edited.png") - png(out / "probes.png")).mean() > 1.0
+
+
+def test_resize_drop_save_and_close(run):
+    out, proc = run
+    d = dump(out / "resized.json")
+    assert d["window_size"] == [640, 480] and png(out / "resized.png").shape == (480, 640, 3)
+    assert d["render_size"] == [round((640 - d["view_rect_framebuffer"][0]) * 0.5), 240]
+    dropped = dump(out / "dropped.json")
+    assert dropped["volume"] == {"name": "blob.npy", "dims": [20, 16, 12]}
+    saved = load_scene(out / "viewer_scene.json")
+    assert saved.volume.path.endswith("blob.npy") and saved.camera.width == d["render_size"][0]
+    assert png(out / "screenshot.png").shape == (480, 640, 3)
+    assert dump(out / "saved.json")["errors"] == []
+    assert dump(out / "help.json")["show_help"]
+    assert np.abs(png(out / "help.png") - png(out / "screenshot.png")).mean() > 1.0
+    browsed = dump(out / "browsed.json")                       # the built-in file browser
+    assert browsed["volume"]["dims"] == [24, 24, 24] and browsed["scene_path"].endswith("scene.json")
+    assert "release check:" in proc.stdout and ", 0 still alive" in proc.stdout
+
+
+def test_cli_screenshot_starts_its_own_display(display, tmp_path):
+    """`view SCENE --screenshot --frames N --method M --probe-view` with no DISPLAY at all: the
+    viewer runs in its own Xvfb and saves the window's image. (`display` only skips the test
+    where Xvfb is missing; this run does not use it.)"""
+    (tmp_path / "scene.json").write_text(json.dumps(SCENE))
+    proc = view(["scene.json", "--screenshot", "shot.png", "--frames", "3", "--method", "probes",
+                 "--probe-view", "--window", "640x400"], tmp_path, display=None)
+    assert "private Xvfb" in proc.stderr
+    image = png(tmp_path / "shot.png")
+    assert image.shape == (400, 640, 3)
+    picture = image[40:, 400:]
+    assert len(np.unique(picture.reshape(-1, 3), axis=0)) > 100  # volume and shaded spheres
+
+
+def test_shader_error_is_shown_not_a_crash(display, tmp_path):
+    glsl = tmp_path / "glsl"
+    from app.paths import GLSL_DIR
+    shutil.copytree(GLSL_DIR, glsl)
+    frag = glsl / "probe_sphere.frag"
+    frag.write_text(frag.read_text().replace("frag_colour = vec4(", "frag_colour = vec5("))
+    (tmp_path / "scene.json").write_text(json.dumps(SCENE))
+    script = write_script(tmp_path / "s.json", [{"frames": 3}, {"dump": "d.json"}, {"screenshot": "s.png"}])
+    proc = view(["scene.json", "--script", str(script), "--probe-view", "--window", "640x400"],
+                tmp_path, display, harness=["--glsl", str(glsl)])
+    d = dump(tmp_path / "d.json")
+    assert any("probe_sphere" in e and "spheres" in e for e in d["errors"]), d["errors"]
+    assert "error shown in the window" in proc.stderr
+    image = png(tmp_path / "s.png")
+    panel = image[200:, 300:]
+    assert ((panel[..., 0] > 100) & (panel[..., 1] < 60)).sum() > 200   # the red error panel
+    assert d["samples"]["pt"] >= 1                              # and the volume kept rendering
+
+
+def test_no_display_falls_back_to_a_headless_render(tmp_path):
+    scene = dict(SCENE, camera={"width": 24, "height": 24})
+    (tmp_path / "scene.json").write_text(json.dumps(scene))
+    proc = view(["scene.json", "--spp", "2"], tmp_path, display=None)
+    assert "no display available" in proc.stderr and "headless" in proc.stderr
+    assert (tmp_path / "view.png").is_file() and "wrote" in proc.stdout

@@ -1,0 +1,113 @@
+"""Helpers for tests/test_viewer.py: run the real viewer (``python -m app view``) in a real window
+on a private Xvfb, read its screenshots and state dumps.
+
+Run as a script it is the viewer with two test hooks:
+  python tests/viewer_harness.py --glsl DIR -- view ARGS...   the shaders come from DIR
+  python tests/viewer_harness.py --release-check -- view ARGS... after the run, every GPU object
+                                    the viewer made must have been released when it closed
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+HARNESS = Path(__file__).resolve()
+RUN_TIMEOUT = 240
+
+
+def view(args: list[str], cwd: Path, display: str | None, timeout: int = RUN_TIMEOUT,
+         harness: list[str] | None = None, check: bool = True,
+         env: dict | None = None) -> subprocess.CompletedProcess:
+    """Runs ``radiance-probes view ARGS`` (through the harness when given hooks)."""
+    env = {**os.environ, **(env or {})}
+    env.pop("DISPLAY", None)
+    env.pop("WAYLAND_DISPLAY", None)
+    if display:
+        env["DISPLAY"] = display
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    if harness is None:
+        cmd = [sys.executable, "-m", "app", "view", *args]
+    else:
+        cmd = [sys.executable, str(HARNESS), *harness, "--", "view", *args]
+    proc = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"view exited {proc.returncode}\nstdout:\n{proc.stdout}\nstderr:\n{proc.stderr}")
+    return proc
+
+
+def png(path: Path) -> np.ndarray:
+    from PIL import Image
+    return np.asarray(Image.open(path).convert("RGB")).astype(np.int16)
+
+
+def dump(path: Path) -> dict:
+    return json.loads(Path(path).read_text())
+
+
+LABEL_BAND = 32   # rows at the top of the view where the method labels are drawn
+
+
+def view_pixels(image: np.ndarray, d: dict) -> np.ndarray:
+    """The picture's part of a screenshot (the sidebar and the label band cut off)."""
+    x, y, w, h = d["view_rect_framebuffer"]
+    height = image.shape[0]
+    top = height - (y + h)
+    return image[top + LABEL_BAND: top + h, x: x + w]
+
+
+def srgb8(linear) -> np.ndarray:
+    from app.render.tonemap import to_uint8
+    return to_uint8(np.asarray(linear, np.float64)).astype(np.int16)
+
+
+def write_script(path: Path, steps: list[dict]) -> Path:
+    path.write_text(json.dumps(steps, indent=1))
+    return path
+
+
+# ---- the hooks, when run as a script ------------------------------------------------------------
+
+def _release_check(argv: list[str]) -> int:
+    """Runs the viewer, remembers its GPU objects before the window closes, checks them after."""
+    import moderngl
+
+    import app.viewer.window as window_module
+    from app.cli import main
+
+    seen: list = []
+    original_close = window_module.ViewerWindow.close
+
+    def close(self) -> None:
+        v = self.viewer
+        s = v.session
+        seen.extend(view.acc.texture for view in s.views.values() if view.acc is not None)
+        if s.probe_grid is not None:
+            seen.extend(s.probe_grid.textures)
+        seen.extend([s.renderer.resources.volume_tex, s.renderer.resources.transfer_tex])
+        seen.extend(p.program for p in v._passes.values())
+        original_close(self)
+
+    window_module.ViewerWindow.close = close
+    rc = main(argv)
+    live = [o for o in seen if not isinstance(o.mglo, moderngl.InvalidObject)]
+    print(f"release check: {len(seen)} GPU objects, {len(live)} still alive")
+    return rc if not live else 5
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(ROOT))
+    split = sys.argv.index("--")
+    hooks, view_argv = sys.argv[1:split], sys.argv[split + 1:]
+    if "--glsl" in hooks:
+        import app.gl.shaders as shaders
+        shaders.GLSL_DIR = Path(hooks[hooks.index("--glsl") + 1])
+    if "--release-check" in hooks:
+        sys.exit(_release_check(view_argv))
+    from app.cli import main
+    sys.exit(main(view_argv))
