@@ -91,3 +91,26 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
     report = write_report(path)
     text = report.read_text()
     assert "Time to reach an error" in text and (tmp_path / "error_vs_time.png").is_file()
+
+
+def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):
+    from app.bench.cost import PROBE_VARIANTS
+    from app.bench.runner import run_bench
+    config = BenchConfig(mode="cost", scenes=("anisotropic",), width=12,
+                         height=12, ref_spp=32, ref_samples_per_pass=16, samples_per_dispatch=2,
+                         cost_settings=((3, 16),), cost_probe_frames=2, cost_raymarch_frames=2,
+                         cost_pt_spp=2)
+    first = run_bench(config, tmp_path / "a")
+    # a second run reuses the first one's reference and its measured noise
+    again = run_bench(config.scaled(reference_dir=str(tmp_path / "a")), tmp_path / "b")
+    data = json.loads(again.read_text())
+    assert data["references"]["anisotropic"]["loaded_from"].endswith("anisotropic.npy")
+    assert (data["references"]["anisotropic"]["noise_rrmse"]
+            == json.loads(first.read_text())["references"]["anisotropic"]["noise_rrmse"])
+    probes = [r for r in data["records"] if r["method"] == "probes"]
+    assert {r["variant"] for r in probes} >= {label for label, _ in PROBE_VARIANTS}
+    by = {r["variant"]: r for r in probes}
+    assert by["rgba16f"]["probe_bytes"] * 2 == by["baseline"]["probe_bytes"]
+    assert by["fit visible"]["probe_grid_xyz"] != [3, 3, 3]   # the cloud is flatter than its box
+    text = write_report(again).read_text()
+    assert "Cost that follows the scene" in text and "| baseline |" in text

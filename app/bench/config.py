@@ -26,6 +26,12 @@ class BenchConfig:
     raymarch_steps: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0)
     flip_frames: tuple[int, ...] = (16, 256)   # FLIP only at these snapshots (it costs CPU time)
     image_frames: int = 64                  # snapshot saved as PNG for the showcase images
+    mode: str = "sweep"                     # "sweep": every method and setting; "cost": cost.py
+    reference_dir: str | None = None        # reuse an earlier run's refs/ and measured noise
+    cost_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 256))  # grid, samples
+    cost_probe_frames: int = 64
+    cost_raymarch_frames: int = 16
+    cost_pt_spp: int = 256
 
     def scaled(self, **changes) -> "BenchConfig":
         return replace(self, **changes)
@@ -33,6 +39,7 @@ class BenchConfig:
 
 PRESETS = {
     "gpu": BenchConfig(),
+    "cost": BenchConfig(mode="cost"),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),

@@ -46,7 +46,7 @@ def main_records(data: dict, scene: str) -> list[dict]:
     lo = floor(data, scene)
     out = []
     for r in data["records"]:
-        if r["scene"] != scene:
+        if r["scene"] != scene or r.get("mode") == "cost":
             continue
         if r.get("precision", "rgba32f") != "rgba32f" or r.get("sh_window", "none") != "none":
             continue
@@ -145,6 +145,8 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
     out.mkdir(parents=True, exist_ok=True)
     scenes = [s for s in dict.fromkeys(r["scene"] for r in data["records"])]
     meta = data["meta"]
+    if all(r.get("mode") == "cost" for r in data["records"]) and data["records"]:
+        return _write_cost_report(data, out, scenes)
     lines = [f"# Speed against error", "",
              f"Device: **{meta['device']}**. Started {meta.get('started')}, finished "
              f"{meta.get('finished', 'not finished (partial run)')}.", "",
@@ -231,7 +233,7 @@ def _table1(data: dict, scenes: list[str]) -> list[str]:
              "Bake GPU time; `probes` frame time and rRMSE after the most frames measured.", ""]
     for s in scenes:
         recs = [r for r in data["records"] if r["scene"] == s and r["method"] == "probes"
-                and r.get("precision") == "rgba32f" and r.get("sh_window") == "none"]
+                and r.get("mode") != "cost" and r.get("precision") == "rgba32f" and r.get("sh_window") == "none"]
         if not recs:
             continue
         frames = max(r["spp"] for r in recs)
@@ -261,7 +263,7 @@ def _sweeps(data: dict, scenes: list[str]) -> list[str]:
     for s in scenes:
         by_variant = defaultdict(list)
         for r in data["records"]:
-            if r["scene"] != s or r["method"] == "pt":
+            if r["scene"] != s or r["method"] == "pt" or r.get("mode") == "cost":
                 continue
             if r["method"] == "raymarch":
                 key = (f"raymarch {r.get('stage')} step {r.get('raymarch_step')} vox, "
@@ -279,3 +281,57 @@ def _sweeps(data: dict, scenes: list[str]) -> list[str]:
                          f"{_ms(r['bake_ms'])} | {shown(r['rrmse'], floor(data, s))} | {_fmt(r.get('flip'))} | "
                          f"{r['gpu_bytes'] / 2**20:.1f} MiB |")
     return lines
+
+
+def _write_cost_report(data: dict, out: Path, scenes: list[str]) -> Path:
+    """The cost mode's report (app/bench/cost.py): each saving against the baseline, error beside."""
+    meta = data["meta"]
+    lines = ["# Cost that follows the scene", "",
+             f"Device: **{meta['device']}**. Command: `{meta.get('command', '')}`.", "",
+             "Each variant against the baseline at the same nominal probe grid and walks per probe: "
+             "bake GPU time, GPU time per frame (median, "
+             f"{meta['config'].get('samples_per_dispatch', 1)} samples per dispatch), probe texture "
+             "memory, and relative RMSE against the path-traced reference (written `<floor` below "
+             "ten times the reference's noise). Ratios are baseline / variant: above 1 is a gain.", ""]
+    for s in scenes:
+        lo = floor(data, s)
+        recs = [r for r in data["records"] if r["scene"] == s]
+        lines += [f"## {s}", ""]
+        pts = [r for r in recs if r["method"] == "pt"]
+        if pts:
+            lines += ["| path tracer | empty-space skipping | ms / spp | rRMSE |", "|---|---|---|---|"]
+            for r in pts:
+                lines.append(f"| {r['spp']} spp | {r.get('empty_space_skipping')} | "
+                             f"{r['frame_ms']:.3f} | {shown(r['rrmse'], lo)} |")
+            lines.append("")
+        settings = sorted({(r["probe_grid"], r["probe_samples"]) for r in recs if r["method"] != "pt"})
+        for g, n in settings:
+            rows = [r for r in recs if (r["probe_grid"], r["probe_samples"]) == (g, n)]
+            base = {m: next((r for r in rows if r["method"] == m and r["variant"] == "baseline"
+                             and r.get("empty_space_skipping") in (True, None)), None)
+                    for m in ("probes", "raymarch")}
+            lines += [f"### {g}^3 x {n} walks", "",
+                      "| variant | skipping | grid | bake (x) | probes ms/fr (x) | raymarch ms/fr (x) "
+                      "| probe memory (x) | probes rRMSE | raymarch rRMSE |",
+                      "|---|---|---|---|---|---|---|---|---|"]
+            keys = list(dict.fromkeys((r["variant"], r.get("empty_space_skipping")) for r in rows))
+            for variant, skipping in keys:
+                pr = next(r for r in rows if r["method"] == "probes" and r["variant"] == variant
+                          and r.get("empty_space_skipping") == skipping)
+                rm = next(r for r in rows if r["method"] == "raymarch" and r["variant"] == variant
+                          and r.get("empty_space_skipping") == skipping)
+
+                def x(value, ref):
+                    return f"{ref / value:.2f}x" if ref and value else "-"
+                bp, br = base["probes"], base["raymarch"]
+                lines.append(
+                    f"| {variant} | {skipping} | {'x'.join(map(str, pr['probe_grid_xyz']))} | "
+                    f"{_ms(pr['bake_ms'])} ({x(pr['bake_ms'], bp and bp['bake_ms'])}) | "
+                    f"{pr['frame_ms']:.3f} ({x(pr['frame_ms'], bp and bp['frame_ms'])}) | "
+                    f"{rm['frame_ms']:.3f} ({x(rm['frame_ms'], br and br['frame_ms'])}) | "
+                    f"{pr['probe_bytes'] / 2**20:.2f} MiB ({x(pr['probe_bytes'], bp and bp['probe_bytes'])}) | "
+                    f"{shown(pr['rrmse'], lo)} | {shown(rm['rrmse'], lo)} |")
+            lines.append("")
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path

@@ -128,12 +128,22 @@ def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Pa
     return out / "results.json"
 
 
-def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out: Path,
-                 device: str) -> None:
-    scene = renderer.scene
-    base = {"scene": name, "device": device, "width": config.width, "height": config.height}
-
-    # Reference: two independent halves; their difference measures the reference's own noise.
+def _reference(renderer, name: str, config: BenchConfig, results: Results, out: Path) -> np.ndarray:
+    """The scene's converged path-traced reference: loaded from config.reference_dir (an earlier
+    run's refs/NAME.npy and its measured noise in results.json) when there, else rendered as two
+    independent halves whose difference measures the reference's own noise."""
+    if config.reference_dir:
+        src = Path(config.reference_dir)
+        path = src / "refs" / f"{name}.npy"
+        known = json.loads((src / "results.json").read_text())["references"].get(name)
+        if path.is_file() and known:
+            reference = np.load(path)
+            if reference.shape != (config.height, config.width, 3):
+                raise ValueError(f"reference {path} is {reference.shape}, the run renders "
+                                 f"{config.height}x{config.width}")
+            results.references[name] = dict(known, loaded_from=str(path))
+            _log(f"  reference: loaded {path} (relative noise {known['noise_rrmse']:.2e})")
+            return reference
     half = config.ref_spp // 2
     halves = []
     ref_ms = 0.0
@@ -148,6 +158,20 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
     np.save(out / "refs" / f"{name}.npy", reference.astype(np.float32))
     save_png(out / "images" / f"{name}_reference.png", reference)
     _log(f"  reference: {config.ref_spp} spp, relative noise {noise:.2e}")
+    return reference
+
+
+def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out: Path,
+                 device: str) -> None:
+    if config.mode == "cost":
+        from .cost import cost_scene
+        return cost_scene(renderer, name, config, results, out, device,
+                          _reference(renderer, name, config, results, out))
+    scene = renderer.scene
+    base = {"scene": name, "device": device, "width": config.width, "height": config.height}
+
+    reference = _reference(renderer, name, config, results, out)
+    scene = renderer.scene
 
     def record(method: str, frames: int, image: np.ndarray, timing: tuple[float, float],
                bake_ms: float = 0.0, **extra) -> None:

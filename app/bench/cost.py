@@ -1,0 +1,90 @@
+"""The benchmark's "cost that follows the scene" mode: each saving measured against a baseline
+that models the whole box at full generality, at equal nominal settings, with its error beside it.
+
+Variants of the probe layout (app/render/probe_layout.py) and precision:
+  baseline      grid over the whole box, SH order 2, RGBA32F
+  fit visible   grid over the visible region only, aspect following it
+  sh order auto order 0 when g = 0
+  rgba16f       half-precision probe textures
+  all           the three together (the defaults, plus 16F)
+and, where the renderer has it, empty-space skipping on and off for the path tracer and the bake.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..imageio import save_png
+from .metrics import rrmse
+
+PROBE_VARIANTS = (
+    ("baseline", {"fit": "box", "sh_order": 2, "precision": "rgba32f"}),
+    ("fit visible", {"fit": "visible", "sh_order": 2, "precision": "rgba32f"}),
+    ("sh order auto", {"fit": "box", "sh_order": "auto", "precision": "rgba32f"}),
+    ("rgba16f", {"fit": "box", "sh_order": 2, "precision": "rgba16f"}),
+    ("all", {"fit": "visible", "sh_order": "auto", "precision": "rgba16f"}),
+)
+
+
+def skipping_modes(renderer) -> tuple[bool, ...]:
+    """Empty-space skipping on and off where the renderer can switch it, else just as it is."""
+    return (True, False) if hasattr(renderer, "set_empty_space_skipping") else (None,)
+
+
+def _set_skipping(renderer, on) -> None:
+    if on is not None:
+        renderer.set_empty_space_skipping(on)
+
+
+def cost_scene(renderer, name: str, config, results, out, device: str,
+               reference: np.ndarray) -> None:
+    from .runner import _log, _progressive
+    scene = renderer.scene
+    k = config.samples_per_dispatch
+    base = {"scene": name, "device": device, "width": config.width, "height": config.height,
+            "samples_per_dispatch": k, "mode": "cost"}
+
+    def record(method, frames, image, timing, bake_ms=0.0, **extra):
+        frame_ms, render_ms = timing
+        rec = dict(base, method=method, spp=frames, frame_ms=frame_ms, bake_ms=bake_ms,
+                   render_ms=render_ms, total_ms=bake_ms + render_ms,
+                   rrmse=rrmse(image, reference), probe_grid=None, probe_samples=None)
+        rec.update(extra)
+        rec["gpu_bytes"] = rec.get("probe_bytes", 0)
+        results.add(rec, image, reference)
+        return rec
+
+    for skipping in skipping_modes(renderer):
+        _set_skipping(renderer, skipping)
+        renderer.set_scene(scene)
+        for spp, image, *timing in _progressive(renderer, "pt", (config.cost_pt_spp,), 5, k):
+            r = record("pt", spp, image, timing, variant="pt", empty_space_skipping=skipping)
+        _log(f"  pt skipping={skipping}: {r['frame_ms']:.3f} ms/spp, rRMSE {r['rrmse']:.4f}")
+
+    for grid, samples in config.cost_settings:
+        for skipping in skipping_modes(renderer):
+            _set_skipping(renderer, skipping)
+            variants = PROBE_VARIANTS if skipping in (True, None) else PROBE_VARIANTS[:1]
+            for label, changes in variants:
+                probes = replace(scene.probes, grid=(grid, grid, grid), samples=samples, **changes)
+                renderer.set_scene(scene.replace(probes=probes))
+                bake_ms = renderer.bake(seed=11)
+                g = renderer.probe_grid
+                info = {"variant": label, "empty_space_skipping": skipping, "probe_grid": grid,
+                        "probe_samples": samples, "probe_grid_xyz": list(g.grid),
+                        "sh_order": g.sh_order, "precision": g.precision, "fit": probes.fit,
+                        "probe_bytes": g.gpu_bytes}
+                line = [f"  {grid}^3x{samples} {label} skipping={skipping}: grid {g.grid}, "
+                        f"bake {bake_ms:.1f} ms, {g.gpu_bytes / 2**20:.1f} MiB"]
+                for method, frames in (("probes", config.cost_probe_frames),
+                                       ("raymarch", config.cost_raymarch_frames)):
+                    light_ms = renderer.bake_light() if method == "raymarch" else 0.0
+                    for n, image, *timing in _progressive(renderer, method, (frames,), 13, k):
+                        r = record(method, n, image, timing, bake_ms + light_ms, **info)
+                        if label == "all" and (grid, samples) == tuple(config.cost_settings[0]):
+                            save_png(out / "images" / f"{name}_{method}_cost_all.png", image)
+                    line.append(f"{method} {r['frame_ms']:.3f} ms/fr rRMSE {r['rrmse']:.4f}")
+                _log(", ".join(line))
+    _set_skipping(renderer, None if not skipping_modes(renderer)[0] else True)
+    renderer.set_scene(scene)
