@@ -67,6 +67,15 @@ def cmd_render(args: argparse.Namespace) -> int:
         scene = scene.replace(camera=replace(cam, width=w, height=h))
     ctx = create_headless_context()
     renderer = Renderer(ctx, scene)
+    if getattr(args, "auto_probes", None) is not None:
+        if args.method == "pt":
+            raise SceneError("--auto-probes chooses probe settings: use it with a probe method")
+        from .render.auto_probes import choose_probes
+        choice = choose_probes(renderer, args.auto_probes, args.method,
+                               progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
+        print(choice.report())
+        scene = choice.scene
+        renderer.set_scene(scene)
     renderer.raymarch_stage = args.raymarch_stage
     renderer.raymarch_step_voxels = args.raymarch_step
     spp = args.spp
@@ -154,6 +163,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--probe-samples", type=_positive_int, help="walks per probe")
     r.add_argument("--sh-window", choices=("none", "hann", "lanczos"))
     r.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"))
+    r.add_argument("--auto-probes", type=float, metavar="TARGET",
+                   help="choose the cheapest probe setting whose image is within this relative "
+                        "RMSE of a path-traced pilot (e.g. 0.05), report why, then render")
     r.add_argument("--raymarch-stage", choices=("compute", "fragment"), default="compute",
                    help="raymarch as a compute (default) or fragment shader")
     r.add_argument("--raymarch-step", type=float, default=0.5,

@@ -8,7 +8,7 @@ import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
 from ..render.renderer import METHODS
-from ..scene import SH_WINDOWS, PROBE_PRECISIONS
+from ..scene import PROBE_FITS, PROBE_PRECISIONS, SH_WINDOWS
 from ..volume import BUILTIN_VOLUMES
 from .overlays import shortcut_table
 from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
@@ -210,6 +210,14 @@ def probes_section(v) -> None:
     changed, i = imgui.combo("Precision", PROBE_PRECISIONS.index(spec.precision), list(PROBE_PRECISIONS))
     if changed:
         state.set_probes(precision=PROBE_PRECISIONS[i])
+    changed, i = imgui.combo("Grid covers", PROBE_FITS.index(spec.fit), ["visible region", "whole box"])
+    if changed:
+        state.set_probes(fit=PROBE_FITS[i])
+    orders = ["auto", 0, 1, 2]
+    changed, i = imgui.combo("SH order", orders.index(spec.sh_order), ["auto (0 when g = 0)", "0", "1", "2"])
+    if changed:
+        state.set_probes(sh_order=orders[i])
+    auto_section(v)
     grid, session = v.session.probe_grid, v.session
     if grid is None:
         imgui.text_disabled("not baked yet (a probe method or the probe grid view bakes them)")
@@ -225,6 +233,27 @@ def probes_section(v) -> None:
     rep = session.bake_report
     if rep is not None and rep.passes_done > 1:
         imgui.text_disabled(f"est. standard error of the probes {100 * rep.standard_error:.2f}%")
+
+
+def auto_section(v) -> None:
+    """`auto`: measures the cheapest probe setting meeting a target error (render/auto_probes.py).
+    It blocks while it measures (a pilot path trace and a few bakes)."""
+    state, ui = v.state, v.widgets
+    v.auto_target = getattr(v, "auto_target", 0.05)
+    changed, t = imgui.slider_float("Auto target rRMSE", v.auto_target, 0.01, 0.3, "%.3f")
+    if changed:
+        v.auto_target = float(t)
+    if imgui.button("Auto: cheapest probes meeting it"):
+        from ..render.auto_probes import choose_probes
+        method = state.method if state.method != "pt" else "raymarch"
+        choice = choose_probes(v.session.renderer, v.auto_target, method)
+        p = choice.scene.probes
+        state.set_probes(grid=p.grid, samples=p.samples, sh_order=p.sh_order,
+                         precision=p.precision, fit=p.fit)
+        v.auto_report = choice.report()
+    ui.note("Auto")
+    if getattr(v, "auto_report", None):
+        imgui.text_wrapped(v.auto_report.splitlines()[0])
 
 
 def stats_section(v) -> None:

@@ -1,0 +1,128 @@
+"""`auto`: the cheapest probe setting that meets a target error, chosen from measurements the
+renderer makes itself, with the reasons written down.
+
+1. Representation, from the scene alone: SH order 0 when g = 0 (exact, probe_layout.py), else 2;
+   RGBA16F (the benchmark measured the same error as 32F at half the memory); the grid fitted to
+   the visible region.
+2. A pilot: the scene's own view at low resolution, path traced until the reference's measured
+   noise (two independent halves) is at most a fifth of the target.
+3. Candidates in order of bake cost (probes x walks): for each grid, the fewest walks whose image
+   meets the target against the pilot. The first grid that meets it wins; if none does, the most
+   accurate candidate is taken and the report says the target was not met.
+
+The pilot's lower resolution averages away detail finer than its pixels, so the error it measures
+can be lower than at full resolution: the benchmark checks the choice at full resolution.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..bench.metrics import reference_noise, rrmse
+from ..scene import Scene
+
+GRIDS = (8, 16, 32, 64, 128)
+WALKS = (16, 64, 256)
+PILOT_SIDE = 96
+
+
+@dataclass
+class AutoChoice:
+    scene: Scene                   # the input scene with the chosen probe settings
+    target: float
+    met: bool
+    rrmse: float                   # the chosen setting's error against the pilot
+    pilot_noise: float
+    pilot_spp: int
+    trials: list[dict] = field(default_factory=list)
+    reasons: list[str] = field(default_factory=list)
+
+    def report(self) -> str:
+        from .probe_layout import resolve_sh_order
+        p = self.scene.probes
+        order = resolve_sh_order(p.sh_order, self.scene.anisotropy)
+        head = (f"auto: probes {p.grid[0]}^3 (fitted), {p.samples} walks, SH order {order}, "
+                f"{p.precision}: rRMSE {self.rrmse:.4f} against a {self.pilot_spp}-spp pilot "
+                f"(noise {self.pilot_noise:.4f}); target {self.target:.4f} "
+                f"{'met' if self.met else 'NOT met'}")
+        rows = [f"  tried {t['grid']}^3 x {t['walks']}: rRMSE {t['rrmse']:.4f}, bake "
+                f"{t['bake_ms']:.1f} ms" for t in self.trials]
+        return "\n".join([head, *("  " + r for r in self.reasons), *rows])
+
+
+def _pilot_scene(scene: Scene, side: int) -> Scene:
+    cam = scene.camera
+    scale = side / max(cam.width, cam.height)
+    w, h = max(8, round(cam.width * scale)), max(8, round(cam.height * scale))
+    return scene.replace(camera=replace(cam, width=w, height=h))
+
+
+def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
+                  grids=GRIDS, walks=WALKS, pilot_side: int = PILOT_SIDE,
+                  max_pilot_spp: int = 1 << 16, frames: int | None = None,
+                  progress=None) -> AutoChoice:
+    """Measures and returns the cheapest probe setting for `method` that meets `target` (relative
+    RMSE against a path-traced pilot). Leaves the renderer on the input scene."""
+    if not 0 < target < 1:
+        raise ValueError(f"auto target must be a relative RMSE in (0, 1), got {target}")
+    original = renderer.scene
+    order = "auto"
+    reasons = [f"SH order: {'0, since g = 0 zeroes bands 1 and 2' if original.anisotropy == 0 else '2, since g != 0'}",
+               "precision: rgba16f (same error as 32F in the benchmark, half the memory)",
+               "grid fitted to the visible region"]
+    pilot = _pilot_scene(original, pilot_side)
+    try:
+        renderer.set_scene(pilot)
+        # Pilot: double the samples until its own noise is at most target / 5.
+        spp, halves, noise = 64, None, math.inf
+        while True:
+            halves = [renderer.render("pt", spp=spp, seed=s, samples_per_pass=min(spp, 64)).image
+                      for s in (901, 902)]
+            noise = reference_noise(*halves)
+            if progress:
+                progress(f"pilot {2 * spp} spp: noise {noise:.4f}")
+            if noise <= target / 5 or 2 * spp >= max_pilot_spp:
+                break
+            spp *= 2
+        reference = 0.5 * (halves[0] + halves[1])
+        pilot_spp = 2 * spp
+        frames = frames or (16 if method == "raymarch" else 64)
+        trials: list[dict] = []
+        chosen = None
+        for grid in grids:
+            best_here = None
+            for n in walks:
+                probes = replace(pilot.probes, grid=(grid, grid, grid), samples=n, sh_order=order,
+                                 precision="rgba16f", fit="visible")
+                renderer.set_scene(pilot.replace(probes=probes))
+                bake_ms = renderer.bake(seed=7)
+                image = renderer.render(method, spp=frames, seed=5, samples_per_pass=frames).image
+                err = rrmse(image, reference)
+                trial = {"grid": grid, "walks": n, "rrmse": err, "bake_ms": bake_ms,
+                         "probes": renderer.probe_grid.count}
+                trials.append(trial)
+                if progress:
+                    progress(f"{grid}^3 x {n}: rRMSE {err:.4f}")
+                if err <= target:
+                    best_here = trial
+                    break          # fewer walks first: the first that meets it is the cheapest
+            if best_here is not None:
+                chosen = best_here
+                break
+        met = chosen is not None
+        if not met:
+            chosen = min(trials, key=lambda t: t["rrmse"])
+            reasons.append("no candidate met the target; took the most accurate one")
+        else:
+            reasons.append("the coarsest grid, then the fewest walks, meeting the target")
+        if noise > target / 5:
+            reasons.append(f"the pilot stopped at {pilot_spp} spp with noise {noise:.4f} "
+                           f"(wanted {target / 5:.4f})")
+        probes = replace(original.probes, grid=(chosen["grid"],) * 3, samples=chosen["walks"],
+                         sh_order=order, precision="rgba16f", fit="visible")
+        return AutoChoice(original.replace(probes=probes), target, met, chosen["rrmse"], noise,
+                          pilot_spp, trials, reasons)
+    finally:
+        renderer.set_scene(original)
