@@ -99,7 +99,7 @@ def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):
     config = BenchConfig(mode="cost", scenes=("anisotropic",), width=12,
                          height=12, ref_spp=32, ref_samples_per_pass=16, samples_per_dispatch=2,
                          cost_settings=((3, 16),), cost_probe_frames=2, cost_raymarch_frames=2,
-                         cost_pt_spp=2)
+                         cost_pt_spp=2, cost_auto_targets=(0.9,))
     first = run_bench(config, tmp_path / "a")
     # a second run reuses the first one's reference and its measured noise
     again = run_bench(config.scaled(reference_dir=str(tmp_path / "a")), tmp_path / "b")
@@ -112,5 +112,8 @@ def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):
     by = {r["variant"]: r for r in probes}
     assert by["rgba16f"]["probe_bytes"] * 2 == by["baseline"]["probe_bytes"]
     assert by["fit visible"]["probe_grid_xyz"] != [3, 3, 3]   # the cloud is flatter than its box
+    auto = [r for r in data["records"] if r.get("variant") == "auto 0.9"]
+    assert len(auto) == 1 and auto[0]["auto_met"] == (auto[0]["rrmse"] <= 0.9)
     text = write_report(again).read_text()
     assert "Cost that follows the scene" in text and "| baseline |" in text
+    assert "| auto target |" in text

@@ -32,6 +32,7 @@ class BenchConfig:
     cost_probe_frames: int = 64
     cost_raymarch_frames: int = 16
     cost_pt_spp: int = 256
+    cost_auto_targets: tuple[float, ...] = (0.05, 0.10)   # `auto` checked at full resolution
 
     def scaled(self, **changes) -> "BenchConfig":
         return replace(self, **changes)

@@ -88,3 +88,29 @@ def cost_scene(renderer, name: str, config, results, out, device: str,
                 _log(", ".join(line))
     _set_skipping(renderer, None if not skipping_modes(renderer)[0] else True)
     renderer.set_scene(scene)
+    for target in config.cost_auto_targets:
+        auto_scene(renderer, target, config, record, _log, _progressive)
+    renderer.set_scene(scene)
+
+
+def auto_scene(renderer, target: float, config, record, log, progressive) -> None:
+    """`auto` chooses at its pilot resolution; this checks the choice at full resolution."""
+    from ..render.auto_probes import choose_probes
+    scene = renderer.scene
+    choice = choose_probes(renderer, target, "raymarch")
+    renderer.set_scene(choice.scene)
+    bake_ms = renderer.bake(seed=11) + renderer.bake_light()
+    g = renderer.probe_grid
+    for n, image, *timing in progressive(renderer, "raymarch", (config.cost_raymarch_frames,), 13,
+                                         config.samples_per_dispatch):
+        r = record("raymarch", n, image, timing, bake_ms, variant=f"auto {target:g}",
+                   probe_grid=choice.scene.probes.grid[0], probe_samples=choice.scene.probes.samples,
+                   probe_grid_xyz=list(g.grid), sh_order=g.sh_order, precision=g.precision,
+                   fit="visible", probe_bytes=g.gpu_bytes, auto_target=target,
+                   auto_pilot_rrmse=choice.rrmse, auto_met_on_pilot=choice.met,
+                   auto_trials=choice.trials, auto_pilot_spp=choice.pilot_spp)
+    r["auto_met"] = r["rrmse"] <= target
+    log(f"  auto {target:g}: {choice.scene.probes.grid[0]}^3 x {choice.scene.probes.samples} -> "
+        f"grid {g.grid}; pilot rRMSE {choice.rrmse:.4f}, full-resolution rRMSE {r['rrmse']:.4f} "
+        f"({'met' if r['auto_met'] else 'NOT met'})")
+    renderer.set_scene(scene)

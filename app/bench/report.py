@@ -304,9 +304,22 @@ def _write_cost_report(data: dict, out: Path, scenes: list[str]) -> Path:
                 lines.append(f"| {r['spp']} spp | {r.get('empty_space_skipping')} | "
                              f"{r['frame_ms']:.3f} | {shown(r['rrmse'], lo)} |")
             lines.append("")
-        settings = sorted({(r["probe_grid"], r["probe_samples"]) for r in recs if r["method"] != "pt"})
+        autos = [r for r in recs if str(r.get("variant", "")).startswith("auto")]
+        if autos:
+            lines += ["| auto target | chosen (grid, walks) | pilot rRMSE | full-resolution rRMSE | "
+                      "met | bake | raymarch ms/fr | probe memory |", "|---|---|---|---|---|---|---|---|"]
+            for r in autos:
+                met = "yes" if r["rrmse"] <= r["auto_target"] else "**no**"
+                lines.append(f"| {r['auto_target']:g} | {'x'.join(map(str, r['probe_grid_xyz']))}, "
+                             f"{r['probe_samples']} | {r['auto_pilot_rrmse']:.4f} | "
+                             f"{shown(r['rrmse'], lo)} | {met} | {_ms(r['bake_ms'])} | "
+                             f"{r['frame_ms']:.3f} | {r['probe_bytes'] / 2**20:.2f} MiB |")
+            lines.append("")
+        settings = sorted({(r["probe_grid"], r["probe_samples"]) for r in recs
+                           if r["method"] != "pt" and not str(r.get("variant", "")).startswith("auto")})
         for g, n in settings:
-            rows = [r for r in recs if (r["probe_grid"], r["probe_samples"]) == (g, n)]
+            rows = [r for r in recs if (r["probe_grid"], r["probe_samples"]) == (g, n)
+                    and not str(r.get("variant", "")).startswith("auto")]
             base = {m: next((r for r in rows if r["method"] == m and r["variant"] == "baseline"
                              and r.get("empty_space_skipping") in (True, None)), None)
                     for m in ("probes", "raymarch")}
