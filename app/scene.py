@@ -92,6 +92,8 @@ class ProbeSpec:
     # "visible": the grid covers only where the transfer function makes the medium visible, and a
     # cubic grid N puts N probes along that region's longest side; "box": the whole volume box.
     fit: str = "visible"
+    # "auto": one channel when the transfer function's colours and both lights are grey, else 3.
+    channels: str | int = "auto"
 
 
 @dataclass(frozen=True)
@@ -301,6 +303,11 @@ def _parse_probes(d: Any) -> ProbeSpec:
         kw["sh_order"] = order if order == "auto" else int(order)
     if "fit" in d:
         kw["fit"] = _choice(d["fit"], "probes.fit", PROBE_FITS)
+    if "channels" in d:
+        ch = d["channels"]
+        if ch != "auto" and (isinstance(ch, bool) or ch not in (1, 3)):
+            raise SceneError(f"probes.channels: expected \"auto\", 1 or 3, got {ch!r}")
+        kw["channels"] = ch if ch == "auto" else int(ch)
     return ProbeSpec(**kw)
 
 

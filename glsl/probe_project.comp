@@ -22,6 +22,14 @@ struct ProbeAccum {
 layout(std430, binding = 4) buffer ProbeAccums { ProbeAccum probes[]; };
 
 layout(PROBE_IMAGE_FORMAT, binding = 0) uniform writeonly image3D probe_image0;
+#if PROBE_GREY
+#if PROBE_SH_ORDER >= 1
+layout(PROBE_IMAGE_FORMAT, binding = 1) uniform writeonly image3D probe_image1;
+#endif
+#if PROBE_SH_ORDER >= 2
+layout(PROBE_IMAGE_FORMAT, binding = 2) uniform writeonly image3D probe_image2;
+#endif
+#else
 layout(PROBE_IMAGE_FORMAT, binding = 6) uniform writeonly image3D probe_image6;
 #if PROBE_SH_ORDER >= 1
 layout(PROBE_IMAGE_FORMAT, binding = 1) uniform writeonly image3D probe_image1;
@@ -31,6 +39,7 @@ layout(PROBE_IMAGE_FORMAT, binding = 2) uniform writeonly image3D probe_image2;
 layout(PROBE_IMAGE_FORMAT, binding = 3) uniform writeonly image3D probe_image3;
 layout(PROBE_IMAGE_FORMAT, binding = 4) uniform writeonly image3D probe_image4;
 layout(PROBE_IMAGE_FORMAT, binding = 5) uniform writeonly image3D probe_image5;
+#endif
 #endif
 
 uniform uint first_probe;
@@ -111,6 +120,16 @@ void main()
 
     uint nx = uint(probe_grid.x), ny = uint(probe_grid.y);
     ivec3 texel = ivec3(probe % nx, (probe / nx) % ny, probe / (nx * ny));
+#if PROBE_GREY
+    // r = g = b for grey scenes: store each coefficient's red channel (f[3 k]); lib/probes.glsl
+    imageStore(probe_image0, texel, vec4(f[0], f[3], f[6], f[27]));
+#if PROBE_SH_ORDER >= 1
+    imageStore(probe_image1, texel, vec4(f[9], f[12], f[15], f[18]));
+#endif
+#if PROBE_SH_ORDER >= 2
+    imageStore(probe_image2, texel, vec4(f[21], f[24], 0.0, 0.0));
+#endif
+#else
     imageStore(probe_image0, texel, acc.channels[0]);
     imageStore(probe_image6, texel, acc.channels[6]);
 #if PROBE_SH_ORDER >= 1
@@ -121,5 +140,6 @@ void main()
     imageStore(probe_image3, texel, acc.channels[3]);
     imageStore(probe_image4, texel, acc.channels[4]);
     imageStore(probe_image5, texel, acc.channels[5]);
+#endif
 #endif
 }

@@ -112,3 +112,37 @@ def test_fitted_grid_bakes_inside_the_visible_region(ctx):
         assert r.probe_grid.box is None and r.probe_grid.grid == (4, 4, 4)
     finally:
         r.release()
+
+
+def test_grey_scenes_are_detected():
+    from app.render.probe_layout import scene_is_grey
+    grey = _table([[0, 0], [1, 1]])
+    assert scene_is_grey(grey, (3, 3, 3), (0.1, 0.1, 0.1))
+    assert not scene_is_grey(grey, (3, 3, 2.9), (0.1, 0.1, 0.1))
+    assert not scene_is_grey(grey, (3, 3, 3), (0.1, 0.1, 0.12))
+    colour = transfer_table(TransferFunctionSpec(colormap="plasma"))
+    assert not scene_is_grey(colour, (3, 3, 3), (0.1, 0.1, 0.1))
+    with pytest.raises(SceneError, match="probes.channels"):
+        parse_scene({"probes": {"channels": 2}})
+
+
+GREY = {**BASE, "transfer_function": {"colormap": "grey"}, "anisotropy": 0.6}
+
+
+@pytest.mark.parametrize("method", ["probes", "probes-only", "raymarch"])
+@pytest.mark.parametrize("order", [0, 1, 2])
+def test_one_channel_renders_what_three_render_in_a_grey_scene(ctx, method, order):
+    images, textures = {}, {}
+    for channels in (1, 3):
+        scene = parse_scene({**GREY, "probes": {**GREY["probes"], "sh_order": order,
+                                                "channels": channels}})
+        r = Renderer(ctx, scene)
+        try:
+            images[channels] = r.render(method, spp=2, seed=3).image
+            textures[channels] = len(r.probe_grid.textures)
+            assert r.probe_grid.grey == (channels == 1)
+        finally:
+            r.release()
+    assert textures[1] == order + 1 and textures[3] == (2, 4, 7)[order]
+    assert images[3].max() > 0
+    np.testing.assert_allclose(images[1], images[3], rtol=1e-5, atol=1e-7)

@@ -5,8 +5,9 @@ Variants of the probe layout (app/render/probe_layout.py) and precision:
   baseline      grid over the whole box, SH order 2, RGBA32F
   fit visible   grid over the visible region only, aspect following it
   sh order auto order 0 when g = 0
+  channels auto one channel when the scene is grey
   rgba16f       half-precision probe textures
-  all           the three together (the defaults, plus 16F)
+  all           all of them together (the defaults, plus 16F)
 and, where the renderer has it, empty-space skipping on and off for the path tracer and the bake.
 """
 from __future__ import annotations
@@ -19,11 +20,12 @@ from ..imageio import save_png
 from .metrics import rrmse
 
 PROBE_VARIANTS = (
-    ("baseline", {"fit": "box", "sh_order": 2, "precision": "rgba32f"}),
-    ("fit visible", {"fit": "visible", "sh_order": 2, "precision": "rgba32f"}),
-    ("sh order auto", {"fit": "box", "sh_order": "auto", "precision": "rgba32f"}),
-    ("rgba16f", {"fit": "box", "sh_order": 2, "precision": "rgba16f"}),
-    ("all", {"fit": "visible", "sh_order": "auto", "precision": "rgba16f"}),
+    ("baseline", {"fit": "box", "sh_order": 2, "precision": "rgba32f", "channels": 3}),
+    ("fit visible", {"fit": "visible", "sh_order": 2, "precision": "rgba32f", "channels": 3}),
+    ("sh order auto", {"fit": "box", "sh_order": "auto", "precision": "rgba32f", "channels": 3}),
+    ("channels auto", {"fit": "box", "sh_order": 2, "precision": "rgba32f", "channels": "auto"}),
+    ("rgba16f", {"fit": "box", "sh_order": 2, "precision": "rgba16f", "channels": 3}),
+    ("all", {"fit": "visible", "sh_order": "auto", "precision": "rgba16f", "channels": "auto"}),
 )
 
 
@@ -74,6 +76,7 @@ def cost_scene(renderer, name: str, config, results, out, device: str,
                 info = {"variant": label, "empty_space_skipping": skipping, "probe_grid": grid,
                         "probe_samples": samples, "probe_grid_xyz": list(g.grid),
                         "sh_order": g.sh_order, "precision": g.precision, "fit": probes.fit,
+                        "channels": 1 if g.grey else 3,
                         "probe_bytes": g.gpu_bytes}
                 line = [f"  {grid}^3x{samples} {label} skipping={skipping}: grid {g.grid}, "
                         f"bake {bake_ms:.1f} ms, {g.gpu_bytes / 2**20:.1f} MiB"]

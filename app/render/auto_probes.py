@@ -71,7 +71,7 @@ def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
     order = "auto"
     reasons = [f"SH order: {'0, since g = 0 zeroes bands 1 and 2' if original.anisotropy == 0 else '2, since g != 0'}",
                "precision: rgba16f (same error as 32F in the benchmark, half the memory)",
-               "grid fitted to the visible region"]
+               "grid fitted to the visible region", "one channel when the scene is grey"]
     pilot = _pilot_scene(original, pilot_side)
     try:
         renderer.set_scene(pilot)
@@ -95,7 +95,7 @@ def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
             best_here = None
             for n in walks:
                 probes = replace(pilot.probes, grid=(grid, grid, grid), samples=n, sh_order=order,
-                                 precision="rgba16f", fit="visible")
+                                 precision="rgba16f", fit="visible", channels="auto")
                 renderer.set_scene(pilot.replace(probes=probes))
                 bake_ms = renderer.bake(seed=7)
                 image = renderer.render(method, spp=frames, seed=5, samples_per_pass=frames).image
@@ -121,7 +121,7 @@ def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
             reasons.append(f"the pilot stopped at {pilot_spp} spp with noise {noise:.4f} "
                            f"(wanted {target / 5:.4f})")
         probes = replace(original.probes, grid=(chosen["grid"],) * 3, samples=chosen["walks"],
-                         sh_order=order, precision="rgba16f", fit="visible")
+                         sh_order=order, precision="rgba16f", fit="visible", channels="auto")
         return AutoChoice(original.replace(probes=probes), target, met, chosen["rrmse"], noise,
                           pilot_spp, trials, reasons)
     finally:

@@ -5,7 +5,9 @@
   along that region's longest side with the other axes in proportion (equal probe spacing);
 - the SH order: with g = 0 the phase convolution multiplies bands 1 and 2 by g^l = 0, so order 0
   (one coefficient) gives exactly the same images as order 2 at a fraction of the memory and
-  texture fetches; "auto" picks 0 for g = 0 and 2 otherwise.
+  texture fetches; "auto" picks 0 for g = 0 and 2 otherwise;
+- the colour channels: when the transfer function's colours and both lights are grey, r = g = b in
+  every probe, and one channel is stored ("auto" channels), in 1 to 3 textures instead of 2 to 7.
 """
 from __future__ import annotations
 
@@ -14,6 +16,27 @@ import numpy as np
 # Probe textures (of the seven in lib/probes.glsl's packing) that each SH order needs: texture 6
 # always, for the sun's transmittance in its alpha channel.
 TEXTURES_FOR_ORDER = {0: (0, 6), 1: (0, 1, 2, 6), 2: (0, 1, 2, 3, 4, 5, 6)}
+
+
+GREY_TEXTURES_FOR_ORDER = {0: (0,), 1: (0, 1), 2: (0, 1, 2)}
+
+
+def texture_ids(order: int, grey: bool) -> tuple[int, ...]:
+    return (GREY_TEXTURES_FOR_ORDER if grey else TEXTURES_FOR_ORDER)[order]
+
+
+def scene_is_grey(table: np.ndarray, irradiance, environment) -> bool:
+    """True when every transfer-function colour and both lights have r = g = b exactly, so that
+    every path's radiance has equal channels."""
+    rgb = np.asarray(table)[:, :3]
+    grey = lambda v: np.all(np.asarray(v)[..., 0:1] == np.asarray(v)[..., :3])  # noqa: E731
+    return bool(grey(rgb) and grey(irradiance) and grey(environment))
+
+
+def resolve_channels(channels: str | int, table: np.ndarray, irradiance, environment) -> int:
+    if channels == "auto":
+        return 1 if scene_is_grey(table, irradiance, environment) else 3
+    return int(channels)
 
 
 def resolve_sh_order(order: str | int, anisotropy: float) -> int:

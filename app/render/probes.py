@@ -17,7 +17,7 @@ import numpy as np
 
 from ..gl.context import loop_budget, loop_budget_unbounded
 from ..gl.shaders import compute_program, set_uniforms
-from .probe_layout import TEXTURES_FOR_ORDER
+from .probe_layout import texture_ids
 from .resources import SceneResources
 
 PROBE_TEXTURES = 7
@@ -47,7 +47,7 @@ class BakeProgress:
 class ProbeGrid:
     def __init__(self, ctx: moderngl.Context, grid: tuple[int, int, int], samples: int,
                  precision: str = "rgba32f", sh_order: int = 2,
-                 box: tuple | None = None):
+                 box: tuple | None = None, grey: bool = False):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
         bake time); `sh_order` 0, 1 or 2 decides which of the seven textures exist."""
         self.ctx = ctx
@@ -55,7 +55,8 @@ class ProbeGrid:
         self.samples = int(samples)
         self.precision = precision
         self.sh_order = int(sh_order)
-        self.texture_ids = TEXTURES_FOR_ORDER[self.sh_order]
+        self.grey = bool(grey)
+        self.texture_ids = texture_ids(self.sh_order, self.grey)
         self.box = None if box is None else (tuple(map(float, box[0])), tuple(map(float, box[1])))
         self.count = self.grid[0] * self.grid[1] * self.grid[2]
         self.directions = min(self.samples, DIRECTIONS_PER_PASS)
@@ -166,7 +167,7 @@ class ProbeGrid:
 
     def defines(self) -> dict:
         """Compile-time settings every shader reading these probes needs (lib/probes.glsl)."""
-        return {"PROBE_SH_ORDER": self.sh_order}
+        return {"PROBE_SH_ORDER": self.sh_order, "PROBE_GREY": int(self.grey)}
 
     def box_uniforms(self, resources: SceneResources | None = None) -> dict:
         if self.box is None:

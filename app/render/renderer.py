@@ -15,7 +15,7 @@ from ..volume import Volume
 from .accumulation import Accumulation
 from .pathtracer import PathTracer
 from .light_transmittance import LightTransmittance
-from .probe_layout import fitted_grid, resolve_sh_order, visible_region
+from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, visible_region
 from .probes import ProbeGrid
 from .raymarch import Raymarcher
 from .resources import SceneResources
@@ -81,7 +81,8 @@ class Renderer:
         return self._passes[key]
 
     def _probe_defines(self) -> dict:
-        return {"PROBE_SH_ORDER": resolve_sh_order(self.scene.probes.sh_order, self.scene.anisotropy)}
+        plan = self.probe_plan(region=False)
+        return {"PROBE_SH_ORDER": plan["sh_order"], "PROBE_GREY": int(plan["grey"])}
 
     @property
     def pathtracer(self) -> PathTracer:
@@ -90,7 +91,7 @@ class Renderer:
     # ---- probes -------------------------------------------------------------------------------
     def bake_key(self) -> tuple:
         spec = self.scene.probes
-        return (*self.resources.bake_key(), spec.sh_order, spec.fit)
+        return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels)
 
     def probes_current(self) -> bool:
         return (self.probe_grid is not None and self.probe_grid.done
@@ -107,28 +108,33 @@ class Renderer:
             self._region_key = key
         return self._region
 
-    def probe_plan(self) -> dict:
-        """The probe grid the current scene gets: its counts, box and SH order (probe_layout.py)."""
-        spec = self.scene.probes
-        order = resolve_sh_order(spec.sh_order, self.scene.anisotropy)
-        if spec.fit == "visible":
+    def probe_plan(self, region: bool = True) -> dict:
+        """The probe grid the current scene gets: its counts, box, SH order and channels
+        (probe_layout.py); region=False skips the (NumPy) visible-region search."""
+        s = self.scene
+        spec = s.probes
+        plan = {"grid": tuple(spec.grid), "box": None,
+                "sh_order": resolve_sh_order(spec.sh_order, s.anisotropy),
+                "grey": resolve_channels(spec.channels, self.resources.table, s.light.irradiance,
+                                         s.environment) == 1}
+        if spec.fit == "visible" and region:
             low, high = self.visible_region()
-            return {"grid": fitted_grid(spec.grid, low, high), "box": (tuple(low), tuple(high)),
-                    "sh_order": order}
-        return {"grid": tuple(spec.grid), "box": None, "sh_order": order}
+            plan.update(grid=fitted_grid(spec.grid, low, high), box=(tuple(low), tuple(high)))
+        return plan
 
     def start_bake(self, seed: int = 0) -> ProbeGrid:
         """(Re)starts the bake for the current scene; reuses the textures when the layout is unchanged."""
         spec = self.scene.probes
         plan = self.probe_plan()
         g = self.probe_grid
-        if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box) != (
+        if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey) != (
                 plan["grid"], spec.samples, spec.precision, plan["sh_order"],
-                None if plan["box"] is None else tuple(tuple(map(float, c)) for c in plan["box"])):
+                None if plan["box"] is None else tuple(tuple(map(float, c)) for c in plan["box"]),
+                plan["grey"]):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan["grid"], spec.samples, spec.precision,
-                                        plan["sh_order"], plan["box"])
+                                        plan["sh_order"], plan["box"], plan["grey"])
         self.probe_grid.restart(seed)
         self._baked_key = self.bake_key()
         return self.probe_grid

@@ -15,8 +15,16 @@
 // PROBE_SH_ORDER (0, 1 or 2; default 2) keeps bands up to that order: order 0 uses textures 0 and 6,
 // order 1 textures 0, 1, 2 and 6 (app/render/probe_layout.py); the others are neither allocated
 // nor read, and their coefficients read as 0.
+//
+// PROBE_GREY (0 or 1; default 0): when the transfer function's colours and both lights are grey,
+// every probe's r, g and b are equal, and one channel is stored: f = 0, 1, 2 hold coefficients
+// 0, 1, 2; f = 3 the sun's transmittance; f = 4 + (k - 3) coefficient k >= 3. Order 0 then needs
+// texture 0 alone, order 1 textures 0 and 1, order 2 textures 0, 1 and 2.
 #ifndef PROBE_SH_ORDER
 #define PROBE_SH_ORDER 2
+#endif
+#ifndef PROBE_GREY
+#define PROBE_GREY 0
 #endif
 uniform ivec3 probe_grid;
 uniform vec3 probe_box_min;    // world corner of the probe box
@@ -39,6 +47,15 @@ vec3 probe_walk_direction(uint probe_index, uint pass_index, uint slot, uint dir
 }
 
 #ifdef PROBE_SAMPLING
+#if PROBE_GREY
+uniform sampler3D probe_sh0;
+#if PROBE_SH_ORDER >= 1
+uniform sampler3D probe_sh1;
+#endif
+#if PROBE_SH_ORDER >= 2
+uniform sampler3D probe_sh2;
+#endif
+#else
 uniform sampler3D probe_sh0, probe_sh6;
 #if PROBE_SH_ORDER >= 1
 uniform sampler3D probe_sh1, probe_sh2;
@@ -46,16 +63,36 @@ uniform sampler3D probe_sh1, probe_sh2;
 #if PROBE_SH_ORDER >= 2
 uniform sampler3D probe_sh3, probe_sh4, probe_sh5;
 #endif
+#endif
 uniform vec3 probe_band_factors;  // per SH band: g^l (phase convolution) times the SH window
 
 // Trilinearly interpolated SH coefficients and sun transmittance at world point x.
 void probe_fetch(vec3 x, out vec3 coeffs[9], out float sun_transmittance)
 {
     vec3 uvw = (x - probe_box_min) / probe_box_size;
-    vec4 t0 = texture(probe_sh0, uvw);
-    vec4 t6 = texture(probe_sh6, uvw);
     for (int k = 1; k < 9; ++k)
         coeffs[k] = vec3(0.0);
+#if PROBE_GREY
+    vec4 t0 = texture(probe_sh0, uvw);
+    coeffs[0] = vec3(t0.r);
+#if PROBE_SH_ORDER >= 1
+    vec4 t1 = texture(probe_sh1, uvw);
+    coeffs[1] = vec3(t0.g);
+    coeffs[2] = vec3(t0.b);
+    coeffs[3] = vec3(t1.r);
+#endif
+#if PROBE_SH_ORDER >= 2
+    vec4 t2 = texture(probe_sh2, uvw);
+    coeffs[4] = vec3(t1.g);
+    coeffs[5] = vec3(t1.b);
+    coeffs[6] = vec3(t1.a);
+    coeffs[7] = vec3(t2.r);
+    coeffs[8] = vec3(t2.g);
+#endif
+    sun_transmittance = clamp(t0.a, 0.0, 1.0);
+#else
+    vec4 t0 = texture(probe_sh0, uvw);
+    vec4 t6 = texture(probe_sh6, uvw);
     coeffs[0] = t0.rgb;
 #if PROBE_SH_ORDER >= 1
     vec4 t1 = texture(probe_sh1, uvw), t2 = texture(probe_sh2, uvw);
@@ -72,6 +109,7 @@ void probe_fetch(vec3 x, out vec3 coeffs[9], out float sun_transmittance)
     coeffs[8] = t6.rgb;
 #endif
     sun_transmittance = clamp(t6.a, 0.0, 1.0);
+#endif
 }
 
 // Radiance in-scattered towards a ray travelling along d at x, from the probes' radiance convolved
