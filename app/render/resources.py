@@ -2,6 +2,7 @@
 and the tracking statistics buffer. Re-uploads only what a scene change touches."""
 from __future__ import annotations
 
+import os
 import struct
 
 import moderngl
@@ -12,6 +13,7 @@ from ..medium import majorant
 from ..scene import Scene
 from ..transfer import transfer_table
 from ..volume import Volume, load_scene_volume
+from .majorant_grid import MAJORANT_UNIT, MajorantGrid
 
 VOLUME_UNIT = 0
 TRANSFER_UNIT = 1
@@ -20,6 +22,12 @@ STATS_BINDING = 7
 # dropped and counted as truncated. Far beyond what max_bounces = 64 needs even at sigma_t = 1e4;
 # it only stops a pathological scene from hanging the GPU.
 DEFAULT_MAX_PATH_STEPS = 1 << 24
+
+
+def majorant_grid_default() -> bool:
+    """Empty-space skipping (the macrocell majorant grid) is on unless RP_GLOBAL_MAJORANT=1 asks
+    for the single global majorant (for comparisons and the benchmark)."""
+    return os.environ.get("RP_GLOBAL_MAJORANT", "0").strip() in ("", "0")
 
 
 class SceneResources:
@@ -35,6 +43,12 @@ class SceneResources:
         # Counts volume changes; keys of what was computed from a volume use it, not id(volume):
         # a freed volume's id can be reused by the next one, and baked data would look current.
         self.volume_version = 0
+        # Empty-space skipping: tracking walks a grid of per-macrocell majorants (rebuilt on the
+        # GPU when the transfer function, density_scale or volume changes; never for the camera).
+        # False: the single global majorant everywhere (the same estimator, for comparison).
+        self.use_majorant_grid = majorant_grid_default()
+        self.majorant_grid = MajorantGrid(ctx)
+        self._majorant_key: tuple | None = None
         self.update(scene, volume)
 
     def update(self, scene: Scene, volume: Volume | None = None) -> set[str]:
@@ -66,6 +80,12 @@ class SceneResources:
         if old is None or scene.camera != old.camera:
             changed.add("camera")
         self.scene = scene
+        if "volume" in changed:
+            self.majorant_grid.set_volume(self.volume)
+        key = (self.volume_version, scene.transfer_function, scene.density_scale)
+        if key != self._majorant_key:
+            self.majorant_grid.build(self.transfer_tex, self.table, scene.density_scale, TRANSFER_UNIT)
+            self._majorant_key = key
         return changed
 
     @property
@@ -95,6 +115,9 @@ class SceneResources:
             "albedo": float(s.albedo),
             "box_half_extent": tuple(float(v) for v in self.volume.half_extent),
             "majorant": self.majorant,
+            "majorant_grid": MAJORANT_UNIT,
+            "majorant_grid_bound": float(self.majorant_grid.bound),
+            "use_majorant_grid": int(self.use_majorant_grid),
             "sun_direction": tuple(s.light.direction),
             "sun_irradiance": tuple(s.light.irradiance),
             "environment": tuple(s.environment),
@@ -106,6 +129,7 @@ class SceneResources:
     def bind(self) -> None:
         self.volume_tex.use(VOLUME_UNIT)
         self.transfer_tex.use(TRANSFER_UNIT)
+        self.majorant_grid.bind()
         self.stats.bind_to_storage_buffer(STATS_BINDING)
 
     def reset_stats(self) -> None:
@@ -119,3 +143,4 @@ class SceneResources:
         for obj in (self.volume_tex, self.transfer_tex, self.stats):
             if obj is not None:
                 obj.release()
+        self.majorant_grid.release()

@@ -2,6 +2,21 @@
 // tracking). Unbiased as long as majorant >= sigma_t. Every loop draws on a step budget, so a dense
 // or pathological volume cannot hang the GPU; a path that runs out is dropped and counted in
 // tracking_stats.truncated_paths (the renderers report it, the tests assert it is 0).
+//
+// Empty-space skipping (use_majorant_grid != 0, as in pbrt-v4): the box is cut into macrocells,
+// each with its own majorant (glsl/majorant_grid.comp, app/majorant.py), and tracking walks the
+// cells along the ray with a 3D DDA (Amanatides and Woo). In a cell of majorant m a free-flight
+// distance is drawn with rate m; if it ends inside the cell, that is a tentative collision (real
+// or null, as with one majorant); if not, the walk moves to the next cell and draws afresh there
+// (exact: the exponential is memoryless). Cells of majorant 0 are crossed without a random
+// number. With use_majorant_grid == 0 (or GLOBAL_MAJORANT defined) the one global majorant is
+// used: the same estimators, slower where the medium is thin (for comparisons and the benchmark).
+//
+// Resumable either way: every loop iteration (a tentative collision or a cell crossing) takes one
+// step from steps_left. Between iterations the whole state is the distance t reached (and the
+// cell, a function of t), so when the steps run out the functions return t, and a later call from
+// there (a fresh walk from that point) draws the same random numbers, in the same order, as the
+// uninterrupted call would have.
 
 layout(std430, binding = 7) buffer TrackingStats
 {
@@ -13,12 +28,180 @@ const int TRACK_ESCAPED = 0;
 const int TRACK_COLLIDED = 1;
 const int TRACK_OUT_OF_STEPS = 2;
 
+#if !defined(GLOBAL_MAJORANT)
+uniform sampler3D majorant_grid;    // R32F per macrocell (texelFetch), >= sigma_t in the cell
+uniform float majorant_grid_bound;  // >= every cell's majorant; 0: the whole volume is vacuum
+uniform int use_majorant_grid;      // 0: the global majorant instead (comparison, benchmark)
+
+// The macrocells along a ray, front to back.
+struct CellWalk {
+    vec3 o;           // ray origin in macrocell units (cell i spans [i, i + 1) per axis)
+    vec3 inv;         // 1 / direction in macrocell units (0 where the direction has no component)
+    ivec3 dir_step;   // +1 / -1 per axis (0 where the direction has no component)
+    ivec3 cell;       // current macrocell
+    ivec3 cells;      // grid size
+    vec3 t_next;      // ray distance of the current cell's exit face along each axis
+};
+
+const float CELL_WALK_NEVER = 1e30;   // t_next along an axis the ray never crosses
+// Faces closer than this (in macrocells, along their axis) count as reached; see cell_walk_cross.
+// Far above float rounding of positions in macrocell units (about 1e-5 for origins within a few
+// hundred macrocells), below how far beyond its cell a majorant holds (SUPPORT_SLACK = 1/32 voxel:
+// app/majorant.py; 1/256 of a macrocell of 8 voxels, 1/1024 of one of 32 voxels, which is what a
+// 2048-voxel axis gets).
+const float CELL_WALK_SNAP = 1e-4;
+
+void cell_walk_exits(inout CellWalk w)
+{
+    vec3 face = vec3(w.cell) + vec3(greaterThan(w.dir_step, ivec3(0)));
+    w.t_next = mix((face - w.o) * w.inv, vec3(CELL_WALK_NEVER), equal(w.dir_step, ivec3(0)));
+}
+
+// Crosses every exit face at or just ahead of t (within CELL_WALK_SNAP: faces that rounding may
+// put on either side of t, and corners). Both the walk and a walk started afresh at t use this
+// rule, so a resumed walk is in the same cell as the uninterrupted one and never spends a step or a
+// random number on a sliver of a cell. False once the walk has left the grid.
+bvec3 cell_walk_faces_at(CellWalk w, float t)
+{
+    return lessThanEqual(w.t_next, vec3(t) + CELL_WALK_SNAP * abs(w.inv));
+}
+
+bool cell_walk_cross(inout CellWalk w, float t)
+{
+    w.cell += ivec3(cell_walk_faces_at(w, t)) * w.dir_step;
+    cell_walk_exits(w);
+    return all(greaterThanEqual(w.cell, ivec3(0))) && all(lessThan(w.cell, w.cells));
+}
+
+// Starts the walk at origin + t * direction; false when that point is leaving the grid.
+bool cell_walk_begin(vec3 origin, vec3 direction, float t, out CellWalk w)
+{
+    w.cells = textureSize(majorant_grid, 0);
+    vec3 per_world = vec3(w.cells) / (2.0 * box_half_extent);   // macrocells per unit length
+    w.o = (origin + box_half_extent) * per_world;
+    vec3 d = direction * per_world;
+    bvec3 still = equal(d, vec3(0.0));
+    w.inv = mix(1.0 / mix(d, vec3(1.0), still), vec3(0.0), still);
+    w.dir_step = ivec3(sign(d));
+    w.cell = clamp(ivec3(floor(w.o + t * d)), ivec3(0), w.cells - 1);
+    cell_walk_exits(w);
+    return cell_walk_cross(w, t);
+}
+
+float cell_walk_exit(CellWalk w)
+{
+    return min(min(w.t_next.x, w.t_next.y), w.t_next.z);
+}
+
+float cell_majorant(CellWalk w)
+{
+    return texelFetch(majorant_grid, w.cell, 0).r;
+}
+
+// delta_track with the macrocell majorants (same contract).
+int delta_track_grid(vec3 origin, vec3 direction, float t_min, float t_max, inout uint rng,
+                     inout int steps_left, out float t_collision)
+{
+    t_collision = t_max;
+    float b0, b1;
+    if (majorant_grid_bound <= 0.0 || !box_intersect(origin, direction, b0, b1))
+        return TRACK_ESCAPED;
+    float t = max(t_min, b0);
+    float t_end = min(t_max, b1);
+    CellWalk w;
+    if (t >= t_end || !cell_walk_begin(origin, direction, t, w))
+        return TRACK_ESCAPED;
+    float m = cell_majorant(w);
+    while (steps_left > 0) {
+        --steps_left;
+        float cell_end = min(cell_walk_exit(w), t_end);
+        bool null_collision = false;
+        if (m > 0.0) {
+            float t_try = t - log(1.0 - rng_next(rng)) / m;
+            if (t_try < cell_end) {
+                t = t_try;
+                null_collision = true;
+                if (rng_next(rng) * m < sigma_t_at(origin + t * direction)) {
+                    t_collision = t;
+                    return TRACK_COLLIDED;
+                }
+            }
+        }
+        if (null_collision) {
+            if (!any(cell_walk_faces_at(w, t)))
+                continue;   // well inside the cell
+        } else {
+            t = max(t, cell_end);
+            if (t >= t_end)
+                return TRACK_ESCAPED;
+        }
+        if (!cell_walk_cross(w, t))
+            return TRACK_ESCAPED;
+        m = cell_majorant(w);
+    }
+    t_collision = t;
+    return TRACK_OUT_OF_STEPS;
+}
+
+// ratio_track_continue with the macrocell majorants (same contract).
+bool ratio_track_continue_grid(vec3 origin, vec3 direction, inout float t, float t_max,
+                               inout float transmittance, inout uint rng, inout int steps_left)
+{
+    float b0, b1;
+    if (majorant_grid_bound <= 0.0 || !box_intersect(origin, direction, b0, b1))
+        return true;
+    t = max(t, b0);
+    float t_end = min(t_max, b1);
+    CellWalk w;
+    if (t >= t_end || !cell_walk_begin(origin, direction, t, w))
+        return true;
+    float m = cell_majorant(w);
+    while (steps_left > 0) {
+        --steps_left;
+        float cell_end = min(cell_walk_exit(w), t_end);
+        bool null_collision = false;
+        if (m > 0.0) {
+            float t_try = t - log(1.0 - rng_next(rng)) / m;
+            if (t_try < cell_end) {
+                t = t_try;
+                null_collision = true;
+                transmittance *= max(0.0, 1.0 - sigma_t_at(origin + t * direction) / m);
+                if (transmittance < 0.1) {
+                    float survive = transmittance * 10.0;
+                    if (rng_next(rng) >= survive) {
+                        transmittance = 0.0;
+                        return true;
+                    }
+                    transmittance = 0.1;
+                }
+            }
+        }
+        if (null_collision) {
+            if (!any(cell_walk_faces_at(w, t)))
+                continue;   // well inside the cell
+        } else {
+            t = max(t, cell_end);
+            if (t >= t_end)
+                return true;
+        }
+        if (!cell_walk_cross(w, t))
+            return true;
+        m = cell_majorant(w);
+    }
+    return false;
+}
+#endif
+
 // Samples the distance to the next real collision on origin + t * direction, t in [t_min, t_max].
 // When the steps run out, t_collision is where tracking stopped: free flight is memoryless, so a
 // flight continued from there (same majorant) is distributed exactly as one never interrupted.
 int delta_track(vec3 origin, vec3 direction, float t_min, float t_max, inout uint rng,
                 inout int steps_left, out float t_collision)
 {
+#if !defined(GLOBAL_MAJORANT)
+    if (use_majorant_grid != 0)
+        return delta_track_grid(origin, direction, t_min, t_max, rng, steps_left, t_collision);
+#endif
     t_collision = t_max;
     if (majorant <= 0.0)
         return TRACK_ESCAPED;
@@ -45,6 +228,11 @@ int delta_track(vec3 origin, vec3 direction, float t_min, float t_max, inout uin
 bool ratio_track_continue(vec3 origin, vec3 direction, inout float t, float t_max,
                           inout float transmittance, inout uint rng, inout int steps_left)
 {
+#if !defined(GLOBAL_MAJORANT)
+    if (use_majorant_grid != 0)
+        return ratio_track_continue_grid(origin, direction, t, t_max, transmittance, rng,
+                                         steps_left);
+#endif
     if (majorant <= 0.0)
         return true;
     while (steps_left > 0) {

@@ -1,0 +1,95 @@
+"""The macrocell majorant grid on the GPU (empty-space skipping; see app/majorant.py).
+
+Per volume, the density range of every macrocell is computed with NumPy and uploaded once (RG32F);
+whenever the transfer function or density_scale changes, glsl/majorant_grid.comp turns it into the
+majorant grid (R32F 3D texture, bound to MAJORANT_UNIT and read by glsl/lib/tracking.glsl with
+texelFetch)."""
+from __future__ import annotations
+
+import weakref
+
+import moderngl
+import numpy as np
+
+from ..gl.shaders import compute_program, set_uniforms
+from ..majorant import MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_bound
+from ..volume import Volume
+
+# Texture units: 0 volume, 1 transfer function, 2..8 probes, 9 light transmittance (raymarcher).
+MAJORANT_UNIT = 10   # the majorant grid, read by the tracking passes
+RANGE_UNIT = 11      # the density ranges, read only while the grid is built
+
+_programs: "weakref.WeakKeyDictionary[moderngl.Context, moderngl.ComputeShader]" = \
+    weakref.WeakKeyDictionary()
+
+
+def _program(ctx: moderngl.Context) -> moderngl.ComputeShader:
+    """One compiled build pass per context (every SceneResources shares it)."""
+    program = _programs.get(ctx)
+    if program is None:
+        program = _programs[ctx] = compute_program(ctx, "majorant_grid.comp")
+    return program
+
+
+class MajorantGrid:
+    def __init__(self, ctx: moderngl.Context):
+        self.ctx = ctx
+        self.cells: tuple[int, int, int] | None = None
+        self.range_tex: moderngl.Texture3D | None = None
+        self.texture: moderngl.Texture3D | None = None
+        self.d_min: np.ndarray | None = None
+        self.d_max: np.ndarray | None = None
+        self.bound = 0.0      # >= every cell's majorant; 0 when the whole volume is transparent
+        self.builds = 0       # how many times the grid was built on the GPU (tests count them)
+
+    def set_volume(self, volume: Volume) -> None:
+        """The density range per macrocell of a new volume (NumPy, once per volume)."""
+        cells = macrocell_counts(volume.dims)
+        self.d_min, self.d_max = density_range_grid(volume.data, cells)
+        payload = np.ascontiguousarray(np.stack([self.d_min, self.d_max], axis=-1), np.float32)
+        if self.cells != cells:
+            for tex in (self.range_tex, self.texture):
+                if tex is not None:
+                    tex.release()
+            self.range_tex = self.ctx.texture3d(cells, 2, dtype="f4")
+            self.texture = self.ctx.texture3d(cells, 1, dtype="f4")
+            for tex in (self.range_tex, self.texture):
+                tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+                tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+            self.cells = cells
+        self.range_tex.write(payload.tobytes())
+
+    def build(self, transfer_tex: moderngl.Texture, table: np.ndarray, density_scale: float,
+              transfer_unit: int) -> None:
+        """Majorant per macrocell under the current transfer function and density_scale (GPU)."""
+        program = _program(self.ctx)
+        transfer_tex.use(transfer_unit)
+        self.range_tex.use(RANGE_UNIT)
+        set_uniforms(program, {"density_range": RANGE_UNIT, "transfer_function": transfer_unit,
+                               "transfer_size": int(len(table)),
+                               "density_scale": float(density_scale), "cells": self.cells,
+                               "majorant_safety": float(MAJORANT_SAFETY)})
+        self.texture.bind_to_image(0, read=False, write=True)
+        program.run(*((c + 3) // 4 for c in self.cells))
+        self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT
+                                | moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
+        self.bound = majorant_bound(self.d_min, self.d_max, table, density_scale)
+        self.builds += 1
+
+    def read(self) -> np.ndarray:
+        """The grid as float32 [cz, cy, cx] (tests compare it with app/majorant.py)."""
+        cx, cy, cz = self.cells
+        return np.frombuffer(self.texture.read(), np.float32).reshape(cz, cy, cx).copy()
+
+    @property
+    def gpu_bytes(self) -> int:
+        return 0 if self.cells is None else 12 * int(np.prod(self.cells))
+
+    def bind(self) -> None:
+        self.texture.use(MAJORANT_UNIT)
+
+    def release(self) -> None:
+        for tex in (self.range_tex, self.texture):
+            if tex is not None:
+                tex.release()
+        self.range_tex = self.texture = None
