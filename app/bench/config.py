@@ -41,6 +41,8 @@ class BenchConfig:
 PRESETS = {
     "gpu": BenchConfig(),
     "cost": BenchConfig(mode="cost"),
+    # empty-space skipping on and off, one probe setting, no auto: a short run
+    "skipping": BenchConfig(mode="cost", cost_settings=((32, 256),), cost_auto_targets=()),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),

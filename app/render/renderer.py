@@ -91,7 +91,13 @@ class Renderer:
     # ---- probes -------------------------------------------------------------------------------
     def bake_key(self) -> tuple:
         spec = self.scene.probes
-        return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels)
+        return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
+                self.resources.use_majorant_grid)
+
+    def set_empty_space_skipping(self, on: bool) -> None:
+        """Tracking over the macrocell majorant grid (on, the default) or one global majorant
+        (the same unbiased estimator, slower where the box is mostly empty): for comparisons."""
+        self.resources.use_majorant_grid = bool(on)
 
     def probes_current(self) -> bool:
         return (self.probe_grid is not None and self.probe_grid.done
