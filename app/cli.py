@@ -133,6 +133,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
             changes["scenes"] = tuple(args.scenes)
         if args.ref_spp:
             changes["ref_spp"] = args.ref_spp
+        if args.ref_dir:
+            if not (Path(args.ref_dir) / "results.json").is_file():
+                raise SystemExit(f"error: --ref-dir {args.ref_dir} has no results.json")
+            changes["reference_dir"] = args.ref_dir
         config = config.scaled(**changes)
         run_bench(config, out, command="radiance-probes " + " ".join(sys.argv[1:]))
     results = out / "results.json"
@@ -186,6 +190,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"comma-separated subset of {','.join(ALL_SCENES)}")
     b.add_argument("--out", default="bench/out", help="output folder (default bench/out)")
     b.add_argument("--ref-spp", type=_positive_int, help="reference samples per pixel")
+    b.add_argument("--ref-dir", help="reuse the references (refs/*.npy and their measured noise "
+                                     "in results.json) of an earlier run's output folder")
     b.add_argument("--merge", nargs="+", metavar="RESULTS_JSON",
                    help="combine these results.json files into OUT/results.json, then report")
     b.add_argument("--report-only", action="store_true",
