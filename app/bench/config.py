@@ -43,6 +43,8 @@ PRESETS = {
     "cost": BenchConfig(mode="cost"),
     # empty-space skipping on and off, one probe setting, no auto: a short run
     "skipping": BenchConfig(mode="cost", cost_settings=((32, 256),), cost_auto_targets=()),
+    # `auto` alone, checked at full resolution
+    "auto": BenchConfig(mode="cost", cost_settings=(), cost_auto_targets=(0.05, 0.10)),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),

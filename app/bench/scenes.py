@@ -17,7 +17,9 @@ ANISOTROPIC = {"volume": {"builtin": "cloud", "size": [96, 96, 96]}, "density_sc
                "albedo": 0.95, "anisotropy": 0.8,
                "light": {"direction": [-0.3, 0.35, -0.89], "irradiance": [4.0, 4.0, 4.0]},
                "environment": [0.08, 0.08, 0.1]}
-BUILTIN_SCENES = {"thick": THICK, "anisotropic": ANISOTROPIC}
+# The thick cloud with a grey environment: everything grey, so probes need one channel.
+GREY = {**THICK, "environment": [0.12, 0.12, 0.12]}
+BUILTIN_SCENES = {"thick": THICK, "anisotropic": ANISOTROPIC, "grey": GREY}
 ALL_SCENES = (*DATASET_SCENES, *BUILTIN_SCENES)
 
 

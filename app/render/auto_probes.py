@@ -7,7 +7,7 @@ renderer makes itself, with the reasons written down.
 2. A pilot: the scene's own view at low resolution, path traced until the reference's measured
    noise (two independent halves) is at most a fifth of the target.
 3. Candidates in order of bake cost (probes x walks): for each grid, the fewest walks whose image
-   meets the target against the pilot. The first grid that meets it wins; if none does, the most
+   comes within PILOT_MARGIN x the target against the pilot. The first grid that meets it wins; if none does, the most
    accurate candidate is taken and the report says the target was not met.
 
 The pilot's lower resolution averages away detail finer than its pixels, so the error it measures
@@ -26,6 +26,9 @@ from ..scene import Scene
 GRIDS = (8, 16, 32, 64, 128)
 WALKS = (16, 64, 256)
 PILOT_SIDE = 96
+# The pilot must come within this fraction of the target: at 96 px it sees less fine detail than
+# the full image, and on the benchmark its error was up to 3% below the full-resolution one.
+PILOT_MARGIN = 0.9
 
 
 @dataclass
@@ -105,7 +108,7 @@ def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
                 trials.append(trial)
                 if progress:
                     progress(f"{grid}^3 x {n}: rRMSE {err:.4f}")
-                if err <= target:
+                if err <= PILOT_MARGIN * target:
                     best_here = trial
                     break          # fewer walks first: the first that meets it is the cheapest
             if best_here is not None:
@@ -116,7 +119,8 @@ def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
             chosen = min(trials, key=lambda t: t["rrmse"])
             reasons.append("no candidate met the target; took the most accurate one")
         else:
-            reasons.append("the coarsest grid, then the fewest walks, meeting the target")
+            reasons.append(f"the coarsest grid, then the fewest walks, within {PILOT_MARGIN:g} x "
+                           "the target on the pilot (a margin for detail the pilot cannot see)")
         if noise > target / 5:
             reasons.append(f"the pilot stopped at {pilot_spp} spp with noise {noise:.4f} "
                            f"(wanted {target / 5:.4f})")
