@@ -142,6 +142,7 @@ def _reference(renderer, name: str, config: BenchConfig, results: Results, out: 
                 raise ValueError(f"reference {path} is {reference.shape}, the run renders "
                                  f"{config.height}x{config.width}")
             results.references[name] = dict(known, loaded_from=str(path))
+            save_png(out / "images" / f"{name}_reference.png", reference)
             _log(f"  reference: loaded {path} (relative noise {known['noise_rrmse']:.2e})")
             return reference
     half = config.ref_spp // 2
