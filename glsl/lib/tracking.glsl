@@ -28,6 +28,20 @@ const int TRACK_ESCAPED = 0;
 const int TRACK_COLLIDED = 1;
 const int TRACK_OUT_OF_STEPS = 2;
 
+// Russian roulette on a ratio-tracking estimate: below 0.1 it survives with probability
+// 10 x transmittance and is then raised to 0.1 (unbiased). True when the estimate was ended.
+bool ratio_roulette(inout float transmittance, inout uint rng)
+{
+    if (transmittance >= 0.1)
+        return false;
+    if (rng_next(rng) >= transmittance * 10.0) {
+        transmittance = 0.0;
+        return true;
+    }
+    transmittance = 0.1;
+    return false;
+}
+
 #if !defined(GLOBAL_MAJORANT)
 uniform sampler3D majorant_grid;    // R32F per macrocell (texelFetch), >= sigma_t in the cell
 uniform float majorant_grid_bound;  // >= every cell's majorant; 0: the whole volume is vacuum
@@ -98,46 +112,75 @@ float cell_majorant(CellWalk w)
     return texelFetch(majorant_grid, w.cell, 0).r;
 }
 
+// Starts a walk over the macrocells for t in [t, t_max] clipped to the box; m is the first cell's
+// majorant. False when nothing of the range lies in a cell of the grid (or all is vacuum).
+bool majorant_walk_begin(vec3 origin, vec3 direction, inout float t, float t_max,
+                         out float t_end, out CellWalk w, out float m)
+{
+    float b0, b1;
+    t_end = t_max;
+    m = 0.0;
+    if (majorant_grid_bound <= 0.0 || !box_intersect(origin, direction, b0, b1))
+        return false;
+    t = max(t, b0);
+    t_end = min(t_max, b1);
+    if (t >= t_end || !cell_walk_begin(origin, direction, t, w))
+        return false;
+    m = cell_majorant(w);
+    return true;
+}
+
+// Draws a free flight at the current cell's rate m from t; true (t moved there) when it ends
+// before cell_end: a tentative collision. Cells with m = 0 draw nothing.
+bool majorant_walk_sample(float m, inout float t, float cell_end, inout uint rng)
+{
+    if (m <= 0.0)
+        return false;
+    float t_try = t - log(1.0 - rng_next(rng)) / m;
+    if (t_try >= cell_end)
+        return false;
+    t = t_try;
+    return true;
+}
+
+// After a null collision at t (tentative) or a flight past the cell (not tentative): crosses the
+// faces reached, if any, and loads the next cell's majorant. False once the ray has left the range.
+bool majorant_walk_next(inout CellWalk w, inout float m, inout float t, float cell_end,
+                        float t_end, bool tentative)
+{
+    if (tentative) {
+        if (!any(cell_walk_faces_at(w, t)))
+            return true;   // well inside the cell
+    } else {
+        t = max(t, cell_end);
+        if (t >= t_end)
+            return false;
+    }
+    if (!cell_walk_cross(w, t))
+        return false;
+    m = cell_majorant(w);
+    return true;
+}
+
 // delta_track with the macrocell majorants (same contract).
 int delta_track_grid(vec3 origin, vec3 direction, float t_min, float t_max, inout uint rng,
                      inout int steps_left, out float t_collision)
 {
     t_collision = t_max;
-    float b0, b1;
-    if (majorant_grid_bound <= 0.0 || !box_intersect(origin, direction, b0, b1))
-        return TRACK_ESCAPED;
-    float t = max(t_min, b0);
-    float t_end = min(t_max, b1);
+    float t = t_min, t_end, m;
     CellWalk w;
-    if (t >= t_end || !cell_walk_begin(origin, direction, t, w))
+    if (!majorant_walk_begin(origin, direction, t, t_max, t_end, w, m))
         return TRACK_ESCAPED;
-    float m = cell_majorant(w);
     while (steps_left > 0) {
         --steps_left;
         float cell_end = min(cell_walk_exit(w), t_end);
-        bool null_collision = false;
-        if (m > 0.0) {
-            float t_try = t - log(1.0 - rng_next(rng)) / m;
-            if (t_try < cell_end) {
-                t = t_try;
-                null_collision = true;
-                if (rng_next(rng) * m < sigma_t_at(origin + t * direction)) {
-                    t_collision = t;
-                    return TRACK_COLLIDED;
-                }
-            }
+        bool tentative = majorant_walk_sample(m, t, cell_end, rng);
+        if (tentative && rng_next(rng) * m < sigma_t_at(origin + t * direction)) {
+            t_collision = t;
+            return TRACK_COLLIDED;
         }
-        if (null_collision) {
-            if (!any(cell_walk_faces_at(w, t)))
-                continue;   // well inside the cell
-        } else {
-            t = max(t, cell_end);
-            if (t >= t_end)
-                return TRACK_ESCAPED;
-        }
-        if (!cell_walk_cross(w, t))
+        if (!majorant_walk_next(w, m, t, cell_end, t_end, tentative))
             return TRACK_ESCAPED;
-        m = cell_majorant(w);
     }
     t_collision = t;
     return TRACK_OUT_OF_STEPS;
@@ -147,46 +190,21 @@ int delta_track_grid(vec3 origin, vec3 direction, float t_min, float t_max, inou
 bool ratio_track_continue_grid(vec3 origin, vec3 direction, inout float t, float t_max,
                                inout float transmittance, inout uint rng, inout int steps_left)
 {
-    float b0, b1;
-    if (majorant_grid_bound <= 0.0 || !box_intersect(origin, direction, b0, b1))
-        return true;
-    t = max(t, b0);
-    float t_end = min(t_max, b1);
+    float t_end, m;
     CellWalk w;
-    if (t >= t_end || !cell_walk_begin(origin, direction, t, w))
+    if (!majorant_walk_begin(origin, direction, t, t_max, t_end, w, m))
         return true;
-    float m = cell_majorant(w);
     while (steps_left > 0) {
         --steps_left;
         float cell_end = min(cell_walk_exit(w), t_end);
-        bool null_collision = false;
-        if (m > 0.0) {
-            float t_try = t - log(1.0 - rng_next(rng)) / m;
-            if (t_try < cell_end) {
-                t = t_try;
-                null_collision = true;
-                transmittance *= max(0.0, 1.0 - sigma_t_at(origin + t * direction) / m);
-                if (transmittance < 0.1) {
-                    float survive = transmittance * 10.0;
-                    if (rng_next(rng) >= survive) {
-                        transmittance = 0.0;
-                        return true;
-                    }
-                    transmittance = 0.1;
-                }
-            }
-        }
-        if (null_collision) {
-            if (!any(cell_walk_faces_at(w, t)))
-                continue;   // well inside the cell
-        } else {
-            t = max(t, cell_end);
-            if (t >= t_end)
+        bool tentative = majorant_walk_sample(m, t, cell_end, rng);
+        if (tentative) {
+            transmittance *= max(0.0, 1.0 - sigma_t_at(origin + t * direction) / m);
+            if (ratio_roulette(transmittance, rng))
                 return true;
         }
-        if (!cell_walk_cross(w, t))
+        if (!majorant_walk_next(w, m, t, cell_end, t_end, tentative))
             return true;
-        m = cell_majorant(w);
     }
     return false;
 }
@@ -241,14 +259,8 @@ bool ratio_track_continue(vec3 origin, vec3 direction, inout float t, float t_ma
         if (t >= t_max)
             return true;
         transmittance *= max(0.0, 1.0 - sigma_t_at(origin + t * direction) / majorant);
-        if (transmittance < 0.1) {
-            float survive = transmittance * 10.0;
-            if (rng_next(rng) >= survive) {
-                transmittance = 0.0;
-                return true;
-            }
-            transmittance = 0.1;
-        }
+        if (ratio_roulette(transmittance, rng))
+            return true;
     }
     return false;
 }
