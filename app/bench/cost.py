@@ -17,7 +17,6 @@ from dataclasses import replace
 import numpy as np
 
 from ..imageio import save_png
-from .metrics import rrmse
 
 PROBE_VARIANTS = (
     ("baseline", {"fit": "box", "sh_order": 2, "precision": "rgba32f", "channels": 3}),
@@ -41,19 +40,14 @@ def _set_skipping(renderer, on) -> None:
 
 def cost_scene(renderer, name: str, config, results, out, device: str,
                reference: np.ndarray) -> None:
-    from .runner import _log, _progressive
+    from .runner import _log, _progressive, make_record
     scene = renderer.scene
     k = config.samples_per_dispatch
     base = {"scene": name, "device": device, "width": config.width, "height": config.height,
-            "samples_per_dispatch": k, "mode": "cost"}
+            "mode": "cost"}
 
     def record(method, frames, image, timing, bake_ms=0.0, **extra):
-        frame_ms, render_ms = timing
-        rec = dict(base, method=method, spp=frames, frame_ms=frame_ms, bake_ms=bake_ms,
-                   render_ms=render_ms, total_ms=bake_ms + render_ms,
-                   rrmse=rrmse(image, reference), probe_grid=None, probe_samples=None)
-        rec.update(extra)
-        rec["gpu_bytes"] = rec.get("probe_bytes", 0)
+        rec = make_record(base, config, method, frames, image, reference, timing, bake_ms, **extra)
         results.add(rec, image, reference)
         return rec
 
@@ -89,7 +83,7 @@ def cost_scene(renderer, name: str, config, results, out, device: str,
                             save_png(out / "images" / f"{name}_{method}_cost_all.png", image)
                     line.append(f"{method} {r['frame_ms']:.3f} ms/fr rRMSE {r['rrmse']:.4f}")
                 _log(", ".join(line))
-    _set_skipping(renderer, None if not skipping_modes(renderer)[0] else True)
+    _set_skipping(renderer, skipping_modes(renderer)[0])   # back to the default
     renderer.set_scene(scene)
     for target in config.cost_auto_targets:
         auto_scene(renderer, target, config, record, _log, _progressive)

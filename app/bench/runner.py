@@ -162,6 +162,24 @@ def _reference(renderer, name: str, config: BenchConfig, results: Results, out: 
     return reference
 
 
+def make_record(base: dict, config: BenchConfig, method: str, frames: int, image: np.ndarray,
+                reference: np.ndarray, timing: tuple[float, float], bake_ms: float = 0.0,
+                **extra) -> dict:
+    """One result: `timing` is (median GPU ms per sample, summed GPU ms of the render so far);
+    `extra` adds the setting's own fields (probe_bytes and light_bytes count in gpu_bytes)."""
+    frame_ms, render_ms = timing
+    rec = dict(base, method=method, spp=frames, frame_ms=frame_ms, bake_ms=bake_ms,
+               render_ms=render_ms, total_ms=bake_ms + render_ms, rrmse=rrmse(image, reference),
+               samples_per_dispatch=config.samples_per_dispatch,
+               probe_grid=None, probe_samples=None, gpu_bytes=0)
+    rec.update(extra)
+    # Per-pixel buffers: the accumulation image and, for the path-state passes, PathState.
+    per_pixel = ACCUMULATION_BYTES + (0 if method == "raymarch" else PIXEL_STATE_BYTES)
+    rec["image_bytes"] = config.width * config.height * per_pixel
+    rec["gpu_bytes"] = rec["image_bytes"] + rec.get("probe_bytes", 0) + rec.get("light_bytes", 0)
+    return rec
+
+
 def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out: Path,
                  device: str) -> None:
     if config.mode == "cost":
@@ -170,22 +188,11 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
                           _reference(renderer, name, config, results, out))
     scene = renderer.scene
     base = {"scene": name, "device": device, "width": config.width, "height": config.height}
-
     reference = _reference(renderer, name, config, results, out)
-    scene = renderer.scene
 
     def record(method: str, frames: int, image: np.ndarray, timing: tuple[float, float],
                bake_ms: float = 0.0, **extra) -> None:
-        frame_ms, render_ms = timing
-        rec = dict(base, method=method, spp=frames, frame_ms=frame_ms, bake_ms=bake_ms,
-                   render_ms=render_ms, total_ms=bake_ms + render_ms, rrmse=rrmse(image, reference),
-                   samples_per_dispatch=config.samples_per_dispatch,
-                   probe_grid=None, probe_samples=None, gpu_bytes=0)
-        rec.update(extra)
-        # Per-pixel buffers: the accumulation image and, for the path-state passes, PathState.
-        per_pixel = ACCUMULATION_BYTES + (0 if method == "raymarch" else PIXEL_STATE_BYTES)
-        rec["image_bytes"] = config.width * config.height * per_pixel
-        rec["gpu_bytes"] = rec["image_bytes"] + rec.get("probe_bytes", 0) + rec.get("light_bytes", 0)
+        rec = make_record(base, config, method, frames, image, reference, timing, bake_ms, **extra)
         results.add(rec, image if frames in config.flip_frames or method == "pt" else None,
                     reference)
 
