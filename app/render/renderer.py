@@ -125,7 +125,8 @@ class Renderer:
                                          s.environment) == 1}
         if spec.fit == "visible" and region:
             low, high = self.visible_region()
-            plan.update(grid=fitted_grid(spec.grid, low, high), box=(tuple(low), tuple(high)))
+            plan.update(grid=fitted_grid(spec.grid, low, high),
+                        box=(tuple(map(float, low)), tuple(map(float, high))))
         return plan
 
     def start_bake(self, seed: int = 0) -> ProbeGrid:
@@ -134,8 +135,7 @@ class Renderer:
         plan = self.probe_plan()
         g = self.probe_grid
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey) != (
-                plan["grid"], spec.samples, spec.precision, plan["sh_order"],
-                None if plan["box"] is None else tuple(tuple(map(float, c)) for c in plan["box"]),
+                plan["grid"], spec.samples, spec.precision, plan["sh_order"], plan["box"],
                 plan["grey"]):
             if g is not None:
                 g.release()
