@@ -5,6 +5,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from ..bench.metrics import rrmse
 from ..gl.shaders import render_program, set_uniforms
 from ..transfer import colormap_rgb
 
@@ -15,10 +16,11 @@ MAIN_UNIT, OTHER_UNIT, HEAT_UNIT = 0, 1, 2
 
 
 def relative_rmse(image: np.ndarray, reference: np.ndarray) -> float:
-    """SPEC.md's error: sqrt(mean((x - ref)^2)) / sqrt(mean(ref^2)) over linear RGB."""
-    x, ref = np.asarray(image, np.float64), np.asarray(reference, np.float64)
-    denominator = np.sqrt(np.mean(ref ** 2))
-    return float(np.sqrt(np.mean((x - ref) ** 2)) / denominator) if denominator > 0 else float("nan")
+    """SPEC.md's error (app/bench/metrics.rrmse); NaN while the reference is still black."""
+    try:
+        return rrmse(image, reference)
+    except ValueError:
+        return float("nan")
 
 
 def heat_colours(n: int = 256) -> np.ndarray:
