@@ -1,6 +1,7 @@
 // Probe bake, step 2: project this pass's walks onto SH (equal weights 4 pi / n over the rotated
 // Fibonacci set), fold them into each probe's running mean and publish the seven probe textures.
 // One work group per probe; the group's invocations share its walks and reduce in shared memory.
+// Channel 27 (the sun's transmittance) was written by probe_sun.comp before the first pass.
 layout(local_size_x = 64) in;
 
 #include "lib/rng.glsl"
@@ -9,17 +10,9 @@ layout(local_size_x = 64) in;
 #include "lib/sh.glsl"
 #include "lib/directions.glsl"
 #include "lib/probes.glsl"
-#include "lib/shadow_march.glsl"
+#include "lib/probe_accum.glsl"
 
 layout(std430, binding = 3) readonly buffer WalkRadiance { vec4 walk_radiance[]; };
-struct ProbeAccum {
-    vec4 channels[7];   // the 28 channels in texture packing order (see lib/probes.glsl)
-    float samples;      // walks averaged so far
-    float change;       // squared change of the radiance mean (L00) this pass, summed over rgb
-    float magnitude;    // squared L00, summed over rgb
-    float pad;
-};
-layout(std430, binding = 4) buffer ProbeAccums { ProbeAccum probes[]; };
 
 layout(PROBE_IMAGE_FORMAT, binding = 0) uniform writeonly image3D probe_image0;
 #if PROBE_GREY
@@ -86,10 +79,11 @@ void main()
 
     ProbeAccum acc = probes[probe];
     if (pass_index == 0u) {
+        float sun_transmittance = acc.channels[6].a;   // probe_sun.comp
         for (int t = 0; t < 7; ++t)
             acc.channels[t] = vec4(0.0);
         acc.samples = 0.0;
-        acc.channels[6].a = sun_transmittance_march(probe_position(probe));
+        acc.channels[6].a = sun_transmittance;
     }
     uint n = partial_count[0];
     float[28] f;

@@ -1,7 +1,21 @@
 // Probe bake, step 1: random walks. One invocation per (probe, direction) of this pass and chunk;
-// each walk is a path from the probe (lib/integrator.glsl), resumable like the path tracer's, and
-// leaves its radiance estimate in walk_radiance (a: 1 valid, 2 dropped, 0 not finished).
+// each walk is a path from the probe (lib/integrator.glsl) and leaves its radiance estimate in
+// walk_radiance (a: 1 valid, 2 dropped, 0 not finished).
+//
+// RESUMABLE_WALKS 1 (drivers with a loop limit, llvmpipe): a walk runs until the dispatch's loop
+// budget is low, keeps its state in walks[] and the host dispatches again while walks_with_work > 0.
+// The first dispatch of a chunk (first_dispatch = 1) ignores what the buffers hold from the last
+// chunk, so nothing is cleared from the CPU. RESUMABLE_WALKS 0 (no loop limit): every walk runs to
+// its end in one dispatch; there is no walk state at all, and nothing is read back; each
+// invocation runs several walks in turn (see main).
+//
+// WALK_SUN_GRID (defined or not): the sun at each scattering event from the baked light grid
+// (lib/light_grid.glsl) instead of a ratio-tracked shadow ray.
 layout(local_size_x = 64) in;
+
+#ifndef RESUMABLE_WALKS
+#define RESUMABLE_WALKS 1
+#endif
 
 #include "lib/rng.glsl"
 #include "lib/medium.glsl"
@@ -10,10 +24,17 @@ layout(local_size_x = 64) in;
 #include "lib/tracking.glsl"
 #include "lib/directions.glsl"
 #include "lib/probes.glsl"
+#if defined(WALK_SUN_GRID)
+#include "lib/light_grid.glsl"
+#endif
 #include "lib/integrator.glsl"
+#include "lib/walk_profile.glsl"
 
+#if RESUMABLE_WALKS
 layout(std430, binding = 1) buffer WalkStates { PathState walks[]; };
 layout(std430, binding = 2) buffer Progress { uint walks_with_work; };
+uniform uint first_dispatch;  // 1: start every walk of the chunk afresh
+#endif
 layout(std430, binding = 3) buffer WalkRadiance { vec4 walk_radiance[]; };
 
 uniform uint first_probe;     // chunk offset
@@ -23,30 +44,57 @@ uniform uint pass_index;
 uniform uint seed;
 uniform int loop_budget;
 uniform int loop_reserve;
+#if !RESUMABLE_WALKS
+uniform uint walk_stride;     // invocations in the dispatch (RESUMABLE_WALKS 0)
+#endif
 
-void main()
+// Walk `local` of the chunk from its start to its end (or, resumable, to the dispatch's budget).
+void run_walk(uint local)
 {
-    uint local = gl_GlobalInvocationID.x;
-    if (local >= chunk_probes * directions)
-        return;
-    if (walk_radiance[local].a != 0.0)
-        return;  // finished in an earlier dispatch
     uint probe = first_probe + local / directions;
     uint slot = local % directions;
-    PathState p = walks[local];
-    if (p.status == PATH_IDLE) {
+    PathState p;
+#if RESUMABLE_WALKS
+    bool fresh = first_dispatch != 0u;
+    if (!fresh) {
+        if (walk_radiance[local].a != 0.0)
+            return;  // finished in an earlier dispatch
+        p = walks[local];
+        fresh = p.status == PATH_IDLE;
+    }
+#else
+    const bool fresh = true;
+#endif
+    if (fresh) {
         vec3 omega = probe_walk_direction(probe, pass_index, slot, directions, seed);
         uint key = probe * directions + slot;
         path_begin(p, probe_position(probe), omega, rng_seed(key, pass_index, seed));
     }
     int budget = loop_budget;
     int result = path_continue(p, budget, loop_reserve);
+    walk_profile_flush(result == PATH_SUSPENDED ? 0 : 1, p.bounce);
+#if RESUMABLE_WALKS
     if (result == PATH_SUSPENDED) {
         walks[local] = p;
+        walk_radiance[local] = vec4(0.0);
         atomicAdd(walks_with_work, 1u);
         return;
     }
-    p.status = PATH_IDLE;
-    walks[local] = p;
+#endif
     walk_radiance[local] = path_estimate_valid(p, result) ? vec4(p.radiance, 1.0) : vec4(0.0, 0.0, 0.0, 2.0);
+}
+
+void main()
+{
+    uint walks_in_chunk = chunk_probes * directions;
+#if RESUMABLE_WALKS
+    if (gl_GlobalInvocationID.x < walks_in_chunk)
+        run_walk(gl_GlobalInvocationID.x);
+#else
+    // Each invocation runs walks local, local + walk_stride, ... one after another: a lane whose
+    // walk ended early starts the next one instead of idling until the longest walk of its warp
+    // ends, so a warp's time follows the sum of its lanes' walks rather than their maximum.
+    for (uint local = gl_GlobalInvocationID.x; local < walks_in_chunk; local += walk_stride)
+        run_walk(local);
+#endif
 }

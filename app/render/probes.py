@@ -3,8 +3,14 @@
 A bake is a sequence of passes; each pass sends `directions` walks from every probe (a rotated
 spherical Fibonacci set, lib/probes.glsl), projects them onto order-2 SH and folds them into each
 probe's running mean, then publishes the textures, so a viewer can show probes that improve while
-it stays interactive. Walks are resumable paths (lib/integrator.glsl); probes are processed in
-chunks so the walk state stays within WALKS_PER_CHUNK whatever the grid size.
+it stays interactive. Probes are processed in chunks so the walks' buffers stay within a fixed
+size whatever the grid size.
+
+Nothing goes through the host while a pass runs on a GPU without a loop limit: one walk dispatch
+and one projection dispatch per chunk (a few chunks a pass), no buffer cleared, uploaded or read
+back. Where the driver limits loops (llvmpipe), walks are resumable paths (lib/integrator.glsl)
+that keep their state in a buffer and the host re-dispatches a chunk until a 4-byte counter says
+every walk has ended; the first dispatch of a chunk starts its walks afresh, so nothing is cleared.
 """
 from __future__ import annotations
 
@@ -15,17 +21,25 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from ..gl.context import loop_budget, loop_budget_unbounded
+from ..gl.context import UNBOUNDED_LOOP_BUDGET, loop_budget, loop_budget_unbounded
+from ..gl.profiler import GpuProfile
 from ..gl.shaders import compute_program, set_uniforms
+from .light_transmittance import LIGHT_UNIT
 from .probe_layout import texture_ids
 from .resources import SceneResources
 
 PROBE_TEXTURES = 7
 PROBE_UNIT = 2                # probe textures bind to texture units 2..8
 DIRECTIONS_PER_PASS = 64
-WALKS_PER_CHUNK = 1 << 20     # 64 MiB of walk state at most
+WALKS_PER_CHUNK = 1 << 20     # resumable walks: 80 MiB of walk state and 16 MiB of results at most
+WALKS_PER_CHUNK_UNBOUNDED = 1 << 22   # walks that end in one dispatch: 64 MiB of results at most
 PATH_STATE_BYTES = 80       # PathState of glsl/lib/integrator.glsl, std430
-PROBE_ACCUM_BYTES = 128
+PROBE_ACCUM_BYTES = 128     # ProbeAccum of glsl/lib/probe_accum.glsl
+WALK_SUN_MODES = ("ray", "grid")
+WALK_THREADS = 1 << 18      # invocations of a one-dispatch walk pass (each runs walks in turn)
+WALK_PROFILE_SLOTS = 1024   # rows of 8 counters in glsl/lib/walk_profile.glsl
+WALK_PROFILE_FIELDS = ("walks", "events", "flight_steps", "shadow_steps", "cell_steps",
+                       "dispatch_walks")
 SH_WINDOW_IDS = {"none": 0, "hann": 1, "lanczos": 2}
 
 
@@ -47,9 +61,18 @@ class BakeProgress:
 class ProbeGrid:
     def __init__(self, ctx: moderngl.Context, grid: tuple[int, int, int], samples: int,
                  precision: str = "rgba32f", sh_order: int = 2,
-                 box: tuple | None = None, grey: bool = False):
+                 box: tuple | None = None, grey: bool = False, resumable: bool | None = None,
+                 sun: str = "ray"):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
-        bake time); `sh_order` 0, 1 or 2 decides which of the seven textures exist."""
+        bake time); `sh_order` 0, 1 or 2 decides which of the seven textures exist. `resumable`:
+        walks that suspend and resume across dispatches (default: where the driver limits loops;
+        False on such a driver only for walks short enough to fit its limit, as tests do).
+        `sun`: at the walks' scattering events, "ray" traces a ratio-tracked shadow ray towards the
+        sun (unbiased); "grid" reads the baked light grid (bake_pass(light=...)), a bias of its
+        resolution."""
+        if sun not in WALK_SUN_MODES:
+            raise ValueError(f"walk sun mode {sun!r}: expected one of {', '.join(WALK_SUN_MODES)}")
+        self.sun = sun
         self.ctx = ctx
         self.grid = tuple(int(v) for v in grid)
         self.samples = int(samples)
@@ -68,16 +91,28 @@ class ProbeGrid:
             tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
             tex.repeat_x = tex.repeat_y = tex.repeat_z = False
             self.textures.append(tex)
-        self.chunk_probes = max(1, min(self.count, WALKS_PER_CHUNK // self.directions))
+        self.loop_budget, self.loop_reserve = loop_budget(ctx)
+        self.resumable = (not loop_budget_unbounded(self.loop_budget) if resumable is None
+                          else bool(resumable))
+        if not self.resumable:
+            self.loop_budget, self.loop_reserve = UNBOUNDED_LOOP_BUDGET, 0
+        per_chunk = WALKS_PER_CHUNK if self.resumable else WALKS_PER_CHUNK_UNBOUNDED
+        self.chunk_probes = max(1, min(self.count, per_chunk // self.directions))
         walks = self.chunk_probes * self.directions
-        self.walk_states = ctx.buffer(reserve=walks * PATH_STATE_BYTES)
+        self.walk_states = ctx.buffer(reserve=walks * PATH_STATE_BYTES) if self.resumable else None
         self.walk_radiance = ctx.buffer(reserve=walks * 16)
         self.accums = ctx.buffer(reserve=self.count * PROBE_ACCUM_BYTES)
         self.progress = ctx.buffer(reserve=4)
         defines = {"PROBE_IMAGE_FORMAT": precision, **self.defines()}
-        self.walk_program = compute_program(ctx, "probe_walks.comp")
+        self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable)}
+        if sun == "grid":
+            self._walk_defines["WALK_SUN_GRID"] = 1
+        self.walk_program = compute_program(ctx, "probe_walks.comp", self._walk_defines)
+        self._walk_profile_program = None   # the WALK_PROFILE build, compiled when first asked for
         self.project_program = compute_program(ctx, "probe_project.comp", defines)
-        self.loop_budget, self.loop_reserve = loop_budget(ctx)
+        self.sun_program = compute_program(ctx, "probe_sun.comp")
+        self.walk_threads = WALK_THREADS
+        self.dispatches = 0
         self.passes_done = 0
         self.seed = 0
 
@@ -90,7 +125,8 @@ class ProbeGrid:
     @property
     def bake_bytes(self) -> int:
         """GPU memory the bake uses besides the textures (walk state, running means)."""
-        return self.walk_states.size + self.walk_radiance.size + self.accums.size
+        states = self.walk_states.size if self.walk_states is not None else 0
+        return states + self.walk_radiance.size + self.accums.size
 
     @property
     def done(self) -> bool:
@@ -104,10 +140,34 @@ class ProbeGrid:
         remaining = self.samples - self.passes_done * self.directions
         return min(self.directions, remaining)
 
-    def bake_pass(self, resources: SceneResources) -> None:
-        """Runs one pass over all probes (several dispatches on llvmpipe; see lib/integrator.glsl)."""
+    def walk_counters(self) -> moderngl.Buffer:
+        """A zeroed buffer for the profiling build's walk counters (bake_pass(counters=...))."""
+        return self.ctx.buffer(reserve=WALK_PROFILE_SLOTS * 8 * 4)
+
+    @staticmethod
+    def read_walk_counters(buffer: moderngl.Buffer) -> dict[str, int]:
+        rows = np.frombuffer(buffer.read(), np.uint32).reshape(WALK_PROFILE_SLOTS, 8)
+        sums = rows.astype(np.uint64).sum(0)
+        return {name: int(v) for name, v in zip(WALK_PROFILE_FIELDS, sums)}
+
+    def _walk_program(self, counters: bool):
+        if not counters:
+            return self.walk_program
+        if self._walk_profile_program is None:
+            self._walk_profile_program = compute_program(
+                self.ctx, "probe_walks.comp", {**self._walk_defines, "WALK_PROFILE": 1})
+        return self._walk_profile_program
+
+    def bake_pass(self, resources: SceneResources, profile: GpuProfile | None = None,
+                  counters: moderngl.Buffer | None = None, light=None) -> None:
+        """Runs one pass over all probes. `profile` times its sections on the GPU ("sun", "walks",
+        "project"); `counters` (from walk_counters()) runs the walks' profiling build, which adds
+        what the walks did to it; `light` (a baked LightTransmittance) is what sun="grid" reads."""
         if self.done:
             return
+        if self.sun == "grid" and light is None:
+            raise ValueError("a bake with sun='grid' needs the baked light grid (light=...)")
+        section = profile.section if profile is not None else _no_section
         directions = self._pass_directions()
         scene = resources.scene
         uniforms = resources.uniforms()
@@ -117,36 +177,64 @@ class ProbeGrid:
                          "loop_budget": self.loop_budget, "loop_reserve": self.loop_reserve,
                          "march_step": resources.march_step})
         uniforms.update(self.box_uniforms(resources))
+        walk_program = self._walk_program(counters is not None)
         resources.bind()
-        set_uniforms(self.walk_program, uniforms)
+        if self.sun == "grid":
+            light.bind()
+            uniforms["light_transmittance"] = LIGHT_UNIT
+        set_uniforms(walk_program, uniforms)
         set_uniforms(self.project_program, uniforms)
-        self.walk_states.bind_to_storage_buffer(1)
+        if self.walk_states is not None:
+            self.walk_states.bind_to_storage_buffer(1)
         self.progress.bind_to_storage_buffer(2)
         self.walk_radiance.bind_to_storage_buffer(3)
         self.accums.bind_to_storage_buffer(4)
+        if counters is not None:
+            counters.bind_to_storage_buffer(5)
         for i, tex in zip(self.texture_ids, self.textures):
             tex.bind_to_image(i, read=False, write=True)
+        if self.passes_done == 0:
+            with section("sun"):
+                set_uniforms(self.sun_program, {**uniforms, "probe_count": self.count})
+                self.sun_program.run((self.count + 63) // 64)
+                self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+                self.dispatches += 1
         for first in range(0, self.count, self.chunk_probes):
             n = min(self.chunk_probes, self.count - first)
-            self.walk_states.clear()
-            self.walk_radiance.clear()
-            set_uniforms(self.walk_program, {"first_probe": first, "chunk_probes": n})
+            set_uniforms(walk_program, {"first_probe": first, "chunk_probes": n})
             set_uniforms(self.project_program, {"first_probe": first})
             groups = (n * directions + 63) // 64
-            while True:
-                self.progress.write(bytes(4))
-                self.walk_program.run(groups)
-                self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
-                if loop_budget_unbounded(self.loop_budget):
-                    break  # no driver loop limit: every walk ran to its end in one dispatch
-                (pending,) = struct.unpack("I", self.progress.read())
-                if pending == 0:
-                    break
-            self.project_program.run(n)
-            self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT
-                                    | moderngl.TEXTURE_FETCH_BARRIER_BIT
-                                    | moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
+            with section("walks"):
+                self._run_walks(walk_program, groups)
+            with section("project"):
+                self.project_program.run(n)
+                self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT
+                                        | moderngl.TEXTURE_FETCH_BARRIER_BIT
+                                        | moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
+                self.dispatches += 1
         self.passes_done += 1
+
+    def _run_walks(self, program, groups: int) -> None:
+        """One dispatch where walks end in it; else dispatches until no walk has work left (the
+        only host round trip of a bake: a driver with a loop limit needs it)."""
+        if not self.resumable:
+            groups = min(groups, self.walk_threads // 64)
+            set_uniforms(program, {"walk_stride": groups * 64})
+            program.run(groups)
+            self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+            self.dispatches += 1
+            return
+        first = 1
+        while True:
+            self.progress.write(bytes(4))
+            set_uniforms(program, {"first_dispatch": first})
+            program.run(groups)
+            self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+            self.dispatches += 1
+            (pending,) = struct.unpack("I", self.progress.read())
+            if pending == 0:
+                return
+            first = 0
 
     def progress_report(self) -> BakeProgress:
         """Reads each probe's last change (a small read; call it between passes, not per frame)."""
@@ -193,5 +281,20 @@ class ProbeGrid:
 
     def release(self) -> None:
         for obj in (*self.textures, self.walk_states, self.walk_radiance, self.accums, self.progress,
-                    self.walk_program, self.project_program):
-            obj.release()
+                    self.walk_program, self._walk_profile_program, self.project_program,
+                    self.sun_program):
+            if obj is not None:
+                obj.release()
+
+
+class _no_section:
+    """Stands in for GpuProfile.section when a pass is not profiled."""
+
+    def __init__(self, name: str):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False

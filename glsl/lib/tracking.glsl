@@ -24,6 +24,16 @@ layout(std430, binding = 7) buffer TrackingStats
     uint nonfinite_samples;
 } tracking_stats;
 
+// Profiling build only (lib/walk_profile.glsl): loop iterations of this invocation.
+#ifdef WALK_PROFILE
+uint profile_flight_steps = 0u;   // delta-tracking iterations (tentative collisions, crossings)
+uint profile_shadow_steps = 0u;   // ratio-tracking iterations
+uint profile_cell_steps = 0u;     // macrocell crossings of either
+#define PROFILE_COUNT(counter) counter += 1u
+#else
+#define PROFILE_COUNT(counter)
+#endif
+
 const int TRACK_ESCAPED = 0;
 const int TRACK_COLLIDED = 1;
 const int TRACK_OUT_OF_STEPS = 2;
@@ -173,8 +183,11 @@ int delta_track_grid(vec3 origin, vec3 direction, float t_min, float t_max, inou
         return TRACK_ESCAPED;
     while (steps_left > 0) {
         --steps_left;
+        PROFILE_COUNT(profile_flight_steps);
         float cell_end = min(cell_walk_exit(w), t_end);
         bool tentative = majorant_walk_sample(m, t, cell_end, rng);
+        if (!tentative)
+            PROFILE_COUNT(profile_cell_steps);
         if (tentative && rng_next(rng) * m < sigma_t_at(origin + t * direction)) {
             t_collision = t;
             return TRACK_COLLIDED;
@@ -196,8 +209,11 @@ bool ratio_track_continue_grid(vec3 origin, vec3 direction, inout float t, float
         return true;
     while (steps_left > 0) {
         --steps_left;
+        PROFILE_COUNT(profile_shadow_steps);
         float cell_end = min(cell_walk_exit(w), t_end);
         bool tentative = majorant_walk_sample(m, t, cell_end, rng);
+        if (!tentative)
+            PROFILE_COUNT(profile_cell_steps);
         if (tentative) {
             transmittance *= max(0.0, 1.0 - sigma_t_at(origin + t * direction) / m);
             if (ratio_roulette(transmittance, rng))
@@ -226,6 +242,7 @@ int delta_track(vec3 origin, vec3 direction, float t_min, float t_max, inout uin
     float t = t_min;
     while (steps_left > 0) {
         --steps_left;
+        PROFILE_COUNT(profile_flight_steps);
         t -= log(1.0 - rng_next(rng)) / majorant;
         if (t >= t_max)
             return TRACK_ESCAPED;
@@ -255,6 +272,7 @@ bool ratio_track_continue(vec3 origin, vec3 direction, inout float t, float t_ma
         return true;
     while (steps_left > 0) {
         --steps_left;
+        PROFILE_COUNT(profile_shadow_steps);
         t -= log(1.0 - rng_next(rng)) / majorant;
         if (t >= t_max)
             return true;
