@@ -133,6 +133,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
             changes["scenes"] = tuple(args.scenes)
         if args.ref_spp:
             changes["ref_spp"] = args.ref_spp
+        if args.code_label:
+            changes["code_label"] = args.code_label
         if args.ref_dir:
             if not (Path(args.ref_dir) / "results.json").is_file():
                 raise SystemExit(f"error: --ref-dir {args.ref_dir} has no results.json")
@@ -192,6 +194,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--ref-spp", type=_positive_int, help="reference samples per pixel")
     b.add_argument("--ref-dir", help="reuse the references (refs/*.npy and their measured noise "
                                      "in results.json) of an earlier run's output folder")
+    b.add_argument("--code-label", help="names the code a run measures in its records (bake "
+                                        "mode: 'before' and 'after' records side by side)")
     b.add_argument("--merge", nargs="+", metavar="RESULTS_JSON",
                    help="combine these results.json files into OUT/results.json, then report")
     b.add_argument("--report-only", action="store_true",

@@ -117,3 +117,31 @@ def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):
     text = write_report(again).read_text()
     assert "Cost that follows the scene" in text and "| baseline |" in text
     assert "| auto target |" in text
+
+
+def test_bake_mode_profiles_the_bake(ctx, tmp_path):
+    """The bake mode's records carry the profile fields, consistent with each other: the sections
+    add up to the profiled bake, walks per second follow from the walk count and bake time, the
+    counters counted every walk, and total_ms charges the bake and light grid to the image."""
+    from app.bench.runner import run_bench
+    config = BenchConfig(mode="bake", scenes=("anisotropic",), width=12, height=12, ref_spp=32,
+                         ref_samples_per_pass=16, samples_per_dispatch=2, raymarch_frames=(2,),
+                         bake_settings=((3, 16), (2, 96)), bake_repeats=2, ceiling_rays=4096,
+                         bake_variants=(("ray", 8), ("grid", 8)))
+    path = run_bench(config, tmp_path)
+    records = json.loads(path.read_text())["records"]
+    assert [(r["probe_grid"], r["probe_samples"], r["walk_sun"]) for r in records] == [
+        (3, 16, "ray"), (3, 16, "grid"), (2, 96, "ray"), (2, 96, "grid")]
+    for r in records:
+        for key in ("bake_walk_ms", "bake_project_ms", "bake_other_ms", "walks_per_s",
+                    "steps_per_walk", "ceiling_steps_per_s", "ceiling_fraction"):
+            assert r[key] is not None and np.isfinite(r[key]) and r[key] >= 0, key
+        assert r["mode"] == "bake" and r["method"] == "raymarch"
+        assert r["counted_walks"] == r["walks"] == np.prod(r["probe_grid_xyz"]) * r["probe_samples"]
+        sections = r["bake_walk_ms"] + r["bake_project_ms"] + r["bake_sun_ms"] + r["bake_other_ms"]
+        assert sections == pytest.approx(r["bake_profiled_ms"], rel=1e-6)
+        assert r["walks_per_s"] == pytest.approx(r["walks"] / (r["probe_bake_ms"] / 1e3))
+        assert r["total_ms"] == pytest.approx(r["probe_bake_ms"] + r["light_ms"] + r["render_ms"])
+        assert r["steps_per_walk"] >= 1.0 and r["ceiling_fraction"] > 0
+    text = write_report(path).read_text()
+    assert "The probe bake" in text and "| current | 3^3 x 16" in text and "sun grid" in text

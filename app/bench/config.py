@@ -26,13 +26,20 @@ class BenchConfig:
     raymarch_steps: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0)
     flip_frames: tuple[int, ...] = (16, 256)   # FLIP only at these snapshots (it costs CPU time)
     image_frames: int = 64                  # snapshot saved as PNG for the showcase images
-    mode: str = "sweep"                     # "sweep": every method and setting; "cost": cost.py
+    mode: str = "sweep"                     # "sweep": every method and setting; "cost": cost.py;
+                                            # "bake": the bake's profile (bake.py)
     reference_dir: str | None = None        # reuse an earlier run's refs/ and measured noise
     cost_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 256))  # grid, samples
     cost_probe_frames: int = 64
     cost_raymarch_frames: int = 16
     cost_pt_spp: int = 256
     cost_auto_targets: tuple[float, ...] = (0.05, 0.10)   # `auto` checked at full resolution
+    bake_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 512), (128, 256))  # grid, walks
+    # (sun at walk events, light grid texels per axis at most) per bake setting; see bake.py
+    bake_variants: tuple[tuple[str, int], ...] = (("ray", 128), ("ray", 512), ("grid", 512))
+    bake_repeats: int = 3                   # bakes timed per setting (the median is reported)
+    ceiling_rays: int = 1 << 21             # rays of the ceiling's trilinear march (256 steps each)
+    code_label: str = "current"             # names the code a bake run measured (before/after)
 
     def scaled(self, **changes) -> "BenchConfig":
         return replace(self, **changes)
@@ -45,6 +52,9 @@ PRESETS = {
     "skipping": BenchConfig(mode="cost", cost_settings=((32, 256),), cost_auto_targets=()),
     # `auto` alone, checked at full resolution
     "auto": BenchConfig(mode="cost", cost_settings=(), cost_auto_targets=(0.05, 0.10)),
+    # the bake's profile against the GPU's ceiling, with the raymarcher's error (bake.py)
+    "bake": BenchConfig(mode="bake", scenes=("bonsai", "fuel", "hydrogen", "foot"), ref_spp=16384,
+                        raymarch_frames=(16,)),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),

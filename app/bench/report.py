@@ -147,6 +147,8 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
     meta = data["meta"]
     if all(r.get("mode") == "cost" for r in data["records"]) and data["records"]:
         return _write_cost_report(data, out, scenes)
+    if all(r.get("mode") == "bake" for r in data["records"]) and data["records"]:
+        return _write_bake_report(data, out, scenes)
     lines = [f"# Speed against error", "",
              f"Device: **{meta['device']}**. Started {meta.get('started')}, finished "
              f"{meta.get('finished', 'not finished (partial run)')}.", "",
@@ -353,6 +355,57 @@ def _write_cost_report(data: dict, out: Path, scenes: list[str]) -> Path:
                     f"{pr['probe_bytes'] / 2**20:.2f} MiB ({x(pr['probe_bytes'], bp and bp['probe_bytes'])}) | "
                     f"{shown(pr['rrmse'], lo)} | {shown(rm['rrmse'], lo)} |")
             lines.append("")
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _write_bake_report(data: dict, out: Path, scenes: list[str]) -> Path:
+    """The bake mode's report (app/bench/bake.py): bake time, where it goes, and the ceiling."""
+    meta = data["meta"]
+    lines = ["# The probe bake: time, profile and ceiling", "",
+             f"Device: **{meta['device']}**. Command: `{meta.get('command', '')}`.", "",
+             "Per scene and probe setting (N^3 nominal, fitted to the visible region; walks per "
+             "probe): the bake's GPU time (median of "
+             f"{meta['config'].get('bake_repeats', 3)} bakes), walks per second, its split into "
+             "walks, SH projection, the probes' sun transmittance and the rest (timestamps between "
+             "the dispatches of one more bake), tracking iterations per walk (free flight + shadow "
+             "rays; macrocell crossings and scattering events apart) from the shaders' profiling "
+             "build, and the walks' tracking iterations per second as a fraction of the GPU's "
+             "measured trilinear-march rate (the ceiling). Then the raymarcher over those probes: "
+             "GPU ms per frame and rRMSE against the path-traced reference after "
+             f"{meta['config'].get('raymarch_frames', [16])[-1]} frames; total = bake + the "
+             "raymarcher's light grid + render. `code` names the code measured (before/after).", ""]
+    for s in scenes:
+        lo = floor(data, s)
+        recs = [r for r in data["records"] if r["scene"] == s]
+        if not recs:
+            continue
+        ceiling = recs[0].get("ceiling_steps_per_s")
+        lines += [f"## {s}", "", f"Ceiling: {ceiling / 1e9:.2f} G trilinear steps/s." if ceiling
+                  else "", "",
+                  "| code | setting (fitted) | bake | walks/s | walks / project / sun / other ms "
+                  "| steps per walk (flight + shadow; cells; events) | of ceiling | light | "
+                  "raymarch ms/fr | rRMSE | total |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
+        for r in recs:
+            setting = (f"{r['probe_grid']}^3 x {r['probe_samples']} "
+                       f"({'x'.join(map(str, r['probe_grid_xyz']))}); sun {r.get('walk_sun', 'ray')}"
+                       f", light {'x'.join(map(str, r['light_grid'])) if r.get('light_grid') else '-'}")
+            if r.get("bake_walk_ms") is not None:
+                split = (f"{r['bake_walk_ms']:.1f} / {r['bake_project_ms']:.1f} / "
+                         f"{r['bake_sun_ms']:.1f} / {r['bake_other_ms']:.1f}")
+                steps = (f"{r['steps_per_walk']:.1f} ({r['flight_steps_per_walk']:.1f} + "
+                         f"{r['shadow_steps_per_walk']:.1f}; {r['cell_steps_per_walk']:.1f}; "
+                         f"{r['events_per_walk']:.2f})")
+                frac = f"{100 * r['ceiling_fraction']:.1f}%" if r.get("ceiling_fraction") else "-"
+            else:
+                split, steps, frac = "-", "-", "-"
+            wps = f"{r['walks_per_s'] / 1e6:.0f} M" if r.get("walks_per_s") else "-"
+            lines.append(f"| {r.get('code', '')} | {setting} | {_ms(r['probe_bake_ms'])} | {wps} | "
+                         f"{split} | {steps} | {frac} | {_ms(r['light_ms'])} | "
+                         f"{r['frame_ms']:.3f} | {shown(r['rrmse'], lo)} | {_ms(r['total_ms'])} |")
+        lines.append("")
     path = out / "report.md"
     path.write_text("\n".join(lines) + "\n")
     return path

@@ -186,6 +186,10 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
         from .cost import cost_scene
         return cost_scene(renderer, name, config, results, out, device,
                           _reference(renderer, name, config, results, out))
+    if config.mode == "bake":
+        from .bake import bake_scene
+        return bake_scene(renderer, name, config, results, out, device,
+                          _reference(renderer, name, config, results, out), config.code_label)
     scene = renderer.scene
     base = {"scene": name, "device": device, "width": config.width, "height": config.height}
     reference = _reference(renderer, name, config, results, out)

@@ -14,7 +14,7 @@ from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation
 from .pathtracer import PathTracer
-from .light_transmittance import LightTransmittance
+from .light_transmittance import MAX_SIDE as LIGHT_MAX_SIDE, LightTransmittance
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, visible_region
 from .probes import ProbeGrid
 from .raymarch import Raymarcher
@@ -52,6 +52,10 @@ class Renderer:
         self.raymarch_step_voxels = 0.5   # raymarch step in voxels of the smallest spacing
         self._raymarchers: dict[str, Raymarcher] = {}
         self._light: LightTransmittance | None = None
+        self.light_max_side = LIGHT_MAX_SIDE   # the light grid's texels per axis at most
+        # The sun at the bake's walk events: "ray" (a ratio-tracked shadow ray, unbiased) or
+        # "grid" (the baked light grid; see ProbeGrid)
+        self.walk_sun = "ray"
         self._light_key: tuple | None = None
         self.method = "pt"
         self._region_key: tuple | None = None
@@ -92,7 +96,8 @@ class Renderer:
     def bake_key(self) -> tuple:
         spec = self.scene.probes
         return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
-                self.resources.use_majorant_grid)
+                self.resources.use_majorant_grid, self.walk_sun,
+                self.light_max_side if self.walk_sun == "grid" else None)
 
     def set_empty_space_skipping(self, on: bool) -> None:
         """Tracking over the macrocell majorant grid (on, the default) or one global majorant
@@ -134,32 +139,48 @@ class Renderer:
         spec = self.scene.probes
         plan = self.probe_plan()
         g = self.probe_grid
-        if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey) != (
+        if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun) != (
                 plan["grid"], spec.samples, spec.precision, plan["sh_order"], plan["box"],
-                plan["grey"]):
+                plan["grey"], self.walk_sun):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan["grid"], spec.samples, spec.precision,
-                                        plan["sh_order"], plan["box"], plan["grey"])
+                                        plan["sh_order"], plan["box"], plan["grey"],
+                                        sun=self.walk_sun)
         self.probe_grid.restart(seed)
         self._baked_key = self.bake_key()
         return self.probe_grid
 
-    def bake(self, seed: int = 0, progress: Callable | None = None) -> float:
-        """Bakes the probes to completion if they are stale; returns the GPU time in ms."""
+    def bake(self, seed: int = 0, progress: Callable | None = None, profile=None,
+             counters=None) -> float:
+        """Bakes the probes to completion if they are stale; returns the GPU time in ms.
+        `profile` (a GpuProfile) and `counters` (ProbeGrid.walk_counters()) are the benchmark's
+        bake profile; see ProbeGrid.bake_pass."""
         if self.probes_current():
             return 0.0
         grid = self.start_bake(seed)
-        total = 0.0
-        while not grid.done:
+        total = self._light_for_walks()
+        light = self._light if grid.sun == "grid" else None
+        if progress is None:
+            # One timed span: the passes queue up on the GPU with no wait between them.
             self.timer.start()
-            grid.bake_pass(self.resources)
+            while not grid.done:
+                grid.bake_pass(self.resources, profile=profile, counters=counters, light=light)
             self.timer.stop()
             total += self.timer.elapsed_ms
-            if progress is not None:
-                progress(grid)
+        while not grid.done:   # with progress: each pass waited for, so progress is shown live
+            self.timer.start()
+            grid.bake_pass(self.resources, profile=profile, counters=counters, light=light)
+            self.timer.stop()
+            total += self.timer.elapsed_ms
+            progress(grid)
         self.last_bake_ms = total
         return total
+
+    def _light_for_walks(self) -> float:
+        """The light grid the walks read when walk_sun is "grid" (GPU ms if it was baked now; the
+        bake's time includes it, and the raymarcher then finds it current)."""
+        return self.bake_light() if self.probe_grid.sun == "grid" else 0.0
 
     def raymarcher(self) -> Raymarcher:
         defines = self.probe_grid.defines()   # the layout of the textures it will read
@@ -173,9 +194,11 @@ class Renderer:
         """Bakes the sun's transmittance grid for the raymarcher if stale; GPU ms."""
         s = self.scene
         key = (self.resources.volume_version, s.transfer_function, s.density_scale,
-               s.light.direction)
-        if self._light is None:
-            self._light = LightTransmittance(self.ctx)
+               s.light.direction, self.light_max_side)
+        if self._light is None or self._light.max_side != self.light_max_side:
+            if self._light is not None:
+                self._light.release()
+            self._light = LightTransmittance(self.ctx, self.light_max_side)
         if key == self._light_key:
             return 0.0
         self.timer.start()
@@ -220,10 +243,12 @@ class Renderer:
             return 0.0
         if self.probe_grid is None or self._baked_key != self.bake_key():
             self.start_bake(seed)
+        light_ms = self._light_for_walks()
         self.timer.start()
-        self.probe_grid.bake_pass(self.resources)
+        self.probe_grid.bake_pass(self.resources,
+                                  light=self._light if self.probe_grid.sun == "grid" else None)
         self.timer.stop()
-        return self.timer.elapsed_ms
+        return light_ms + self.timer.elapsed_ms
 
     def add_samples(self, n: int = 1) -> float:
         """Adds n samples per pixel to the accumulation begun by begin(); returns GPU ms.
