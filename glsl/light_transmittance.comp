@@ -1,4 +1,7 @@
-// Bakes the sun's transmittance on a grid over the box (texel centres), for the raymarcher.
+// Bakes the sun's optical depth on a grid over the box (texel centres), for the raymarcher and
+// the bake's walks (lib/light_grid.glsl). Optical depth, not transmittance: it varies slowly
+// (about linearly along the sun's direction), so trilinear filtering of it is nearly exact where
+// filtering exp(-tau) would overestimate the light (exp is convex).
 layout(local_size_x = 4, local_size_y = 4, local_size_z = 4) in;
 #include "lib/medium.glsl"
 #include "lib/lights.glsl"
@@ -13,5 +16,5 @@ void main()
     if (any(greaterThanEqual(texel, grid)))
         return;
     vec3 x = ((2.0 * (vec3(texel) + 0.5)) / vec3(grid) - 1.0) * box_half_extent;
-    imageStore(transmittance_image, texel, vec4(sun_transmittance_march(x)));
+    imageStore(transmittance_image, texel, vec4(sun_optical_depth_march(x)));
 }

@@ -8,6 +8,7 @@
 #include "lib/sh.glsl"
 #include "lib/directions.glsl"
 #include "lib/probes.glsl"
+#include "lib/light_grid.glsl"
 uniform int max_bounces;
 uniform float anisotropy;
 #include "lib/raymarch.glsl"

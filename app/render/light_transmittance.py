@@ -8,17 +8,18 @@ from ..gl.shaders import compute_program, set_uniforms
 from .resources import SceneResources
 
 LIGHT_UNIT = 9
-MAX_SIDE = 128  # per axis; the volume's own resolution when smaller
+MAX_SIDE = 512  # texels per axis at most; the volume's own resolution up to that
 
 
 class LightTransmittance:
-    def __init__(self, ctx: moderngl.Context):
+    def __init__(self, ctx: moderngl.Context, max_side: int = MAX_SIDE):
         self.ctx = ctx
+        self.max_side = int(max_side)
         self.program = compute_program(ctx, "light_transmittance.comp")
         self.texture: moderngl.Texture3D | None = None
 
     def bake(self, resources: SceneResources) -> None:
-        grid = tuple(min(d, MAX_SIDE) for d in resources.volume.dims)
+        grid = tuple(min(d, self.max_side) for d in resources.volume.dims)
         if self.texture is None or self.texture.size != grid:
             if self.texture is not None:
                 self.texture.release()

@@ -104,6 +104,12 @@ int path_flight(inout PathState p, inout int steps_left)
     return STEP_DONE;
 #endif
 #endif
+#if defined(WALK_SUN_GRID)
+    // The sun's transmittance from the baked light grid (lib/light_grid.glsl), no shadow ray.
+    p.radiance += p.throughput * sun_irradiance
+                  * (light_grid_transmittance(p.x) * phase_hg(dot(sun_direction, p.w), anisotropy));
+    return STEP_CONTINUE;
+#endif
     if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
         p.shadow_t = -1.0;
         p.shadow_transmittance = 1.0;

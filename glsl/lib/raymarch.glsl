@@ -5,7 +5,6 @@
 // exactly for piecewise-constant sigma_t, so large steps through dense media stay bounded.
 // Shared by raymarch.comp and raymarch.frag; each calls raymarch_pixel for its pixel.
 uniform float raymarch_step;            // world units
-uniform sampler3D light_transmittance;  // sun transmittance over the box
 uniform uint frame_index;               // keys the jitter; frames accumulate into a running mean
 uniform uint seed;
 
@@ -31,7 +30,7 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
         float opacity = 1.0 - exp(-sigma_t * dt);
         float probe_sun;
         vec3 inscattered = probe_inscattered(x, d, probe_sun);
-        float sun_t = texture(light_transmittance, x / (2.0 * box_half_extent) + 0.5).r;
+        float sun_t = light_grid_transmittance(x);
         vec3 source = albedo * tf.rgb * (inscattered + sun_irradiance * (sun_t * sun_phase));
         radiance += transmittance * opacity * scatter_allowed * source;
         transmittance *= 1.0 - opacity;
