@@ -42,6 +42,7 @@ uniform uint seed;
 
 shared vec3 partial[64][9];
 shared uint partial_count[64];
+shared float partial_square[64];
 
 void main()
 {
@@ -52,10 +53,13 @@ void main()
     for (int k = 0; k < 9; ++k)
         sum[k] = vec3(0.0);
     uint count = 0u;
+    float square = 0.0;
     for (uint slot = tid; slot < directions; slot += 64u) {
         vec4 walk = walk_radiance[base + slot];
         if (walk.a != 1.0)
-            continue;
+            continue;   // dropped (2), or not walked: the probe had converged (3)
+        float v = (walk.r + walk.g + walk.b) / 3.0;
+        square += v * v;
         float basis[9];
         sh_basis(probe_walk_direction(probe, pass_index, slot, directions, seed), basis);
         for (int k = 0; k < 9; ++k)
@@ -65,12 +69,14 @@ void main()
     for (int k = 0; k < 9; ++k)
         partial[tid][k] = sum[k];
     partial_count[tid] = count;
+    partial_square[tid] = square;
     barrier();
     for (uint stride = 32u; stride > 0u; stride >>= 1u) {
         if (tid < stride) {
             for (int k = 0; k < 9; ++k)
                 partial[tid][k] += partial[tid + stride][k];
             partial_count[tid] += partial_count[tid + stride];
+            partial_square[tid] += partial_square[tid + stride];
         }
         barrier();
     }
@@ -83,6 +89,7 @@ void main()
         for (int t = 0; t < 7; ++t)
             acc.channels[t] = vec4(0.0);
         acc.samples = 0.0;
+        acc.square_mean = 0.0;
         acc.channels[6].a = sun_transmittance;
     }
     uint n = partial_count[0];
@@ -102,6 +109,7 @@ void main()
             for (int c = 0; c < 3; ++c)
                 f[3 * k + c] += (projected[c] - f[3 * k + c]) * weight;
         }
+        acc.square_mean += (partial_square[0] / float(n) - acc.square_mean) * weight;
         acc.samples = total;
     }
     for (int i = 0; i < 7; ++i)

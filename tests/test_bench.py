@@ -127,17 +127,22 @@ def test_bake_mode_profiles_the_bake(ctx, tmp_path):
     config = BenchConfig(mode="bake", scenes=("anisotropic",), width=12, height=12, ref_spp=32,
                          ref_samples_per_pass=16, samples_per_dispatch=2, raymarch_frames=(2,),
                          bake_settings=((3, 16), (2, 96)), bake_repeats=2, ceiling_rays=4096,
-                         bake_variants=(("ray", 8), ("grid", 8)))
+                         bake_variants=(("ray", 8, 0.0), ("grid", 8, 1.0)))
     path = run_bench(config, tmp_path)
     records = json.loads(path.read_text())["records"]
-    assert [(r["probe_grid"], r["probe_samples"], r["walk_sun"]) for r in records] == [
-        (3, 16, "ray"), (3, 16, "grid"), (2, 96, "ray"), (2, 96, "grid")]
+    assert [(r["probe_grid"], r["probe_samples"], r["walk_sun"], r["walk_adaptive"])
+            for r in records] == [(3, 16, "ray", 0), (3, 16, "grid", 1.0), (2, 96, "ray", 0),
+                                  (2, 96, "grid", 1.0)]
     for r in records:
         for key in ("bake_walk_ms", "bake_project_ms", "bake_other_ms", "walks_per_s",
                     "steps_per_walk", "ceiling_steps_per_s", "ceiling_fraction"):
             assert r[key] is not None and np.isfinite(r[key]) and r[key] >= 0, key
         assert r["mode"] == "bake" and r["method"] == "raymarch"
-        assert r["counted_walks"] == r["walks"] == np.prod(r["probe_grid_xyz"]) * r["probe_samples"]
+        assert r["walks"] == np.prod(r["probe_grid_xyz"]) * r["probe_samples"]
+        if r["walk_adaptive"]:
+            assert 0 < r["counted_walks"] <= r["walks"]
+        else:
+            assert r["counted_walks"] == r["walks"]
         sections = r["bake_walk_ms"] + r["bake_project_ms"] + r["bake_sun_ms"] + r["bake_other_ms"]
         assert sections == pytest.approx(r["bake_profiled_ms"], rel=1e-6)
         assert r["walks_per_s"] == pytest.approx(r["walks"] / (r["probe_bake_ms"] / 1e3))

@@ -8,7 +8,8 @@ For each scene and probe setting (grid N^3 fitted to the visible region, walks p
                    from timestamps between the dispatches of one more bake (GpuProfile)
   bake_other_ms    the rest of that profiled bake: gaps between dispatches, barriers
   light_ms         the raymarcher's sun-transmittance grid (charged to its images as well)
-  walks_per_s      walks of the bake / bake_ms
+  walks_per_s      walks asked for (probes x walks per probe) / bake_ms; counted_walks: the walks
+                   that ran (fewer with adaptive walks)
   steps_per_walk   tracking iterations per walk (free flight + shadow rays), and each kind apart,
                    scattering events and macrocell crossings, from the shaders' profiling build
   ceiling_steps_per_s
@@ -83,13 +84,15 @@ def bake_scene(renderer, name: str, config, results, out, device: str,
          f"({ceiling['ms']:.2f} ms for {ceiling['steps'] / 1e6:.0f} M steps)")
     profiled = _profiling_supported(renderer)
     default_light_side = getattr(renderer, "light_max_side", None)
-    variants = config.bake_variants if hasattr(renderer, "walk_sun") else ((None, None),)
-    for (grid, samples), (walk_sun, light_side) in ((s, v) for s in config.bake_settings
-                                                    for v in variants):
+    variants = config.bake_variants if hasattr(renderer, "walk_sun") else ((None, None, None),)
+    for (grid, samples), (walk_sun, light_side, adaptive) in ((s, v) for s in config.bake_settings
+                                                              for v in variants):
         if walk_sun is not None:
             renderer.walk_sun, renderer.light_max_side = walk_sun, light_side
+            renderer.walk_adaptive = adaptive
         probes = replace(scene.probes, grid=(grid, grid, grid), samples=samples)
         renderer.set_scene(scene.replace(probes=probes))
+        _rebake(renderer, 7)    # warm-up (shader compilation, clocks), not timed
         times = [_rebake(renderer, 11) for _ in range(config.bake_repeats)]
         bake_ms = statistics.median(times)
         g = renderer.probe_grid
@@ -97,7 +100,8 @@ def bake_scene(renderer, name: str, config, results, out, device: str,
         info = {"probe_grid": grid, "probe_samples": samples, "probe_grid_xyz": list(g.grid),
                 "probe_bytes": g.gpu_bytes, "bake_repeats_ms": times, "walks": walks,
                 "walks_per_s": walks / (bake_ms / 1e3) if bake_ms > 0 else None,
-                "ceiling_steps_per_s": ceiling["steps_per_s"], "walk_sun": walk_sun or "ray"}
+                "ceiling_steps_per_s": ceiling["steps_per_s"], "walk_sun": walk_sun or "ray",
+                "walk_adaptive": adaptive or 0.0}
         if profiled:
             info.update(_profile(renderer, 11))
             if info["bake_walk_ms"] > 0:
@@ -118,16 +122,17 @@ def bake_scene(renderer, name: str, config, results, out, device: str,
                               light_bytes=renderer._light.gpu_bytes,
                               light_grid=list(renderer._light.texture.size), **info)
             results.add(rec, image, reference)
-        tag = f"{label}_{walk_sun or 'ray'}{light_side or ''}_{grid}x{samples}"
+        tag = f"{label}_{walk_sun or 'ray'}{light_side or ''}_a{adaptive or 0:g}_{grid}x{samples}"
         save_png(out / "images" / f"{name}_bake_{tag}.png", image)
         prof = (f"walks {info['bake_walk_ms']:.1f}, project {info['bake_project_ms']:.1f}, sun "
                 f"{info['bake_sun_ms']:.1f}, other {info['bake_other_ms']:.1f} ms; "
                 f"{info['steps_per_walk']:.1f} steps/walk, {100 * info.get('ceiling_fraction', 0):.1f}% "
                 f"of the ceiling" if profiled else "no profile (older code)")
         _log(f"  {grid}^3 x {samples} ({'x'.join(map(str, g.grid))}) sun {walk_sun} light "
-             f"{light_side}: bake {bake_ms:.1f} ms "
+             f"{light_side} adaptive {adaptive}: bake {bake_ms:.1f} ms "
              f"(runs {', '.join(f'{t:.1f}' for t in times)}), {info['walks_per_s'] / 1e6:.0f} M "
              f"walks/s; {prof}; raymarch rRMSE {rec['rrmse']:.4f}")
     if hasattr(renderer, "walk_sun"):
         renderer.walk_sun, renderer.light_max_side = "ray", default_light_side
+        renderer.walk_adaptive = 0.0
     renderer.set_scene(scene)

@@ -35,8 +35,11 @@ class BenchConfig:
     cost_pt_spp: int = 256
     cost_auto_targets: tuple[float, ...] = (0.05, 0.10)   # `auto` checked at full resolution
     bake_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 512), (128, 256))  # grid, walks
-    # (sun at walk events, light grid texels per axis at most) per bake setting; see bake.py
-    bake_variants: tuple[tuple[str, int], ...] = (("ray", 128), ("ray", 512), ("grid", 512))
+    # (sun at walk events, light grid texels per axis at most, adaptive walks factor) per bake
+    # setting; see bake.py
+    bake_variants: tuple[tuple[str, int, float], ...] = (
+        ("ray", 128, 0.0), ("ray", 512, 0.0), ("grid", 512, 0.0), ("grid", 512, 1.0),
+        ("grid", 512, 0.5))
     bake_repeats: int = 3                   # bakes timed per setting (the median is reported)
     ceiling_rays: int = 1 << 21             # rays of the ceiling's trilinear march (256 steps each)
     code_label: str = "current"             # names the code a bake run measured (before/after)

@@ -389,9 +389,13 @@ def _write_bake_report(data: dict, out: Path, scenes: list[str]) -> Path:
                   "raymarch ms/fr | rRMSE | total |",
                   "|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in recs:
+            light = "x".join(map(str, r["light_grid"])) if r.get("light_grid") else "-"
             setting = (f"{r['probe_grid']}^3 x {r['probe_samples']} "
                        f"({'x'.join(map(str, r['probe_grid_xyz']))}); sun {r.get('walk_sun', 'ray')}"
-                       f", light {'x'.join(map(str, r['light_grid'])) if r.get('light_grid') else '-'}")
+                       f", light {light}")
+            if r.get("walk_adaptive"):
+                setting += (f"; adaptive {r['walk_adaptive']:g} "
+                            f"({100 * r['counted_walks'] / r['walks']:.0f}% of walks)")
             if r.get("bake_walk_ms") is not None:
                 split = (f"{r['bake_walk_ms']:.1f} / {r['bake_project_ms']:.1f} / "
                          f"{r['bake_sun_ms']:.1f} / {r['bake_other_ms']:.1f}")

@@ -36,7 +36,6 @@ WALKS_PER_CHUNK_UNBOUNDED = 1 << 22   # walks that end in one dispatch: 64 MiB o
 PATH_STATE_BYTES = 80       # PathState of glsl/lib/integrator.glsl, std430
 PROBE_ACCUM_BYTES = 128     # ProbeAccum of glsl/lib/probe_accum.glsl
 WALK_SUN_MODES = ("ray", "grid")
-WALK_THREADS = 1 << 18      # invocations of a one-dispatch walk pass (each runs walks in turn)
 WALK_PROFILE_SLOTS = 1024   # rows of 8 counters in glsl/lib/walk_profile.glsl
 WALK_PROFILE_FIELDS = ("walks", "events", "flight_steps", "shadow_steps", "cell_steps",
                        "dispatch_walks")
@@ -62,14 +61,19 @@ class ProbeGrid:
     def __init__(self, ctx: moderngl.Context, grid: tuple[int, int, int], samples: int,
                  precision: str = "rgba32f", sh_order: int = 2,
                  box: tuple | None = None, grey: bool = False, resumable: bool | None = None,
-                 sun: str = "ray"):
+                 sun: str = "ray", adaptive: float = 0.0):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
         bake time); `sh_order` 0, 1 or 2 decides which of the seven textures exist. `resumable`:
         walks that suspend and resume across dispatches (default: where the driver limits loops;
         False on such a driver only for walks short enough to fit its limit, as tests do).
         `sun`: at the walks' scattering events, "ray" traces a ratio-tracked shadow ray towards the
         sun (unbiased); "grid" reads the baked light grid (bake_pass(light=...)), a bias of its
-        resolution."""
+        resolution. `adaptive` > 0: walks per probe follow each probe's noise (lib/probe_noise.glsl):
+        a probe stops taking walks once its standard error is at most `adaptive` times what the
+        asked-for walks give a probe of average noise; 0 (default): every probe takes them all."""
+        if not (math.isfinite(adaptive) and adaptive >= 0.0):
+            raise ValueError(f"adaptive walks factor {adaptive!r}: expected a finite number >= 0")
+        self.adaptive = float(adaptive)
         if sun not in WALK_SUN_MODES:
             raise ValueError(f"walk sun mode {sun!r}: expected one of {', '.join(WALK_SUN_MODES)}")
         self.sun = sun
@@ -103,6 +107,7 @@ class ProbeGrid:
         self.walk_radiance = ctx.buffer(reserve=walks * 16)
         self.accums = ctx.buffer(reserve=self.count * PROBE_ACCUM_BYTES)
         self.progress = ctx.buffer(reserve=4)
+        self.noise = ctx.buffer(reserve=8)   # lib/probe_noise.glsl
         defines = {"PROBE_IMAGE_FORMAT": precision, **self.defines()}
         self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable)}
         if sun == "grid":
@@ -111,7 +116,7 @@ class ProbeGrid:
         self._walk_profile_program = None   # the WALK_PROFILE build, compiled when first asked for
         self.project_program = compute_program(ctx, "probe_project.comp", defines)
         self.sun_program = compute_program(ctx, "probe_sun.comp")
-        self.walk_threads = WALK_THREADS
+        self.noise_program = compute_program(ctx, "probe_noise.comp") if self.adaptive else None
         self.dispatches = 0
         self.passes_done = 0
         self.seed = 0
@@ -141,8 +146,9 @@ class ProbeGrid:
         return min(self.directions, remaining)
 
     def walk_counters(self) -> moderngl.Buffer:
-        """A zeroed buffer for the profiling build's walk counters (bake_pass(counters=...))."""
-        return self.ctx.buffer(reserve=WALK_PROFILE_SLOTS * 8 * 4)
+        """A zeroed buffer for the profiling build's walk counters (bake_pass(counters=...)); zeroed
+        from the host, once per profiled bake, never in a normal one."""
+        return self.ctx.buffer(bytes(WALK_PROFILE_SLOTS * 8 * 4))
 
     @staticmethod
     def read_walk_counters(buffer: moderngl.Buffer) -> dict[str, int]:
@@ -175,7 +181,8 @@ class ProbeGrid:
         uniforms.update({"probe_grid": self.grid, "directions": directions,
                          "pass_index": self.passes_done, "seed": self.seed & 0xFFFFFFFF,
                          "loop_budget": self.loop_budget, "loop_reserve": self.loop_reserve,
-                         "march_step": resources.march_step})
+                         "march_step": resources.march_step,
+                         "adaptive_walks": int(self.adaptive > 0)})
         uniforms.update(self.box_uniforms(resources))
         walk_program = self._walk_program(counters is not None)
         resources.bind()
@@ -189,11 +196,13 @@ class ProbeGrid:
         self.progress.bind_to_storage_buffer(2)
         self.walk_radiance.bind_to_storage_buffer(3)
         self.accums.bind_to_storage_buffer(4)
+        self.noise.bind_to_storage_buffer(6)
         if counters is not None:
             counters.bind_to_storage_buffer(5)
         for i, tex in zip(self.texture_ids, self.textures):
             tex.bind_to_image(i, read=False, write=True)
         if self.passes_done == 0:
+            self.noise.write(struct.pack("2f", -1.0, 0.0))   # no noise target until pass 0 ends
             with section("sun"):
                 set_uniforms(self.sun_program, {**uniforms, "probe_count": self.count})
                 self.sun_program.run((self.count + 63) // 64)
@@ -212,14 +221,20 @@ class ProbeGrid:
                                         | moderngl.TEXTURE_FETCH_BARRIER_BIT
                                         | moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
                 self.dispatches += 1
+        if self.passes_done == 0 and self.adaptive > 0:
+            with section("project"):
+                set_uniforms(self.noise_program, {"probe_count": self.count,
+                                                  "adaptive_factor": self.adaptive,
+                                                  "walks_asked": float(self.samples)})
+                self.noise_program.run(1)
+                self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+                self.dispatches += 1
         self.passes_done += 1
 
     def _run_walks(self, program, groups: int) -> None:
         """One dispatch where walks end in it; else dispatches until no walk has work left (the
         only host round trip of a bake: a driver with a loop limit needs it)."""
         if not self.resumable:
-            groups = min(groups, self.walk_threads // 64)
-            set_uniforms(program, {"walk_stride": groups * 64})
             program.run(groups)
             self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
             self.dispatches += 1
@@ -235,6 +250,11 @@ class ProbeGrid:
             if pending == 0:
                 return
             first = 0
+
+    def walks_taken(self) -> np.ndarray:
+        """Walks averaged into each probe, (nz, ny, nx) (a small read; for tests and the views)."""
+        data = np.frombuffer(self.accums.read(), np.float32).reshape(self.count, 32)[:, 28]
+        return data.reshape(self.grid[2], self.grid[1], self.grid[0]).copy()
 
     def progress_report(self) -> BakeProgress:
         """Reads each probe's last change (a small read; call it between passes, not per frame)."""
@@ -281,6 +301,7 @@ class ProbeGrid:
 
     def release(self) -> None:
         for obj in (*self.textures, self.walk_states, self.walk_radiance, self.accums, self.progress,
+                    self.noise, self.noise_program,
                     self.walk_program, self._walk_profile_program, self.project_program,
                     self.sun_program):
             if obj is not None:

@@ -56,6 +56,8 @@ class Renderer:
         # The sun at the bake's walk events: "ray" (a ratio-tracked shadow ray, unbiased) or
         # "grid" (the baked light grid; see ProbeGrid)
         self.walk_sun = "ray"
+        # Walks per probe from each probe's noise (ProbeGrid's `adaptive`; 0: all walks everywhere)
+        self.walk_adaptive = 0.0
         self._light_key: tuple | None = None
         self.method = "pt"
         self._region_key: tuple | None = None
@@ -96,7 +98,7 @@ class Renderer:
     def bake_key(self) -> tuple:
         spec = self.scene.probes
         return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
-                self.resources.use_majorant_grid, self.walk_sun,
+                self.resources.use_majorant_grid, self.walk_sun, self.walk_adaptive,
                 self.light_max_side if self.walk_sun == "grid" else None)
 
     def set_empty_space_skipping(self, on: bool) -> None:
@@ -139,14 +141,15 @@ class Renderer:
         spec = self.scene.probes
         plan = self.probe_plan()
         g = self.probe_grid
-        if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun) != (
+        if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
+                         g.adaptive) != (
                 plan["grid"], spec.samples, spec.precision, plan["sh_order"], plan["box"],
-                plan["grey"], self.walk_sun):
+                plan["grey"], self.walk_sun, self.walk_adaptive):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan["grid"], spec.samples, spec.precision,
                                         plan["sh_order"], plan["box"], plan["grey"],
-                                        sun=self.walk_sun)
+                                        sun=self.walk_sun, adaptive=self.walk_adaptive)
         self.probe_grid.restart(seed)
         self._baked_key = self.bake_key()
         return self.probe_grid
