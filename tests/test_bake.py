@@ -191,6 +191,7 @@ def test_sun_from_the_light_grid_has_a_small_measured_bias(ctx):
 def test_light_grid_matches_its_numpy_twin(ctx):
     """The light grid stores the sun's optical depth at texel centres (light_transmittance.comp)
     as the NumPy twin of shadow_march.glsl computes it."""
+    from app.render.light_transmittance import LIGHT_MARCH_VOXELS
     from app.shadow_march import light_grid_centres, sun_optical_depth_march
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
                                    "density_scale": 30.0, "camera": CAMERA,
@@ -203,7 +204,7 @@ def test_light_grid_matches_its_numpy_twin(ctx):
         s = r.scene
         twin = sun_optical_depth_march(r.resources.volume, r.resources.table, s.density_scale,
                                        s.light.direction, light_grid_centres(r.resources.volume, grid),
-                                       r.resources.march_step)
+                                       LIGHT_MARCH_VOXELS * r.resources.march_step)
     finally:
         r.release()
     assert grid == (10, 8, 12) and twin.max() > 1.0

