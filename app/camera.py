@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import CameraSpec
+from .scene_types import CameraSpec
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from functools import lru_cache
 import numpy as np
 
 from .paths import ASSETS_DIR
-from .scene import TransferFunctionSpec
+from .scene_types import TransferFunctionSpec
 
 
 @lru_cache(maxsize=1)

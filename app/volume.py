@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from .scene import Scene, VolumeSpec
+from .scene_types import Scene, VolumeSpec
 
 
 class VolumeError(ValueError):
