@@ -220,8 +220,8 @@ def run(display, tmp_path_factory):
     ]
     script = write_script(out / "script.json", steps)
     proc = view(["scene.json", "--script", str(script), "--window", WINDOW, "--spp", str(SPP),
-                 "--render-scale", "0.5"], out, display, harness=["--release-check"],
-                env={"RP_FILE_DIALOG": "builtin"})
+                 "--render-scale", "0.5", "--file-dialog", "builtin"], out, display,
+                harness=["--release-check"])
     return out, proc
 
 

@@ -1,6 +1,7 @@
 """One front for every render method: the CLI, the viewer and the benchmark all call this."""
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -13,6 +14,7 @@ from ..gl.timer import GpuTimer
 from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation
+from .limits import check_image_size
 from .pathtracer import PathTracer
 from .light_transmittance import LightTransmittance
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, visible_region
@@ -39,17 +41,26 @@ class RenderResult:
         return self.render_ms / max(self.spp, 1)
 
 
+RAYMARCH_STAGES = ("compute", "fragment")
+
+
 class Renderer:
-    def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None):
+    def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None, *,
+                 empty_space_skipping: bool = True, raymarch_stage: str = "compute",
+                 raymarch_step: float = 0.5):
+        """`empty_space_skipping`: tracking over the macrocell majorant grid (default) or one
+        global majorant (the same unbiased estimator, for comparisons); `raymarch_stage`: the
+        raymarcher as a compute (default) or the design card's fragment pass; `raymarch_step`:
+        its step in voxels of the smallest spacing (finite, > 0)."""
+        self.raymarch_stage = raymarch_stage          # checked before anything is allocated
+        self.raymarch_step_voxels = raymarch_step
         self.ctx = ctx
-        self.resources = SceneResources(ctx, scene, volume)
+        self.resources = SceneResources(ctx, scene, volume, use_majorant_grid=empty_space_skipping)
         self._passes: dict[str, PathTracer] = {}
         self._acc: Accumulation | None = None
         self.timer = GpuTimer(ctx)
         self.probe_grid: ProbeGrid | None = None
         self._baked_key: tuple | None = None
-        self.raymarch_stage = "compute"   # or "fragment" (the design card's)
-        self.raymarch_step_voxels = 0.5   # raymarch step in voxels of the smallest spacing
         self._raymarchers: dict[str, Raymarcher] = {}
         self._light: LightTransmittance | None = None
         self._light_key: tuple | None = None
@@ -60,6 +71,29 @@ class Renderer:
         self.camera = None
         self.last_bake_ms = 0.0
         self.last_light_ms = 0.0
+
+    @property
+    def raymarch_stage(self) -> str:
+        return self._raymarch_stage
+
+    @raymarch_stage.setter
+    def raymarch_stage(self, stage: str) -> None:
+        if stage not in RAYMARCH_STAGES:
+            raise ValueError(f"raymarch stage: expected one of {', '.join(RAYMARCH_STAGES)}, "
+                             f"got {stage!r}")
+        self._raymarch_stage = stage
+
+    @property
+    def raymarch_step_voxels(self) -> float:
+        """The raymarch step in voxels of the smallest spacing."""
+        return self._raymarch_step
+
+    @raymarch_step_voxels.setter
+    def raymarch_step_voxels(self, step: float) -> None:
+        if isinstance(step, bool) or not isinstance(step, (int, float)) or not (
+                math.isfinite(step) and step > 0):
+            raise ValueError(f"raymarch step: expected a finite number of voxels > 0, got {step!r}")
+        self._raymarch_step = float(step)
 
     @property
     def scene(self) -> Scene:
@@ -202,9 +236,10 @@ class Renderer:
         """Starts a fresh accumulation for `method` with the scene's current camera."""
         if method not in METHODS:
             raise ValueError(f"unknown method '{method}' (known: {', '.join(METHODS)})")
+        self.camera = camera_frame(self.scene.camera, width, height)
+        check_image_size(self.ctx, self.camera.width, self.camera.height)
         self.method = method
         self.seed = seed
-        self.camera = camera_frame(self.scene.camera, width, height)
         self.resources.reset_stats()
         acc = self.accumulation(self.camera.width, self.camera.height)
         acc.reset()

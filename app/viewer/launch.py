@@ -7,6 +7,7 @@ import os
 import sys
 from pathlib import Path
 
+from ..frontend import apply_options, render_defaults, render_to_files, scene_from_arg
 from ..scene import Scene
 from .state import ViewerState
 from .xvfb import Xvfb, XvfbError, has_display
@@ -35,22 +36,13 @@ def initial_state(scene: Scene, args: argparse.Namespace) -> ViewerState:
 
 def scene_from_args(args: argparse.Namespace) -> Scene:
     """The scene argument (as `render` reads it) with the --probe-* options applied."""
-    from ..cli import _scene_from_arg
-    from ..scene import parse_scene, scene_to_dict
     from .files import VOLUME_SUFFIXES, scene_for_path
     if args.scene and Path(args.scene).suffix.lower() in VOLUME_SUFFIXES:
         # A volume file opens as it does when dropped: with its bundled scene where there is one.
-        scene, _ = scene_for_path(args.scene, _scene_from_arg(None))
+        scene, _ = scene_for_path(args.scene, scene_from_arg(None))
     else:
-        scene = _scene_from_arg(args.scene)
-    changes = {key: value for key, value in (
-        ("grid", args.probe_grid), ("samples", args.probe_samples), ("sh_window", args.sh_window),
-        ("precision", args.probe_precision)) if value}
-    if not changes:
-        return scene
-    data = scene_to_dict(scene)
-    data["probes"].update(changes)
-    return parse_scene(data, base_dir=scene.base_dir)
+        scene = scene_from_arg(args.scene)
+    return apply_options(scene, args)
 
 
 def run_view(args: argparse.Namespace) -> int:
@@ -79,7 +71,8 @@ def _run_window(args: argparse.Namespace, scene: Scene, scripted: bool) -> int:
     state = initial_state(scene, args)
     width, height = args.window
     try:
-        window = ViewerWindow(state, width, height, vsync=not scripted)
+        window = ViewerWindow(state, width, height, vsync=not scripted,
+                              file_dialog=args.file_dialog)
     except WindowError as exc:
         return headless_fallback(args, str(exc))
     software = any(n in window.viewer.device.lower() for n in ("llvmpipe", "softpipe", "lavapipe"))
@@ -111,14 +104,13 @@ def _run_window(args: argparse.Namespace, scene: Scene, scripted: bool) -> int:
 
 
 def headless_fallback(args: argparse.Namespace, reason: str) -> int:
-    """Renders the scene with the CLI's `render` when no window can be opened."""
-    from ..cli import cmd_render
+    """Renders the scene as `render` does when no window can be opened."""
     out = args.screenshot or "view.png"
     print(f"view: no display available ({reason}), so no window can open. Rendering the scene "
           f"headless instead ({args.method}, {args.spp or 64} spp) to {out}.", file=sys.stderr)
-    render_args = argparse.Namespace(
-        scene=args.scene, method=args.method, spp=args.spp or 64, samples_per_pass=1, out=out,
-        linear=None, exr=None, probe_grid=args.probe_grid, probe_samples=args.probe_samples,
-        sh_window=args.sh_window, probe_precision=args.probe_precision, raymarch_stage="compute",
-        raymarch_step=0.5, seed=args.seed, width=None, height=None, exposure=args.exposure)
-    return cmd_render(render_args)
+    options = render_defaults()
+    options.update(scene=args.scene, method=args.method, spp=args.spp or 64, out=out,
+                   probe_grid=args.probe_grid, probe_samples=args.probe_samples,
+                   sh_window=args.sh_window, probe_precision=args.probe_precision, seed=args.seed,
+                   exposure=args.exposure, gl_backend=args.gl_backend)
+    return render_to_files(argparse.Namespace(**options))

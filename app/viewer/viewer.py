@@ -32,14 +32,15 @@ SNAPSHOT_MAX_PROBES = 512      # a snapshot carries the probes' coefficients for
 
 
 class Viewer:
-    def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = ""):
+    def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = "",
+                 file_dialog: str = "auto"):
         self.ctx = ctx
         self.state = state
         self.device = device
         self.session = RenderSession(ctx, state.scene)
         self.widgets = WidgetRects()
         self.error_meter = ErrorMeter()
-        self.files = FileDialogs(self.open_path)
+        self.files = FileDialogs(self.open_path, dialog=file_dialog)
         self.dataset_paths = datasets()
         self.timer = GpuTimer(ctx)
         self._passes: dict[str, object] = {}     # display, spheres, box: built on first use
