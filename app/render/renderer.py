@@ -27,6 +27,21 @@ METHODS = ("pt", "probes", "probes-only", "raymarch")
 PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
 
 
+@dataclass(frozen=True)
+class ProbePlan:
+    """The probe grid a scene gets (Renderer.probe_plan): probes per axis, the world box they
+    cover (low and high corners as plain floats; None: the whole volume box), the SH order kept
+    (0, 1 or 2) and whether one grey channel is stored instead of three."""
+    grid: tuple[int, int, int]
+    box: tuple[tuple[float, float, float], tuple[float, float, float]] | None
+    sh_order: int
+    grey: bool
+
+    def defines(self) -> dict:
+        """The compile-time probe layout of the shaders that read such a grid (lib/probes.glsl)."""
+        return {"PROBE_SH_ORDER": self.sh_order, "PROBE_GREY": int(self.grey)}
+
+
 @dataclass
 class RenderResult:
     image: np.ndarray          # linear RGB float32 (H, W, 3)
@@ -116,7 +131,7 @@ class Renderer:
 
     def _probe_defines(self) -> dict:
         plan = self.probe_plan(region=False)
-        return {"PROBE_SH_ORDER": plan["sh_order"], "PROBE_GREY": int(plan["grey"])}
+        return plan.defines()
 
     @property
     def pathtracer(self) -> PathTracer:
@@ -148,20 +163,20 @@ class Renderer:
             self._region_key = key
         return self._region
 
-    def probe_plan(self, region: bool = True) -> dict:
+    def probe_plan(self, region: bool = True) -> ProbePlan:
         """The probe grid the current scene gets: its counts, box, SH order and channels
         (probe_layout.py); region=False skips the (NumPy) visible-region search."""
         s = self.scene
         spec = s.probes
-        plan = {"grid": tuple(spec.grid), "box": None,
-                "sh_order": resolve_sh_order(spec.sh_order, s.anisotropy),
-                "grey": resolve_channels(spec.channels, self.resources.table, s.light.irradiance,
-                                         s.environment) == 1}
+        grid, box = tuple(spec.grid), None
         if spec.fit == "visible" and region:
             low, high = self.visible_region()
-            plan.update(grid=fitted_grid(spec.grid, low, high),
-                        box=(tuple(map(float, low)), tuple(map(float, high))))
-        return plan
+            grid = fitted_grid(spec.grid, low, high)
+            box = (tuple(map(float, low)), tuple(map(float, high)))
+        return ProbePlan(grid=tuple(int(v) for v in grid), box=box,
+                         sh_order=resolve_sh_order(spec.sh_order, s.anisotropy),
+                         grey=resolve_channels(spec.channels, self.resources.table,
+                                               s.light.irradiance, s.environment) == 1)
 
     def start_bake(self, seed: int = 0) -> ProbeGrid:
         """(Re)starts the bake for the current scene; reuses the textures when the layout is unchanged."""
@@ -169,12 +184,11 @@ class Renderer:
         plan = self.probe_plan()
         g = self.probe_grid
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey) != (
-                plan["grid"], spec.samples, spec.precision, plan["sh_order"], plan["box"],
-                plan["grey"]):
+                plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey):
             if g is not None:
                 g.release()
-            self.probe_grid = ProbeGrid(self.ctx, plan["grid"], spec.samples, spec.precision,
-                                        plan["sh_order"], plan["box"], plan["grey"])
+            self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
+                                        plan.sh_order, plan.box, plan.grey)
         self.probe_grid.restart(seed)
         self._baked_key = self.bake_key()
         return self.probe_grid
