@@ -124,3 +124,15 @@ def test_environment_switches_are_only_the_named_test_shortcuts():
     assert used <= ALLOWED_ENV, f"environment switches not allowed: {sorted(used - ALLOWED_ENV)}"
     for name in ALLOWED_ENV:
         assert name in readme, f"{name} is read by the code but the README does not name it"
+
+
+def test_each_numpy_twin_names_the_glsl_file_it_mirrors():
+    """app/twins/NAME.py mirrors glsl/lib/NAME.glsl or glsl/NAME.comp, and says so first."""
+    twins = sorted(p for p in (APP / "twins").glob("*.py") if p.name != "__init__.py")
+    assert len(twins) >= 7
+    for p in twins:
+        glsl = [g for g in (ROOT / "glsl").rglob(f"{p.stem}.*") if g.suffix in (".glsl", ".comp")]
+        assert len(glsl) == 1, f"{p.name}: no single GLSL file named {p.stem} ({glsl})"
+        first = ast.get_docstring(ast.parse(p.read_text())).splitlines()[0]
+        expected = f"NumPy twin of {glsl[0].relative_to(ROOT).as_posix()}"
+        assert first.startswith(expected), f"{p.name}: docstring starts {first!r}, not {expected!r}"

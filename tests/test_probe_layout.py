@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from app.medium import sigma_t_at
+from app.twins.medium import sigma_t_at
 from app.render.probe_layout import (TEXTURES_FOR_ORDER, fitted_grid, resolve_sh_order,
                                      visible_region)
 from app.render.renderer import Renderer

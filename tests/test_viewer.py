@@ -14,9 +14,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.camera import camera_frame
+from app.twins.camera import camera_frame
 from app.scene import CameraSpec, load_scene, parse_scene
-from app.sh import sh_evaluate
+from app.twins.sh import sh_evaluate
 from app.viewer import layout, orbit
 from app.viewer.probe_view import box_edges, probe_centres, uv_sphere
 from app.viewer.state import (ViewerState, add_point, angles_from_direction, direction_from_angles,
@@ -292,7 +292,7 @@ def test_orbit_restarts_the_image_but_never_rebakes(run):
 
 def _sphere_colours_checked(image: np.ndarray, d: dict) -> int:
     """Compares the centre pixel of the nearest probes' spheres with the probe's SH radiance at
-    the normal facing the camera (app/sh.py, tone mapped); returns how many were compared."""
+    the normal facing the camera (app/twins/sh.py, tone mapped); returns how many were compared."""
     x0, _, w, h = d["view_rect_framebuffer"]
     coeffs = np.array(d["probe_coefficients"])[:, :27].reshape(-1, 9, 3)
     centres = probe_centres(tuple(d["probe_grid"]), d["half_extent"])

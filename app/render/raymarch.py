@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import moderngl
 
-from ..camera import CameraFrame
+from ..twins.camera import CameraFrame
 from ..gl.shaders import compute_program, render_program, set_uniforms
 from .accumulation import Accumulation
 from .light_transmittance import LIGHT_UNIT

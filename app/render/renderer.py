@@ -9,7 +9,7 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from ..camera import camera_frame
+from ..twins.camera import camera_frame
 from ..gl.timer import GpuTimer
 from ..scene import Scene
 from ..volume import Volume

@@ -8,7 +8,7 @@ import moderngl
 import numpy as np
 
 from ..gl.textures import transfer_texture, volume_texture
-from ..medium import majorant
+from ..twins.medium import majorant
 from ..scene import Scene
 from ..transfer import transfer_table
 from ..volume import Volume, load_scene_volume

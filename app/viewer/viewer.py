@@ -11,7 +11,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from ..camera import camera_frame
+from ..twins.camera import camera_frame
 from ..gl.shaders import ShaderError
 from ..gl.timer import GpuTimer
 from ..scene import SceneError, scene_to_dict
