@@ -114,7 +114,9 @@ def _error_summary(v) -> None:
     rmse = v.error_meter.value
     text = "n/a" if not np.isfinite(rmse) else f"{rmse:.4f}"
     imgui.text(f"relative RMSE {state.method} vs pt: {text}")
-    imgui.text_disabled(f"pt at {v.session.samples('pt')} spp (its own noise is included)")
+    n, n_pt = v.error_meter.samples
+    imgui.text_disabled(f"measured at {n} spp against pt at {n_pt} spp (its own noise is "
+                        "included; measured again each time both double)")
 
 
 def data_section(v) -> None:

@@ -186,7 +186,7 @@ class Viewer:
                 state.error(f"rendering stopped: {exc}")
                 self._halted_scene = state.scene
         if state.display == "error" and state.method != "pt":
-            self.error_meter.update(self.session, state.method)
+            self.error_meter.update(self.session, state.method, state.max_samples)
         self.ctx.screen.use()
         self.ctx.viewport = (0, 0, *self.framebuffer_size)
         self.ctx.clear(*BACKGROUND, 1.0, depth=1.0)
