@@ -79,6 +79,13 @@ def render_section(v) -> None:
     chosen = _radio_row(v, "Probe grid", PROBE_VIEWS, state.probe_view, "probes ")
     if chosen:
         state.probe_view = chosen
+    drawn = v.probes_drawn()
+    if drawn is not None:
+        stride = f", every {drawn['stride']}th per axis" if drawn["stride"] > 1 else ""
+        where = (f"of {drawn['visible']} in visible medium" if drawn["visible"]
+                 else "(none in visible medium)")
+        imgui.text_disabled(f"{len(drawn['indices'])} of {drawn['total']} probes drawn, "
+                            f"{where}{stride}; colour: radiance at the exposure below")
     changed, value = imgui.checkbox("Volume box", state.show_box)
     ui.note("Volume box")
     if changed:

@@ -22,6 +22,7 @@ from .files import FileDialogs, builtin_scene, datasets, scene_for_path
 from .probe_view import BoxOutline, ProbeSpheres, probe_centres
 from .session import FrameTimes, RenderSession
 from .state import ViewerState
+from ..transfer import opacity_points
 from .tf_editor import histogram_curve
 from .widgets import WidgetRects
 
@@ -59,6 +60,7 @@ class Viewer:
         self.close_requested = False
         self.frame_index = 0
         self._histogram = (None, None)
+        self._opacity_points = (None, None)
 
     # ---- geometry ------------------------------------------------------------------------------
     def sidebar_width(self) -> float:
@@ -81,6 +83,14 @@ class Viewer:
 
     def render_size(self) -> tuple[int, int]:
         return layout.render_size(self.view_rect_framebuffer(), self.state.render_scale)
+
+    def opacity_points(self):
+        """The scene's opacity curve as the editor's control points (transfer.opacity_points),
+        cached while the transfer function stays the same."""
+        tf = self.state.scene.transfer_function
+        if self._opacity_points[0] != tf:
+            self._opacity_points = (tf, opacity_points(tf))
+        return self._opacity_points[1]
 
     def histogram(self):
         volume = self.session.volume
@@ -274,6 +284,15 @@ class Viewer:
         top = self.framebuffer_size[1] - rh
         return [[x0 + px / w * rw, top + py / h * rh] for px, py in pixels.tolist()]
 
+    def probes_drawn(self) -> dict | None:
+        """Which probes the probe-grid view draws (ProbeSelection), None while it draws none."""
+        spheres = self._passes.get("spheres")
+        selection = None if spheres is None else spheres.selection
+        if self.state.probe_view == "off" or selection is None:
+            return None
+        return {"indices": selection.indices.tolist(), "stride": selection.stride,
+                "visible": selection.visible, "total": selection.total}
+
     def snapshot(self) -> dict:
         """The state a test asserts on, JSON-ready."""
         s, session = self.state, self.session
@@ -296,12 +315,14 @@ class Viewer:
             "bake_ms": session.bake_ms, "frame_ms": session.last.total_ms,
             "rel_rmse": self.error_meter.value if s.display == "error" else None,
             "probe_pixels": self.probe_pixels() if s.probe_view != "off" else [],
+            "probes_drawn": self.probes_drawn(),
             "probe_coefficients": (grid.coefficients().reshape(grid.count, 28).tolist()
                                    if grid is not None and grid.count <= SNAPSHOT_MAX_PROBES
                                    and s.probe_view != "off" else None),
             "camera_eye": list(s.scene.camera.eye),
             "half_extent": [float(x) for x in session.volume.half_extent],
             "volume": {"name": session.volume.name, "dims": list(session.volume.dims)},
+            "opacity_points": [list(p) for p in self.opacity_points()[0]],
             "errors": list(s.errors), "messages": list(s.messages),
             "widgets": {k: list(v) for k, v in self.widgets.rects.items()},
         }
