@@ -227,6 +227,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     from .imageio import save_exr, save_npy, save_png
     from .render.limits import check_image_size
     from .render.renderer import Renderer
+    from .render.raymarch import check_step
     from .volume import load_scene_volume
 
     if args.auto_probes is not None and args.method == "pt":
@@ -234,6 +235,11 @@ def render_to_files(args: argparse.Namespace) -> int:
     scene = apply_options(scene_from_arg(args.scene), args)
     check_outputs(args)
     volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
+    if args.method == "raymarch":
+        try:
+            check_step(args.raymarch_step, volume)
+        except ValueError as exc:
+            raise OptionError(f"--raymarch-step: {exc}") from None
     ctx = create_headless_context(args.gl_backend)
     check_image_size(ctx, scene.camera.width, scene.camera.height)
     renderer = Renderer(ctx, scene, volume, raymarch_stage=args.raymarch_stage,

@@ -58,6 +58,9 @@ BAD_RENDER_OPTIONS = [
     (["--method", "raymarch", "--raymarch-step", -1], ["--raymarch-step"]),
     (["--method", "raymarch", "--raymarch-step", "inf"], ["--raymarch-step"]),
     (["--method", "raymarch", "--raymarch-step", "nan"], ["--raymarch-step"]),
+    # finer than the shader's 8192 steps across this 8^3 box allow: it would silently coarsen
+    (["--method", "raymarch", "--raymarch-step", 0.001], ["--raymarch-step", "too fine",
+                                                            "at least 0.00169"]),
     (["--exposure", "nan"], ["--exposure", "finite number > 0"]),
     (["--exposure", "-inf"], ["--exposure"]),
     (["--exposure", 0], ["--exposure"]),
@@ -87,6 +90,15 @@ BAD_RENDER_OPTIONS = [
 def test_bad_render_option_is_one_line_before_any_gpu_work(options, needles, scene, tmp_path,
                                                           capsys, no_gpu):
     one_error_line(["render", scene, "--out", tmp_path / "o.png", *options], capsys, *needles)
+
+
+def test_a_huge_exposure_clips_to_white_without_numpy_warnings():
+    import warnings
+    from app.render.tonemap import to_uint8
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = to_uint8(np.full((2, 2, 3), 5.0, np.float32), 1e308)
+    assert (out == 255).all()
 
 
 def test_output_that_is_a_folder_or_under_a_file(scene, tmp_path, capsys, no_gpu):
@@ -191,6 +203,9 @@ def test_renderer_options_are_checked(ctx):
         with pytest.raises(ValueError, match="raymarch step"):
             r.raymarch_step_voxels = math.nan
         assert r.raymarch_step_voxels == 2.0
+        r.raymarch_step_voxels = 1e-4   # finer than 8192 steps across a 4^3 box
+        with pytest.raises(ValueError, match="too fine"):
+            r.render("raymarch", spp=1)
     finally:
         r.release()
 

@@ -19,7 +19,7 @@ from .pathtracer import PathTracer
 from .light_transmittance import LightTransmittance
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, visible_region
 from .probes import ProbeGrid
-from .raymarch import Raymarcher
+from .raymarch import Raymarcher, check_step
 from .resources import SceneResources
 
 METHODS = ("pt", "probes", "probes-only", "raymarch")
@@ -283,6 +283,8 @@ class Renderer:
             if self.probe_grid is None:
                 raise RuntimeError("probe methods need a bake first (bake() or bake_step())")
             extra = self.probe_uniforms()
+        if method == "raymarch":
+            check_step(self.raymarch_step_voxels, self.resources.volume)
         light_ms = self.bake_light() if method == "raymarch" else 0.0
         self.timer.start()
         if method == "raymarch":
@@ -309,6 +311,8 @@ class Renderer:
                progress: Callable[[int, int], None] | None = None,
                bake_progress: Callable | None = None) -> RenderResult:
         """Renders the current scene from scratch with `spp` samples per pixel."""
+        if method == "raymarch":
+            check_step(self.raymarch_step_voxels, self.resources.volume)
         acc = self.begin(method, width, height, seed)
         bake_ms = 0.0
         if self.needs_probes(method):
