@@ -136,3 +136,18 @@ def test_each_numpy_twin_names_the_glsl_file_it_mirrors():
         first = ast.get_docstring(ast.parse(p.read_text())).splitlines()[0]
         expected = f"NumPy twin of {glsl[0].relative_to(ROOT).as_posix()}"
         assert first.startswith(expected), f"{p.name}: docstring starts {first!r}, not {expected!r}"
+
+
+def test_the_readme_layout_names_every_module():
+    readme = (ROOT / "README.md").read_text()
+    section = readme[readme.index("### Layout"):readme.index("**Paths are resumable.**")]
+    for path in sorted(APP.rglob("*.py")):
+        if path.name == "__init__.py":
+            continue
+        folder = path.parent.relative_to(ROOT).as_posix()
+        line = next((block for block in section.split("\n- ") if block.startswith(f"`{folder}/`")),
+                    None)
+        assert line is not None, f"the README's layout has no entry for {folder}/"
+        assert f"`{path.name}`" in line, f"the README's layout entry for {folder}/ omits {path.name}"
+    for name in re.findall(r"`(app/[\w/]+\.py)`", section):
+        assert (ROOT / name).is_file(), f"the README's layout names {name}, which does not exist"
