@@ -32,9 +32,13 @@ def test_the_timer_restores_the_framebuffer_it_found(ctx):
         ctx.clear(1.0, 0.0, 0.0, 1.0, viewport=ctx.viewport)
         pixels = np.frombuffer(fbo.read(components=4), np.uint8).reshape(4, 8, 4)
         assert tuple(pixels[1, 1]) == (255, 0, 0, 255) and tuple(pixels[0, 0])[:3] == (64, 128, 191)
+        # A framebuffer the caller released while bound is not put back: no framebuffer is.
+        fbo.release()
+        timer.start()
+        timer.stop()
+        assert ctx.fbo is None and _gl_get_integer(GL_DRAW_FRAMEBUFFER_BINDING) == 0
     finally:
         timer.release()
-        fbo.release()
         colour.release()
 
 

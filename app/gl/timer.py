@@ -75,6 +75,8 @@ class GpuTimer:
 
     def _flush_rasteriser(self) -> None:
         found = self._ctx.fbo
+        if found is not None and type(found.mglo).__name__ == "InvalidObject":
+            found = None   # the caller released the framebuffer it last used
         self._flush_fbo.use()
         if found is not None:
             found.use()
