@@ -78,8 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "RMSE of a path-traced pilot (e.g. 0.05), report why, then render")
     r.add_argument("--raymarch-stage", choices=RAYMARCH_STAGES, default="compute",
                    help="raymarch as a compute (default) or fragment shader")
-    r.add_argument("--raymarch-step", type=positive_float, default=0.5,
-                   help="raymarch step in voxels (default 0.5)")
+    r.add_argument("--raymarch-step", type=positive_float,
+                   help="raymarch step in voxels (default 0.5, or the finest the shader's 8192 "
+                        "steps across the box allow, whichever is longer)")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--width", type=positive_int)
     r.add_argument("--height", type=positive_int)

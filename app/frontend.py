@@ -24,6 +24,7 @@ from .scene import Scene, SceneError, default_scene, load_scene, parse_scene, sc
 MAX_SPP = (1 << 31) - 1        # samples per pixel reach the shaders as a 32-bit uniform
 MAX_WINDOW_SIDE = 16384
 MAX_RENDER_SCALE = 4.0
+DEFAULT_RAYMARCH_STEP = 0.5    # voxels; --raymarch-step's default (None: not given)
 
 
 class OptionError(ValueError):
@@ -216,7 +217,7 @@ def render_defaults() -> dict:
     """Every option `render` has, at its default: what the viewer's headless fallback starts from."""
     return dict(scene=None, method="pt", spp=64, samples_per_pass=1, out="render.png", linear=None,
                 exr=None, probe_grid=None, probe_samples=None, sh_window=None, probe_precision=None,
-                auto_probes=None, raymarch_stage="compute", raymarch_step=0.5, seed=0, width=None,
+                auto_probes=None, raymarch_stage="compute", raymarch_step=None, seed=0, width=None,
                 height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True)
 
 
@@ -235,15 +236,15 @@ def render_to_files(args: argparse.Namespace) -> int:
     scene = apply_options(scene_from_arg(args.scene), args)
     check_outputs(args)
     volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
-    if args.method == "raymarch":
+    if args.method == "raymarch" and args.raymarch_step is not None:
         try:
-            check_step(args.raymarch_step, volume)
+            check_step(args.raymarch_step, volume)   # a step asked for is taken, or refused
         except ValueError as exc:
             raise OptionError(f"--raymarch-step: {exc}") from None
     ctx = create_headless_context(args.gl_backend)
     check_image_size(ctx, scene.camera.width, scene.camera.height)
     renderer = Renderer(ctx, scene, volume, raymarch_stage=args.raymarch_stage,
-                        raymarch_step=args.raymarch_step,
+                        raymarch_step=args.raymarch_step or DEFAULT_RAYMARCH_STEP,
                         empty_space_skipping=args.empty_space_skipping)
     if args.auto_probes is not None:
         from .render.auto_probes import choose_probes
@@ -275,6 +276,11 @@ def render_to_files(args: argparse.Namespace) -> int:
               f"bake GPU time: {result.bake_ms:.1f} ms; last pass changed the probes by "
               f"{100 * rep.relative_change:.2f}% (est. standard error "
               f"{'n/a, one pass' if rep.passes_done < 2 else f'{100 * rep.standard_error:.2f}%'})")
+    if args.method == "raymarch" and (renderer.effective_raymarch_step_voxels
+                                      > renderer.raymarch_step_voxels):
+        print(f"note: raymarch step {renderer.effective_raymarch_step_voxels:.3g} voxels, not the "
+              f"default {renderer.raymarch_step_voxels:g}: the shader takes at most 8192 steps "
+              "across this volume's box")
     print(f"render GPU time: {result.render_ms:.1f} ms  ({result.ms_per_sample:.3f} ms per sample "
           "per pixel of the whole image)")
     if result.stats.get("truncated_paths") or result.stats.get("nonfinite_samples"):

@@ -203,9 +203,8 @@ def test_renderer_options_are_checked(ctx):
         with pytest.raises(ValueError, match="raymarch step"):
             r.raymarch_step_voxels = math.nan
         assert r.raymarch_step_voxels == 2.0
-        r.raymarch_step_voxels = 1e-4   # finer than 8192 steps across a 4^3 box
-        with pytest.raises(ValueError, match="too fine"):
-            r.render("raymarch", spp=1)
+        r.raymarch_step_voxels = 1e-4   # finer than 8192 steps across a 4^3 box: said, not hidden
+        assert r.effective_raymarch_step_voxels == pytest.approx(3 ** 0.5 / 8192 * 4)
     finally:
         r.release()
 
@@ -235,3 +234,19 @@ def test_a_failed_write_after_the_render_says_where_the_image_went(scene, tmp_pa
     assert rescued.parent == tmp_path / "rescue" and rescued.suffix == ".png" and rescued.is_file()
     assert not wanted.exists()
     assert np.load(tmp_path / "o.npy").shape == (8, 8, 3)   # the other output is unaffected
+
+
+def test_default_raymarch_step_lengthened_by_the_shader_is_said(tmp_path, capsys):
+    """On a box 1000 times longer than its voxels are thin, the default 0.5-voxel step would need
+    more than the shader's 8192 steps: the render goes ahead and says which step it took."""
+    p = tmp_path / "thin.json"
+    p.write_text(json.dumps({"volume": {"builtin": "sphere", "size": [8, 8, 8],
+                                        "spacing": [1, 1, 1000]},
+                             "camera": {"width": 4, "height": 4},
+                             "probes": {"grid": 2, "samples": 1}}))
+    rc, lines, out = run(["render", p, "--method", "raymarch", "--spp", 1,
+                          "--out", tmp_path / "o.png"], capsys)
+    assert rc == 0 and not [line for line in lines if line.startswith("error")]
+    assert "note: raymarch step 0.977 voxels, not the default 0.5" in out
+    one_error_line(["render", p, "--method", "raymarch", "--raymarch-step", 0.5, "--out",
+                    tmp_path / "o.png"], capsys, "--raymarch-step", "at least 0.977")

@@ -191,6 +191,7 @@ def npy_bytes(major, descr, fortran, shape, body, pad) -> bytes:
     return b"\x93NUMPY" + bytes([major, 0]) + length + raw + body
 
 
+@pytest.mark.filterwarnings("ignore:Data type alias:DeprecationWarning")  # NumPy on 'a' descrs
 @FUZZ
 @given(major=st.sampled_from([1, 2, 3]), descr=descrs,
        fortran=st.sampled_from(["False", "True", "0", "'no'", "None"]), shape=shape_text,

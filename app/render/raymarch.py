@@ -30,6 +30,7 @@ def min_step_voxels(volume) -> float:
 
 
 def check_step(step_voxels: float, volume) -> None:
+    """Raises ValueError for a step the shader would lengthen on this volume's longest rays."""
     low = min_step_voxels(volume)
     if step_voxels < low:
         raise ValueError(f"raymarch step {step_voxels:g} voxels: too fine for this volume (a ray "

@@ -19,7 +19,7 @@ from .pathtracer import PathTracer
 from .light_transmittance import LightTransmittance
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, visible_region
 from .probes import ProbeGrid
-from .raymarch import Raymarcher, check_step
+from .raymarch import Raymarcher, min_step_voxels
 from .resources import SceneResources
 
 METHODS = ("pt", "probes", "probes-only", "raymarch")
@@ -109,6 +109,12 @@ class Renderer:
                 math.isfinite(step) and step > 0):
             raise ValueError(f"raymarch step: expected a finite number of voxels > 0, got {step!r}")
         self._raymarch_step = float(step)
+
+    @property
+    def effective_raymarch_step_voxels(self) -> float:
+        """The raymarch step the shader takes on the longest rays through this volume's box: the
+        one asked for, or longer where it would need more than raymarch.MAX_MARCH_STEPS steps."""
+        return max(self.raymarch_step_voxels, min_step_voxels(self.resources.volume))
 
     @property
     def scene(self) -> Scene:
@@ -283,8 +289,6 @@ class Renderer:
             if self.probe_grid is None:
                 raise RuntimeError("probe methods need a bake first (bake() or bake_step())")
             extra = self.probe_uniforms()
-        if method == "raymarch":
-            check_step(self.raymarch_step_voxels, self.resources.volume)
         light_ms = self.bake_light() if method == "raymarch" else 0.0
         self.timer.start()
         if method == "raymarch":
@@ -311,8 +315,6 @@ class Renderer:
                progress: Callable[[int, int], None] | None = None,
                bake_progress: Callable | None = None) -> RenderResult:
         """Renders the current scene from scratch with `spp` samples per pixel."""
-        if method == "raymarch":
-            check_step(self.raymarch_step_voxels, self.resources.volume)
         acc = self.begin(method, width, height, seed)
         bake_ms = 0.0
         if self.needs_probes(method):
