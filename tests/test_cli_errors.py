@@ -250,3 +250,12 @@ def test_default_raymarch_step_lengthened_by_the_shader_is_said(tmp_path, capsys
     assert "note: raymarch step 0.977 voxels, not the default 0.5" in out
     one_error_line(["render", p, "--method", "raymarch", "--raymarch-step", 0.5, "--out",
                     tmp_path / "o.png"], capsys, "--raymarch-step", "at least 0.977")
+
+
+def test_view_with_a_missing_volume_is_one_line_before_any_window(tmp_path, capsys, no_gpu,
+                                                                  monkeypatch):
+    import app.viewer.xvfb
+    monkeypatch.setattr(app.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
+        AssertionError("an X server was started before the volume was checked")))
+    one_error_line(["view", tmp_path / "nowhere.raw", "--frames", 1], capsys, "nowhere.raw",
+                   "not found")

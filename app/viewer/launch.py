@@ -46,8 +46,14 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
 
 
 def run_view(args: argparse.Namespace) -> int:
+    from ..volume import load_scene_volume
     scene = scene_from_args(args)
     scripted = bool(args.screenshot or args.script or args.frames)
+    if has_display() or scripted:
+        # A volume that does not load fails here, before a window, an X server or a GL context.
+        volume = load_scene_volume(scene)
+    else:
+        volume = None   # the headless fallback loads it
     xvfb = None
     if not has_display():
         if not scripted:
@@ -59,20 +65,20 @@ def run_view(args: argparse.Namespace) -> int:
         except XvfbError as exc:
             return headless_fallback(args, f"DISPLAY is not set and Xvfb could not be started ({exc})")
     try:
-        return _run_window(args, scene, scripted)
+        return _run_window(args, scene, volume, scripted)
     finally:
         if xvfb is not None:
             xvfb.stop()
 
 
-def _run_window(args: argparse.Namespace, scene: Scene, scripted: bool) -> int:
+def _run_window(args: argparse.Namespace, scene: Scene, volume, scripted: bool) -> int:
     from .script import ScriptError, ScriptRunner, load_script
     from .window import ViewerWindow, WindowError
     state = initial_state(scene, args)
     width, height = args.window
     try:
         window = ViewerWindow(state, width, height, vsync=not scripted,
-                              file_dialog=args.file_dialog)
+                              file_dialog=args.file_dialog, volume=volume)
     except WindowError as exc:
         return headless_fallback(args, str(exc))
     software = any(n in window.viewer.device.lower() for n in ("llvmpipe", "softpipe", "lavapipe"))

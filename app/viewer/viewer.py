@@ -34,11 +34,11 @@ SNAPSHOT_MAX_PROBES = 512      # a snapshot carries the probes' coefficients for
 
 class Viewer:
     def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = "",
-                 file_dialog: str = "auto"):
+                 file_dialog: str = "auto", volume=None):
         self.ctx = ctx
         self.state = state
         self.device = device
-        self.session = RenderSession(ctx, state.scene)
+        self.session = RenderSession(ctx, state.scene, volume)
         self.widgets = WidgetRects()
         self.error_meter = ErrorMeter()
         self.files = FileDialogs(self.open_path, dialog=file_dialog)

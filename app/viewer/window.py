@@ -47,7 +47,9 @@ def _font_path() -> Path | None:
 
 class ViewerWindow:
     def __init__(self, state: ViewerState, width: int = 1280, height: int = 800,
-                 title: str = "Radiance probes", vsync: bool = True, file_dialog: str = "auto"):
+                 title: str = "Radiance probes", vsync: bool = True, file_dialog: str = "auto",
+                 volume=None):
+        """`volume`: the scene's volume, already loaded (else the viewer loads it)."""
         self._glfw_errors: list[str] = []
         glfw.ERROR_REPORTING = "ignore"
         glfw.set_error_callback(lambda code, text: self._glfw_errors.append(
@@ -74,7 +76,7 @@ class ViewerWindow:
             raise WindowError(f"the window's OpenGL context is not 4.3 core: {exc}") from None
         self._init_imgui()
         try:
-            self.viewer = Viewer(self.ctx, state, describe(self.ctx), file_dialog)
+            self.viewer = Viewer(self.ctx, state, describe(self.ctx), file_dialog, volume)
         except BaseException:  # a scene whose volume does not load: close the window, then report
             self._shutdown()
             raise
