@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 from app.scene import VolumeSpec
 from app.volume import RAW_DTYPES, Volume, VolumeError, load_volume
 
-FUZZ = settings(max_examples=150, deadline=2000, derandomize=True, database=None,
+FUZZ = settings(max_examples=400, deadline=2000, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
                                        HealthCheck.too_slow])
 WATCHDOG_SECONDS = 10
