@@ -459,6 +459,7 @@ def test_unseen_volume_with_an_explicit_table_and_a_fine_probe_grid(display, tmp
     script = write_script(tmp_path / "s.json", [
         {"until": "baked"}, {"frames": 2}, {"dump": "over.json"}, {"screenshot": "over.png"},
         {"key": "g"}, {"frames": 2}, {"dump": "alone.json"}, {"screenshot": "alone.png"},
+        {"click": "Empty-space skipping"}, {"until": "baked"}, {"dump": "global.json"},
         {"close": True}])
     view(["head.json", "--script", str(script), "--method", "raymarch", "--probe-view",
           "--probe-grid", "32", "--probe-samples", "1", "--window", "640x400"], tmp_path, display)
@@ -474,6 +475,10 @@ def test_unseen_volume_with_an_explicit_table_and_a_fine_probe_grid(display, tmp
     image = view_pixels(png(tmp_path / "alone.png"), alone)
     covered = ~_is_background(image, np.round(np.array(BACKGROUND) * 255))
     assert 0.02 < covered.mean() < 0.5, covered.mean()   # a lattice in the head, not a wall
+    # the Render panel's switch: one global majorant; the probes re-bake (their key holds it)
+    switched = dump(tmp_path / "global.json")
+    assert over["empty_space_skipping"] and not switched["empty_space_skipping"]
+    assert switched["bakes_started"] == over["bakes_started"] + 1 and switched["probes_ready"]
 
 
 def test_cli_screenshot_starts_its_own_display(display, tmp_path):

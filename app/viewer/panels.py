@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
-from ..render.renderer import METHODS
+from ..render.renderer import METHODS, RAYMARCH_STAGES
 from ..scene import PROBE_FITS, PROBE_PRECISIONS, SH_WINDOWS
 from ..volume import BUILTIN_VOLUMES
 from .overlays import shortcut_table
@@ -15,7 +15,6 @@ from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and
 from .tf_editor import heat_legend, transfer_panel
 
 SIDEBAR_WIDTH = 370           # logical pixels, before the UI scale
-RAYMARCH_STAGES = ("compute", "fragment")
 
 
 def sidebar(v) -> None:
@@ -107,6 +106,11 @@ def render_section(v) -> None:
     if changed:
         r.raymarch_stage = RAYMARCH_STAGES[i]
         v.session.restart(["raymarch"])
+    changed, value = imgui.checkbox("Empty-space skipping", r.resources.use_majorant_grid)
+    ui.note("Empty-space skipping")
+    if changed:   # the same images either way (unbiased); the probes re-bake by their key
+        r.set_empty_space_skipping(value)
+        v.session.restart()
     for method in state.shown_methods():
         n = v.session.samples(method)
         imgui.progress_bar(min(n / state.max_samples, 1.0), ImVec2(-1, 0),

@@ -309,6 +309,7 @@ class Viewer:
             "window_size": list(self.window_size), "view_rect_window": list(self.view_rect_window()),
             "view_rect_framebuffer": list(self.view_rect_framebuffer()),
             "bake_passes_run": session.bake_passes_run, "bakes_started": session.bake_generation,
+            "empty_space_skipping": session.renderer.resources.use_majorant_grid,
             "probes_ready": session.probes_ready(),
             "probe_grid": list(grid.grid) if grid is not None else None,
             "probe_bytes": grid.gpu_bytes if grid is not None else 0,
