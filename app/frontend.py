@@ -143,7 +143,7 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
 
 # ---- outputs -----------------------------------------------------------------------------------
 
-OUTPUT_SUFFIXES = {"--out": ".png", "--linear": ".npy", "--exr": ".exr"}
+OUTPUT_SUFFIXES = {"--out": ".png", "--linear": ".npy", "--exr": ".exr", "--screenshot": ".png"}
 
 
 def check_output(path: str, option: str) -> Path:

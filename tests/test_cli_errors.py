@@ -259,3 +259,12 @@ def test_view_with_a_missing_volume_is_one_line_before_any_window(tmp_path, caps
         AssertionError("an X server was started before the volume was checked")))
     one_error_line(["view", tmp_path / "nowhere.raw", "--frames", 1], capsys, "nowhere.raw",
                    "not found")
+
+
+def test_view_screenshot_path_is_checked_before_any_window(scene, capsys, no_gpu, monkeypatch):
+    import app.viewer.xvfb
+    monkeypatch.setattr(app.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
+        AssertionError("an X server was started before --screenshot was checked")))
+    one_error_line(["view", scene, "--screenshot", "/proc/shot.png", "--frames", 1], capsys,
+                   "--screenshot /proc/shot.png", "cannot write there")
+    one_error_line(["view", scene, "--screenshot", "shot.jpg"], capsys, ".png")

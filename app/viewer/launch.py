@@ -7,7 +7,8 @@ import os
 import sys
 from pathlib import Path
 
-from ..frontend import apply_options, render_defaults, render_to_files, scene_from_arg
+from ..frontend import (apply_options, check_output, render_defaults, render_to_files,
+                        scene_from_arg)
 from ..scene import Scene
 from .state import ViewerState
 from .xvfb import Xvfb, XvfbError, has_display
@@ -48,6 +49,8 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
 def run_view(args: argparse.Namespace) -> int:
     from ..volume import load_scene_volume
     scene = scene_from_args(args)
+    if args.screenshot:
+        check_output(args.screenshot, "--screenshot")   # before a long scripted run, not after
     scripted = bool(args.screenshot or args.script or args.frames)
     if has_display() or scripted:
         # A volume that does not load fails here, before a window, an X server or a GL context.
@@ -84,6 +87,7 @@ def _run_window(args: argparse.Namespace, scene: Scene, volume, scripted: bool) 
     software = any(n in window.viewer.device.lower() for n in ("llvmpipe", "softpipe", "lavapipe"))
     state.render_scale = args.render_scale or (SOFTWARE_RENDER_SCALE if software else 1.0)
     print(f"view: {window.viewer.device}", file=sys.stderr)
+    rc = 0
     try:
         if args.script:
             steps = load_script(args.script)
@@ -94,7 +98,13 @@ def _run_window(args: argparse.Namespace, scene: Scene, volume, scripted: bool) 
             window.viewer.request_screenshot(args.screenshot)
             window.poll()
             window.frame()
-            print(f"wrote {Path(args.screenshot).resolve()}")
+            _, saved, error = window.viewer.last_screenshot
+            if error:   # written elsewhere (or lost): said once, as the command's error
+                state.errors.remove(error)
+                print(f"error: --{error}", file=sys.stderr)
+                rc = 1
+            else:
+                print(f"wrote {saved}")
         if not scripted:
             window.run()
         for text in state.errors:
@@ -106,7 +116,7 @@ def _run_window(args: argparse.Namespace, scene: Scene, volume, scripted: bool) 
         return 130
     finally:
         window.close()
-    return 0
+    return rc
 
 
 def headless_fallback(args: argparse.Namespace, reason: str) -> int:

@@ -57,6 +57,7 @@ class Viewer:
         self.remembered_colours: dict[str, tuple] = {}
         self.probe_axes_locked = len(set(state.scene.probes.grid)) == 1
         self.pending_screenshot: str | None = None
+        self.last_screenshot: tuple | None = None   # (path asked for, where it went, error line)
         self.close_requested = False
         self.frame_index = 0
         self._histogram = (None, None)

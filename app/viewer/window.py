@@ -130,12 +130,14 @@ class ViewerWindow:
         self.ctx.screen.use()
         imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
         if v.pending_screenshot:
+            from ..frontend import save_or_rescue
             path, v.pending_screenshot = v.pending_screenshot, None
-            try:
-                saved = self.save_screenshot(path)
+            saved, error = save_or_rescue(lambda p: self.save_screenshot(p), path, "screenshot")
+            v.last_screenshot = (path, saved, error)
+            if error:
+                v.state.error(error)
+            else:
                 v.state.note(f"saved a screenshot to {saved}")
-            except OSError as exc:
-                v.state.error(f"could not save the screenshot {path}: {exc}")
         glfw.swap_buffers(self.window)
 
     def read_pixels(self) -> np.ndarray:
