@@ -268,3 +268,15 @@ def test_view_screenshot_path_is_checked_before_any_window(scene, capsys, no_gpu
     one_error_line(["view", scene, "--screenshot", "/proc/shot.png", "--frames", 1], capsys,
                    "--screenshot /proc/shot.png", "cannot write there")
     one_error_line(["view", scene, "--screenshot", "shot.jpg"], capsys, ".png")
+
+
+def test_view_bad_script_is_one_line_before_any_window(scene, tmp_path, capsys, no_gpu,
+                                                       monkeypatch):
+    import app.viewer.xvfb
+    monkeypatch.setattr(app.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
+        AssertionError("an X server was started before the script was read")))
+    (tmp_path / "s.json").write_text('{"not": "a list"}')
+    one_error_line(["view", scene, "--script", tmp_path / "s.json"], capsys, "s.json",
+                   "a JSON list of objects")
+    one_error_line(["view", scene, "--script", tmp_path / "missing.json"], capsys,
+                   "cannot read the script")

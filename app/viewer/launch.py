@@ -51,6 +51,14 @@ def run_view(args: argparse.Namespace) -> int:
     scene = scene_from_args(args)
     if args.screenshot:
         check_output(args.screenshot, "--screenshot")   # before a long scripted run, not after
+    steps = None
+    if args.script:
+        from .script import ScriptError, load_script
+        try:
+            steps = load_script(args.script)   # a bad script fails before anything opens
+        except ScriptError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 3
     scripted = bool(args.screenshot or args.script or args.frames)
     if has_display() or scripted:
         # A volume that does not load fails here, before a window, an X server or a GL context.
@@ -68,14 +76,14 @@ def run_view(args: argparse.Namespace) -> int:
         except XvfbError as exc:
             return headless_fallback(args, f"DISPLAY is not set and Xvfb could not be started ({exc})")
     try:
-        return _run_window(args, scene, volume, scripted)
+        return _run_window(args, scene, volume, steps, scripted)
     finally:
         if xvfb is not None:
             xvfb.stop()
 
 
-def _run_window(args: argparse.Namespace, scene: Scene, volume, scripted: bool) -> int:
-    from .script import ScriptError, ScriptRunner, load_script
+def _run_window(args: argparse.Namespace, scene: Scene, volume, steps, scripted: bool) -> int:
+    from .script import ScriptError, ScriptRunner
     from .window import ViewerWindow, WindowError
     state = initial_state(scene, args)
     width, height = args.window
@@ -89,8 +97,7 @@ def _run_window(args: argparse.Namespace, scene: Scene, volume, scripted: bool) 
     print(f"view: {window.viewer.device}", file=sys.stderr)
     rc = 0
     try:
-        if args.script:
-            steps = load_script(args.script)
+        if steps is not None:
             ScriptRunner(window, Path.cwd()).run(steps)
         if args.frames:  # the screenshot's frame is the last of them
             ScriptRunner(window, Path.cwd()).frame(args.frames - (1 if args.screenshot else 0))
