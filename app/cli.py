@@ -5,33 +5,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from .scene import Scene, SceneError, default_scene, load_scene
-
-
-def _scene_from_arg(arg: str | None) -> Scene:
-    if arg is None:
-        return default_scene()
-    p = Path(arg)
-    if p.suffix.lower() == ".json":
-        return load_scene(p)
-    # A volume file: the default scene with that volume.
-    from .scene import parse_scene
-    return parse_scene({"volume": {"path": str(p)}})
-
-
-def _progress(label: str):
-    interactive = sys.stderr.isatty()
-    last = [-1]
-
-    def report(done: int, total: int) -> None:
-        pct = int(100 * done / max(total, 1))
-        if interactive:
-            print(f"\r{label}: {done}/{total} ({pct}%)", end="" if done < total else "\n",
-                  file=sys.stderr, flush=True)
-        elif pct // 10 != last[0] // 10 or done == total:
-            print(f"{label}: {done}/{total} ({pct}%)", file=sys.stderr, flush=True)
-        last[0] = pct
-    return report
+from .frontend import (ArgumentParser, OptionError, fraction, grid_arg, positive_float,
+                       positive_int, render_to_files)
+from .scene import SceneError
 
 
 def cmd_view(args: argparse.Namespace) -> int:
@@ -40,77 +16,7 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from .gl.context import create_headless_context, describe
-    from .imageio import save_exr, save_npy, save_png
-    from .render.renderer import Renderer
-
-    scene = _scene_from_arg(args.scene)
-    probe_changes = {}
-    if args.probe_grid:
-        probe_changes["grid"] = args.probe_grid
-    if args.probe_samples:
-        probe_changes["samples"] = args.probe_samples
-    if args.sh_window:
-        probe_changes["sh_window"] = args.sh_window
-    if args.probe_precision:
-        probe_changes["precision"] = args.probe_precision
-    if probe_changes:
-        from .scene import parse_scene, scene_to_dict
-        data = scene_to_dict(scene)
-        data["probes"].update(probe_changes)
-        scene = parse_scene(data, base_dir=scene.base_dir)
-    if args.width or args.height:
-        cam = scene.camera
-        w = args.width or cam.width
-        h = args.height or cam.height
-        from dataclasses import replace
-        scene = scene.replace(camera=replace(cam, width=w, height=h))
-    ctx = create_headless_context()
-    renderer = Renderer(ctx, scene)
-    if getattr(args, "auto_probes", None) is not None:
-        if args.method == "pt":
-            raise SceneError("--auto-probes chooses probe settings: use it with a probe method")
-        from .render.auto_probes import choose_probes
-        choice = choose_probes(renderer, args.auto_probes, args.method,
-                               progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
-        print(choice.report())
-        scene = choice.scene
-        renderer.set_scene(scene)
-    renderer.raymarch_stage = args.raymarch_stage
-    renderer.raymarch_step_voxels = args.raymarch_step
-    spp = args.spp
-    bake_report = _progress("probe bake passes")
-
-    def on_bake_pass(grid) -> None:
-        bake_report(grid.passes_done, grid.passes_total)
-
-    result = renderer.render(args.method, spp=spp, seed=args.seed,
-                             samples_per_pass=args.samples_per_pass,
-                             progress=_progress(f"{args.method} samples"), bake_progress=on_bake_pass)
-    out = save_png(args.out, result.image, args.exposure)
-    print(f"device: {describe(ctx)}")
-    cam = scene.camera
-    print(f"method: {result.method}  image: {cam.width}x{cam.height}  spp: {result.spp}")
-    if renderer.probe_grid is not None and args.method != "pt":
-        g = renderer.probe_grid
-        rep = g.progress_report()
-        print(f"probes: {g.grid[0]}x{g.grid[1]}x{g.grid[2]}, {g.samples} walks each, "
-              f"{g.precision}, window {scene.probes.sh_window}; textures {g.gpu_bytes / 2**20:.1f} MiB; "
-              f"bake GPU time: {result.bake_ms:.1f} ms; last pass changed the probes by "
-              f"{100 * rep.relative_change:.2f}% (est. standard error "
-              f"{'n/a, one pass' if rep.passes_done < 2 else f'{100 * rep.standard_error:.2f}%'})")
-    print(f"render GPU time: {result.render_ms:.1f} ms  ({result.ms_per_sample:.3f} ms per sample "
-          "per pixel of the whole image)")
-    if result.stats.get("truncated_paths") or result.stats.get("nonfinite_samples"):
-        print(f"warning: {result.stats['truncated_paths']} paths ran out of their step budget and "
-              f"{result.stats['nonfinite_samples']} samples were not finite; both were left out",
-              file=sys.stderr)
-    if args.linear:
-        print(f"linear image: {save_npy(args.linear, result.image)}")
-    if args.exr:
-        print(f"EXR image: {save_exr(args.exr, result.image)}")
-    print(f"wrote {out.resolve()}")
-    return 0
+    return render_to_files(args)
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -150,36 +56,41 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="radiance-probes",
+    parser = ArgumentParser(prog="radiance-probes",
                                      description="Volume rendering with radiance probes and a "
                                                  "reference volumetric path tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    from .render.renderer import METHODS
+    from .render.renderer import METHODS, RAYMARCH_STAGES
     r = sub.add_parser("render", help="render a scene headless to a PNG (and linear .npy/.exr)")
     r.add_argument("scene", nargs="?", help="scene JSON or a volume file (default: built-in scene)")
     r.add_argument("--method", choices=METHODS, default="pt")
-    r.add_argument("--spp", type=_positive_int, default=64, help="samples per pixel (default 64)")
-    r.add_argument("--samples-per-pass", type=_positive_int, default=1,
+    r.add_argument("--spp", type=positive_int, default=64, help="samples per pixel (default 64)")
+    r.add_argument("--samples-per-pass", type=positive_int, default=1,
                    help="samples per pixel in one GPU dispatch (default 1)")
     r.add_argument("--out", default="render.png", help="PNG path (default render.png)")
     r.add_argument("--linear", help="also write the linear float32 (H, W, 3) image as .npy")
     r.add_argument("--exr", help="also write the linear image as OpenEXR")
-    r.add_argument("--probe-grid", type=_grid_arg, help="probes per axis: N or NX,NY,NZ (1..256)")
-    r.add_argument("--probe-samples", type=_positive_int, help="walks per probe")
+    r.add_argument("--probe-grid", type=grid_arg, help="probes per axis: N or NX,NY,NZ (1..256)")
+    r.add_argument("--probe-samples", type=positive_int, help="walks per probe")
     r.add_argument("--sh-window", choices=("none", "hann", "lanczos"))
     r.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"))
-    r.add_argument("--auto-probes", type=float, metavar="TARGET",
+    r.add_argument("--auto-probes", type=fraction, metavar="TARGET",
                    help="choose the cheapest probe setting whose image is within this relative "
                         "RMSE of a path-traced pilot (e.g. 0.05), report why, then render")
-    r.add_argument("--raymarch-stage", choices=("compute", "fragment"), default="compute",
+    r.add_argument("--raymarch-stage", choices=RAYMARCH_STAGES, default="compute",
                    help="raymarch as a compute (default) or fragment shader")
-    r.add_argument("--raymarch-step", type=float, default=0.5,
-                   help="raymarch step in voxels (default 0.5)")
+    r.add_argument("--raymarch-step", type=positive_float,
+                   help="raymarch step in voxels (default 0.5, or the finest the shader's 8192 "
+                        "steps across the box allow, whichever is longer)")
     r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--width", type=_positive_int)
-    r.add_argument("--height", type=_positive_int)
-    r.add_argument("--exposure", type=float, default=1.0, help="PNG exposure (default 1)")
+    r.add_argument("--width", type=positive_int)
+    r.add_argument("--height", type=positive_int)
+    r.add_argument("--exposure", type=positive_float, default=1.0, help="PNG exposure (default 1)")
+    r.add_argument("--no-empty-space-skipping", dest="empty_space_skipping", action="store_false",
+                   help="track with one global majorant instead of the macrocell grid (the same "
+                        "image; for comparisons)")
+    add_gl_backend(r)
     r.set_defaults(func=cmd_render)
 
     from .bench.config import PRESETS
@@ -191,7 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--scenes", type=lambda t: t.split(","), default=None,
                    help=f"comma-separated subset of {','.join(ALL_SCENES)}")
     b.add_argument("--out", default="bench/out", help="output folder (default bench/out)")
-    b.add_argument("--ref-spp", type=_positive_int, help="reference samples per pixel")
+    b.add_argument("--ref-spp", type=positive_int, help="reference samples per pixel")
     b.add_argument("--ref-dir", help="reuse the references (refs/*.npy and their measured noise "
                                      "in results.json) of an earlier run's output folder")
     b.add_argument("--code-label", help="names the code a run measures in its records (bake "
@@ -203,36 +114,41 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=cmd_bench)
 
     from .viewer.arguments import add_view_parser
-    add_view_parser(sub, cmd_view, _grid_arg, _positive_int)
+    add_gl_backend(add_view_parser(sub, cmd_view))
     return parser
 
 
-def _grid_arg(text: str) -> list[int]:
-    parts = text.split(",")
-    if len(parts) not in (1, 3):
-        raise argparse.ArgumentTypeError(f"expected N or NX,NY,NZ, got {text!r}")
-    values = [_positive_int(p) for p in parts]
-    return values * 3 if len(values) == 1 else values
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return v
+def add_gl_backend(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    from .gl.context import BACKENDS
+    parser.add_argument("--gl-backend", choices=BACKENDS,
+                        help="headless OpenGL backend (default: the first that works of "
+                             f"{', '.join(BACKENDS)}; RP_GL_BACKEND sets it for tests)")
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    import moderngl
+
     from .gl.context import ContextError
     from .gl.shaders import ShaderError
+    from .render.limits import DeviceLimitError
     from .volume import VolumeError
     try:
         return args.func(args)
-    except (SceneError, VolumeError, ContextError, ShaderError) as exc:
+    except (SceneError, VolumeError, OptionError, DeviceLimitError, ContextError,
+            ShaderError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except moderngl.Error as exc:  # e.g. the device ran out of memory allocating a buffer
+        print(f"error: OpenGL: {str(exc).strip().splitlines()[0] if str(exc).strip() else exc!r}",
+              file=sys.stderr)
+        return 1
+    except MemoryError:
+        print("error: out of host memory (try a smaller image, volume or probe grid)",
+              file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130

@@ -1,4 +1,5 @@
-"""The scene of SPEC.md: frozen, validated dataclasses, parsed once from JSON and written back.
+"""The scene of SPEC.md parsed once from JSON into the frozen dataclasses of app/scene_types.py
+(re-exported here, so ``from app.scene import Scene`` keeps working).
 
 Every field has a default, so ``{}`` is the built-in default scene. Unknown fields and bad values
 raise :class:`SceneError` naming the field by its JSON path (``camera.fov_y``).
@@ -8,115 +9,20 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+from .scene_types import (MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS, MAX_PROBE_SAMPLES,
+                          MAX_TRANSFER_ROWS, PROBE_FITS, PROBE_PRECISIONS, SH_WINDOWS, CameraSpec,
+                          LightSpec, ProbeSpec, Scene, SceneError, TransferFunctionSpec, VolumeSpec,
+                          scene_to_dict)
+from .transfer import COLORMAPS
+from .volume import BUILTIN_VOLUMES, RAW_DTYPES
 
-class SceneError(ValueError):
-    """A scene file or dictionary that does not follow SPEC.md; the message names the field."""
-
-
-# Largest values we accept; beyond them a scene is almost surely a typo and would only hang.
-MAX_BOUNCES_LIMIT = 1_000_000_000
-MAX_IMAGE_SIDE = 16384
-MAX_PROBE_AXIS = 256
-MAX_PROBE_SAMPLES = 1 << 20
-MAX_TRANSFER_ROWS = 4096  # the table is an N x 1 texture; GL guarantees widths up to 16384
-SH_WINDOWS = ("none", "hann", "lanczos")
-PROBE_PRECISIONS = ("rgba32f", "rgba16f")
-PROBE_FITS = ("visible", "box")
-
-
-@dataclass(frozen=True)
-class VolumeSpec:
-    path: str | None = None
-    builtin: str | None = "cloud"
-    size: tuple[int, int, int] = (64, 64, 64)
-    # None: the file's own spacing (an NRRD header's), else 1, 1, 1. A value given here always wins,
-    # even [1, 1, 1], which is why the default is None rather than (1, 1, 1).
-    spacing: tuple[float, float, float] | None = None
-    value_range: tuple[float, float] | None = None
-    dims: tuple[int, int, int] | None = None  # for .raw files not in the Open SciVis naming
-    dtype: str | None = None
-    replace_nonfinite: float | None = None  # None: NaN/Inf in the data are an error
-
-
-@dataclass(frozen=True)
-class TransferFunctionSpec:
-    colormap: str = "plasma"
-    opacity: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.2, 0.0), (1.0, 1.0))
-    rgba: tuple[tuple[float, float, float, float], ...] | None = None
-    resolution: int = 256
-
-
-def _unit(v: tuple, name: str) -> tuple[float, float, float]:
-    """``v`` scaled to unit length; idempotent, so a vector already of unit length is kept bit for bit
-    (re-normalising one can change its last bits, which would break the JSON round trip)."""
-    n = math.sqrt(sum(float(c) * float(c) for c in v))
-    if not n >= 1e-9 or not math.isfinite(n):
-        raise SceneError(f"{name}: must be a finite, non-zero vector, got {list(v)!r}")
-    if abs(n - 1.0) <= 4e-16:
-        return tuple(float(c) for c in v)
-    return tuple(float(c) / n for c in v)
-
-
-@dataclass(frozen=True)
-class LightSpec:
-    direction: tuple[float, float, float] = (0.5, 0.8, 0.3)  # normalised in __post_init__
-    irradiance: tuple[float, float, float] = (3.0, 3.0, 3.0)
-
-    def __post_init__(self) -> None:
-        # A unit vector however the spec was made (parse_scene, LightSpec(), dataclasses.replace).
-        object.__setattr__(self, "direction", _unit(self.direction, "light.direction"))
-
-
-@dataclass(frozen=True)
-class CameraSpec:
-    eye: tuple[float, float, float] = (0.0, 0.3, 2.2)
-    target: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
-    fov_y: float = 35.0
-    width: int = 512
-    height: int = 512
-
-
-@dataclass(frozen=True)
-class ProbeSpec:
-    grid: tuple[int, int, int] = (16, 16, 16)
-    samples: int = 256
-    sh_window: str = "none"
-    precision: str = "rgba32f"
-    # "auto": order 0 when g = 0 (the phase convolution zeroes bands 1 and 2: exact), else 2.
-    sh_order: str | int = "auto"
-    # "visible": the grid covers only where the transfer function makes the medium visible, and a
-    # cubic grid N puts N probes along that region's longest side; "box": the whole volume box.
-    fit: str = "visible"
-    # "auto": one channel when the transfer function's colours and both lights are grey, else 3.
-    channels: str | int = "auto"
-
-
-@dataclass(frozen=True)
-class Scene:
-    volume: VolumeSpec = field(default_factory=VolumeSpec)
-    transfer_function: TransferFunctionSpec = field(default_factory=TransferFunctionSpec)
-    density_scale: float = 100.0
-    albedo: float = 0.9
-    anisotropy: float = 0.0
-    light: LightSpec = field(default_factory=LightSpec)
-    environment: tuple[float, float, float] = (0.1, 0.1, 0.1)
-    max_bounces: int = 64
-    camera: CameraSpec = field(default_factory=CameraSpec)
-    probes: ProbeSpec = field(default_factory=ProbeSpec)
-    # Folder that relative volume paths are also looked up in (the scene file's folder).
-    base_dir: str | None = field(default=None, compare=False)
-
-    def replace(self, **changes: Any) -> "Scene":
-        return dataclasses.replace(self, **changes)
-
-    def to_dict(self) -> dict:
-        return scene_to_dict(self)
-
+__all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_SAMPLES",
+           "MAX_TRANSFER_ROWS", "PROBE_FITS", "PROBE_PRECISIONS", "SH_WINDOWS", "CameraSpec",
+           "LightSpec", "ProbeSpec", "Scene", "SceneError", "TransferFunctionSpec", "VolumeSpec",
+           "default_scene", "load_scene", "parse_scene", "scene_to_dict"]
 
 # --------------------------------------------------------------------------------------------
 # Value checks. Each names the field by its dotted JSON path.
@@ -184,7 +90,6 @@ def _parse_volume(d: Any) -> VolumeSpec:
             raise SceneError(f"volume.path: expected a file path, got {d['path']!r}")
         kw["path"], kw["builtin"] = d["path"], None
     if "builtin" in d:
-        from .volume import BUILTIN_VOLUMES
         kw["builtin"] = _choice(d["builtin"], "volume.builtin", tuple(BUILTIN_VOLUMES))
     if "size" in d:
         if kw.get("path"):
@@ -202,7 +107,6 @@ def _parse_volume(d: Any) -> VolumeSpec:
         kw["dims"] = tuple(_integer(v, f"volume.dims[{i}]", 1, 1 << 20)
                            for i, v in enumerate(_vector(d["dims"], "volume.dims", 3)))
     if d.get("dtype") is not None:
-        from .volume import RAW_DTYPES
         kw["dtype"] = _choice(d["dtype"], "volume.dtype", tuple(RAW_DTYPES))
     if d.get("replace_nonfinite") is not None:
         kw["replace_nonfinite"] = _number(d["replace_nonfinite"], "volume.replace_nonfinite")
@@ -215,7 +119,6 @@ def _parse_transfer(d: Any) -> TransferFunctionSpec:
     if "rgba" in d and ("colormap" in d or "opacity" in d):
         raise SceneError("transfer_function: give either rgba rows or colormap/opacity, not both")
     if "colormap" in d:
-        from .transfer import COLORMAPS
         kw["colormap"] = _choice(d["colormap"], "transfer_function.colormap", tuple(COLORMAPS))
     if "opacity" in d:
         pts = d["opacity"]
@@ -361,34 +264,3 @@ def load_scene(path: str | Path) -> Scene:
 
 def default_scene() -> Scene:
     return parse_scene({})
-
-
-def scene_to_dict(scene: Scene) -> dict:
-    """The scene as JSON-ready data; ``parse_scene(scene_to_dict(s)) == s``."""
-    def conv(x):
-        if isinstance(x, tuple):
-            return [conv(v) for v in x]
-        return x
-
-    out: dict[str, Any] = {}
-    for f in dataclasses.fields(scene):
-        if f.name == "base_dir":
-            continue
-        v = getattr(scene, f.name)
-        if dataclasses.is_dataclass(v):
-            sub = {k.name: conv(getattr(v, k.name)) for k in dataclasses.fields(v)}
-            if f.name == "volume":
-                sub = {k: val for k, val in sub.items() if val is not None}
-                if v.path:
-                    sub.pop("builtin", None)
-                    sub.pop("size", None)
-            if f.name == "transfer_function":
-                if v.rgba is not None:
-                    sub.pop("colormap")
-                    sub.pop("opacity")
-                else:
-                    sub.pop("rgba")
-            out[f.name] = sub
-        else:
-            out[f.name] = conv(v)
-    return out

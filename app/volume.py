@@ -6,6 +6,7 @@ that the longest side is 1.
 """
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from .scene import Scene, VolumeSpec
+from .scene_types import Scene, VolumeSpec
 
 
 class VolumeError(ValueError):
@@ -160,6 +161,11 @@ def _resolve(path: str, base_dir: str | None) -> Path:
     return alt if alt.is_file() else p
 
 
+def _one_line(exc: BaseException) -> str:
+    """A library's error message on one line (some span several)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
 def _read_raw(p: Path, dims: tuple[int, int, int] | None, dtype: str | None) -> np.ndarray:
     m = _RAW_NAME.search(p.name)
     if dims is None:
@@ -176,7 +182,7 @@ def _read_raw(p: Path, dims: tuple[int, int, int] | None, dtype: str | None) -> 
     if min(dims) < 1:
         raise VolumeError(f"{p}: dimensions must be at least 1, got {dims}")
     np_dtype = np.dtype(RAW_DTYPES[dtype]).newbyteorder("<")
-    expected = int(np.prod(dims)) * np_dtype.itemsize
+    expected = math.prod(dims) * np_dtype.itemsize   # Python integers: no 64-bit wrap-around
     actual = p.stat().st_size
     if actual != expected:
         raise VolumeError(f"{p}: file has {actual} bytes but {dims[0]}x{dims[1]}x{dims[2]} {dtype} "
@@ -185,19 +191,29 @@ def _read_raw(p: Path, dims: tuple[int, int, int] | None, dtype: str | None) -> 
 
 
 def _read_nrrd(p: Path) -> tuple[np.ndarray, tuple[float, float, float] | None]:
+    import warnings
+
     import nrrd
     try:
-        data, header = nrrd.read(str(p), index_order="C")
+        with warnings.catch_warnings():
+            # NumPy warns (and pynrrd goes on with garbage) when a header's numbers do not fit.
+            warnings.simplefilter("error", RuntimeWarning)
+            data, header = nrrd.read(str(p), index_order="C")
     except Exception as exc:  # pynrrd raises several types for malformed files
-        raise VolumeError(f"{p}: cannot read NRRD ({exc})") from None
+        raise VolumeError(f"{p}: cannot read NRRD ({_one_line(exc)})") from None
     if data.ndim != 3:
         raise VolumeError(f"{p}: expected a 3D volume, the NRRD has {data.ndim} dimensions")
     spacing = None
-    if "spacings" in header:
-        spacing = tuple(float(s) for s in header["spacings"])
-    elif "space directions" in header:
-        dirs = np.asarray(header["space directions"], dtype=np.float64)
-        spacing = tuple(float(np.linalg.norm(v)) for v in dirs)
+    try:
+        if "spacings" in header:
+            spacing = tuple(float(s) for s in header["spacings"])
+        elif "space directions" in header:
+            dirs = np.asarray(header["space directions"], dtype=np.float64)
+            spacing = tuple(float(np.linalg.norm(v)) for v in dirs)
+    except (TypeError, ValueError) as exc:
+        raise VolumeError(f"{p}: cannot read the NRRD's spacing ({_one_line(exc)})") from None
+    if spacing is not None and len(spacing) != 3:
+        raise VolumeError(f"{p}: the NRRD gives {len(spacing)} spacings for 3 axes")
     return data, spacing
 
 
@@ -205,7 +221,7 @@ def _read_npy(p: Path) -> np.ndarray:
     try:
         data = np.load(p, allow_pickle=False)
     except Exception as exc:
-        raise VolumeError(f"{p}: cannot read .npy ({exc})") from None
+        raise VolumeError(f"{p}: cannot read .npy ({_one_line(exc)})") from None
     if data.ndim != 3:
         raise VolumeError(f"{p}: expected a 3D array [z, y, x], got shape {data.shape}")
     return data

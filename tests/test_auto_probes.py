@@ -27,6 +27,11 @@ def test_auto_takes_the_first_candidate_meeting_the_target(renderer):
     assert (p.grid, p.samples) == ((2, 2, 2), 16) and p.precision == "rgba16f" and p.fit == "visible"
     assert renderer.scene == before
     assert "target 0.5000 met" in choice.report()
+    # a second search finds the probes already baked: its trials still say what they cost
+    again = choose_probes(renderer, 0.5, "raymarch", grids=(2,), walks=(16,), pilot_side=16,
+                          max_pilot_spp=512)
+    assert all(t["bake_ms"] > 0 for t in choice.trials + again.trials)
+    assert again.search_ms > again.trials[0]["bake_ms"]
 
 
 def test_auto_says_when_the_target_is_out_of_reach(renderer):

@@ -25,8 +25,8 @@ def _bake(r, seed=3, resumable=None, loop_budget=None, per_chunk=None, monkeypat
         monkeypatch.setattr(probes_module, "WALKS_PER_CHUNK", per_chunk)
         monkeypatch.setattr(probes_module, "WALKS_PER_CHUNK_UNBOUNDED", per_chunk)
     plan = r.probe_plan()
-    grid = probes_module.ProbeGrid(r.ctx, plan["grid"], r.scene.probes.samples,
-                                   box=plan["box"], resumable=resumable)
+    grid = probes_module.ProbeGrid(r.ctx, plan.grid, r.scene.probes.samples,
+                                   box=plan.box, resumable=resumable)
     if loop_budget is not None:
         grid.loop_budget, grid.loop_reserve = loop_budget, loop_budget // 2
     grid.restart(seed)
@@ -77,7 +77,7 @@ def test_one_dispatch_bake_has_no_host_round_trip(renderer):
             raise AssertionError(f"host round trip: progress.{name}")
 
     plan = renderer.probe_plan()
-    grid = probes_module.ProbeGrid(renderer.ctx, plan["grid"], 256, box=plan["box"],
+    grid = probes_module.ProbeGrid(renderer.ctx, plan.grid, 256, box=plan.box,
                                    resumable=False)
     real, grid.progress = grid.progress, Untouchable()
     try:
@@ -103,7 +103,7 @@ def test_bake_is_deterministic_for_a_seed(renderer):
 def test_bake_profile_sections_and_counters(renderer):
     plan = renderer.probe_plan()
     samples = renderer.scene.probes.samples
-    grid = probes_module.ProbeGrid(renderer.ctx, plan["grid"], samples, box=plan["box"])
+    grid = probes_module.ProbeGrid(renderer.ctx, plan.grid, samples, box=plan.box)
     profile = GpuProfile()
     counters = grid.walk_counters()
     try:
@@ -195,7 +195,7 @@ def test_light_grid_matches_its_numpy_twin(ctx):
     assert light_grid_size((64, 64, 64)) == (128, 128, 128)
     assert light_grid_size((256, 256, 100)) == (256, 256, 100)
     assert light_grid_size((1024, 512, 8)) == (512, 512, 8)
-    from app.shadow_march import light_grid_centres, sun_optical_depth_march
+    from app.twins.shadow_march import light_grid_centres, sun_optical_depth_march
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
                                    "density_scale": 30.0, "camera": CAMERA,
                                    "light": {"direction": [0.3, 0.8, -0.52]}}))
@@ -220,7 +220,7 @@ def test_walk_counters_start_from_zero_every_time(renderer):
     """A counters buffer is zeroed when made: a profiled bake after another counts only its own
     walks (GL leaves a reserved buffer's contents undefined; a driver may hand back old counts)."""
     plan = renderer.probe_plan()
-    grid = probes_module.ProbeGrid(renderer.ctx, plan["grid"], 64, box=plan["box"])
+    grid = probes_module.ProbeGrid(renderer.ctx, plan.grid, 64, box=plan.box)
     counts = []
     try:
         for _ in range(3):

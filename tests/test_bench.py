@@ -114,6 +114,9 @@ def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):
     assert by["fit visible"]["probe_grid_xyz"] != [3, 3, 3]   # the cloud is flatter than its box
     auto = [r for r in data["records"] if r.get("variant") == "auto 0.9"]
     assert len(auto) == 1 and auto[0]["auto_met"] == (auto[0]["rrmse"] <= 0.9)
+    # the image's total charges the whole search (its bakes included), not just the render
+    assert auto[0]["bake_ms"] > 0 and auto[0]["auto_search_ms"] >= auto[0]["bake_ms"]
+    assert auto[0]["total_ms"] >= auto[0]["auto_search_ms"] + auto[0]["render_ms"] - 1e-9
     text = write_report(again).read_text()
     assert "Cost that follows the scene" in text and "| baseline |" in text
     assert "| auto target |" in text

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from app.directions import fibonacci_direction, fibonacci_directions, random_rotation
-from app.sh import sh_project_function, sh_project_samples
+from app.twins.directions import fibonacci_direction, fibonacci_directions, random_rotation
+from app.twins.sh import sh_project_function, sh_project_samples
 from glsl_harness import run_kernel
 
 FIBONACCI_KERNEL = """

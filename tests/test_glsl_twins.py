@@ -22,10 +22,10 @@ Tolerances
 import numpy as np
 import pytest
 
-from app import rng as nrng
-from app.camera import camera_frame
+from app.twins import rng as nrng
+from app.twins.camera import camera_frame
 from app.gl.textures import transfer_texture, volume_texture
-from app.medium import albedo_at, box_intersect, density_at, sigma_t_at
+from app.twins.medium import albedo_at, box_intersect, density_at, sigma_t_at
 from app.scene import CameraSpec
 from app.transfer import lookup
 from app.volume import Volume

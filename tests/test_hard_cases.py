@@ -47,11 +47,11 @@ import moderngl
 import numpy as np
 import pytest
 
-from app import rng as nrng
-from app.camera import camera_frame
+from app.twins import rng as nrng
+from app.twins.camera import camera_frame
 from app.gl.shaders import compute_program, set_uniforms
-from app.medium import box_intersect
-from app.phase import phase_hg
+from app.twins.medium import box_intersect
+from app.twins.phase import phase_hg
 from app.render.renderer import Renderer, RenderResult
 from app.scene import Scene, parse_scene
 from app.transfer import transfer_table

@@ -1,4 +1,4 @@
-"""Empty-space skipping: the macrocell majorant grid (app/majorant.py, glsl/majorant_grid.comp) and
+"""Empty-space skipping: the macrocell majorant grid (app/twins/majorant_grid.py, glsl/majorant_grid.comp) and
 the DDA in delta and ratio tracking (glsl/lib/tracking.glsl).
 
 The grid must bound sigma_t everywhere in every cell (NumPy twin and GPU-sampled sigma_t, sharp
@@ -13,9 +13,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from app.majorant import (MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_grid,
+from app.twins.majorant_grid import (MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_grid,
                           voxel_ranges)
-from app.medium import density_at, sigma_t_at
+from app.twins.medium import density_at, sigma_t_at
 from app.render.renderer import Renderer
 from app.render.resources import SceneResources
 from app.scene import parse_scene

@@ -2,10 +2,12 @@
 every point where sigma_t > 0, a cubic request follows the region's aspect, SH order 0 gives the
 same images as order 2 when g = 0 (the phase convolution zeroes bands 1 and 2), and a fitted grid
 renders as well as the box grid."""
+import dataclasses
+
 import numpy as np
 import pytest
 
-from app.medium import sigma_t_at
+from app.twins.medium import sigma_t_at
 from app.render.probe_layout import (TEXTURES_FOR_ORDER, fitted_grid, resolve_sh_order,
                                      visible_region)
 from app.render.renderer import Renderer
@@ -99,6 +101,12 @@ def test_fitted_grid_bakes_inside_the_visible_region(ctx):
         low, high = r.visible_region()
         grid = r.probe_grid
         assert grid.box is not None and grid.grid == fitted_grid((4, 4, 4), low, high)
+        plan = r.probe_plan()   # a frozen dataclass, equal to what was baked
+        assert (plan.grid, plan.box, plan.sh_order, plan.grey) == (grid.grid, grid.box,
+                                                                   grid.sh_order, grid.grey)
+        assert plan.defines() == grid.defines() and plan == r.probe_plan()
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            plan.grid = (1, 1, 1)
         assert grid.grid != (4, 4, 4)   # the cloud is flatter than its box
         np.testing.assert_allclose(grid.box[0], low)
         # the camera never re-bakes; a transfer-function change that moves the region does

@@ -104,3 +104,50 @@ def test_lookup_equal_entries_exact():
     table = np.array([[1.0, 0.3, 0.7, 1.0]] * 5, np.float32)
     d = np.random.default_rng(0).uniform(size=10000)
     np.testing.assert_array_equal(lookup(table, d), np.broadcast_to(table[0].astype(np.float64), (10000, 4)))
+
+
+def _mri_like_rows(n: int = 256) -> tuple:
+    """An explicit RGBA table as an MRI scene gives it: transparent air, a ramp, a plateau."""
+    d = np.linspace(0, 1, n)
+    alpha = np.clip((d - 0.2) / 0.3, 0, 1) * 0.6
+    return tuple((float(x), float(x) ** 2, 0.5, float(a)) for x, a in zip(d, alpha))
+
+
+def test_the_editor_sees_an_explicit_tables_real_opacity():
+    from app.transfer import opacity_points
+    spec = TransferFunctionSpec(rgba=_mri_like_rows())
+    points, error = opacity_points(spec)
+    assert error < 1e-12 and len(points) <= 5          # the same curve, from its corners only
+    table = transfer_table(spec)
+    np.testing.assert_allclose(opacity_curve(points, len(table)), table[:, 3], atol=1e-6)
+    assert points != ((0.0, 0.0), (1.0, 1.0))          # not the straight 0-to-1 ramp
+    # an opacity curve is its own points
+    curve = TransferFunctionSpec(opacity=((0.0, 0.0), (0.4, 0.1), (1.0, 0.7)))
+    assert opacity_points(curve) == (curve.opacity, 0.0)
+
+
+def test_a_noisy_table_is_shown_with_the_points_that_matter_and_says_how_far_off():
+    from app.transfer import MAX_EDIT_POINTS, opacity_points
+    rng = np.random.default_rng(3)
+    d = np.linspace(0, 1, 4096)
+    alpha = np.clip(np.sin(6 * d) * 0.5 + 0.5 + rng.normal(0, 0.002, d.size), 0, 1)
+    spec = TransferFunctionSpec(rgba=tuple((0.1, 0.2, 0.3, float(a)) for a in alpha))
+    points, error = opacity_points(spec)
+    assert len(points) == MAX_EDIT_POINTS and points[0][0] == 0.0 and points[-1][0] == 1.0
+    measured = np.abs(opacity_curve(points, d.size) - alpha).max()
+    assert error == pytest.approx(measured) and 0 < error < 0.02
+
+
+def test_editing_an_explicit_tables_curve_keeps_its_colours():
+    from app.transfer import rgba_with_opacity
+    rows = ((0.0, 0.0, 1.0, 0.0), (1.0, 0.5, 0.0, 0.5), (0.2, 1.0, 0.2, 1.0))
+    spec = TransferFunctionSpec(rgba=rows)
+    new = np.asarray(rgba_with_opacity(spec, ((0.0, 0.0), (0.25, 0.8), (1.0, 0.1))))
+    assert len(new) >= spec.resolution and (len(new) - 1) % (len(rows) - 1) == 0
+    step = (len(new) - 1) // (len(rows) - 1)
+    np.testing.assert_array_equal(new[::step, :3], np.asarray(rows)[:, :3])  # old colours exact
+    d = np.linspace(0, 1, len(new))
+    np.testing.assert_allclose(new[:, 3], np.interp(d, [0, 0.25, 1], [0, 0.8, 0.1]), atol=1e-12)
+    # colours in between are the old table's own interpolation
+    old = np.stack([np.interp(d, [0, 0.5, 1], np.asarray(rows)[:, c]) for c in range(3)], 1)
+    np.testing.assert_allclose(new[:, :3], old, atol=1e-12)

@@ -14,15 +14,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.camera import camera_frame
+from app.twins.camera import camera_frame
 from app.scene import CameraSpec, load_scene, parse_scene
-from app.sh import sh_evaluate
+from app.twins.sh import sh_evaluate
 from app.viewer import layout, orbit
-from app.viewer.probe_view import box_edges, probe_centres, uv_sphere
+from app.viewer.probe_view import RADIUS_PER_SPACING, box_edges, probe_centres, uv_sphere
 from app.viewer.state import (ViewerState, add_point, angles_from_direction, direction_from_angles,
                               move_point, remove_point)
 from viewer_harness import dump, png, srgb8, view, view_pixels, write_script
 from app.render.probe_layout import TEXTURES_FOR_ORDER
+from app.transfer import transfer_table
 
 # The test scene scatters isotropically (g = 0), so "auto" stores SH order 0: two textures.
 PROBE_TEXTURES_G0 = len(TEXTURES_FOR_ORDER[0])
@@ -99,13 +100,61 @@ def test_state_edits_replace_the_scene():
     state.step_probe_grid(-1)
     assert state.scene.probes.grid == (12, 12, 12)
     state.cycle_colormap()
-    assert state.scene.transfer_function.rgba is None  # editing replaces an explicit table
+    # a colormap replaces an explicit table's colours and keeps its opacity curve
+    assert state.scene.transfer_function.rgba is None
+    assert state.scene.transfer_function.opacity == ((0.0, 0.0), (1.0, 1.0))
     state.turn_light(15.0, 0.0)
     assert angles_from_direction(state.scene.light.direction)[0] == pytest.approx(
         angles_from_direction(first.light.direction)[0] + 15.0)
     state.set_camera(replace(state.scene.camera, fov_y=50.0))
     state.reset_camera()
     assert state.scene.camera == first.camera
+
+
+def test_editing_an_explicit_tables_opacity_keeps_it_explicit():
+    rows = [[0, 0, 1, 0], [1, 0.5, 0, 0.5], [0.2, 1, 0.2, 1]]
+    state = ViewerState.for_scene(parse_scene({"transfer_function": {"rgba": rows}}))
+    state.set_transfer(opacity=((0.0, 0.0), (0.5, 0.1), (1.0, 0.2)))
+    tf = state.scene.transfer_function
+    assert tf.rgba is not None and tf.rgba[0][:3] == (0.0, 0.0, 1.0) and tf.rgba[-1] == (0.2, 1.0, 0.2, 0.2)
+    assert parse_scene(state.scene.to_dict()) == state.scene     # still a valid scene
+
+
+def test_probe_view_draws_the_visible_probes_and_thins_large_grids():
+    from app.twins.medium import sigma_t_at
+    from app.viewer.probe_view import MAX_SPHERES, select_probes, visible_cells
+    from app.volume import load_volume
+    scene = parse_scene({"volume": {"builtin": "sphere", "size": [40, 40, 40]},
+                         "transfer_function": {"opacity": [[0, 0], [0.5, 0], [0.6, 1], [1, 1]]}})
+    volume = load_volume(scene.volume)
+    alpha = transfer_table(scene.transfer_function)[:, 3]
+    grid = (32, 32, 32)
+    visible = visible_cells(grid, None, volume, alpha, scene.density_scale)
+    # brute force: a probe's cell holds a voxel centre where the medium is visible
+    centres = probe_centres(grid, volume.half_extent)
+    assert visible.sum() > 0 and visible.sum() < visible.size / 2
+    he = np.asarray(volume.half_extent)
+    z, y, x = np.meshgrid(*[(np.arange(n) + 0.5) / n * 2 * h - h
+                            for n, h in zip(volume.dims[::-1], he[::-1])], indexing="ij")
+    points = np.stack([x, y, z], -1).reshape(-1, 3)
+    seen = sigma_t_at(volume, transfer_table(scene.transfer_function), scene.density_scale,
+                      points) > 0
+    cell = np.floor((points[seen] + he) / (2 * he) * 32).astype(int)
+    expected = np.zeros((32, 32, 32), bool)
+    expected[cell[:, 2], cell[:, 1], cell[:, 0]] = True
+    assert (visible >= expected).all() and (visible & ~expected).sum() <= 0.1 * expected.sum()
+    chosen = select_probes(grid, visible)
+    assert chosen.stride == 1 and len(chosen.indices) == visible.sum() <= MAX_SPHERES
+    assert visible.ravel()[chosen.indices].all() and len(centres) == chosen.total == 32 ** 3
+    # a grid with more visible probes than MAX_SPHERES: the smallest stride that fits
+    full = np.ones((64, 64, 64), bool)
+    thinned = select_probes((64, 64, 64), full)
+    assert len(thinned.indices) <= MAX_SPHERES < len(select_probes((64, 64, 64), full,
+                                                                   10 ** 9).indices)
+    assert thinned.stride == 4 and len(thinned.indices) == 16 ** 3
+    # nothing visible (an empty volume): every probe, so the view is not blank
+    nothing = select_probes((4, 4, 4), np.zeros((4, 4, 4), bool))
+    assert len(nothing.indices) == 64 and nothing.visible == 0
 
 
 def test_shown_methods_and_probe_needs():
@@ -220,8 +269,8 @@ def run(display, tmp_path_factory):
     ]
     script = write_script(out / "script.json", steps)
     proc = view(["scene.json", "--script", str(script), "--window", WINDOW, "--spp", str(SPP),
-                 "--render-scale", "0.5"], out, display, harness=["--release-check"],
-                env={"RP_FILE_DIALOG": "builtin"})
+                 "--render-scale", "0.5", "--file-dialog", "builtin"], out, display,
+                harness=["--release-check"])
     return out, proc
 
 
@@ -292,13 +341,26 @@ def test_orbit_restarts_the_image_but_never_rebakes(run):
 
 def _sphere_colours_checked(image: np.ndarray, d: dict) -> int:
     """Compares the centre pixel of the nearest probes' spheres with the probe's SH radiance at
-    the normal facing the camera (app/sh.py, tone mapped); returns how many were compared."""
+    the normal facing the camera (app/twins/sh.py, tone mapped); returns how many were compared."""
     x0, _, w, h = d["view_rect_framebuffer"]
     coeffs = np.array(d["probe_coefficients"])[:, :27].reshape(-1, 9, 3)
     centres = probe_centres(tuple(d["probe_grid"]), d["half_extent"])
     eye = np.array(d["camera_eye"])
     checked = 0
-    for i in np.argsort(np.linalg.norm(centres - eye, axis=1))[:16]:  # nearest: not hidden
+    drawn = d["probes_drawn"]["indices"]
+    radius = (RADIUS_PER_SPACING * d["probes_drawn"]["stride"]
+              * (2 * np.asarray(d["half_extent"]) / np.asarray(d["probe_grid"])).min())
+
+    def hidden(i: int) -> bool:
+        """Another drawn sphere lies on the ray from the eye to this probe's centre, before it."""
+        ray = (centres[i] - eye) / np.linalg.norm(centres[i] - eye)
+        t = (centres[drawn] - eye) @ ray
+        miss = np.linalg.norm(centres[drawn] - eye - t[:, None] * ray, axis=1)
+        return bool(np.any((t < t[drawn.index(i)] - 1e-9) & (miss < 1.05 * radius)))
+
+    nearest = [i for i in np.argsort(np.linalg.norm(centres - eye, axis=1))
+               if i in drawn and not hidden(i)]
+    for i in nearest[:16]:  # nearest of those drawn that nothing hides
         px, py = d["probe_pixels"][i]
         if not (x0 + 5 < px < x0 + w - 5 and 40 < py < h - 5):
             continue
@@ -379,6 +441,46 @@ def test_resize_drop_save_and_close(run):
     assert "release check:" in proc.stdout and ", 0 still alive" in proc.stdout
 
 
+def test_unseen_volume_with_an_explicit_table_and_a_fine_probe_grid(display, tmp_path):
+    """The issue's case: a head-like volume the viewer has not seen, an explicit RGBA transfer
+    function that leaves the air transparent, the probe view at 32^3. The editor shows the
+    table's own opacity, and the probe view draws the probes in the visible head only, so most
+    of the picture is still the volume."""
+    from app.transfer import opacity_points
+    z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in (40, 48, 40)), indexing="ij")
+    r = np.sqrt(x * x + (y / 1.1) ** 2 + z * z)
+    head = np.where(r < 0.7, 0.55 + 0.3 * (r < 0.6), 0.02 * np.cos(9 * x) ** 2)
+    np.save(tmp_path / "head.npy", head.astype(np.float32))
+    d = np.linspace(0, 1, 64)
+    rows = [[float(v), float(v) * 0.8, 0.7, float(np.clip((v - 0.3) * 2.5, 0, 1) * 0.8)] for v in d]
+    scene = {"volume": {"path": "head.npy"}, "transfer_function": {"rgba": rows},
+             "camera": {"width": 64, "height": 64}, "density_scale": 40}
+    (tmp_path / "head.json").write_text(json.dumps(scene))
+    script = write_script(tmp_path / "s.json", [
+        {"until": "baked"}, {"frames": 2}, {"dump": "over.json"}, {"screenshot": "over.png"},
+        {"key": "g"}, {"frames": 2}, {"dump": "alone.json"}, {"screenshot": "alone.png"},
+        {"click": "Empty-space skipping"}, {"until": "baked"}, {"dump": "global.json"},
+        {"close": True}])
+    view(["head.json", "--script", str(script), "--method", "raymarch", "--probe-view",
+          "--probe-grid", "32", "--probe-samples", "1", "--window", "640x400"], tmp_path, display)
+    over, alone = dump(tmp_path / "over.json"), dump(tmp_path / "alone.json")
+    expected, _ = opacity_points(load_scene(tmp_path / "head.json").transfer_function)
+    assert [tuple(p) for p in over["opacity_points"]] == [tuple(p) for p in expected]
+    assert over["opacity_points"] != [[0.0, 0.0], [1.0, 1.0]] and len(expected) <= 6
+    drawn = alone["probes_drawn"]
+    assert drawn["total"] == math.prod(alone["probe_grid"]) and max(alone["probe_grid"]) == 32
+    assert 0 < drawn["visible"] < drawn["total"] and drawn["stride"] >= 1
+    assert len(drawn["indices"]) <= min(drawn["visible"], 4096)
+    from app.viewer.display import BACKGROUND
+    image = view_pixels(png(tmp_path / "alone.png"), alone)
+    covered = ~_is_background(image, np.round(np.array(BACKGROUND) * 255))
+    assert 0.02 < covered.mean() < 0.5, covered.mean()   # a lattice in the head, not a wall
+    # the Render panel's switch: one global majorant; the probes re-bake (their key holds it)
+    switched = dump(tmp_path / "global.json")
+    assert over["empty_space_skipping"] and not switched["empty_space_skipping"]
+    assert switched["bakes_started"] == over["bakes_started"] + 1 and switched["probes_ready"]
+
+
 def test_cli_screenshot_starts_its_own_display(display, tmp_path):
     """`view SCENE --screenshot --frames N --method M --probe-view` with no DISPLAY at all: the
     viewer runs in its own Xvfb and saves the window's image. (`display` only skips the test
@@ -407,7 +509,7 @@ def test_shader_error_is_shown_not_a_crash(display, tmp_path):
     assert any("probe_sphere" in e and "spheres" in e for e in d["errors"]), d["errors"]
     assert "error shown in the window" in proc.stderr
     image = png(tmp_path / "s.png")
-    panel = image[200:, 300:]
+    panel = image[120:, 300:]
     assert ((panel[..., 0] > 100) & (panel[..., 1] < 60)).sum() > 200   # the red error panel
     assert d["samples"]["pt"] >= 1                              # and the volume kept rendering
 

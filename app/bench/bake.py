@@ -30,6 +30,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..imageio import save_png
+from .records import log as _log, make_record, progressive as _progressive
 from .ceiling import measure_ceiling
 
 
@@ -75,7 +76,6 @@ def _profile(renderer, seed: int) -> dict:
 
 def bake_scene(renderer, name: str, config, results, out, device: str,
                reference: np.ndarray, label: str = "current") -> None:
-    from .runner import _log, _progressive, make_record
     scene = renderer.scene
     base = {"scene": name, "device": device, "width": config.width, "height": config.height,
             "mode": "bake", "code": label}

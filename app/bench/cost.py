@@ -17,6 +17,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..imageio import save_png
+from .records import log as _log, make_record, progressive as _progressive
 
 PROBE_VARIANTS = (
     ("baseline", {"fit": "box", "sh_order": 2, "precision": "rgba32f", "channels": 3}),
@@ -40,7 +41,6 @@ def _set_skipping(renderer, on) -> None:
 
 def cost_scene(renderer, name: str, config, results, out, device: str,
                reference: np.ndarray) -> None:
-    from .runner import _log, _progressive, make_record
     scene = renderer.scene
     k = config.samples_per_dispatch
     base = {"scene": name, "device": device, "width": config.width, "height": config.height,
@@ -96,12 +96,12 @@ def auto_scene(renderer, target: float, config, record, log, progressive) -> Non
     scene = renderer.scene
     choice = choose_probes(renderer, target, "raymarch")
     renderer.set_scene(choice.scene)
-    bake_ms = renderer.bake(seed=11) + renderer.bake_light()
+    # The chosen setting's probes are the search's last trial (the camera never re-bakes): their
+    # bake is already paid inside search_ms, and bake_ms says what it was.
+    renderer.bake(seed=11)
+    light_ms = renderer.bake_light()
+    bake_ms = renderer.last_bake_ms + light_ms
     g = renderer.probe_grid
-    chosen = next((t for t in choice.trials if (t["grid"], t["walks"]) ==
-                   (choice.scene.probes.grid[0], choice.scene.probes.samples)), None)
-    if chosen is not None:
-        bake_ms += chosen["bake_ms"]   # the pilot's bake is this one: the camera never re-bakes
     for n, image, *timing in progressive(renderer, "raymarch", (config.cost_raymarch_frames,), 13,
                                          config.samples_per_dispatch):
         r = record("raymarch", n, image, timing, bake_ms, variant=f"auto {target:g}",
@@ -109,7 +109,12 @@ def auto_scene(renderer, target: float, config, record, log, progressive) -> Non
                    probe_grid_xyz=list(g.grid), sh_order=g.sh_order, precision=g.precision,
                    fit="visible", probe_bytes=g.gpu_bytes, auto_target=target,
                    auto_pilot_rrmse=choice.rrmse, auto_met_on_pilot=choice.met,
-                   auto_trials=choice.trials, auto_pilot_spp=choice.pilot_spp)
+                   auto_trials=choice.trials, auto_pilot_spp=choice.pilot_spp,
+                   auto_search_ms=choice.search_ms)
+    # Everything this image cost: the whole search (pilot path traces, each trial's bake and
+    # pilot render, the chosen bake among them), the light grid if it was baked now, the render.
+    r["total_ms"] = choice.search_ms + light_ms + r["render_ms"]
+    r["total_includes"] = "auto search (pilot path traces, trial bakes and renders) + render"
     r["auto_met"] = r["rrmse"] <= target
     log(f"  auto {target:g}: {choice.scene.probes.grid[0]}^3 x {choice.scene.probes.samples} -> "
         f"grid {g.grid}; pilot rRMSE {choice.rrmse:.4f}, full-resolution rRMSE {r['rrmse']:.4f} "

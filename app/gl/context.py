@@ -1,6 +1,8 @@
 """OpenGL 4.3 core contexts: headless (EGL, then OSMesa, then GLX) and, in the viewer, GLFW.
 
-Headless code imports neither glfw nor imgui. ``RP_GL_BACKEND=egl|osmesa|x11`` forces one backend.
+Headless code imports neither glfw nor imgui. ``create_headless_context("egl"|"osmesa"|"x11")``
+(the CLI's ``--gl-backend``) forces one backend; without one, ``RP_GL_BACKEND`` names it (a
+shortcut for running a whole test suite on one backend), else they are tried in that order.
 """
 from __future__ import annotations
 
@@ -62,14 +64,20 @@ def _osmesa() -> moderngl.Context:
 _BACKENDS = {"egl": _egl, "osmesa": _osmesa, "x11": _x11}
 
 
-def create_headless_context() -> moderngl.Context:
-    """An OpenGL 4.3 core context with no window; raises :class:`ContextError` naming what to install."""
-    forced = os.environ.get("RP_GL_BACKEND")
-    order = [forced] if forced else ["egl", "osmesa", "x11"]
+BACKENDS = tuple(_BACKENDS)
+
+
+def create_headless_context(backend: str | None = None) -> moderngl.Context:
+    """An OpenGL 4.3 core context with no window, from `backend` (one of BACKENDS) or the first
+    that works; raises :class:`ContextError` naming what to install."""
+    where = "backend"
+    if backend is None and os.environ.get("RP_GL_BACKEND"):
+        backend, where = os.environ["RP_GL_BACKEND"], "RP_GL_BACKEND"
+    order = [backend] if backend else list(BACKENDS)
     tried = []
     for name in order:
         if name not in _BACKENDS:
-            raise ContextError(f"RP_GL_BACKEND={name!r}: expected one of {', '.join(_BACKENDS)}")
+            raise ContextError(f"{where} {name!r}: expected one of {', '.join(_BACKENDS)}")
         try:
             ctx = _BACKENDS[name]()
         except Exception as exc:  # each backend fails in its own way

@@ -11,6 +11,7 @@ import ctypes.util
 
 GL_TIMESTAMP = 0x8E28
 GL_QUERY_RESULT = 0x8866
+GL_FRAMEBUFFER = 0x8D40
 
 _gl = None
 
@@ -32,6 +33,7 @@ def _lib():
             lib.glQueryCounter.argtypes = [ctypes.c_uint, ctypes.c_uint]
             lib.glGetQueryObjectui64v.argtypes = [ctypes.c_uint, ctypes.c_uint,
                                                   ctypes.POINTER(ctypes.c_uint64)]
+            lib.glBindFramebuffer.argtypes = [ctypes.c_uint, ctypes.c_uint]
             _gl = lib
             break
         else:
@@ -44,11 +46,21 @@ class GpuTimer:
 
     >>> t = GpuTimer(); t.start(); ...dispatch...; t.stop(); t.elapsed_ms
     Falls back to moderngl's GL_TIME_ELAPSED query when libOpenGL is not available.
+
+    On a software rasteriser (llvmpipe) a timestamp is binned into the rasteriser's pending scene
+    and taken when that scene runs, after the compute work it should bracket; binding another
+    framebuffer flushes the scene. So on those, start() binds a 1x1 framebuffer of its own and
+    then the framebuffer it found (its viewport with it): callers see no change of binding.
     """
 
     def __init__(self, ctx=None):
         self._gl = _lib()
         self._ctx = ctx
+        self._flush_fbo = None
+        if ctx is not None:
+            renderer = ctx.info.get("GL_RENDERER", "").lower()
+            if any(name in renderer for name in ("llvmpipe", "softpipe", "lavapipe")):
+                self._flush_fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer((1, 1), 4)])
         self._fallback = None
         if self._gl is not None:
             self._ids = (ctypes.c_uint * 2)()
@@ -61,7 +73,20 @@ class GpuTimer:
     def available(self) -> bool:
         return self._gl is not None or self._fallback is not None
 
+    def _flush_rasteriser(self) -> None:
+        found = self._ctx.fbo
+        if found is not None and type(found.mglo).__name__ == "InvalidObject":
+            found = None   # the caller released the framebuffer it last used
+        self._flush_fbo.use()
+        if found is not None:
+            found.use()
+        elif self._gl is not None:   # a standalone context before any framebuffer was used
+            self._gl.glBindFramebuffer(GL_FRAMEBUFFER, 0)
+            self._ctx.fbo = None
+
     def start(self) -> None:
+        if self._flush_fbo is not None:
+            self._flush_rasteriser()
         if self._gl is not None:
             self._gl.glQueryCounter(self._ids[0], GL_TIMESTAMP)
         elif self._fallback is not None:
@@ -97,3 +122,11 @@ class GpuTimer:
         if self._gl is not None:
             self._gl.glDeleteQueries(2, self._ids)
             self._gl = None
+        if self._fallback is not None:
+            self._fallback.release()
+            self._fallback = None
+        if self._flush_fbo is not None:
+            for attachment in self._flush_fbo.color_attachments:
+                attachment.release()
+            self._flush_fbo.release()
+            self._flush_fbo = None

@@ -41,6 +41,9 @@ class AutoChoice:
     pilot_spp: int
     trials: list[dict] = field(default_factory=list)
     reasons: list[str] = field(default_factory=list)
+    # GPU ms the choice cost: the pilot's path traces, every trial's bake (what its probes cost,
+    # also when the renderer already held them) and every trial's pilot render.
+    search_ms: float = 0.0
 
     def report(self) -> str:
         from .probe_layout import resolve_sh_order
@@ -80,9 +83,12 @@ def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
         renderer.set_scene(pilot)
         # Pilot: double the samples until its own noise is at most target / 5.
         spp, halves, noise = 64, None, math.inf
+        search_ms = 0.0
         while True:
-            halves = [renderer.render("pt", spp=spp, seed=s, samples_per_pass=min(spp, 64)).image
-                      for s in (901, 902)]
+            runs = [renderer.render("pt", spp=spp, seed=s, samples_per_pass=min(spp, 64))
+                    for s in (901, 902)]
+            search_ms += sum(r.render_ms for r in runs)
+            halves = [r.image for r in runs]
             noise = reference_noise(*halves)
             if progress:
                 progress(f"pilot {2 * spp} spp: noise {noise:.4f}")
@@ -100,8 +106,13 @@ def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
                 probes = replace(pilot.probes, grid=(grid, grid, grid), samples=n, sh_order=order,
                                  precision="rgba16f", fit="visible", channels="auto")
                 renderer.set_scene(pilot.replace(probes=probes))
-                bake_ms = renderer.bake(seed=7)
-                image = renderer.render(method, spp=frames, seed=5, samples_per_pass=frames).image
+                renderer.bake(seed=7)
+                # What these probes cost, also when the renderer held them already (an earlier
+                # search baked the same setting): bake() then returns 0 and last_bake_ms keeps it.
+                bake_ms = renderer.last_bake_ms
+                run = renderer.render(method, spp=frames, seed=5, samples_per_pass=frames)
+                search_ms += bake_ms + run.bake_ms + run.render_ms
+                image = run.image
                 err = rrmse(image, reference)
                 trial = {"grid": grid, "walks": n, "rrmse": err, "bake_ms": bake_ms,
                          "probes": renderer.probe_grid.count}
@@ -127,6 +138,6 @@ def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
         probes = replace(original.probes, grid=(chosen["grid"],) * 3, samples=chosen["walks"],
                          sh_order=order, precision="rgba16f", fit="visible", channels="auto")
         return AutoChoice(original.replace(probes=probes), target, met, chosen["rrmse"], noise,
-                          pilot_spp, trials, reasons)
+                          pilot_spp, trials, reasons, search_ms)
     finally:
         renderer.set_scene(original)

@@ -1,4 +1,4 @@
-"""The macrocell majorant grid on the GPU (empty-space skipping; see app/majorant.py).
+"""The macrocell majorant grid on the GPU (empty-space skipping; see app/twins/majorant_grid.py).
 
 Per volume, the density range of every macrocell is computed with NumPy and uploaded once (RG32F);
 whenever the transfer function or density_scale changes, glsl/majorant_grid.comp turns it into the
@@ -12,7 +12,7 @@ import moderngl
 import numpy as np
 
 from ..gl.shaders import compute_program, set_uniforms
-from ..majorant import MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_bound
+from ..twins.majorant_grid import MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_bound
 from ..volume import Volume
 
 # Texture units: 0 volume, 1 transfer function, 2..8 probes, 9 light transmittance (raymarcher).
@@ -77,7 +77,7 @@ class MajorantGrid:
         self.builds += 1
 
     def read(self) -> np.ndarray:
-        """The grid as float32 [cz, cy, cx] (tests compare it with app/majorant.py)."""
+        """The grid as float32 [cz, cy, cx] (tests compare it with app/twins/majorant_grid.py)."""
         cx, cy, cz = self.cells
         return np.frombuffer(self.texture.read(), np.float32).reshape(cz, cy, cx).copy()
 

@@ -5,7 +5,7 @@ import struct
 
 import moderngl
 
-from ..camera import CameraFrame
+from ..twins.camera import CameraFrame
 from ..gl.context import loop_budget, loop_budget_unbounded
 from ..gl.shaders import compute_program, set_uniforms
 from .accumulation import Accumulation

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import moderngl
 
-from ..camera import CameraFrame
+from ..twins.camera import CameraFrame
 from ..gl.shaders import compute_program, render_program, set_uniforms
 from .accumulation import Accumulation
 from .light_transmittance import LIGHT_UNIT
@@ -12,6 +12,30 @@ from .pathtracer import groups
 from .resources import SceneResources
 
 STAGES = ("compute", "fragment")
+MAX_MARCH_STEPS = 8192   # glsl/lib/raymarch.glsl clamps a ray's step count to this
+
+
+def voxel_size(volume) -> float:
+    """The smallest voxel side in world units (the box's longest side is 1)."""
+    he = volume.half_extent
+    return float(min(2.0 * he[i] / volume.dims[i] for i in range(3)))
+
+
+def min_step_voxels(volume) -> float:
+    """The smallest raymarch step (in voxels of the smallest side) the shader honours: a ray
+    across the box's diagonal may take at most MAX_MARCH_STEPS steps, beyond which the shader
+    would silently lengthen them."""
+    diagonal = 2.0 * float((volume.half_extent.astype("float64") ** 2).sum() ** 0.5)
+    return diagonal / MAX_MARCH_STEPS / voxel_size(volume)
+
+
+def check_step(step_voxels: float, volume) -> None:
+    """Raises ValueError for a step the shader would lengthen on this volume's longest rays."""
+    low = min_step_voxels(volume)
+    if step_voxels < low:
+        raise ValueError(f"raymarch step {step_voxels:g} voxels: too fine for this volume (a ray "
+                         f"across its box may take at most {MAX_MARCH_STEPS} steps); use at "
+                         f"least {low:.3g}")
 
 
 class Raymarcher:

@@ -1,6 +1,7 @@
 """One front for every render method: the CLI, the viewer and the benchmark all call this."""
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -8,21 +9,37 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from ..camera import camera_frame
+from ..twins.camera import camera_frame
 from ..gl.timer import GpuTimer
 from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation
+from .limits import check_image_size
 from .pathtracer import PathTracer
 from .light_transmittance import MAX_SIDE as LIGHT_MAX_SIDE, LightTransmittance
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, visible_region
 from .probes import ProbeGrid
-from .raymarch import Raymarcher
+from .raymarch import Raymarcher, min_step_voxels
 from .resources import SceneResources
 
 METHODS = ("pt", "probes", "probes-only", "raymarch")
 # Variants of glsl/pathtrace.comp: the probe renderers stop at the first scattering event.
 PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
+
+
+@dataclass(frozen=True)
+class ProbePlan:
+    """The probe grid a scene gets (Renderer.probe_plan): probes per axis, the world box they
+    cover (low and high corners as plain floats; None: the whole volume box), the SH order kept
+    (0, 1 or 2) and whether one grey channel is stored instead of three."""
+    grid: tuple[int, int, int]
+    box: tuple[tuple[float, float, float], tuple[float, float, float]] | None
+    sh_order: int
+    grey: bool
+
+    def defines(self) -> dict:
+        """The compile-time probe layout of the shaders that read such a grid (lib/probes.glsl)."""
+        return {"PROBE_SH_ORDER": self.sh_order, "PROBE_GREY": int(self.grey)}
 
 
 @dataclass
@@ -39,17 +56,26 @@ class RenderResult:
         return self.render_ms / max(self.spp, 1)
 
 
+RAYMARCH_STAGES = ("compute", "fragment")
+
+
 class Renderer:
-    def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None):
+    def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None, *,
+                 empty_space_skipping: bool = True, raymarch_stage: str = "compute",
+                 raymarch_step: float = 0.5):
+        """`empty_space_skipping`: tracking over the macrocell majorant grid (default) or one
+        global majorant (the same unbiased estimator, for comparisons); `raymarch_stage`: the
+        raymarcher as a compute (default) or the design card's fragment pass; `raymarch_step`:
+        its step in voxels of the smallest spacing (finite, > 0)."""
+        self.raymarch_stage = raymarch_stage          # checked before anything is allocated
+        self.raymarch_step_voxels = raymarch_step
         self.ctx = ctx
-        self.resources = SceneResources(ctx, scene, volume)
+        self.resources = SceneResources(ctx, scene, volume, use_majorant_grid=empty_space_skipping)
         self._passes: dict[str, PathTracer] = {}
         self._acc: Accumulation | None = None
         self.timer = GpuTimer(ctx)
         self.probe_grid: ProbeGrid | None = None
         self._baked_key: tuple | None = None
-        self.raymarch_stage = "compute"   # or "fragment" (the design card's)
-        self.raymarch_step_voxels = 0.5   # raymarch step in voxels of the smallest spacing
         self._raymarchers: dict[str, Raymarcher] = {}
         self._light: LightTransmittance | None = None
         self.light_max_side = LIGHT_MAX_SIDE   # the light grid's texels per axis at most
@@ -69,6 +95,35 @@ class Renderer:
         self.camera = None
         self.last_bake_ms = 0.0
         self.last_light_ms = 0.0
+
+    @property
+    def raymarch_stage(self) -> str:
+        return self._raymarch_stage
+
+    @raymarch_stage.setter
+    def raymarch_stage(self, stage: str) -> None:
+        if stage not in RAYMARCH_STAGES:
+            raise ValueError(f"raymarch stage: expected one of {', '.join(RAYMARCH_STAGES)}, "
+                             f"got {stage!r}")
+        self._raymarch_stage = stage
+
+    @property
+    def raymarch_step_voxels(self) -> float:
+        """The raymarch step in voxels of the smallest spacing."""
+        return self._raymarch_step
+
+    @raymarch_step_voxels.setter
+    def raymarch_step_voxels(self, step: float) -> None:
+        if isinstance(step, bool) or not isinstance(step, (int, float)) or not (
+                math.isfinite(step) and step > 0):
+            raise ValueError(f"raymarch step: expected a finite number of voxels > 0, got {step!r}")
+        self._raymarch_step = float(step)
+
+    @property
+    def effective_raymarch_step_voxels(self) -> float:
+        """The raymarch step the shader takes on the longest rays through this volume's box: the
+        one asked for, or longer where it would need more than raymarch.MAX_MARCH_STEPS steps."""
+        return max(self.raymarch_step_voxels, min_step_voxels(self.resources.volume))
 
     @property
     def scene(self) -> Scene:
@@ -91,7 +146,7 @@ class Renderer:
 
     def _probe_defines(self) -> dict:
         plan = self.probe_plan(region=False)
-        return {"PROBE_SH_ORDER": plan["sh_order"], "PROBE_GREY": int(plan["grey"])}
+        return plan.defines()
 
     @property
     def pathtracer(self) -> PathTracer:
@@ -124,20 +179,20 @@ class Renderer:
             self._region_key = key
         return self._region
 
-    def probe_plan(self, region: bool = True) -> dict:
+    def probe_plan(self, region: bool = True) -> ProbePlan:
         """The probe grid the current scene gets: its counts, box, SH order and channels
         (probe_layout.py); region=False skips the (NumPy) visible-region search."""
         s = self.scene
         spec = s.probes
-        plan = {"grid": tuple(spec.grid), "box": None,
-                "sh_order": resolve_sh_order(spec.sh_order, s.anisotropy),
-                "grey": resolve_channels(spec.channels, self.resources.table, s.light.irradiance,
-                                         s.environment) == 1}
+        grid, box = tuple(spec.grid), None
         if spec.fit == "visible" and region:
             low, high = self.visible_region()
-            plan.update(grid=fitted_grid(spec.grid, low, high),
-                        box=(tuple(map(float, low)), tuple(map(float, high))))
-        return plan
+            grid = fitted_grid(spec.grid, low, high)
+            box = (tuple(map(float, low)), tuple(map(float, high)))
+        return ProbePlan(grid=tuple(int(v) for v in grid), box=box,
+                         sh_order=resolve_sh_order(spec.sh_order, s.anisotropy),
+                         grey=resolve_channels(spec.channels, self.resources.table,
+                                               s.light.irradiance, s.environment) == 1)
 
     def start_bake(self, seed: int = 0) -> ProbeGrid:
         """(Re)starts the bake for the current scene; reuses the textures when the layout is unchanged."""
@@ -146,12 +201,12 @@ class Renderer:
         g = self.probe_grid
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
                          g.adaptive) != (
-                plan["grid"], spec.samples, spec.precision, plan["sh_order"], plan["box"],
-                plan["grey"], self.walk_sun, self.walk_adaptive):
+                plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
+                self.walk_sun, self.walk_adaptive):
             if g is not None:
                 g.release()
-            self.probe_grid = ProbeGrid(self.ctx, plan["grid"], spec.samples, spec.precision,
-                                        plan["sh_order"], plan["box"], plan["grey"],
+            self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
+                                        plan.sh_order, plan.box, plan.grey,
                                         sun=self.walk_sun, adaptive=self.walk_adaptive)
         self.probe_grid.restart(seed)
         self._baked_key = self.bake_key()
@@ -231,9 +286,10 @@ class Renderer:
         """Starts a fresh accumulation for `method` with the scene's current camera."""
         if method not in METHODS:
             raise ValueError(f"unknown method '{method}' (known: {', '.join(METHODS)})")
+        self.camera = camera_frame(self.scene.camera, width, height)
+        check_image_size(self.ctx, self.camera.width, self.camera.height)
         self.method = method
         self.seed = seed
-        self.camera = camera_frame(self.scene.camera, width, height)
         self.resources.reset_stats()
         acc = self.accumulation(self.camera.width, self.camera.height)
         acc.reset()

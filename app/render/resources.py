@@ -2,14 +2,13 @@
 and the tracking statistics buffer. Re-uploads only what a scene change touches."""
 from __future__ import annotations
 
-import os
 import struct
 
 import moderngl
 import numpy as np
 
 from ..gl.textures import transfer_texture, volume_texture
-from ..medium import majorant
+from ..twins.medium import majorant
 from ..scene import Scene
 from ..transfer import transfer_table
 from ..volume import Volume, load_scene_volume
@@ -24,14 +23,9 @@ STATS_BINDING = 7
 DEFAULT_MAX_PATH_STEPS = 1 << 24
 
 
-def majorant_grid_default() -> bool:
-    """Empty-space skipping (the macrocell majorant grid) is on unless RP_GLOBAL_MAJORANT=1 asks
-    for the single global majorant (for comparisons and the benchmark)."""
-    return os.environ.get("RP_GLOBAL_MAJORANT", "0").strip() in ("", "0")
-
-
 class SceneResources:
-    def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None):
+    def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
+                 use_majorant_grid: bool = True):
         self.ctx = ctx
         self.scene: Scene | None = None
         self.volume: Volume | None = None
@@ -46,7 +40,7 @@ class SceneResources:
         # Empty-space skipping: tracking walks a grid of per-macrocell majorants (rebuilt on the
         # GPU when the transfer function, density_scale or volume changes; never for the camera).
         # False: the single global majorant everywhere (the same estimator, for comparison).
-        self.use_majorant_grid = majorant_grid_default()
+        self.use_majorant_grid = bool(use_majorant_grid)
         self.majorant_grid = MajorantGrid(ctx)
         self._majorant_key: tuple | None = None
         self.update(scene, volume)

@@ -11,7 +11,8 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 
 def tonemap(image: np.ndarray, exposure: float = 1.0) -> np.ndarray:
     """Linear RGB (H, W, 3) to display sRGB in [0, 1]: scale by exposure, clip, encode."""
-    return srgb_encode(np.asarray(image, np.float64) * exposure)
+    with np.errstate(over="ignore"):   # a huge exposure overflows to inf, which clips to 1
+        return srgb_encode(np.asarray(image, np.float64) * exposure)
 
 
 def to_uint8(image: np.ndarray, exposure: float = 1.0) -> np.ndarray:

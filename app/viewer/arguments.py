@@ -3,10 +3,11 @@ from __future__ import annotations
 
 import argparse
 
+from ..frontend import grid_arg, positive_float, positive_int, render_scale, window_size
 from ..render.renderer import METHODS
 
 
-def add_view_parser(sub, func, grid_arg, positive_int) -> argparse.ArgumentParser:
+def add_view_parser(sub, func) -> argparse.ArgumentParser:
     v = sub.add_parser("view", help="the interactive viewer: a window with panels over the same "
                                     "renderers; with --screenshot/--frames/--script it runs unattended")
     v.add_argument("scene", nargs="?", help="scene JSON or a volume file (default: built-in scene)")
@@ -24,26 +25,19 @@ def add_view_parser(sub, func, grid_arg, positive_int) -> argparse.ArgumentParse
     v.add_argument("--script", metavar="JSON", help="drive the viewer with a script of input "
                                                     "events (app/viewer/script.py), then exit")
     v.add_argument("--spp", type=positive_int, help="samples per pixel to stop at (default 1024)")
-    v.add_argument("--window", default="1280x800", type=_window_size,
+    v.add_argument("--window", default="1280x800", type=window_size,
                    help="window size WxH (default 1280x800)")
-    v.add_argument("--render-scale", type=float,
+    v.add_argument("--render-scale", type=render_scale,
                    help="render pixels per window pixel (default 1; 0.5 on a software renderer)")
-    v.add_argument("--exposure", type=float, default=1.0)
+    v.add_argument("--exposure", type=positive_float, default=1.0)
     v.add_argument("--probe-grid", type=grid_arg, help="probes per axis: N or NX,NY,NZ (1..256)")
     v.add_argument("--probe-samples", type=positive_int, help="walks per probe")
     v.add_argument("--sh-window", choices=("none", "hann", "lanczos"))
     v.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"))
     v.add_argument("--seed", type=int, default=0)
+    v.add_argument("--file-dialog", choices=("auto", "builtin"), default="auto",
+                   help="auto: the system's file dialog where one is installed (zenity, kdialog), "
+                        "else the viewer's own; builtin: always the viewer's own")
     v.set_defaults(func=func)
     return v
 
-
-def _window_size(text: str) -> tuple[int, int]:
-    w, sep, h = text.lower().partition("x")
-    try:
-        size = (int(w), int(h))
-    except ValueError:
-        size = (0, 0)
-    if not sep or min(size) < 64:
-        raise argparse.ArgumentTypeError(f"expected WxH (at least 64x64), got {text!r}")
-    return size

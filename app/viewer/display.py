@@ -60,17 +60,31 @@ class DisplayPass:
             obj.release()
 
 
+def sample_stage(samples: int, max_samples: int) -> int:
+    """The error view re-reads its images when this changes: at 1, 2, 4, 8, ... samples and at the
+    last one, so an accumulation of N samples costs about log2(N) read-backs, not N."""
+    return samples if samples >= max_samples else samples.bit_length()
+
+
 class ErrorMeter:
-    """Relative RMSE of a method against the path tracer, re-read only when either changed."""
+    """Relative RMSE of a method against the path tracer. Reading both images back from the GPU
+    costs more than a frame on a large view, so it is measured again only when either image has
+    doubled its samples since (or finished, or restarted), not on every frame."""
 
     def __init__(self):
         self.key = None
         self.value = float("nan")
         self.reference_rms = 0.0
+        self.reads = 0                 # read-backs so far (a test counts them)
+        self.samples = (0, 0)          # the method's and the path tracer's samples when measured
 
-    def update(self, session, method: str) -> float:
-        key = (method, session.samples(method), session.samples("pt"), session.restarts)
+    def update(self, session, method: str, max_samples: int) -> float:
+        n, n_pt = session.samples(method), session.samples("pt")
+        key = (method, sample_stage(n, max_samples), sample_stage(n_pt, max_samples),
+               session.restarts)
         if key != self.key:
+            self.reads += 1
+            self.samples = (n, n_pt)
             image, reference = session.image(method), session.image("pt")
             if image is None or reference is None or image.shape != reference.shape:
                 self.value, self.reference_rms = float("nan"), 0.0

@@ -63,9 +63,14 @@ def builtin_scene(name: str, size: tuple[int, int, int], current: Scene) -> Scen
     return current.replace(volume=VolumeSpec(builtin=name, size=tuple(size)))
 
 
-def native_dialogs_available() -> bool:
-    """A system dialog tool is installed, and RP_FILE_DIALOG=builtin does not ask for ours."""
-    if os.environ.get("RP_FILE_DIALOG", "").lower() == "builtin":
+FILE_DIALOGS = ("auto", "builtin")
+
+
+def native_dialogs_available(dialog: str = "auto") -> bool:
+    """A system dialog tool is installed, and `dialog` (``view --file-dialog``) is not "builtin"."""
+    if dialog not in FILE_DIALOGS:
+        raise ValueError(f"file dialog: expected one of {', '.join(FILE_DIALOGS)}, got {dialog!r}")
+    if dialog == "builtin":
         return False
     return any(shutil.which(tool) for tool in DIALOG_TOOLS)
 
@@ -73,9 +78,9 @@ def native_dialogs_available() -> bool:
 class FileDialogs:
     """Asynchronous open/save dialogs; the viewer polls them once a frame."""
 
-    def __init__(self, on_open, start_dir: str | None = None):
+    def __init__(self, on_open, start_dir: str | None = None, dialog: str = "auto"):
         self.on_open = on_open            # on_open(path)
-        self.native = native_dialogs_available()
+        self.native = native_dialogs_available(dialog)
         self.pending = None               # a portable_file_dialogs dialog in flight
         self.browser_open = False
         self.browser_dir = Path(start_dir or os.getcwd())

@@ -7,6 +7,8 @@ import os
 import sys
 from pathlib import Path
 
+from ..frontend import (apply_options, check_output, render_defaults, render_to_files,
+                        scene_from_arg)
 from ..scene import Scene
 from .state import ViewerState
 from .xvfb import Xvfb, XvfbError, has_display
@@ -35,27 +37,34 @@ def initial_state(scene: Scene, args: argparse.Namespace) -> ViewerState:
 
 def scene_from_args(args: argparse.Namespace) -> Scene:
     """The scene argument (as `render` reads it) with the --probe-* options applied."""
-    from ..cli import _scene_from_arg
-    from ..scene import parse_scene, scene_to_dict
     from .files import VOLUME_SUFFIXES, scene_for_path
     if args.scene and Path(args.scene).suffix.lower() in VOLUME_SUFFIXES:
         # A volume file opens as it does when dropped: with its bundled scene where there is one.
-        scene, _ = scene_for_path(args.scene, _scene_from_arg(None))
+        scene, _ = scene_for_path(args.scene, scene_from_arg(None))
     else:
-        scene = _scene_from_arg(args.scene)
-    changes = {key: value for key, value in (
-        ("grid", args.probe_grid), ("samples", args.probe_samples), ("sh_window", args.sh_window),
-        ("precision", args.probe_precision)) if value}
-    if not changes:
-        return scene
-    data = scene_to_dict(scene)
-    data["probes"].update(changes)
-    return parse_scene(data, base_dir=scene.base_dir)
+        scene = scene_from_arg(args.scene)
+    return apply_options(scene, args)
 
 
 def run_view(args: argparse.Namespace) -> int:
+    from ..volume import load_scene_volume
     scene = scene_from_args(args)
+    if args.screenshot:
+        check_output(args.screenshot, "--screenshot")   # before a long scripted run, not after
+    steps = None
+    if args.script:
+        from .script import ScriptError, load_script
+        try:
+            steps = load_script(args.script)   # a bad script fails before anything opens
+        except ScriptError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 3
     scripted = bool(args.screenshot or args.script or args.frames)
+    if has_display() or scripted:
+        # A volume that does not load fails here, before a window, an X server or a GL context.
+        volume = load_scene_volume(scene)
+    else:
+        volume = None   # the headless fallback loads it
     xvfb = None
     if not has_display():
         if not scripted:
@@ -67,27 +76,28 @@ def run_view(args: argparse.Namespace) -> int:
         except XvfbError as exc:
             return headless_fallback(args, f"DISPLAY is not set and Xvfb could not be started ({exc})")
     try:
-        return _run_window(args, scene, scripted)
+        return _run_window(args, scene, volume, steps, scripted)
     finally:
         if xvfb is not None:
             xvfb.stop()
 
 
-def _run_window(args: argparse.Namespace, scene: Scene, scripted: bool) -> int:
-    from .script import ScriptError, ScriptRunner, load_script
+def _run_window(args: argparse.Namespace, scene: Scene, volume, steps, scripted: bool) -> int:
+    from .script import ScriptError, ScriptRunner
     from .window import ViewerWindow, WindowError
     state = initial_state(scene, args)
     width, height = args.window
     try:
-        window = ViewerWindow(state, width, height, vsync=not scripted)
+        window = ViewerWindow(state, width, height, vsync=not scripted,
+                              file_dialog=args.file_dialog, volume=volume)
     except WindowError as exc:
         return headless_fallback(args, str(exc))
     software = any(n in window.viewer.device.lower() for n in ("llvmpipe", "softpipe", "lavapipe"))
     state.render_scale = args.render_scale or (SOFTWARE_RENDER_SCALE if software else 1.0)
     print(f"view: {window.viewer.device}", file=sys.stderr)
+    rc = 0
     try:
-        if args.script:
-            steps = load_script(args.script)
+        if steps is not None:
             ScriptRunner(window, Path.cwd()).run(steps)
         if args.frames:  # the screenshot's frame is the last of them
             ScriptRunner(window, Path.cwd()).frame(args.frames - (1 if args.screenshot else 0))
@@ -95,7 +105,13 @@ def _run_window(args: argparse.Namespace, scene: Scene, scripted: bool) -> int:
             window.viewer.request_screenshot(args.screenshot)
             window.poll()
             window.frame()
-            print(f"wrote {Path(args.screenshot).resolve()}")
+            _, saved, error = window.viewer.last_screenshot
+            if error:   # written elsewhere (or lost): said once, as the command's error
+                state.errors.remove(error)
+                print(f"error: --{error}", file=sys.stderr)
+                rc = 1
+            else:
+                print(f"wrote {saved}")
         if not scripted:
             window.run()
         for text in state.errors:
@@ -107,18 +123,17 @@ def _run_window(args: argparse.Namespace, scene: Scene, scripted: bool) -> int:
         return 130
     finally:
         window.close()
-    return 0
+    return rc
 
 
 def headless_fallback(args: argparse.Namespace, reason: str) -> int:
-    """Renders the scene with the CLI's `render` when no window can be opened."""
-    from ..cli import cmd_render
+    """Renders the scene as `render` does when no window can be opened."""
     out = args.screenshot or "view.png"
     print(f"view: no display available ({reason}), so no window can open. Rendering the scene "
           f"headless instead ({args.method}, {args.spp or 64} spp) to {out}.", file=sys.stderr)
-    render_args = argparse.Namespace(
-        scene=args.scene, method=args.method, spp=args.spp or 64, samples_per_pass=1, out=out,
-        linear=None, exr=None, probe_grid=args.probe_grid, probe_samples=args.probe_samples,
-        sh_window=args.sh_window, probe_precision=args.probe_precision, raymarch_stage="compute",
-        raymarch_step=0.5, seed=args.seed, width=None, height=None, exposure=args.exposure)
-    return cmd_render(render_args)
+    options = render_defaults()
+    options.update(scene=args.scene, method=args.method, spp=args.spp or 64, out=out,
+                   probe_grid=args.probe_grid, probe_samples=args.probe_samples,
+                   sh_window=args.sh_window, probe_precision=args.probe_precision, seed=args.seed,
+                   exposure=args.exposure, gl_backend=args.gl_backend)
+    return render_to_files(argparse.Namespace(**options))

@@ -1,5 +1,5 @@
 """Orbit, pan and zoom of the scene camera (a CameraSpec), and the matrices that draw geometry
-with the very camera the renderers trace rays from (app/camera.py)."""
+with the very camera the renderers trace rays from (app/twins/camera.py)."""
 from __future__ import annotations
 
 import math
@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..camera import CameraFrame
+from ..twins.camera import CameraFrame
 from ..scene import CameraSpec
 
 ORBIT_DEGREES_PER_PIXEL = 0.4

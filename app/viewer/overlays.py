@@ -103,6 +103,6 @@ def view_labels(v) -> None:
         label(x + w - imgui.calc_text_size(right).x - 12, right)
     elif state.display == "error" and state.method != "pt":
         rmse = v.error_meter.value
-        label(x + 8, f"|{state.method} - pt|  rel. RMSE {rmse:.4f}  (pt {v.session.samples('pt')} spp)")
+        label(x + 8, f"|{state.method} - pt|  rel. RMSE {rmse:.4f}  (pt {v.error_meter.samples[1]} spp)")
     else:
         label(x + 8, f"{state.method}  {v.session.samples(state.method)} spp")

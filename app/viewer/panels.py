@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
-from ..render.renderer import METHODS
+from ..render.renderer import METHODS, RAYMARCH_STAGES
 from ..scene import PROBE_FITS, PROBE_PRECISIONS, SH_WINDOWS
 from ..volume import BUILTIN_VOLUMES
 from .overlays import shortcut_table
@@ -15,7 +15,6 @@ from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and
 from .tf_editor import heat_legend, transfer_panel
 
 SIDEBAR_WIDTH = 370           # logical pixels, before the UI scale
-RAYMARCH_STAGES = ("compute", "fragment")
 
 
 def sidebar(v) -> None:
@@ -79,6 +78,13 @@ def render_section(v) -> None:
     chosen = _radio_row(v, "Probe grid", PROBE_VIEWS, state.probe_view, "probes ")
     if chosen:
         state.probe_view = chosen
+    drawn = v.probes_drawn()
+    if drawn is not None:
+        stride = f", every {drawn['stride']}th per axis" if drawn["stride"] > 1 else ""
+        where = (f"of {drawn['visible']} in visible medium" if drawn["visible"]
+                 else "(none in visible medium)")
+        imgui.text_disabled(f"{len(drawn['indices'])} of {drawn['total']} probes drawn, "
+                            f"{where}{stride}; colour: radiance at the exposure below")
     changed, value = imgui.checkbox("Volume box", state.show_box)
     ui.note("Volume box")
     if changed:
@@ -100,6 +106,11 @@ def render_section(v) -> None:
     if changed:
         r.raymarch_stage = RAYMARCH_STAGES[i]
         v.session.restart(["raymarch"])
+    changed, value = imgui.checkbox("Empty-space skipping", r.resources.use_majorant_grid)
+    ui.note("Empty-space skipping")
+    if changed:   # the same images either way (unbiased); the probes re-bake by their key
+        r.set_empty_space_skipping(value)
+        v.session.restart()
     for method in state.shown_methods():
         n = v.session.samples(method)
         imgui.progress_bar(min(n / state.max_samples, 1.0), ImVec2(-1, 0),
@@ -114,7 +125,9 @@ def _error_summary(v) -> None:
     rmse = v.error_meter.value
     text = "n/a" if not np.isfinite(rmse) else f"{rmse:.4f}"
     imgui.text(f"relative RMSE {state.method} vs pt: {text}")
-    imgui.text_disabled(f"pt at {v.session.samples('pt')} spp (its own noise is included)")
+    n, n_pt = v.error_meter.samples
+    imgui.text_disabled(f"measured at {n} spp against pt at {n_pt} spp (its own noise is "
+                        "included; measured again each time both double)")
 
 
 def data_section(v) -> None:

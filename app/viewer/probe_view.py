@@ -1,8 +1,15 @@
-"""The probe-grid view: every probe a small sphere at its centre, shaded by the probe's SH
-radiance at the sphere's normal (glsl/probe_sphere.*), instanced; and the volume box's outline."""
+"""The probe-grid view: probes as small spheres at their centres, shaded by the probe's SH
+radiance at the sphere's normal under the current exposure (glsl/probe_sphere_instanced.vert and
+probe_sphere.frag), instanced; and the volume box's outline.
+
+Readable at any grid: only probes whose cell holds visible medium are drawn (what the transfer
+function makes visible; all of them when nothing is), and on grids with more of those than
+MAX_SPHERES every stride-th probe along each axis, the spheres growing with the stride, so a
+32^3 grid over an unseen volume is a lattice through the visible part, not a wall."""
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
 
 import moderngl
 import numpy as np
@@ -13,8 +20,69 @@ from ..render.resources import SceneResources
 from .orbit import gl_matrix
 
 SPHERE_STACKS, SPHERE_SLICES = 8, 12
-RADIUS_PER_SPACING = 0.28      # sphere radius as a fraction of the smallest probe spacing
+RADIUS_PER_SPACING = 0.28      # sphere radius as a fraction of the smallest drawn probe spacing
+MAX_SPHERES = 4096             # beyond this many, every stride-th probe per axis
 BOX_COLOUR = (0.85, 0.85, 0.9, 1.0)
+
+
+@dataclass(frozen=True)
+class ProbeSelection:
+    """Which probes the view draws: their indices (i + nx (j + ny k), ascending), the stride per
+    axis, and how many probes the grid has and how many of them lie in visible medium."""
+    indices: np.ndarray
+    stride: int
+    visible: int
+    total: int
+
+
+def visible_cells(grid: tuple[int, int, int], box, volume, alpha: np.ndarray,
+                  density_scale: float) -> np.ndarray:
+    """bool (nz, ny, nx): the probe's cell (the box of one probe spacing around it) holds a voxel
+    whose density the transfer function's opacity makes visible (alpha > 0 at either table entry
+    it interpolates between)."""
+    nx, ny, nz = grid
+    out = np.zeros((nz, ny, nx), bool)
+    if density_scale <= 0:
+        return out
+    positive = np.asarray(alpha) > 0
+    if not positive.any():
+        return out
+    n = len(positive)
+    scaled = volume.data * np.float32(n - 1)
+    i0 = np.clip(scaled.astype(np.int32), 0, n - 1)
+    voxels = positive[i0] | positive[np.minimum(i0 + 1, n - 1)]
+    he = np.asarray(volume.half_extent, np.float64)
+    low, high = (-he, he) if box is None else (np.asarray(box[0], np.float64),
+                                                np.asarray(box[1], np.float64))
+    cells = []
+    for axis, (count, dim) in enumerate(zip(grid, volume.dims)):
+        centres = (np.arange(dim) + 0.5) / dim * 2 * he[axis] - he[axis]
+        size = max(high[axis] - low[axis], 1e-12)
+        cells.append(np.floor((centres - low[axis]) / size * count).astype(np.int64))
+    cx, cy, cz = cells
+    inside = lambda c, n: (c >= 0) & (c < n)  # noqa: E731
+    zs, ys, xs = np.nonzero(voxels[np.ix_(inside(cz, nz), inside(cy, ny), inside(cx, nx))])
+    kz, ky, kx = cz[inside(cz, nz)][zs], cy[inside(cy, ny)][ys], cx[inside(cx, nx)][xs]
+    out[kz, ky, kx] = True
+    return out
+
+
+def select_probes(grid: tuple[int, int, int], visible: np.ndarray,
+                  max_spheres: int = MAX_SPHERES) -> ProbeSelection:
+    """The probes to draw: the visible ones (all when none is), every stride-th per axis with the
+    smallest stride that leaves at most max_spheres."""
+    nx, ny, nz = grid
+    total = nx * ny * nz
+    shown = visible if visible.any() else np.ones_like(visible)
+    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    stride = 1
+    while True:
+        o = stride // 2
+        keep = shown & (i % stride == o) & (j % stride == o) & (k % stride == o)
+        if keep.sum() <= max_spheres or stride >= max(grid):
+            break
+        stride += 1
+    return ProbeSelection(np.flatnonzero(keep.ravel()), stride, int(visible.sum()), total)
 
 
 def uv_sphere(stacks: int = SPHERE_STACKS, slices: int = SPHERE_SLICES) -> tuple[np.ndarray, np.ndarray]:
@@ -65,42 +133,76 @@ class ProbeSpheres:
         vertices, triangles = uv_sphere()
         self.vbo = ctx.buffer(vertices.tobytes())
         self.ibo = ctx.buffer(triangles.tobytes())
+        self.centres = ctx.buffer(reserve=12 * 64, dynamic=True)  # per instance, grown as needed
         self.defines = None
         self.program = self.vao = None
+        self.selection: ProbeSelection | None = None
+        self._key = None
         self._build(defines or {"PROBE_SH_ORDER": 2})
 
     def _build(self, defines: dict) -> None:
         if defines == self.defines:
             return
-        program = render_program(self.ctx, "probe_sphere.vert", "probe_sphere.frag", defines)
+        program = render_program(self.ctx, "probe_sphere_instanced.vert", "probe_sphere.frag",
+                                  defines)
         if self.program is not None:
             self.vao.release()
             self.program.release()
         self.program, self.defines = program, dict(defines)
-        self.vao = self.ctx.vertex_array(self.program, [(self.vbo, "3f", "sphere_point")],
+        self._make_vao()
+
+    def _make_vao(self) -> None:
+        if self.vao is not None:
+            self.vao.release()
+        self.vao = self.ctx.vertex_array(self.program, [(self.vbo, "3f", "sphere_point"),
+                                                        (self.centres, "3f/i", "instance_centre")],
                                          index_buffer=self.ibo, index_element_size=4)
+
+    def select(self, grid: ProbeGrid, resources: SceneResources) -> ProbeSelection:
+        """The probes drawn (cached until the grid, the volume or the transfer function changes)."""
+        scene = resources.scene
+        key = (grid.grid, grid.box, resources.volume_version, scene.transfer_function,
+               scene.density_scale > 0)
+        if key != self._key:
+            visible = visible_cells(grid.grid, grid.box, resources.volume, resources.table[:, 3],
+                                    scene.density_scale)
+            self.selection = select_probes(grid.grid, visible)
+            centres = probe_centres(grid.grid, resources.volume.half_extent, grid.box)
+            data = centres[self.selection.indices].astype(np.float32).tobytes()
+            if len(data) > self.centres.size:
+                self.centres.release()
+                self.centres = self.ctx.buffer(data, dynamic=True)
+                self._make_vao()
+            elif data:
+                self.centres.write(data)
+            self._key = key
+        return self.selection
 
     def draw(self, matrix: np.ndarray, grid: ProbeGrid, resources: SceneResources,
              exposure: float) -> None:
         """Draws the spheres into the bound framebuffer and viewport, depth-tested among
         themselves (the caller clears depth)."""
         self._build(grid.defines())
+        selection = self.select(grid, resources)
+        if len(selection.indices) == 0:
+            return
         resources.bind()
         uniforms = resources.uniforms()
         uniforms.update(grid.uniforms(resources.scene.anisotropy, resources.scene.probes.sh_window,
                                       resources))
         he = 0.5 * np.asarray(uniforms["probe_box_size"])   # the probe box's half size
-        uniforms.update({"sphere_radius": sphere_radius(grid.grid, he), "exposure": float(exposure)})
+        radius = sphere_radius(grid.grid, he) * selection.stride
+        uniforms.update({"sphere_radius": radius, "exposure": float(exposure)})
         grid.bind()
         set_uniforms(self.program, uniforms)
         self.program["view_projection"].write(gl_matrix(matrix))
         self.ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         self.ctx.front_face = "ccw"
-        self.vao.render(moderngl.TRIANGLES, instances=grid.count)
+        self.vao.render(moderngl.TRIANGLES, instances=len(selection.indices))
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
 
     def release(self) -> None:
-        for obj in (self.vao, self.vbo, self.ibo, self.program):
+        for obj in (self.vao, self.vbo, self.ibo, self.centres, self.program):
             obj.release()
 
 

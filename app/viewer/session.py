@@ -66,7 +66,6 @@ class RenderSession:
         self.last = FrameTimes()
         self.history: deque[float] = deque(maxlen=FRAME_HISTORY)
         self.filter = moderngl.NEAREST
-        self._timing_fbos = _timing_framebuffers(ctx)
 
     @property
     def scene(self) -> Scene:
@@ -135,7 +134,6 @@ class RenderSession:
         times = FrameTimes()
         r = self.renderer
         if want_probes and not r.probes_current():
-            self._settle_timestamps()
             times.bake_ms = r.bake_step(self.seed)
             if r.probe_grid.passes_done == 1:  # this pass began a new bake
                 self.bake_ms = 0.0
@@ -165,7 +163,6 @@ class RenderSession:
     def _add_samples(self, view: MethodView, n: int) -> float:
         r = self.renderer
         r._acc, r.method, r.camera, r.seed = view.acc, view.method, view.camera, self.seed
-        self._settle_timestamps()
         try:
             return r.add_samples(n)
         finally:
@@ -202,28 +199,8 @@ class RenderSession:
             if view.acc is not None:
                 view.acc.texture.filter = (self.filter, self.filter)
 
-    def _settle_timestamps(self) -> None:
-        """On llvmpipe with a window, a timestamp query is binned into the rasteriser's pending
-        scene and taken when that scene runs, after the compute work it should bracket; binding
-        another framebuffer flushes the scene, so the next timestamps are taken in order."""
-        if self._timing_fbos:
-            self._timing_fbos.reverse()
-            self._timing_fbos[0].use()
-
     def release(self) -> None:
         for name in list(self.views):
             self._drop(name)
-        for fbo in self._timing_fbos:
-            for attachment in fbo.color_attachments:
-                attachment.release()
-            fbo.release()
-        self._timing_fbos = []
         self.renderer.release()
 
-
-def _timing_framebuffers(ctx: moderngl.Context) -> list:
-    """Two 1x1 framebuffers to alternate between, on software rasterisers only."""
-    renderer = ctx.info.get("GL_RENDERER", "").lower()
-    if not any(name in renderer for name in ("llvmpipe", "softpipe", "lavapipe")):
-        return []
-    return [ctx.framebuffer(color_attachments=[ctx.renderbuffer((1, 1), 4)]) for _ in range(2)]

@@ -98,9 +98,17 @@ class ViewerState:
         self.scene = self.scene.replace(probes=replace(self.scene.probes, **changes))
 
     def set_transfer(self, **changes) -> None:
+        """Edits the transfer function. An explicit RGBA table keeps its colours when its opacity
+        curve is edited (its alpha column is rewritten), and keeps its opacity curve when a
+        colormap replaces its colours."""
+        from ..transfer import opacity_points, rgba_with_opacity
         tf = self.scene.transfer_function
-        if tf.rgba is not None and ("colormap" in changes or "opacity" in changes):
-            tf = replace(tf, rgba=None)  # editing turns an explicit table into colormap + curve
+        if tf.rgba is not None:
+            if "colormap" in changes:
+                changes.setdefault("opacity", opacity_points(tf)[0])
+                tf = replace(tf, rgba=None)
+            elif "opacity" in changes:
+                changes["rgba"] = rgba_with_opacity(tf, changes.pop("opacity"))
         self.scene = self.scene.replace(transfer_function=replace(tf, **changes))
 
     def cycle_colormap(self, step: int = 1) -> None:

@@ -38,8 +38,9 @@ def transfer_panel(v) -> None:
     tf = state.scene.transfer_function
     width = imgui.get_content_region_avail().x
     if tf.rgba is not None:
-        imgui.text_wrapped("The scene gives an explicit RGBA table; choosing a colormap or editing the "
-                           "curve replaces it.")
+        imgui.text_wrapped(f"The scene gives an explicit RGBA table ({len(tf.rgba)} rows): editing the "
+                           "curve rewrites its opacity and keeps its colours; choosing a colormap "
+                           "replaces its colours and keeps the curve.")
     current = ALIASES.get(tf.colormap, tf.colormap)
     changed, index = imgui.combo("Colormap", PRESETS.index(current) if current in PRESETS else 0, list(PRESETS))
     ui.note("Colormap")
@@ -66,7 +67,8 @@ def transfer_panel(v) -> None:
 def _opacity_editor(v, width: float) -> None:
     state, ui = v.state, v.widgets
     tf = state.scene.transfer_function
-    points = tf.opacity if tf.rgba is None else ((0.0, 0.0), (1.0, 1.0))
+    points, simplified_by = v.opacity_points()
+    table_alpha = v.session.renderer.resources.table[:, 3]   # what the renderers use
     xs, heights = v.histogram()
     flags = (implot.Flags_.no_menus | implot.Flags_.no_box_select | implot.Flags_.no_legend
              | implot.Flags_.no_mouse_text | implot.Flags_.no_title)
@@ -77,10 +79,10 @@ def _opacity_editor(v, width: float) -> None:
     implot.setup_axes_limits(0.0, 1.0, 0.0, 1.05, implot.Cond_.always)
     implot.plot_shaded("histogram", xs, heights, 0.0,
                        spec=implot.Spec(fill_color=(0.45, 0.55, 0.7, 1.0), fill_alpha=0.45))
-    curve = np.array(points, np.float64)
-    line_x = np.concatenate([[0.0], curve[:, 0], [1.0]])
-    line_y = np.concatenate([[curve[0, 1]], curve[:, 1], [curve[-1, 1]]])
-    implot.plot_line("opacity", line_x, line_y, spec=implot.Spec(line_color=POINT_COLOUR, line_weight=2.0))
+    # The curve drawn is the scene's own opacity, from the table the renderers sample.
+    line_x = np.linspace(0.0, 1.0, len(table_alpha))
+    implot.plot_line("opacity", line_x, np.asarray(table_alpha, np.float64),
+                     spec=implot.Spec(line_color=POINT_COLOUR, line_weight=2.0))
     new_points, any_hovered = points, False
     for i, (x, y) in enumerate(points):
         moved, nx, ny, _, hovered, _ = implot.drag_point(i, float(x), float(y), POINT_COLOUR, 6.0,
@@ -101,6 +103,9 @@ def _opacity_editor(v, width: float) -> None:
     if new_points != points:
         state.set_transfer(opacity=new_points)
     imgui.text_disabled("drag points; double-click adds one; right-click removes one")
+    if simplified_by > 0:
+        imgui.text_disabled(f"{len(points)} points stand for the table's {len(tf.rgba)} rows "
+                            f"(up to {simplified_by:.3f} apart); an edit keeps only these points")
 
 
 def heat_legend(width: float, height: float, heat_max: float) -> None:

@@ -11,7 +11,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from ..camera import camera_frame
+from ..twins.camera import camera_frame
 from ..gl.shaders import ShaderError
 from ..gl.timer import GpuTimer
 from ..scene import SceneError, scene_to_dict
@@ -22,6 +22,7 @@ from .files import FileDialogs, builtin_scene, datasets, scene_for_path
 from .probe_view import BoxOutline, ProbeSpheres, probe_centres
 from .session import FrameTimes, RenderSession
 from .state import ViewerState
+from ..transfer import opacity_points
 from .tf_editor import histogram_curve
 from .widgets import WidgetRects
 
@@ -32,14 +33,15 @@ SNAPSHOT_MAX_PROBES = 512      # a snapshot carries the probes' coefficients for
 
 
 class Viewer:
-    def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = ""):
+    def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = "",
+                 file_dialog: str = "auto", volume=None):
         self.ctx = ctx
         self.state = state
         self.device = device
-        self.session = RenderSession(ctx, state.scene)
+        self.session = RenderSession(ctx, state.scene, volume)
         self.widgets = WidgetRects()
         self.error_meter = ErrorMeter()
-        self.files = FileDialogs(self.open_path)
+        self.files = FileDialogs(self.open_path, dialog=file_dialog)
         self.dataset_paths = datasets()
         self.timer = GpuTimer(ctx)
         self._passes: dict[str, object] = {}     # display, spheres, box: built on first use
@@ -55,9 +57,11 @@ class Viewer:
         self.remembered_colours: dict[str, tuple] = {}
         self.probe_axes_locked = len(set(state.scene.probes.grid)) == 1
         self.pending_screenshot: str | None = None
+        self.last_screenshot: tuple | None = None   # (path asked for, where it went, error line)
         self.close_requested = False
         self.frame_index = 0
         self._histogram = (None, None)
+        self._opacity_points = (None, None)
 
     # ---- geometry ------------------------------------------------------------------------------
     def sidebar_width(self) -> float:
@@ -80,6 +84,14 @@ class Viewer:
 
     def render_size(self) -> tuple[int, int]:
         return layout.render_size(self.view_rect_framebuffer(), self.state.render_scale)
+
+    def opacity_points(self):
+        """The scene's opacity curve as the editor's control points (transfer.opacity_points),
+        cached while the transfer function stays the same."""
+        tf = self.state.scene.transfer_function
+        if self._opacity_points[0] != tf:
+            self._opacity_points = (tf, opacity_points(tf))
+        return self._opacity_points[1]
 
     def histogram(self):
         volume = self.session.volume
@@ -185,7 +197,7 @@ class Viewer:
                 state.error(f"rendering stopped: {exc}")
                 self._halted_scene = state.scene
         if state.display == "error" and state.method != "pt":
-            self.error_meter.update(self.session, state.method)
+            self.error_meter.update(self.session, state.method, state.max_samples)
         self.ctx.screen.use()
         self.ctx.viewport = (0, 0, *self.framebuffer_size)
         self.ctx.clear(*BACKGROUND, 1.0, depth=1.0)
@@ -273,6 +285,15 @@ class Viewer:
         top = self.framebuffer_size[1] - rh
         return [[x0 + px / w * rw, top + py / h * rh] for px, py in pixels.tolist()]
 
+    def probes_drawn(self) -> dict | None:
+        """Which probes the probe-grid view draws (ProbeSelection), None while it draws none."""
+        spheres = self._passes.get("spheres")
+        selection = None if spheres is None else spheres.selection
+        if self.state.probe_view == "off" or selection is None:
+            return None
+        return {"indices": selection.indices.tolist(), "stride": selection.stride,
+                "visible": selection.visible, "total": selection.total}
+
     def snapshot(self) -> dict:
         """The state a test asserts on, JSON-ready."""
         s, session = self.state, self.session
@@ -289,18 +310,21 @@ class Viewer:
             "window_size": list(self.window_size), "view_rect_window": list(self.view_rect_window()),
             "view_rect_framebuffer": list(self.view_rect_framebuffer()),
             "bake_passes_run": session.bake_passes_run, "bakes_started": session.bake_generation,
+            "empty_space_skipping": session.renderer.resources.use_majorant_grid,
             "probes_ready": session.probes_ready(),
             "probe_grid": list(grid.grid) if grid is not None else None,
             "probe_bytes": grid.gpu_bytes if grid is not None else 0,
             "bake_ms": session.bake_ms, "frame_ms": session.last.total_ms,
             "rel_rmse": self.error_meter.value if s.display == "error" else None,
             "probe_pixels": self.probe_pixels() if s.probe_view != "off" else [],
+            "probes_drawn": self.probes_drawn(),
             "probe_coefficients": (grid.coefficients().reshape(grid.count, 28).tolist()
                                    if grid is not None and grid.count <= SNAPSHOT_MAX_PROBES
                                    and s.probe_view != "off" else None),
             "camera_eye": list(s.scene.camera.eye),
             "half_extent": [float(x) for x in session.volume.half_extent],
             "volume": {"name": session.volume.name, "dims": list(session.volume.dims)},
+            "opacity_points": [list(p) for p in self.opacity_points()[0]],
             "errors": list(s.errors), "messages": list(s.messages),
             "widgets": {k: list(v) for k, v in self.widgets.rects.items()},
         }

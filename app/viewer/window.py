@@ -47,7 +47,9 @@ def _font_path() -> Path | None:
 
 class ViewerWindow:
     def __init__(self, state: ViewerState, width: int = 1280, height: int = 800,
-                 title: str = "Radiance probes", vsync: bool = True):
+                 title: str = "Radiance probes", vsync: bool = True, file_dialog: str = "auto",
+                 volume=None):
+        """`volume`: the scene's volume, already loaded (else the viewer loads it)."""
         self._glfw_errors: list[str] = []
         glfw.ERROR_REPORTING = "ignore"
         glfw.set_error_callback(lambda code, text: self._glfw_errors.append(
@@ -74,7 +76,7 @@ class ViewerWindow:
             raise WindowError(f"the window's OpenGL context is not 4.3 core: {exc}") from None
         self._init_imgui()
         try:
-            self.viewer = Viewer(self.ctx, state, describe(self.ctx))
+            self.viewer = Viewer(self.ctx, state, describe(self.ctx), file_dialog, volume)
         except BaseException:  # a scene whose volume does not load: close the window, then report
             self._shutdown()
             raise
@@ -128,12 +130,14 @@ class ViewerWindow:
         self.ctx.screen.use()
         imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
         if v.pending_screenshot:
+            from ..frontend import save_or_rescue
             path, v.pending_screenshot = v.pending_screenshot, None
-            try:
-                saved = self.save_screenshot(path)
+            saved, error = save_or_rescue(lambda p: self.save_screenshot(p), path, "screenshot")
+            v.last_screenshot = (path, saved, error)
+            if error:
+                v.state.error(error)
+            else:
                 v.state.note(f"saved a screenshot to {saved}")
-            except OSError as exc:
-                v.state.error(f"could not save the screenshot {path}: {exc}")
         glfw.swap_buffers(self.window)
 
     def read_pixels(self) -> np.ndarray:

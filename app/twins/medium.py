@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .transfer import lookup
-from .volume import Volume
+from ..transfer import lookup
+from ..volume import Volume
 
 
 def density_at(volume: Volume, points: np.ndarray) -> np.ndarray:

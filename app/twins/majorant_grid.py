@@ -1,4 +1,4 @@
-"""Macrocell majorants for empty-space skipping: NumPy twin of glsl/majorant_grid.comp.
+"""NumPy twin of glsl/majorant_grid.comp: macrocell majorants for empty-space skipping.
 
 The box is cut into ``cells`` equal macrocells per axis (``macrocell_counts``). Each macrocell
 stores a bound on sigma_t over every point inside it, which delta and ratio tracking
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .transfer import lookup
+from ..transfer import lookup
 
 CELL_VOXELS = 8          # voxels per macrocell along an axis (before clamping the count)
 MAX_CELLS = 64           # macrocells per axis at most

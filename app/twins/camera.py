@@ -1,4 +1,5 @@
-"""The pinhole camera of SPEC.md as the shaders see it, and its NumPy twin for tests."""
+"""NumPy twin of glsl/lib/camera.glsl: the pinhole camera of SPEC.md as the shaders see it (the
+renderers pass its frame as uniforms; the tests generate the same rays)."""
 from __future__ import annotations
 
 import math
@@ -6,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import CameraSpec
+from ..scene_types import CameraSpec
 
 
 @dataclass(frozen=True)

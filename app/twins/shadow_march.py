@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .medium import box_intersect, sigma_t_at
-from .volume import Volume
+from ..volume import Volume
 
 
 def sun_optical_depth_march(volume: Volume, table: np.ndarray, density_scale: float,

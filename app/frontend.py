@@ -1,0 +1,305 @@
+"""What both front ends (the CLI's ``render`` and the viewer, ``view``) share: the scene named on the
+command line with its options applied, the option types that check each value as it is parsed,
+the output checks made before a long render, and the render-to-files run itself.
+
+The rule: every option and scene value is checked before any GPU work, and a bad one ends in one
+line naming the option (or the scene field) and the problem. Values are checked where they are
+parsed (argument types below; the scene's fields in app/scene.py); what depends on the device
+(image sizes against its GL limits) right after the context exists and before the scene is
+uploaded (app/render/limits.py); where the outputs go before the render starts. A render whose
+output cannot be written at the end is not lost: it is written elsewhere and the error says where.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from .scene import Scene, SceneError, default_scene, load_scene, parse_scene, scene_to_dict
+
+MAX_SPP = (1 << 31) - 1        # samples per pixel reach the shaders as a 32-bit uniform
+MAX_WINDOW_SIDE = 16384
+MAX_RENDER_SCALE = 4.0
+DEFAULT_RAYMARCH_STEP = 0.5    # voxels; --raymarch-step's default (None: not given)
+
+
+class OptionError(ValueError):
+    """A command-line option that cannot work (a path that cannot be written, a bad combination);
+    the message names the option."""
+
+
+# ---- argument types: each checks its value as argparse parses it ------------------------------
+
+def positive_int(text: str, limit: int = MAX_SPP) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if not 1 <= v <= limit:
+        raise argparse.ArgumentTypeError(f"expected an integer from 1 to {limit}, got {text!r}")
+    return v
+
+
+def positive_float(text: str) -> float:
+    """A finite number > 0 (exposures, steps, scales): nan, inf, 0 and negatives are refused."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(v) and v > 0.0):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return v
+
+
+def fraction(text: str) -> float:
+    """A finite number in (0, 1] (a relative error target)."""
+    v = positive_float(text)
+    if v > 1.0:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 1], got {text!r}")
+    return v
+
+
+def render_scale(text: str) -> float:
+    """Render pixels per window pixel: finite, in (0, MAX_RENDER_SCALE]."""
+    v = positive_float(text)
+    if v > MAX_RENDER_SCALE:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, {MAX_RENDER_SCALE}], got {text!r}")
+    return v
+
+
+def grid_arg(text: str) -> list[int]:
+    parts = text.split(",")
+    if len(parts) not in (1, 3):
+        raise argparse.ArgumentTypeError(f"expected N or NX,NY,NZ, got {text!r}")
+    values = [positive_int(p) for p in parts]
+    return values * 3 if len(values) == 1 else values
+
+
+def window_size(text: str) -> tuple[int, int]:
+    w, sep, h = text.lower().partition("x")
+    try:
+        size = (int(w), int(h))
+    except ValueError:
+        size = (0, 0)
+    if not sep or min(size) < 64 or max(size) > MAX_WINDOW_SIDE:
+        raise argparse.ArgumentTypeError(f"expected WxH from 64x64 to {MAX_WINDOW_SIDE}x"
+                                         f"{MAX_WINDOW_SIDE}, got {text!r}")
+    return size
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with its errors as one line (``radiance-probes render: error: ...``), exit 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+# ---- the scene ---------------------------------------------------------------------------------
+
+def scene_from_arg(arg: str | None) -> Scene:
+    """The scene argument: a scene JSON file, a volume file (in the default scene), or none (the
+    default scene)."""
+    if arg is None:
+        return default_scene()
+    p = Path(arg)
+    if p.suffix.lower() == ".json":
+        return load_scene(p)
+    return parse_scene({"volume": {"path": str(p)}})
+
+
+# Scene fields the options set, for messages that name the option as well as the field.
+_OPTION_FIELDS = {"camera.width": "--width", "camera.height": "--height",
+                  "probes.grid": "--probe-grid", "probes.samples": "--probe-samples",
+                  "probes.sh_window": "--sh-window", "probes.precision": "--probe-precision"}
+
+
+def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
+    """The scene with the --probe-* and --width/--height options applied, validated as a scene
+    file's values are (the same limits, the same messages, naming the option too)."""
+    probes = {key: value for key, value in (
+        ("grid", getattr(args, "probe_grid", None)), ("samples", getattr(args, "probe_samples", None)),
+        ("sh_window", getattr(args, "sh_window", None)),
+        ("precision", getattr(args, "probe_precision", None))) if value}
+    camera = {key: value for key, value in (("width", getattr(args, "width", None)),
+                                            ("height", getattr(args, "height", None))) if value}
+    if not probes and not camera:
+        return scene
+    data = scene_to_dict(scene)
+    data["probes"].update(probes)
+    data["camera"].update(camera)
+    try:
+        return parse_scene(data, base_dir=scene.base_dir)
+    except SceneError as exc:
+        text = str(exc)
+        for name, option in _OPTION_FIELDS.items():
+            if text.startswith(name):
+                raise OptionError(f"{option}: {text}") from None
+        raise
+
+
+# ---- outputs -----------------------------------------------------------------------------------
+
+OUTPUT_SUFFIXES = {"--out": ".png", "--linear": ".npy", "--exr": ".exr", "--screenshot": ".png"}
+
+
+def check_output(path: str, option: str) -> Path:
+    """Raises OptionError unless `path` can be written: the right suffix, not a folder, its folder
+    creatable and writable. Creates the missing folders (the write would) but leaves no file."""
+    p = Path(path).expanduser()
+    if p.is_dir():
+        raise OptionError(f"{option} {path}: is a folder; give a file name")
+    suffix = OUTPUT_SUFFIXES.get(option)
+    if suffix and p.suffix.lower() != suffix:
+        raise OptionError(f"{option} {path}: expected a {suffix} file name")
+    for parent in p.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise OptionError(f"{option} {path}: {parent} is a file, not a folder")
+            break
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        existed = p.exists()
+        with open(p, "ab"):
+            pass
+        if not existed:
+            p.unlink()
+    except OSError as exc:
+        raise OptionError(f"{option} {path}: cannot write there ({exc.strerror or exc})") from None
+    return p
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    for option in OUTPUT_SUFFIXES:
+        value = getattr(args, option[2:], None)
+        if value:
+            check_output(value, option)
+
+
+def save_or_rescue(save, path: str, option: str, *payload) -> tuple[Path | None, str | None]:
+    """Writes an output with `save(path, *payload)`. When that fails (the disk filled up, the
+    folder went away during the render), writes it to the temporary folder instead. Returns
+    (where it went, an error line or None)."""
+    try:
+        return save(path, *payload).resolve(), None
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+    rescue = Path(tempfile.gettempdir()) / f"radiance-probes-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{Path(path).name}"
+    try:
+        where = save(rescue, *payload).resolve()
+    except OSError as exc:
+        return None, (f"{option} {path}: could not write it ({reason}), nor a copy at {rescue} "
+                      f"({exc.strerror or exc}); the image is lost")
+    return where, f"{option} {path}: could not write it ({reason}); it was written to {where} instead"
+
+
+# ---- render to files (`render`, and `view` where no window can open) ---------------------------
+
+def progress_printer(label: str):
+    interactive = sys.stderr.isatty()
+    last = [-1]
+
+    def report(done: int, total: int) -> None:
+        pct = int(100 * done / max(total, 1))
+        if interactive:
+            print(f"\r{label}: {done}/{total} ({pct}%)", end="" if done < total else "\n",
+                  file=sys.stderr, flush=True)
+        elif pct // 10 != last[0] // 10 or done == total:
+            print(f"{label}: {done}/{total} ({pct}%)", file=sys.stderr, flush=True)
+        last[0] = pct
+    return report
+
+
+def render_defaults() -> dict:
+    """Every option `render` has, at its default: what the viewer's headless fallback starts from."""
+    return dict(scene=None, method="pt", spp=64, samples_per_pass=1, out="render.png", linear=None,
+                exr=None, probe_grid=None, probe_samples=None, sh_window=None, probe_precision=None,
+                auto_probes=None, raymarch_stage="compute", raymarch_step=None, seed=0, width=None,
+                height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True)
+
+
+def render_to_files(args: argparse.Namespace) -> int:
+    """Renders the scene the arguments name and writes the PNG (and the linear .npy/.exr); every
+    check comes before the first GPU call. Returns the exit status."""
+    from .gl.context import create_headless_context, describe
+    from .imageio import save_exr, save_npy, save_png
+    from .render.limits import check_image_size
+    from .render.renderer import Renderer
+    from .render.raymarch import check_step
+    from .volume import load_scene_volume
+
+    if args.auto_probes is not None and args.method == "pt":
+        raise OptionError("--auto-probes chooses probe settings: use it with a probe method")
+    scene = apply_options(scene_from_arg(args.scene), args)
+    check_outputs(args)
+    volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
+    if args.method == "raymarch" and args.raymarch_step is not None:
+        try:
+            check_step(args.raymarch_step, volume)   # a step asked for is taken, or refused
+        except ValueError as exc:
+            raise OptionError(f"--raymarch-step: {exc}") from None
+    ctx = create_headless_context(args.gl_backend)
+    check_image_size(ctx, scene.camera.width, scene.camera.height)
+    renderer = Renderer(ctx, scene, volume, raymarch_stage=args.raymarch_stage,
+                        raymarch_step=args.raymarch_step or DEFAULT_RAYMARCH_STEP,
+                        empty_space_skipping=args.empty_space_skipping)
+    if args.auto_probes is not None:
+        from .render.auto_probes import choose_probes
+        choice = choose_probes(renderer, args.auto_probes, args.method,
+                               progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
+        print(choice.report())
+        scene = choice.scene
+        renderer.set_scene(scene)
+    bake_report = progress_printer("probe bake passes")
+
+    def on_bake_pass(grid) -> None:
+        bake_report(grid.passes_done, grid.passes_total)
+
+    result = renderer.render(args.method, spp=args.spp, seed=args.seed,
+                             samples_per_pass=args.samples_per_pass,
+                             progress=progress_printer(f"{args.method} samples"),
+                             bake_progress=on_bake_pass)
+    errors = []
+    out, err = save_or_rescue(save_png, args.out, "--out", result.image, args.exposure)
+    errors.append(err)
+    print(f"device: {describe(ctx)}")
+    cam = scene.camera
+    print(f"method: {result.method}  image: {cam.width}x{cam.height}  spp: {result.spp}")
+    if renderer.probe_grid is not None and args.method != "pt":
+        g = renderer.probe_grid
+        rep = g.progress_report()
+        print(f"probes: {g.grid[0]}x{g.grid[1]}x{g.grid[2]}, {g.samples} walks each, "
+              f"{g.precision}, window {scene.probes.sh_window}; textures {g.gpu_bytes / 2**20:.1f} MiB; "
+              f"bake GPU time: {result.bake_ms:.1f} ms; last pass changed the probes by "
+              f"{100 * rep.relative_change:.2f}% (est. standard error "
+              f"{'n/a, one pass' if rep.passes_done < 2 else f'{100 * rep.standard_error:.2f}%'})")
+    if args.method == "raymarch" and (renderer.effective_raymarch_step_voxels
+                                      > renderer.raymarch_step_voxels):
+        print(f"note: raymarch step {renderer.effective_raymarch_step_voxels:.3g} voxels, not the "
+              f"default {renderer.raymarch_step_voxels:g}: the shader takes at most 8192 steps "
+              "across this volume's box")
+    print(f"render GPU time: {result.render_ms:.1f} ms  ({result.ms_per_sample:.3f} ms per sample "
+          "per pixel of the whole image)")
+    if result.stats.get("truncated_paths") or result.stats.get("nonfinite_samples"):
+        print(f"warning: {result.stats['truncated_paths']} paths ran out of their step budget and "
+              f"{result.stats['nonfinite_samples']} samples were not finite; both were left out",
+              file=sys.stderr)
+    if args.linear:
+        where, err = save_or_rescue(save_npy, args.linear, "--linear", result.image)
+        errors.append(err)
+        if where:
+            print(f"linear image: {where}")
+    if args.exr:
+        where, err = save_or_rescue(save_exr, args.exr, "--exr", result.image)
+        errors.append(err)
+        if where:
+            print(f"EXR image: {where}")
+    if out:
+        print(f"wrote {out}")
+    errors = [e for e in errors if e]
+    for e in errors:
+        print(f"error: {e}", file=sys.stderr)
+    return 1 if errors else 0

@@ -1,0 +1,150 @@
+"""The house rules, checked from the source: no import cycles in `app` (lazy imports inside
+functions count too: a cycle is a cycle whenever it closes), and no behaviour switched by
+environment variables other than the ones the README names as test shortcuts."""
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+APP = ROOT / "app"
+
+# Cycles that are known and owned elsewhere; each entry is the cycle's modules, sorted.
+ALLOWED_CYCLES = {
+}
+# Environment variables the code may read, each named in the README as a shortcut for tests.
+ALLOWED_ENV = {"RP_GL_BACKEND"}
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def modules() -> dict[str, Path]:
+    return {module_name(p): p for p in APP.rglob("*.py")}
+
+
+def imports_of(name: str, path: Path, known: set[str]) -> set[str]:
+    """The app modules `name` imports anywhere in its file (top level or inside functions)."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        targets: list[str] = []
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[:len(base) - (node.level - 1)]
+                prefix = ".".join(base + ([node.module] if node.module else []))
+            else:
+                prefix = node.module or ""
+            # `from pkg import mod` imports the module pkg.mod; `from mod import name` imports mod.
+            targets = [f"{prefix}.{a.name}" if f"{prefix}.{a.name}" in known else prefix
+                       for a in node.names]
+        for t in targets:
+            while t and t not in known:
+                t = t.rpartition(".")[0]
+            if t and t != name:
+                out.add(t)
+    return out
+
+
+def import_graph() -> dict[str, set[str]]:
+    mods = modules()
+    known = set(mods)
+    return {name: imports_of(name, path, known) for name, path in mods.items()}
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+    counter = [0]
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_the_graph_sees_imports():
+    """The checker itself: it finds relative, absolute, lazy and `from pkg import module` imports."""
+    graph = import_graph()
+    assert "app.scene_types" in graph["app.volume"]
+    assert "app.frontend" in graph["app.cli"]
+    assert "app.viewer.launch" in graph["app.cli"]          # lazy, inside cmd_view
+    assert "app.frontend" in graph["app.viewer.launch"]
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_import_cycles():
+    found = [tuple(c) for c in cycles(import_graph())]
+    unexpected = [c for c in found if c not in ALLOWED_CYCLES]
+    assert not unexpected, "import cycles: " + "; ".join(" <-> ".join(c) for c in unexpected)
+
+
+def test_environment_switches_are_only_the_named_test_shortcuts():
+    readme = (ROOT / "README.md").read_text()
+    used = set()
+    for path in APP.rglob("*.py"):
+        used |= set(re.findall(r"\b(RP_[A-Z0-9_]+)\b", path.read_text()))
+    assert used <= ALLOWED_ENV, f"environment switches not allowed: {sorted(used - ALLOWED_ENV)}"
+    for name in ALLOWED_ENV:
+        assert name in readme, f"{name} is read by the code but the README does not name it"
+
+
+def test_each_numpy_twin_names_the_glsl_file_it_mirrors():
+    """app/twins/NAME.py mirrors glsl/lib/NAME.glsl or glsl/NAME.comp, and says so first."""
+    twins = sorted(p for p in (APP / "twins").glob("*.py") if p.name != "__init__.py")
+    assert len(twins) >= 7
+    for p in twins:
+        glsl = [g for g in (ROOT / "glsl").rglob(f"{p.stem}.*") if g.suffix in (".glsl", ".comp")]
+        assert len(glsl) == 1, f"{p.name}: no single GLSL file named {p.stem} ({glsl})"
+        first = ast.get_docstring(ast.parse(p.read_text())).splitlines()[0]
+        expected = f"NumPy twin of {glsl[0].relative_to(ROOT).as_posix()}"
+        assert first.startswith(expected), f"{p.name}: docstring starts {first!r}, not {expected!r}"
+
+
+def test_the_readme_layout_names_every_module():
+    readme = (ROOT / "README.md").read_text()
+    section = readme[readme.index("### Layout"):readme.index("**Paths are resumable.**")]
+    for path in sorted(APP.rglob("*.py")):
+        if path.name == "__init__.py":
+            continue
+        folder = path.parent.relative_to(ROOT).as_posix()
+        line = next((block for block in section.split("\n- ") if block.startswith(f"`{folder}/`")),
+                    None)
+        assert line is not None, f"the README's layout has no entry for {folder}/"
+        assert f"`{path.name}`" in line, f"the README's layout entry for {folder}/ omits {path.name}"
+    for name in re.findall(r"`(app/[\w/]+\.py)`", section):
+        assert (ROOT / name).is_file(), f"the README's layout names {name}, which does not exist"
