@@ -344,6 +344,8 @@ def _sphere_colours_checked(image: np.ndarray, d: dict) -> int:
     the normal facing the camera (app/twins/sh.py, tone mapped); returns how many were compared."""
     x0, _, w, h = d["view_rect_framebuffer"]
     coeffs = np.array(d["probe_coefficients"])[:, :27].reshape(-1, 9, 3)
+    # the textures hold the bands up to the grid's SH order only (the running means hold all)
+    coeffs[:, (d["probe_sh_order"] + 1) ** 2:] = 0.0
     centres = probe_centres(tuple(d["probe_grid"]), d["half_extent"])
     eye = np.array(d["camera_eye"])
     checked = 0

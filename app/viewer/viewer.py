@@ -313,6 +313,7 @@ class Viewer:
             "empty_space_skipping": session.renderer.resources.use_majorant_grid,
             "probes_ready": session.probes_ready(),
             "probe_grid": list(grid.grid) if grid is not None else None,
+            "probe_sh_order": grid.sh_order if grid is not None else None,
             "probe_bytes": grid.gpu_bytes if grid is not None else 0,
             "bake_ms": session.bake_ms, "frame_ms": session.last.total_ms,
             "rel_rmse": self.error_meter.value if s.display == "error" else None,
