@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from app.bench.config import BenchConfig
-from app.bench.metrics import flip, reference_noise, rrmse
+from app.bench.metrics import corrected_floor, corrected_rrmse, flip, reference_noise, rrmse
 from app.bench.report import pareto, time_to_error, write_report
 
 REQUIRED = ("scene", "method", "probe_grid", "probe_samples", "spp", "bake_ms", "frame_ms",
@@ -34,6 +34,35 @@ def test_reference_noise_matches_the_mean_of_two_halves():
     assert measured == pytest.approx(sigma_half / np.sqrt(2) / 2.0, rel=0.02)
 
 
+@pytest.mark.parametrize("true_error", [0.006, 0.01, 0.02])
+def test_corrected_error_recovers_a_known_error_below_the_reference_noise(true_error):
+    """Synthetic images: a structured truth, an image with a known relative error, a reference
+    made of two noisy halves whose noise (3.5%) is far above that error. The plain rRMSE sees
+    mostly the reference's noise; the corrected one recovers the true error within a few percent
+    of itself once it is above the stated floor, and stays below the floor when the error is 0."""
+    rng = np.random.default_rng(7)
+    h = w = 512
+    yy, xx = np.mgrid[0:h, 0:w] / 512.0
+    truth = np.stack([1.0 + np.sin(6 * xx) * np.cos(4 * yy), 0.5 + xx, 0.8 + 0.3 * yy], -1)
+    truth_rms = np.sqrt(np.mean(truth ** 2))
+    error = rng.normal(0.0, 1.0, truth.shape) * np.exp(-3 * xx)[..., None]   # uneven, any sign
+    error *= true_error * truth_rms / np.sqrt(np.mean(error ** 2))
+    image = truth + error
+    sigma_half = 0.05 * truth_rms   # each half's noise; the mean of both has 0.05 / sqrt(2)
+    a = truth + rng.normal(0, sigma_half, truth.shape)
+    b = truth + rng.normal(0, sigma_half, truth.shape)
+    reference = 0.5 * (a + b)
+    noise = reference_noise(a, b)
+    assert noise == pytest.approx(0.05 / np.sqrt(2), rel=0.02)
+    measured = rrmse(image, reference)
+    assert measured > 1.7 * true_error                     # the noise hides the error...
+    floor = corrected_floor(noise, h * w)
+    assert 0.002 < floor < true_error
+    assert corrected_rrmse(measured, noise) == pytest.approx(true_error, rel=0.1)  # ...not this
+    assert abs(corrected_rrmse(rrmse(truth, reference), noise)) < floor       # zero error
+    assert corrected_rrmse(0.2, 0.0) == pytest.approx(0.2)                     # no noise: as is
+
+
 def test_flip_zero_for_identical_and_grows_with_difference():
     rng = np.random.default_rng(2)
     ref = rng.uniform(0.1, 0.8, (32, 32, 3)).astype(np.float32)
@@ -50,13 +79,24 @@ def test_pareto_and_time_to_error():
 
 
 def test_errors_below_the_reference_floor_are_never_stated():
-    from app.bench.report import err, main_records
-    data = {"references": {"s": {"noise_rrmse": 0.002}},
-            "records": [{"scene": "s", "method": "pt", "rrmse": 0.005, "total_ms": 1.0},
-                        {"scene": "s", "method": "pt", "rrmse": 0.05, "total_ms": 0.5}]}
-    low, high = main_records(data, "s")
-    assert low["below_floor"] and low["error"] == pytest.approx(0.02) and err(low) == "<0.0200"
-    assert not high["below_floor"] and err(high) == "0.0500"
+    """Errors are stated corrected for the reference's noise, and never below what the correction
+    resolves (the floor, from the noise and the pixel count)."""
+    from app.bench.metrics import corrected_floor
+    from app.bench.report import err, floor, main_records
+    data = {"meta": {"config": {"width": 64, "height": 64}},
+            "references": {"s": {"noise_rrmse": 0.02}},
+            "records": [{"scene": "s", "method": "pt", "rrmse": 0.0201, "total_ms": 1.0},
+                        {"scene": "s", "method": "pt", "rrmse": 0.05, "total_ms": 0.5},
+                        {"scene": "s", "method": "pt", "rrmse": 0.03, "total_ms": 0.7,
+                         "reference_noise": 0.0}]}
+    lo = floor(data, "s")
+    assert lo == pytest.approx(corrected_floor(0.02, 64 * 64)) and 0.002 < lo < 0.02
+    low, high, own = main_records(data, "s")
+    assert low["below_floor"] and low["error"] == pytest.approx(lo) and err(low) == f"<{lo:.4f}"
+    expected = np.sqrt((0.05 ** 2 - 0.02 ** 2) / (1 - 0.02 ** 2))
+    assert not high["below_floor"] and high["error"] == pytest.approx(expected)
+    assert err(high) == f"{expected:.4f}"
+    assert own["error"] == pytest.approx(0.03)   # measured against a noise-free reference
 
 
 def test_tiny_benchmark_writes_every_field(ctx, tmp_path):

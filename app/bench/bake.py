@@ -78,6 +78,7 @@ def bake_scene(renderer, name: str, config, results, out, device: str,
                reference: np.ndarray, label: str = "current") -> None:
     scene = renderer.scene
     base = {"scene": name, "device": device, "width": config.width, "height": config.height,
+            "reference_noise": results.references.get(name, {}).get("noise_rrmse"),
             "mode": "bake", "code": label}
     ceiling = measure_ceiling(renderer, rays=config.ceiling_rays)
     _log(f"  ceiling: trilinear march {ceiling['steps_per_s'] / 1e9:.2f} G steps/s "

@@ -44,6 +44,7 @@ def cost_scene(renderer, name: str, config, results, out, device: str,
     scene = renderer.scene
     k = config.samples_per_dispatch
     base = {"scene": name, "device": device, "width": config.width, "height": config.height,
+            "reference_noise": results.references.get(name, {}).get("noise_rrmse"),
             "mode": "cost"}
 
     def record(method, frames, image, timing, bake_ms=0.0, **extra):

@@ -146,8 +146,9 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
         return bake_scene(renderer, name, config, results, out, device,
                           _reference(renderer, name, config, results, out), config.code_label)
     scene = renderer.scene
-    base = {"scene": name, "device": device, "width": config.width, "height": config.height}
     reference = _reference(renderer, name, config, results, out)
+    base = {"scene": name, "device": device, "width": config.width, "height": config.height,
+            "reference_noise": results.references.get(name, {}).get("noise_rrmse")}
 
     def record(method: str, frames: int, image: np.ndarray, timing: tuple[float, float],
                bake_ms: float = 0.0, **extra) -> None:
