@@ -195,6 +195,10 @@ def test_light_grid_matches_its_numpy_twin(ctx):
     assert light_grid_size((64, 64, 64)) == (128, 128, 128)
     assert light_grid_size((256, 256, 100)) == (256, 256, 100)
     assert light_grid_size((1024, 512, 8)) == (512, 512, 8)
+    from app.render.light_transmittance import min_side_for_probes
+    assert light_grid_size((256, 256, 256), min_side=min_side_for_probes((64, 58, 64))) == (384,) * 3
+    assert min_side_for_probes((8, 8, 8)) == 128 and min_side_for_probes((128,) * 3) == 768
+    assert light_grid_size((256, 128, 256), min_side=768) == (512, 384, 512)
     from app.twins.shadow_march import light_grid_centres, sun_optical_depth_march
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
                                    "density_scale": 30.0, "camera": CAMERA,

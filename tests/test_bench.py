@@ -118,6 +118,8 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
         assert np.isfinite(r["rrmse"]) and r["rrmse"] > 0
         assert r["frame_ms"] >= 0 and r["total_ms"] >= r["bake_ms"]
         assert r["gpu_bytes"] >= 16 * 16 * 16
+        if r["method"] == "raymarch":   # every raymarched image pays for its light grid
+            assert r["light_ms"] > 0 and r["bake_ms"] >= r["light_ms"]
         if r["method"] == "pt" or r["spp"] in config.flip_frames:
             assert r["flip"] is not None and 0.0 <= r["flip"] <= 1.0
         if r["method"] != "pt":

@@ -16,7 +16,7 @@ from ..volume import Volume
 from .accumulation import Accumulation
 from .limits import check_image_size
 from .pathtracer import PathTracer
-from .light_transmittance import MAX_SIDE as LIGHT_MAX_SIDE, LightTransmittance
+from .light_transmittance import MAX_SIDE as LIGHT_MAX_SIDE, LightTransmittance, min_side_for_probes
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, visible_region
 from .probes import ProbeGrid
 from .raymarch import Raymarcher, min_step_voxels
@@ -95,6 +95,7 @@ class Renderer:
         self.camera = None
         self.last_bake_ms = 0.0
         self.last_light_ms = 0.0
+        self.light_cost_ms = 0.0   # GPU ms the light grid in hand took to bake
 
     @property
     def raymarch_stage(self) -> str:
@@ -252,10 +253,12 @@ class Renderer:
         return self._raymarchers[key]
 
     def bake_light(self) -> float:
-        """Bakes the sun's transmittance grid for the raymarcher if stale; GPU ms."""
+        """Bakes the sun's transmittance grid for the raymarcher if stale; GPU ms. Its resolution
+        follows the probe grid (light_transmittance.TEXELS_PER_PROBE)."""
         s = self.scene
+        min_side = min_side_for_probes(s.probes.grid)
         key = (self.resources.volume_version, s.transfer_function, s.density_scale,
-               s.light.direction, self.light_max_side)
+               s.light.direction, self.light_max_side, min_side)
         if self._light is None or self._light.max_side != self.light_max_side:
             if self._light is not None:
                 self._light.release()
@@ -263,10 +266,17 @@ class Renderer:
         if key == self._light_key:
             return 0.0
         self.timer.start()
-        self._light.bake(self.resources)
+        self._light.bake(self.resources, min_side)
         self.timer.stop()
         self._light_key = key
-        return self.timer.elapsed_ms
+        self.light_cost_ms = self.timer.elapsed_ms
+        return self.light_cost_ms
+
+    def invalidate(self) -> None:
+        """Forgets the baked probes and light grid, so the next image pays for both again (the
+        benchmark charges every record what its image cost)."""
+        self._baked_key = None
+        self._light_key = None
 
     def probe_uniforms(self) -> dict:
         self.probe_grid.bind()
