@@ -28,9 +28,16 @@ def light_grid_size(dims: tuple[int, int, int], max_side: int = MAX_SIDE,
     return tuple(int(min(max(1, round(d * scale)), max_side)) for d in dims)
 
 
-def min_side_for_probes(probe_grid: tuple[int, int, int] | None) -> int:
-    """The light grid's least texels along the longest axis for a probe grid (None: no probes)."""
-    return max(MIN_SIDE, TEXELS_PER_PROBE * max(probe_grid)) if probe_grid else MIN_SIDE
+def min_side_for_probes(probe_grid: tuple[int, int, int] | None, floor: int = MIN_SIDE) -> int:
+    """The light grid's least texels along the longest axis for a probe grid (None: no probes),
+    and at least `floor`."""
+    return max(floor, TEXELS_PER_PROBE * max(probe_grid)) if probe_grid else floor
+
+
+# On a CPU rasterizer the light grid keeps the volume's own resolution: upsampling a 24^3 test
+# volume's grid to 128^3 took 0.9 s per bake on llvmpipe's two cores against 12 ms, and every
+# light, transfer-function or probe edit re-bakes it.
+SOFTWARE_MIN_SIDE = 1
 
 
 class LightTransmittance:

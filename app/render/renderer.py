@@ -10,13 +10,15 @@ import moderngl
 import numpy as np
 
 from ..twins.camera import camera_frame
+from ..gl.context import is_software
 from ..gl.timer import GpuTimer
 from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation
 from .limits import check_image_size
 from .pathtracer import PathTracer
-from .light_transmittance import MAX_SIDE as LIGHT_MAX_SIDE, LightTransmittance, min_side_for_probes
+from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_MIN_SIDE,
+                                  SOFTWARE_MIN_SIDE, LightTransmittance, min_side_for_probes)
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, visible_region
 from .probes import ProbeGrid
 from .raymarch import Raymarcher, min_step_voxels
@@ -79,6 +81,11 @@ class Renderer:
         self._raymarchers: dict[str, Raymarcher] = {}
         self._light: LightTransmittance | None = None
         self.light_max_side = LIGHT_MAX_SIDE   # the light grid's texels per axis at most
+        # ... and at least along the longest axis, and whether it follows the probe grid (6 texels
+        # per probe spacing): per device class (light_transmittance.py)
+        software = is_software(ctx)
+        self.light_min_side = SOFTWARE_MIN_SIDE if software else LIGHT_MIN_SIDE
+        self.light_follows_probes = not software
         # The sun at the bake's walk events: "grid" (the baked light grid; see ProbeGrid) or "ray"
         # (a ratio-tracked shadow ray, unbiased). Walks per probe from each probe's noise
         # (ProbeGrid's `adaptive`; 0: all walks everywhere). Defaults from bench/h100-bake: the
@@ -158,7 +165,8 @@ class Renderer:
         spec = self.scene.probes
         return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
                 self.resources.use_majorant_grid, self.walk_sun, self.walk_adaptive,
-                self.light_max_side if self.walk_sun == "grid" else None)
+                (self.light_max_side, self.light_min_side, self.light_follows_probes)
+                if self.walk_sun == "grid" else None)
 
     def set_empty_space_skipping(self, on: bool) -> None:
         """Tracking over the macrocell majorant grid (on, the default) or one global majorant
@@ -256,7 +264,8 @@ class Renderer:
         """Bakes the sun's transmittance grid for the raymarcher if stale; GPU ms. Its resolution
         follows the probe grid (light_transmittance.TEXELS_PER_PROBE)."""
         s = self.scene
-        min_side = min_side_for_probes(s.probes.grid)
+        min_side = (min_side_for_probes(s.probes.grid, self.light_min_side)
+                    if self.light_follows_probes else self.light_min_side)
         key = (self.resources.volume_version, s.transfer_function, s.density_scale,
                s.light.direction, self.light_max_side, min_side)
         if self._light is None or self._light.max_side != self.light_max_side:
