@@ -13,6 +13,10 @@ layout(local_size_x = 64) in;
 #include "lib/probe_accum.glsl"
 
 layout(std430, binding = 3) readonly buffer WalkRadiance { vec4 walk_radiance[]; };
+// A warm restart's old running means (ProbeGrid.restart(warm=True)): what the textures show is the
+// new mean blended with these, weighted as warm_walks walks; 0 (cold, and the last pass): the mean.
+layout(std430, binding = 7) readonly buffer PriorAccums { ProbeAccum prior[]; };
+uniform float warm_walks;
 
 layout(PROBE_IMAGE_FORMAT, binding = 0) uniform writeonly image3D probe_image0;
 #if PROBE_GREY
@@ -120,6 +124,17 @@ void main()
     acc.magnitude = dot(l00, l00);
     probes[probe] = acc;
 
+    vec4 shown[7];
+    float w = warm_walks > 0.0 ? warm_walks / (warm_walks + acc.samples) : 0.0;
+    for (int i = 0; i < 7; ++i)
+        shown[i] = w > 0.0 ? mix(acc.channels[i], prior[probe].channels[i], w) : acc.channels[i];
+    for (int i = 0; i < 7; ++i) {
+        f[4 * i + 0] = shown[i].r;
+        f[4 * i + 1] = shown[i].g;
+        f[4 * i + 2] = shown[i].b;
+        f[4 * i + 3] = shown[i].a;
+    }
+
     uint nx = uint(probe_grid.x), ny = uint(probe_grid.y);
     ivec3 texel = ivec3(probe % nx, (probe / nx) % ny, probe / (nx * ny));
 #if PROBE_GREY
@@ -132,16 +147,16 @@ void main()
     imageStore(probe_image2, texel, vec4(f[21], f[24], 0.0, 0.0));
 #endif
 #else
-    imageStore(probe_image0, texel, acc.channels[0]);
-    imageStore(probe_image6, texel, acc.channels[6]);
+    imageStore(probe_image0, texel, shown[0]);
+    imageStore(probe_image6, texel, shown[6]);
 #if PROBE_SH_ORDER >= 1
-    imageStore(probe_image1, texel, acc.channels[1]);
-    imageStore(probe_image2, texel, acc.channels[2]);
+    imageStore(probe_image1, texel, shown[1]);
+    imageStore(probe_image2, texel, shown[2]);
 #endif
 #if PROBE_SH_ORDER >= 2
-    imageStore(probe_image3, texel, acc.channels[3]);
-    imageStore(probe_image4, texel, acc.channels[4]);
-    imageStore(probe_image5, texel, acc.channels[5]);
+    imageStore(probe_image3, texel, shown[3]);
+    imageStore(probe_image4, texel, shown[4]);
+    imageStore(probe_image5, texel, shown[5]);
 #endif
 #endif
 }

@@ -39,6 +39,7 @@ WALK_SUN_MODES = ("ray", "grid")
 WALK_PROFILE_SLOTS = 1024   # rows of 8 counters in glsl/lib/walk_profile.glsl
 WALK_PROFILE_FIELDS = ("walks", "events", "flight_steps", "shadow_steps", "cell_steps",
                        "dispatch_walks")
+WARM_WALKS = 64   # a warm restart's old probes count as this many walks until the last pass
 SH_WINDOW_IDS = {"none": 0, "hann": 1, "lanczos": 2}
 
 
@@ -119,7 +120,10 @@ class ProbeGrid:
         self.noise_program = compute_program(ctx, "probe_noise.comp") if self.adaptive else None
         self.dispatches = 0
         self.passes_done = 0
+        self.next_chunk = 0        # the next chunk of probes of the current pass
         self.seed = 0
+        self.prior = None          # a warm restart's copy of the probes' running means
+        self.warm_walks = 0.0
 
     @property
     def gpu_bytes(self) -> int:
@@ -137,9 +141,23 @@ class ProbeGrid:
     def done(self) -> bool:
         return self.passes_done >= self.passes_total
 
-    def restart(self, seed: int = 0) -> None:
+    def restart(self, seed: int = 0, warm: bool = False) -> None:
+        """Starts the bake over. `warm`: until the last pass, the textures show each probe's new
+        running mean blended with what the probes held before (weighted as WARM_WALKS walks, so
+        the old probes fade as walks come in); the running means and the final probes are the
+        cold bake's, exactly. Cold: the texels of probes not yet walked keep their old values
+        until the first pass reaches them."""
+        had_walks = self.passes_done > 0 or self.next_chunk > 0
         self.passes_done = 0
+        self.next_chunk = 0
         self.seed = seed
+        if not (warm and not had_walks and self.warm_walks > 0):   # else: the prior still holds
+            self.warm_walks = 0.0
+        if warm and had_walks:
+            if self.prior is None:
+                self.prior = self.ctx.buffer(reserve=self.accums.size)
+            self.ctx.copy_buffer(self.prior, self.accums)
+            self.warm_walks = float(WARM_WALKS)
 
     def _pass_directions(self) -> int:
         remaining = self.samples - self.passes_done * self.directions
@@ -164,13 +182,43 @@ class ProbeGrid:
                 self.ctx, "probe_walks.comp", {**self._walk_defines, "WALK_PROFILE": 1})
         return self._walk_profile_program
 
+    @property
+    def chunks_per_pass(self) -> int:
+        return -(-self.count // self.chunk_probes)
+
+    @property
+    def chunks_left(self) -> int:
+        """Chunks of walks still to run before the bake is done (a budgeted bake's unit)."""
+        if self.done:
+            return 0
+        return (self.passes_total - self.passes_done) * self.chunks_per_pass - self.next_chunk
+
     def bake_pass(self, resources: SceneResources, profile: GpuProfile | None = None,
                   counters: moderngl.Buffer | None = None, light=None) -> None:
-        """Runs one pass over all probes. `profile` times its sections on the GPU ("sun", "walks",
-        "project"); `counters` (from walk_counters()) runs the walks' profiling build, which adds
-        what the walks did to it; `light` (a baked LightTransmittance) is what sun="grid" reads."""
-        if self.done:
-            return
+        """Runs one pass over all probes (the rest of it, when bake_chunks stopped within one).
+        `profile` times its sections on the GPU ("sun", "walks", "project"); `counters` (from
+        walk_counters()) runs the walks' profiling build, which adds what the walks did to it;
+        `light` (a baked LightTransmittance) is what sun="grid" reads."""
+        if not self.done:
+            self.bake_chunks(resources, self.chunks_per_pass - self.next_chunk, profile=profile,
+                             counters=counters, light=light)
+
+    def bake_chunks(self, resources: SceneResources, max_chunks: int,
+                    profile: GpuProfile | None = None, counters: moderngl.Buffer | None = None,
+                    light=None) -> int:
+        """Runs up to `max_chunks` chunks of walks (each walks and projects one chunk of probes
+        and publishes their texels), continuing the current pass where the last call stopped and
+        going on into the next ones: the budgeted bake's slice (Renderer.bake_step). The same
+        chunks in the same order as whole passes, so the probes are the same. Returns the chunks
+        run."""
+        ran = 0
+        while ran < max_chunks and not self.done:
+            k = min(max_chunks - ran, self.chunks_per_pass - self.next_chunk)
+            self._run_chunks(resources, k, profile, counters, light)
+            ran += k
+        return ran
+
+    def _run_chunks(self, resources, k, profile, counters, light) -> None:
         if self.sun == "grid" and light is None:
             raise ValueError("a bake with sun='grid' needs the baked light grid (light=...)")
         section = profile.section if profile is not None else _no_section
@@ -178,11 +226,13 @@ class ProbeGrid:
         scene = resources.scene
         uniforms = resources.uniforms()
         uniforms["max_bounces"] = max(scene.max_bounces - 1, 0)  # the render's first event is one
+        last_pass = self.passes_done + 1 >= self.passes_total
         uniforms.update({"probe_grid": self.grid, "directions": directions,
                          "pass_index": self.passes_done, "seed": self.seed & 0xFFFFFFFF,
                          "loop_budget": self.loop_budget, "loop_reserve": self.loop_reserve,
                          "march_step": resources.march_step,
-                         "adaptive_walks": int(self.adaptive > 0)})
+                         "adaptive_walks": int(self.adaptive > 0),
+                         "warm_walks": 0.0 if last_pass else self.warm_walks})
         uniforms.update(self.box_uniforms(resources))
         walk_program = self._walk_program(counters is not None)
         resources.bind()
@@ -197,18 +247,20 @@ class ProbeGrid:
         self.walk_radiance.bind_to_storage_buffer(3)
         self.accums.bind_to_storage_buffer(4)
         self.noise.bind_to_storage_buffer(6)
+        (self.prior if self.prior is not None else self.accums).bind_to_storage_buffer(7)
         if counters is not None:
             counters.bind_to_storage_buffer(5)
         for i, tex in zip(self.texture_ids, self.textures):
             tex.bind_to_image(i, read=False, write=True)
-        if self.passes_done == 0:
+        if self.passes_done == 0 and self.next_chunk == 0:
             self.noise.write(struct.pack("2f", -1.0, 0.0))   # no noise target until pass 0 ends
             with section("sun"):
                 set_uniforms(self.sun_program, {**uniforms, "probe_count": self.count})
                 self.sun_program.run((self.count + 63) // 64)
                 self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
                 self.dispatches += 1
-        for first in range(0, self.count, self.chunk_probes):
+        for c in range(self.next_chunk, self.next_chunk + k):
+            first = c * self.chunk_probes
             n = min(self.chunk_probes, self.count - first)
             set_uniforms(walk_program, {"first_probe": first, "chunk_probes": n})
             set_uniforms(self.project_program, {"first_probe": first})
@@ -221,6 +273,9 @@ class ProbeGrid:
                                         | moderngl.TEXTURE_FETCH_BARRIER_BIT
                                         | moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
                 self.dispatches += 1
+        self.next_chunk += k
+        if self.next_chunk < self.chunks_per_pass:
+            return
         if self.passes_done == 0 and self.adaptive > 0:
             with section("project"):
                 set_uniforms(self.noise_program, {"probe_count": self.count,
@@ -229,6 +284,7 @@ class ProbeGrid:
                 self.noise_program.run(1)
                 self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
                 self.dispatches += 1
+        self.next_chunk = 0
         self.passes_done += 1
 
     def _run_walks(self, program, groups: int) -> None:
@@ -301,7 +357,7 @@ class ProbeGrid:
 
     def release(self) -> None:
         for obj in (*self.textures, self.walk_states, self.walk_radiance, self.accums, self.progress,
-                    self.noise, self.noise_program,
+                    self.noise, self.noise_program, self.prior,
                     self.walk_program, self._walk_profile_program, self.project_program,
                     self.sun_program):
             if obj is not None:

@@ -94,6 +94,11 @@ class Renderer:
         # less time at the same error.
         self.walk_sun = "grid"
         self.walk_adaptive = 1.0
+        # A bake restarted by an edit starts from the previous probes (ProbeGrid.restart(warm)):
+        # they fade out as the new walks come in; the finished probes are the cold bake's.
+        self.bake_warm = True
+        self._chunk_ms: dict[tuple, float] = {}   # measured GPU ms per chunk, per grid layout
+        self.last_slice_ms = 0.0
         self._light_key: tuple | None = None
         self.method = "pt"
         self._region_key: tuple | None = None
@@ -203,8 +208,10 @@ class Renderer:
                          grey=resolve_channels(spec.channels, self.resources.table,
                                                s.light.irradiance, s.environment) == 1)
 
-    def start_bake(self, seed: int = 0) -> ProbeGrid:
-        """(Re)starts the bake for the current scene; reuses the textures when the layout is unchanged."""
+    def start_bake(self, seed: int = 0, warm: bool = False) -> ProbeGrid:
+        """(Re)starts the bake for the current scene; reuses the textures when the layout is
+        unchanged, and then `warm` shows the new probes blended with the old ones until the
+        bake ends (ProbeGrid.restart)."""
         spec = self.scene.probes
         plan = self.probe_plan()
         g = self.probe_grid
@@ -217,7 +224,7 @@ class Renderer:
             self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
                                         plan.sh_order, plan.box, plan.grey,
                                         sun=self.walk_sun, adaptive=self.walk_adaptive)
-        self.probe_grid.restart(seed)
+        self.probe_grid.restart(seed, warm=warm)
         self._baked_key = self.bake_key()
         return self.probe_grid
 
@@ -317,19 +324,45 @@ class Renderer:
     def needs_probes(self, method: str | None = None) -> bool:
         return (method or self.method) in PROBE_LIGHTING or (method or self.method) == "raymarch"
 
-    def bake_step(self, seed: int = 0) -> float:
-        """One progressive bake pass if the probes are stale or unfinished (GPU ms; 0 when
-        nothing was done). Starts a new bake when the scene's bake inputs changed."""
+    def bake_step(self, seed: int = 0, budget_ms: float | None = None) -> float:
+        """One slice of a progressive bake if the probes are stale or unfinished (GPU ms; 0 when
+        nothing was done); starts a new bake (warm when `bake_warm`) when the scene's bake inputs
+        changed, so an edit in the middle of a bake is never lost. `budget_ms` None: the rest of
+        the current pass. Otherwise as many chunks of walks as the GPU time of earlier slices
+        predicts fit in the budget (at least one); the slice is timed as one span (one wait, for
+        the timer), and its measured time per chunk predicts the next slice."""
         if self.probes_current():
             return 0.0
         if self.probe_grid is None or self._baked_key != self.bake_key():
-            self.start_bake(seed)
+            self.start_bake(seed, warm=self.bake_warm)
+        grid = self.probe_grid
         light_ms = self._light_for_walks()
+        light = self._light if grid.sun == "grid" else None
         self.timer.start()
-        self.probe_grid.bake_pass(self.resources,
-                                  light=self._light if self.probe_grid.sun == "grid" else None)
-        self.timer.stop()
-        return light_ms + self.timer.elapsed_ms
+        if budget_ms is None:
+            grid.bake_pass(self.resources, light=light)
+            self.timer.stop()
+            ms = self.timer.elapsed_ms
+        else:
+            left = max(budget_ms - light_ms, 0.0)
+            key = (grid.grid, grid.samples, grid.chunk_probes)
+            per_chunk = self._chunk_ms.get(key)
+            chunks = 1 if per_chunk is None else max(1, int(left / max(per_chunk, 1e-3)))
+            ran = grid.bake_chunks(self.resources, chunks, light=light)
+            self.timer.stop()
+            ms = self.timer.elapsed_ms
+            if ran:
+                seen = ms / ran
+                # the first slice of a bake also runs the sun's pass: a running estimate
+                self._chunk_ms[key] = seen if per_chunk is None else 0.5 * (per_chunk + seen)
+        self.last_slice_ms = light_ms + ms
+        return light_ms + ms
+
+    def probes_shown(self) -> bool:
+        """Whether the probe textures hold anything to render from: a finished bake, or one
+        with at least one chunk walked (then the image shows the probes as they are)."""
+        g = self.probe_grid
+        return g is not None and (g.passes_done > 0 or g.next_chunk > 0 or g.warm_walks > 0)
 
     def add_samples(self, n: int = 1) -> float:
         """Adds n samples per pixel to the accumulation begun by begin(); returns GPU ms.
