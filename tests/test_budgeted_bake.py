@@ -107,3 +107,54 @@ def test_an_edit_in_the_middle_of_a_bake_is_not_lost(renderer):
     r.invalidate()
     r.bake(seed=4)
     assert all(np.array_equal(a, b) for a, b in zip(got, _textures(r)))
+
+
+def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
+    """--preset interact at a tiny size: every event's record with its fields, warm and cold
+    edits, the dispatch tail, the references cached by name and reused, the report and plot."""
+    import json
+
+    from app.bench.config import PRESETS
+    from app.bench.report import write_report
+    from app.bench.runner import run_bench
+    config = PRESETS["interact"].scaled(
+        scenes=("tiny",), interact_sizes=((24, 16),), interact_probes=(3, 64),
+        interact_ref_spp=64, ref_samples_per_pass=32, interact_orbit_frames=3,
+        interact_max_frames=6, interact_samples_per_frame=2,
+        interact_target_spp=(("probes", 4), ("raymarch", 2)), interact_tail_k=2)
+    path = run_bench(config, tmp_path / "a")
+    data = json.loads(path.read_text())
+    recs = data["records"]
+    events = [(r["event"], r["variant"]) for r in recs]
+    assert events == [("load", None), ("orbit", None),
+                      *[(e, v) for e in ("tf_drag", "sun_30deg", "density", "albedo")
+                        for v in ("warm", "cold")],
+                      ("raymarch_switch", None), ("dispatch_tail", None), ("dispatch_tail", None)]
+    for r in recs:
+        assert r["mode"] == "interact" and r["scene"] == "tiny" and (r["width"], r["height"]) == (24, 16)
+        if r["event"] == "dispatch_tail":
+            assert r["ms_per_sample_1"] > 0 and r["ms_per_sample_k"] > 0
+            continue
+        for key in ("frame_ms_p50", "frame_ms_p99", "first_frame_ms", "final_rrmse"):
+            assert r[key] is not None and np.isfinite(r[key]), key
+        assert r["frame_ms_p99"] >= r["frame_ms_p50"] > 0
+        for key in ("ms_to_10pct", "ms_to_5pct", "ms_to_3pct"):
+            assert key in r
+            assert r[key] is None or r[key] > 0
+            if r[key] is None:   # never reached: the final error says by how much
+                assert r["final_rrmse"] > float(key[6:-3]) / 100
+        times = [t for t, _ in r["curve"]]
+        assert times == sorted(times)
+    assert recs[-3]["method"] == "raymarch" and recs[1]["orbit_frames"] == 3
+    assert recs[1]["frames"] >= 3
+    # the edit's re-bake happened in the timed frames: its first frame pays a bake slice
+    assert all(r["first_frame_ms"] > 0 for r in recs[:-2])
+    assert set(data["references"]) == {f"tiny_24x16_{k}" for k in
+                                       ("load", "orbit", "tf_drag", "sun_30deg", "density",
+                                        "albedo")}
+    text = write_report(path).read_text()
+    assert "Interaction" in text and "| tiny | 24x16 | tf_drag | probes | warm |" in text
+    assert (tmp_path / "a" / "interact.png").is_file()
+    again = run_bench(config.scaled(reference_dir=str(tmp_path / "a")), tmp_path / "b")
+    refs = json.loads(again.read_text())["references"]
+    assert all("loaded_from" in v for v in refs.values()) and len(refs) == 6

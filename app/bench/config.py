@@ -42,6 +42,16 @@ class BenchConfig:
     bake_repeats: int = 3                   # bakes timed per setting (the median is reported)
     ceiling_rays: int = 1 << 21             # rays of the ceiling's trilinear march (256 steps each)
     code_label: str = "current"             # names the code a bake run measured (before/after)
+    # --preset interact (interact.py): the replayed viewer session
+    interact_sizes: tuple[tuple[int, int], ...] = ((1920, 1080), (1280, 720))
+    interact_probes: tuple[int, int] = (64, 256)     # grid, walks per probe
+    interact_bake_budget_ms: float = 8.0             # GPU time a frame gives the bake
+    interact_samples_per_frame: int = 4              # samples per pixel per frame (one dispatch)
+    interact_target_spp: tuple = (("probes", 64), ("raymarch", 16), ("pt", 256))
+    interact_max_frames: int = 300                   # frames an event may take to converge
+    interact_orbit_frames: int = 60
+    interact_ref_spp: int = 1024                     # reference per event state (two halves)
+    interact_tail_k: int = 8                         # samples per dispatch against 1
 
     def scaled(self, **changes) -> "BenchConfig":
         return replace(self, **changes)
@@ -57,6 +67,9 @@ PRESETS = {
     # the bake's profile against the GPU's ceiling, with the raymarcher's error (bake.py)
     "bake": BenchConfig(mode="bake", scenes=("bonsai", "fuel", "hydrogen", "foot"), ref_spp=16384,
                         raymarch_frames=(16,)),
+    # the replayed viewer session (interact.py): about 4 minutes on an H100, half of it the
+    # 24 references (--ref-dir reuses them)
+    "interact": BenchConfig(mode="interact", scenes=("bonsai", "foot"), ref_samples_per_pass=64),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),

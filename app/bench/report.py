@@ -179,6 +179,9 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
         return _write_cost_report(data, out, scenes)
     if all(r.get("mode") == "bake" for r in data["records"]) and data["records"]:
         return _write_bake_report(data, out, scenes)
+    if all(r.get("mode") == "interact" for r in data["records"]) and data["records"]:
+        from .interact_report import write_interact_report
+        return write_interact_report(data, out)
     lines = [f"# Speed against error", "",
              f"Device: **{meta['device']}**. Started {meta.get('started')}, finished "
              f"{meta.get('finished', 'not finished (partial run)')}.", "", *caveat(meta),

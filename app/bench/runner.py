@@ -141,6 +141,10 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
         from .cost import cost_scene
         return cost_scene(renderer, name, config, results, out, device,
                           _reference(renderer, name, config, results, out))
+    if config.mode == "interact":
+        from .interact import interact_scene
+        return interact_scene(renderer, name, config, results, out, device,
+                              lambda r, key, cfg: _reference(r, key, cfg, results, out))
     if config.mode == "bake":
         from .bake import bake_scene
         return bake_scene(renderer, name, config, results, out, device,

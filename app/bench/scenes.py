@@ -19,8 +19,11 @@ ANISOTROPIC = {"volume": {"builtin": "cloud", "size": [96, 96, 96]}, "density_sc
                "environment": [0.08, 0.08, 0.1]}
 # The thick cloud with a grey environment: everything grey, so probes need one channel.
 GREY = {**THICK, "environment": [0.12, 0.12, 0.12]}
-BUILTIN_SCENES = {"thick": THICK, "anisotropic": ANISOTROPIC, "grey": GREY}
-ALL_SCENES = (*DATASET_SCENES, *BUILTIN_SCENES)
+# An 8^3 cloud: the interact mode's end-to-end test (not in the sweeps).
+TINY = {"volume": {"builtin": "cloud", "size": [8, 8, 8]}, "density_scale": 30.0, "albedo": 0.8,
+        "max_bounces": 8}
+BUILTIN_SCENES = {"thick": THICK, "anisotropic": ANISOTROPIC, "grey": GREY, "tiny": TINY}
+ALL_SCENES = (*DATASET_SCENES, "thick", "anisotropic", "grey")
 
 
 def bench_scene(name: str, width: int, height: int) -> Scene | None:

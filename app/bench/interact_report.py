@@ -1,0 +1,107 @@
+"""The interact mode's report (app/bench/interact.py): per event, the first frame's GPU time, frame
+p50/p99 and the GPU time to each error target since the event; warm against cold bakes; the
+per-dispatch tail; and a plot of error against time since each event."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+
+def _ms(v) -> str:
+    if v is None:
+        return "not reached"
+    return f"{v:.3g} ms" if v < 1000 else f"{v / 1000:.3g} s"
+
+
+def plot_interact(data: dict, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    recs = [r for r in data["records"] if r.get("mode") == "interact" and r.get("curve")]
+    groups = list(dict.fromkeys((r["scene"], r["width"], r["height"]) for r in recs))
+    events = list(dict.fromkeys(r["event"] for r in recs))
+    if not groups:
+        return
+    fig, axes = plt.subplots(len(groups), len(events), squeeze=False,
+                             figsize=(3.0 * len(events), 2.8 * len(groups)))
+    for gi, (scene, w, h) in enumerate(groups):
+        for ei, event in enumerate(events):
+            ax = axes[gi][ei]
+            for r in recs:
+                if (r["scene"], r["width"], r["height"], r["event"]) != (scene, w, h, event):
+                    continue
+                xs = [max(t, 1e-3) for t, _ in r["curve"]]
+                ys = [max(e, 1e-4) for _, e in r["curve"]]
+                ax.plot(xs, ys, marker=".", lw=1, label=f"{r['method']} {r['variant'] or ''}")
+            for target in (0.10, 0.05, 0.03):
+                ax.axhline(target, color="grey", lw=0.5, ls=":")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_title(f"{scene} {w}x{h}: {event}", fontsize=7)
+            ax.tick_params(labelsize=6)
+            ax.grid(True, which="both", alpha=0.2)
+            if gi == len(groups) - 1:
+                ax.set_xlabel("GPU ms since the event", fontsize=7)
+            if ei == 0:
+                ax.set_ylabel("rRMSE", fontsize=7)
+            ax.legend(fontsize=5)
+    fig.suptitle(f"Error against time since each event: {data['meta']['device']}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def interact_section(data: dict, out: Path) -> list[str]:
+    recs = [r for r in data["records"] if r.get("mode") == "interact"]
+    if not recs:
+        return []
+    plot_interact(data, out / "interact.png")
+    cfg = data["meta"]["config"]
+    lines = ["## Interaction (`--preset interact`)", "",
+             "A scripted session replayed through the viewer's progressive Renderer API: load, "
+             f"orbit ({cfg.get('interact_orbit_frames')} frames), drag an opacity point, the sun "
+             "30 degrees, density scale, albedo, then the raymarcher. Each frame gives the bake "
+             f"{cfg.get('interact_bake_budget_ms')} ms of GPU time and adds "
+             f"{cfg.get('interact_samples_per_frame')} samples per pixel; after a bake slice the "
+             "picture restarts from the probes as they are. Times are GPU timestamp queries since "
+             "the event (the orbit: since its last move); errors are rRMSE corrected for the "
+             "noise of a path-traced reference of the state after the event "
+             f"({cfg.get('interact_ref_spp')} spp). Warm: the bake starts from the previous "
+             "probes; cold: from nothing (both end at the same probes).", "",
+             "![error against time since each event](interact.png)", "",
+             "| scene | size | event | method | bake | first frame | p50 | p99 | to 10% | to 5% "
+             "| to 3% | final rRMSE | frames |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in recs:
+        if r["event"] == "dispatch_tail":
+            continue
+        lines.append(
+            f"| {r['scene']} | {r['width']}x{r['height']} | {r['event']} | {r['method']} | "
+            f"{r['variant'] or '-'} | {_ms(r['first_frame_ms'])} | {_ms(r['frame_ms_p50'])} | "
+            f"{_ms(r['frame_ms_p99'])} | {_ms(r['ms_to_10pct'])} | {_ms(r['ms_to_5pct'])} | "
+            f"{_ms(r['ms_to_3pct'])} | {r['final_rrmse']:.4f} | {r['frames']}"
+            f"{'' if r['converged'] else ' (not converged)'} |")
+    tails = [r for r in recs if r["event"] == "dispatch_tail"]
+    if tails:
+        lines += ["", "### The per-dispatch tail", "",
+                  "GPU ms per sample per pixel at one sample per dispatch against k per dispatch "
+                  "(the final state; medians):", "",
+                  "| scene | size | method | 1 per dispatch | k per dispatch | k | saved |",
+                  "| --- | --- | --- | --- | --- | --- | --- |"]
+        for r in tails:
+            one, many = r["ms_per_sample_1"], r["ms_per_sample_k"]
+            saved = f"{100 * (1 - many / one):.0f}%" if one > 0 else "-"
+            lines.append(f"| {r['scene']} | {r['width']}x{r['height']} | {r['method']} | "
+                         f"{one:.3f} ms | {many:.3f} ms | {r['k']} | {saved} |")
+    lines.append("")
+    return lines
+
+
+def write_interact_report(data: dict, out: Path) -> Path:
+    meta = data["meta"]
+    lines = ["# Interaction", "", f"Device: **{meta['device']}**. Started {meta.get('started')}, "
+             f"finished {meta.get('finished', 'not finished (partial run)')}.", "",
+             f"Command: `{meta.get('command', '')}`", "", *interact_section(data, out)]
+    path = out / "report.md"
+    path.write_text("\n".join(lines))
+    return path
