@@ -158,3 +158,28 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
     again = run_bench(config.scaled(reference_dir=str(tmp_path / "a")), tmp_path / "b")
     refs = json.loads(again.read_text())["references"]
     assert all("loaded_from" in v for v in refs.values()) and len(refs) == 6
+
+
+def test_the_viewer_session_bakes_in_slices_and_shows_probes_after_each(ctx):
+    from app.viewer.session import RenderSession
+    s = RenderSession(ctx, parse_scene(SCENE))
+    try:
+        s.resize(24, 16)
+        s.set_methods(["raymarch"])
+        s.renderer.start_bake(0)
+        s.renderer.probe_grid.chunk_probes = 5
+        s.renderer.invalidate()
+        s.step(64, True)
+        grid = s.renderer.probe_grid
+        assert not grid.done and grid.chunks_left == grid.chunks_per_pass * grid.passes_total - 1
+        assert s.samples("raymarch") > 0            # the picture from the probes it has
+        frames = 1
+        while not s.probes_ready():
+            s.step(64, True)
+            frames += 1
+            if frames == 10:                         # an edit in the middle of the bake
+                s.set_scene(s.scene.replace(albedo=0.6))
+        assert frames > 10 and s.bake_generation == 2 and s.renderer._baked_key == s.renderer.bake_key()
+        assert s.bake_report is not None and s.bake_report.passes_done == grid.passes_total
+    finally:
+        s.release()

@@ -3,8 +3,9 @@ grid) and one accumulation per shown method, advanced a little every frame.
 
 Camera moves only restart the accumulations (the probes' bake key leaves the camera out); any
 other scene change restarts them too and, where it touches the bake key, the bake. While probes
-bake, the methods that read them restart after every bake pass, so the picture improves with the
-probes and never mixes two generations of them.
+bake, each frame gives the bake a budget of GPU time (a slice of chunks of walks, never a whole
+bake), and the methods that read probes restart after every slice, so the picture improves with
+the probes as they come.
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from ..gl.context import is_software
 from ..render.accumulation import Accumulation
 from ..render.probes import BakeProgress
 from ..render.renderer import Renderer
@@ -23,6 +25,10 @@ from ..volume import Volume
 FRAME_HISTORY = 240
 FRAME_BUDGET_MS = 15.0        # GPU time a frame may spend adding samples, per shown method
 MAX_SAMPLES_PER_FRAME = 64
+# GPU time a frame gives the bake (Renderer.bake_step predicts how many chunks of walks fit from
+# the slices it has timed, so the budget holds on any device): a 60 Hz frame's half on a GPU; on
+# llvmpipe, where one chunk alone takes longer, one chunk a frame.
+BAKE_BUDGET_MS = {"gpu": 8.0, "software": 1.0}
 
 
 @dataclass
@@ -66,6 +72,7 @@ class RenderSession:
         self.last = FrameTimes()
         self.history: deque[float] = deque(maxlen=FRAME_HISTORY)
         self.filter = moderngl.NEAREST
+        self.bake_budget_ms = BAKE_BUDGET_MS["software" if is_software(ctx) else "gpu"]
 
     @property
     def scene(self) -> Scene:
@@ -129,18 +136,22 @@ class RenderSession:
         return self.renderer.probe_grid is not None and self.renderer.probes_current()
 
     def step(self, max_samples: int, want_probes: bool) -> FrameTimes:
-        """One bake pass (while the probes are stale) and samples for every unfinished view: as
-        many as fit in FRAME_BUDGET_MS of GPU time (one on a software renderer)."""
+        """One bake slice of `bake_budget_ms` GPU time (while the probes are stale; a whole bake
+        never blocks a frame) and samples for every unfinished view: as many as fit in
+        FRAME_BUDGET_MS of GPU time. The views that read probes restart after every slice, from
+        the probes as they are then."""
         times = FrameTimes()
         r = self.renderer
         if want_probes and not r.probes_current():
-            times.bake_ms = r.bake_step(self.seed)
-            if r.probe_grid.passes_done == 1:  # this pass began a new bake
+            starting = r.probe_grid is None or r._baked_key != r.bake_key()
+            times.bake_ms = r.bake_step(self.seed, budget_ms=self.bake_budget_ms)
+            if starting:
                 self.bake_ms = 0.0
                 self.bake_generation += 1
             self.bake_ms += times.bake_ms
             self.bake_passes_run += 1
-            self.bake_report = r.probe_grid.progress_report()
+            if r.probe_grid.next_chunk == 0:   # a pass ended: its progress is readable
+                self.bake_report = r.probe_grid.progress_report()
             self.restart([m for m in self.views if r.needs_probes(m)])
         for view in self.views.values():
             if view.acc is None or view.acc.samples >= max_samples:
