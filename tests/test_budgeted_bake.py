@@ -35,33 +35,45 @@ def test_slices_give_the_probes_of_one_whole_bake(renderer):
     r = renderer
     _small_chunks(r)
     grid = r.probe_grid
-    assert grid.chunks_per_pass == 13 and grid.passes_total == 3
+    assert grid.count == 64 and grid.passes_total == 3
     r.invalidate()
     r.bake(seed=5)
     whole = _textures(r)
     r.invalidate()
     slices = 0
     while not r.probes_current():
-        ms = r.bake_step(5, budget_ms=1e-6)      # one chunk a slice
+        ms = r.bake_step(5, budget_ms=1e-6)      # FIRST_SLICE_PROBES, then one probe a slice
         assert ms > 0
         slices += 1
         if slices == 1:
-            assert grid.next_chunk == 1 and not grid.done
-    assert slices == grid.chunks_per_pass * grid.passes_total
+            assert grid.next_probe == 0 and grid.passes_done == 1
+        if slices == 2:
+            assert grid.next_probe == 1 and not grid.done
+    assert slices == 1 + 2 * 64
     assert all(np.array_equal(a, b) for a, b in zip(whole, _textures(r)))
     assert np.abs(whole[0]).max() > 0
+    # uneven slices across pass ends (a dispatch per 5 probes within each)
+    r.invalidate()
+    r.start_bake(5)
+    light = r._light
+    for n in (7, 60, 3, 64, 50):
+        grid.bake_probes(r.resources, n, light=light)
+    assert grid.probes_left == 3 * 64 - 184
+    grid.bake_probes(r.resources, 1000, light=light)
+    assert grid.done and all(np.array_equal(a, b) for a, b in zip(whole, _textures(r)))
 
 
-def test_budget_follows_the_measured_chunk_time(renderer):
+def test_budget_follows_the_measured_probe_time(renderer):
     r = renderer
     _small_chunks(r)
     r.invalidate()
     r.bake_step(1, budget_ms=1e-6)
-    per_chunk = next(iter(r._chunk_ms.values()))
-    before = r.probe_grid.chunks_left
-    r.bake_step(1, budget_ms=per_chunk * 4.5)   # about 4 chunks fit
-    ran = before - r.probe_grid.chunks_left
-    assert 2 <= ran <= 8
+    r.bake_step(1, budget_ms=1e-6)
+    per_probe = next(iter(r._probe_ms.values()))
+    before = r.probe_grid.probes_left
+    r.bake_step(1, budget_ms=per_probe * 20.5)   # about 20 probes fit
+    ran = before - r.probe_grid.probes_left
+    assert ran == 20
 
 
 def test_warm_restart_ends_at_the_cold_bake(renderer):
@@ -171,15 +183,17 @@ def test_the_viewer_session_bakes_in_slices_and_shows_probes_after_each(ctx):
         s.renderer.invalidate()
         s.step(64, True)
         grid = s.renderer.probe_grid
-        assert not grid.done and grid.chunks_left == grid.chunks_per_pass * grid.passes_total - 1
+        assert not grid.done and grid.next_probe == 0 and grid.passes_done == 1
+        s.step(64, True)
+        assert grid.passes_done == 1 and 0 < grid.next_probe < 64   # a budget, not a pass
         assert s.samples("raymarch") > 0            # the picture from the probes it has
         frames = 1
         while not s.probes_ready():
             s.step(64, True)
             frames += 1
-            if frames == 10:                         # an edit in the middle of the bake
+            if frames == 4:                          # an edit in the middle of the bake
                 s.set_scene(s.scene.replace(albedo=0.6))
-        assert frames > 10 and s.bake_generation == 2 and s.renderer._baked_key == s.renderer.bake_key()
+        assert frames > 4 and s.bake_generation == 2 and s.renderer._baked_key == s.renderer.bake_key()
         assert s.bake_report is not None and s.bake_report.passes_done == grid.passes_total
     finally:
         s.release()

@@ -70,6 +70,13 @@ PRESETS = {
     # the replayed viewer session (interact.py): about 4 minutes on an H100, half of it the
     # 24 references (--ref-dir reuses them)
     "interact": BenchConfig(mode="interact", scenes=("bonsai", "foot"), ref_samples_per_pass=64),
+    # the same session on llvmpipe: small images and probes (warm against cold at small size)
+    "interact-quick": BenchConfig(mode="interact", scenes=("anisotropic", "thick"),
+                                  interact_sizes=((64, 48),), interact_probes=(8, 128),
+                                  interact_bake_budget_ms=40.0, interact_samples_per_frame=1,
+                                  interact_target_spp=(("probes", 16), ("raymarch", 4)),
+                                  interact_max_frames=60, interact_orbit_frames=12,
+                                  interact_ref_spp=512, ref_samples_per_pass=16, interact_tail_k=4),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),

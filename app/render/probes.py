@@ -120,7 +120,7 @@ class ProbeGrid:
         self.noise_program = compute_program(ctx, "probe_noise.comp") if self.adaptive else None
         self.dispatches = 0
         self.passes_done = 0
-        self.next_chunk = 0        # the next chunk of probes of the current pass
+        self.next_probe = 0        # the next probe to walk in the current pass
         self.seed = 0
         self.prior = None          # a warm restart's copy of the probes' running means
         self.warm_walks = 0.0
@@ -147,9 +147,9 @@ class ProbeGrid:
         the old probes fade as walks come in); the running means and the final probes are the
         cold bake's, exactly. Cold: the texels of probes not yet walked keep their old values
         until the first pass reaches them."""
-        had_walks = self.passes_done > 0 or self.next_chunk > 0
+        had_walks = self.passes_done > 0 or self.next_probe > 0
         self.passes_done = 0
-        self.next_chunk = 0
+        self.next_probe = 0
         self.seed = seed
         if not (warm and not had_walks and self.warm_walks > 0):   # else: the prior still holds
             self.warm_walks = 0.0
@@ -183,42 +183,39 @@ class ProbeGrid:
         return self._walk_profile_program
 
     @property
-    def chunks_per_pass(self) -> int:
-        return -(-self.count // self.chunk_probes)
-
-    @property
-    def chunks_left(self) -> int:
-        """Chunks of walks still to run before the bake is done (a budgeted bake's unit)."""
+    def probes_left(self) -> int:
+        """Probe walks (one probe's walks of one pass each) still to run before the bake is
+        done: a budgeted bake's unit."""
         if self.done:
             return 0
-        return (self.passes_total - self.passes_done) * self.chunks_per_pass - self.next_chunk
+        return (self.passes_total - self.passes_done) * self.count - self.next_probe
 
     def bake_pass(self, resources: SceneResources, profile: GpuProfile | None = None,
                   counters: moderngl.Buffer | None = None, light=None) -> None:
-        """Runs one pass over all probes (the rest of it, when bake_chunks stopped within one).
+        """Runs one pass over all probes (the rest of it, when bake_probes stopped within one).
         `profile` times its sections on the GPU ("sun", "walks", "project"); `counters` (from
         walk_counters()) runs the walks' profiling build, which adds what the walks did to it;
         `light` (a baked LightTransmittance) is what sun="grid" reads."""
         if not self.done:
-            self.bake_chunks(resources, self.chunks_per_pass - self.next_chunk, profile=profile,
+            self.bake_probes(resources, self.count - self.next_probe, profile=profile,
                              counters=counters, light=light)
 
-    def bake_chunks(self, resources: SceneResources, max_chunks: int,
+    def bake_probes(self, resources: SceneResources, max_probes: int,
                     profile: GpuProfile | None = None, counters: moderngl.Buffer | None = None,
                     light=None) -> int:
-        """Runs up to `max_chunks` chunks of walks (each walks and projects one chunk of probes
-        and publishes their texels), continuing the current pass where the last call stopped and
-        going on into the next ones: the budgeted bake's slice (Renderer.bake_step). The same
-        chunks in the same order as whole passes, so the probes are the same. Returns the chunks
-        run."""
+        """Walks and projects up to `max_probes` probes (dispatches of at most `chunk_probes`
+        each, publishing their texels), continuing the current pass where the last call stopped
+        and going on into the next ones: the budgeted bake's slice (Renderer.bake_step). Every
+        walk's random numbers follow its probe, pass and slot, so any slicing gives the probes
+        of whole passes. Returns the probes walked."""
         ran = 0
-        while ran < max_chunks and not self.done:
-            k = min(max_chunks - ran, self.chunks_per_pass - self.next_chunk)
-            self._run_chunks(resources, k, profile, counters, light)
+        while ran < max_probes and not self.done:
+            k = min(max_probes - ran, self.count - self.next_probe)
+            self._run_probes(resources, k, profile, counters, light)
             ran += k
         return ran
 
-    def _run_chunks(self, resources, k, profile, counters, light) -> None:
+    def _run_probes(self, resources, k, profile, counters, light) -> None:
         if self.sun == "grid" and light is None:
             raise ValueError("a bake with sun='grid' needs the baked light grid (light=...)")
         section = profile.section if profile is not None else _no_section
@@ -252,16 +249,16 @@ class ProbeGrid:
             counters.bind_to_storage_buffer(5)
         for i, tex in zip(self.texture_ids, self.textures):
             tex.bind_to_image(i, read=False, write=True)
-        if self.passes_done == 0 and self.next_chunk == 0:
+        if self.passes_done == 0 and self.next_probe == 0:
             self.noise.write(struct.pack("2f", -1.0, 0.0))   # no noise target until pass 0 ends
             with section("sun"):
                 set_uniforms(self.sun_program, {**uniforms, "probe_count": self.count})
                 self.sun_program.run((self.count + 63) // 64)
                 self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
                 self.dispatches += 1
-        for c in range(self.next_chunk, self.next_chunk + k):
-            first = c * self.chunk_probes
-            n = min(self.chunk_probes, self.count - first)
+        end = self.next_probe + k
+        for first in range(self.next_probe, end, self.chunk_probes):
+            n = min(self.chunk_probes, end - first)
             set_uniforms(walk_program, {"first_probe": first, "chunk_probes": n})
             set_uniforms(self.project_program, {"first_probe": first})
             groups = (n * directions + 63) // 64
@@ -273,8 +270,8 @@ class ProbeGrid:
                                         | moderngl.TEXTURE_FETCH_BARRIER_BIT
                                         | moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
                 self.dispatches += 1
-        self.next_chunk += k
-        if self.next_chunk < self.chunks_per_pass:
+        self.next_probe = end
+        if self.next_probe < self.count:
             return
         if self.passes_done == 0 and self.adaptive > 0:
             with section("project"):
@@ -284,7 +281,7 @@ class ProbeGrid:
                 self.noise_program.run(1)
                 self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
                 self.dispatches += 1
-        self.next_chunk = 0
+        self.next_probe = 0
         self.passes_done += 1
 
     def _run_walks(self, program, groups: int) -> None:

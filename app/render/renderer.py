@@ -59,6 +59,9 @@ class RenderResult:
 
 
 RAYMARCH_STAGES = ("compute", "fragment")
+# A budgeted bake's first slice, before any slice of this probe layout was timed: small enough
+# for a frame on llvmpipe (64 walks a probe), and the next slices follow the measured time.
+FIRST_SLICE_PROBES = 64
 
 
 class Renderer:
@@ -97,7 +100,7 @@ class Renderer:
         # A bake restarted by an edit starts from the previous probes (ProbeGrid.restart(warm)):
         # they fade out as the new walks come in; the finished probes are the cold bake's.
         self.bake_warm = True
-        self._chunk_ms: dict[tuple, float] = {}   # measured GPU ms per chunk, per grid layout
+        self._probe_ms: dict[tuple, float] = {}   # measured GPU ms per probe walked, per layout
         self.last_slice_ms = 0.0
         self._light_key: tuple | None = None
         self.method = "pt"
@@ -328,9 +331,10 @@ class Renderer:
         """One slice of a progressive bake if the probes are stale or unfinished (GPU ms; 0 when
         nothing was done); starts a new bake (warm when `bake_warm`) when the scene's bake inputs
         changed, so an edit in the middle of a bake is never lost. `budget_ms` None: the rest of
-        the current pass. Otherwise as many chunks of walks as the GPU time of earlier slices
-        predicts fit in the budget (at least one); the slice is timed as one span (one wait, for
-        the timer), and its measured time per chunk predicts the next slice."""
+        the current pass. Otherwise as many probes' walks as the GPU time of earlier slices
+        predicts fit in the budget (FIRST_SLICE_PROBES before any is timed; at least one probe's
+        walks of one pass); the slice is timed as one span (one wait, for
+        the timer), and its measured time per probe predicts the next slice."""
         if self.probes_current():
             return 0.0
         if self.probe_grid is None or self._baked_key != self.bake_key():
@@ -345,16 +349,17 @@ class Renderer:
             ms = self.timer.elapsed_ms
         else:
             left = max(budget_ms - light_ms, 0.0)
-            key = (grid.grid, grid.samples, grid.chunk_probes)
-            per_chunk = self._chunk_ms.get(key)
-            chunks = 1 if per_chunk is None else max(1, int(left / max(per_chunk, 1e-3)))
-            ran = grid.bake_chunks(self.resources, chunks, light=light)
+            key = (grid.grid, grid.samples)
+            per_probe = self._probe_ms.get(key)
+            probes = (min(FIRST_SLICE_PROBES, grid.count) if per_probe is None
+                      else max(1, int(left / max(per_probe, 1e-9))))
+            ran = grid.bake_probes(self.resources, probes, light=light)
             self.timer.stop()
             ms = self.timer.elapsed_ms
             if ran:
                 seen = ms / ran
-                # the first slice of a bake also runs the sun's pass: a running estimate
-                self._chunk_ms[key] = seen if per_chunk is None else 0.5 * (per_chunk + seen)
+                # a running estimate (the first slice of a bake also runs the sun's pass)
+                self._probe_ms[key] = seen if per_probe is None else 0.5 * (per_probe + seen)
         self.last_slice_ms = light_ms + ms
         return light_ms + ms
 
@@ -362,7 +367,7 @@ class Renderer:
         """Whether the probe textures hold anything to render from: a finished bake, or one
         with at least one chunk walked (then the image shows the probes as they are)."""
         g = self.probe_grid
-        return g is not None and (g.passes_done > 0 or g.next_chunk > 0 or g.warm_walks > 0)
+        return g is not None and (g.passes_done > 0 or g.next_probe > 0 or g.warm_walks > 0)
 
     def add_samples(self, n: int = 1) -> float:
         """Adds n samples per pixel to the accumulation begun by begin(); returns GPU ms.

@@ -25,10 +25,10 @@ from ..volume import Volume
 FRAME_HISTORY = 240
 FRAME_BUDGET_MS = 15.0        # GPU time a frame may spend adding samples, per shown method
 MAX_SAMPLES_PER_FRAME = 64
-# GPU time a frame gives the bake (Renderer.bake_step predicts how many chunks of walks fit from
-# the slices it has timed, so the budget holds on any device): a 60 Hz frame's half on a GPU; on
-# llvmpipe, where one chunk alone takes longer, one chunk a frame.
-BAKE_BUDGET_MS = {"gpu": 8.0, "software": 1.0}
+# GPU time a frame gives the bake (Renderer.bake_step predicts how many probes' walks fit from
+# the slices it has timed, so the budget holds on any device): half a 60 Hz frame on a GPU; on
+# llvmpipe, where a frame of the picture alone takes tens of ms, about as much again.
+BAKE_BUDGET_MS = {"gpu": 8.0, "software": 50.0}
 
 
 @dataclass
@@ -150,7 +150,7 @@ class RenderSession:
                 self.bake_generation += 1
             self.bake_ms += times.bake_ms
             self.bake_passes_run += 1
-            if r.probe_grid.next_chunk == 0:   # a pass ended: its progress is readable
+            if r.probe_grid.next_probe == 0:   # a pass ended: its progress is readable
                 self.bake_report = r.probe_grid.progress_report()
             self.restart([m for m in self.views if r.needs_probes(m)])
         for view in self.views.values():
