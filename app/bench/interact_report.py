@@ -17,6 +17,7 @@ def plot_interact(data: dict, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
     recs = [r for r in data["records"] if r.get("mode") == "interact" and r.get("curve")]
     groups = list(dict.fromkeys((r["scene"], r["width"], r["height"]) for r in recs))
     events = list(dict.fromkeys(r["event"] for r in recs))
@@ -37,6 +38,8 @@ def plot_interact(data: dict, path: Path) -> None:
                 ax.axhline(target, color="grey", lw=0.5, ls=":")
             ax.set_xscale("log")
             ax.set_yscale("log")
+            ax.xaxis.set_minor_formatter(NullFormatter())
+            ax.yaxis.set_minor_formatter(NullFormatter())
             ax.set_title(f"{scene} {w}x{h}: {event}", fontsize=7)
             ax.tick_params(labelsize=6)
             ax.grid(True, which="both", alpha=0.2)
