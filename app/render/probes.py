@@ -133,9 +133,11 @@ class ProbeGrid:
 
     @property
     def bake_bytes(self) -> int:
-        """GPU memory the bake uses besides the textures (walk state, running means)."""
+        """GPU memory the bake uses besides the textures (walk state, running means, a warm
+        restart's copy of the old ones)."""
         states = self.walk_states.size if self.walk_states is not None else 0
-        return states + self.walk_radiance.size + self.accums.size
+        prior = self.prior.size if self.prior is not None else 0   # after a warm restart
+        return states + prior + self.walk_radiance.size + self.accums.size
 
     @property
     def done(self) -> bool:
