@@ -10,6 +10,7 @@ import numpy as np
 
 from ..environment_map import EnvironmentMap, load_scene_environment
 from ..gl.textures import transfer_texture, volume_texture
+from ..twins.environment_map import Distribution
 from ..twins.medium import majorant
 from ..scene import Scene
 from ..transfer import transfer_table
@@ -27,6 +28,21 @@ STATS_BINDING = 7
 DEFAULT_MAX_PATH_STEPS = 1 << 24
 
 
+def environment_textures(ctx: moderngl.Context, image: np.ndarray, distribution: Distribution):
+    """The two textures lib/environment_map.glsl reads: RGBA32F (rgb radiance, a the density over
+    (u, v)) and the R32F CDFs (app/twins/environment_map.py); texelFetch only."""
+    h, w = image.shape[:2]
+    rgba = np.empty((h, w, 4), np.float32)
+    rgba[..., :3] = image
+    rgba[..., 3] = distribution.pdf_uv
+    tex = ctx.texture((w, h), 4, rgba.tobytes(), dtype="f4")
+    cdf = distribution.cdf_texture()
+    cdf_tex = ctx.texture((w + 1, h + 1), 1, cdf.tobytes(), dtype="f4")
+    for t in (tex, cdf_tex):
+        t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    return tex, cdf_tex
+
+
 class SceneResources:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
                  use_majorant_grid: bool = True):
@@ -39,6 +55,8 @@ class SceneResources:
         self.environment: EnvironmentMap | None = None   # the scene's map, None: constant
         self.environment_tex = None
         self.environment_cdf_tex = None
+        # False: paths find the map by phase sampling alone (for measuring what sampling gains).
+        self.environment_sampling = True
         self.stats = ctx.buffer(reserve=16)
         self.max_path_steps = DEFAULT_MAX_PATH_STEPS
         # Counts volume changes; keys of what was computed from a volume use it, not id(volume):
@@ -103,19 +121,15 @@ class SceneResources:
         self.environment, self.environment_tex, self.environment_cdf_tex = env, None, None
         if env is None:
             return
-        h, w = env.image.shape[:2]
-        rgba = np.empty((h, w, 4), np.float32)
-        rgba[..., :3] = env.image
-        rgba[..., 3] = env.distribution.pdf_uv
-        self.environment_tex = self.ctx.texture((w, h), 4, rgba.tobytes(), dtype="f4")
-        cdf = env.distribution.cdf_texture()
-        self.environment_cdf_tex = self.ctx.texture((w + 1, h + 1), 1, cdf.tobytes(), dtype="f4")
-        for tex in (self.environment_tex, self.environment_cdf_tex):
-            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)   # read with texelFetch only
+        self.environment_tex, self.environment_cdf_tex = environment_textures(
+            self.ctx, env.image, env.distribution)
 
     def defines(self) -> dict:
         """Compile-time variants the scene's lights need in every pass that includes lib/lights.glsl."""
-        return {"ENVIRONMENT_MAP": 1} if self.environment is not None else {}
+        if self.environment is None:
+            return {}
+        return {"ENVIRONMENT_MAP": 1} if self.environment_sampling else {
+            "ENVIRONMENT_MAP": 1, "ENVIRONMENT_MAP_SAMPLING": 0}
 
     @property
     def majorant(self) -> float:

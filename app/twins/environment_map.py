@@ -129,14 +129,15 @@ def build_distribution(image: np.ndarray) -> Distribution:
                         marginal=_cdf(weights.sum(axis=1)))
 
 
-def _search(cdf: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The largest index k < len(cdf) - 1 with cdf[k] <= x, by the GLSL's binary search."""
+def _search(cdf: np.ndarray, x: np.ndarray, row: np.ndarray | None = None) -> np.ndarray:
+    """The largest index k < n with cdf[k] <= x (cdf's last axis holds n + 1 entries; `row` picks
+    a row of a 2D cdf per element), by the GLSL's binary search."""
     lo = np.zeros(x.shape, np.int64)
-    hi = np.full(x.shape, len(cdf) - 1, np.int64)
+    hi = np.full(x.shape, cdf.shape[-1] - 1, np.int64)
     while np.any(hi - lo > 1):
         mid = (lo + hi) // 2
         go = (hi - lo > 1)
-        below = cdf[mid] <= x
+        below = (cdf[mid] if row is None else cdf[row, mid]) <= x
         lo = np.where(go & below, mid, lo)
         hi = np.where(go & ~below, mid, hi)
     return lo
@@ -151,8 +152,7 @@ def sample(dist: Distribution, u1: np.ndarray, u2: np.ndarray, rotation: float =
     i = _search(m, u1)
     dv = np.clip((u1 - m[i]) / (m[i + 1] - m[i]), 0.0, 1.0)
     c = dist.conditional.astype(np.float32).astype(np.float64)
-    j = np.array([_search(c[ii], np.asarray(x))[()] for ii, x in zip(np.ravel(i), np.ravel(u2))],
-                 np.int64).reshape(i.shape)
+    j = _search(c, u2, row=i)
     cj, cj1 = c[i, j], c[i, j + 1]
     du = np.clip((u2 - cj) / (cj1 - cj), 0.0, 1.0)
     u, v = (j + du) / w, (i + dv) / h
@@ -171,6 +171,7 @@ def pdf(dist: Distribution, d: np.ndarray, rotation: float = 0.0) -> np.ndarray:
     u, v = direction_to_uv(m)
     j = np.minimum((u * w).astype(np.int64), w - 1)
     i = np.minimum((v * h).astype(np.int64), h - 1)
-    s = np.sqrt(np.maximum(1.0 - np.clip(m[..., 1], -1, 1) ** 2, 0.0))
+    y = np.clip(m[..., 1], -1, 1)
+    s = np.sqrt(np.maximum((1.0 - y) * (1.0 + y), 0.0))
     with np.errstate(divide="ignore"):
         return np.where(s > 0, dist.pdf_uv[i, j] / (2.0 * np.pi ** 2 * np.where(s > 0, s, 1.0)), 0.0)

@@ -34,7 +34,8 @@ vec2 environment_uv(vec3 m)
 {
     float u = atan(m.x, -m.z) / (2.0 * ENVIRONMENT_PI);
     u -= floor(u);
-    float v = acos(clamp(m.y, -1.0, 1.0)) / ENVIRONMENT_PI;
+    // acos(m.y) for a unit m, written as an atan: GLSL's acos is loose (llvmpipe's is 3e-5 off).
+    float v = atan(length(m.xz), m.y) / ENVIRONMENT_PI;
     return vec2(u, v);
 }
 
@@ -114,5 +115,5 @@ float environment_pdf(vec3 d)
     int w = environment_size.x, h = environment_size.y;
     int j = min(int(uv.x * float(w)), w - 1);
     int i = min(int(uv.y * float(h)), h - 1);
-    return environment_pdf_at(j, i, sqrt(max(1.0 - m.y * m.y, 0.0)));
+    return environment_pdf_at(j, i, sqrt(max((1.0 - m.y) * (1.0 + m.y), 0.0)));
 }
