@@ -74,6 +74,10 @@ class SceneResources:
         """Adopt a new scene; returns which parts changed ('volume', 'transfer', 'medium', ...)."""
         changed: set[str] = set()
         old = self.scene
+        # The map first: a bad file fails before anything on the GPU changes.
+        old_map = None if old is None else (old.environment_map, old.base_dir)
+        new_map = (scene.environment_map, scene.base_dir)
+        environment = load_scene_environment(scene) if new_map != old_map else self.environment
         if volume is not None and volume is not self.volume:
             changed.add("volume")
         elif old is None or scene.volume != old.volume or scene.base_dir != old.base_dir:
@@ -97,9 +101,7 @@ class SceneResources:
         if old is None or scene.light != old.light or scene.environment != old.environment or (
                 scene.environment_map != old.environment_map):
             changed.add("light")
-        old_map = None if old is None else (old.environment_map, old.base_dir)
-        if (scene.environment_map, scene.base_dir) != old_map:
-            self._set_environment(load_scene_environment(scene))
+        self._set_environment(environment)
         if old is None or scene.camera != old.camera:
             changed.add("camera")
         self.scene = scene

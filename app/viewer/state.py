@@ -93,7 +93,7 @@ class ViewerState:
         spec = EnvironmentMapSpec(path) if path is not None else current
         if spec is None:
             return
-        if "rotation" in changes:
+        if "rotation" in changes and not -180.0 <= changes["rotation"] <= 180.0:
             changes["rotation"] = (float(changes["rotation"]) + 180.0) % 360.0 - 180.0
         self.scene = self.scene.replace(environment_map=replace(spec, **changes))
 
