@@ -8,6 +8,9 @@ position (u W, v H), where pixel (row i, column j) covers [j, j + 1) x [i, i + 1
 at its centre (j + 0.5, i + 0.5), as in an OpenGL texture (the volume's convention too). Bilinear
 between centres, wrapping in u, clamped to the first and last row in v (row 0 is +y).
 
+Mitsuba 3's envmap matches this in u (it reads column u W - 0.5); in v it reads row v (H - 1), up to
+half a row from SPEC.md's v H - 0.5 towards the poles (equal at the equator). We follow SPEC.md.
+
 The map is turned by `rotation` about +y (right-handed): radiance from world direction d is the
 map's at R_y(-rotation) d.
 
