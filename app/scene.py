@@ -160,6 +160,9 @@ def _parse_light(d: Any) -> LightSpec:
 
 def _parse_environment(d: Any) -> dict[str, Any]:
     """[r, g, b] (a constant) or {"map": FILE, "scale": s, "rotation": degrees} (SPEC.md)."""
+    if isinstance(d, str):
+        raise SceneError(f"environment: expected [r, g, b] or {{\"map\": FILE, \"scale\": s, "
+                         f"\"rotation\": degrees}}, got {d!r}")
     if not isinstance(d, Mapping):
         return {"environment": _vector(d, "environment", 3, lo=0.0)}
     d = _object(d, "environment", {"map", "scale", "rotation"})

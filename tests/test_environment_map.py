@@ -421,7 +421,7 @@ def test_scene_round_trip_and_bad_fields():
     for bad, field in (({"scale": 1}, "environment.map"), ({"map": ""}, "environment.map"),
                        ({"map": "a.exr", "scale": -1}, "environment.scale"),
                        ({"map": "a.exr", "rotation": 400}, "environment.rotation"),
-                       ({"map": "a.exr", "tint": 1}, "environment.tint")):
+                       ({"map": "a.exr", "tint": 1}, "environment.tint"), ("sky.exr", "environment")):
         with pytest.raises(SceneError, match=field.replace(".", r"\.")):
             parse_scene({"environment": bad})
 
