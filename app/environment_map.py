@@ -4,8 +4,8 @@ names the file: missing, unreadable or truncated, an unknown format, not 2:1, to
 or non-finite radiance.
 
 Formats: OpenEXR (`.exr`, through the OpenEXR package: R, G, B channels or Y for grey; half or
-float) and NumPy `.npy` float arrays (H, W, 3) or (H, W). Radiance `.hdr` is not read: no
-well-kept library reads it without downloading plug-ins.
+float), Radiance RGBE (`.hdr`/`.pic`, through OpenCV's reader, opencv-python-headless) and NumPy
+`.npy` float arrays (H, W, 3) or (H, W).
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import numpy as np
 from .scene_types import EnvironmentMapSpec, Scene, SceneError
 from .twins.environment_map import Distribution, build_distribution
 
-FORMATS = (".exr", ".npy")
+FORMATS = (".exr", ".hdr", ".pic", ".npy")
 # The CDF texture is (W + 1) x (H + 1) texels and GL 4.3 guarantees 16384 per side.
 MAX_WIDTH = 8192
 
@@ -66,6 +66,20 @@ def _read_exr(p: Path) -> np.ndarray:
                      f"(it has {', '.join(sorted(channels)) or 'none'})")
 
 
+def _read_hdr(p: Path) -> np.ndarray:
+    try:
+        import cv2
+    except ImportError:
+        raise SceneError(f"{p}: reading Radiance .hdr needs OpenCV: pip install "
+                         "opencv-python-headless") from None
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # errors come back as None
+    data = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+    if data is None or data.ndim != 3 or data.shape[-1] != 3 or data.dtype != np.float32:
+        raise SceneError(f"{p}: cannot read the environment map (not a complete Radiance RGBE "
+                         "file)")
+    return data[..., ::-1]   # OpenCV's BGR order
+
+
 def _read_npy(p: Path) -> np.ndarray:
     try:
         data = np.load(p, allow_pickle=False)
@@ -87,11 +101,13 @@ def read_environment_map(p: Path) -> np.ndarray:
     suffix = p.suffix.lower()
     if suffix == ".exr":
         data = _read_exr(p)
+    elif suffix in (".hdr", ".pic"):
+        data = _read_hdr(p)
     elif suffix == ".npy":
         data = _read_npy(p)
     else:
         raise SceneError(f"{p}: unknown environment map format '{suffix}' (known: "
-                         f"{', '.join(FORMATS)}; Radiance .hdr is not supported)")
+                         f"{', '.join(FORMATS)})")
     if data.ndim == 2:
         data = np.repeat(data[..., None], 3, axis=-1)
     if data.ndim != 3 or data.shape[-1] not in (3, 4):

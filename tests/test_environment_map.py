@@ -436,6 +436,23 @@ def _exr(path, img):
     OpenEXR.File(header, {"RGB": np.ascontiguousarray(img, np.float32)}).write(str(path))
 
 
+def _hdr(path, img):
+    import cv2
+    assert cv2.imwrite(str(path), np.ascontiguousarray(np.asarray(img, np.float32)[..., ::-1]))
+
+
+def test_hdr_map_reads(tmp_path):
+    """Radiance RGBE keeps 8 bits of mantissa per pixel's largest channel: each pixel within
+    1/128 of its largest value, and in RGB (not OpenCV's BGR) order."""
+    img = np.random.default_rng(8).uniform(0.1, 5.0, size=(8, 16, 3)).astype(np.float32)
+    img[2, 3] = [100.0, 0.5, 0.25]
+    _hdr(tmp_path / "sky.hdr", img)
+    back = read_environment_map(tmp_path / "sky.hdr")
+    assert back.shape == img.shape and back.dtype == np.float32
+    assert (np.abs(back - img) <= img.max(axis=-1, keepdims=True) / 128).all()
+    assert back[2, 3, 0] > 90 and back[2, 3, 2] < 1
+
+
 def test_exr_map_reads(tmp_path):
     img = np.random.default_rng(7).uniform(size=(8, 16, 3)).astype(np.float32)
     _exr(tmp_path / "sky.exr", img)
@@ -470,7 +487,13 @@ def _bad_maps(tmp_path):
     cases["truncated.npy"] = (tmp_path / "truncated.npy", "cannot read")
     cases["missing.exr"] = (tmp_path / "missing.exr", "not found")
     (tmp_path / "sky.hdr").write_bytes(b"#?RADIANCE\n")
-    cases["sky.hdr"] = (tmp_path / "sky.hdr", "unknown environment map format")
+    cases["sky.hdr"] = (tmp_path / "sky.hdr", "cannot read")
+    _hdr(tmp_path / "whole.hdr", good)
+    whole = (tmp_path / "whole.hdr").read_bytes()
+    (tmp_path / "truncated.hdr").write_bytes(whole[:-10])
+    cases["truncated.hdr"] = (tmp_path / "truncated.hdr", "cannot read")
+    (tmp_path / "sky.png").write_bytes(b"\x89PNG")
+    cases["sky.png"] = (tmp_path / "sky.png", "unknown environment map format")
     np.save(tmp_path / "grey3d.npy", np.ones((8, 16, 2), np.float32))
     cases["grey3d.npy"] = (tmp_path / "grey3d.npy", "shape")
     return cases

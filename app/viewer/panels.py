@@ -206,7 +206,7 @@ def environment_section(v) -> None:
         if imgui.button("Constant environment"):
             state.set_environment_map("")
         ui.note("Constant environment")
-    changed, text = imgui.input_text("Map file (.exr, .npy)", v.environment_map_text)
+    changed, text = imgui.input_text("Map file (.exr, .hdr, .npy)", v.environment_map_text)
     ui.note("Map file")
     if changed:
         v.environment_map_text = text
