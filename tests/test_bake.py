@@ -195,10 +195,15 @@ def test_light_grid_matches_its_numpy_twin(ctx):
     assert light_grid_size((64, 64, 64)) == (128, 128, 128)
     assert light_grid_size((256, 256, 100)) == (256, 256, 100)
     assert light_grid_size((1024, 512, 8)) == (512, 512, 8)
+    from app.render.light_transmittance import min_side_for_probes
+    assert light_grid_size((256, 256, 256), min_side=min_side_for_probes((64, 58, 64))) == (384,) * 3
+    assert min_side_for_probes((8, 8, 8)) == 128 and min_side_for_probes((128,) * 3) == 768
+    assert light_grid_size((256, 128, 256), min_side=768) == (512, 384, 512)
     from app.twins.shadow_march import light_grid_centres, sun_optical_depth_march
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
                                    "density_scale": 30.0, "camera": CAMERA,
                                    "light": {"direction": [0.3, 0.8, -0.52]}}))
+    r.light_min_side, r.light_follows_probes = 128, True   # a GPU's defaults (llvmpipe: 1, off)
     try:
         r.bake_light()
         tex = r._light.texture
@@ -214,6 +219,35 @@ def test_light_grid_matches_its_numpy_twin(ctx):
         r.release()
     assert grid == (107, 85, 128) and twin.max() > 1.0
     np.testing.assert_allclose(tau.reshape(-1)[::61], twin, rtol=2e-4, atol=2e-5)
+
+
+@pytest.mark.parametrize("use_majorant_grid", [True, False])
+def test_light_grid_skips_empty_macrocells_without_changing_a_texel(ctx, use_majorant_grid):
+    """A sphere in a large box: most macrocells are empty, and the march jumps over their
+    quadrature points. The result must be the NumPy twin's plain sum over every point."""
+    from app.render.light_transmittance import LIGHT_MARCH_VOXELS
+    from app.twins.shadow_march import light_grid_centres, sun_optical_depth_march
+    r = Renderer(ctx, parse_scene({"volume": {"builtin": "sphere", "size": [40, 32, 48]},
+                                   "density_scale": 20.0, "camera": CAMERA,
+                                   "light": {"direction": [0.3, 0.8, -0.52]}}),
+                 empty_space_skipping=use_majorant_grid)
+    r.light_min_side, r.light_follows_probes = 1, False   # the volume's own 40 x 32 x 48
+    try:
+        cells = r.resources.majorant_grid.read()
+        r.bake_light()
+        tex = r._light.texture
+        grid = tex.size
+        tau = np.frombuffer(tex.read(), np.float32).reshape(grid[2], grid[1], grid[0])
+        s = r.scene
+        centres = light_grid_centres(r.resources.volume, grid).reshape(-1, 3)[::7]
+        twin = sun_optical_depth_march(r.resources.volume, r.resources.table, s.density_scale,
+                                       s.light.direction, centres,
+                                       LIGHT_MARCH_VOXELS * r.resources.march_step)
+    finally:
+        r.release()
+    assert (cells == 0).mean() > 0.3   # the test means something: most cells are empty
+    assert grid == (40, 32, 48) and twin.max() > 1.0 and (twin == 0).mean() > 0.2
+    np.testing.assert_allclose(tau.reshape(-1)[::7], twin, rtol=2e-4, atol=2e-5)
 
 
 def test_walk_counters_start_from_zero_every_time(renderer):

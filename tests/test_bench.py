@@ -118,6 +118,8 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
         assert np.isfinite(r["rrmse"]) and r["rrmse"] > 0
         assert r["frame_ms"] >= 0 and r["total_ms"] >= r["bake_ms"]
         assert r["gpu_bytes"] >= 16 * 16 * 16
+        if r["method"] == "raymarch":   # every raymarched image pays for its light grid
+            assert r["light_ms"] > 0 and r["bake_ms"] >= r["light_ms"]
         if r["method"] == "pt" or r["spp"] in config.flip_frames:
             assert r["flip"] is not None and 0.0 <= r["flip"] <= 1.0
         if r["method"] != "pt":
@@ -193,3 +195,17 @@ def test_bake_mode_profiles_the_bake(ctx, tmp_path):
         assert r["steps_per_walk"] >= 1.0 and r["ceiling_fraction"] > 0
     text = write_report(path).read_text()
     assert "The probe bake" in text and "| current | 3^3 x 16" in text and "sun grid" in text
+
+
+def test_a_runs_caveat_heads_its_report(tmp_path):
+    """A run recorded with a known shortcoming says so at the top of its report."""
+    data = {"meta": {"device": "d", "command": "c", "config": {"width": 4, "height": 4},
+                     "caveat": "the light grid is charged once"},
+            "references": {"s": {"noise_rrmse": 0.0}},
+            "records": [{"scene": "s", "method": "pt", "rrmse": 0.1, "total_ms": 1.0, "spp": 1,
+                         "frame_ms": 1.0, "bake_ms": 0.0, "probe_grid": None,
+                         "probe_samples": None, "flip": None, "gpu_bytes": 0}]}
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps(data))
+    text = write_report(path).read_text()
+    assert "**Caveat:** the light grid is charged once" in text.split("## ")[0]

@@ -66,7 +66,10 @@ def cost_scene(renderer, name: str, config, results, out, device: str,
             for label, changes in variants:
                 probes = replace(scene.probes, grid=(grid, grid, grid), samples=samples, **changes)
                 renderer.set_scene(scene.replace(probes=probes))
-                bake_ms = renderer.bake(seed=11)
+                # the light grid (the walks' sun and the raymarcher's): charged to every setting
+                light_ms = renderer.bake_light() or renderer.light_cost_ms
+                walk_light_ms = light_ms if renderer.walk_sun == "grid" else 0.0
+                bake_ms = renderer.bake(seed=11) + walk_light_ms
                 g = renderer.probe_grid
                 info = {"variant": label, "empty_space_skipping": skipping, "probe_grid": grid,
                         "probe_samples": samples, "probe_grid_xyz": list(g.grid),
@@ -77,9 +80,9 @@ def cost_scene(renderer, name: str, config, results, out, device: str,
                         f"bake {bake_ms:.1f} ms, {g.gpu_bytes / 2**20:.1f} MiB"]
                 for method, frames in (("probes", config.cost_probe_frames),
                                        ("raymarch", config.cost_raymarch_frames)):
-                    light_ms = renderer.bake_light() if method == "raymarch" else 0.0
+                    extra_ms = light_ms - walk_light_ms if method == "raymarch" else 0.0
                     for n, image, *timing in _progressive(renderer, method, (frames,), 13, k):
-                        r = record(method, n, image, timing, bake_ms + light_ms, **info)
+                        r = record(method, n, image, timing, bake_ms + extra_ms, **info)
                         if label == "all" and (grid, samples) == tuple(config.cost_settings[0]):
                             save_png(out / "images" / f"{name}_{method}_cost_all.png", image)
                     line.append(f"{method} {r['frame_ms']:.3f} ms/fr rRMSE {r['rrmse']:.4f}")
@@ -100,8 +103,8 @@ def auto_scene(renderer, target: float, config, record, log, progressive) -> Non
     # The chosen setting's probes are the search's last trial (the camera never re-bakes): their
     # bake is already paid inside search_ms, and bake_ms says what it was.
     renderer.bake(seed=11)
-    light_ms = renderer.bake_light()
-    bake_ms = renderer.last_bake_ms + light_ms
+    light_ms = renderer.bake_light()   # 0 when the search's last trial baked this light grid
+    bake_ms = renderer.last_bake_ms + (light_ms or renderer.light_cost_ms)
     g = renderer.probe_grid
     for n, image, *timing in progressive(renderer, "raymarch", (config.cost_raymarch_frames,), 13,
                                          config.samples_per_dispatch):

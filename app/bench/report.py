@@ -49,6 +49,11 @@ def _pixels(data: dict) -> int:
     return int(config.get("width", 512)) * int(config.get("height", 512))
 
 
+def caveat(meta: dict) -> list[str]:
+    """A run's known shortcoming, stated at the top of its report (results.json's meta.caveat)."""
+    return [f"**Caveat:** {meta['caveat']}", ""] if meta.get("caveat") else []
+
+
 def floor(data: dict, scene: str) -> float:
     """The smallest error the report states for the scene: the resolution of the error corrected
     for the reference's noise (metrics.corrected_floor, 3 standard errors; about a tenth of the
@@ -176,7 +181,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
         return _write_bake_report(data, out, scenes)
     lines = [f"# Speed against error", "",
              f"Device: **{meta['device']}**. Started {meta.get('started')}, finished "
-             f"{meta.get('finished', 'not finished (partial run)')}.", "",
+             f"{meta.get('finished', 'not finished (partial run)')}.", "", *caveat(meta),
              f"Command: `{meta.get('command', '')}`", "",
              f"Image {meta['config']['width']}x{meta['config']['height']}. Times are GPU times from "
              "timestamp queries: bake is the sum over bake passes; every progressive method adds "
@@ -319,6 +324,7 @@ def _write_cost_report(data: dict, out: Path, scenes: list[str]) -> Path:
     meta = data["meta"]
     lines = ["# Cost that follows the scene", "",
              f"Device: **{meta['device']}**. Command: `{meta.get('command', '')}`.", "",
+             *caveat(meta),
              "Each variant against the baseline at the same nominal probe grid and walks per probe: "
              "bake GPU time, GPU time per frame (median, "
              f"{meta['config'].get('samples_per_dispatch', 1)} samples per dispatch), probe texture "
@@ -393,6 +399,7 @@ def _write_bake_report(data: dict, out: Path, scenes: list[str]) -> Path:
     meta = data["meta"]
     lines = ["# The probe bake: time, profile and ceiling", "",
              f"Device: **{meta['device']}**. Command: `{meta.get('command', '')}`.", "",
+             *caveat(meta),
              "Per scene and probe setting (N^3 nominal, fitted to the visible region; walks per "
              "probe): the bake's GPU time (median of "
              f"{meta['config'].get('bake_repeats', 3)} bakes), walks per second, its split into "

@@ -176,9 +176,13 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
             variants.append({"sh_window": "hann"})
         for variant in variants:
             renderer.set_scene(_with_probes(scene, grid, samples, **variant))
+            # The light grid this setting's images use (its size follows the probe grid; the
+            # walks read it too): what it cost, also when an earlier setting baked the same one.
+            light_ms = renderer.bake_light() or renderer.light_cost_ms
             baked_ms = renderer.bake(seed=11)
             # An SH window is applied at render time: the probes stay, and so does their cost.
             bake_ms = baked_ms if baked_ms > 0 else bake_ms
+            walk_light_ms = light_ms if renderer.walk_sun == "grid" else 0.0
             probe_info = {"probe_grid": grid, "probe_samples": samples,
                           "precision": renderer.scene.probes.precision,
                           "sh_window": renderer.scene.probes.sh_window,
@@ -186,10 +190,10 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
             for method in PROBE_METHODS:
                 for frames, image, *timing in _progressive(renderer, method, config.probe_frames,
                                                            13, k):
-                    record(method, frames, image, timing, bake_ms, **probe_info)
+                    record(method, frames, image, timing, bake_ms + walk_light_ms,
+                           light_ms=walk_light_ms, **probe_info)
                     if showcase and not variant and frames == config.image_frames:
                         save_png(out / "images" / f"{name}_{method}_{grid}x{samples}.png", image)
-            light_ms = renderer.bake_light()
             steps = config.raymarch_steps if showcase and not variant else (0.5,)
             stages = ("compute", "fragment") if showcase and not variant else ("compute",)
             for stage in stages:
@@ -198,7 +202,9 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
                     for frames, image, *timing in _progressive(renderer, "raymarch",
                                                                config.raymarch_frames, 17, k):
                         record("raymarch", frames, image, timing, bake_ms + light_ms,
-                               raymarch_step=step, stage=stage, light_bytes=renderer._light.gpu_bytes,
+                               raymarch_step=step, stage=stage, light_ms=light_ms,
+                               light_bytes=renderer._light.gpu_bytes,
+                               light_grid=list(renderer._light.texture.size),
                                **probe_info)
                         if (showcase and not variant and stage == "compute" and step == 0.5
                                 and frames == config.raymarch_frames[-1]):

@@ -109,11 +109,17 @@ def loop_budget_unbounded(budget: int) -> bool:
     return budget >= UNBOUNDED_LOOP_BUDGET
 
 
+def is_software(ctx: moderngl.Context) -> bool:
+    """A CPU rasterizer (Mesa's llvmpipe, softpipe, lavapipe)."""
+    renderer = ctx.info.get("GL_RENDERER", "").lower()
+    return any(name in renderer for name in ("llvmpipe", "softpipe", "lavapipe"))
+
+
 def loop_budget(ctx: moderngl.Context) -> tuple[int, int]:
     """(loop iterations one invocation may run per dispatch, reserve kept for one more flight)."""
     import re
     renderer = ctx.info.get("GL_RENDERER", "").lower()
-    if any(name in renderer for name in ("llvmpipe", "softpipe", "lavapipe")):
+    if is_software(ctx):
         m = re.search(r"(\d+) bits", renderer)
         lanes = max(int(m.group(1)) // 32, 1) if m else 16
         budget = SOFTWARE_LOOP_LIMIT // lanes - 256

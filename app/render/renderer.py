@@ -10,13 +10,15 @@ import moderngl
 import numpy as np
 
 from ..twins.camera import camera_frame
+from ..gl.context import is_software
 from ..gl.timer import GpuTimer
 from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation
 from .limits import check_image_size
 from .pathtracer import PathTracer
-from .light_transmittance import MAX_SIDE as LIGHT_MAX_SIDE, LightTransmittance
+from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_MIN_SIDE,
+                                  SOFTWARE_MIN_SIDE, LightTransmittance, min_side_for_probes)
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, visible_region
 from .probes import ProbeGrid
 from .raymarch import Raymarcher, min_step_voxels
@@ -79,6 +81,11 @@ class Renderer:
         self._raymarchers: dict[str, Raymarcher] = {}
         self._light: LightTransmittance | None = None
         self.light_max_side = LIGHT_MAX_SIDE   # the light grid's texels per axis at most
+        # ... and at least along the longest axis, and whether it follows the probe grid (6 texels
+        # per probe spacing): per device class (light_transmittance.py)
+        software = is_software(ctx)
+        self.light_min_side = SOFTWARE_MIN_SIDE if software else LIGHT_MIN_SIDE
+        self.light_follows_probes = not software
         # The sun at the bake's walk events: "grid" (the baked light grid; see ProbeGrid) or "ray"
         # (a ratio-tracked shadow ray, unbiased). Walks per probe from each probe's noise
         # (ProbeGrid's `adaptive`; 0: all walks everywhere). Defaults from bench/h100-bake: the
@@ -95,6 +102,7 @@ class Renderer:
         self.camera = None
         self.last_bake_ms = 0.0
         self.last_light_ms = 0.0
+        self.light_cost_ms = 0.0   # GPU ms the light grid in hand took to bake
 
     @property
     def raymarch_stage(self) -> str:
@@ -159,7 +167,8 @@ class Renderer:
         spec = self.scene.probes
         return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
                 self.resources.use_majorant_grid, self.walk_sun, self.walk_adaptive,
-                self.light_max_side if self.walk_sun == "grid" else None)
+                (self.light_max_side, self.light_min_side, self.light_follows_probes)
+                if self.walk_sun == "grid" else None)
 
     def set_empty_space_skipping(self, on: bool) -> None:
         """Tracking over the macrocell majorant grid (on, the default) or one global majorant
@@ -260,10 +269,13 @@ class Renderer:
         return self._raymarchers[key]
 
     def bake_light(self) -> float:
-        """Bakes the sun's transmittance grid for the raymarcher if stale; GPU ms."""
+        """Bakes the sun's transmittance grid for the raymarcher if stale; GPU ms. Its resolution
+        follows the probe grid (light_transmittance.TEXELS_PER_PROBE)."""
         s = self.scene
+        min_side = (min_side_for_probes(s.probes.grid, self.light_min_side)
+                    if self.light_follows_probes else self.light_min_side)
         key = (self.resources.volume_version, s.transfer_function, s.density_scale,
-               s.light.direction, self.light_max_side)
+               s.light.direction, self.light_max_side, min_side)
         if self._light is None or self._light.max_side != self.light_max_side:
             if self._light is not None:
                 self._light.release()
@@ -271,10 +283,17 @@ class Renderer:
         if key == self._light_key:
             return 0.0
         self.timer.start()
-        self._light.bake(self.resources)
+        self._light.bake(self.resources, min_side)
         self.timer.stop()
         self._light_key = key
-        return self.timer.elapsed_ms
+        self.light_cost_ms = self.timer.elapsed_ms
+        return self.light_cost_ms
+
+    def invalidate(self) -> None:
+        """Forgets the baked probes and light grid, so the next image pays for both again (the
+        benchmark charges every record what its image cost)."""
+        self._baked_key = None
+        self._light_key = None
 
     def probe_uniforms(self) -> dict:
         self.probe_grid.bind()
