@@ -229,6 +229,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     from .render.limits import check_image_size
     from .render.renderer import Renderer
     from .render.raymarch import check_step
+    from .environment_map import load_scene_environment
     from .volume import load_scene_volume
 
     if args.auto_probes is not None and args.method == "pt":
@@ -236,6 +237,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     scene = apply_options(scene_from_arg(args.scene), args)
     check_outputs(args)
     volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
+    load_scene_environment(scene)          # so does an environment map (kept in its cache)
     if args.method == "raymarch" and args.raymarch_step is not None:
         try:
             check_step(args.raymarch_step, volume)   # a step asked for is taken, or refused

@@ -14,13 +14,14 @@ from typing import Any, Mapping
 
 from .scene_types import (MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS, MAX_PROBE_SAMPLES,
                           MAX_TRANSFER_ROWS, PROBE_FITS, PROBE_PRECISIONS, SH_WINDOWS, CameraSpec,
-                          LightSpec, ProbeSpec, Scene, SceneError, TransferFunctionSpec, VolumeSpec,
+                          EnvironmentMapSpec, LightSpec, ProbeSpec, Scene, SceneError, TransferFunctionSpec, VolumeSpec,
                           scene_to_dict)
 from .transfer import COLORMAPS
 from .volume import BUILTIN_VOLUMES, RAW_DTYPES
 
 __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_SAMPLES",
            "MAX_TRANSFER_ROWS", "PROBE_FITS", "PROBE_PRECISIONS", "SH_WINDOWS", "CameraSpec",
+           "EnvironmentMapSpec",
            "LightSpec", "ProbeSpec", "Scene", "SceneError", "TransferFunctionSpec", "VolumeSpec",
            "default_scene", "load_scene", "parse_scene", "scene_to_dict"]
 
@@ -157,6 +158,24 @@ def _parse_light(d: Any) -> LightSpec:
     return LightSpec(**kw)
 
 
+def _parse_environment(d: Any) -> dict[str, Any]:
+    """[r, g, b] (a constant) or {"map": FILE, "scale": s, "rotation": degrees} (SPEC.md)."""
+    if isinstance(d, str):
+        raise SceneError(f"environment: expected [r, g, b] or {{\"map\": FILE, \"scale\": s, "
+                         f"\"rotation\": degrees}}, got {d!r}")
+    if not isinstance(d, Mapping):
+        return {"environment": _vector(d, "environment", 3, lo=0.0)}
+    d = _object(d, "environment", {"map", "scale", "rotation"})
+    if not isinstance(d.get("map"), str) or not d["map"]:
+        raise SceneError(f"environment.map: expected a file path, got {d.get('map')!r}")
+    kw: dict[str, Any] = {"path": d["map"]}
+    if "scale" in d:
+        kw["scale"] = _number(d["scale"], "environment.scale", 0.0, 1e7)
+    if "rotation" in d:
+        kw["rotation"] = _number(d["rotation"], "environment.rotation", -360.0, 360.0)
+    return {"environment_map": EnvironmentMapSpec(**kw)}
+
+
 def _parse_camera(d: Any) -> CameraSpec:
     d = _object(d, "camera", _fields(CameraSpec))
     kw: dict[str, Any] = {}
@@ -216,7 +235,7 @@ def _parse_probes(d: Any) -> ProbeSpec:
 
 def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
     """Validate a JSON-like dictionary into a :class:`Scene`."""
-    d = _object(data, "", _fields(Scene) - {"base_dir"})
+    d = _object(data, "", _fields(Scene) - {"base_dir", "environment_map"})
     kw: dict[str, Any] = {}
     if "volume" in d:
         kw["volume"] = _parse_volume(d["volume"])
@@ -230,7 +249,7 @@ def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
         kw["anisotropy"] = _number(d["anisotropy"], "anisotropy", -1.0, 1.0, lo_open=True, hi_open=True)
     kw["light"] = _parse_light(d.get("light", {}))
     if "environment" in d:
-        kw["environment"] = _vector(d["environment"], "environment", 3, lo=0.0)
+        kw.update(_parse_environment(d["environment"]))
     if "max_bounces" in d:
         kw["max_bounces"] = _integer(d["max_bounces"], "max_bounces", 0, MAX_BOUNCES_LIMIT)
     kw["camera"] = _parse_camera(d.get("camera", {}))

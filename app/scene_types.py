@@ -71,6 +71,16 @@ class LightSpec:
 
 
 @dataclass(frozen=True)
+class EnvironmentMapSpec:
+    """An equirectangular environment map (SPEC.md): `path` relative to the scene file like volume
+    paths, radiance multiplied by `scale`, the map turned by `rotation` degrees about +y (the
+    radiance from direction d is the map's at R_y(-rotation) d)."""
+    path: str
+    scale: float = 1.0
+    rotation: float = 0.0
+
+
+@dataclass(frozen=True)
 class CameraSpec:
     eye: tuple[float, float, float] = (0.0, 0.3, 2.2)
     target: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -104,6 +114,8 @@ class Scene:
     anisotropy: float = 0.0
     light: LightSpec = field(default_factory=LightSpec)
     environment: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    # JSON "environment": {"map": ...}: the map replaces the constant `environment` (kept, unused).
+    environment_map: EnvironmentMapSpec | None = None
     max_bounces: int = 64
     camera: CameraSpec = field(default_factory=CameraSpec)
     probes: ProbeSpec = field(default_factory=ProbeSpec)
@@ -126,9 +138,13 @@ def scene_to_dict(scene: Scene) -> dict:
 
     out: dict[str, Any] = {}
     for f in dataclasses.fields(scene):
-        if f.name == "base_dir":
+        if f.name in ("base_dir", "environment_map"):
             continue
         v = getattr(scene, f.name)
+        if f.name == "environment" and scene.environment_map is not None:
+            m = scene.environment_map
+            out[f.name] = {"map": m.path, "scale": m.scale, "rotation": m.rotation}
+            continue
         if dataclasses.is_dataclass(v):
             sub = {k.name: conv(getattr(v, k.name)) for k in dataclasses.fields(v)}
             if f.name == "volume":

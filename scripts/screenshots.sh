@@ -15,6 +15,12 @@ done
 $py scripts/montage.py screenshots/default_methods.png /tmp/rp-shots/default_pt.png:"path tracer 64 spp" \
   /tmp/rp-shots/default_probes.png:"probes 64 spp" /tmp/rp-shots/default_probes-only.png:"probes-only 64 spp" \
   /tmp/rp-shots/default_raymarch.png:"raymarch 64 frames"
+# The cloud under the procedural sky map (assets/scenes/sky.json): path tracer and raymarcher.
+$rp render assets/scenes/sky.json --spp 256 --width 256 --height 256 --out /tmp/rp-shots/sky_pt.png
+$rp render assets/scenes/sky.json --method raymarch --spp 16 --width 256 --height 256 \
+  --out /tmp/rp-shots/sky_raymarch.png
+$py scripts/montage.py screenshots/sky_envmap.png /tmp/rp-shots/sky_pt.png:"path tracer 256 spp" \
+  /tmp/rp-shots/sky_raymarch.png:"raymarch 16 frames"
 if [ -f ../shared/datasets/bonsai_256x256x256_uint8.raw ]; then
   $rp render assets/scenes/bonsai.json --spp 128 --out screenshots/bonsai_pt.png
 fi

@@ -522,3 +522,34 @@ def test_no_display_falls_back_to_a_headless_render(tmp_path):
     proc = view(["scene.json", "--spp", "2"], tmp_path, display=None)
     assert "no display available" in proc.stderr and "headless" in proc.stderr
     assert (tmp_path / "view.png").is_file() and "wrote" in proc.stdout
+
+
+def test_environment_map_shows_rotates_and_goes_back_to_a_colour(display, tmp_path):
+    """A scene with an environment map: the map is the background, the Light panel's rotation
+    slider turns it (the picture changes, the scene's rotation follows), and the constant-colour
+    button goes back to the scene's colour."""
+    h = 16
+    u = (np.arange(2 * h) + 0.5) / (2 * h)
+    img = np.zeros((h, 2 * h, 3), np.float32)
+    img[...] = np.stack([0.2 + 0.6 * u, 0.3 + 0.0 * u, 0.8 - 0.6 * u], -1)[None]   # varies along u
+    np.save(tmp_path / "sky.npy", img)
+    scene = {**SCENE, "environment": {"map": "sky.npy", "scale": 1.0, "rotation": 0.0}}
+    (tmp_path / "scene.json").write_text(json.dumps(scene))
+    steps = [{"until": "done"}, {"screenshot": "map.png"}, {"dump": "map.json"},
+             {"drag": "Environment rotation", "by": [25, 0]}, {"until": "done"},
+             {"screenshot": "turned.png"}, {"dump": "turned.json"},
+             {"click": "Constant environment"}, {"until": "done"}, {"dump": "constant.json"},
+             {"close": True}]
+    script = write_script(tmp_path / "script.json", steps)
+    view(["scene.json", "--script", str(script), "--window", "720x800", "--spp", str(SPP),
+          "--render-scale", "0.5"], tmp_path, display)
+    d0, d1, d2 = (dump(tmp_path / f"{n}.json") for n in ("map", "turned", "constant"))
+    assert d0["errors"] == [] and d1["errors"] == []
+    assert d0["scene"]["environment"] == {"map": "sky.npy", "scale": 1.0, "rotation": 0.0}
+    assert 10.0 < d1["scene"]["environment"]["rotation"] <= 180.0
+    picture0 = view_pixels(png(tmp_path / "map.png"), d0)
+    picture1 = view_pixels(png(tmp_path / "turned.png"), d1)
+    # The background is the map (red and blue trade places along u), not the default grey.
+    assert not _is_background(picture0, ENVIRONMENT_SRGB, tol=12).any()
+    assert np.abs(picture1 - picture0).mean() > 3.0
+    assert d2["scene"]["environment"] == [0.1, 0.1, 0.1]

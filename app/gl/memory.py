@@ -8,6 +8,7 @@ from pathlib import Path
 
 import moderngl
 
+
 GPU_MEMORY_INFO_CURRENT_AVAILABLE_VIDMEM_NVX = 0x9049   # KiB
 
 _get_integerv = None
@@ -26,11 +27,6 @@ def _gl_get_integer(pname: int) -> int | None:
     value = ctypes.c_int(-1)
     _get_integerv(pname, ctypes.byref(value))
     return value.value if value.value >= 0 else None
-
-
-def software_renderer(ctx: moderngl.Context) -> bool:
-    renderer = ctx.info.get("GL_RENDERER", "").lower()
-    return any(name in renderer for name in ("llvmpipe", "softpipe", "lavapipe"))
 
 
 def host_available_bytes() -> int | None:

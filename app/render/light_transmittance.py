@@ -44,7 +44,8 @@ class LightTransmittance:
     def __init__(self, ctx: moderngl.Context, max_side: int = MAX_SIDE):
         self.ctx = ctx
         self.max_side = int(max_side)
-        self.program = compute_program(ctx, "light_transmittance.comp")
+        self.program = compute_program(ctx, "light_transmittance.comp",
+                                       {"SUN_MARCH_SKIPS_EMPTY_CELLS": 1})
         self.texture: moderngl.Texture3D | None = None
 
     def bake(self, resources: SceneResources, min_side: int = MIN_SIDE) -> None:

@@ -30,7 +30,8 @@ def check_image_size(ctx: moderngl.Context, width: int, height: int) -> None:
     GL_MAX_TEXTURE_SIZE and GL_MAX_VIEWPORT_DIMS, the compute dispatch within
     GL_MAX_COMPUTE_WORK_GROUP_COUNT, and its buffers within the memory the device has left (the
     NVIDIA driver's query; on a software renderer, the host's available memory)."""
-    from ..gl.memory import gpu_available_bytes, host_available_bytes, software_renderer
+    from ..gl.context import is_software as software_renderer
+    from ..gl.memory import gpu_available_bytes, host_available_bytes
     from .pathtracer import LOCAL_SIZE
     side = max(width, height)
     for name in ("GL_MAX_TEXTURE_SIZE", "GL_MAX_VIEWPORT_DIMS"):

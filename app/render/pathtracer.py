@@ -13,6 +13,7 @@ from .resources import SceneResources
 
 LOCAL_SIZE = 8
 PIXEL_STATE_BYTES = 96  # PathState (80) + next_sample and padding, std430
+PIXEL_STATE_BYTES_ENVIRONMENT_MAP = 128  # the same with ENVIRONMENT_MAP (PathState 112)
 
 
 def groups(width: int, height: int) -> tuple[int, int]:
@@ -23,13 +24,15 @@ class PathTracer:
     def __init__(self, ctx: moderngl.Context, defines: dict | None = None):
         self.ctx = ctx
         self.program = compute_program(ctx, "pathtrace.comp", defines)
+        self.state_bytes = (PIXEL_STATE_BYTES_ENVIRONMENT_MAP if (defines or {}).get("ENVIRONMENT_MAP")
+                            else PIXEL_STATE_BYTES)
         self.loop_budget, self.loop_reserve = loop_budget(ctx)
         self.states: moderngl.Buffer | None = None
         self.progress = ctx.buffer(reserve=4)
         self.dispatches = 0
 
     def _states_for(self, acc: Accumulation) -> moderngl.Buffer:
-        size = acc.width * acc.height * PIXEL_STATE_BYTES
+        size = acc.width * acc.height * self.state_bytes
         if self.states is None or self.states.size != size:
             if self.states is not None:
                 self.states.release()

@@ -34,6 +34,7 @@ DIRECTIONS_PER_PASS = 64
 WALKS_PER_CHUNK = 1 << 20     # resumable walks: 80 MiB of walk state and 16 MiB of results at most
 WALKS_PER_CHUNK_UNBOUNDED = 1 << 22   # walks that end in one dispatch: 64 MiB of results at most
 PATH_STATE_BYTES = 80       # PathState of glsl/lib/integrator.glsl, std430
+PATH_STATE_BYTES_ENVIRONMENT_MAP = 112   # the same with ENVIRONMENT_MAP
 PROBE_ACCUM_BYTES = 128     # ProbeAccum of glsl/lib/probe_accum.glsl
 WALK_SUN_MODES = ("ray", "grid")
 WALK_PROFILE_SLOTS = 1024   # rows of 8 counters in glsl/lib/walk_profile.glsl
@@ -62,7 +63,7 @@ class ProbeGrid:
     def __init__(self, ctx: moderngl.Context, grid: tuple[int, int, int], samples: int,
                  precision: str = "rgba32f", sh_order: int = 2,
                  box: tuple | None = None, grey: bool = False, resumable: bool | None = None,
-                 sun: str = "ray", adaptive: float = 0.0):
+                 sun: str = "ray", adaptive: float = 0.0, environment_map: bool = False):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
         bake time); `sh_order` 0, 1 or 2 decides which of the seven textures exist. `resumable`:
         walks that suspend and resume across dispatches (default: where the driver limits loops;
@@ -71,7 +72,10 @@ class ProbeGrid:
         sun (unbiased); "grid" reads the baked light grid (bake_pass(light=...)), a bias of its
         resolution. `adaptive` > 0: walks per probe follow each probe's noise (lib/probe_noise.glsl):
         a probe stops taking walks once its standard error is at most `adaptive` times what the
-        asked-for walks give a probe of average noise; 0 (default): every probe takes them all."""
+        asked-for walks give a probe of average noise; 0 (default): every probe takes them all.
+        `environment_map`: the walks' build for a scene whose environment is a map (they sample it
+        at each scattering event; lib/integrator.glsl)."""
+        self.environment_map = bool(environment_map)
         if not (math.isfinite(adaptive) and adaptive >= 0.0):
             raise ValueError(f"adaptive walks factor {adaptive!r}: expected a finite number >= 0")
         self.adaptive = float(adaptive)
@@ -104,7 +108,8 @@ class ProbeGrid:
         per_chunk = WALKS_PER_CHUNK if self.resumable else WALKS_PER_CHUNK_UNBOUNDED
         self.chunk_probes = max(1, min(self.count, per_chunk // self.directions))
         walks = self.chunk_probes * self.directions
-        self.walk_states = ctx.buffer(reserve=walks * PATH_STATE_BYTES) if self.resumable else None
+        state_bytes = PATH_STATE_BYTES_ENVIRONMENT_MAP if self.environment_map else PATH_STATE_BYTES
+        self.walk_states = ctx.buffer(reserve=walks * state_bytes) if self.resumable else None
         self.walk_radiance = ctx.buffer(reserve=walks * 16)
         self.accums = ctx.buffer(reserve=self.count * PROBE_ACCUM_BYTES)
         self.progress = ctx.buffer(reserve=4)
@@ -113,6 +118,8 @@ class ProbeGrid:
         self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable)}
         if sun == "grid":
             self._walk_defines["WALK_SUN_GRID"] = 1
+        if self.environment_map:
+            self._walk_defines["ENVIRONMENT_MAP"] = 1
         self.walk_program = compute_program(ctx, "probe_walks.comp", self._walk_defines)
         self._walk_profile_program = None   # the WALK_PROFILE build, compiled when first asked for
         self.project_program = compute_program(ctx, "probe_project.comp", defines)

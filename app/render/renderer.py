@@ -155,6 +155,8 @@ class Renderer:
         if method in PROBE_LIGHTING:
             defines = {"PROBE_LIGHTING": PROBE_LIGHTING[method],
                        **(probe_defines or self._probe_defines())}
+        if self.resources.defines():
+            defines = {**(defines or {}), **self.resources.defines()}
         key = (method, tuple(sorted((defines or {}).items())))
         if key not in self._passes:
             self._passes[key] = PathTracer(self.ctx, defines)
@@ -206,10 +208,13 @@ class Renderer:
             low, high = self.visible_region()
             grid = fitted_grid(spec.grid, low, high)
             box = (tuple(map(float, low)), tuple(map(float, high)))
+        env = self.resources.environment
+        # A map is grey when its three channels are equal everywhere; (1, 0, 0) stands for colour.
+        environment = s.environment if env is None else ((1, 1, 1) if env.grey else (1, 0, 0))
         return ProbePlan(grid=tuple(int(v) for v in grid), box=box,
                          sh_order=resolve_sh_order(spec.sh_order, s.anisotropy),
                          grey=resolve_channels(spec.channels, self.resources.table,
-                                               s.light.irradiance, s.environment) == 1)
+                                               s.light.irradiance, environment) == 1)
 
     def start_bake(self, seed: int = 0, warm: bool = False) -> ProbeGrid:
         """(Re)starts the bake for the current scene; reuses the textures when the layout is
@@ -218,15 +223,17 @@ class Renderer:
         spec = self.scene.probes
         plan = self.probe_plan()
         g = self.probe_grid
+        env_map = self.resources.environment is not None
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
-                         g.adaptive) != (
+                         g.adaptive, g.environment_map) != (
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
-                self.walk_sun, self.walk_adaptive):
+                self.walk_sun, self.walk_adaptive, env_map):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
                                         plan.sh_order, plan.box, plan.grey,
-                                        sun=self.walk_sun, adaptive=self.walk_adaptive)
+                                        sun=self.walk_sun, adaptive=self.walk_adaptive,
+                                        environment_map=env_map)
         self.probe_grid.restart(seed, warm=warm)
         self._baked_key = self.bake_key()
         return self.probe_grid
@@ -263,7 +270,8 @@ class Renderer:
         return self.bake_light() if self.probe_grid.sun == "grid" else 0.0
 
     def raymarcher(self) -> Raymarcher:
-        defines = self.probe_grid.defines()   # the layout of the textures it will read
+        # The layout of the textures it will read, and the scene's lights.
+        defines = {**self.probe_grid.defines(), **self.resources.defines()}
         key = (self.raymarch_stage, tuple(sorted(defines.items())))
         if key not in self._raymarchers:
             self._raymarchers[key] = Raymarcher(self.ctx, self.raymarch_stage, defines)

@@ -2,12 +2,15 @@
 and the tracking statistics buffer. Re-uploads only what a scene change touches."""
 from __future__ import annotations
 
+import math
 import struct
 
 import moderngl
 import numpy as np
 
+from ..environment_map import EnvironmentMap, load_scene_environment
 from ..gl.textures import transfer_texture, volume_texture
+from ..twins.environment_map import Distribution
 from ..twins.medium import majorant
 from ..scene import Scene
 from ..transfer import transfer_table
@@ -16,11 +19,28 @@ from .majorant_grid import MAJORANT_UNIT, MajorantGrid
 
 VOLUME_UNIT = 0
 TRANSFER_UNIT = 1
+ENVIRONMENT_MAP_UNIT = 12   # lib/environment_map.glsl: radiance and pdf (RGBA32F)
+ENVIRONMENT_CDF_UNIT = 13   # and its CDFs (R32F)
 STATS_BINDING = 7
 # Tracking steps (null and real collisions, shadow-ray steps) one path may take before it is
 # dropped and counted as truncated. Far beyond what max_bounces = 64 needs even at sigma_t = 1e4;
 # it only stops a pathological scene from hanging the GPU.
 DEFAULT_MAX_PATH_STEPS = 1 << 24
+
+
+def environment_textures(ctx: moderngl.Context, image: np.ndarray, distribution: Distribution):
+    """The two textures lib/environment_map.glsl reads: RGBA32F (rgb radiance, a the density over
+    (u, v)) and the R32F CDFs (app/twins/environment_map.py); texelFetch only."""
+    h, w = image.shape[:2]
+    rgba = np.empty((h, w, 4), np.float32)
+    rgba[..., :3] = image
+    rgba[..., 3] = distribution.pdf_uv
+    tex = ctx.texture((w, h), 4, rgba.tobytes(), dtype="f4")
+    cdf = distribution.cdf_texture()
+    cdf_tex = ctx.texture((w + 1, h + 1), 1, cdf.tobytes(), dtype="f4")
+    for t in (tex, cdf_tex):
+        t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    return tex, cdf_tex
 
 
 class SceneResources:
@@ -32,6 +52,11 @@ class SceneResources:
         self.volume_tex = None
         self.transfer_tex = None
         self.table: np.ndarray | None = None
+        self.environment: EnvironmentMap | None = None   # the scene's map, None: constant
+        self.environment_tex = None
+        self.environment_cdf_tex = None
+        # False: paths find the map by phase sampling alone (for measuring what sampling gains).
+        self.environment_sampling = True
         self.stats = ctx.buffer(reserve=16)
         self.max_path_steps = DEFAULT_MAX_PATH_STEPS
         # Counts volume changes; keys of what was computed from a volume use it, not id(volume):
@@ -49,6 +74,10 @@ class SceneResources:
         """Adopt a new scene; returns which parts changed ('volume', 'transfer', 'medium', ...)."""
         changed: set[str] = set()
         old = self.scene
+        # The map first: a bad file fails before anything on the GPU changes.
+        old_map = None if old is None else (old.environment_map, old.base_dir)
+        new_map = (scene.environment_map, scene.base_dir)
+        environment = load_scene_environment(scene) if new_map != old_map else self.environment
         if volume is not None and volume is not self.volume:
             changed.add("volume")
         elif old is None or scene.volume != old.volume or scene.base_dir != old.base_dir:
@@ -69,8 +98,10 @@ class SceneResources:
         if old is None or (scene.density_scale, scene.albedo, scene.anisotropy, scene.max_bounces) != (
                 old.density_scale, old.albedo, old.anisotropy, old.max_bounces):
             changed.add("medium")
-        if old is None or scene.light != old.light or scene.environment != old.environment:
+        if old is None or scene.light != old.light or scene.environment != old.environment or (
+                scene.environment_map != old.environment_map):
             changed.add("light")
+        self._set_environment(environment)
         if old is None or scene.camera != old.camera:
             changed.add("camera")
         self.scene = scene
@@ -81,6 +112,26 @@ class SceneResources:
             self.majorant_grid.build(self.transfer_tex, self.table, scene.density_scale, TRANSFER_UNIT)
             self._majorant_key = key
         return changed
+
+    def _set_environment(self, env: EnvironmentMap | None) -> None:
+        """Uploads the map (radiance with its (u, v) density in alpha, and the CDFs) if it is new."""
+        if env is self.environment:
+            return
+        for tex in (self.environment_tex, self.environment_cdf_tex):
+            if tex is not None:
+                tex.release()
+        self.environment, self.environment_tex, self.environment_cdf_tex = env, None, None
+        if env is None:
+            return
+        self.environment_tex, self.environment_cdf_tex = environment_textures(
+            self.ctx, env.image, env.distribution)
+
+    def defines(self) -> dict:
+        """Compile-time variants the scene's lights need in every pass that includes lib/lights.glsl."""
+        if self.environment is None:
+            return {}
+        return {"ENVIRONMENT_MAP": 1} if self.environment_sampling else {
+            "ENVIRONMENT_MAP": 1, "ENVIRONMENT_MAP_SAMPLING": 0}
 
     @property
     def majorant(self) -> float:
@@ -96,7 +147,7 @@ class SceneResources:
         """What the probes depend on: everything but the camera (camera moves never re-bake)."""
         s = self.scene
         return (self.volume_version, s.transfer_function, s.density_scale, s.albedo, s.anisotropy,
-                s.light, s.environment, s.max_bounces, s.probes.grid, s.probes.samples,
+                s.light, s.environment, s.environment_map, s.max_bounces, s.probes.grid, s.probes.samples,
                 s.probes.precision)
 
     def uniforms(self) -> dict:
@@ -118,12 +169,26 @@ class SceneResources:
             "max_bounces": int(s.max_bounces),
             "anisotropy": float(s.anisotropy),
             "max_path_steps": int(self.max_path_steps),
+            **self.environment_uniforms(),
         }
+
+    def environment_uniforms(self) -> dict:
+        if self.environment is None:
+            return {}
+        m = self.scene.environment_map
+        h, w = self.environment.image.shape[:2]
+        a = math.radians(m.rotation)
+        return {"environment_map": ENVIRONMENT_MAP_UNIT, "environment_cdf": ENVIRONMENT_CDF_UNIT,
+                "environment_size": (w, h), "environment_scale": float(m.scale),
+                "environment_rotation": (math.cos(a), math.sin(a))}
 
     def bind(self) -> None:
         self.volume_tex.use(VOLUME_UNIT)
         self.transfer_tex.use(TRANSFER_UNIT)
         self.majorant_grid.bind()
+        if self.environment_tex is not None:
+            self.environment_tex.use(ENVIRONMENT_MAP_UNIT)
+            self.environment_cdf_tex.use(ENVIRONMENT_CDF_UNIT)
         self.stats.bind_to_storage_buffer(STATS_BINDING)
 
     def reset_stats(self) -> None:
@@ -134,7 +199,8 @@ class SceneResources:
         return {"truncated_paths": truncated, "nonfinite_samples": nonfinite}
 
     def release(self) -> None:
-        for obj in (self.volume_tex, self.transfer_tex, self.stats):
+        for obj in (self.volume_tex, self.transfer_tex, self.stats, self.environment_tex,
+                    self.environment_cdf_tex):
             if obj is not None:
                 obj.release()
         self.majorant_grid.release()

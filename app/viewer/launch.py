@@ -47,6 +47,7 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
 
 
 def run_view(args: argparse.Namespace) -> int:
+    from ..environment_map import load_scene_environment
     from ..volume import load_scene_volume
     scene = scene_from_args(args)
     if args.screenshot:
@@ -63,6 +64,7 @@ def run_view(args: argparse.Namespace) -> int:
     if has_display() or scripted:
         # A volume that does not load fails here, before a window, an X server or a GL context.
         volume = load_scene_volume(scene)
+        load_scene_environment(scene)   # and an environment map (kept in its cache)
     else:
         volume = None   # the headless fallback loads it
     xvfb = None

@@ -3,6 +3,7 @@ and files, and help."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
@@ -180,8 +181,40 @@ def light_section(v) -> None:
     imgui.text_disabled(f"towards the sun: ({d[0]:.2f}, {d[1]:.2f}, {d[2]:.2f})")
     _colour_strength(v, "Sun", state.scene.light.irradiance, 100.0,
                      lambda rgb: state.edit(light=replace(state.scene.light, irradiance=rgb)))
-    _colour_strength(v, "Environment", state.scene.environment, 10.0,
-                     lambda rgb: state.edit(environment=rgb))
+    environment_section(v)
+
+
+def environment_section(v) -> None:
+    """A constant colour, or a map (README: environment maps) with its scale and rotation."""
+    state, ui = v.state, v.widgets
+    env = state.scene.environment_map
+    if env is None:
+        _colour_strength(v, "Environment", state.scene.environment, 10.0,
+                         lambda rgb: state.edit(environment=rgb))
+    else:
+        imgui.text(f"Environment map: {Path(env.path).name}")
+        changed, scale = imgui.slider_float("Environment scale", env.scale, 0.0, 100.0, "%.3f",
+                                            imgui.SliderFlags_.logarithmic)
+        ui.note("Environment scale")
+        if changed:
+            state.set_environment_map(scale=max(float(scale), 0.0))
+        changed, rotation = imgui.slider_float("Environment rotation", env.rotation, -180.0, 180.0,
+                                               "%.0f deg")
+        ui.note("Environment rotation")
+        if changed:
+            state.set_environment_map(rotation=rotation)
+        if imgui.button("Constant environment"):
+            state.set_environment_map("")
+        ui.note("Constant environment")
+    changed, text = imgui.input_text("Map file (.exr, .hdr, .npy)", v.environment_map_text)
+    ui.note("Map file")
+    if changed:
+        v.environment_map_text = text
+    imgui.same_line()
+    if imgui.button("Load map") and v.environment_map_text.strip():
+        p = Path(v.environment_map_text.strip()).expanduser()
+        state.set_environment_map(str(p.resolve()) if p.is_file() else str(p))
+    ui.note("Load map")
 
 
 def _colour_strength(v, name: str, rgb, max_strength: float, apply) -> None:

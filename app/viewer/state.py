@@ -82,6 +82,21 @@ class ViewerState:
         light = replace(self.scene.light, direction=direction_from_angles(azimuth_deg, elevation_deg))
         self.scene = self.scene.replace(light=light)
 
+    def set_environment_map(self, path: str | None = None, **changes) -> None:
+        """A map file (a new map starts at scale 1, rotation 0), its scale or rotation (degrees
+        about +y, wrapped into [-180, 180]); path="" goes back to the constant environment."""
+        from ..scene_types import EnvironmentMapSpec
+        current = self.scene.environment_map
+        if path == "":
+            self.scene = self.scene.replace(environment_map=None)
+            return
+        spec = EnvironmentMapSpec(path) if path is not None else current
+        if spec is None:
+            return
+        if "rotation" in changes and not -180.0 <= changes["rotation"] <= 180.0:
+            changes["rotation"] = (float(changes["rotation"]) + 180.0) % 360.0 - 180.0
+        self.scene = self.scene.replace(environment_map=replace(spec, **changes))
+
     def turn_light(self, d_azimuth_deg: float, d_elevation_deg: float) -> None:
         az, el = angles_from_direction(self.scene.light.direction)
         self.set_light_angles(az + d_azimuth_deg, max(-89.0, min(89.0, el + d_elevation_deg)))

@@ -15,6 +15,7 @@ from ..twins.camera import camera_frame
 from ..gl.shaders import ShaderError
 from ..gl.timer import GpuTimer
 from ..scene import SceneError, scene_to_dict
+from ..environment_map import load_scene_environment
 from ..volume import VolumeError, load_scene_volume
 from . import layout, orbit, overlays, panels
 from .display import BACKGROUND, DisplayPass, ErrorMeter
@@ -55,6 +56,7 @@ class Viewer:
         self.screenshot_path = "screenshot.png"
         self.scene_file = SAVED_SCENE_NAME       # "save scene" never overwrites the one opened
         self.remembered_colours: dict[str, tuple] = {}
+        self.environment_map_text = ""   # the light panel's map file field
         self.probe_axes_locked = len(set(state.scene.probes.grid)) == 1
         self.pending_screenshot: str | None = None
         self.last_screenshot: tuple | None = None   # (path asked for, where it went, error line)
@@ -123,6 +125,11 @@ class Viewer:
             candidate = Path(scene.base_dir) / volume["path"]
             if candidate.is_file():
                 volume["path"] = str(candidate.resolve())
+        env = data.get("environment")
+        if isinstance(env, dict) and scene.base_dir and not Path(env["map"]).is_absolute():
+            candidate = Path(scene.base_dir) / env["map"]
+            if candidate.is_file():
+                env["map"] = str(candidate.resolve())
         try:
             target.parent.mkdir(parents=True, exist_ok=True)
             target.write_text(json.dumps(data, indent=2) + "\n")
@@ -137,6 +144,7 @@ class Viewer:
         try:
             scene, scene_path = scene_for_path(path, self.state.scene)
             volume = load_scene_volume(scene)
+            load_scene_environment(scene)
         except RECOVERABLE as exc:
             self.state.error(f"could not open {path}: {exc}")
             return False

@@ -13,9 +13,35 @@
 // at a scattering event and the next dispatch continues it. Where the budget is unbounded (the
 // lent NVIDIA GPU) a path simply runs to its end. A flight or a shadow ray cut short is continued
 // from where tracking stopped (free flight and ratio tracking's null collisions are memoryless).
+//
+// ENVIRONMENT_MAP (defined or not): the environment is a map (lib/environment_map.glsl). Each
+// scattering event then also samples the map (a ratio-tracked shadow ray towards a direction drawn
+// from the map's distribution, after the sun's), and paths that leave the box after a scattering
+// event add the map's radiance; both are weighted by the power heuristic between the map's pdf and
+// the phase function's, so a small bright region is found by the map's samples and a broad one by
+// the phase function's. Without it the code below is the constant environment's, unchanged.
+// ENVIRONMENT_MAP_SAMPLING 0 turns the map's samples off (phase sampling alone, escapes weighted
+// 1): the same estimate with more noise, kept for measuring what importance sampling gains.
 uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
 uniform int max_path_steps;   // hang guard: tracking steps one path may take in all
+
+#if defined(ENVIRONMENT_MAP) && !defined(ENVIRONMENT_MAP_SAMPLING)
+#define ENVIRONMENT_MAP_SAMPLING 1
+#endif
+
+#if defined(ENVIRONMENT_MAP)
+// Loop iterations one map sample may take (two binary searches over at most 65536 rows/columns),
+// charged to the path's step budget so the dispatch's loop budget stays honest.
+const int ENVIRONMENT_SAMPLE_STEPS = 32;
+
+// The power heuristic's weight of a strategy with pdf a against one with pdf b.
+float mis_power(float a, float b)
+{
+    float a2 = a * a, b2 = b * b;
+    return a2 + b2 > 0.0 ? a2 / (a2 + b2) : 0.0;
+}
+#endif
 
 #ifndef RR_START_BOUNCE
 #define RR_START_BOUNCE 3
@@ -28,7 +54,8 @@ const int PATH_DONE = 0;
 const int PATH_SUSPENDED = 1;
 const int PATH_TRUNCATED = 2;
 
-// std430-friendly: five 16-byte rows (80 bytes; app/render/probes.py PATH_STATE_BYTES).
+// std430-friendly: five 16-byte rows (80 bytes; app/render/probes.py PATH_STATE_BYTES); seven
+// (112 bytes) with ENVIRONMENT_MAP.
 struct PathState {
     vec3 x;             // current vertex (origin, then each scattering point)
     int bounce;         // scattering events so far
@@ -42,6 +69,12 @@ struct PathState {
     float shadow_transmittance;  // and its ratio-tracking estimate so far
     int shadow_pending; // 1 while the shadow ray of the event at x is unfinished
     int pad;
+#if defined(ENVIRONMENT_MAP)
+    vec3 env_w;         // the map sample's direction at x
+    float phase_pdf;    // pdf of the phase sampling that chose w (0: w was not phase-sampled)
+    vec3 env_weight;    // its radiance x phase x MIS weight / pdf, to be times its transmittance
+    int env_pending;    // 1 while the map sample's shadow ray at x is unfinished
+#endif
 };
 
 void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
@@ -58,7 +91,25 @@ void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
     p.shadow_transmittance = 1.0;
     p.shadow_pending = 0;
     p.pad = 0;
+#if defined(ENVIRONMENT_MAP)
+    p.env_w = vec3(0.0);
+    p.phase_pdf = 0.0;
+    p.env_weight = vec3(0.0);
+    p.env_pending = 0;
+#endif
 }
+
+#if defined(ENVIRONMENT_MAP)
+// The map's radiance for a path that leaves the box along p.w: weighted against the map's own
+// samples where p.w was phase-sampled at a scattering event.
+vec3 path_escape_radiance(PathState p)
+{
+    vec3 le = environment_radiance(p.w);
+    if (ENVIRONMENT_MAP_SAMPLING != 0 && p.phase_pdf > 0.0)
+        le *= mis_power(p.phase_pdf, environment_pdf(p.w));
+    return le;
+}
+#endif
 
 const int STEP_CONTINUE = 0;
 const int STEP_DONE = 1;
@@ -72,13 +123,21 @@ int path_flight(inout PathState p, inout int steps_left)
 {
     float t0, t1;
     if (!box_intersect(p.x, p.w, t0, t1)) {
+#if defined(ENVIRONMENT_MAP)
+        p.radiance += p.throughput * path_escape_radiance(p);
+#else
         p.radiance += p.throughput * environment;
+#endif
         return STEP_DONE;
     }
     float t;
     int event = delta_track(p.x, p.w, t0, t1, p.rng, steps_left, t);
     if (event == TRACK_ESCAPED) {
+#if defined(ENVIRONMENT_MAP)
+        p.radiance += p.throughput * path_escape_radiance(p);
+#else
         p.radiance += p.throughput * environment;
+#endif
         return STEP_DONE;
     }
     if (event == TRACK_OUT_OF_STEPS) {
@@ -104,6 +163,26 @@ int path_flight(inout PathState p, inout int steps_left)
     return STEP_DONE;
 #endif
 #endif
+#if defined(ENVIRONMENT_MAP) && !defined(PROBE_LIGHTING)
+    // A direction from the map's distribution; its shadow ray runs after the sun's.
+    if (ENVIRONMENT_MAP_SAMPLING != 0) {
+        float env_pdf;
+        vec3 env_w = environment_sample(rng_next(p.rng), rng_next(p.rng), env_pdf);
+        steps_left -= ENVIRONMENT_SAMPLE_STEPS;
+        p.env_pending = 0;
+        if (env_pdf > 0.0) {
+            float phase = phase_hg(dot(env_w, p.w), anisotropy);
+            vec3 le = environment_radiance(env_w);
+            if (any(greaterThan(le, vec3(0.0)))) {
+                p.env_w = env_w;
+                p.env_weight = le * (phase * mis_power(env_pdf, phase) / env_pdf);
+                p.env_pending = 1;
+                p.shadow_t = -1.0;
+                p.shadow_transmittance = 1.0;
+            }
+        }
+    }
+#endif
 #if defined(WALK_SUN_GRID)
     // The sun's transmittance from the baked light grid (lib/light_grid.glsl), no shadow ray.
     p.radiance += p.throughput * sun_irradiance
@@ -122,7 +201,11 @@ int path_flight(inout PathState p, inout int steps_left)
 // After STEP_SHADOW_CUT the next call resumes the shadow ray where it stopped, then goes on.
 int path_step(inout PathState p, inout int steps_left)
 {
+#if defined(ENVIRONMENT_MAP)
+    if (p.shadow_pending == 0 && p.env_pending == 0) {
+#else
     if (p.shadow_pending == 0) {
+#endif
         int flight = path_flight(p, steps_left);
         if (flight != STEP_CONTINUE)
             return flight;
@@ -134,11 +217,30 @@ int path_step(inout PathState p, inout int steps_left)
         p.shadow_pending = 0;
         p.radiance += p.throughput * sun_irradiance
                       * (p.shadow_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy));
+#if defined(ENVIRONMENT_MAP)
+        p.shadow_t = -1.0;          // the map sample's shadow ray starts afresh
+        p.shadow_transmittance = 1.0;
+#endif
     }
+#if defined(ENVIRONMENT_MAP)
+    if (p.env_pending != 0) {
+        if (!transmittance_to_boundary_continue(p.x, p.env_w, p.shadow_t,
+                                                p.shadow_transmittance, p.rng, steps_left))
+            return STEP_SHADOW_CUT;
+        p.env_pending = 0;
+        p.radiance += p.throughput * p.env_weight * p.shadow_transmittance;
+    }
+#endif
 #if defined(PROBE_LIGHTING)
     return STEP_DONE;
 #endif
+#if defined(ENVIRONMENT_MAP)
+    vec3 w_in = p.w;
     p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
+    p.phase_pdf = phase_hg(dot(w_in, p.w), anisotropy);
+#else
+    p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
+#endif
     if (p.bounce >= RR_START_BOUNCE) {
         float q = max(p.throughput.r, max(p.throughput.g, p.throughput.b));
         if (q < 1.0) {

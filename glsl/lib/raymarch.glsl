@@ -3,7 +3,8 @@
 // [sun * T_sun(x) * phase + probe radiance convolved with the phase function]; T_sun comes from the
 // baked light-transmittance texture (light_transmittance.comp). The step's opacity is integrated
 // exactly for piecewise-constant sigma_t, so large steps through dense media stay bounded.
-// Shared by raymarch.comp and raymarch.frag; each calls raymarch_pixel for its pixel.
+// Shared by raymarch.comp and raymarch.frag; each calls raymarch_pixel for its pixel. With
+// ENVIRONMENT_MAP the environment behind the volume is the map's radiance along the ray.
 uniform float raymarch_step;            // world units
 uniform uint frame_index;               // keys the jitter; frames accumulate into a running mean
 uniform uint seed;
@@ -12,6 +13,9 @@ layout(rgba32f, binding = 0) uniform image2D accumulation;  // rgb: running mean
 
 vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
 {
+#if defined(ENVIRONMENT_MAP)
+    vec3 environment = environment_radiance(d);   // the background this ray sees
+#endif
     float t0, t1;
     if (!box_intersect(origin, d, t0, t1))
         return environment;

@@ -1,8 +1,9 @@
 // Deterministic transmittance towards the sun: midpoint quadrature of sigma_t from x to the box
 // boundary, at most 4096 steps (exp(-tau) is 0 in float32 past tau = 104, so it stops there).
-// With the majorant grid (use_majorant_grid != 0) the quadrature points in macrocells of majorant
-// 0 are jumped over instead of sampled: sigma_t is 0 there, so the sum is the same, over the same
-// points (app/twins/shadow_march.py has no grid and must agree).
+// With SUN_MARCH_SKIPS_EMPTY_CELLS (the light grid's pass) and the majorant grid
+// (use_majorant_grid != 0) the quadrature points in macrocells of majorant 0 are jumped over
+// instead of sampled: sigma_t is 0 there, so the sum is the same, over the same points
+// (app/twins/shadow_march.py has no grid and must agree).
 #include "lib/cell_walk.glsl"
 
 uniform float march_step;  // world units between quadrature points
@@ -16,7 +17,7 @@ float sun_optical_depth_march(vec3 x)
     int n = clamp(int(ceil((t1 - t0) / march_step)), 1, 4096);
     float dt = (t1 - t0) / float(n);
     float tau = 0.0;
-#if !defined(GLOBAL_MAJORANT)
+#if defined(SUN_MARCH_SKIPS_EMPTY_CELLS) && !defined(GLOBAL_MAJORANT)
     if (use_majorant_grid != 0) {
         if (majorant_grid_bound <= 0.0)
             return 0.0;   // the whole volume is vacuum
