@@ -161,9 +161,9 @@ def test_unknown_dtype(tmp_path, name, kw):
 
 
 def test_unknown_format(tmp_path):
-    f = tmp_path / "vol.tiff"
+    f = tmp_path / "vol.vtk"   # (.tiff was the example until TIFF stacks became a format)
     f.write_bytes(bytes(8))
-    with pytest.raises(VolumeError, match=r"vol\.tiff.*format"):
+    with pytest.raises(VolumeError, match=r"vol\.vtk.*format"):
         load_volume(file_spec(f))
 
 
