@@ -240,7 +240,15 @@ def run(display, tmp_path_factory):
     out = tmp_path_factory.mktemp("viewer")
     (out / "scene.json").write_text(json.dumps(SCENE))
     z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in (12, 16, 20)), indexing="ij")
-    np.save(out / "blob.npy", np.clip(1.2 - 2 * np.sqrt(x * x + y * y + z * z), 0, 1).astype(np.float32))
+    blob = np.clip(1.2 - 2 * np.sqrt(x * x + y * y + z * z), 0, 1).astype(np.float32)
+    np.save(out / "blob.npy", blob)
+    import nibabel as nib   # the new formats open like any volume: a NIfTI file, a TIFF folder
+    import tifffile
+    nib.save(nib.Nifti1Image(np.ascontiguousarray(blob.transpose(2, 1, 0)), np.eye(4)),
+             str(out / "blob.nii.gz"))
+    (out / "stack").mkdir()
+    for k, page in enumerate((blob[:, :, :10] * 1000).astype(np.uint16)):
+        tifffile.imwrite(out / "stack" / f"z{k:03d}.tif", page)
     steps = [
         {"until": "done"}, {"screenshot": "pt.png"}, {"dump": "pt.json"},
         {"key": "2"}, {"until": "done"}, {"screenshot": "probes.png"}, {"dump": "probes.json"},
@@ -265,6 +273,8 @@ def run(display, tmp_path_factory):
         {"key": "f1"}, {"screenshot": "help.png"}, {"dump": "help.json"}, {"key": "f1"},
         {"click": "Data"}, {"click": "Open file..."}, {"click": "browser scene.json"},
         {"dump": "browsed.json"},
+        {"drop": ["blob.nii.gz"]}, {"frames": 1}, {"dump": "dropped_nifti.json"},
+        {"drop": ["stack"]}, {"frames": 1}, {"dump": "dropped_folder.json"},
         {"close": True},
     ]
     script = write_script(out / "script.json", steps)
@@ -440,6 +450,9 @@ def test_resize_drop_save_and_close(run):
     assert np.abs(png(out / "help.png") - png(out / "screenshot.png")).mean() > 1.0
     browsed = dump(out / "browsed.json")                       # the built-in file browser
     assert browsed["volume"]["dims"] == [24, 24, 24] and browsed["scene_path"].endswith("scene.json")
+    nifti, folder = dump(out / "dropped_nifti.json"), dump(out / "dropped_folder.json")
+    assert nifti["volume"] == {"name": "blob.nii.gz", "dims": [20, 16, 12]} and nifti["errors"] == []
+    assert folder["volume"] == {"name": "stack", "dims": [10, 16, 12]} and folder["errors"] == []
     assert "release check:" in proc.stdout and ", 0 still alive" in proc.stdout
 
 

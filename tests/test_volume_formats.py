@@ -297,3 +297,14 @@ def test_window_in_the_scene_json():
                        [{"window": "lung", "value_range": [0, 1]}, "volume.window"]):
         with pytest.raises(SceneError, match=field.replace(".", r"\.")):
             parse_scene({"volume": {"path": "ct", **bad}})
+
+
+def test_histogram_axis_in_data_units():
+    from app.viewer.tf_editor import data_ticks, window_choice
+    ticks, labels = data_ticks((-160.0, 240.0))   # the soft-tissue window in HU
+    assert labels == ["-100", "0", "100", "200"]
+    np.testing.assert_allclose(ticks, [60 / 400, 160 / 400, 260 / 400, 360 / 400])
+    ticks, labels = data_ticks((0.0, 255.0))
+    assert labels[0] == "0" and labels[-1] == "250" and ticks[-1] == pytest.approx(250 / 255)
+    assert window_choice((400.0, 1800.0)) == "bone" and window_choice((1.0, 2.0)) == "custom"
+    assert window_choice(None) == "value range"
