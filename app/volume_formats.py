@@ -180,6 +180,16 @@ def read_dicom_folder(folder: Path, need_spacing: bool
     """One series' slices: ordered by ImagePositionPatient along the slice normal (never by file
     name); pixel row = y, column = x; spacing from PixelSpacing and the slice positions;
     RescaleSlope/RescaleIntercept applied (CT in Hounsfield units)."""
+    try:
+        return _read_dicom_folder(folder, need_spacing)
+    except VolumeError:
+        raise
+    except Exception as exc:  # pydicom converts values lazily: a mangled one raises on first use
+        raise VolumeError(f"{folder}: cannot read the DICOM series ({_one_line(exc)})") from None
+
+
+def _read_dicom_folder(folder: Path, need_spacing: bool
+                       ) -> tuple[np.ndarray, tuple[float, float, float] | None]:
     import pydicom
     from pydicom.errors import InvalidDicomError
 

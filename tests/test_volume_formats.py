@@ -159,6 +159,7 @@ def test_dicom_orders_along_the_normal_when_positions_descend(tmp_path):
     ("gap", "uneven slice spacing"),
     ("no spacing", "missing spacing"),
     ("empty", "holds no files"),
+    ("frames", "cannot read the DICOM series"),
 ])
 def test_dicom_bad_series(tmp_path, case, message):
     folder = tmp_path / "bad"
@@ -195,6 +196,13 @@ def test_dicom_bad_series(tmp_path, case, message):
     elif case == "not dicom":
         write_dicom_series(folder, data)
         (folder / "notes.txt").write_text("hello")
+    elif case == "frames":   # a value pydicom reads but that is no number
+        write_dicom_series(folder, data)
+        f = sorted(folder.iterdir())[0]
+        ds = pydicom.dcmread(f)
+        ds.add_new(0x00280008, "IS", None)
+        ds[0x00280008]._value = "x"
+        ds.save_as(f)
     elif case == "same position":
         write_dicom_series(folder, data, dz=0.0)
     elif case == "gap":
