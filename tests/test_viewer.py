@@ -496,6 +496,32 @@ def test_unseen_volume_with_an_explicit_table_and_a_fine_probe_grid(display, tmp
     assert switched["bakes_started"] == over["bakes_started"] + 1 and switched["probes_ready"]
 
 
+def test_ct_series_with_a_window_and_its_level_dragged(display, tmp_path):
+    """A DICOM CT series opened through its scene with the bone window: the panel shows the
+    window, and dragging its level re-normalises the volume (the scene's window changes, no
+    error)."""
+    from test_volume_formats import write_dicom_series
+    z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in (10, 12, 14)), indexing="ij")
+    r = np.sqrt(x * x + y * y + z * z)
+    hu = np.where(r < 0.5, 1200, np.where(r < 0.8, 40, -1000)).astype(np.int16)
+    write_dicom_series(tmp_path / "ct", hu)
+    scene = {"volume": {"path": "ct", "window": "bone"}, "camera": {"width": 48, "height": 48},
+             "transfer_function": {"colormap": "grey", "opacity": [[0, 0], [0.5, 0], [1, 1]]}}
+    (tmp_path / "ct.json").write_text(json.dumps(scene))
+    script = write_script(tmp_path / "s.json", [
+        {"frames": 2}, {"dump": "before.json"},
+        {"drag": "Level", "by": [-40, 0]}, {"frames": 2}, {"dump": "after.json"},
+        {"close": True}])
+    view(["ct.json", "--script", str(script), "--method", "raymarch", "--window", "640x400"],
+         tmp_path, display)
+    before, after = dump(tmp_path / "before.json"), dump(tmp_path / "after.json")
+    assert before["errors"] == [] and after["errors"] == []
+    assert before["volume"] == {"name": "ct", "dims": [14, 12, 10]}
+    assert before["scene"]["volume"]["window"] == {"level": 400.0, "width": 1800.0}
+    level, width = after["scene"]["volume"]["window"].values()
+    assert level < 400.0 and width == 1800.0
+
+
 def test_cli_screenshot_starts_its_own_display(display, tmp_path):
     """`view SCENE --screenshot --frames N --method M --probe-view` with no DISPLAY at all: the
     viewer runs in its own Xvfb and saves the window's image. (`display` only skips the test

@@ -71,12 +71,17 @@ def window_editor(v) -> None:
             window = WINDOW_PRESETS[choice]
         state.edit(volume=replace(vol, window=window, value_range=None))
     if vol.window is not None:
-        level, width = vol.window
-        changed, values = imgui.drag_float2("Level, width", [float(level), float(width)],
-                                            max(float(width), 1e-6) / 200.0)
-        ui.note("Level, width")
-        if changed and values[1] > 0 and all(math.isfinite(x) for x in values):
-            state.edit(volume=replace(vol, window=(float(values[0]), float(values[1]))))
+        level, width = (float(w) for w in vol.window)
+        speed = max(width, 1e-6) / 200.0          # a 200-pixel drag moves by one width
+        changed_l, new_level = imgui.drag_float("Level", level, speed, format="%.4g")
+        ui.note("Level")
+        changed_w, new_width = imgui.drag_float("Width", width, speed, format="%.4g")
+        ui.note("Width")
+        if changed_l or changed_w:
+            new_level = float(new_level) if math.isfinite(new_level) else level
+            new_width = float(new_width) if math.isfinite(new_width) and new_width > 0 else width
+            if (new_level, new_width) != (level, width):
+                state.edit(volume=replace(vol, window=(new_level, new_width)))
 
 
 def colour_bar(rgb: np.ndarray, width: float, height: float) -> None:
