@@ -714,7 +714,8 @@ def test_new_volume_never_reuses_stale_probes_or_light(renderers, monkeypatch):
     bakes = []
     real_bake = LightTransmittance.bake
     monkeypatch.setattr(LightTransmittance, "bake",
-                        lambda self, resources: (bakes.append(1), real_bake(self, resources)))
+                        lambda self, resources, *rest: (bakes.append(1),
+                                                        real_bake(self, resources, *rest)))
     scene = _scene(camera={**CAMERA, "width": 4, "height": 4},
                    probes={"grid": [1, 1, 1], "samples": 1})
     r = renderers(scene)
