@@ -13,15 +13,15 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from .scene_types import (MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS, MAX_PROBE_SAMPLES,
-                          MAX_TRANSFER_ROWS, PROBE_FITS, PROBE_PRECISIONS, SH_WINDOWS, CameraSpec,
-                          EnvironmentMapSpec, LightSpec, ProbeSpec, Scene, SceneError, TransferFunctionSpec, VolumeSpec,
-                          scene_to_dict)
+                          MAX_TRANSFER_ROWS, PROBE_FITS, PROBE_PRECISIONS, SH_WINDOWS, WINDOW_PRESETS,
+                          CameraSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene, SceneError,
+                          TransferFunctionSpec, VolumeSpec, scene_to_dict, window_range)
 from .transfer import COLORMAPS
 from .volume import BUILTIN_VOLUMES, RAW_DTYPES
 
 __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_SAMPLES",
-           "MAX_TRANSFER_ROWS", "PROBE_FITS", "PROBE_PRECISIONS", "SH_WINDOWS", "CameraSpec",
-           "EnvironmentMapSpec",
+           "MAX_TRANSFER_ROWS", "PROBE_FITS", "PROBE_PRECISIONS", "SH_WINDOWS", "WINDOW_PRESETS",
+           "CameraSpec", "EnvironmentMapSpec",
            "LightSpec", "ProbeSpec", "Scene", "SceneError", "TransferFunctionSpec", "VolumeSpec",
            "default_scene", "load_scene", "parse_scene", "scene_to_dict"]
 
@@ -104,6 +104,11 @@ def _parse_volume(d: Any) -> VolumeSpec:
         if not hi > lo:
             raise SceneError(f"volume.value_range: needs min < max, got {[lo, hi]}")
         kw["value_range"] = (lo, hi)
+    if d.get("window") is not None:
+        if "value_range" in kw:
+            raise SceneError("volume.window: give either volume.window or volume.value_range, "
+                             "not both")
+        kw["window"] = _parse_window(d["window"])
     if d.get("dims") is not None:
         kw["dims"] = tuple(_integer(v, f"volume.dims[{i}]", 1, 1 << 20)
                            for i, v in enumerate(_vector(d["dims"], "volume.dims", 3)))
@@ -112,6 +117,23 @@ def _parse_volume(d: Any) -> VolumeSpec:
     if d.get("replace_nonfinite") is not None:
         kw["replace_nonfinite"] = _number(d["replace_nonfinite"], "volume.replace_nonfinite")
     return VolumeSpec(**kw)
+
+
+def _parse_window(w: Any) -> tuple[float, float]:
+    """A CT/MRI window: a preset name or {"level": L, "width": W} in data units."""
+    if isinstance(w, str):
+        return WINDOW_PRESETS[_choice(w, "volume.window", tuple(WINDOW_PRESETS))]
+    w = _object(w, "volume.window", {"level", "width"})
+    if set(w) != {"level", "width"}:
+        raise SceneError("volume.window: needs both level and width (or a preset: "
+                         f"{', '.join(WINDOW_PRESETS)})")
+    level = _number(w["level"], "volume.window.level")
+    width = _number(w["width"], "volume.window.width", lo=0.0, lo_open=True)
+    lo, hi = window_range(level, width)
+    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+        raise SceneError(f"volume.window: level {level:g} and width {width:g} give no finite "
+                         "range")
+    return (level, width)
 
 
 def _parse_transfer(d: Any) -> TransferFunctionSpec:

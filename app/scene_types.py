@@ -16,6 +16,27 @@ class SceneError(ValueError):
     """A scene file or dictionary that does not follow SPEC.md; the message names the field."""
 
 
+class VolumeError(ValueError):
+    """A volume that cannot be used; the message names the file and the problem (raised by the
+    loaders in app/volume.py and app/volume_formats.py, defined here so both can import it)."""
+
+
+# CT windows in Hounsfield units, (level, width): the window maps level - width / 2 to density 0
+# and level + width / 2 to 1 (radiology's usual lung, soft-tissue and bone windows; "air" spans
+# air to lung parenchyma, for airways and gas).
+WINDOW_PRESETS: dict[str, tuple[float, float]] = {
+    "air": (-650.0, 700.0),
+    "lung": (-600.0, 1500.0),
+    "soft_tissue": (40.0, 400.0),
+    "bone": (400.0, 1800.0),
+}
+
+
+def window_range(level: float, width: float) -> tuple[float, float]:
+    """The data values a window (level, width) maps to densities 0 and 1."""
+    return (float(level) - 0.5 * float(width), float(level) + 0.5 * float(width))
+
+
 # Largest values we accept; beyond them a scene is almost surely a typo and would only hang.
 MAX_BOUNCES_LIMIT = 1_000_000_000
 MAX_IMAGE_SIDE = 16384
@@ -39,6 +60,17 @@ class VolumeSpec:
     dims: tuple[int, int, int] | None = None  # for .raw files not in the Open SciVis naming
     dtype: str | None = None
     replace_nonfinite: float | None = None  # None: NaN/Inf in the data are an error
+    # (level, width) in data units (Hounsfield units for CT), or a WINDOW_PRESETS name in the JSON:
+    # another way to give value_range (level -/+ width / 2), which it excludes.
+    window: tuple[float, float] | None = None
+
+    @property
+    def domain(self) -> tuple[float, float] | None:
+        """The data values mapped to densities 0 and 1: value_range or the window; None for the
+        default (the data's own range, or the type's for 8-bit data)."""
+        if self.window is not None:
+            return window_range(*self.window)
+        return self.value_range
 
 
 @dataclass(frozen=True)
@@ -149,6 +181,8 @@ def scene_to_dict(scene: Scene) -> dict:
             sub = {k.name: conv(getattr(v, k.name)) for k in dataclasses.fields(v)}
             if f.name == "volume":
                 sub = {k: val for k, val in sub.items() if val is not None}
+                if v.window is not None:
+                    sub["window"] = {"level": v.window[0], "width": v.window[1]}
                 if v.path:
                     sub.pop("builtin", None)
                     sub.pop("size", None)

@@ -1,4 +1,5 @@
-"""Volumes: file loaders (.raw, .nrrd, .npy), built-in procedural volumes, normalisation.
+"""Volumes: file loaders (.raw, .nrrd, .npy here; NIfTI, TIFF and DICOM in app/volume_formats.py),
+built-in procedural volumes, normalisation.
 
 A :class:`Volume` holds the density normalised to [0, 1] as SPEC.md says (``data[z, y, x]``,
 x fastest) and the world box it fills: centred at the origin, extent ``dims * spacing`` scaled so
@@ -14,11 +15,17 @@ from typing import Callable
 
 import numpy as np
 
-from .scene_types import Scene, VolumeSpec
+from . import volume_formats as formats
+from .scene_types import Scene, VolumeError, VolumeSpec
+
+# What load_volume takes, by file name ending (a folder is a TIFF stack or a DICOM series).
+VOLUME_SUFFIXES = (".raw", ".nrrd", ".nhdr", ".npy") + formats.NIFTI_SUFFIXES + formats.TIFF_SUFFIXES
 
 
-class VolumeError(ValueError):
-    """A volume that cannot be used; the message names the file and the problem."""
+def is_volume_path(p: Path) -> bool:
+    """A file load_volume reads by its name, or a folder (a TIFF stack or a DICOM series)."""
+    return p.is_dir() or formats.has_suffix(p, VOLUME_SUFFIXES)
+
 
 
 RAW_DTYPES = {
@@ -155,10 +162,10 @@ BUILTIN_VOLUMES: dict[str, Callable[[tuple[int, int, int]], np.ndarray]] = {
 
 def _resolve(path: str, base_dir: str | None) -> Path:
     p = Path(path).expanduser()
-    if p.is_file() or p.is_absolute() or base_dir is None:
+    if p.exists() or p.is_absolute() or base_dir is None:
         return p
     alt = Path(base_dir) / p
-    return alt if alt.is_file() else p
+    return alt if alt.exists() else p
 
 
 def _one_line(exc: BaseException) -> str:
@@ -265,30 +272,46 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
         if name not in BUILTIN_VOLUMES:
             raise VolumeError(f"unknown built-in volume '{name}' (known: {', '.join(BUILTIN_VOLUMES)})")
         data = BUILTIN_VOLUMES[name](tuple(spec.size))
-        vr = spec.value_range or (0.0, 1.0)
+        vr = spec.domain or (0.0, 1.0)
         norm, vr = normalise(data, vr, f"built-in '{name}'")
         return Volume(norm, tuple(float(v) for v in spacing), f"builtin:{name}", vr, "float32",
                       float(data.min()), float(data.max()))
 
     p = _resolve(spec.path, base_dir)
-    if not p.is_file():
+    need_spacing = spec.spacing is None
+    file_spacing = None
+    if p.is_dir():
+        if formats.tiff_files(p):
+            raw = formats.read_tiff_folder(p)
+        else:
+            raw, file_spacing = formats.read_dicom_folder(p, need_spacing)
+    elif not p.is_file():
         raise VolumeError(f"{p}: volume file not found")
-    suffix = p.suffix.lower()
-    if suffix == ".raw":
-        raw = _read_raw(p, spec.dims, spec.dtype)
-    elif suffix in (".nrrd", ".nhdr"):
-        raw, file_spacing = _read_nrrd(p)
-        if file_spacing is not None and spec.spacing is None:
-            spacing = file_spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
-    elif suffix == ".npy":
-        raw = _read_npy(p)
+    elif formats.has_suffix(p, formats.NIFTI_SUFFIXES):
+        raw, file_spacing = formats.read_nifti(p, need_spacing)
+    elif formats.has_suffix(p, formats.TIFF_SUFFIXES):
+        raw = formats.read_tiff(p)
+    elif formats.has_suffix(p, formats.DICOM_SUFFIXES):
+        raise VolumeError(f"{p}: a single DICOM file; give the folder holding its series")
     else:
-        raise VolumeError(f"{p}: unknown volume format '{suffix}' (known: .raw, .nrrd, .npy)")
+        suffix = p.suffix.lower()
+        if suffix == ".raw":
+            raw = _read_raw(p, spec.dims, spec.dtype)
+        elif suffix in (".nrrd", ".nhdr"):
+            raw, file_spacing = _read_nrrd(p)
+        elif suffix == ".npy":
+            raw = _read_npy(p)
+        else:
+            raise VolumeError(f"{p}: unknown volume format '{suffix}' (known: "
+                              f"{', '.join(VOLUME_SUFFIXES)}, or a folder of TIFF or DICOM "
+                              "slices)")
+    if file_spacing is not None and need_spacing:
+        spacing = file_spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
     if min(raw.shape) < 1:
         raise VolumeError(f"{p}: volume has zero size, shape {raw.shape[::-1]} (x, y, z)")
     if any(not (s > 0 and np.isfinite(s)) for s in spacing):
         raise VolumeError(f"{p}: spacing must be positive, got {spacing}")
-    norm, vr = normalise(raw, spec.value_range, str(p), spec.replace_nonfinite)
+    norm, vr = normalise(raw, spec.domain, str(p), spec.replace_nonfinite)
     finite = raw[np.isfinite(raw)] if raw.dtype.kind == "f" else raw
     return Volume(norm, tuple(float(s) for s in spacing), p.name, vr, raw.dtype.name,
                   float(finite.min()) if finite.size else 0.0,

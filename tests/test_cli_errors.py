@@ -280,3 +280,20 @@ def test_view_bad_script_is_one_line_before_any_window(scene, tmp_path, capsys, 
                    "a JSON list of objects")
     one_error_line(["view", scene, "--script", tmp_path / "missing.json"], capsys,
                    "cannot read the script")
+
+
+def test_bad_new_format_volumes_are_one_line(tmp_path, capsys, no_gpu, monkeypatch):
+    """A TIFF, NIfTI or DICOM folder the loaders refuse ends `render` and `view` like any bad
+    volume: one line naming it, before any GPU work or window."""
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "a.txt").write_text("no images here")
+    (tmp_path / "bad.nii.gz").write_bytes(b"\x1f\x8b" + bytes(30))
+    for path, needle in ((tmp_path / "empty", "holds no files"),
+                         (tmp_path / "notes", "not a DICOM file"),
+                         (tmp_path / "bad.nii.gz", "cannot read NIfTI")):
+        one_error_line(["render", path, "--out", tmp_path / "o.png"], capsys, str(path), needle)
+    import app.viewer.xvfb
+    monkeypatch.setattr(app.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
+        AssertionError("an X server was started before the volume was checked")))
+    one_error_line(["view", tmp_path / "empty", "--frames", 1], capsys, "holds no files")

@@ -1,5 +1,5 @@
-"""Fuzzed volume loaders (hypothesis): random and mutated `.raw` names and sizes, NRRD headers and
-`.npy` headers. Whatever the file, load_volume returns a valid Volume or raises VolumeError, the
+"""Fuzzed volume loaders (hypothesis): random and mutated `.raw` names and sizes, NRRD headers,
+`.npy` headers, and mutated NIfTI, TIFF and DICOM files that nibabel, tifffile and pydicom wrote. Whatever the file, load_volume returns a valid Volume or raises VolumeError, the
 loaders' own error: never another exception, a crash or a hang (each example runs under a
 watchdog, and hypothesis's deadline flags slow ones).
 
@@ -216,3 +216,53 @@ def test_mutated_npy(tmp_path_factory, edits, dtype):
     p = tmp_path_factory.mktemp("npy") / "m.npy"
     p.write_bytes(mutate(buf.getvalue(), edits))
     load_or_volume_error(p)
+
+
+# ---- NIfTI, TIFF, DICOM: mutated files the libraries wrote ---------------------------------------
+# Fewer examples than above: each reads through a library (nibabel, tifffile, pydicom), and the
+# mutations of their headers are what matters; together they stay within a few seconds.
+
+FUZZ_FORMATS = settings(FUZZ, max_examples=60)
+NEW_FORMAT_ARRAY = (np.arange(2 * 3 * 4, dtype=np.int16).reshape(2, 3, 4) * 50 - 400)
+
+
+def valid_nifti(folder: Path, name: str) -> bytes:
+    import nibabel as nib
+    img = nib.Nifti1Image(np.ascontiguousarray(NEW_FORMAT_ARRAY.transpose(2, 1, 0)), np.eye(4))
+    img.header.set_zooms((0.5, 0.5, 2.0))
+    img.header.set_slope_inter(2.0, -1024.0)
+    nib.save(img, str(folder / name))
+    return (folder / name).read_bytes()
+
+
+@FUZZ_FORMATS
+@given(edits=mutations, name=st.sampled_from(["v.nii", "v.nii.gz"]))
+def test_mutated_nifti(tmp_path_factory, edits, name):
+    folder = tmp_path_factory.mktemp("nii")
+    p = folder / name
+    p.write_bytes(mutate(valid_nifti(folder, name), edits))
+    load_or_volume_error(p)
+
+
+@FUZZ_FORMATS
+@given(edits=mutations, dtype=st.sampled_from(["uint8", "uint16", "float32"]))
+def test_mutated_tiff(tmp_path_factory, edits, dtype):
+    import tifffile
+    folder = tmp_path_factory.mktemp("tif")
+    p = folder / "v.tif"
+    tifffile.imwrite(p, NEW_FORMAT_ARRAY.astype(dtype), photometric="minisblack")
+    p.write_bytes(mutate(p.read_bytes(), edits))
+    load_or_volume_error(p)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")   # pydicom warns on each mangled value it reads
+@FUZZ_FORMATS
+@given(edits=mutations, which=st.integers(0, 1))
+def test_mutated_dicom_series(tmp_path_factory, edits, which):
+    """A two-slice CT series with one slice's bytes mutated (header or pixels)."""
+    from test_volume_formats import write_dicom_series
+    folder = tmp_path_factory.mktemp("dcm") / "series"
+    write_dicom_series(folder, NEW_FORMAT_ARRAY, slope=1.0, intercept=-1024.0, uid="1.2.3")
+    f = sorted(folder.iterdir())[which]
+    f.write_bytes(mutate(f.read_bytes(), [(p + 128, k, v) for p, k, v in edits]))
+    load_or_volume_error(folder)

@@ -240,7 +240,15 @@ def run(display, tmp_path_factory):
     out = tmp_path_factory.mktemp("viewer")
     (out / "scene.json").write_text(json.dumps(SCENE))
     z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in (12, 16, 20)), indexing="ij")
-    np.save(out / "blob.npy", np.clip(1.2 - 2 * np.sqrt(x * x + y * y + z * z), 0, 1).astype(np.float32))
+    blob = np.clip(1.2 - 2 * np.sqrt(x * x + y * y + z * z), 0, 1).astype(np.float32)
+    np.save(out / "blob.npy", blob)
+    import nibabel as nib   # the new formats open like any volume: a NIfTI file, a TIFF folder
+    import tifffile
+    nib.save(nib.Nifti1Image(np.ascontiguousarray(blob.transpose(2, 1, 0)), np.eye(4)),
+             str(out / "blob.nii.gz"))
+    (out / "stack").mkdir()
+    for k, page in enumerate((blob[:, :, :10] * 1000).astype(np.uint16)):
+        tifffile.imwrite(out / "stack" / f"z{k:03d}.tif", page)
     steps = [
         {"until": "done"}, {"screenshot": "pt.png"}, {"dump": "pt.json"},
         {"key": "2"}, {"until": "done"}, {"screenshot": "probes.png"}, {"dump": "probes.json"},
@@ -265,6 +273,8 @@ def run(display, tmp_path_factory):
         {"key": "f1"}, {"screenshot": "help.png"}, {"dump": "help.json"}, {"key": "f1"},
         {"click": "Data"}, {"click": "Open file..."}, {"click": "browser scene.json"},
         {"dump": "browsed.json"},
+        {"drop": ["blob.nii.gz"]}, {"frames": 1}, {"dump": "dropped_nifti.json"},
+        {"drop": ["stack"]}, {"frames": 1}, {"dump": "dropped_folder.json"},
         {"close": True},
     ]
     script = write_script(out / "script.json", steps)
@@ -440,6 +450,9 @@ def test_resize_drop_save_and_close(run):
     assert np.abs(png(out / "help.png") - png(out / "screenshot.png")).mean() > 1.0
     browsed = dump(out / "browsed.json")                       # the built-in file browser
     assert browsed["volume"]["dims"] == [24, 24, 24] and browsed["scene_path"].endswith("scene.json")
+    nifti, folder = dump(out / "dropped_nifti.json"), dump(out / "dropped_folder.json")
+    assert nifti["volume"] == {"name": "blob.nii.gz", "dims": [20, 16, 12]} and nifti["errors"] == []
+    assert folder["volume"] == {"name": "stack", "dims": [10, 16, 12]} and folder["errors"] == []
     assert "release check:" in proc.stdout and ", 0 still alive" in proc.stdout
 
 
@@ -481,6 +494,32 @@ def test_unseen_volume_with_an_explicit_table_and_a_fine_probe_grid(display, tmp
     switched = dump(tmp_path / "global.json")
     assert over["empty_space_skipping"] and not switched["empty_space_skipping"]
     assert switched["bakes_started"] == over["bakes_started"] + 1 and switched["probes_ready"]
+
+
+def test_ct_series_with_a_window_and_its_level_dragged(display, tmp_path):
+    """A DICOM CT series opened through its scene with the bone window: the panel shows the
+    window, and dragging its level re-normalises the volume (the scene's window changes, no
+    error)."""
+    from test_volume_formats import write_dicom_series
+    z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in (10, 12, 14)), indexing="ij")
+    r = np.sqrt(x * x + y * y + z * z)
+    hu = np.where(r < 0.5, 1200, np.where(r < 0.8, 40, -1000)).astype(np.int16)
+    write_dicom_series(tmp_path / "ct", hu)
+    scene = {"volume": {"path": "ct", "window": "bone"}, "camera": {"width": 48, "height": 48},
+             "transfer_function": {"colormap": "grey", "opacity": [[0, 0], [0.5, 0], [1, 1]]}}
+    (tmp_path / "ct.json").write_text(json.dumps(scene))
+    script = write_script(tmp_path / "s.json", [
+        {"frames": 2}, {"dump": "before.json"},
+        {"drag": "Level", "by": [-40, 0]}, {"frames": 2}, {"dump": "after.json"},
+        {"close": True}])
+    view(["ct.json", "--script", str(script), "--method", "raymarch", "--window", "640x400"],
+         tmp_path, display)
+    before, after = dump(tmp_path / "before.json"), dump(tmp_path / "after.json")
+    assert before["errors"] == [] and after["errors"] == []
+    assert before["volume"] == {"name": "ct", "dims": [14, 12, 10]}
+    assert before["scene"]["volume"]["window"] == {"level": 400.0, "width": 1800.0}
+    level, width = after["scene"]["volume"]["window"].values()
+    assert level < 400.0 and width == 1800.0
 
 
 def test_cli_screenshot_starts_its_own_display(display, tmp_path):

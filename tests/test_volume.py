@@ -161,9 +161,9 @@ def test_unknown_dtype(tmp_path, name, kw):
 
 
 def test_unknown_format(tmp_path):
-    f = tmp_path / "vol.tiff"
+    f = tmp_path / "vol.vtk"   # (.tiff was the example until TIFF stacks became a format)
     f.write_bytes(bytes(8))
-    with pytest.raises(VolumeError, match=r"vol\.tiff.*format"):
+    with pytest.raises(VolumeError, match=r"vol\.vtk.*format"):
         load_volume(file_spec(f))
 
 
@@ -367,3 +367,14 @@ def test_dataset_chest_ct_nrrd():
     assert v.spacing == (1.40625, 1.40625, 2.5)
     assert v.raw_dtype == "uint8"
     np.testing.assert_allclose(v.half_extent, [0.5, 0.5, 0.5 * 133 * 2.5 / 360], rtol=1e-6)
+
+
+def test_volume_beyond_the_memory_left_is_refused_with_why():
+    from app.gl.textures import check_volume_fits
+    check_volume_fits("ct", (512, 512, 400), 4, 2048, 512 * 512 * 400 * 4, "GPU memory")  # fits
+    with pytest.raises(VolumeError, match=r"ct: the 512 x 512 x 401 volume needs 0\.39 GiB .*"
+                                          r"more than the 0\.39 GiB of GPU memory.*bricking"):
+        check_volume_fits("ct", (512, 512, 401), 4, 2048, 512 * 512 * 400 * 4, "GPU memory")
+    with pytest.raises(VolumeError, match="GL_MAX_3D_TEXTURE_SIZE of 2048.*bricking"):
+        check_volume_fits("ct", (4096, 8, 8), 2, 2048, None, "GPU memory")
+    check_volume_fits("ct", (2048, 8, 8), 2, 2048, None, "GPU memory")   # None: cannot tell

@@ -33,7 +33,7 @@ def bench_scene(name: str, width: int, height: int) -> Scene | None:
     elif name in DATASET_SCENES:
         from ..volume import _resolve
         scene = load_scene(ASSETS_DIR / "scenes" / f"{name}.json")
-        if not _resolve(scene.volume.path, scene.base_dir).is_file():
+        if not _resolve(scene.volume.path, scene.base_dir).exists():   # a file or a TIFF/DICOM folder
             return None
     else:
         raise ValueError(f"unknown benchmark scene '{name}' (known: {', '.join(ALL_SCENES)})")

@@ -15,14 +15,39 @@ def _check_gl(ctx: moderngl.Context, what: str) -> None:
         raise VolumeError(f"{what}: OpenGL error {err}")
 
 
+BRICKING_HINT = "bricking (README, Volume files) would split it into textures that fit"
+
+
+def check_volume_fits(name: str, dims: tuple[int, int, int], bytes_per_voxel: int,
+                      max_side: int, available: int | None, where: str) -> None:
+    """Raises VolumeError unless a dims volume fits one 3D texture: every side within
+    GL_MAX_3D_TEXTURE_SIZE and its bytes within the memory the device has left (``available``,
+    None where the device cannot tell)."""
+    if max(dims) > max_side:
+        raise VolumeError(f"{name}: dimensions {dims} exceed this GPU's GL_MAX_3D_TEXTURE_SIZE of "
+                          f"{max_side} voxels per side; {BRICKING_HINT}")
+    need = int(np.prod(np.asarray(dims, np.int64))) * bytes_per_voxel
+    if available is not None and need > available:
+        raise VolumeError(f"{name}: the {dims[0]} x {dims[1]} x {dims[2]} volume needs "
+                          f"{need / 2**30:.2f} GiB as a 3D texture, more than the "
+                          f"{available / 2**30:.2f} GiB of {where}; {BRICKING_HINT}")
+
+
 def volume_texture(ctx: moderngl.Context, volume: Volume) -> moderngl.Texture3D:
     """A one-channel 3D texture, linear, clamped to edge: R16 for exact 8-bit data (k * 257 / 65535
     is exactly k / 255, and llvmpipe filters 8-bit textures with 8-bit intermediate rounding), else
-    R32F."""
-    limit = ctx.info["GL_MAX_3D_TEXTURE_SIZE"]
-    if max(volume.dims) > limit:
-        raise VolumeError(f"{volume.name}: dimensions {volume.dims} exceed this GPU's "
-                          f"GL_MAX_3D_TEXTURE_SIZE of {limit}")
+    R32F, so 16-bit and float data keep their precision (float32 holds every 16-bit step exactly).
+    Refused before any allocation when it exceeds GL_MAX_3D_TEXTURE_SIZE or the memory left."""
+    from .memory import gpu_available_bytes, host_available_bytes, software_renderer
+    texel = 2 if volume.exact_uint8 else 4
+    if software_renderer(ctx):
+        # the texture lives in host memory, beside the upload's payload and its bytes copy
+        available, where = host_available_bytes(), "host memory available (MemAvailable)"
+        available = None if available is None else available // 3
+    else:
+        available, where = gpu_available_bytes(ctx), "GPU memory available (GL_NVX_gpu_memory_info)"
+    check_volume_fits(volume.name, volume.dims, texel, int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"]),
+                      available, where)
     if volume.exact_uint8:
         payload = (np.round(volume.data * 255.0).astype(np.uint16) * 257).astype(np.uint16)
         dtype = "nu2"

@@ -1,4 +1,5 @@
-"""Opening scenes and volumes: by path (drag and drop, the file dialog), the built-in volumes and
+"""Opening scenes and volumes: by path (drag and drop, the file dialog; a folder is a TIFF stack or a
+DICOM series), the built-in volumes and
 the datasets in ../shared/datasets; and the file dialog itself, the system's own through
 portable-file-dialogs where it has one (zenity, kdialog), else a small browser drawn with ImGui."""
 from __future__ import annotations
@@ -11,8 +12,11 @@ from pathlib import Path
 
 from ..paths import ASSETS_DIR
 from ..scene import Scene, VolumeSpec, load_scene
+from ..volume import VOLUME_SUFFIXES, is_volume_path
+from ..volume_formats import has_suffix
 
-VOLUME_SUFFIXES = (".raw", ".nrrd", ".nhdr", ".npy")
+# The open dialog's filter: every suffix load_volume reads (folders are opened with "Open folder").
+DIALOG_PATTERNS = " ".join(["*.json"] + [f"*{s}" for s in VOLUME_SUFFIXES])
 SCENE_SUFFIXES = (".json",)
 DIALOG_TOOLS = ("zenity", "kdialog", "qarma", "matedialog")
 
@@ -29,7 +33,7 @@ def datasets_dirs() -> list[Path]:
 
 def datasets() -> list[Path]:
     return sorted(p for d in datasets_dirs() for p in d.iterdir()
-                  if p.suffix.lower() in VOLUME_SUFFIXES and p.is_file())
+                  if p.is_file() and has_suffix(p, VOLUME_SUFFIXES))
 
 
 def bundled_scene_for(volume_path: Path) -> Path | None:
@@ -46,16 +50,18 @@ def bundled_scene_for(volume_path: Path) -> Path | None:
 
 def scene_for_path(path: str | Path, current: Scene) -> tuple[Scene, str | None]:
     """A scene file as it is; a volume file with its bundled scene where there is one, else in
-    the current scene (its transfer function, light and probes kept). Returns (scene, scene path)."""
+    the current scene (its transfer function, light and probes kept); a folder is a volume (a TIFF
+    stack or a DICOM series). Returns (scene, scene path)."""
     p = Path(path).expanduser()
-    if p.suffix.lower() in SCENE_SUFFIXES:
+    if p.suffix.lower() in SCENE_SUFFIXES and not p.is_dir():
         return load_scene(p), str(p)
     bundled = bundled_scene_for(p)
     if bundled is not None:
         scene = load_scene(bundled)
         return scene.replace(volume=replace(scene.volume, path=str(p.resolve()))), None
-    if p.suffix.lower() not in VOLUME_SUFFIXES:
-        raise ValueError(f"{p}: not a scene (.json) or a volume ({', '.join(VOLUME_SUFFIXES)})")
+    if not is_volume_path(p):
+        raise ValueError(f"{p}: not a scene (.json) or a volume ({', '.join(VOLUME_SUFFIXES)}, "
+                         "or a folder of TIFF or DICOM slices)")
     return current.replace(volume=VolumeSpec(path=str(p.resolve()), builtin=None)), None
 
 
@@ -89,15 +95,26 @@ class FileDialogs:
         if self.native:
             from imgui_bundle import portable_file_dialogs as pfd
             self.pending = pfd.open_file("Open a scene or a volume", str(self.browser_dir),
-                                         ["Scenes and volumes", "*.json *.raw *.nrrd *.nhdr *.npy",
+                                         ["Scenes and volumes", DIALOG_PATTERNS,
                                           "All files", "*"])
+        else:
+            self.browser_open = True
+
+    def open_folder_dialog(self) -> None:
+        """A folder as a volume: a TIFF stack or a DICOM series (the built-in browser's "Open this
+        folder" where there is no system dialog)."""
+        if self.native:
+            from imgui_bundle import portable_file_dialogs as pfd
+            self.pending = pfd.select_folder("Open a TIFF or DICOM folder", str(self.browser_dir))
         else:
             self.browser_open = True
 
     def poll(self) -> None:
         if self.pending is not None and self.pending.ready(0):
-            chosen = self.pending.result()
+            chosen = self.pending.result()   # a list of files, or a folder's path
             self.pending = None
+            if isinstance(chosen, str):
+                chosen = [chosen] if chosen else []
             if chosen:
                 self.on_open(chosen[0])
 
@@ -109,5 +126,5 @@ class FileDialogs:
             return []
         folders = sorted(p for p in items if p.is_dir() and not p.name.startswith("."))
         files = sorted(p for p in items if p.is_file()
-                       and p.suffix.lower() in VOLUME_SUFFIXES + SCENE_SUFFIXES)
+                       and has_suffix(p, VOLUME_SUFFIXES + SCENE_SUFFIXES))
         return folders + files

@@ -53,7 +53,8 @@ SHORTCUTS = (
     Shortcut("ctrl+q", "quit", lambda v: v.request_close()),
 )
 MOUSE_HELP = (("left drag", "orbit"), ("right or middle drag", "pan"), ("wheel", "zoom"),
-              ("drop a file", "open a scene (.json) or a volume (.raw, .nrrd, .npy)"))
+              ("drop a file", "open a scene (.json), a volume (.raw, .nrrd, .npy, .nii, .nii.gz, .tif) "
+                               "or a folder (TIFF stack, DICOM series)"))
 
 _NAMED_KEYS = {
     "left": glfw.KEY_LEFT, "right": glfw.KEY_RIGHT, "up": glfw.KEY_UP, "down": glfw.KEY_DOWN,

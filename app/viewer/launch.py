@@ -37,8 +37,9 @@ def initial_state(scene: Scene, args: argparse.Namespace) -> ViewerState:
 
 def scene_from_args(args: argparse.Namespace) -> Scene:
     """The scene argument (as `render` reads it) with the --probe-* options applied."""
-    from .files import VOLUME_SUFFIXES, scene_for_path
-    if args.scene and Path(args.scene).suffix.lower() in VOLUME_SUFFIXES:
+    from ..volume import is_volume_path
+    from .files import scene_for_path
+    if args.scene and is_volume_path(Path(args.scene)):
         # A volume file opens as it does when dropped: with its bundled scene where there is one.
         scene, _ = scene_for_path(args.scene, scene_from_arg(None))
     else:

@@ -64,6 +64,11 @@ def file_browser(v) -> None:
         if imgui.button("Up"):
             files.browser_dir = files.browser_dir.parent
         imgui.same_line()
+        if imgui.button("Open this folder"):   # a TIFF stack or a DICOM series
+            files.browser_open = False
+            v.open_path(str(files.browser_dir))
+        v.widgets.note("Open this folder")
+        imgui.same_line()
         imgui.text_disabled("no system file dialog (zenity, kdialog) found; this is the built-in one")
         imgui.begin_child("entries", ImVec2(0, 0))
         for p in files.entries():

@@ -13,7 +13,7 @@ from ..scene import PROBE_FITS, PROBE_PRECISIONS, SH_WINDOWS
 from ..volume import BUILTIN_VOLUMES
 from .overlays import shortcut_table
 from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
-from .tf_editor import heat_legend, transfer_panel
+from .tf_editor import data_ticks, heat_legend, transfer_panel
 
 SIDEBAR_WIDTH = 370           # logical pixels, before the UI scale
 
@@ -142,15 +142,25 @@ def data_section(v) -> None:
     imgui.text(f"spacing {sp[0]:g}, {sp[1]:g}, {sp[2]:g}")
     imgui.text(f"values {vol.raw_min:g} .. {vol.raw_max:g}; 0..1 = {vol.value_range[0]:g} .. {vol.value_range[1]:g}")
     xs, heights = v.histogram()
-    if implot.begin_plot("##histogram", ImVec2(-1, 70 * v.ui_scale),
-                         implot.Flags_.canvas_only | implot.Flags_.no_inputs):
+    if implot.begin_plot("##histogram", ImVec2(-1, 90 * v.ui_scale),
+                         implot.Flags_.no_title | implot.Flags_.no_legend | implot.Flags_.no_menus
+                         | implot.Flags_.no_box_select | implot.Flags_.no_mouse_text
+                         | implot.Flags_.no_inputs):
+        implot.setup_axes("", "", implot.AxisFlags_.no_label,
+                          implot.AxisFlags_.no_label | implot.AxisFlags_.no_tick_labels)
         implot.setup_axes_limits(0.0, 1.0, 0.0, 1.05, implot.Cond_.always)
+        ticks, labels = data_ticks(vol.value_range)
+        implot.setup_axis_ticks(implot.ImAxis_.x1, ticks, labels)
         implot.plot_bars("histogram", xs, heights, 1.0 / len(xs))
         implot.end_plot()
-    imgui.text_disabled("histogram of normalised values (log counts)")
+    imgui.text_disabled("histogram in data units over the value range or window (log counts)")
     if imgui.button("Open file..."):
         v.files.open_dialog()
     ui.note("Open file...")
+    imgui.same_line()
+    if imgui.button("Open folder..."):   # a TIFF stack or a DICOM series
+        v.files.open_folder_dialog()
+    ui.note("Open folder...")
     imgui.same_line()
     imgui.text_disabled("or drop one on the window")
     names = list(BUILTIN_VOLUMES)

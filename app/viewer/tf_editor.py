@@ -1,11 +1,16 @@
-"""The transfer function panel: colormap preset with a preview bar, the opacity curve edited by
-dragging its control points over the volume's histogram (ImPlot), density scale, albedo and
+"""The transfer function panel: colormap preset with a preview bar, the CT/MRI window (a preset or
+level and width in data units), the opacity curve edited by dragging its control points over the
+volume's histogram (ImPlot, its axis labelled in data units), density scale, albedo and
 anisotropy."""
 from __future__ import annotations
 
 import numpy as np
+import math
+from dataclasses import replace
+
 from imgui_bundle import ImVec2, imgui, implot
 
+from ..scene_types import WINDOW_PRESETS
 from ..transfer import ALIASES, COLORMAPS
 from .state import add_point, move_point, remove_point
 
@@ -20,6 +25,63 @@ def histogram_curve(volume, bins: int = HISTOGRAM_BINS) -> tuple[np.ndarray, np.
     logc = np.log1p(counts)
     height = logc / logc.max() if logc.max() > 0 else logc
     return (np.arange(bins) + 0.5) / bins, height
+
+
+def data_ticks(value_range: tuple[float, float], target: int = 5) -> tuple[list[float], list[str]]:
+    """Ticks for an axis drawn over normalised density [0, 1] but labelled in data units (HU for
+    CT): round data values in the range (steps of 1, 2 or 5 times a power of ten) and where they
+    fall on [0, 1], as value_range (or the window) maps them."""
+    lo, hi = (float(v) for v in value_range)
+    span = hi - lo
+    if not (math.isfinite(span) and span > 0):
+        return [0.0, 1.0], [f"{lo:.4g}", f"{hi:.4g}"]
+    raw = span / max(target - 1, 1)
+    mag = 10.0 ** math.floor(math.log10(raw))
+    step = next(m * mag for m in (1.0, 2.0, 5.0, 10.0) if m * mag >= raw)
+    first = math.ceil(lo / step - 1e-9)
+    values = [k * step for k in range(first, math.floor(hi / step + 1e-9) + 1)]
+    return [(val - lo) / span for val in values], [f"{val:.4g}" for val in values]
+
+
+WINDOW_CHOICES = ("value range",) + tuple(WINDOW_PRESETS) + ("custom",)
+
+
+def window_choice(window: tuple[float, float] | None) -> str:
+    if window is None:
+        return "value range"
+    return next((k for k, w in WINDOW_PRESETS.items() if tuple(w) == tuple(window)), "custom")
+
+
+def window_editor(v) -> None:
+    """A CT/MRI window over the data (in its units: HU for CT): a preset, or level and width; the
+    volume is renormalised with it (scene JSON volume.window)."""
+    state, ui = v.state, v.widgets
+    vol = state.scene.volume
+    current = window_choice(vol.window)
+    changed, index = imgui.combo("Window", WINDOW_CHOICES.index(current), list(WINDOW_CHOICES))
+    ui.note("Window")
+    if changed and WINDOW_CHOICES[index] != current:
+        choice = WINDOW_CHOICES[index]
+        if choice == "value range":
+            window = None
+        elif choice == "custom":
+            lo, hi = v.session.volume.value_range
+            window = (0.5 * (lo + hi), hi - lo)
+        else:
+            window = WINDOW_PRESETS[choice]
+        state.edit(volume=replace(vol, window=window, value_range=None))
+    if vol.window is not None:
+        level, width = (float(w) for w in vol.window)
+        speed = max(width, 1e-6) / 200.0          # a 200-pixel drag moves by one width
+        changed_l, new_level = imgui.drag_float("Level", level, speed, format="%.4g")
+        ui.note("Level")
+        changed_w, new_width = imgui.drag_float("Width", width, speed, format="%.4g")
+        ui.note("Width")
+        if changed_l or changed_w:
+            new_level = float(new_level) if math.isfinite(new_level) else level
+            new_width = float(new_width) if math.isfinite(new_width) and new_width > 0 else width
+            if (new_level, new_width) != (level, width):
+                state.edit(volume=replace(vol, window=(new_level, new_width)))
 
 
 def colour_bar(rgb: np.ndarray, width: float, height: float) -> None:
@@ -48,6 +110,7 @@ def transfer_panel(v) -> None:
         state.set_transfer(colormap=PRESETS[index])
     table = v.session.renderer.resources.table
     colour_bar(table[:, :3], width, 14 * v.ui_scale)
+    window_editor(v)
     _opacity_editor(v, width)
     changed, value = imgui.slider_float("Density scale", state.scene.density_scale, 0.1, 10000.0, "%.1f",
                                         imgui.SliderFlags_.logarithmic)
@@ -77,6 +140,8 @@ def _opacity_editor(v, width: float) -> None:
     axis_flags = implot.AxisFlags_.no_menus | implot.AxisFlags_.no_label
     implot.setup_axes("density", "opacity", axis_flags, axis_flags)
     implot.setup_axes_limits(0.0, 1.0, 0.0, 1.05, implot.Cond_.always)
+    ticks, labels = data_ticks(v.session.volume.value_range)   # the x axis in data units
+    implot.setup_axis_ticks(implot.ImAxis_.x1, ticks, labels)
     implot.plot_shaded("histogram", xs, heights, 0.0,
                        spec=implot.Spec(fill_color=(0.45, 0.55, 0.7, 1.0), fill_alpha=0.45))
     # The curve drawn is the scene's own opacity, from the table the renderers sample.
@@ -102,7 +167,8 @@ def _opacity_editor(v, width: float) -> None:
     ui.note("opacity curve")
     if new_points != points:
         state.set_transfer(opacity=new_points)
-    imgui.text_disabled("drag points; double-click adds one; right-click removes one")
+    imgui.text_disabled("drag points; double-click adds one; right-click removes one; "
+                        "the axis is in data units")
     if simplified_by > 0:
         imgui.text_disabled(f"{len(points)} points stand for the table's {len(tf.rgba)} rows "
                             f"(up to {simplified_by:.3f} apart); an edit keeps only these points")

@@ -123,7 +123,7 @@ class Viewer:
         volume = data.get("volume", {})
         if volume.get("path") and scene.base_dir and not Path(volume["path"]).is_absolute():
             candidate = Path(scene.base_dir) / volume["path"]
-            if candidate.is_file():
+            if candidate.exists():   # a file, or a TIFF or DICOM folder
                 volume["path"] = str(candidate.resolve())
         env = data.get("environment")
         if isinstance(env, dict) and scene.base_dir and not Path(env["map"]).is_absolute():
