@@ -38,7 +38,8 @@ def volume_texture(ctx: moderngl.Context, volume: Volume) -> moderngl.Texture3D:
     is exactly k / 255, and llvmpipe filters 8-bit textures with 8-bit intermediate rounding), else
     R32F, so 16-bit and float data keep their precision (float32 holds every 16-bit step exactly).
     Refused before any allocation when it exceeds GL_MAX_3D_TEXTURE_SIZE or the memory left."""
-    from .memory import gpu_available_bytes, host_available_bytes, software_renderer
+    from .context import is_software as software_renderer
+    from .memory import gpu_available_bytes, host_available_bytes
     texel = 2 if volume.exact_uint8 else 4
     if software_renderer(ctx):
         # the texture lives in host memory, beside the upload's payload and its bytes copy
