@@ -137,11 +137,13 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
     path = run_bench(config, tmp_path / "a")
     data = json.loads(path.read_text())
     recs = data["records"]
-    events = [(r["event"], r["variant"]) for r in recs]
-    assert events == [("load", None), ("orbit", None),
-                      *[(e, v) for e in ("tf_drag", "sun_30deg", "density", "albedo")
-                        for v in ("warm", "cold")],
-                      ("raymarch_switch", None), ("dispatch_tail", None), ("dispatch_tail", None)]
+    events = [(r["event"], r["method"], r["variant"]) for r in recs]
+    session = lambda m: [("load", m, None), ("orbit", m, None),  # noqa: E731
+                         *[(e, m, v) for e in ("tf_drag", "sun_30deg", "density", "albedo")
+                           for v in ("warm", "cold")]]
+    # the session replayed with each method, against the same references (rendered once)
+    assert events == [*session("probes"), *session("raymarch"), ("raymarch_switch", "raymarch", None),
+                      ("dispatch_tail", "probes", None), ("dispatch_tail", "pt", None)]
     for r in recs:
         assert r["mode"] == "interact" and r["scene"] == "tiny" and (r["width"], r["height"]) == (24, 16)
         if r["event"] == "dispatch_tail":

@@ -48,6 +48,8 @@ class BenchConfig:
     interact_bake_budget_ms: float = 8.0             # GPU time a frame gives the bake
     interact_samples_per_frame: int = 4              # samples per pixel per frame (one dispatch)
     interact_target_spp: tuple = (("probes", 64), ("raymarch", 16), ("pt", 256))
+    # the methods the session is replayed with (load, orbit, edits), each against the same references
+    interact_methods: tuple[str, ...] = ("probes", "raymarch")
     interact_max_frames: int = 300                   # frames an event may take to converge
     interact_orbit_frames: int = 60
     interact_ref_spp: int = 1024                     # reference per event state (two halves)

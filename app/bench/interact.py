@@ -153,9 +153,14 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                 "samples_per_frame": config.interact_samples_per_frame}
         tag = f"{name}_{width}x{height}"
 
+        refs: dict = {}
+
         def ref(key):
-            img = reference_of(r, f"{tag}_{key}", size_cfg)
-            return img, results.references.get(f"{tag}_{key}", {}).get("noise_rrmse", 0.0)
+            """The state's reference, rendered once per run (every method is measured on it)."""
+            if key not in refs:
+                img = reference_of(r, f"{tag}_{key}", size_cfg)
+                refs[key] = img, results.references.get(f"{tag}_{key}", {}).get("noise_rrmse", 0.0)
+            return refs[key]
 
         def add(rec, image=None):
             results.add(rec)
@@ -165,38 +170,39 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                  f"{rec['frame_ms_p99']:.2f} ms, final rRMSE {rec['final_rrmse']:.4f}, ms to "
                  f"{shown}")
 
-        # load: nothing baked yet
-        r.set_scene(scene)
-        reference, noise = ref("load")
-        r.invalidate()
-        if r.probe_grid is not None:   # a fresh load has no probes at all
-            r.probe_grid.release()
-            r.probe_grid = None
-        add(record(base, "load", "probes", None, run_frames(r, "probes", config, reference,
-                                                                 noise, seed=1)))
-        # orbit: camera moves never re-bake
-        moves = [orbit(scene, 60.0 * (i + 1) / config.interact_orbit_frames)
-                 for i in range(config.interact_orbit_frames)]
-        state = moves[-1]
-        r.set_scene(state)
-        reference, noise = ref("orbit")
-        run = run_frames(r, "probes", config, reference, noise, seed=2, moves=moves)
-        add(record(base, "orbit", "probes", None, run, orbit_frames=len(moves)))
-        for i, event in enumerate(EDITS):
-            before, after = state, edit(state, event)
-            r.set_scene(after)
-            reference, noise = ref(event)
-            for variant in ("warm", "cold"):
-                r.set_scene(before)
-                r.bake_warm = False
-                r.bake(seed=100 + i)        # the state before the edit, finished (not timed)
+        for method in config.interact_methods:
+            # load: nothing baked yet
+            r.set_scene(scene)
+            reference, noise = ref("load")
+            r.invalidate()
+            if r.probe_grid is not None:   # a fresh load has no probes at all
+                r.probe_grid.release()
+                r.probe_grid = None
+            add(record(base, "load", method, None, run_frames(r, method, config, reference,
+                                                                     noise, seed=1)))
+            # orbit: camera moves never re-bake
+            moves = [orbit(scene, 60.0 * (i + 1) / config.interact_orbit_frames)
+                     for i in range(config.interact_orbit_frames)]
+            state = moves[-1]
+            r.set_scene(state)
+            reference, noise = ref("orbit")
+            run = run_frames(r, method, config, reference, noise, seed=2, moves=moves)
+            add(record(base, "orbit", method, None, run, orbit_frames=len(moves)))
+            for i, event in enumerate(EDITS):
+                before, after = state, edit(state, event)
                 r.set_scene(after)
-                r.bake_warm = variant == "warm"
-                run = run_frames(r, "probes", config, reference, noise, seed=3 + i)
-                add(record(base, event, "probes", variant, run))
-            state = after
+                reference, noise = ref(event)
+                for variant in ("warm", "cold"):
+                    r.set_scene(before)
+                    r.bake_warm = False
+                    r.bake(seed=100 + i)        # the state before the edit, finished (not timed)
+                    r.set_scene(after)
+                    r.bake_warm = variant == "warm"
+                    run = run_frames(r, method, config, reference, noise, seed=3 + i)
+                    add(record(base, event, method, variant, run))
+                state = after
+            save_png(out / "images" / f"{tag}_{method}_final.png", r.image())
         r.bake_warm = True
-        save_png(out / "images" / f"{tag}_probes_final.png", r.image())
         # switch probes -> raymarcher: the same state, so the albedo reference serves
         run = run_frames(r, "raymarch", config, reference, noise, seed=9)
         add(record(base, "raymarch_switch", "raymarch", None, run))
