@@ -27,7 +27,7 @@ def write_ct_series(folder: Path) -> None:
     from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
     data, header = nrrd.read(str(CHEST))            # stored x, y, z
     spacing = np.abs(np.diag(header["space directions"]))
-    stored = (data.astype(np.int32) * 1).astype(np.uint16)   # HU = 8 * value - 1024
+    stored = data.astype(np.uint16)   # HU = 8 * value - 1024 (the slope and intercept below)
     series = generate_uid()
     names = random.Random(1).sample(range(10000), data.shape[2])
     folder.mkdir(parents=True, exist_ok=True)

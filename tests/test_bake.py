@@ -188,10 +188,27 @@ def test_sun_from_the_light_grid_has_a_small_measured_bias(ctx):
     assert coarse_bias > bias
 
 
+def _light_grid_and_twin(r, stride: int):
+    """The renderer's baked light grid, its size, and the NumPy twin's optical depth at every
+    stride-th texel centre (the twin marches one point at a time in Python)."""
+    from app.render.light_transmittance import LIGHT_MARCH_VOXELS
+    from app.twins.shadow_march import light_grid_centres, sun_optical_depth_march
+    r.bake_light()
+    tex = r._light.texture
+    grid = tex.size
+    tau = np.frombuffer(tex.read(), np.float32)
+    s = r.scene
+    centres = light_grid_centres(r.resources.volume, grid).reshape(-1, 3)[::stride]
+    twin = sun_optical_depth_march(r.resources.volume, r.resources.table, s.density_scale,
+                                   s.light.direction, centres,
+                                   LIGHT_MARCH_VOXELS * r.resources.march_step)
+    return grid, tau[::stride], twin
+
+
 def test_light_grid_matches_its_numpy_twin(ctx):
     """The light grid stores the sun's optical depth at texel centres (light_transmittance.comp)
     as the NumPy twin of shadow_march.glsl computes it."""
-    from app.render.light_transmittance import LIGHT_MARCH_VOXELS, light_grid_size
+    from app.render.light_transmittance import light_grid_size
     assert light_grid_size((64, 64, 64)) == (128, 128, 128)
     assert light_grid_size((256, 256, 100)) == (256, 256, 100)
     assert light_grid_size((1024, 512, 8)) == (512, 512, 8)
@@ -199,34 +216,22 @@ def test_light_grid_matches_its_numpy_twin(ctx):
     assert light_grid_size((256, 256, 256), min_side=min_side_for_probes((64, 58, 64))) == (384,) * 3
     assert min_side_for_probes((8, 8, 8)) == 128 and min_side_for_probes((128,) * 3) == 768
     assert light_grid_size((256, 128, 256), min_side=768) == (512, 384, 512)
-    from app.twins.shadow_march import light_grid_centres, sun_optical_depth_march
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
                                    "density_scale": 30.0, "camera": CAMERA,
                                    "light": {"direction": [0.3, 0.8, -0.52]}}))
     r.light_min_side, r.light_follows_probes = 128, True   # a GPU's defaults (llvmpipe: 1, off)
     try:
-        r.bake_light()
-        tex = r._light.texture
-        grid = tex.size
-        tau = np.frombuffer(tex.read(), np.float32).reshape(grid[2], grid[1], grid[0])
-        s = r.scene
-        # every 61st texel (the twin marches one point at a time in Python): about 19000 of them
-        centres = light_grid_centres(r.resources.volume, grid).reshape(-1, 3)[::61]
-        twin = sun_optical_depth_march(r.resources.volume, r.resources.table, s.density_scale,
-                                       s.light.direction, centres,
-                                       LIGHT_MARCH_VOXELS * r.resources.march_step)
+        grid, tau, twin = _light_grid_and_twin(r, 61)   # about 19000 texels
     finally:
         r.release()
     assert grid == (107, 85, 128) and twin.max() > 1.0
-    np.testing.assert_allclose(tau.reshape(-1)[::61], twin, rtol=2e-4, atol=2e-5)
+    np.testing.assert_allclose(tau, twin, rtol=2e-4, atol=2e-5)
 
 
 @pytest.mark.parametrize("use_majorant_grid", [True, False])
 def test_light_grid_skips_empty_macrocells_without_changing_a_texel(ctx, use_majorant_grid):
     """A sphere in a large box: most macrocells are empty, and the march jumps over their
     quadrature points. The result must be the NumPy twin's plain sum over every point."""
-    from app.render.light_transmittance import LIGHT_MARCH_VOXELS
-    from app.twins.shadow_march import light_grid_centres, sun_optical_depth_march
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "sphere", "size": [40, 32, 48]},
                                    "density_scale": 20.0, "camera": CAMERA,
                                    "light": {"direction": [0.3, 0.8, -0.52]}}),
@@ -234,20 +239,12 @@ def test_light_grid_skips_empty_macrocells_without_changing_a_texel(ctx, use_maj
     r.light_min_side, r.light_follows_probes = 1, False   # the volume's own 40 x 32 x 48
     try:
         cells = r.resources.majorant_grid.read()
-        r.bake_light()
-        tex = r._light.texture
-        grid = tex.size
-        tau = np.frombuffer(tex.read(), np.float32).reshape(grid[2], grid[1], grid[0])
-        s = r.scene
-        centres = light_grid_centres(r.resources.volume, grid).reshape(-1, 3)[::7]
-        twin = sun_optical_depth_march(r.resources.volume, r.resources.table, s.density_scale,
-                                       s.light.direction, centres,
-                                       LIGHT_MARCH_VOXELS * r.resources.march_step)
+        grid, tau, twin = _light_grid_and_twin(r, 7)
     finally:
         r.release()
     assert (cells == 0).mean() > 0.3   # the test means something: most cells are empty
     assert grid == (40, 32, 48) and twin.max() > 1.0 and (twin == 0).mean() > 0.2
-    np.testing.assert_allclose(tau.reshape(-1)[::7], twin, rtol=2e-4, atol=2e-5)
+    np.testing.assert_allclose(tau, twin, rtol=2e-4, atol=2e-5)
 
 
 def test_walk_counters_start_from_zero_every_time(renderer):

@@ -67,7 +67,7 @@ def cost_scene(renderer, name: str, config, results, out, device: str,
                 probes = replace(scene.probes, grid=(grid, grid, grid), samples=samples, **changes)
                 renderer.set_scene(scene.replace(probes=probes))
                 # the light grid (the walks' sun and the raymarcher's): charged to every setting
-                light_ms = renderer.bake_light() or renderer.light_cost_ms
+                light_ms = renderer.light_grid_ms()
                 walk_light_ms = light_ms if renderer.walk_sun == "grid" else 0.0
                 bake_ms = renderer.bake(seed=11) + walk_light_ms
                 g = renderer.probe_grid

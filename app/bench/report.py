@@ -54,6 +54,12 @@ def caveat(meta: dict) -> list[str]:
     return [f"**Caveat:** {meta['caveat']}", ""] if meta.get("caveat") else []
 
 
+def _header(title: str, meta: dict) -> list[str]:
+    """A mode report's title, device, command and caveat."""
+    return [title, "", f"Device: **{meta['device']}**. Command: `{meta.get('command', '')}`.", "",
+            *caveat(meta)]
+
+
 def floor(data: dict, scene: str) -> float:
     """The smallest error the report states for the scene: the resolution of the error corrected
     for the reference's noise (metrics.corrected_floor, 3 standard errors; about a tenth of the
@@ -325,9 +331,7 @@ def _sweeps(data: dict, scenes: list[str]) -> list[str]:
 def _write_cost_report(data: dict, out: Path, scenes: list[str]) -> Path:
     """The cost mode's report (app/bench/cost.py): each saving against the baseline, error beside."""
     meta = data["meta"]
-    lines = ["# Cost that follows the scene", "",
-             f"Device: **{meta['device']}**. Command: `{meta.get('command', '')}`.", "",
-             *caveat(meta),
+    lines = [*_header("# Cost that follows the scene", meta),
              "Each variant against the baseline at the same nominal probe grid and walks per probe: "
              "bake GPU time, GPU time per frame (median, "
              f"{meta['config'].get('samples_per_dispatch', 1)} samples per dispatch), probe texture "
@@ -400,9 +404,7 @@ def _write_cost_report(data: dict, out: Path, scenes: list[str]) -> Path:
 def _write_bake_report(data: dict, out: Path, scenes: list[str]) -> Path:
     """The bake mode's report (app/bench/bake.py): bake time, where it goes, and the ceiling."""
     meta = data["meta"]
-    lines = ["# The probe bake: time, profile and ceiling", "",
-             f"Device: **{meta['device']}**. Command: `{meta.get('command', '')}`.", "",
-             *caveat(meta),
+    lines = [*_header("# The probe bake: time, profile and ceiling", meta),
              "Per scene and probe setting (N^3 nominal, fitted to the visible region; walks per "
              "probe): the bake's GPU time (median of "
              f"{meta['config'].get('bake_repeats', 3)} bakes), walks per second, its split into "

@@ -182,7 +182,7 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
             renderer.set_scene(_with_probes(scene, grid, samples, **variant))
             # The light grid this setting's images use (its size follows the probe grid; the
             # walks read it too): what it cost, also when an earlier setting baked the same one.
-            light_ms = renderer.bake_light() or renderer.light_cost_ms
+            light_ms = renderer.light_grid_ms()
             baked_ms = renderer.bake(seed=11)
             # An SH window is applied at render time: the probes stay, and so does their cost.
             bake_ms = baked_ms if baked_ms > 0 else bake_ms

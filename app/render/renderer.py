@@ -298,6 +298,12 @@ class Renderer:
         self.light_cost_ms = self.timer.elapsed_ms
         return self.light_cost_ms
 
+    def light_grid_ms(self) -> float:
+        """What the light grid the current scene uses cost to bake (GPU ms), baking it if stale:
+        also when an earlier call baked the same grid (the benchmark charges it to every image)."""
+        self.bake_light()
+        return self.light_cost_ms
+
     def invalidate(self) -> None:
         """Forgets the baked probes and light grid, so the next image pays for both again (the
         benchmark charges every record what its image cost)."""
