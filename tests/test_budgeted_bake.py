@@ -40,6 +40,13 @@ def test_slices_give_the_probes_of_one_whole_bake(renderer):
     r.bake(seed=5)
     whole = _textures(r)
     r.invalidate()
+    # the light grid the walks read comes first, a z layer a slice at this budget
+    depth = r._light.grid[2]
+    assert depth > 1
+    for layer in range(depth):
+        assert not r.light_current() and r.bake_step(5, budget_ms=1e-6) > 0
+        assert r._light.next_layer == layer + 1 and grid.next_probe == 0 and grid.passes_done == 0
+    assert r.light_current()
     slices = 0
     while not r.probes_current():
         ms = r.bake_step(5, budget_ms=1e-6)      # FIRST_SLICE_PROBES, then one probe a slice
@@ -67,6 +74,7 @@ def test_budget_follows_the_measured_probe_time(renderer):
     r = renderer
     _small_chunks(r)
     r.invalidate()
+    r.bake_light()
     r.bake_step(1, budget_ms=1e-6)
     r.bake_step(1, budget_ms=1e-6)
     per_probe = next(iter(r._probe_ms.values()))
@@ -74,6 +82,49 @@ def test_budget_follows_the_measured_probe_time(renderer):
     r.bake_step(1, budget_ms=per_probe * 20.5)   # about 20 probes fit
     ran = before - r.probe_grid.probes_left
     assert ran == 20
+
+
+def test_sliced_light_grid_is_the_whole_one(ctx):
+    """Slabs of z layers give the grid of one dispatch, bit for bit; an edit in the middle of a
+    sliced bake restarts it for the new state; the raymarcher reads a sliced bake as it is."""
+    r = Renderer(ctx, parse_scene({**SCENE, "volume": {"builtin": "cloud", "size": [12, 10, 9]}}))
+    try:
+        r.bake_light()
+        whole = np.frombuffer(r._light.texture.read(), np.float32).copy()
+        assert whole.max() > 0
+        r.invalidate()
+        ms = r.bake_light(budget_ms=1e-6)          # the first slab: 1/16 of the layers, at least 1
+        assert ms > 0 and r.light_baking() and not r.light_current()
+        assert r._light.next_layer == 1
+        per_layer = next(iter(r._layer_ms.values()))
+        r.bake_light(budget_ms=per_layer * 3.5)    # about three layers fit
+        assert r._light.next_layer == 4
+        # the raymarcher renders from the grid as it is, without finishing it
+        r.begin("raymarch", 8, 8)
+        r.bake()                                   # (the probes; this finishes the light grid)
+        assert r.light_current()
+        r.invalidate()
+        r.bake_light(budget_ms=1e-6)
+        r.begin("raymarch", 8, 8)
+        r.add_samples(1)
+        assert r.light_baking() and r._light.next_layer == 1
+        while not r.light_current():
+            r.bake_light(budget_ms=1e-6)
+        assert np.array_equal(whole, np.frombuffer(r._light.texture.read(), np.float32))
+        assert r.light_cost_ms > 0
+        # an edit mid-bake: the new state's grid from its first layer
+        r.invalidate()
+        r.bake_light(budget_ms=1e-6)
+        r.bake_light(budget_ms=1e-6)
+        assert r._light.next_layer == 2
+        r.set_scene(r.scene.replace(density_scale=r.scene.density_scale * 2))
+        r.bake_light(budget_ms=1e-6)
+        assert r._light.next_layer == 1
+        r.bake_light()
+        doubled = np.frombuffer(r._light.texture.read(), np.float32)
+        np.testing.assert_allclose(doubled, 2 * whole, rtol=1e-4, atol=1e-6)
+    finally:
+        r.release()
 
 
 def test_warm_restart_ends_at_the_cold_bake(renderer):
@@ -183,8 +234,11 @@ def test_the_viewer_session_bakes_in_slices_and_shows_probes_after_each(ctx):
         s.renderer.start_bake(0)
         s.renderer.probe_grid.chunk_probes = 5
         s.renderer.invalidate()
-        s.step(64, True)
+        s.step(64, True)                             # a slab of the light grid comes first
         grid = s.renderer.probe_grid
+        assert s.renderer.light_baking() and grid.next_probe == 0 and grid.passes_done == 0
+        s.renderer.bake_light()                      # (the rest of it at once)
+        s.step(64, True)
         assert not grid.done and grid.next_probe == 0 and grid.passes_done == 1
         per_probe = next(iter(s.renderer._probe_ms.values()))
         s.bake_budget_ms = per_probe * 10.5          # about 10 probes a frame

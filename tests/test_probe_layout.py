@@ -154,3 +154,40 @@ def test_one_channel_renders_what_three_render_in_a_grey_scene(ctx, method, orde
     assert textures[1] == order + 1 and textures[3] == (2, 4, 7)[order]
     assert images[3].max() > 0
     np.testing.assert_allclose(images[1], images[3], rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.parametrize("case", range(6))
+def test_the_gpu_visible_region_is_its_twin(ctx, case):
+    """glsl/visible_region.comp against app/twins/visible_region.py: random float volumes and
+    8-bit volumes (densities on the table's nodes, where the segment logic matters), thresholds,
+    spikes and tables that are transparent on nodes but not between them; nothing visible."""
+    rng = np.random.default_rng(case)
+    shape = tuple(int(v) for v in rng.integers(5, 19, 3))
+    data = np.zeros(shape)
+    z, y, x = (rng.integers(0, s, 2) for s in shape)
+    block = (slice(z.min(), z.max() + 1), slice(y.min(), y.max() + 1), slice(x.min(), x.max() + 1))
+    if case % 2:
+        data[block] = rng.integers(0, 256, data[block].shape) / 255.0       # 8-bit, on the nodes
+    else:
+        data[block] = rng.uniform(0.0, 1.0, data[block].shape)
+    opacity = [[[0, 0], [0.3, 0], [1, 1]],
+               [[0, 0], [0.49, 0], [0.5, 1], [0.51, 0], [1, 0]],
+               [[0, 0], [100 / 255, 0], [101 / 255, 0.7], [102 / 255, 0], [1, 0]],
+               [[0, 1], [0.1, 0], [1, 0]],
+               [[0, 0], [1, 0]],
+               [[0, 0], [0.9, 0], [0.95, 0.5], [1, 0]]][case]
+    scene = parse_scene({**BASE, "density_scale": 7.0})
+    vol = _volume(data, spacing=(1.0, 1.5, 0.75))
+    r = Renderer(ctx, scene, vol)
+    try:
+        r.set_scene(scene.replace(transfer_function=TransferFunctionSpec(
+            colormap="grey", opacity=tuple(map(tuple, opacity)))))
+        table_alpha = r.resources.table[:, 3]
+        want = visible_region(r.resources.volume.data, r.resources.volume.half_extent, table_alpha, 7.0)
+        got = r.visible_region()
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+        if case == 4:
+            np.testing.assert_array_equal(got[1], r.resources.volume.half_extent)
+    finally:
+        r.release()

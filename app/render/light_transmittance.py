@@ -47,8 +47,18 @@ class LightTransmittance:
         self.program = compute_program(ctx, "light_transmittance.comp",
                                        {"SUN_MARCH_SKIPS_EMPTY_CELLS": 1})
         self.texture: moderngl.Texture3D | None = None
+        self.grid = (0, 0, 0)
+        self.next_layer = 0
 
     def bake(self, resources: SceneResources, min_side: int = MIN_SIDE) -> None:
+        """The whole grid in one dispatch."""
+        self.begin(resources, min_side)
+        self.bake_layers(resources)
+
+    def begin(self, resources: SceneResources, min_side: int = MIN_SIDE) -> None:
+        """Starts a bake that bake_layers() does a slab of z layers at a time (the viewer's
+        budgeted frames); until it is done the texture holds new layers below next_layer and the
+        previous grid's above (texels are independent: each marches to the sun on its own)."""
         grid = light_grid_size(resources.volume.dims, self.max_side, min_side)
         if self.texture is None or self.texture.size != grid:
             if self.texture is not None:
@@ -56,15 +66,32 @@ class LightTransmittance:
             self.texture = self.ctx.texture3d(grid, 1, dtype="f4")
             self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
             self.texture.repeat_x = self.texture.repeat_y = self.texture.repeat_z = False
+        self.grid = grid
+        self.next_layer = 0
+
+    @property
+    def done(self) -> bool:
+        return self.texture is not None and self.next_layer >= self.grid[2]
+
+    def bake_layers(self, resources: SceneResources, layers: int | None = None) -> int:
+        """Bakes the next `layers` z layers (None: all that are left); returns how many ran."""
+        grid = self.grid
+        first = self.next_layer
+        count = grid[2] - first if layers is None else max(0, min(int(layers), grid[2] - first))
+        if count == 0:
+            return 0
         resources.bind()
         set_uniforms(self.program, resources.uniforms())
         # Quadrature every voxel (the probes' march takes half voxels): the grid's own interpolation
         # error dominates; measured on bonsai at 256^3, RMS error of the sun's transmittance at
         # scattering points 7.6% against 7.4%, for half the time.
-        set_uniforms(self.program, {"grid": grid, "march_step": LIGHT_MARCH_VOXELS * resources.march_step})
+        set_uniforms(self.program, {"grid": grid, "first_layer": first,
+                                    "march_step": LIGHT_MARCH_VOXELS * resources.march_step})
         self.texture.bind_to_image(0, read=False, write=True)
-        self.program.run(*((g + 3) // 4 for g in grid))
+        self.program.run((grid[0] + 3) // 4, (grid[1] + 3) // 4, (count + 3) // 4)
         self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
+        self.next_layer = first + count
+        return count
 
     @property
     def gpu_bytes(self) -> int:

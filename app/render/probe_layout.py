@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..twins.visible_region import visible_region  # noqa: F401  (the NumPy twin; the renderer's is on the GPU)
+
 # Probe textures (of the seven in lib/probes.glsl's packing) that each SH order needs: texture 6
 # always, for the sun's transmittance in its alpha channel.
 TEXTURES_FOR_ORDER = {0: (0, 6), 1: (0, 1, 2, 6), 2: (0, 1, 2, 3, 4, 5, 6)}
@@ -43,54 +45,6 @@ def resolve_sh_order(order: str | int, anisotropy: float) -> int:
     if order == "auto":
         return 0 if anisotropy == 0.0 else 2
     return int(order)
-
-
-def _positive_interval_test(table_alpha: np.ndarray):
-    """f(lo, hi) -> bool array: does the piecewise-linear opacity exceed 0 anywhere in [lo, hi]?"""
-    alpha = np.asarray(table_alpha, np.float64)
-    n = len(alpha)
-    positive = alpha > 0
-    before = np.concatenate([[0], np.cumsum(positive)])  # positive nodes with index < k
-
-    def test(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        a_lo = np.interp(lo, np.linspace(0, 1, n), alpha)
-        a_hi = np.interp(hi, np.linspace(0, 1, n), alpha)
-        first = np.clip(np.ceil(lo * (n - 1)), 0, n).astype(np.int64)
-        last = np.clip(np.floor(hi * (n - 1)), -1, n - 1).astype(np.int64)
-        inside = before[last + 1] - before[np.minimum(first, last + 1)] > 0
-        return (a_lo > 0) | (a_hi > 0) | inside
-    return test
-
-
-def visible_region(data: np.ndarray, half_extent, table_alpha: np.ndarray,
-                   density_scale: float) -> tuple[np.ndarray, np.ndarray]:
-    """World-space (low, high) corners of the smallest box outside which sigma_t is 0 everywhere.
-    The whole volume box when nothing is visible (then no light scatters anywhere)."""
-    half = np.asarray(half_extent, np.float64)
-    if density_scale <= 0:
-        return -half, half
-    # Pad with the edge voxels: between the box face and the outermost voxel centre the density is
-    # clamped to that voxel's, so the padded neighbour pair covers that slab.
-    d = np.pad(np.asarray(data, np.float32), 1, mode="edge")
-    lo = hi = None
-    for dz in (0, 1):
-        for dy in (0, 1):
-            for dx in (0, 1):
-                s = d[dz:d.shape[0] - 1 + dz, dy:d.shape[1] - 1 + dy, dx:d.shape[2] - 1 + dx]
-                lo = s if lo is None else np.minimum(lo, s)
-                hi = s if hi is None else np.maximum(hi, s)
-    visible = _positive_interval_test(table_alpha)(lo, hi)   # cells [z, y, x], (n + 1) per axis
-    if not visible.any():
-        return -half, half
-    low, high = np.empty(3), np.empty(3)
-    for axis, reduce_axes in ((0, (0, 1)), (1, (0, 2)), (2, (1, 2))):  # x, y, z
-        used = np.flatnonzero(visible.any(axis=reduce_axes))
-        n = d.shape[2 - axis] - 2          # voxels along this axis
-        # padded index k sits at the box face (k = 0, n + 1) or at voxel centre k - 1
-        pos = np.concatenate([[-half[axis]],
-                              ((np.arange(n) + 0.5) / n * 2.0 - 1.0) * half[axis], [half[axis]]])
-        low[axis], high[axis] = pos[used[0]], pos[used[-1] + 1]
-    return low, high
 
 
 def fitted_grid(grid: tuple[int, int, int], low: np.ndarray, high: np.ndarray) -> tuple[int, int, int]:

@@ -18,7 +18,8 @@ from .limits import check_image_size
 from .pathtracer import PathTracer
 from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_MIN_SIDE,
                                   SOFTWARE_MIN_SIDE, LightTransmittance, min_side_for_probes)
-from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, visible_region
+from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order
+from .visible_region import gpu_visible_region
 from .probes import ProbeGrid
 from .raymarch import Raymarcher, min_step_voxels
 from .resources import SceneResources
@@ -61,6 +62,8 @@ RAYMARCH_STAGES = ("compute", "fragment")
 # A budgeted bake's first slice, before any slice of this probe layout was timed: small enough
 # for a frame on llvmpipe (64 walks a probe), and the next slices follow the measured time.
 FIRST_SLICE_PROBES = 64
+# ... and of a sliced light-grid bake: this fraction of its z layers (1/16).
+FIRST_SLICE_LIGHT_FRACTION = 16
 
 
 class Renderer:
@@ -102,6 +105,9 @@ class Renderer:
         self._probe_ms: dict[tuple, float] = {}   # measured GPU ms per probe walked, per layout
         self.last_slice_ms = 0.0
         self._light_key: tuple | None = None
+        self._light_pending: tuple | None = None   # the key of a sliced light-grid bake under way
+        self._light_spent_ms = 0.0                  # its GPU ms so far
+        self._layer_ms: dict[tuple, float] = {}     # measured GPU ms per light-grid z layer, per size
         self.method = "pt"
         self._region_key: tuple | None = None
         self._region = None
@@ -187,13 +193,13 @@ class Renderer:
                 and self._baked_key == self.bake_key())
 
     def visible_region(self) -> tuple[np.ndarray, np.ndarray]:
-        """World corners of what the transfer function makes visible (cached: NumPy over the
-        whole volume, redone when the volume or the transfer function changes)."""
+        """World corners of what the transfer function makes visible (cached: one GPU pass over
+        the volume, glsl/visible_region.comp, redone when the volume or the transfer function
+        changes)."""
         s = self.scene
         key = (self.resources.volume_version, s.transfer_function, s.density_scale > 0)
         if self._region_key != key:
-            self._region = visible_region(self.resources.volume.data, self.resources.volume.half_extent,
-                                          self.resources.table[:, 3], s.density_scale)
+            self._region = gpu_visible_region(self.ctx, self.resources)
             self._region_key = key
         return self._region
 
@@ -277,26 +283,63 @@ class Renderer:
         self._light.bind()
         return self._raymarchers[key]
 
-    def bake_light(self) -> float:
-        """Bakes the sun's transmittance grid for the raymarcher if stale; GPU ms. Its resolution
-        follows the probe grid (light_transmittance.TEXELS_PER_PROBE)."""
+    def _light_target(self) -> tuple[tuple, int]:
+        """The light grid the current scene needs: its key and least texels along the longest
+        axis (it follows the probe grid: light_transmittance.TEXELS_PER_PROBE)."""
         s = self.scene
         min_side = (min_side_for_probes(s.probes.grid, self.light_min_side)
                     if self.light_follows_probes else self.light_min_side)
         key = (self.resources.volume_version, s.transfer_function, s.density_scale,
                s.light.direction, self.light_max_side, min_side)
+        return key, min_side
+
+    def light_current(self) -> bool:
+        return self._light is not None and self._light_key == self._light_target()[0]
+
+    def light_baking(self) -> bool:
+        """Whether a sliced light-grid bake for the current scene is under way (bake_light with
+        a budget): its texture then holds new layers and the previous grid's, and readers use it
+        as it is rather than finish it in one go."""
+        return self._light_pending is not None and self._light_pending == self._light_target()[0]
+
+    def bake_light(self, budget_ms: float | None = None) -> float:
+        """Bakes the sun's transmittance grid for the raymarcher and the walks if stale; GPU ms.
+        `budget_ms` None: all of it (or the rest of a sliced bake); otherwise a slab of z layers
+        that the GPU time per layer measured by earlier slabs of this grid size predicts fits
+        (1/16 of the grid before any was timed; at least one layer). An edit in the middle of a
+        sliced bake restarts it."""
+        key, min_side = self._light_target()
         if self._light is None or self._light.max_side != self.light_max_side:
             if self._light is not None:
                 self._light.release()
             self._light = LightTransmittance(self.ctx, self.light_max_side)
+            self._light_pending = None
         if key == self._light_key:
             return 0.0
+        light = self._light
+        if self._light_pending != key:
+            light.begin(self.resources, min_side)
+            self._light_key = None
+            self._light_pending = key
+            self._light_spent_ms = 0.0
+        layers = None
+        if budget_ms is not None:
+            per_layer = self._layer_ms.get(light.grid)
+            layers = (max(1, light.grid[2] // FIRST_SLICE_LIGHT_FRACTION) if per_layer is None
+                      else max(1, int(budget_ms / max(per_layer, 1e-9))))
         self.timer.start()
-        self._light.bake(self.resources, min_side)
+        ran = light.bake_layers(self.resources, layers)
         self.timer.stop()
-        self._light_key = key
-        self.light_cost_ms = self.timer.elapsed_ms
-        return self.light_cost_ms
+        ms = self.timer.elapsed_ms
+        if ran and layers is not None:
+            seen = ms / ran
+            per_layer = self._layer_ms.get(light.grid)
+            self._layer_ms[light.grid] = seen if per_layer is None else 0.5 * (per_layer + seen)
+        self._light_spent_ms += ms
+        if light.done:
+            self._light_key, self._light_pending = key, None
+            self.light_cost_ms = self._light_spent_ms
+        return ms
 
     def light_grid_ms(self) -> float:
         """What the light grid the current scene uses cost to bake (GPU ms), baking it if stale:
@@ -309,6 +352,7 @@ class Renderer:
         benchmark charges every record what its image cost)."""
         self._baked_key = None
         self._light_key = None
+        self._light_pending = None
 
     def probe_uniforms(self) -> dict:
         self.probe_grid.bind()
@@ -353,7 +397,14 @@ class Renderer:
         if self.probe_grid is None or self._baked_key != self.bake_key():
             self.start_bake(seed, warm=self.bake_warm)
         grid = self.probe_grid
-        light_ms = self._light_for_walks()
+        if grid.sun == "grid":
+            # the walks read the light grid: it comes first, in slices of the same budget
+            light_ms = self.bake_light(budget_ms)
+            if not self.light_current() or (budget_ms is not None and light_ms >= budget_ms):
+                self.last_slice_ms = light_ms
+                return light_ms
+        else:
+            light_ms = 0.0
         light = self._light if grid.sun == "grid" else None
         self.timer.start()
         if budget_ms is None:
@@ -391,7 +442,8 @@ class Renderer:
             if self.probe_grid is None:
                 raise RuntimeError("probe methods need a bake first (bake() or bake_step())")
             extra = self.probe_uniforms()
-        light_ms = self.bake_light() if method == "raymarch" else 0.0
+        # a sliced light-grid bake under way (bake_step) is read as it is, not finished here
+        light_ms = self.bake_light() if method == "raymarch" and not self.light_baking() else 0.0
         self.timer.start()
         if method == "raymarch":
             self.raymarcher().run(self.resources, self.camera, acc, n, self.seed,
