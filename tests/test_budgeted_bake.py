@@ -181,9 +181,9 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
     from app.bench.report import write_report
     from app.bench.runner import run_bench
     config = PRESETS["interact"].scaled(
-        scenes=("tiny",), interact_sizes=((24, 16),), interact_probes=(3, 64),
+        scenes=("tiny",), interact_sizes=((24, 16),), interact_probes=((3, 64),),
         interact_ref_spp=64, ref_samples_per_pass=32, interact_orbit_frames=3,
-        interact_max_frames=6, interact_samples_per_frame=2,
+        interact_max_frames=6, interact_frame_budget_ms=1.0,
         interact_target_spp=(("probes", 4), ("raymarch", 2)), interact_tail_k=2)
     path = run_bench(config, tmp_path / "a")
     data = json.loads(path.read_text())
@@ -200,7 +200,8 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
         if r["event"] == "dispatch_tail":
             assert r["ms_per_sample_1"] > 0 and r["ms_per_sample_k"] > 0
             continue
-        for key in ("frame_ms_p50", "frame_ms_p99", "first_frame_ms", "final_rrmse"):
+        for key in ("frame_ms_p50", "frame_ms_p99", "first_frame_ms", "final_rrmse",
+                    "first_frame_wall_ms", "frame_wall_ms_p50", "frame_wall_ms_p99"):
             assert r[key] is not None and np.isfinite(r[key]), key
         assert r["frame_ms_p99"] >= r["frame_ms_p50"] > 0
         for key in ("ms_to_10pct", "ms_to_5pct", "ms_to_3pct"):
@@ -210,6 +211,8 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
                 assert r["final_rrmse"] > float(key[6:-3]) / 100
         times = [t for t, _ in r["curve"]]
         assert times == sorted(times)
+        walls = [t for t, _ in r["wall_curve"]]
+        assert walls == sorted(walls) and len(walls) == len(times)
     assert recs[-3]["method"] == "raymarch" and recs[1]["orbit_frames"] == 3
     assert recs[1]["frames"] >= 3
     # the edit's re-bake happened in the timed frames: its first frame pays a bake slice
@@ -218,7 +221,7 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
                                        ("load", "orbit", "tf_drag", "sun_30deg", "density",
                                         "albedo")}
     text = write_report(path).read_text()
-    assert "Interaction" in text and "| tiny | 24x16 | tf_drag | probes | warm |" in text
+    assert "Interaction" in text and "| tiny | 24x16 | 3^3x64 | tf_drag | probes | warm |" in text
     assert (tmp_path / "a" / "interact.png").is_file()
     again = run_bench(config.scaled(reference_dir=str(tmp_path / "a")), tmp_path / "b")
     refs = json.loads(again.read_text())["references"]
@@ -253,5 +256,47 @@ def test_the_viewer_session_bakes_in_slices_and_shows_probes_after_each(ctx):
                 s.set_scene(s.scene.replace(albedo=0.6))
         assert frames > 4 and s.bake_generation == 2 and s.renderer._baked_key == s.renderer.bake_key()
         assert s.bake_report is not None and s.bake_report.passes_done == grid.passes_total
+    finally:
+        s.release()
+
+
+def test_probe_methods_show_the_raymarcher_while_baking_then_their_own(ctx):
+    """While the probes bake, a `probes` view accumulates the raymarcher over the probes as they
+    are (and says so in its caption); when the bake ends it restarts as `probes` and converges
+    to the image of a finished bake. The frame's budget left after the slice sets the samples."""
+    from app.viewer.session import RenderSession
+    s = RenderSession(ctx, parse_scene(SCENE))
+    try:
+        s.resize(24, 16)
+        s.set_methods(["probes"])
+        s.bake_budget_ms = 1e-6                      # one light layer or one probe a frame
+        s.step(8, True)
+        view = s.views["probes"]
+        assert view.shown == "raymarch" and "raymarch meanwhile" in s.label("probes")
+        frames = 1
+        while not s.renderer.probes_current():
+            s.step(8, True)
+            frames += 1
+            assert view.shown == "raymarch" or s.renderer.probes_current()
+        assert frames > 10
+        assert not s.finished(8, True)
+        s.step(8, True)
+        assert view.shown == "probes" and s.label("probes").startswith("probes  ")
+        while not s.finished(8, True):
+            s.step(8, True)
+        assert view.samples == 8
+        want = s.renderer.render("probes", spp=8, seed=s.seed).image
+        np.testing.assert_allclose(s.image("probes"), want, rtol=1e-5, atol=1e-6)
+        # samples per frame from the budget the slice left: none left -> one each
+        s.set_scene(s.scene.replace(albedo=0.5))
+        s.frame_budget_ms = 0.0
+        s.views["probes"].ms_per_sample["raymarch"] = 1.0
+        s.step(8, True)
+        assert view.samples == 1
+        s.frame_budget_ms = 1e6
+        s.bake_budget_ms = 0.0
+        before = view.samples
+        s.step(8, True)                              # a restart after the slice, then 8 at once
+        assert view.samples == 8 and before == 1
     finally:
         s.release()

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from .scenes import ALL_SCENES
+from ..render.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 
 
 @dataclass(frozen=True)
@@ -44,9 +45,10 @@ class BenchConfig:
     code_label: str = "current"             # names the code a bake run measured (before/after)
     # --preset interact (interact.py): the replayed viewer session
     interact_sizes: tuple[tuple[int, int], ...] = ((1920, 1080), (1280, 720))
-    interact_probes: tuple[int, int] = (64, 256)     # grid, walks per probe
-    interact_bake_budget_ms: float = 8.0             # GPU time a frame gives the bake
-    interact_samples_per_frame: int = 4              # samples per pixel per frame (one dispatch)
+    # probe settings replayed, each (grid, walks per probe)
+    interact_probes: tuple[tuple[int, int], ...] = ((64, 256),)
+    interact_bake_budget_ms: float = BAKE_BUDGET_MS["gpu"]     # GPU time a frame gives the bake
+    interact_frame_budget_ms: float = FRAME_BUDGET_MS["gpu"]   # ... and a frame in all (session.py)
     interact_target_spp: tuple = (("probes", 64), ("raymarch", 16), ("pt", 256))
     # the methods the session is replayed with (load, orbit, edits), each against the same references
     interact_methods: tuple[str, ...] = ("probes", "raymarch")
@@ -74,8 +76,8 @@ PRESETS = {
     "interact": BenchConfig(mode="interact", scenes=("bonsai", "foot"), ref_samples_per_pass=64),
     # the same session on llvmpipe: small images and probes (warm against cold at small size)
     "interact-quick": BenchConfig(mode="interact", scenes=("anisotropic", "thick"),
-                                  interact_sizes=((64, 48),), interact_probes=(8, 128),
-                                  interact_bake_budget_ms=40.0, interact_samples_per_frame=1,
+                                  interact_sizes=((64, 48),), interact_probes=((8, 128),),
+                                  interact_bake_budget_ms=40.0, interact_frame_budget_ms=45.0,
                                   interact_target_spp=(("probes", 16), ("raymarch", 4)),
                                   interact_max_frames=60, interact_orbit_frames=12,
                                   interact_ref_spp=512, ref_samples_per_pass=16, interact_tail_k=4),

@@ -1,21 +1,25 @@
-"""`--preset interact`: a scripted viewer session replayed through the progressive Renderer API the
-viewer uses (bake_step with a GPU-time budget, begin, add_samples), per scene and image size:
+"""`--preset interact`: a scripted viewer session replayed through the viewer's own loop
+(app/viewer/session.py RenderSession, without a window), per scene, image size and probe setting:
 
     load; orbit the camera through N frames; drag a transfer-function opacity point; rotate the sun
     by 30 degrees; change the density scale; change the albedo; switch probes to the raymarcher.
 
-Every frame is what RenderSession.step does: a bake slice while the probes are stale (after which
-the picture restarts from the probes as they are), then samples. For each event it records the GPU
-time of the first frame after it, frame-time p50 and p99 over the frames until convergence (bake
-done and the target samples reached), and the rRMSE (corrected for the reference's noise) against
-the GPU time since the event, measured against a path-traced reference of the state after the event
-(cached by name under refs/, so --ref-dir reuses them). Edits run twice: `warm` (the bake starts from
+Every frame is RenderSession.step with the viewer's budgets: a bake slice while the probes are stale
+(light-grid layers, then probes' walks; after it the picture restarts from the probes as they are;
+probe-lit methods show the raymarcher until the bake is done), then the samples the rest of the
+frame holds. For each event it records the first frame after it, frame-time p50 and p99 over the
+frames until convergence (bake done and the target samples reached), and the rRMSE (corrected for
+the reference's noise) against the time since the event, measured against a path-traced reference
+of the state after the event (cached by name under refs/, so --ref-dir reuses them). Times are GPU
+timestamps and, beside them, wall-clock time of the whole frame (the edit's CPU work included, and
+the frame's wait for its timers), which is what a person at the viewer feels. Edits run twice: `warm` (the bake starts from
 the previous probes) and `cold`, each from the previous state's finished probes. At the end, the
 per-dispatch tail: GPU ms per sample at 1 and at k samples per dispatch."""
 from __future__ import annotations
 
 import math
 import statistics
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -73,56 +77,70 @@ def time_to(curve: list[tuple[float, float]], target: float) -> float | None:
     return next((t for t, e in curve if e <= target), None)
 
 
-def run_frames(r, method: str, config, reference, noise: float, seed: int,
-               moves: list | None = None) -> dict:
-    """Frames as the viewer makes them until convergence (or interact_max_frames). `moves`: one
-    scene per frame before the rest (the orbit), each restarting the picture."""
-    budget = config.interact_bake_budget_ms
-    spf = config.interact_samples_per_frame
+def run_frames(session, method: str, config, reference, noise: float, seed: int,
+               scenes: list | None = None, orbit: bool = False) -> dict:
+    """Frames as the viewer makes them until convergence (or interact_max_frames). `scenes`: the
+    event, one scene per frame from the first (the orbit's moves, or the edited scene), each set
+    inside its frame's wall time. Timed from the event (the orbit: from its last move)."""
+    s = session
+    r = s.renderer
+    needs = r.needs_probes(method)
     target_spp = dict(config.interact_target_spp).get(method, 16)
-    frames: list[float] = []
-    curve: list[tuple[float, float]] = []
-    t = 0.0
-    r.begin(method, seed=seed)
+    s.seed = seed
+    s.set_methods([method])
+    s.restart()
+    scenes = list(scenes or [])
+    lead = len(scenes) - 1 if orbit else 0     # frames before the one the timing starts at
+    frames, walls, curve = [], [], []
+    t = wall_t = 0.0
     checks = {0, 1, 2, 3}
     k = 4
     while k < config.interact_max_frames + 64:
         checks.add(k)
         k = int(k * 1.4) + 1
-    moves = list(moves or [])
-    for f in range(len(moves) + config.interact_max_frames):
-        if f < len(moves):
-            r.set_scene(moves[f])
-            r.begin(method, seed=seed)
-        bake_ms = 0.0
-        if r.needs_probes(method) and not r.probes_current():
-            bake_ms = r.bake_step(seed, budget_ms=budget)
-            r.begin(method, seed=seed)   # the picture restarts from the probes as they are now
-        ms = bake_ms + r.add_samples(spf)
+    converged = False
+    for f in range(lead + config.interact_max_frames):
+        start = time.perf_counter()
+        if f < len(scenes):
+            s.set_scene(scenes[f])
+        times = s.step(target_spp, needs)
+        wall = (time.perf_counter() - start) * 1e3
+        ms = times.total_ms
         frames.append(ms)
-        t += ms
-        after = f - len(moves)
+        walls.append(wall)
+        t, wall_t = t + ms, wall_t + wall
+        after = f - lead
         if after < 0:
             continue
         if after == 0:
-            t = ms   # the orbit's error is timed from its last move
-        converged = (not r.needs_probes(method) or r.probes_current()) and r.samples >= target_spp
-        if after in checks or converged or f == len(moves) + config.interact_max_frames - 1:
-            curve.append((t, corrected_rrmse(rrmse(r.image(), reference), noise)))
+            t, wall_t = ms, wall
+        view = s.views[method]
+        converged = (not needs or r.probes_current()) and view.shown == method \
+            and view.samples >= target_spp
+        if after in checks or converged or f == lead + config.interact_max_frames - 1:
+            error = corrected_rrmse(rrmse(s.image(method), reference), noise)
+            curve.append((t, wall_t, error))
         if converged:
             break
-    return {"frames": frames, "curve": curve, "converged": converged}
+    # every frame counts for frame times (the orbit's are camera moves); errors from the event on
+    return {"frames": frames, "walls": walls, "curve": curve, "converged": converged}
 
 
 def record(base: dict, event: str, method: str, variant, run: dict, **extra) -> dict:
-    frames, curve = run["frames"], run["curve"]
+    frames, walls, curve = run["frames"], run["walls"], run["curve"]
     rec = dict(base, event=event, method=method, variant=variant,
                first_frame_ms=frames[0], frame_ms_p50=float(np.percentile(frames, 50)),
-               frame_ms_p99=float(np.percentile(frames, 99)), frames=len(frames),
-               converged=run["converged"], final_rrmse=curve[-1][1] if curve else None,
-               total_ms=sum(frames), curve=[[float(a), float(b)] for a, b in curve])
+               frame_ms_p99=float(np.percentile(frames, 99)),
+               first_frame_wall_ms=walls[0], frame_wall_ms_p50=float(np.percentile(walls, 50)),
+               frame_wall_ms_p99=float(np.percentile(walls, 99)), frames=len(frames),
+               converged=run["converged"], final_rrmse=curve[-1][2] if curve else None,
+               total_ms=sum(frames), total_wall_ms=sum(walls),
+               curve=[[float(a), float(c)] for a, _, c in curve],
+               wall_curve=[[float(b), float(c)] for _, b, c in curve])
     for target in TARGETS:
-        rec[f"ms_to_{round(target * 100)}pct"] = time_to(curve, target)
+        pct = round(target * 100)
+        rec[f"ms_to_{pct}pct"] = time_to([(a, c) for a, _, c in curve], target)
+        rec[f"wall_ms_to_{pct}pct"] = time_to([(b, c) for _, b, c in curve], target)
     rec.update(extra)
     return rec
 
@@ -140,19 +158,16 @@ def dispatch_tail(r, method: str, k: int, seed: int = 99) -> dict:
 def interact_scene(renderer, name: str, config, results, out, device: str, reference_of) -> None:
     """`reference_of(renderer, key, config)`: the runner's cached path-traced reference of the
     renderer's current scene under `key` (refs/KEY.npy, reused from --ref-dir)."""
+    from ..viewer.session import RenderSession
     r = renderer
     start = r.scene
-    grid, walks = config.interact_probes
-    start = start.replace(probes=replace(start.probes, grid=(grid, grid, grid), samples=walks))
+    session = RenderSession(r.ctx, start, renderer=r)
+    session.bake_budget_ms = config.interact_bake_budget_ms
+    session.frame_budget_ms = config.interact_frame_budget_ms
     for width, height in config.interact_sizes:
         size_cfg = config.scaled(width=width, height=height, ref_spp=config.interact_ref_spp)
-        scene = start.replace(camera=replace(start.camera, width=width, height=height))
-        base = {"mode": "interact", "scene": name, "device": device, "width": width,
-                "height": height, "probe_grid": grid, "probe_samples": walks,
-                "bake_budget_ms": config.interact_bake_budget_ms,
-                "samples_per_frame": config.interact_samples_per_frame}
+        session.resize(width, height)
         tag = f"{name}_{width}x{height}"
-
         refs: dict = {}
 
         def ref(key):
@@ -162,54 +177,64 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                 refs[key] = img, results.references.get(f"{tag}_{key}", {}).get("noise_rrmse", 0.0)
             return refs[key]
 
-        def add(rec, image=None):
+        def add(rec):
             results.add(rec)
             shown = ", ".join(f"{t}: {rec[f'ms_to_{t}pct']}" for t in (10, 5, 3))
-            _log(f"  {tag} {rec['event']} {rec['method']} {rec['variant'] or ''}: first "
-                 f"{rec['first_frame_ms']:.2f} ms, p50 {rec['frame_ms_p50']:.2f}, p99 "
-                 f"{rec['frame_ms_p99']:.2f} ms, final rRMSE {rec['final_rrmse']:.4f}, ms to "
-                 f"{shown}")
+            _log(f"  {tag} {rec['probe_grid']}^3x{rec['probe_samples']} {rec['event']} "
+                 f"{rec['method']} {rec['variant'] or ''}: first {rec['first_frame_ms']:.2f} ms "
+                 f"(wall {rec['first_frame_wall_ms']:.1f}), p50 {rec['frame_ms_p50']:.2f}, p99 "
+                 f"{rec['frame_ms_p99']:.2f} ms (wall {rec['frame_wall_ms_p99']:.1f}), final rRMSE "
+                 f"{rec['final_rrmse']:.4f}, ms to {shown}")
 
-        for method in config.interact_methods:
-            # load: nothing baked yet
-            r.set_scene(scene)
-            reference, noise = ref("load")
-            r.invalidate()
-            if r.probe_grid is not None:   # a fresh load has no probes at all
-                r.probe_grid.release()
-                r.probe_grid = None
-            add(record(base, "load", method, None, run_frames(r, method, config, reference,
-                                                                     noise, seed=1)))
-            # orbit: camera moves never re-bake
-            moves = [orbit(scene, 60.0 * (i + 1) / config.interact_orbit_frames)
-                     for i in range(config.interact_orbit_frames)]
-            state = moves[-1]
-            r.set_scene(state)
-            reference, noise = ref("orbit")
-            run = run_frames(r, method, config, reference, noise, seed=2, moves=moves)
-            add(record(base, "orbit", method, None, run, orbit_frames=len(moves)))
-            for i, event in enumerate(EDITS):
-                before, after = state, edit(state, event)
-                r.set_scene(after)
-                reference, noise = ref(event)
-                for variant in ("warm", "cold"):
-                    r.set_scene(before)
-                    r.bake_warm = False
-                    r.bake(seed=100 + i)        # the state before the edit, finished (not timed)
+        for grid, walks in config.interact_probes:
+            probes = replace(start.probes, grid=(grid, grid, grid), samples=walks)
+            scene = start.replace(probes=probes,
+                                  camera=replace(start.camera, width=width, height=height))
+            base = {"mode": "interact", "scene": name, "device": device, "width": width,
+                    "height": height, "probe_grid": grid, "probe_samples": walks,
+                    "bake_budget_ms": config.interact_bake_budget_ms,
+                    "frame_budget_ms": config.interact_frame_budget_ms}
+            for method in config.interact_methods:
+                # load: nothing baked yet
+                r.set_scene(scene)
+                reference, noise = ref("load")
+                r.invalidate()
+                if r.probe_grid is not None:   # a fresh load has no probes at all
+                    r.probe_grid.release()
+                    r.probe_grid = None
+                add(record(base, "load", method, None,
+                           run_frames(session, method, config, reference, noise, seed=1)))
+                # orbit: camera moves never re-bake
+                moves = [orbit(scene, 60.0 * (i + 1) / config.interact_orbit_frames)
+                         for i in range(config.interact_orbit_frames)]
+                state = moves[-1]
+                r.set_scene(state)
+                reference, noise = ref("orbit")
+                run = run_frames(session, method, config, reference, noise, seed=2, scenes=moves,
+                                 orbit=True)
+                add(record(base, "orbit", method, None, run, orbit_frames=len(moves)))
+                for i, event in enumerate(EDITS):
+                    before, after = state, edit(state, event)
                     r.set_scene(after)
-                    r.bake_warm = variant == "warm"
-                    run = run_frames(r, method, config, reference, noise, seed=3 + i)
-                    add(record(base, event, method, variant, run))
-                state = after
-            save_png(out / "images" / f"{tag}_{method}_final.png", r.image())
-        r.bake_warm = True
-        # switch probes -> raymarcher: the same state, so the albedo reference serves
-        run = run_frames(r, "raymarch", config, reference, noise, seed=9)
-        add(record(base, "raymarch_switch", "raymarch", None, run))
-        save_png(out / "images" / f"{tag}_raymarch_final.png", r.image())
-        for method in ("probes", "pt"):
-            tail = dispatch_tail(r, method, config.interact_tail_k)
-            results.add(dict(base, event="dispatch_tail", method=method, variant=None, **tail))
-            _log(f"  {tag} dispatch tail {method}: {tail['ms_per_sample_1']:.3f} ms/sample at 1, "
-                 f"{tail['ms_per_sample_k']:.3f} at {tail['k']} per dispatch")
+                    reference, noise = ref(event)
+                    for variant in ("warm", "cold"):
+                        session.set_scene(before)
+                        r.bake_warm = False
+                        r.bake(seed=100 + i)        # the state before the edit, finished (untimed)
+                        r.bake_warm = variant == "warm"
+                        run = run_frames(session, method, config, reference, noise, seed=3 + i,
+                                         scenes=[after])
+                        add(record(base, event, method, variant, run))
+                    state = after
+                save_png(out / "images" / f"{tag}_{grid}_{method}_final.png", session.image(method))
+            r.bake_warm = True
+            # switch probes -> raymarcher: the same state, so the albedo reference serves
+            run = run_frames(session, "raymarch", config, reference, noise, seed=9)
+            add(record(base, "raymarch_switch", "raymarch", None, run))
+            for method in ("probes", "pt"):
+                tail = dispatch_tail(r, method, config.interact_tail_k)
+                results.add(dict(base, event="dispatch_tail", method=method, variant=None, **tail))
+                _log(f"  {tag} dispatch tail {method}: {tail['ms_per_sample_1']:.3f} ms/sample at "
+                     f"1, {tail['ms_per_sample_k']:.3f} at {tail['k']} per dispatch")
+    session.set_methods([])
     r.set_scene(start)

@@ -13,23 +13,28 @@ def _ms(v) -> str:
     return f"{v:.3g} ms" if v < 1000 else f"{v / 1000:.3g} s"
 
 
+def _probes(r: dict) -> str:
+    return f"{r.get('probe_grid')}^3x{r.get('probe_samples')}"
+
+
 def plot_interact(data: dict, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter
     recs = [r for r in data["records"] if r.get("mode") == "interact" and r.get("curve")]
-    groups = list(dict.fromkeys((r["scene"], r["width"], r["height"]) for r in recs))
+    groups = list(dict.fromkeys((r["scene"], r["width"], r["height"], _probes(r)) for r in recs))
     events = list(dict.fromkeys(r["event"] for r in recs))
     if not groups:
         return
     fig, axes = plt.subplots(len(groups), len(events), squeeze=False,
                              figsize=(3.0 * len(events), 2.8 * len(groups)))
-    for gi, (scene, w, h) in enumerate(groups):
+    for gi, (scene, w, h, probes) in enumerate(groups):
         for ei, event in enumerate(events):
             ax = axes[gi][ei]
             for r in recs:
-                if (r["scene"], r["width"], r["height"], r["event"]) != (scene, w, h, event):
+                if (r["scene"], r["width"], r["height"], _probes(r), r["event"]) != (
+                        scene, w, h, probes, event):
                     continue
                 xs = [max(t, 1e-3) for t, _ in r["curve"]]
                 ys = [max(e, 1e-4) for _, e in r["curve"]]
@@ -40,7 +45,7 @@ def plot_interact(data: dict, path: Path) -> None:
             ax.set_yscale("log")
             ax.xaxis.set_minor_formatter(NullFormatter())
             ax.yaxis.set_minor_formatter(NullFormatter())
-            ax.set_title(f"{scene} {w}x{h}: {event}", fontsize=7)
+            ax.set_title(f"{scene} {w}x{h} {probes}: {event}", fontsize=7)
             ax.tick_params(labelsize=6)
             ax.grid(True, which="both", alpha=0.2)
             if gi == len(groups) - 1:
@@ -60,41 +65,53 @@ def interact_section(data: dict, out: Path) -> list[str]:
         return []
     plot_interact(data, out / "interact.png")
     cfg = data["meta"]["config"]
+    budget = cfg.get("interact_frame_budget_ms")
     lines = ["## Interaction (`--preset interact`)", "",
-             "A scripted session replayed through the viewer's progressive Renderer API: load, "
-             f"orbit ({cfg.get('interact_orbit_frames')} frames), drag an opacity point, the sun "
-             "30 degrees, density scale, albedo, then the raymarcher. Each frame gives the bake "
-             f"{cfg.get('interact_bake_budget_ms')} ms of GPU time and adds "
-             f"{cfg.get('interact_samples_per_frame')} samples per pixel; after a bake slice the "
-             "picture restarts from the probes as they are. Times are GPU timestamp queries since "
-             "the event (the orbit: since its last move); errors are rRMSE corrected for the "
-             "noise of a path-traced reference of the state after the event "
+             "A scripted session replayed through the viewer's own loop (RenderSession, no window): "
+             f"load, orbit ({cfg.get('interact_orbit_frames')} frames), drag an opacity point, the "
+             "sun 30 degrees, density scale, albedo, then the raymarcher. A frame has "
+             f"{budget} ms of GPU time: the bake's slice ({cfg.get('interact_bake_budget_ms')} ms: "
+             "light-grid layers, then probes' walks) and as many samples as the rest holds "
+             "(at least one); after a bake slice the picture restarts from the probes as they are, "
+             "and `probes` shows the raymarcher until its bake is done. Times are GPU timestamps "
+             "since the event (the orbit: since its last move) and, in brackets, wall-clock time of "
+             "whole frames (the edit's CPU work included: what a person feels); errors are rRMSE "
+             "corrected for the noise of a path-traced reference of the state after the event "
              f"({cfg.get('interact_ref_spp')} spp). Warm: the bake starts from the previous "
              "probes; cold: from nothing (both end at the same probes).", "",
              "![error against time since each event](interact.png)", "",
-             "| scene | size | event | method | bake | first frame | p50 | p99 | to 10% | to 5% "
-             "| to 3% | final rRMSE | frames |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+             "| scene | size | probes | event | method | bake | first frame | p50 | p99 | to 10% "
+             "| to 5% | to 3% | final rRMSE | frames |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+
+    def both(r, key, wall_key):
+        wall = r.get(wall_key, "absent")
+        return _ms(r[key]) if wall == "absent" else f"{_ms(r[key])} ({_ms(wall)})"
+
     for r in recs:
         if r["event"] == "dispatch_tail":
             continue
         lines.append(
-            f"| {r['scene']} | {r['width']}x{r['height']} | {r['event']} | {r['method']} | "
-            f"{r['variant'] or '-'} | {_ms(r['first_frame_ms'])} | {_ms(r['frame_ms_p50'])} | "
-            f"{_ms(r['frame_ms_p99'])} | {_ms(r['ms_to_10pct'])} | {_ms(r['ms_to_5pct'])} | "
-            f"{_ms(r['ms_to_3pct'])} | {r['final_rrmse']:.4f} | {r['frames']}"
+            f"| {r['scene']} | {r['width']}x{r['height']} | {_probes(r)} | {r['event']} | "
+            f"{r['method']} | {r['variant'] or '-'} | "
+            f"{both(r, 'first_frame_ms', 'first_frame_wall_ms')} | "
+            f"{both(r, 'frame_ms_p50', 'frame_wall_ms_p50')} | "
+            f"{both(r, 'frame_ms_p99', 'frame_wall_ms_p99')} | "
+            f"{both(r, 'ms_to_10pct', 'wall_ms_to_10pct')} | "
+            f"{both(r, 'ms_to_5pct', 'wall_ms_to_5pct')} | "
+            f"{both(r, 'ms_to_3pct', 'wall_ms_to_3pct')} | {r['final_rrmse']:.4f} | {r['frames']}"
             f"{'' if r['converged'] else ' (not converged)'} |")
     tails = [r for r in recs if r["event"] == "dispatch_tail"]
     if tails:
         lines += ["", "### The per-dispatch tail", "",
                   "GPU ms per sample per pixel at one sample per dispatch against k per dispatch "
                   "(the final state; medians):", "",
-                  "| scene | size | method | 1 per dispatch | k per dispatch | k | saved |",
-                  "| --- | --- | --- | --- | --- | --- | --- |"]
+                  "| scene | size | probes | method | 1 per dispatch | k per dispatch | k | saved |",
+                  "| --- | --- | --- | --- | --- | --- | --- | --- |"]
         for r in tails:
             one, many = r["ms_per_sample_1"], r["ms_per_sample_k"]
             saved = f"{100 * (1 - many / one):.0f}%" if one > 0 else "-"
-            lines.append(f"| {r['scene']} | {r['width']}x{r['height']} | {r['method']} | "
+            lines.append(f"| {r['scene']} | {r['width']}x{r['height']} | {_probes(r)} | {r['method']} | "
                          f"{one:.3f} ms | {many:.3f} ms | {r['k']} | {saved} |")
     lines.append("")
     return lines

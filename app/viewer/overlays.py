@@ -103,11 +103,11 @@ def view_labels(v) -> None:
     if state.probe_view == "alone":
         label(x + 8, "probe grid")
     elif state.display == "split" and len(shown) > 1:
-        label(x + 8, f"{state.method}  {v.session.samples(state.method)} spp")
-        right = f"{state.split_method}  {v.session.samples(state.split_method)} spp"
+        label(x + 8, v.session.label(state.method))
+        right = v.session.label(state.split_method)
         label(x + w - imgui.calc_text_size(right).x - 12, right)
     elif state.display == "error" and state.method != "pt":
         rmse = v.error_meter.value
         label(x + 8, f"|{state.method} - pt|  rel. RMSE {rmse:.4f}  (pt {v.error_meter.samples[1]} spp)")
     else:
-        label(x + 8, f"{state.method}  {v.session.samples(state.method)} spp")
+        label(x + 8, v.session.label(state.method))

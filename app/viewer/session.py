@@ -5,7 +5,12 @@ Camera moves only restart the accumulations (the probes' bake key leaves the cam
 other scene change restarts them too and, where it touches the bake key, the bake. While probes
 bake, each frame gives the bake a budget of GPU time (a slice of chunks of walks, never a whole
 bake), and the methods that read probes restart after every slice, so the picture improves with
-the probes as they come.
+the probes as they come. Until the bake is done, `probes` and `probes-only` show the raymarcher's
+image (its frames cost a few ms; theirs tens of ms at 1080p on an H100, bench/h100-interact) and
+switch to their own when the probes are current.
+
+A frame's GPU time is budgeted as a whole (FRAME_BUDGET_MS): the bake slice first, then as many
+samples per shown method as the rest of the frame holds by their measured cost, at least one.
 """
 from __future__ import annotations
 
@@ -17,18 +22,16 @@ import numpy as np
 
 from ..gl.context import is_software
 from ..render.accumulation import Accumulation
+from ..render.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from ..render.probes import BakeProgress
-from ..render.renderer import Renderer
+from ..render.renderer import PROBE_LIGHTING, Renderer
 from ..scene import Scene
 from ..volume import Volume
 
 FRAME_HISTORY = 240
-FRAME_BUDGET_MS = 15.0        # GPU time a frame may spend adding samples, per shown method
 MAX_SAMPLES_PER_FRAME = 64
-# GPU time a frame gives the bake (Renderer.bake_step predicts how many probes' walks fit from
-# the slices it has timed, so the budget holds on any device): half a 60 Hz frame on a GPU; on
-# llvmpipe, where a frame of the picture alone takes tens of ms, about as much again.
-BAKE_BUDGET_MS = {"gpu": 8.0, "software": 50.0}
+# What a probe-lit method shows while its probes bake: the raymarcher over the probes as they are.
+PREVIEW_WHILE_BAKING = "raymarch"
 
 
 @dataclass
@@ -37,7 +40,12 @@ class MethodView:
     method: str
     acc: Accumulation | None = None
     camera: object = None
-    ms_per_sample: float = 0.0    # GPU time of one sample per pixel, as last measured
+    shown: str = ""               # what the accumulation holds: method, or the bake's preview
+    ms_per_sample: dict = None    # GPU time of one sample per pixel per method, as last measured
+
+    def __post_init__(self):
+        self.shown = self.shown or self.method
+        self.ms_per_sample = {} if self.ms_per_sample is None else self.ms_per_sample
 
     @property
     def samples(self) -> int:
@@ -58,9 +66,10 @@ class FrameTimes:
 
 class RenderSession:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
-                 seed: int = 0):
+                 seed: int = 0, renderer: Renderer | None = None):
+        """`renderer`: one to drive instead of a new one (the interact benchmark's replay)."""
         self.ctx = ctx
-        self.renderer = Renderer(ctx, scene, volume)
+        self.renderer = renderer if renderer is not None else Renderer(ctx, scene, volume)
         self.seed = seed
         self.views: dict[str, MethodView] = {}
         self.size = (0, 0)
@@ -72,7 +81,9 @@ class RenderSession:
         self.last = FrameTimes()
         self.history: deque[float] = deque(maxlen=FRAME_HISTORY)
         self.filter = moderngl.NEAREST
-        self.bake_budget_ms = BAKE_BUDGET_MS["software" if is_software(ctx) else "gpu"]
+        device = "software" if is_software(ctx) else "gpu"
+        self.bake_budget_ms = BAKE_BUDGET_MS[device]
+        self.frame_budget_ms = FRAME_BUDGET_MS[device]
 
     @property
     def scene(self) -> Scene:
@@ -120,8 +131,9 @@ class RenderSession:
         if self.size == (0, 0):
             return
         r = self.renderer
+        view.shown = self.shown_method(view.method)
         r._acc = view.acc  # the Renderer keeps one accumulation; each view lends it its own
-        view.acc = r.begin(view.method, *self.size, seed=self.seed)
+        view.acc = r.begin(view.shown, *self.size, seed=self.seed)
         view.acc.texture.filter = (self.filter, self.filter)
         view.camera = r.camera
         r._acc = None
@@ -135,11 +147,20 @@ class RenderSession:
     def probes_ready(self) -> bool:
         return self.renderer.probe_grid is not None and self.renderer.probes_current()
 
+    def shown_method(self, method: str) -> str:
+        """What a view of `method` renders now: the raymarcher while a probe-lit method's probes
+        bake (PREVIEW_WHILE_BAKING), else the method itself."""
+        r = self.renderer
+        if method in PROBE_LIGHTING and r.probe_grid is not None and not r.probes_current():
+            return PREVIEW_WHILE_BAKING
+        return method
+
     def step(self, max_samples: int, want_probes: bool) -> FrameTimes:
         """One bake slice of `bake_budget_ms` GPU time (while the probes are stale; a whole bake
-        never blocks a frame) and samples for every unfinished view: as many as fit in
-        FRAME_BUDGET_MS of GPU time. The views that read probes restart after every slice, from
-        the probes as they are then."""
+        never blocks a frame), then samples for every unfinished view: as many as the rest of
+        `frame_budget_ms` holds, shared between the views, at least one each. The views that read
+        probes restart after every slice, from the probes as they are then; a probe-lit view
+        shows the raymarcher until the bake is done."""
         times = FrameTimes()
         r = self.renderer
         if want_probes and not r.probes_current():
@@ -153,27 +174,32 @@ class RenderSession:
             if r.probe_grid.next_probe == 0:   # a pass ended: its progress is readable
                 self.bake_report = r.probe_grid.progress_report()
             self.restart([m for m in self.views if r.needs_probes(m)])
-        for view in self.views.values():
-            if view.acc is None or view.acc.samples >= max_samples:
-                continue
-            if r.needs_probes(view.method) and r.probe_grid is None:
-                continue  # nothing to read yet: the first bake pass comes first
-            n = min(self.samples_per_frame(view), max_samples - view.acc.samples)
+        # a view whose preview is over (the bake ended, or was never needed) starts its own method
+        stale = [v.method for v in self.views.values() if v.shown != self.shown_method(v.method)]
+        if stale:
+            self.restart(stale)
+        todo = [v for v in self.views.values() if v.acc is not None and v.acc.samples < max_samples
+                and not (r.needs_probes(v.shown) and r.probe_grid is None)]  # nothing to read yet
+        share = max(self.frame_budget_ms - times.bake_ms, 0.0) / max(len(todo), 1)
+        for view in todo:
+            n = min(self.samples_per_frame(view, share), max_samples - view.acc.samples)
             ms = self._add_samples(view, n)
-            view.ms_per_sample = ms / n
+            view.ms_per_sample[view.shown] = ms / n
             times.render_ms += ms
         self.last = times
         return times
 
     @staticmethod
-    def samples_per_frame(view: MethodView) -> int:
-        if view.ms_per_sample <= 0.0:
+    def samples_per_frame(view: MethodView, budget_ms: float) -> int:
+        """Samples that fit in `budget_ms` by the view's measured cost (1 before it is known)."""
+        ms = view.ms_per_sample.get(view.shown, 0.0)
+        if ms <= 0.0:
             return 1
-        return int(max(1, min(MAX_SAMPLES_PER_FRAME, FRAME_BUDGET_MS // view.ms_per_sample)))
+        return int(max(1, min(MAX_SAMPLES_PER_FRAME, budget_ms // ms)))
 
     def _add_samples(self, view: MethodView, n: int) -> float:
         r = self.renderer
-        r._acc, r.method, r.camera, r.seed = view.acc, view.method, view.camera, self.seed
+        r._acc, r.method, r.camera, r.seed = view.acc, view.shown, view.camera, self.seed
         try:
             return r.add_samples(n)
         finally:
@@ -185,6 +211,8 @@ class RenderSession:
     def finished(self, max_samples: int, want_probes: bool) -> bool:
         """True when another step would do nothing (the viewer may then wait for events)."""
         if want_probes and not self.renderer.probes_current():
+            return False
+        if any(v.shown != self.shown_method(v.method) for v in self.views.values()):
             return False
         return all(v.acc is None or v.acc.samples >= max_samples
                    or (self.renderer.needs_probes(v.method) and self.renderer.probe_grid is None)
@@ -198,6 +226,20 @@ class RenderSession:
     def samples(self, method: str) -> int:
         view = self.views.get(method)
         return 0 if view is None else view.samples
+
+    def label(self, method: str) -> str:
+        """A view's caption: its method and samples, and the preview it shows while baking."""
+        view = self.views.get(method)
+        shown = method if view is None else view.shown
+        extra = "" if shown == method else f" (bake {self._bake_percent()}%: {shown} meanwhile)"
+        return f"{method}  {self.samples(method)} spp{extra}"
+
+    def _bake_percent(self) -> int:
+        g = self.renderer.probe_grid
+        if g is None:
+            return 0
+        total = g.passes_total * g.count
+        return int(100 * (total - g.probes_left) / max(total, 1))
 
     def image(self, method: str) -> np.ndarray | None:
         """The linear RGB image of a shown method, (H, W, 3), row 0 at the top."""
