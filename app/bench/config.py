@@ -46,7 +46,7 @@ class BenchConfig:
     # --preset interact (interact.py): the replayed viewer session
     interact_sizes: tuple[tuple[int, int], ...] = ((1920, 1080), (1280, 720))
     # probe settings replayed, each (grid, walks per probe)
-    interact_probes: tuple[tuple[int, int], ...] = ((64, 256),)
+    interact_probes: tuple[tuple[int, int], ...] = ((64, 256), (128, 64))
     interact_bake_budget_ms: float = BAKE_BUDGET_MS["gpu"]     # GPU time a frame gives the bake
     interact_frame_budget_ms: float = FRAME_BUDGET_MS["gpu"]   # ... and a frame in all (session.py)
     interact_target_spp: tuple = (("probes", 64), ("raymarch", 16), ("pt", 256))
@@ -71,8 +71,8 @@ PRESETS = {
     # the bake's profile against the GPU's ceiling, with the raymarcher's error (bake.py)
     "bake": BenchConfig(mode="bake", scenes=("bonsai", "fuel", "hydrogen", "foot"), ref_spp=16384,
                         raymarch_frames=(16,)),
-    # the replayed viewer session (interact.py): about 4 minutes on an H100, half of it the
-    # 24 references (--ref-dir reuses them)
+    # the replayed viewer session (interact.py), two probe settings: about 4 minutes a scene on
+    # an H100, a third of it the 12 references per scene (--ref-dir reuses them)
     "interact": BenchConfig(mode="interact", scenes=("bonsai", "foot"), ref_samples_per_pass=64),
     # the same session on llvmpipe: small images and probes (warm against cold at small size)
     "interact-quick": BenchConfig(mode="interact", scenes=("anisotropic", "thick"),
