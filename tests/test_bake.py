@@ -292,3 +292,41 @@ def test_adaptive_walks_follow_the_noise_with_a_small_measured_bias(ctx):
     print(f"walks saved {saved:.2f}; L00 difference {diff:.4f}, adaptive bakes' noise {noise:.4f}")
     assert saved > 0.2
     assert diff < 0.02
+
+
+def test_progress_sums_on_the_gpu_are_the_probes_column_sums(ctx):
+    """glsl/probe_progress.comp against NumPy over the accumulators it spares the host reading
+    (504 probes: two workgroups, the second partly empty)."""
+    r = Renderer(ctx, parse_scene({**SHORT_WALKS, "probes": {"grid": [9, 8, 7], "samples": 128,
+                                                             "fit": "box"}}))
+    r.start_bake(3)
+    grid = r.probe_grid
+    r.bake_light()
+    assert grid.passes_total >= 2
+    grid.bake_pass(r.resources, light=r._light)
+    grid.bake_pass(r.resources, light=r._light)
+    data = np.frombuffer(grid.accums.read(), np.float32).reshape(grid.count, 32)
+    change, magnitude = grid.progress_sums()
+    assert magnitude > 0 and change > 0
+    np.testing.assert_allclose(change, data[:, 29].astype(np.float64).sum(), rtol=1e-5)
+    np.testing.assert_allclose(magnitude, data[:, 30].astype(np.float64).sum(), rtol=1e-5)
+    rep = grid.progress_report()
+    assert rep.passes_done == 2 and np.isfinite(rep.standard_error) and rep.standard_error > 0
+    assert grid.count == 504
+    r.release()
+
+
+def test_accumulation_clears_on_the_gpu_and_leaves_the_framebuffer_alone(ctx):
+    from app.render.accumulation import Accumulation
+    acc = Accumulation(ctx, 5, 3)
+    other = ctx.simple_framebuffer((2, 2))
+    try:
+        acc.texture.write(np.full((3, 5, 4), 7.0, np.float32).tobytes())
+        other.use()
+        acc.reset()
+        assert ctx.fbo is other and acc.samples == 0
+        assert not np.frombuffer(acc.texture.read(), np.float32).any()
+    finally:
+        ctx.screen.use() if ctx.screen is not None else None
+        other.release()
+        acc.release()

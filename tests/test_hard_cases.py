@@ -712,10 +712,10 @@ def test_new_volume_never_reuses_stale_probes_or_light(renderers, monkeypatch):
     switch to C; C must never pass for baked."""
     from app.render.light_transmittance import LightTransmittance
     bakes = []
-    real_bake = LightTransmittance.bake
-    monkeypatch.setattr(LightTransmittance, "bake",
+    real_begin = LightTransmittance.begin     # every light-grid bake, whole or sliced, begins
+    monkeypatch.setattr(LightTransmittance, "begin",
                         lambda self, resources, *rest: (bakes.append(1),
-                                                        real_bake(self, resources, *rest)))
+                                                        real_begin(self, resources, *rest)))
     scene = _scene(camera={**CAMERA, "width": 4, "height": 4},
                    probes={"grid": [1, 1, 1], "samples": 1})
     r = renderers(scene)

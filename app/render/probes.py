@@ -113,6 +113,8 @@ class ProbeGrid:
         self.walk_radiance = ctx.buffer(reserve=walks * 16)
         self.accums = ctx.buffer(reserve=self.count * PROBE_ACCUM_BYTES)
         self.progress = ctx.buffer(reserve=4)
+        self._progress_program = None   # glsl/probe_progress.comp, built on first use
+        self._partial_sums = None
         self.noise = ctx.buffer(reserve=8)   # lib/probe_noise.glsl
         defines = {"PROBE_IMAGE_FORMAT": precision, **self.defines()}
         self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable)}
@@ -318,10 +320,28 @@ class ProbeGrid:
         data = np.frombuffer(self.accums.read(), np.float32).reshape(self.count, 32)[:, 28]
         return data.reshape(self.grid[2], self.grid[1], self.grid[0]).copy()
 
+    def progress_sums(self) -> tuple[float, float]:
+        """Sums over probes of the last pass's squared change of L00 and of squared L00, reduced
+        on the GPU (glsl/probe_progress.comp): a read of count / 256 pairs, not of every probe's
+        accumulator (268 MB at 128^3 probes)."""
+        groups = (self.count + 255) // 256
+        if self._progress_program is None:
+            self._progress_program = compute_program(self.ctx, "probe_progress.comp")
+        if self._partial_sums is None or self._partial_sums.size != groups * 8:
+            if self._partial_sums is not None:
+                self._partial_sums.release()
+            self._partial_sums = self.ctx.buffer(reserve=groups * 8)
+        self.accums.bind_to_storage_buffer(4)
+        self._partial_sums.bind_to_storage_buffer(0)
+        set_uniforms(self._progress_program, {"probe_count": self.count})
+        self._progress_program.run(groups)
+        self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
+        sums = np.frombuffer(self._partial_sums.read(), np.float32).reshape(groups, 2)
+        return float(sums[:, 0].astype(np.float64).sum()), float(sums[:, 1].astype(np.float64).sum())
+
     def progress_report(self) -> BakeProgress:
-        """Reads each probe's last change (a small read; call it between passes, not per frame)."""
-        data = np.frombuffer(self.accums.read(), np.float32).reshape(self.count, 32)
-        change, magnitude = data[:, 29].sum(), data[:, 30].sum()
+        """The bake's progress from each probe's last change (call it when a pass ends)."""
+        change, magnitude = self.progress_sums()
         rel = float(np.sqrt(change / magnitude)) if magnitude > 0 else 0.0
         # The mean of P pass estimates moves by (X_P - M_(P-1)) / P, whose mean square is
         # sigma^2 / (P (P - 1)); so the mean's standard error sigma / sqrt(P) is rms * sqrt(P - 1).
@@ -365,7 +385,7 @@ class ProbeGrid:
         for obj in (*self.textures, self.walk_states, self.walk_radiance, self.accums, self.progress,
                     self.noise, self.noise_program, self.prior,
                     self.walk_program, self._walk_profile_program, self.project_program,
-                    self.sun_program):
+                    self.sun_program, self._progress_program, self._partial_sums):
             if obj is not None:
                 obj.release()
 

@@ -165,13 +165,14 @@ class RenderSession:
         r = self.renderer
         if want_probes and not r.probes_current():
             starting = r.probe_grid is None or r._baked_key != r.bake_key()
+            passes = None if starting else r.probe_grid.passes_done
             times.bake_ms = r.bake_step(self.seed, budget_ms=self.bake_budget_ms)
             if starting:
                 self.bake_ms = 0.0
                 self.bake_generation += 1
             self.bake_ms += times.bake_ms
             self.bake_passes_run += 1
-            if r.probe_grid.next_probe == 0:   # a pass ended: its progress is readable
+            if r.probe_grid.passes_done not in (0, passes):   # a pass ended: its progress
                 self.bake_report = r.probe_grid.progress_report()
             self.restart([m for m in self.views if r.needs_probes(m)])
         # a view whose preview is over (the bake ended, or was never needed) starts its own method
