@@ -194,7 +194,8 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
                            for v in ("warm", "cold")]]
     # the session replayed with each method, against the same references (rendered once)
     assert events == [*session("probes"), *session("raymarch"), ("raymarch_switch", "raymarch", None),
-                      ("dispatch_tail", "probes", None), ("dispatch_tail", "pt", None)]
+                      ("dispatch_tail", "raymarch", None), ("dispatch_tail", "probes", None),
+                      ("dispatch_tail", "pt", None)]
     for r in recs:
         assert r["mode"] == "interact" and r["scene"] == "tiny" and (r["width"], r["height"]) == (24, 16)
         if r["event"] == "dispatch_tail":
@@ -213,10 +214,10 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
         assert times == sorted(times)
         walls = [t for t, _ in r["wall_curve"]]
         assert walls == sorted(walls) and len(walls) == len(times)
-    assert recs[-3]["method"] == "raymarch" and recs[1]["orbit_frames"] == 3
+    assert recs[-4]["method"] == "raymarch" and recs[1]["orbit_frames"] == 3
     assert recs[1]["frames"] >= 3
     # the edit's re-bake happened in the timed frames: its first frame pays a bake slice
-    assert all(r["first_frame_ms"] > 0 for r in recs[:-2])
+    assert all(r["first_frame_ms"] > 0 for r in recs[:-3])
     assert set(data["references"]) == {f"tiny_24x16_{k}" for k in
                                        ("load", "orbit", "tf_drag", "sun_30deg", "density",
                                         "albedo")}
@@ -290,7 +291,7 @@ def test_probe_methods_show_the_raymarcher_while_baking_then_their_own(ctx):
         # samples per frame from the budget the slice left: none left -> one each
         s.set_scene(s.scene.replace(albedo=0.5))
         s.frame_budget_ms = 0.0
-        s.views["probes"].ms_per_sample["raymarch"] = 1.0
+        s.views["probes"].dispatch_ms["raymarch"] = {1: 1.0, 4: 4.0}
         s.step(8, True)
         assert view.samples == 1
         s.frame_budget_ms = 1e6
@@ -300,3 +301,19 @@ def test_probe_methods_show_the_raymarcher_while_baking_then_their_own(ctx):
         assert view.samples == 8 and before == 1
     finally:
         s.release()
+
+
+def test_samples_per_dispatch_follow_a_fixed_plus_per_sample_cost():
+    """A dispatch that waits for its longest paths costs nearly as much for 8 samples as for 1: the
+    session then takes the 8 (measured once), and fits many where the cost is per sample."""
+    from app.viewer.session import MethodView, RenderSession
+    view = MethodView("probes")
+    per_frame = RenderSession.samples_per_frame
+    assert per_frame(view, 6.0) == 1                                   # nothing timed yet
+    view.dispatch_ms["probes"] = {1: 27.5}
+    assert per_frame(view, 6.0) == 8                                   # overruns: try 8 once
+    view.dispatch_ms["probes"][8] = 25.0 + 2.5                         # 27.1 + 0.06/sample
+    assert 8 <= per_frame(view, 6.0) <= 64
+    view.dispatch_ms["raymarch"] = {1: 2.0, 3: 6.0}                    # 2 ms a sample, no tail
+    view.shown = "raymarch"
+    assert per_frame(view, 12.5) == 6 and per_frame(view, 1.0) == 1

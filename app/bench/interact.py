@@ -231,7 +231,8 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
             # switch probes -> raymarcher: the same state, so the albedo reference serves
             run = run_frames(session, "raymarch", config, reference, noise, seed=9)
             add(record(base, "raymarch_switch", "raymarch", None, run))
-            for method in ("probes", "pt"):
+            # one sample's dispatch of the raymarcher is what a camera move costs
+            for method in ("raymarch", "probes", "pt"):
                 tail = dispatch_tail(r, method, config.interact_tail_k)
                 results.add(dict(base, event="dispatch_tail", method=method, variant=None, **tail))
                 _log(f"  {tag} dispatch tail {method}: {tail['ms_per_sample_1']:.3f} ms/sample at "
