@@ -19,7 +19,7 @@ from .pathtracer import PathTracer
 from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_MIN_SIDE,
                                   SOFTWARE_MIN_SIDE, LightTransmittance, min_side_for_probes)
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order
-from .visible_region import gpu_visible_region
+from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
 from .raymarch import Raymarcher, min_step_voxels
 from .resources import SceneResources
@@ -121,6 +121,7 @@ class Renderer:
         self.method = "pt"
         self._region_key: tuple | None = None
         self._region = None
+        self._region_pass = VisibleRegionPass(ctx)
         self.seed = 0
         self.camera = None
         self.last_bake_ms = 0.0
@@ -209,7 +210,7 @@ class Renderer:
         s = self.scene
         key = (self.resources.volume_version, s.transfer_function, s.density_scale > 0)
         if self._region_key != key:
-            self._region = gpu_visible_region(self.ctx, self.resources)
+            self._region = self._region_pass.region(self.resources)
             self._region_key = key
         return self._region
 
@@ -505,5 +506,6 @@ class Renderer:
             self.probe_grid.release()
         if self._acc is not None:
             self._acc.release()
+        self._region_pass.release()
         self.resources.release()
         self.timer.release()

@@ -4,8 +4,6 @@ function or the density scale's sign changes. NumPy took 1.3 s on bonsai (256^3)
 for every transfer-function edit, which the viewer felt as a stall."""
 from __future__ import annotations
 
-import weakref
-
 import moderngl
 import numpy as np
 
@@ -16,37 +14,45 @@ from .resources import TRANSFER_UNIT, VOLUME_UNIT, SceneResources
 COUNTS_UNIT = 14   # the positive-node counts, read only during the pass
 NONE_VISIBLE = 0xFFFFFFFF
 
-_programs: "weakref.WeakKeyDictionary[moderngl.Context, moderngl.ComputeShader]" = \
-    weakref.WeakKeyDictionary()
+class VisibleRegionPass:
+    """The pass and its program, owned by one Renderer (compiled on first use, released with it)."""
 
+    def __init__(self, ctx: moderngl.Context):
+        self.ctx = ctx
+        self.program: moderngl.ComputeShader | None = None
 
-def gpu_visible_region(ctx: moderngl.Context, resources: SceneResources
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """World (low, high) corners of where sigma_t can be > 0 (the whole box when nowhere)."""
-    half = np.asarray(resources.volume.half_extent, np.float64)
-    if resources.scene.density_scale <= 0:
-        return -half, half
-    program = _programs.get(ctx)
-    if program is None:
-        program = _programs[ctx] = compute_program(ctx, "visible_region.comp")
-    dims = tuple(int(v) for v in resources.volume.dims)
-    counts = positive_node_counts(resources.table[:, 3])
-    counts_tex = ctx.texture((len(counts), 1), 1, counts.tobytes(), dtype="i4")
-    counts_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-    cells = ctx.buffer(np.array([NONE_VISIBLE] * 3 + [0] * 3, np.uint32).tobytes())
-    try:
-        resources.bind()
-        counts_tex.use(COUNTS_UNIT)
-        set_uniforms(program, {"volume_density": VOLUME_UNIT, "transfer_function": TRANSFER_UNIT,
-                               "transfer_size": int(len(resources.table)),
-                               "positive_node_counts": COUNTS_UNIT, "dims": dims})
-        cells.bind_to_storage_buffer(0)
-        program.run((dims[0] + 8) // 8, (dims[1] + 8) // 8, (dims[2] + 4) // 4)
-        ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
-        found = np.frombuffer(cells.read(), np.uint32)
-    finally:
-        counts_tex.release()
-        cells.release()
-    if found[0] == NONE_VISIBLE:
-        return -half, half
-    return region_from_cells(found[:3], found[3:], dims, half)
+    def region(self, resources: SceneResources) -> tuple[np.ndarray, np.ndarray]:
+        """World (low, high) corners of where sigma_t can be > 0 (the whole box when nowhere)."""
+        ctx = self.ctx
+        half = np.asarray(resources.volume.half_extent, np.float64)
+        if resources.scene.density_scale <= 0:
+            return -half, half
+        if self.program is None:
+            self.program = compute_program(ctx, "visible_region.comp")
+        program = self.program
+        dims = tuple(int(v) for v in resources.volume.dims)
+        counts = positive_node_counts(resources.table[:, 3])
+        counts_tex = ctx.texture((len(counts), 1), 1, counts.tobytes(), dtype="i4")
+        counts_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        cells = ctx.buffer(np.array([NONE_VISIBLE] * 3 + [0] * 3, np.uint32).tobytes())
+        try:
+            resources.bind()
+            counts_tex.use(COUNTS_UNIT)
+            set_uniforms(program, {"volume_density": VOLUME_UNIT, "transfer_function": TRANSFER_UNIT,
+                                   "transfer_size": int(len(resources.table)),
+                                   "positive_node_counts": COUNTS_UNIT, "dims": dims})
+            cells.bind_to_storage_buffer(0)
+            program.run((dims[0] + 8) // 8, (dims[1] + 8) // 8, (dims[2] + 4) // 4)
+            ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
+            found = np.frombuffer(cells.read(), np.uint32)
+        finally:
+            counts_tex.release()
+            cells.release()
+        if found[0] == NONE_VISIBLE:
+            return -half, half
+        return region_from_cells(found[:3], found[3:], dims, half)
+
+    def release(self) -> None:
+        if self.program is not None:
+            self.program.release()
+            self.program = None
