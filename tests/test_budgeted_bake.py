@@ -312,8 +312,11 @@ def test_samples_per_dispatch_follow_a_fixed_plus_per_sample_cost():
     assert per_frame(view, 6.0) == 1                                   # nothing timed yet
     view.dispatch_ms["probes"] = {1: 27.5}
     assert per_frame(view, 6.0) == 8                                   # overruns: try 8 once
-    view.dispatch_ms["probes"][8] = 25.0 + 2.5                         # 27.1 + 0.06/sample
-    assert 8 <= per_frame(view, 6.0) <= 64
+    view.dispatch_ms["probes"][8] = 25.0                               # the tail: no dearer
+    assert per_frame(view, 6.0) == 16                                  # so double
+    view.dispatch_ms["probes"][16] = 28.0                              # 22 ms + 0.375 a sample
+    view.dispatch_ms["probes"][32] = 34.0
+    assert per_frame(view, 6.0) == int((1.25 * 22.375 - 22.0) // 0.375)  # 14: at most 25% dearer
     view.dispatch_ms["raymarch"] = {1: 2.0, 3: 6.0}                    # 2 ms a sample, no tail
     view.shown = "raymarch"
     assert per_frame(view, 12.5) == 6 and per_frame(view, 1.0) == 1

@@ -204,14 +204,19 @@ class RenderSession:
         seen = view.dispatch_ms.get(view.shown)
         if not seen:
             return 1
-        n_lo, n_hi = min(seen), max(seen)
-        if n_lo == n_hi:
-            if n_lo == 1 and seen[1] > budget_ms:
+        counts = sorted(seen)
+        if len(counts) == 1:
+            n = counts[0]
+            if n == 1 and seen[1] > budget_ms:
                 return TAIL_PROBE_SAMPLES
-            base, per = 0.0, seen[n_lo] / n_lo
+            base, per = 0.0, seen[n] / n
         else:
-            per = max((seen[n_hi] - seen[n_lo]) / (n_hi - n_lo), 1e-6)
-            base = max(seen[n_lo] - per * n_lo, 0.0)
+            # the slope between the two largest dispatches timed (the smallest sit on the tail)
+            n_lo, n_hi = counts[-2], counts[-1]
+            per = (seen[n_hi] - seen[n_lo]) / (n_hi - n_lo)
+            if per <= 0.0:   # more samples cost nothing yet: double them
+                return min(MAX_SAMPLES_PER_FRAME, 2 * n_hi)
+            base = max(seen[n_hi] - per * n_hi, 0.0)
         allowed = max(budget_ms, TAIL_SLACK * (base + per))
         return int(max(1, min(MAX_SAMPLES_PER_FRAME, (allowed - base) // per)))
 
