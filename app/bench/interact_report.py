@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from .records import caveat
+
 
 def _ms(v) -> str:
     if v is None:
@@ -121,7 +123,7 @@ def write_interact_report(data: dict, out: Path) -> Path:
     meta = data["meta"]
     lines = ["# Interaction", "", f"Device: **{meta['device']}**. Started {meta.get('started')}, "
              f"finished {meta.get('finished', 'not finished (partial run)')}.", "",
-             f"Command: `{meta.get('command', '')}`", "", *interact_section(data, out)]
+             f"Command: `{meta.get('command', '')}`", "", *caveat(meta), *interact_section(data, out)]
     path = out / "report.md"
     path.write_text("\n".join(lines))
     return path

@@ -56,3 +56,8 @@ def make_record(base: dict, config: BenchConfig, method: str, frames: int, image
     rec["image_bytes"] = config.width * config.height * per_pixel
     rec["gpu_bytes"] = rec["image_bytes"] + rec.get("probe_bytes", 0) + rec.get("light_bytes", 0)
     return rec
+
+
+def caveat(meta: dict) -> list[str]:
+    """A run's known shortcoming, stated at the top of its report (results.json's meta.caveat)."""
+    return [f"**Caveat:** {meta['caveat']}", ""] if meta.get("caveat") else []

@@ -8,6 +8,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from .metrics import corrected_floor, corrected_rrmse
+from .records import caveat
 
 METHOD_ORDER = ("pt", "probes", "probes-only", "raymarch")
 COLOURS = {"pt": "#222222", "probes": "#1f77b4", "probes-only": "#2ca02c", "raymarch": "#d62728"}
@@ -49,9 +50,6 @@ def _pixels(data: dict) -> int:
     return int(config.get("width", 512)) * int(config.get("height", 512))
 
 
-def caveat(meta: dict) -> list[str]:
-    """A run's known shortcoming, stated at the top of its report (results.json's meta.caveat)."""
-    return [f"**Caveat:** {meta['caveat']}", ""] if meta.get("caveat") else []
 
 
 def _header(title: str, meta: dict) -> list[str]:
