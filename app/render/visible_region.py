@@ -11,7 +11,7 @@ from ..gl.shaders import compute_program, set_uniforms
 from ..twins.visible_region import positive_node_counts, region_from_cells
 from .resources import TRANSFER_UNIT, VOLUME_UNIT, SceneResources
 
-COUNTS_UNIT = 14   # the positive-node counts, read only during the pass
+COUNTS_UNIT = 15   # the positive-node counts, read only during the pass (14: the adaptive layout's warp)
 NONE_VISIBLE = 0xFFFFFFFF
 
 class VisibleRegionPass:
