@@ -287,8 +287,8 @@ class Viewer:
         if grid is None:
             return []
         w, h = self.session.size
-        pixels = orbit.project(self.view_projection(), probe_centres(grid.grid, self.session.volume.half_extent,
-                                                                     grid.box), w, h)
+        centres = probe_centres(grid.grid, self.session.volume.half_extent, grid.box, grid.planes)
+        pixels = orbit.project(self.view_projection(), centres, w, h)
         x0, _, rw, rh = self.view_rect_framebuffer()
         top = self.framebuffer_size[1] - rh
         return [[x0 + px / w * rw, top + py / h * rh] for px, py in pixels.tolist()]
