@@ -116,16 +116,19 @@ def probe_density(variation: np.ndarray, strength: float) -> np.ndarray | None:
     if strength <= 0 or not np.isfinite(v).all() or top <= 0 or v.min() >= top:
         return None
     raw = (1.0 - strength) + strength * v / v.mean()
+    # Bins without variation at strength 1 get a trace, so that a scale exists at which the
+    # clamped density has mean 1 (else a few sharp bins could not hold the mass beyond the floor).
+    raw = np.maximum(raw, 1e-9 * raw.max())
     lo, hi = 1.0 / MAX_SPACING, 1.0 / MIN_SPACING
-    # mean(clip(c raw, lo, hi)) rises with c from lo to hi: bisect for 1
-    c_lo, c_hi = 0.0, hi / max(raw.min(), 1e-300) + 1.0
+    # mean(clip(c raw, lo, hi)) rises with c from lo to hi: bisect (geometrically) for 1
+    c_lo, c_hi = lo / raw.max(), hi / raw.min()
     for _ in range(200):
-        c = 0.5 * (c_lo + c_hi)
+        c = math.sqrt(c_lo * c_hi)
         if np.clip(c * raw, lo, hi).mean() < 1.0:
             c_lo = c
         else:
             c_hi = c
-    return np.clip(0.5 * (c_lo + c_hi) * raw, lo, hi)
+    return np.clip(c_hi * raw, lo, hi)
 
 
 def planes_from_density(density: np.ndarray, n: int) -> np.ndarray:

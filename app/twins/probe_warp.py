@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 # Columns of the warp table (and at least the most probes per axis, whose planes share it).
-WARP_COLUMNS = 4096
+WARP_COLUMNS = 16384   # GL 4.3 guarantees 2D textures this wide
 WARP_ROWS = 6    # rows 0..2: the warp per axis; rows 3..5: the planes per axis
 
 
@@ -71,3 +71,35 @@ def probe_fractions(grid: tuple[int, int, int], planes: tuple | None) -> np.ndar
     k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
     px, py, pz = (np.asarray(p, np.float64) for p in planes)
     return np.stack([px[i], py[j], pz[k]], axis=-1).reshape(-1, 3)
+
+
+def texture_trilinear(values: np.ndarray, uvw: np.ndarray) -> np.ndarray:
+    """GL's linear filter of a 3D texture (values (nz, ny, nx), texel centres at (i + 0.5) / n,
+    clamped to the edge) at coordinates uvw (..., 3): how probe_fetch blends the probes."""
+    uvw = np.asarray(uvw, np.float64)
+    nz, ny, nx = values.shape
+    out = np.zeros(uvw.shape[:-1])
+    base, frac = [], []
+    for axis, n in enumerate((nx, ny, nz)):
+        c = uvw[..., axis] * n - 0.5
+        b = np.floor(c)
+        base.append(b.astype(np.int64))
+        frac.append(c - b)
+    for dz in (0, 1):
+        for dy in (0, 1):
+            for dx in (0, 1):
+                ix = np.clip(base[0] + dx, 0, nx - 1)
+                iy = np.clip(base[1] + dy, 0, ny - 1)
+                iz = np.clip(base[2] + dz, 0, nz - 1)
+                w = ((frac[0] if dx else 1 - frac[0]) * (frac[1] if dy else 1 - frac[1])
+                     * (frac[2] if dz else 1 - frac[2]))
+                out += w * values[iz, iy, ix]
+    return out
+
+
+def interpolate_between_planes(values: np.ndarray, planes: tuple, s: np.ndarray) -> np.ndarray:
+    """Trilinear interpolation between the 8 probes around world fractions s (..., 3) at their
+    real positions (planes per axis), the outer probes' values beyond them: what the warp makes
+    texture_trilinear at probe_warp_uvw compute, up to the table's error."""
+    uvw = np.stack([warp_exact(planes[a], np.asarray(s)[..., a]) for a in range(3)], axis=-1)
+    return texture_trilinear(values, uvw)

@@ -7,8 +7,10 @@
 // them, as the uniform grid does.
 //
 // One R32F texture `probe_warp` (app/render/probes.py) holds, for axis a:
-//   row a:     w_a tabulated at s = j / (columns - 1), j = 0 .. columns - 1, read with linear
-//              filtering (exact where w_a is linear; within a table step next to a plane);
+//   row a:     w_a tabulated at s = j / (columns - 1), j = 0 .. columns - 1 (16384 columns), read
+//              with linear filtering: exact where w_a is linear (the identity warp included); in a
+//              table step holding a plane off by at most about n_a / 16384 of a probe texel
+//              (measured: 1.8% of a texel at 256 planes, 0.1% at 64);
 //   row 3 + a: p_a[i] at column i (texelFetch), for probe_position.
 // NumPy twin: app/twins/probe_warp.py. PROBE_WARP 0 (default) compiles none of this.
 #ifndef PROBE_WARP
