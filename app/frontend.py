@@ -114,7 +114,9 @@ def scene_from_arg(arg: str | None) -> Scene:
 # Scene fields the options set, for messages that name the option as well as the field.
 _OPTION_FIELDS = {"camera.width": "--width", "camera.height": "--height",
                   "probes.grid": "--probe-grid", "probes.samples": "--probe-samples",
-                  "probes.sh_window": "--sh-window", "probes.precision": "--probe-precision"}
+                  "probes.sh_window": "--sh-window", "probes.precision": "--probe-precision",
+                  "probes.layout": "--probe-layout", "probes.adaptive_strength": "--adaptive-strength",
+                  "probes.adaptive_indicator": "--adaptive-indicator"}
 
 
 def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
@@ -124,6 +126,10 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
         ("grid", getattr(args, "probe_grid", None)), ("samples", getattr(args, "probe_samples", None)),
         ("sh_window", getattr(args, "sh_window", None)),
         ("precision", getattr(args, "probe_precision", None))) if value}
+    probes.update({key: value for key, value in (
+        ("layout", getattr(args, "probe_layout", None)),
+        ("adaptive_strength", getattr(args, "adaptive_strength", None)),
+        ("adaptive_indicator", getattr(args, "adaptive_indicator", None))) if value is not None})
     camera = {key: value for key, value in (("width", getattr(args, "width", None)),
                                             ("height", getattr(args, "height", None))) if value}
     if not probes and not camera:
