@@ -19,6 +19,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from .scene import Scene, SceneError, default_scene, load_scene, parse_scene, scene_to_dict
 
 MAX_SPP = (1 << 31) - 1        # samples per pixel reach the shaders as a 32-bit uniform
@@ -284,6 +286,14 @@ def render_to_files(args: argparse.Namespace) -> int:
               f"bake GPU time: {result.bake_ms:.1f} ms; last pass changed the probes by "
               f"{100 * rep.relative_change:.2f}% (est. standard error "
               f"{'n/a, one pass' if rep.passes_done < 2 else f'{100 * rep.standard_error:.2f}%'})")
+        if scene.probes.layout == "adaptive":
+            spacing = ("evenly spaced (no variation to follow)" if g.planes is None else
+                       "spacing per axis from " + ", ".join(
+                           f"{min(np.diff(p)) * len(p):.2f}-{max(np.diff(p)) * len(p):.2f}"
+                           if len(p) > 1 else "1" for p in g.planes) + " x the uniform one")
+            print(f"probe layout: adaptive ({scene.probes.adaptive_indicator}, strength "
+                  f"{scene.probes.adaptive_strength:g}): {spacing}; "
+                  f"{renderer.last_layout_ms:.0f} ms on the host")
     if args.method == "raymarch" and (renderer.effective_raymarch_step_voxels
                                       > renderer.raymarch_step_voxels):
         print(f"note: raymarch step {renderer.effective_raymarch_step_voxels:.3g} voxels, not the "
