@@ -21,7 +21,8 @@ from .transfer import COLORMAPS
 from .volume import BUILTIN_VOLUMES, RAW_DTYPES
 
 __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_SAMPLES",
-           "MAX_TRANSFER_ROWS", "PROBE_FITS", "PROBE_INDICATORS", "PROBE_LAYOUTS", "PROBE_PRECISIONS", "SH_WINDOWS", "WINDOW_PRESETS",
+           "MAX_TRANSFER_ROWS", "PROBE_FITS", "PROBE_INDICATORS", "PROBE_LAYOUTS", "PROBE_PRECISIONS",
+           "SH_WINDOWS", "WINDOW_PRESETS",
            "CameraSpec", "EnvironmentMapSpec",
            "LightSpec", "ProbeSpec", "Scene", "SceneError", "TransferFunctionSpec", "VolumeSpec",
            "default_scene", "load_scene", "parse_scene", "scene_to_dict"]

@@ -31,7 +31,6 @@ MAX_SPACING = 3.0       # probe spacing at most this many times the uniform grid
 MIN_SPACING = 0.25      # and at least this fraction of it
 BINS_PER_SPACING = 8    # bins of the density per uniform probe spacing
 MAX_FIELD_SIDE = 256    # the indicator field is block-averaged down to this many samples per axis
-INDICATORS = ("extinction", "sun")
 
 
 def block_factors(shape: tuple[int, ...], max_side: int = MAX_FIELD_SIDE) -> tuple[int, ...]:

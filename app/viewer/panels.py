@@ -9,7 +9,8 @@ import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
 from ..render.renderer import METHODS, RAYMARCH_STAGES
-from ..scene import PROBE_FITS, PROBE_INDICATORS, PROBE_LAYOUTS, PROBE_PRECISIONS, SH_WINDOWS
+from ..scene import (PROBE_FITS, PROBE_INDICATORS, PROBE_LAYOUTS, PROBE_PRECISIONS,
+                     SH_WINDOWS)
 from ..volume import BUILTIN_VOLUMES
 from .overlays import shortcut_table
 from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
