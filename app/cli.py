@@ -41,6 +41,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
             changes["ref_spp"] = args.ref_spp
         if args.code_label:
             changes["code_label"] = args.code_label
+        if args.probe_layouts:
+            changes["probe_layouts"] = args.probe_layouts
+        if args.adaptive_strength is not None:
+            if not 0.0 <= args.adaptive_strength <= 1.0:
+                raise SystemExit(f"error: --adaptive-strength {args.adaptive_strength}: expected "
+                                 "a number in [0, 1]")
+            changes["adaptive_strength"] = args.adaptive_strength
         if args.ref_dir:
             if not (Path(args.ref_dir) / "results.json").is_file():
                 raise SystemExit(f"error: --ref-dir {args.ref_dir} has no results.json")
@@ -55,6 +62,17 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def probe_layouts_arg(text: str) -> tuple[str, ...]:
+    """`bench --probe-layouts`: a comma-separated list of BENCH_PROBE_LAYOUTS."""
+    from .bench.config import BENCH_PROBE_LAYOUTS
+    layouts = tuple(t.strip() for t in text.split(",") if t.strip())
+    unknown = [t for t in layouts if t not in BENCH_PROBE_LAYOUTS]
+    if not layouts or unknown:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of "
+                                         f"{', '.join(BENCH_PROBE_LAYOUTS)}, got {text!r}")
+    return tuple(dict.fromkeys(layouts))
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(prog="radiance-probes",
                                      description="Volume rendering with radiance probes and a "
@@ -62,6 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     from .render.renderer import METHODS, RAYMARCH_STAGES
+    from .scene_types import PROBE_INDICATORS, PROBE_LAYOUTS
     r = sub.add_parser("render", help="render a scene headless to a PNG (and linear .npy/.exr)")
     r.add_argument("scene", nargs="?", help="scene JSON or a volume file (default: built-in scene)")
     r.add_argument("--method", choices=METHODS, default="pt")
@@ -75,6 +94,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--probe-samples", type=positive_int, help="walks per probe")
     r.add_argument("--sh-window", choices=("none", "hann", "lanczos"))
     r.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"))
+    r.add_argument("--probe-layout", choices=PROBE_LAYOUTS,
+                   help="probe planes evenly spaced (uniform) or denser where the indicator "
+                        "varies (adaptive); default: the scene's (uniform)")
+    r.add_argument("--adaptive-strength", type=float, metavar="S",
+                   help="adaptive layout: 0 uniform .. 1 the indicator alone (default 0.5)")
+    r.add_argument("--adaptive-indicator", choices=PROBE_INDICATORS,
+                   help="adaptive layout: sigma_t's variation (extinction, default) or the sun's "
+                        "transmittance's (sun)")
     r.add_argument("--auto-probes", type=fraction, metavar="TARGET",
                    help="choose the cheapest probe setting whose image is within this relative "
                         "RMSE of a path-traced pilot (e.g. 0.05), report why, then render")
@@ -109,6 +136,12 @@ def build_parser() -> argparse.ArgumentParser:
                                         "mode: 'before' and 'after' records side by side)")
     b.add_argument("--merge", nargs="+", metavar="RESULTS_JSON",
                    help="combine these results.json files into OUT/results.json, then report")
+    b.add_argument("--probe-layouts", type=probe_layouts_arg, metavar="L[,L...]",
+                   help="probe layouts each probe setting of the sweep is run with, at the same "
+                        "probe count: uniform, extinction, sun (adaptive with that indicator); "
+                        "default uniform")
+    b.add_argument("--adaptive-strength", type=float, metavar="S",
+                   help="the adaptive layouts' strength in [0, 1] (default: the scene's, 0.5)")
     b.add_argument("--report-only", action="store_true",
                    help="rewrite report.md and plots from an existing results.json")
     b.set_defaults(func=cmd_bench)

@@ -19,6 +19,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from .scene import Scene, SceneError, default_scene, load_scene, parse_scene, scene_to_dict
 
 MAX_SPP = (1 << 31) - 1        # samples per pixel reach the shaders as a 32-bit uniform
@@ -114,7 +116,9 @@ def scene_from_arg(arg: str | None) -> Scene:
 # Scene fields the options set, for messages that name the option as well as the field.
 _OPTION_FIELDS = {"camera.width": "--width", "camera.height": "--height",
                   "probes.grid": "--probe-grid", "probes.samples": "--probe-samples",
-                  "probes.sh_window": "--sh-window", "probes.precision": "--probe-precision"}
+                  "probes.sh_window": "--sh-window", "probes.precision": "--probe-precision",
+                  "probes.layout": "--probe-layout", "probes.adaptive_strength": "--adaptive-strength",
+                  "probes.adaptive_indicator": "--adaptive-indicator"}
 
 
 def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
@@ -124,6 +128,10 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
         ("grid", getattr(args, "probe_grid", None)), ("samples", getattr(args, "probe_samples", None)),
         ("sh_window", getattr(args, "sh_window", None)),
         ("precision", getattr(args, "probe_precision", None))) if value}
+    probes.update({key: value for key, value in (
+        ("layout", getattr(args, "probe_layout", None)),
+        ("adaptive_strength", getattr(args, "adaptive_strength", None)),
+        ("adaptive_indicator", getattr(args, "adaptive_indicator", None))) if value is not None})
     camera = {key: value for key, value in (("width", getattr(args, "width", None)),
                                             ("height", getattr(args, "height", None))) if value}
     if not probes and not camera:
@@ -278,6 +286,14 @@ def render_to_files(args: argparse.Namespace) -> int:
               f"bake GPU time: {result.bake_ms:.1f} ms; last pass changed the probes by "
               f"{100 * rep.relative_change:.2f}% (est. standard error "
               f"{'n/a, one pass' if rep.passes_done < 2 else f'{100 * rep.standard_error:.2f}%'})")
+        if scene.probes.layout == "adaptive":
+            spacing = ("evenly spaced (no variation to follow)" if g.planes is None else
+                       "spacing per axis from " + ", ".join(
+                           f"{min(np.diff(p)) * len(p):.2f}-{max(np.diff(p)) * len(p):.2f}"
+                           if len(p) > 1 else "1" for p in g.planes) + " x the uniform one")
+            print(f"probe layout: adaptive ({scene.probes.adaptive_indicator}, strength "
+                  f"{scene.probes.adaptive_strength:g}): {spacing}; "
+                  f"{renderer.last_layout_ms:.0f} ms on the host")
     if args.method == "raymarch" and (renderer.effective_raymarch_step_voxels
                                       > renderer.raymarch_step_voxels):
         print(f"note: raymarch step {renderer.effective_raymarch_step_voxels:.3g} voxels, not the "

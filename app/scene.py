@@ -13,14 +13,16 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from .scene_types import (MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS, MAX_PROBE_SAMPLES,
-                          MAX_TRANSFER_ROWS, PROBE_FITS, PROBE_PRECISIONS, SH_WINDOWS, WINDOW_PRESETS,
+                          MAX_TRANSFER_ROWS, PROBE_FITS, PROBE_INDICATORS, PROBE_LAYOUTS,
+                          PROBE_PRECISIONS, SH_WINDOWS, WINDOW_PRESETS,
                           CameraSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene, SceneError,
                           TransferFunctionSpec, VolumeSpec, scene_to_dict, window_range)
 from .transfer import COLORMAPS
 from .volume import BUILTIN_VOLUMES, RAW_DTYPES
 
 __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_SAMPLES",
-           "MAX_TRANSFER_ROWS", "PROBE_FITS", "PROBE_PRECISIONS", "SH_WINDOWS", "WINDOW_PRESETS",
+           "MAX_TRANSFER_ROWS", "PROBE_FITS", "PROBE_INDICATORS", "PROBE_LAYOUTS", "PROBE_PRECISIONS",
+           "SH_WINDOWS", "WINDOW_PRESETS",
            "CameraSpec", "EnvironmentMapSpec",
            "LightSpec", "ProbeSpec", "Scene", "SceneError", "TransferFunctionSpec", "VolumeSpec",
            "default_scene", "load_scene", "parse_scene", "scene_to_dict"]
@@ -252,6 +254,13 @@ def _parse_probes(d: Any) -> ProbeSpec:
         if ch != "auto" and (isinstance(ch, bool) or ch not in (1, 3)):
             raise SceneError(f"probes.channels: expected \"auto\", 1 or 3, got {ch!r}")
         kw["channels"] = ch if ch == "auto" else int(ch)
+    if "layout" in d:
+        kw["layout"] = _choice(d["layout"], "probes.layout", PROBE_LAYOUTS)
+    if "adaptive_strength" in d:
+        kw["adaptive_strength"] = _number(d["adaptive_strength"], "probes.adaptive_strength", 0.0, 1.0)
+    if "adaptive_indicator" in d:
+        kw["adaptive_indicator"] = _choice(d["adaptive_indicator"], "probes.adaptive_indicator",
+                                           PROBE_INDICATORS)
     return ProbeSpec(**kw)
 
 

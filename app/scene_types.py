@@ -46,6 +46,10 @@ MAX_TRANSFER_ROWS = 4096  # the table is an N x 1 texture; GL guarantees widths 
 SH_WINDOWS = ("none", "hann", "lanczos")
 PROBE_PRECISIONS = ("rgba32f", "rgba16f")
 PROBE_FITS = ("visible", "box")
+PROBE_LAYOUTS = ("uniform", "adaptive")
+# What drives an adaptive layout's probe density (app/render/probe_planes.py): "extinction", the
+# variation of sigma_t along each axis; "sun", the variation of the sun's transmittance (light grid).
+PROBE_INDICATORS = ("extinction", "sun")
 
 
 @dataclass(frozen=True)
@@ -135,6 +139,12 @@ class ProbeSpec:
     fit: str = "visible"
     # "auto": one channel when the transfer function's colours and both lights are grey, else 3.
     channels: str | int = "auto"
+    # "uniform": probe planes evenly spaced along each axis; "adaptive": per axis, more planes where
+    # `adaptive_indicator` says the light changes fast (app/render/probe_planes.py), the same count.
+    layout: str = "uniform"
+    # 0: uniform; 1: the indicator alone decides (within the spacing bounds of probe_planes.py).
+    adaptive_strength: float = 0.5
+    adaptive_indicator: str = "extinction"
 
 
 @dataclass(frozen=True)

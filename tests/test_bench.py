@@ -106,7 +106,7 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
                          probe_samples=(16,), large_grids=(), probe_frames=(1, 4),
                          raymarch_frames=(1,), showcase=(2, 16), raymarch_steps=(0.5, 1.0),
                          samples_per_dispatch=2,
-                         flip_frames=(4,), image_frames=4)
+                         flip_frames=(4,), image_frames=4, probe_layouts=("uniform", "extinction"))
     path = run_bench(config, tmp_path, command="test")
     data = json.loads(path.read_text())
     records = data["records"]
@@ -128,11 +128,16 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
     assert any(r.get("precision") == "rgba16f" for r in records)
     assert any(r.get("sh_window") == "hann" for r in records)
     assert {r.get("stage") for r in records if r["method"] == "raymarch"} == {"compute", "fragment"}
+    # the layouts at the same probe count (--probe-layouts)
+    layouts = {r.get("probe_layout") for r in records if r["method"] != "pt"}
+    assert layouts == {"uniform", "adaptive-extinction"}
+    assert all("layout_ms" in r for r in records if r.get("probe_layout") == "adaptive-extinction")
     assert data["references"]["anisotropic"]["noise_rrmse"] > 0
     assert (tmp_path / "images" / "anisotropic_reference.png").is_file()
     report = write_report(path)
     text = report.read_text()
     assert "Time to reach an error" in text and (tmp_path / "error_vs_time.png").is_file()
+    assert "Probe layouts at the same probe count" in text and "adaptive-extinction" in text
 
 
 def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):

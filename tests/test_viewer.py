@@ -594,3 +594,56 @@ def test_environment_map_shows_rotates_and_goes_back_to_a_colour(display, tmp_pa
     assert not _is_background(picture0, ENVIRONMENT_SRGB, tol=12).any()
     assert np.abs(picture1 - picture0).mean() > 3.0
     assert d2["scene"]["environment"] == [0.1, 0.1, 0.1]
+
+
+def test_probe_view_shows_where_an_adaptive_layout_put_the_probes(display, tmp_path):
+    """A dense slab across y and an adaptive layout: the spheres sit at the adaptive planes (the
+    bake's probe_position), none at the uniform grid's outer y planes, which it moved inwards."""
+    d = np.full((16, 16, 16), 0.1, np.float32)
+    d[:, 7:9, :] = 1.0
+    np.save(tmp_path / "slab.npy", d)
+    scene = {"volume": {"path": "slab.npy"}, "density_scale": 40,
+             "transfer_function": {"rgba": [[1, 1, 1, 0], [1, 1, 1, 1]]},
+             "camera": {"eye": [0.0, 0.1, 1.6], "target": [0, 0, 0], "width": 64, "height": 64},
+             "probes": {"grid": 4, "samples": 16, "fit": "box", "layout": "adaptive",
+                        "adaptive_strength": 1.0}}
+    (tmp_path / "slab.json").write_text(json.dumps(scene))
+    script = write_script(tmp_path / "s.json", [
+        {"until": "baked"}, {"key": "g"}, {"frames": 2}, {"dump": "alone.json"},
+        {"screenshot": "alone.png"}, {"close": True}])
+    view(["slab.json", "--script", str(script), "--method", "raymarch", "--probe-view",
+          "--window", "640x400"], tmp_path, display)
+    alone = dump(tmp_path / "alone.json")
+    planes = alone["probe_planes"]
+    assert alone["probes_ready"] and planes is not None
+    y = np.asarray(planes[1])
+    assert y.min() > 0.2 and y.max() < 0.8            # drawn towards the slab
+    from app.viewer.display import BACKGROUND
+    image = png(tmp_path / "alone.png")
+    background = np.round(np.array(BACKGROUND) * 255)
+    pixels = np.asarray(alone["probe_pixels"])
+    assert len(pixels) == 64
+    x0, _, rw, rh = alone["view_rect_framebuffer"]
+    top = image.shape[0] - rh
+
+    def in_view(px, py):
+        return x0 + 3 < px < x0 + rw - 3 and top + 40 < py < image.shape[0] - 3
+
+    shown = [~_is_background(image[int(py), int(px)][None], background)[0]
+             for px, py in pixels if in_view(px, py)]
+    assert len(shown) >= 16 and np.mean(shown) > 0.8   # spheres where the probes are
+    # where the uniform grid's outer y planes would have put spheres: background
+    uniform = probe_centres(tuple(alone["probe_grid"]), alone["half_extent"])
+    outer = np.isclose(np.abs(uniform[:, 1]), 0.375)
+    w, h = alone["render_size"]
+    cam = alone["scene"]["camera"]
+    matrix = orbit.view_projection(camera_frame(replace(
+        CameraSpec(), eye=tuple(cam["eye"]), target=tuple(cam["target"]), up=tuple(cam["up"]),
+        fov_y=cam["fov_y"]), w, h))
+    checked = 0
+    for px, py in orbit.project(matrix, uniform[outer], w, h).tolist():
+        fx, fy = x0 + px / w * rw, top + py / h * rh
+        if in_view(fx, fy):
+            assert _is_background(image[int(fy), int(fx)][None], background)[0]
+            checked += 1
+    assert checked >= 8

@@ -8,6 +8,10 @@ from dataclasses import dataclass, replace
 from .scenes import ALL_SCENES
 from ..render.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 
+# The sweep's probe layouts (`--probe-layouts`): "uniform", or an adaptive layout driven by that
+# indicator (app/render/probe_planes.py), each at the same probe counts.
+BENCH_PROBE_LAYOUTS = ("uniform", "extinction", "sun")
+
 
 @dataclass(frozen=True)
 class BenchConfig:
@@ -24,6 +28,8 @@ class BenchConfig:
     probe_frames: tuple[int, ...] = (1, 4, 16, 64, 256)  # probes / probes-only snapshots
     raymarch_frames: tuple[int, ...] = (1, 16)
     showcase: tuple[int, int] = (32, 256)   # grid, samples: images, step/stage/precision sweeps
+    probe_layouts: tuple[str, ...] = ("uniform",)   # of BENCH_PROBE_LAYOUTS, per probe setting
+    adaptive_strength: float | None = None  # the adaptive layouts' strength (None: the scene's)
     raymarch_steps: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0)
     flip_frames: tuple[int, ...] = (16, 256)   # FLIP only at these snapshots (it costs CPU time)
     image_frames: int = 64                  # snapshot saved as PNG for the showcase images

@@ -262,6 +262,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
             lines.append(f"| {s} | {_ms(p['total_ms'])} ({p['spp']}) | " + " | ".join(cells) + " |")
     lines += _table1(data, scenes)
     lines += _sweeps(data, scenes)
+    lines += _layouts(data, scenes)
     lines += ["", "## Raw results", "", "`results.json`: one record per scene, method and setting "
               "(`scene, method, probe_grid, probe_samples, spp, bake_ms, frame_ms, total_ms, rrmse, "
               "flip, gpu_bytes, device`, and the sweep's own fields)."]
@@ -276,7 +277,8 @@ def _table1(data: dict, scenes: list[str]) -> list[str]:
              "Bake GPU time; `probes` frame time and rRMSE after the most frames measured.", ""]
     for s in scenes:
         recs = [r for r in data["records"] if r["scene"] == s and r["method"] == "probes"
-                and r.get("mode") != "cost" and r.get("precision") == "rgba32f" and r.get("sh_window") == "none"]
+                and r.get("mode") != "cost" and r.get("precision") == "rgba32f" and r.get("sh_window") == "none"
+                and r.get("probe_layout", "uniform") == "uniform"]
         if not recs:
             continue
         frames = max(r["spp"] for r in recs)
@@ -299,6 +301,38 @@ def _table1(data: dict, scenes: list[str]) -> list[str]:
     return lines
 
 
+def _layouts(data: dict, scenes: list[str]) -> list[str]:
+    """Probe layouts at the same probe count (bench --probe-layouts): each setting's error and
+    bake time per layout, after the most frames measured."""
+    recs = [r for r in data["records"] if r.get("mode") != "cost" and r["method"] != "pt"
+            and r.get("precision", "rgba32f") == "rgba32f" and r.get("sh_window", "none") == "none"
+            and (r["method"] != "raymarch" or (r.get("stage") == "compute"
+                                              and r.get("raymarch_step") == 0.5))]
+    if not any(r.get("probe_layout", "uniform") != "uniform" for r in recs):
+        return []
+    lines = ["", "## Probe layouts at the same probe count", "",
+             "| scene | grid x walks | layout | bake | probes rRMSE | probes-only rRMSE | "
+             "raymarch rRMSE |", "|---|---|---|---|---|---|---|"]
+    for s in scenes:
+        cells = defaultdict(dict)
+        for r in recs:
+            if r["scene"] != s:
+                continue
+            key = (r["probe_grid"], r["probe_samples"], r.get("probe_layout", "uniform"))
+            best = cells[key].get(r["method"])
+            if best is None or r["spp"] > best["spp"]:
+                cells[key][r["method"]] = r
+        settings = {(g, n) for (g, n, layout) in cells if layout != "uniform"}
+        for (g, n, layout), by_method in sorted(cells.items()):
+            if (g, n) not in settings:
+                continue
+            any_r = next(iter(by_method.values()))
+            errors = " | ".join(shown(by_method[m], data) if m in by_method else ""
+                                for m in ("probes", "probes-only", "raymarch"))
+            lines.append(f"| {s} | {g}^3 x {n} | {layout} | {_ms(any_r['bake_ms'])} | {errors} |")
+    return lines
+
+
 def _sweeps(data: dict, scenes: list[str]) -> list[str]:
     """Raymarch step and stage, 16F against 32F, SH window: at the showcase setting."""
     lines = ["## Raymarch step and stage, precision and SH window (showcase setting)", "",
@@ -313,6 +347,8 @@ def _sweeps(data: dict, scenes: list[str]) -> list[str]:
                        f"{r.get('precision')} window {r.get('sh_window')}")
             else:
                 key = f"{r['method']} {r.get('precision')} window {r.get('sh_window')}"
+            if r.get("probe_layout", "uniform") != "uniform":
+                key += f", {r['probe_layout']} layout"
             by_variant[(key, r["probe_grid"], r["probe_samples"])].append(r)
         grids = {(g, n) for (_, g, n), rs in by_variant.items()
                  if any(r.get("precision") == "rgba16f" or r.get("stage") == "fragment" for r in rs)}

@@ -66,6 +66,26 @@ def _with_probes(scene, grid: int, samples: int, **changes):
     return scene.replace(probes=probes)
 
 
+def _layout_variant(name: str, config: BenchConfig) -> dict:
+    """The probe settings of a --probe-layouts entry: an adaptive layout with that indicator."""
+    variant = {"layout": "adaptive", "adaptive_indicator": name}
+    if config.adaptive_strength is not None:
+        variant["adaptive_strength"] = config.adaptive_strength
+    return variant
+
+
+def _layout_info(renderer) -> dict:
+    """What a record says of its probe layout: "uniform" or "adaptive-INDICATOR" (with its
+    strength), the planes that came out (None: evenly spaced) and the host ms they took."""
+    spec, grid = renderer.scene.probes, renderer.probe_grid
+    if spec.layout == "uniform":
+        return {"probe_layout": "uniform"}
+    return {"probe_layout": f"adaptive-{spec.adaptive_indicator}",
+            "adaptive_strength": spec.adaptive_strength,
+            "probe_planes": None if grid.planes is None else [list(p) for p in grid.planes],
+            "layout_ms": renderer.last_layout_ms}
+
+
 def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Path:
     from ..gl.context import create_headless_context, describe
     from ..render.renderer import Renderer
@@ -178,6 +198,8 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
         if showcase and scene.anisotropy != 0.0:
             # With g = 0 the phase convolution zeroes bands 1 and 2: a window changes nothing.
             variants.append({"sh_window": "hann"})
+        variants += [_layout_variant(name, config) for name in config.probe_layouts
+                     if name != "uniform"]
         for variant in variants:
             renderer.set_scene(_with_probes(scene, grid, samples, **variant))
             # The light grid this setting's images use (its size follows the probe grid; the
@@ -190,7 +212,8 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
             probe_info = {"probe_grid": grid, "probe_samples": samples,
                           "precision": renderer.scene.probes.precision,
                           "sh_window": renderer.scene.probes.sh_window,
-                          "probe_bytes": renderer.probe_grid.gpu_bytes}
+                          "probe_bytes": renderer.probe_grid.gpu_bytes,
+                          **_layout_info(renderer)}
             for method in PROBE_METHODS:
                 for frames, image, *timing in _progressive(renderer, method, config.probe_frames,
                                                            13, k):

@@ -26,10 +26,12 @@ from ..gl.profiler import GpuProfile
 from ..gl.shaders import compute_program, set_uniforms
 from .light_transmittance import LIGHT_UNIT
 from .probe_layout import texture_ids
+from ..twins.probe_warp import WARP_ROWS, warp_table
 from .resources import SceneResources
 
 PROBE_TEXTURES = 7
 PROBE_UNIT = 2                # probe textures bind to texture units 2..8
+PROBE_WARP_UNIT = 14          # an adaptive layout's warp and planes (lib/probe_warp.glsl)
 DIRECTIONS_PER_PASS = 64
 WALKS_PER_CHUNK = 1 << 20     # resumable walks: 80 MiB of walk state and 16 MiB of results at most
 WALKS_PER_CHUNK_UNBOUNDED = 1 << 22   # walks that end in one dispatch: 64 MiB of results at most
@@ -63,7 +65,8 @@ class ProbeGrid:
     def __init__(self, ctx: moderngl.Context, grid: tuple[int, int, int], samples: int,
                  precision: str = "rgba32f", sh_order: int = 2,
                  box: tuple | None = None, grey: bool = False, resumable: bool | None = None,
-                 sun: str = "ray", adaptive: float = 0.0, environment_map: bool = False):
+                 sun: str = "ray", adaptive: float = 0.0, environment_map: bool = False,
+                 planes: tuple | None = None):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
         bake time); `sh_order` 0, 1 or 2 decides which of the seven textures exist. `resumable`:
         walks that suspend and resume across dispatches (default: where the driver limits loops;
@@ -74,7 +77,9 @@ class ProbeGrid:
         a probe stops taking walks once its standard error is at most `adaptive` times what the
         asked-for walks give a probe of average noise; 0 (default): every probe takes them all.
         `environment_map`: the walks' build for a scene whose environment is a map (they sample it
-        at each scattering event; lib/integrator.glsl)."""
+        at each scattering event; lib/integrator.glsl). `planes`: an adaptive layout's probe
+        planes per axis, world fractions of the box (app/render/probe_planes.py); None: evenly
+        spaced, and the shaders are built without the warp (PROBE_WARP 0)."""
         self.environment_map = bool(environment_map)
         if not (math.isfinite(adaptive) and adaptive >= 0.0):
             raise ValueError(f"adaptive walks factor {adaptive!r}: expected a finite number >= 0")
@@ -91,6 +96,17 @@ class ProbeGrid:
         self.texture_ids = texture_ids(self.sh_order, self.grey)
         self.box = None if box is None else (tuple(map(float, box[0])), tuple(map(float, box[1])))
         self.count = self.grid[0] * self.grid[1] * self.grid[2]
+        self.planes = None if planes is None else tuple(tuple(map(float, p)) for p in planes)
+        self.warp_texture = None
+        if self.planes is not None:
+            if tuple(len(p) for p in self.planes) != self.grid:
+                raise ValueError(f"probe planes per axis {tuple(len(p) for p in self.planes)} "
+                                 f"do not match the grid {self.grid}")
+            table = warp_table(self.planes)
+            self.warp_texture = ctx.texture((table.shape[1], WARP_ROWS), 1, table.tobytes(),
+                                            dtype="f4")
+            self.warp_texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self.warp_texture.repeat_x = self.warp_texture.repeat_y = False
         self.directions = min(self.samples, DIRECTIONS_PER_PASS)
         self.passes_total = math.ceil(self.samples / self.directions)
         dtype = "f4" if precision == "rgba32f" else "f2"
@@ -117,7 +133,7 @@ class ProbeGrid:
         self._partial_sums = None
         self.noise = ctx.buffer(reserve=8)   # lib/probe_noise.glsl
         defines = {"PROBE_IMAGE_FORMAT": precision, **self.defines()}
-        self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable)}
+        self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable), **self._warp_defines()}
         if sun == "grid":
             self._walk_defines["WALK_SUN_GRID"] = 1
         if self.environment_map:
@@ -125,7 +141,7 @@ class ProbeGrid:
         self.walk_program = compute_program(ctx, "probe_walks.comp", self._walk_defines)
         self._walk_profile_program = None   # the WALK_PROFILE build, compiled when first asked for
         self.project_program = compute_program(ctx, "probe_project.comp", defines)
-        self.sun_program = compute_program(ctx, "probe_sun.comp")
+        self.sun_program = compute_program(ctx, "probe_sun.comp", self._warp_defines() or None)
         self.noise_program = compute_program(ctx, "probe_noise.comp") if self.adaptive else None
         self.dispatches = 0
         self.passes_done = 0
@@ -242,6 +258,9 @@ class ProbeGrid:
                          "adaptive_walks": int(self.adaptive > 0),
                          "warm_walks": 0.0 if last_pass else self.warm_walks})
         uniforms.update(self.box_uniforms(resources))
+        if self.warp_texture is not None:
+            self.warp_texture.use(PROBE_WARP_UNIT)
+            uniforms["probe_warp"] = PROBE_WARP_UNIT
         walk_program = self._walk_program(counters is not None)
         resources.bind()
         if self.sun == "grid":
@@ -357,7 +376,12 @@ class ProbeGrid:
 
     def defines(self) -> dict:
         """Compile-time settings every shader reading these probes needs (lib/probes.glsl)."""
-        return {"PROBE_SH_ORDER": self.sh_order, "PROBE_GREY": int(self.grey)}
+        return {"PROBE_SH_ORDER": self.sh_order, "PROBE_GREY": int(self.grey),
+                **self._warp_defines()}
+
+    def _warp_defines(self) -> dict:
+        """PROBE_WARP 1 for an adaptive layout; nothing for the uniform one (today's shaders)."""
+        return {"PROBE_WARP": 1} if self.planes is not None else {}
 
     def box_uniforms(self, resources: SceneResources | None = None) -> dict:
         if self.box is None:
@@ -372,18 +396,22 @@ class ProbeGrid:
     def bind(self) -> None:
         for i, tex in zip(self.texture_ids, self.textures):
             tex.use(PROBE_UNIT + i)
+        if self.warp_texture is not None:
+            self.warp_texture.use(PROBE_WARP_UNIT)
 
     def uniforms(self, anisotropy: float, window: str,
                  resources: SceneResources | None = None) -> dict:
         u = {f"probe_sh{i}": PROBE_UNIT + i for i in self.texture_ids}
         u["probe_grid"] = self.grid
+        if self.warp_texture is not None:
+            u["probe_warp"] = PROBE_WARP_UNIT
         u.update(self.box_uniforms(resources))
         u["probe_band_factors"] = band_factors(anisotropy, window)
         return u
 
     def release(self) -> None:
         for obj in (*self.textures, self.walk_states, self.walk_radiance, self.accums, self.progress,
-                    self.noise, self.noise_program, self.prior,
+                    self.noise, self.noise_program, self.prior, self.warp_texture,
                     self.walk_program, self._walk_profile_program, self.project_program,
                     self.sun_program, self._progress_program, self._partial_sums):
             if obj is not None:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -19,6 +20,7 @@ from .pathtracer import PathTracer
 from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_MIN_SIDE,
                                   SOFTWARE_MIN_SIDE, LightTransmittance, min_side_for_probes)
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order
+from .probe_planes import adaptive_planes, extinction_field, sun_field
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
 from .raymarch import Raymarcher, min_step_voxels
@@ -33,15 +35,18 @@ PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
 class ProbePlan:
     """The probe grid a scene gets (Renderer.probe_plan): probes per axis, the world box they
     cover (low and high corners as plain floats; None: the whole volume box), the SH order kept
-    (0, 1 or 2) and whether one grey channel is stored instead of three."""
+    (0, 1 or 2) and whether one grey channel is stored instead of three; `planes`, an adaptive
+    layout's probe planes per axis (world fractions of the box; None: evenly spaced)."""
     grid: tuple[int, int, int]
     box: tuple[tuple[float, float, float], tuple[float, float, float]] | None
     sh_order: int
     grey: bool
+    planes: tuple | None = None
 
     def defines(self) -> dict:
         """The compile-time probe layout of the shaders that read such a grid (lib/probes.glsl)."""
-        return {"PROBE_SH_ORDER": self.sh_order, "PROBE_GREY": int(self.grey)}
+        return {"PROBE_SH_ORDER": self.sh_order, "PROBE_GREY": int(self.grey),
+                **({"PROBE_WARP": 1} if self.planes is not None else {})}
 
 
 @dataclass
@@ -122,6 +127,9 @@ class Renderer:
         self._region_key: tuple | None = None
         self._region = None
         self._region_pass = VisibleRegionPass(ctx)
+        self._planes_key: tuple | None = None
+        self._planes = None
+        self.last_layout_ms = 0.0   # host time the last adaptive layout took (indicator, planes)
         self.seed = 0
         self.camera = None
         self.last_bake_ms = 0.0
@@ -190,6 +198,7 @@ class Renderer:
     def bake_key(self) -> tuple:
         spec = self.scene.probes
         return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
+                spec.layout, spec.adaptive_strength, spec.adaptive_indicator,
                 self.resources.use_majorant_grid, self.walk_sun, self.walk_adaptive,
                 (self.light_max_side, self.light_min_side, self.light_follows_probes)
                 if self.walk_sun == "grid" else None)
@@ -215,8 +224,9 @@ class Renderer:
         return self._region
 
     def probe_plan(self, region: bool = True) -> ProbePlan:
-        """The probe grid the current scene gets: its counts, box, SH order and channels
-        (probe_layout.py); region=False skips the (NumPy) visible-region search."""
+        """The probe grid the current scene gets: its counts, box, SH order, channels
+        (probe_layout.py) and, for an adaptive layout, its planes (probe_planes.py);
+        region=False skips the (NumPy) visible-region search and the planes (evenly spaced)."""
         s = self.scene
         spec = s.probes
         grid, box = tuple(spec.grid), None
@@ -227,10 +237,40 @@ class Renderer:
         env = self.resources.environment
         # A map is grey when its three channels are equal everywhere; (1, 0, 0) stands for colour.
         environment = s.environment if env is None else ((1, 1, 1) if env.grey else (1, 0, 0))
-        return ProbePlan(grid=tuple(int(v) for v in grid), box=box,
+        grid = tuple(int(v) for v in grid)
+        planes = (self.adaptive_planes(grid, box)
+                  if region and spec.layout == "adaptive" else None)
+        return ProbePlan(grid=grid, box=box,
                          sh_order=resolve_sh_order(spec.sh_order, s.anisotropy),
                          grey=resolve_channels(spec.channels, self.resources.table,
-                                               s.light.irradiance, environment) == 1)
+                                               s.light.irradiance, environment) == 1,
+                         planes=planes)
+
+    def adaptive_planes(self, grid: tuple[int, int, int], box) -> tuple | None:
+        """The adaptive layout's probe planes for this grid and box (cached; None: it came out
+        uniform). The "sun" indicator bakes the light grid if stale and reads it back."""
+        s = self.scene
+        spec = s.probes
+        sun = spec.adaptive_indicator == "sun"
+        key = (self.resources.volume_version, s.transfer_function, s.density_scale, grid, box,
+               spec.adaptive_strength, spec.adaptive_indicator,
+               (s.light.direction, self.light_max_side, self.light_min_side,
+                self.light_follows_probes) if sun else None)
+        if key != self._planes_key:
+            start = time.perf_counter()
+            if sun:
+                self.bake_light()
+                w, h, d = self._light.texture.size
+                tau = np.frombuffer(self._light.texture.read(), np.float32).reshape(d, h, w)
+                field = sun_field(tau)
+            else:
+                field = extinction_field(self.resources.volume.data, self.resources.table,
+                                         s.density_scale)
+            self._planes = adaptive_planes(field, self.resources.volume.half_extent, box, grid,
+                                           spec.adaptive_strength)
+            self._planes_key = key
+            self.last_layout_ms = 1e3 * (time.perf_counter() - start)
+        return self._planes
 
     def start_bake(self, seed: int = 0, warm: bool = False) -> ProbeGrid:
         """(Re)starts the bake for the current scene; reuses the textures when the layout is
@@ -241,15 +281,15 @@ class Renderer:
         g = self.probe_grid
         env_map = self.resources.environment is not None
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
-                         g.adaptive, g.environment_map) != (
+                         g.adaptive, g.environment_map, g.planes) != (
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
-                self.walk_sun, self.walk_adaptive, env_map):
+                self.walk_sun, self.walk_adaptive, env_map, plan.planes):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
                                         plan.sh_order, plan.box, plan.grey,
                                         sun=self.walk_sun, adaptive=self.walk_adaptive,
-                                        environment_map=env_map)
+                                        environment_map=env_map, planes=plan.planes)
         self.probe_grid.restart(seed, warm=warm)
         self._baked_key = self.bake_key()
         return self.probe_grid

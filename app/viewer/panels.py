@@ -9,7 +9,8 @@ import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
 from ..render.renderer import METHODS, RAYMARCH_STAGES
-from ..scene import PROBE_FITS, PROBE_PRECISIONS, SH_WINDOWS
+from ..scene import (PROBE_FITS, PROBE_INDICATORS, PROBE_LAYOUTS, PROBE_PRECISIONS,
+                     SH_WINDOWS)
 from ..volume import BUILTIN_VOLUMES
 from .overlays import shortcut_table
 from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
@@ -273,6 +274,7 @@ def probes_section(v) -> None:
     changed, i = imgui.combo("SH order", orders.index(spec.sh_order), ["auto (0 when g = 0)", "0", "1", "2"])
     if changed:
         state.set_probes(sh_order=orders[i])
+    layout_section(v)
     auto_section(v)
     grid, session = v.session.probe_grid, v.session
     if grid is None:
@@ -289,6 +291,41 @@ def probes_section(v) -> None:
     rep = session.bake_report
     if rep is not None and rep.passes_done > 1:
         imgui.text_disabled(f"est. standard error of the probes {100 * rep.standard_error:.2f}%")
+
+
+def layout_section(v) -> None:
+    """Probe planes evenly spaced or adaptive (render/probe_planes.py): the indicator and the
+    strength, applied when the slider is let go (each value re-places the planes and re-bakes)."""
+    state, ui = v.state, v.widgets
+    spec = state.scene.probes
+    changed, i = imgui.combo("Layout", PROBE_LAYOUTS.index(spec.layout),
+                             ["uniform", "adaptive (denser where it varies)"])
+    ui.note("Layout")
+    if changed:
+        state.set_probes(layout=PROBE_LAYOUTS[i])
+    if spec.layout != "adaptive":
+        return
+    changed, i = imgui.combo("Follows", PROBE_INDICATORS.index(spec.adaptive_indicator),
+                             ["extinction (sigma_t)", "sun's transmittance"])
+    if changed:
+        state.set_probes(adaptive_indicator=PROBE_INDICATORS[i])
+    shown = spec.adaptive_strength if v.adaptive_strength_edit is None else v.adaptive_strength_edit
+    changed, value = imgui.slider_float("Strength", shown, 0.0, 1.0, "%.2f")
+    ui.note("Strength")
+    if changed:
+        v.adaptive_strength_edit = float(value)
+    if imgui.is_item_deactivated_after_edit() and v.adaptive_strength_edit is not None:
+        state.set_probes(adaptive_strength=min(max(v.adaptive_strength_edit, 0.0), 1.0))
+        v.adaptive_strength_edit = None
+    grid = v.session.probe_grid
+    if grid is not None and v.session.probes_ready():
+        if grid.planes is None:
+            imgui.text_disabled("planes evenly spaced: the indicator does not vary")
+        else:
+            spans = [np.diff(p) * len(p) for p in grid.planes if len(p) > 1]
+            if spans:
+                imgui.text_disabled(f"spacing {min(s.min() for s in spans):.2f} to "
+                                    f"{max(s.max() for s in spans):.2f} x uniform")
 
 
 def auto_section(v) -> None:

@@ -17,6 +17,7 @@ import numpy as np
 from ..gl.shaders import render_program, set_uniforms
 from ..render.probes import ProbeGrid
 from ..render.resources import SceneResources
+from ..twins.probe_warp import probe_fractions, warp_exact
 from .orbit import gl_matrix
 
 SPHERE_STACKS, SPHERE_SLICES = 8, 12
@@ -36,10 +37,11 @@ class ProbeSelection:
 
 
 def visible_cells(grid: tuple[int, int, int], box, volume, alpha: np.ndarray,
-                  density_scale: float) -> np.ndarray:
-    """bool (nz, ny, nx): the probe's cell (the box of one probe spacing around it) holds a voxel
-    whose density the transfer function's opacity makes visible (alpha > 0 at either table entry
-    it interpolates between)."""
+                  density_scale: float, planes: tuple | None = None) -> np.ndarray:
+    """bool (nz, ny, nx): the probe's cell (the box of one probe spacing around it; with an
+    adaptive layout's `planes`, one texel of the warped coordinate: halfway to each neighbour)
+    holds a voxel whose density the transfer function's opacity makes visible (alpha > 0 at
+    either table entry it interpolates between)."""
     nx, ny, nz = grid
     out = np.zeros((nz, ny, nx), bool)
     if density_scale <= 0:
@@ -58,7 +60,11 @@ def visible_cells(grid: tuple[int, int, int], box, volume, alpha: np.ndarray,
     for axis, (count, dim) in enumerate(zip(grid, volume.dims)):
         centres = (np.arange(dim) + 0.5) / dim * 2 * he[axis] - he[axis]
         size = max(high[axis] - low[axis], 1e-12)
-        cells.append(np.floor((centres - low[axis]) / size * count).astype(np.int64))
+        fraction = (centres - low[axis]) / size
+        if planes is not None:   # lib/probe_warp.glsl: the cell in the textures' coordinates
+            inside_box = (fraction >= 0) & (fraction < 1)
+            fraction = np.where(inside_box, warp_exact(planes[axis], fraction), -1.0)
+        cells.append(np.floor(fraction * count).astype(np.int64))
     cx, cy, cz = cells
     inside = lambda c, n: (c >= 0) & (c < n)  # noqa: E731
     zs, ys, xs = np.nonzero(voxels[np.ix_(inside(cz, nz), inside(cy, ny), inside(cx, nx))])
@@ -100,20 +106,25 @@ def uv_sphere(stacks: int = SPHERE_STACKS, slices: int = SPHERE_SLICES) -> tuple
     return vertices.reshape(-1, 3).astype(np.float32), triangles.astype(np.uint32)
 
 
-def probe_centres(grid: tuple[int, int, int], half_extent, box=None) -> np.ndarray:
+def probe_centres(grid: tuple[int, int, int], half_extent, box=None,
+                  planes: tuple | None = None) -> np.ndarray:
     """World positions (count, 3) of probes in index order i + nx (j + ny k): the NumPy twin of
     probe_position in lib/probes.glsl. `box`: the probe box's (low, high) corners (ProbeGrid.box),
-    default the volume box."""
-    nx, ny, nz = grid
-    k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
-    ijk = np.stack([i, j, k], axis=-1).reshape(-1, 3).astype(np.float64)
+    default the volume box; `planes`: an adaptive layout's (ProbeGrid.planes), where the probes
+    went; None: evenly spaced."""
     half = np.asarray(half_extent, np.float64)
     low, high = (-half, half) if box is None else (np.asarray(box[0]), np.asarray(box[1]))
-    return low + (ijk + 0.5) / np.asarray(grid, np.float64) * (high - low)
+    return low + probe_fractions(grid, planes) * (high - low)
 
 
-def sphere_radius(grid: tuple[int, int, int], half_extent) -> float:
-    spacing = 2.0 * np.asarray(half_extent, np.float64) / np.asarray(grid, np.float64)
+def sphere_radius(grid: tuple[int, int, int], half_extent, planes: tuple | None = None) -> float:
+    """RADIUS_PER_SPACING times the smallest probe spacing (an adaptive layout's closest planes)."""
+    size = 2.0 * np.asarray(half_extent, np.float64)
+    if planes is None:
+        spacing = size / np.asarray(grid, np.float64)
+    else:
+        spacing = np.array([np.diff(p).min() * s if len(p) > 1 else s / len(p)
+                            for p, s in zip(planes, size)])
     return float(RADIUS_PER_SPACING * spacing.min())
 
 
@@ -161,13 +172,14 @@ class ProbeSpheres:
     def select(self, grid: ProbeGrid, resources: SceneResources) -> ProbeSelection:
         """The probes drawn (cached until the grid, the volume or the transfer function changes)."""
         scene = resources.scene
-        key = (grid.grid, grid.box, resources.volume_version, scene.transfer_function,
-               scene.density_scale > 0)
+        key = (grid.grid, grid.box, grid.planes, resources.volume_version,
+               scene.transfer_function, scene.density_scale > 0)
         if key != self._key:
             visible = visible_cells(grid.grid, grid.box, resources.volume, resources.table[:, 3],
-                                    scene.density_scale)
+                                    scene.density_scale, grid.planes)
             self.selection = select_probes(grid.grid, visible)
-            centres = probe_centres(grid.grid, resources.volume.half_extent, grid.box)
+            centres = probe_centres(grid.grid, resources.volume.half_extent, grid.box,
+                                    grid.planes)
             data = centres[self.selection.indices].astype(np.float32).tobytes()
             if len(data) > self.centres.size:
                 self.centres.release()
@@ -191,7 +203,7 @@ class ProbeSpheres:
         uniforms.update(grid.uniforms(resources.scene.anisotropy, resources.scene.probes.sh_window,
                                       resources))
         he = 0.5 * np.asarray(uniforms["probe_box_size"])   # the probe box's half size
-        radius = sphere_radius(grid.grid, he) * selection.stride
+        radius = sphere_radius(grid.grid, he, grid.planes) * selection.stride
         uniforms.update({"sphere_radius": radius, "exposure": float(exposure)})
         grid.bind()
         set_uniforms(self.program, uniforms)

@@ -58,6 +58,7 @@ class Viewer:
         self.remembered_colours: dict[str, tuple] = {}
         self.environment_map_text = ""   # the light panel's map file field
         self.probe_axes_locked = len(set(state.scene.probes.grid)) == 1
+        self.adaptive_strength_edit: float | None = None   # the slider's value while dragged
         self.pending_screenshot: str | None = None
         self.last_screenshot: tuple | None = None   # (path asked for, where it went, error line)
         self.close_requested = False
@@ -287,8 +288,8 @@ class Viewer:
         if grid is None:
             return []
         w, h = self.session.size
-        pixels = orbit.project(self.view_projection(), probe_centres(grid.grid, self.session.volume.half_extent,
-                                                                     grid.box), w, h)
+        centres = probe_centres(grid.grid, self.session.volume.half_extent, grid.box, grid.planes)
+        pixels = orbit.project(self.view_projection(), centres, w, h)
         x0, _, rw, rh = self.view_rect_framebuffer()
         top = self.framebuffer_size[1] - rh
         return [[x0 + px / w * rw, top + py / h * rh] for px, py in pixels.tolist()]
@@ -321,6 +322,8 @@ class Viewer:
             "empty_space_skipping": session.renderer.resources.use_majorant_grid,
             "probes_ready": session.probes_ready(),
             "probe_grid": list(grid.grid) if grid is not None else None,
+            "probe_box": grid.box if grid is not None else None,
+            "probe_planes": grid.planes if grid is not None else None,
             "probe_sh_order": grid.sh_order if grid is not None else None,
             "probe_bytes": grid.gpu_bytes if grid is not None else 0,
             "bake_ms": session.bake_ms, "frame_ms": session.last.total_ms,

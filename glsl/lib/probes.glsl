@@ -20,12 +20,16 @@
 // every probe's r, g and b are equal, and one channel is stored: f = 0, 1, 2 hold coefficients
 // 0, 1, 2; f = 3 the sun's transmittance; f = 4 + (k - 3) coefficient k >= 3. Order 0 then needs
 // texture 0 alone, order 1 textures 0 and 1, order 2 textures 0, 1 and 2.
+//
+// PROBE_WARP (0 or 1; default 0): 1 places the probe planes of each axis where an adaptive layout
+// put them (lib/probe_warp.glsl) instead of evenly; the textures and their packing are the same.
 #ifndef PROBE_SH_ORDER
 #define PROBE_SH_ORDER 2
 #endif
 #ifndef PROBE_GREY
 #define PROBE_GREY 0
 #endif
+#include "lib/probe_warp.glsl"
 uniform ivec3 probe_grid;
 uniform vec3 probe_box_min;    // world corner of the probe box
 uniform vec3 probe_box_size;   // its size (> 0 on every axis)
@@ -34,7 +38,11 @@ vec3 probe_position(uint probe_index)
 {
     uint nx = uint(probe_grid.x), ny = uint(probe_grid.y);
     uvec3 ijk = uvec3(probe_index % nx, (probe_index / nx) % ny, probe_index / (nx * ny));
+#if PROBE_WARP
+    return probe_box_min + probe_warp_plane_fractions(ijk) * probe_box_size;
+#else
     return probe_box_min + (vec3(ijk) + 0.5) / vec3(probe_grid) * probe_box_size;
+#endif
 }
 
 // Direction `slot` of a pass's spherical Fibonacci set, turned by a random rotation drawn per probe
@@ -69,7 +77,11 @@ uniform vec3 probe_band_factors;  // per SH band: g^l (phase convolution) times 
 // Trilinearly interpolated SH coefficients and sun transmittance at world point x.
 void probe_fetch(vec3 x, out vec3 coeffs[9], out float sun_transmittance)
 {
+#if PROBE_WARP
+    vec3 uvw = probe_warp_uvw((x - probe_box_min) / probe_box_size);
+#else
     vec3 uvw = (x - probe_box_min) / probe_box_size;
+#endif
     for (int k = 1; k < 9; ++k)
         coeffs[k] = vec3(0.0);
 #if PROBE_GREY
