@@ -50,11 +50,6 @@ class LightTransmittance:
         self.grid = (0, 0, 0)
         self.next_layer = 0
 
-    def bake(self, resources: SceneResources, min_side: int = MIN_SIDE) -> None:
-        """The whole grid in one dispatch."""
-        self.begin(resources, min_side)
-        self.bake_layers(resources)
-
     def begin(self, resources: SceneResources, min_side: int = MIN_SIDE) -> None:
         """Starts a bake that bake_layers() does a slab of z layers at a time (the viewer's
         budgeted frames); until it is done the texture holds new layers below next_layer and the

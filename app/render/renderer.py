@@ -226,7 +226,7 @@ class Renderer:
     def probe_plan(self, region: bool = True) -> ProbePlan:
         """The probe grid the current scene gets: its counts, box, SH order, channels
         (probe_layout.py) and, for an adaptive layout, its planes (probe_planes.py);
-        region=False skips the (NumPy) visible-region search and the planes (evenly spaced)."""
+        region=False skips the visible-region pass and the planes (evenly spaced)."""
         s = self.scene
         spec = s.probes
         grid, box = tuple(spec.grid), None
