@@ -1,21 +1,83 @@
-// Bakes the sun's optical depth on a grid over the box (texel centres), for the raymarcher and
-// the bake's walks (lib/light_grid.glsl). Optical depth, not transmittance: it varies slowly
-// (about linearly along the sun's direction), so trilinear filtering of it is nearly exact where
-// filtering exp(-tau) would overestimate the light (exp is convex).
-layout(local_size_x = 4, local_size_y = 4, local_size_z = 4) in;
+// Bakes the sun's optical depth on the sheared light grid (lib/light_grid.glsl) for the raymarcher
+// and the bake's walks. Optical depth, not transmittance: it varies slowly (about linearly along
+// the sun's direction), so trilinear filtering of it is nearly exact where filtering exp(-tau)
+// would overestimate the light (exp is convex).
+//
+// One invocation per sun ray (a texel column along the grid's axis a): it starts on the box's
+// sun side with tau = 0 and walks away from the sun through the column's texel centres, adding
+// the midpoint quadrature of sigma_t over each segment between them (steps of at most
+// march_step, only where the ray is inside the box) and storing the running sum. Every texel
+// costs one segment, where a march from each texel to the boundary costs the whole way.
+// Once past tau = 104 (exp(-tau) is 0 in float32) it stops adding.
+layout(local_size_x = 8, local_size_y = 8) in;
 #include "lib/medium.glsl"
 #include "lib/lights.glsl"
-#include "lib/shadow_march.glsl"
+#include "lib/light_grid.glsl"
 
-layout(r32f, binding = 0) uniform writeonly image3D transmittance_image;
+#ifndef LIGHT_GRID_FORMAT
+#define LIGHT_GRID_FORMAT r32f
+#endif
+layout(LIGHT_GRID_FORMAT, binding = 0) uniform writeonly image3D transmittance_image;
 uniform ivec3 grid;
-uniform int first_layer;   // a slab of z layers per dispatch (LightTransmittance.bake_layers)
+uniform int first_layer;   // a slab of rays along axis (a + 2) % 3 per dispatch (bake_layers)
+uniform float march_step;  // world units between quadrature points at most
+
+// x[a] at the centre of texel k along the axis.
+float column_centre(int k, int a)
+{
+    return ((2.0 * (float(k) + 0.5)) / float(grid[a]) - 1.0) * box_half_extent[a];
+}
 
 void main()
 {
-    ivec3 texel = ivec3(gl_GlobalInvocationID) + ivec3(0, 0, first_layer);
-    if (any(greaterThanEqual(texel, grid)))
+    int a = light_grid_axis;
+    int b = (a + 1) % 3;
+    int c = (a + 2) % 3;
+    ivec2 ray = ivec2(gl_GlobalInvocationID.xy) + ivec2(0, first_layer);
+    if (ray.x >= grid[b] || ray.y >= grid[c])
         return;
-    vec3 x = ((2.0 * (vec3(texel) + 0.5)) / vec3(grid) - 1.0) * box_half_extent;
-    imageStore(transmittance_image, texel, vec4(sun_optical_depth_march(x)));
+    // The ray's sheared coordinates: the world point at x[a] = s is q + shear * s.
+    vec3 q = vec3(0.0);
+    q[b] = ((2.0 * (float(ray.x) + 0.5)) / float(grid[b]) - 1.0) * light_grid_half_extent[b];
+    q[c] = ((2.0 * (float(ray.y) + 0.5)) / float(grid[c]) - 1.0) * light_grid_half_extent[c];
+    // Where the ray is inside the box, as an interval of s.
+    float h = box_half_extent[a];
+    float lo = -h, hi = h;
+    for (int i = 1; i <= 2; ++i) {
+        int j = (a + i) % 3;
+        float k = light_grid_shear[j];
+        float e = box_half_extent[j];
+        if (k == 0.0) {
+            if (abs(q[j]) > e) { lo = 1.0; hi = -1.0; }
+        } else {
+            float s0 = (-e - q[j]) / k, s1 = (e - q[j]) / k;
+            lo = max(lo, min(s0, s1));
+            hi = min(hi, max(s0, s1));
+        }
+    }
+    float toward_sun = sun_direction[a] > 0.0 ? 1.0 : -1.0;
+    float length_per_s = 1.0 / abs(sun_direction[a]);   // world length per unit of s
+    float tau = 0.0;
+    float s_from = toward_sun * h;
+    ivec3 texel;
+    texel[b] = ray.x;
+    texel[c] = ray.y;
+    for (int n = 0; n < grid[a]; ++n) {
+        int k = toward_sun > 0.0 ? grid[a] - 1 - n : n;
+        float s_to = column_centre(k, a);
+        float s0 = max(min(s_from, s_to), lo), s1 = min(max(s_from, s_to), hi);
+        if (s1 > s0 && tau < 104.0) {
+            int m = max(1, int(ceil((s1 - s0) * length_per_s / march_step)));
+            float ds = (s1 - s0) / float(m);
+            for (int i = 0; i < m; ++i) {
+                float s = s0 + (float(i) + 0.5) * ds;
+                vec3 x = q + light_grid_shear * s;
+                x[a] = s;
+                tau += sigma_t_at(x) * ds * length_per_s;
+            }
+        }
+        texel[a] = k;
+        imageStore(transmittance_image, texel, vec4(tau));
+        s_from = s_to;
+    }
 }

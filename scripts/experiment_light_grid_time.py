@@ -1,12 +1,20 @@
-"""The light grid's bake time with and without jumping over empty macrocells, per side, and the
-largest difference between the two grids (they must agree). Usage:
+"""The light grid's bake time per side: the sheared column march (light_transmittance.comp) for
+the scene's sun and for a sun 45 degrees off two axes (the widest sheared grid), next to the
+per-texel march it replaced (bench/h100-light-time, where that run measured the same box grid).
+Usage:
     python scripts/experiment_light_grid_time.py OUT.json [scene ...]"""
-import json, statistics, sys
-import numpy as np
+import dataclasses, json, statistics, sys
+from pathlib import Path
 from app.gl.context import create_headless_context, describe
 from app.render.renderer import Renderer
 from app.bench.scenes import bench_scene
 from app.volume import load_volume
+
+BEFORE = Path(__file__).resolve().parent.parent / "bench/h100-light-time/results.json"
+before = {}
+if BEFORE.is_file():
+    for rec in json.load(open(BEFORE))["records"]:
+        before.setdefault((rec["scene"], tuple(rec["light_grid"])), rec["ms_skipping"])
 
 ctx = create_headless_context()
 names = sys.argv[2:] or ["bonsai", "foot", "fuel", "hydrogen"]
@@ -17,23 +25,21 @@ for name in names:
         continue
     r = Renderer(ctx, scene, load_volume(scene.volume, scene.base_dir))
     r.light_follows_probes = False
-    for side in (128, 256, 384, 512):
-        r.light_min_side = side
-        grids, times = {}, {}
-        for skipping in (True, False):
-            r.set_empty_space_skipping(skipping)
+    for sun in ("scene", "oblique"):
+        if sun == "oblique":
+            r.set_scene(scene.replace(light=dataclasses.replace(scene.light, direction=(0.5, 0.70710678, 0.5))))
+        for side in (128, 256, 384, 512):
+            r.light_min_side = side
             ms = []
             for _ in range(4):
                 r._light_key = None
                 ms.append(r.bake_light())
-            times[skipping] = statistics.median(ms[1:])
-            tex = r._light.texture
-            grids[skipping] = np.frombuffer(tex.read(), np.float32)
-        rec = {"scene": name, "light_grid": list(r._light.texture.size),
-               "ms_skipping": times[True], "ms_plain": times[False],
-               "max_abs_diff": float(np.abs(grids[True] - grids[False]).max()),
-               "max_tau": float(grids[False].max())}
-        print(json.dumps(rec), flush=True)
-        out["records"].append(rec)
+            light = r._light
+            rec = {"scene": name, "sun": sun, "sun_direction": list(r.scene.light.direction),
+                   "box_grid": list(light.box_grid), "light_grid": list(light.grid),
+                   "ms": statistics.median(ms[1:]),
+                   "ms_per_texel_march": before.get((name, tuple(light.box_grid))) if sun == "scene" else None}
+            print(json.dumps(rec), flush=True)
+            out["records"].append(rec)
     r.release()
 json.dump(out, open(sys.argv[1], "w"), indent=1)

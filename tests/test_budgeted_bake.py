@@ -40,8 +40,8 @@ def test_slices_give_the_probes_of_one_whole_bake(renderer):
     r.bake(seed=5)
     whole = _textures(r)
     r.invalidate()
-    # the light grid the walks read comes first, a z layer a slice at this budget
-    depth = r._light.grid[2]
+    # the light grid the walks read comes first, a slab of sun rays a slice at this budget
+    depth = r._light.layers
     assert depth > 1
     for layer in range(depth):
         assert not r.light_current() and r.bake_step(5, budget_ms=1e-6) > 0
@@ -85,12 +85,12 @@ def test_budget_follows_the_measured_probe_time(renderer):
 
 
 def test_sliced_light_grid_is_the_whole_one(ctx):
-    """Slabs of z layers give the grid of one dispatch, bit for bit; an edit in the middle of a
+    """Slabs of sun rays give the grid of one dispatch, bit for bit; an edit in the middle of a
     sliced bake restarts it for the new state; the raymarcher reads a sliced bake as it is."""
     r = Renderer(ctx, parse_scene({**SCENE, "volume": {"builtin": "cloud", "size": [12, 10, 9]}}))
     try:
         r.bake_light()
-        whole = np.frombuffer(r._light.texture.read(), np.float32).copy()
+        whole = r._light.read().copy()
         assert whole.max() > 0
         r.invalidate()
         ms = r.bake_light(budget_ms=1e-6)          # the first slab: 1/16 of the layers, at least 1
@@ -110,7 +110,7 @@ def test_sliced_light_grid_is_the_whole_one(ctx):
         assert r.light_baking() and r._light.next_layer == 1
         while not r.light_current():
             r.bake_light(budget_ms=1e-6)
-        assert np.array_equal(whole, np.frombuffer(r._light.texture.read(), np.float32))
+        assert np.array_equal(whole, r._light.read())
         assert r.light_cost_ms > 0
         # an edit mid-bake: the new state's grid from its first layer
         r.invalidate()
@@ -121,8 +121,19 @@ def test_sliced_light_grid_is_the_whole_one(ctx):
         r.bake_light(budget_ms=1e-6)
         assert r._light.next_layer == 1
         r.bake_light()
-        doubled = np.frombuffer(r._light.texture.read(), np.float32)
+        doubled = r._light.read()
         np.testing.assert_allclose(doubled, 2 * whole, rtol=1e-4, atol=1e-6)
+        # the sun moves: a new sheared layout, whose first slice bakes all of it (the old rays
+        # would be read at the wrong places), as one whole bake does
+        from dataclasses import replace
+        old_layout = r._light.layout
+        r.set_scene(r.scene.replace(light=replace(r.scene.light, direction=(0.7, 0.2, -0.6))))
+        r.bake_light(budget_ms=1e-6)
+        assert r._light.layout != old_layout and r.light_current()
+        moved = r._light.read().copy()
+        r.invalidate()
+        r.bake_light()
+        np.testing.assert_array_equal(moved, r._light.read())
     finally:
         r.release()
 

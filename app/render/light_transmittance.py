@@ -1,10 +1,13 @@
-"""The sun's transmittance baked on a grid over the box (glsl/light_transmittance.comp), which the
-raymarcher reads instead of tracing a shadow ray per step."""
+"""The sun's transmittance baked on a grid sheared along the sun's direction
+(glsl/light_transmittance.comp, layout in light_grid_layout.py), which the raymarcher and the
+bake's walks read instead of tracing a shadow ray."""
 from __future__ import annotations
 
 import moderngl
+import numpy as np
 
 from ..gl.shaders import compute_program, set_uniforms
+from .light_grid_layout import LightGridLayout, light_grid_layout
 from .resources import SceneResources
 
 LIGHT_UNIT = 9
@@ -13,10 +16,12 @@ MIN_SIDE = 128  # texels along the volume's longest axis at least (small volumes
 MAX_SIDE = 512  # texels per axis at most; the volume's own resolution up to that
 # Texels per probe spacing at least, along the longest axis: the sun's transmittance from the grid
 # is the raymarcher's direct light and the walks' sun, and its interpolation error must stay below
-# the probes' own. Measured on the H100 (bench/h100-light): bonsai at 128^3 probes, raymarch rRMSE
-# 3.38% with the volume's 256 texels, 2.55% at 384, 2.24% at 512 (foot 1.43 / 1.03 / 0.91%); at
-# 64^3 probes 5.77 / 5.04 / 4.74%; the grid takes 9 / 30 / 70 ms.
-TEXELS_PER_PROBE = 6
+# the probes' own. Measured on the H100 (bench/h100-light-sheared, 64 walks, raymarch rRMSE with
+# 256 / 384 / 512 texels): 32^3 probes, bonsai 8.65 / 8.36 / 8.26% (foot 3.63 / 3.45 / 3.37%);
+# 64^3, 5.11 / 4.80 / 4.69% (foot 2.35 / 2.10 / 2.01%); 128^3, 2.69 / 2.34 / 2.23% (foot 1.54 /
+# 1.21 / 1.10%), for 0.9 / 2.9 / 6.6 ms of grid. Hence 12 texels per probe spacing: 384 at 32^3,
+# the 512 cap from 43^3 up.
+TEXELS_PER_PROBE = 12
 
 
 def light_grid_size(dims: tuple[int, int, int], max_side: int = MAX_SIDE,
@@ -40,57 +45,101 @@ def min_side_for_probes(probe_grid: tuple[int, int, int] | None, floor: int = MI
 SOFTWARE_MIN_SIDE = 1
 
 
+# The texture's precision: 16-bit floats hold the optical depth to 1 part in 2048 (the
+# transmittance to tau / 2048 relative: 0.15% at tau = 3), far below the grid's interpolation error,
+# in half the memory of 32-bit ones. Measured on the H100 (bench/h100-light-sheared): the same
+# raymarched rRMSE within 0.01 points at every probe grid and size on bonsai and the foot; 742 MB
+# against 1.48 GB at 512 texels under the bench's sun, but 2x the bake time (6.6 against 3.3 ms).
+PRECISIONS = {"f2": "r16f", "f4": "r32f"}
+PRECISION = "f2"
+
+
 class LightTransmittance:
-    def __init__(self, ctx: moderngl.Context, max_side: int = MAX_SIDE):
+    def __init__(self, ctx: moderngl.Context, max_side: int = MAX_SIDE, precision: str = PRECISION):
         self.ctx = ctx
         self.max_side = int(max_side)
+        self.precision = precision
         self.program = compute_program(ctx, "light_transmittance.comp",
-                                       {"SUN_MARCH_SKIPS_EMPTY_CELLS": 1})
+                                       {"LIGHT_GRID_FORMAT": PRECISIONS[precision]})
         self.texture: moderngl.Texture3D | None = None
-        self.grid = (0, 0, 0)
+        self.layout: LightGridLayout | None = None   # of the texture's contents
+        self.box_grid = (0, 0, 0)     # texels per axis over the box (light_grid_size)
         self.next_layer = 0
+        self.whole = False            # the next bake_layers does every layer left
 
-    def begin(self, resources: SceneResources, min_side: int = MIN_SIDE) -> None:
-        """Starts a bake that bake_layers() does a slab of z layers at a time (the viewer's
-        budgeted frames); until it is done the texture holds new layers below next_layer and the
-        previous grid's above (texels are independent: each marches to the sun on its own)."""
-        grid = light_grid_size(resources.volume.dims, self.max_side, min_side)
-        if self.texture is None or self.texture.size != grid:
+    @property
+    def grid(self) -> tuple[int, int, int]:
+        """The texture's texels per axis (x, y, z)."""
+        return self.layout.size if self.layout is not None else (0, 0, 0)
+
+    @property
+    def layers(self) -> int:
+        """Slabs a sliced bake takes at most: ray rows along the layout's layer axis."""
+        return self.grid[self.layout.layer_axis] if self.layout is not None else 0
+
+    def begin(self, resources: SceneResources, sun_direction, min_side: int = MIN_SIDE) -> None:
+        """Starts a bake that bake_layers() does a slab of rays at a time (the viewer's budgeted
+        frames). Until it is done the texture holds the new rays below next_layer and the previous
+        grid's above, which readers may use as they are (each ray is marched on its own) when the
+        layout is the same; a new layout (the sun moved, or another size) is baked whole by the
+        next bake_layers, since the old contents would be read at the wrong places."""
+        self.box_grid = light_grid_size(resources.volume.dims, self.max_side, min_side)
+        layout = light_grid_layout(self.box_grid, resources.volume.half_extent, sun_direction,
+                                   self.max_side)
+        self.whole = self.layout is not None and layout != self.layout
+        if self.texture is None or self.texture.size != layout.size:
             if self.texture is not None:
                 self.texture.release()
-            self.texture = self.ctx.texture3d(grid, 1, dtype="f4")
+            self.texture = self.ctx.texture3d(layout.size, 1, dtype=self.precision)
             self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
             self.texture.repeat_x = self.texture.repeat_y = self.texture.repeat_z = False
-        self.grid = grid
+        self.layout = layout
         self.next_layer = 0
 
     @property
     def done(self) -> bool:
-        return self.texture is not None and self.next_layer >= self.grid[2]
+        return self.texture is not None and self.next_layer >= self.layers
 
     def bake_layers(self, resources: SceneResources, layers: int | None = None) -> int:
-        """Bakes the next `layers` z layers (None: all that are left); returns how many ran."""
-        grid = self.grid
+        """Bakes the next `layers` slabs of rays (None, or a new layout: all that are left);
+        returns how many ran."""
         first = self.next_layer
-        count = grid[2] - first if layers is None else max(0, min(int(layers), grid[2] - first))
+        left = self.layers - first
+        count = left if layers is None or self.whole else max(0, min(int(layers), left))
         if count == 0:
             return 0
+        layout = self.layout
+        grid = layout.size
         resources.bind()
         set_uniforms(self.program, resources.uniforms())
+        set_uniforms(self.program, layout.uniforms())
         # Quadrature every voxel (the probes' march takes half voxels): the grid's own interpolation
         # error dominates; measured on bonsai at 256^3, RMS error of the sun's transmittance at
         # scattering points 7.6% against 7.4%, for half the time.
         set_uniforms(self.program, {"grid": grid, "first_layer": first,
                                     "march_step": LIGHT_MARCH_VOXELS * resources.march_step})
         self.texture.bind_to_image(0, read=False, write=True)
-        self.program.run((grid[0] + 3) // 4, (grid[1] + 3) // 4, (count + 3) // 4)
+        rows = grid[(layout.axis + 1) % 3]
+        self.program.run((rows + 7) // 8, (count + 7) // 8, 1)
         self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
         self.next_layer = first + count
+        self.whole = False
         return count
+
+    def uniforms(self) -> dict:
+        """What a reader of the grid (lib/light_grid.glsl) needs besides the texture unit."""
+        return {"light_transmittance": LIGHT_UNIT, **self.layout.uniforms()}
+
+    def read(self) -> np.ndarray:
+        """The optical depth (z, y, x) of the texture, in the layout's sheared coordinates."""
+        w, h, d = self.texture.size
+        dtype = np.float16 if self.precision == "f2" else np.float32
+        return np.frombuffer(self.texture.read(), dtype).reshape(d, h, w).astype(np.float32)
 
     @property
     def gpu_bytes(self) -> int:
-        return 0 if self.texture is None else 4 * self.texture.width * self.texture.height * self.texture.depth
+        return (0 if self.texture is None else int(self.precision[1]) * self.texture.width
+                * self.texture.height * self.texture.depth)
 
     def bind(self) -> None:
         self.texture.use(LIGHT_UNIT)

@@ -24,7 +24,6 @@ import numpy as np
 from ..gl.context import UNBOUNDED_LOOP_BUDGET, loop_budget, loop_budget_unbounded
 from ..gl.profiler import GpuProfile
 from ..gl.shaders import compute_program, set_uniforms
-from .light_transmittance import LIGHT_UNIT
 from .probe_layout import texture_ids
 from ..twins.probe_warp import WARP_ROWS, warp_table
 from .resources import SceneResources
@@ -265,7 +264,7 @@ class ProbeGrid:
         resources.bind()
         if self.sun == "grid":
             light.bind()
-            uniforms["light_transmittance"] = LIGHT_UNIT
+            uniforms.update(light.uniforms())
         set_uniforms(walk_program, uniforms)
         set_uniforms(self.project_program, uniforms)
         if self.walk_states is not None:

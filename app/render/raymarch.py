@@ -7,7 +7,6 @@ import moderngl
 from ..twins.camera import CameraFrame
 from ..gl.shaders import compute_program, render_program, set_uniforms
 from .accumulation import Accumulation
-from .light_transmittance import LIGHT_UNIT
 from .pathtracer import groups
 from .resources import SceneResources
 
@@ -66,7 +65,7 @@ class Raymarcher:
         set_uniforms(self.program, resources.uniforms())
         set_uniforms(self.program, camera.uniforms())
         set_uniforms(self.program, uniforms)
-        set_uniforms(self.program, {"raymarch_step": step, "light_transmittance": LIGHT_UNIT,
+        set_uniforms(self.program, {"raymarch_step": step,
                                     "seed": seed & 0xFFFFFFFF})
         acc.bind_image(0)
         for _ in range(frames):

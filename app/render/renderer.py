@@ -10,6 +10,7 @@ import moderngl
 import numpy as np
 
 from ..twins.camera import camera_frame
+from ..twins.light_grid import light_grid_lookup
 from ..gl.context import is_software
 from ..gl.timer import GpuTimer
 from ..scene import Scene
@@ -18,9 +19,10 @@ from .accumulation import Accumulation
 from .limits import check_image_size
 from .pathtracer import PathTracer
 from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_MIN_SIDE,
+                                  PRECISION as LIGHT_PRECISION,
                                   SOFTWARE_MIN_SIDE, LightTransmittance, min_side_for_probes)
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order
-from .probe_planes import adaptive_planes, extinction_field, sun_field
+from .probe_planes import MAX_FIELD_SIDE, adaptive_planes, extinction_field, sun_field
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
 from .raymarch import Raymarcher, min_step_voxels
@@ -101,6 +103,7 @@ class Renderer:
         self._raymarchers: dict[str, Raymarcher] = {}
         self._light: LightTransmittance | None = None
         self.light_max_side = LIGHT_MAX_SIDE   # the light grid's texels per axis at most
+        self.light_precision = LIGHT_PRECISION  # "f2" or "f4" (light_transmittance.PRECISIONS)
         # ... and at least along the longest axis, and whether it follows the probe grid (6 texels
         # per probe spacing): per device class (light_transmittance.py)
         software = is_software(ctx)
@@ -200,7 +203,8 @@ class Renderer:
         return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
                 spec.layout, spec.adaptive_strength, spec.adaptive_indicator,
                 self.resources.use_majorant_grid, self.walk_sun, self.walk_adaptive,
-                (self.light_max_side, self.light_min_side, self.light_follows_probes)
+                (self.light_max_side, self.light_min_side, self.light_follows_probes,
+                 self.light_precision)
                 if self.walk_sun == "grid" else None)
 
     def set_empty_space_skipping(self, on: bool) -> None:
@@ -260,9 +264,7 @@ class Renderer:
             start = time.perf_counter()
             if sun:
                 self.bake_light()
-                w, h, d = self._light.texture.size
-                tau = np.frombuffer(self._light.texture.read(), np.float32).reshape(d, h, w)
-                field = sun_field(tau)
+                field = sun_field(self._light_box_optical_depth())
             else:
                 field = extinction_field(self.resources.volume.data, self.resources.table,
                                          s.density_scale)
@@ -271,6 +273,17 @@ class Renderer:
             self._planes_key = key
             self.last_layout_ms = 1e3 * (time.perf_counter() - start)
         return self._planes
+
+    def _light_box_optical_depth(self) -> np.ndarray:
+        """The light grid's optical depth resampled (trilinear, as the shaders read it) at the
+        texel centres of a box-aligned grid of its density, at most MAX_FIELD_SIDE per axis."""
+        light = self._light
+        scale = min(1.0, MAX_FIELD_SIDE / max(light.box_grid))
+        dims = tuple(max(1, round(n * scale)) for n in light.box_grid)
+        he = np.asarray(self.resources.volume.half_extent, np.float64)
+        axes = [((2.0 * (np.arange(n) + 0.5)) / n - 1.0) * he[i] for i, n in enumerate(dims)]
+        z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+        return light_grid_lookup(light.read(), light.layout, np.stack([x, y, z], axis=-1))
 
     def start_bake(self, seed: int = 0, warm: bool = False) -> ProbeGrid:
         """(Re)starts the bake for the current scene; reuses the textures when the layout is
@@ -341,7 +354,7 @@ class Renderer:
         min_side = (min_side_for_probes(s.probes.grid, self.light_min_side)
                     if self.light_follows_probes else self.light_min_side)
         key = (self.resources.volume_version, s.transfer_function, s.density_scale,
-               s.light.direction, self.light_max_side, min_side)
+               s.light.direction, self.light_max_side, min_side, self.light_precision)
         return key, min_side
 
     def light_current(self) -> bool:
@@ -360,23 +373,24 @@ class Renderer:
         (1/16 of the grid before any was timed; at least one layer). An edit in the middle of a
         sliced bake restarts it."""
         key, min_side = self._light_target()
-        if self._light is None or self._light.max_side != self.light_max_side:
+        if (self._light is None or self._light.max_side != self.light_max_side
+                or self._light.precision != self.light_precision):
             if self._light is not None:
                 self._light.release()
-            self._light = LightTransmittance(self.ctx, self.light_max_side)
+            self._light = LightTransmittance(self.ctx, self.light_max_side, self.light_precision)
             self._light_pending = None
         if key == self._light_key:
             return 0.0
         light = self._light
         if self._light_pending != key:
-            light.begin(self.resources, min_side)
+            light.begin(self.resources, self.scene.light.direction, min_side)
             self._light_key = None
             self._light_pending = key
             self._light_spent_ms = 0.0
         layers = None
         if budget_ms is not None:
             per_layer = self._layer_ms.get(light.grid)
-            layers = (max(1, light.grid[2] // FIRST_SLICE_LIGHT_FRACTION) if per_layer is None
+            layers = (max(1, light.layers // FIRST_SLICE_LIGHT_FRACTION) if per_layer is None
                       else max(1, int(budget_ms / max(per_layer, 1e-9))))
         self.timer.start()
         ran = light.bake_layers(self.resources, layers)
@@ -498,7 +512,8 @@ class Renderer:
         self.timer.start()
         if method == "raymarch":
             self.raymarcher().run(self.resources, self.camera, acc, n, self.seed,
-                                  self.raymarch_step_voxels * 2 * self.resources.march_step, extra)
+                                  self.raymarch_step_voxels * 2 * self.resources.march_step,
+                                  {**extra, **self._light.uniforms()})
         else:
             defines = self.probe_grid.defines() if method in PROBE_LIGHTING else None
             self.pass_for(method, defines).run(self.resources, self.camera, acc, acc.samples + n,

@@ -1,5 +1,5 @@
-"""NumPy twin of glsl/lib/shadow_march.glsl and the light grid it fills
-(glsl/light_transmittance.comp, read by glsl/lib/light_grid.glsl)."""
+"""NumPy twin of glsl/lib/shadow_march.glsl: the sun's optical depth marched from each point (the
+probes' own sun; the light grid's twin is light_grid.py)."""
 from __future__ import annotations
 
 import numpy as np
@@ -25,11 +25,3 @@ def sun_optical_depth_march(volume: Volume, table: np.ndarray, density_scale: fl
         before = np.concatenate([[0.0], np.cumsum(sig)[:-1]])
         tau[i] = sig[before < 104.0].sum()
     return tau.reshape(np.shape(points)[:-1])
-
-
-def light_grid_centres(volume: Volume, grid: tuple[int, int, int]) -> np.ndarray:
-    """World positions (z, y, x, 3) of the light grid's texel centres."""
-    he = volume.half_extent.astype(np.float64)
-    axes = [((2.0 * (np.arange(g) + 0.5)) / g - 1.0) * he[i] for i, g in enumerate(grid)]
-    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
-    return np.stack([x, y, z], axis=-1)

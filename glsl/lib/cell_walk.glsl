@@ -1,7 +1,7 @@
 // Walking the macrocells of the majorant grid along a ray with a 3D DDA (Amanatides and Woo): the
 // cells in order, each one's exit distance and majorant (glsl/majorant_grid.comp builds them;
 // every cell's majorant bounds sigma_t in it). Tracking (lib/tracking.glsl) draws free flights per
-// cell; the sun's deterministic march (lib/shadow_march.glsl) skips the cells of majorant 0.
+// cell.
 // Needs box_half_extent (lib/medium.glsl). Absent where GLOBAL_MAJORANT is defined.
 #if !defined(GLOBAL_MAJORANT)
 uniform sampler3D majorant_grid;    // R32F per macrocell (texelFetch), >= sigma_t in the cell

@@ -1,0 +1,90 @@
+"""NumPy twin of glsl/lib/light_grid.glsl (the sheared light grid's lookup, trilinear like GL's
+texture filtering with clamp-to-edge) and of its bake, glsl/light_transmittance.comp (one march per
+sun ray through a column of texel centres)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .medium import sigma_t_at
+from ..render.light_grid_layout import LightGridLayout
+from ..volume import Volume
+
+
+def light_grid_bake(volume: Volume, table: np.ndarray, density_scale: float, sun_direction,
+                    layout: LightGridLayout, march_step: float) -> np.ndarray:
+    """Optical depth (z, y, x) at every texel centre of `layout`: each column along axis a marched
+    from the box's sun side, midpoint quadrature of sigma_t over each segment between centres
+    (at most march_step apart, only inside the box), no more added once past 104."""
+    d = np.asarray(sun_direction, np.float64)
+    d = d / np.linalg.norm(d)
+    a = layout.axis
+    b, c = (a + 1) % 3, (a + 2) % 3
+    size = layout.size
+    he = volume.half_extent.astype(np.float64)
+    half = np.asarray(layout.half_extent, np.float64)
+    shear = np.asarray(layout.shear, np.float64)
+    qb = ((2.0 * (np.arange(size[b]) + 0.5)) / size[b] - 1.0) * half[b]
+    qc = ((2.0 * (np.arange(size[c]) + 0.5)) / size[c] - 1.0) * half[c]
+    QB, QC = np.meshgrid(qb, qc, indexing="ij")          # rays (size[b], size[c])
+    lo = np.full(QB.shape, -he[a])
+    hi = np.full(QB.shape, he[a])
+    for j, q in ((b, QB), (c, QC)):
+        if shear[j] == 0.0:
+            outside = np.abs(q) > he[j]
+            lo[outside], hi[outside] = 1.0, -1.0
+        else:
+            s0, s1 = (-he[j] - q) / shear[j], (he[j] - q) / shear[j]
+            lo = np.maximum(lo, np.minimum(s0, s1))
+            hi = np.minimum(hi, np.maximum(s0, s1))
+    toward_sun = 1.0 if d[a] > 0 else -1.0
+    per_s = 1.0 / abs(d[a])
+    centres = ((2.0 * (np.arange(size[a]) + 0.5)) / size[a] - 1.0) * he[a]
+    order = range(size[a] - 1, -1, -1) if toward_sun > 0 else range(size[a])
+    tau = np.zeros(QB.shape)
+    out = np.zeros((size[a],) + QB.shape)
+    s_from = toward_sun * he[a]
+    for k in order:
+        s_to = centres[k]
+        s0 = np.maximum(min(s_from, s_to), lo)
+        s1 = np.minimum(max(s_from, s_to), hi)
+        live = (s1 > s0) & (tau < 104.0)
+        if live.any():
+            m = np.where(live, np.maximum(1, np.ceil((s1 - s0) * per_s / march_step)), 1).astype(int)
+            ds = np.where(live, (s1 - s0) / m, 0.0)
+            for i in range(int(m.max())):
+                step = live & (i < m)
+                s = s0[step] + (i + 0.5) * ds[step]
+                x = np.empty(s.shape + (3,))
+                x[:, a] = s
+                x[:, b] = QB[step] + shear[b] * s
+                x[:, c] = QC[step] + shear[c] * s
+                tau[step] += sigma_t_at(volume, table, density_scale, x) * ds[step] * per_s
+        out[k] = tau
+        s_from = s_to
+    # out is (a, b, c); return (z, y, x)
+    axes_xyz = np.argsort([a, b, c])          # position of x, y, z in (a, b, c)
+    return np.transpose(out, axes_xyz[::-1])
+
+
+def light_grid_lookup(optical_depth: np.ndarray, layout: LightGridLayout, points) -> np.ndarray:
+    """Optical depth at world points (..., 3) from the grid (z, y, x), as light_grid.glsl reads
+    it: sheared coordinates, then trilinear filtering of texel centres, clamped to the edge."""
+    pts = np.asarray(points, np.float64)
+    q = pts - np.asarray(layout.shear) * pts[..., layout.axis:layout.axis + 1]
+    uvw = q / (2.0 * np.asarray(layout.half_extent)) + 0.5
+    size = np.asarray(layout.size, np.float64)
+    coord = uvw * size - 0.5
+    base = np.floor(coord)
+    f = coord - base
+    out = np.zeros(coord.shape[:-1])
+    nx, ny, nz = layout.size
+    for dz in (0, 1):
+        for dy in (0, 1):
+            for dx in (0, 1):
+                ix = np.clip(base[..., 0].astype(np.int64) + dx, 0, nx - 1)
+                iy = np.clip(base[..., 1].astype(np.int64) + dy, 0, ny - 1)
+                iz = np.clip(base[..., 2].astype(np.int64) + dz, 0, nz - 1)
+                w = ((f[..., 0] if dx else 1 - f[..., 0]) * (f[..., 1] if dy else 1 - f[..., 1])
+                     * (f[..., 2] if dz else 1 - f[..., 2]))
+                out += w * optical_depth[iz, iy, ix]
+    return out
