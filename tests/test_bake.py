@@ -212,7 +212,11 @@ def test_light_grid_size_and_layout():
     assert light_grid_size((256, 256, 256), min_side=min_side_for_probes((32, 29, 32))) == (384,) * 3
     assert light_grid_size((256, 256, 256), min_side=min_side_for_probes((64, 58, 64))) == (512,) * 3
     assert min_side_for_probes((8, 8, 8)) == 128 and min_side_for_probes((128,) * 3) == 1536
-    assert light_grid_size((256, 128, 256), min_side=768) == (512, 384, 512)
+    assert light_grid_size((256, 128, 256), min_side=768) == (512, 256, 512)
+    # probes ask for more than twice the volume's resolution: twice it (or MIN_SIDE)
+    assert light_grid_size((96, 96, 80), min_side=768) == (192, 192, 160)
+    assert light_grid_size((64, 64, 64), min_side=384) == (128, 128, 128)
+    assert light_grid_size((24, 24, 24), min_side=384) == (128, 128, 128)
     # the sun along an axis: the box's own grid
     up = light_grid_layout((64, 32, 48), (1.0, 0.5, 0.75), (0.0, -1.0, 0.0), 512)
     assert up.axis == 1 and up.shear == (0.0, 0.0, 0.0) and up.size == (64, 32, 48)
