@@ -49,7 +49,8 @@ def light_grid_bake(volume: Volume, table: np.ndarray, density_scale: float, sun
         s1 = np.minimum(max(s_from, s_to), hi)
         live = (s1 > s0) & (tau < 104.0)
         if live.any():
-            m = np.where(live, np.maximum(1, np.ceil((s1 - s0) * per_s / march_step)), 1).astype(int)
+            steps = np.maximum(1, np.ceil((s1 - s0) * per_s / march_step))
+            m = np.where(live, steps, 1).astype(int)
             ds = np.where(live, (s1 - s0) / m, 0.0)
             for i in range(int(m.max())):
                 step = live & (i < m)
