@@ -123,14 +123,26 @@ def test_sliced_light_grid_is_the_whole_one(ctx):
         r.bake_light()
         doubled = r._light.read()
         np.testing.assert_allclose(doubled, 2 * whole, rtol=1e-4, atol=1e-6)
-        # the sun moves: a new sheared layout, whose first slice bakes all of it (the old rays
-        # would be read at the wrong places), as one whole bake does
+        # the sun moves: a new sheared layout, baked slice by slice into a texture of its own
+        # while readers keep the previous grid whole (the old rays would be read at the wrong
+        # places in the new layout); the last slice hands it over, equal to one whole bake
         from dataclasses import replace
-        old_layout = r._light.layout
+        old_layout, before = r._light.layout, r._light.read().copy()
         r.set_scene(r.scene.replace(light=replace(r.scene.light, direction=(0.7, 0.2, -0.6))))
         r.bake_light(budget_ms=1e-6)
-        assert r._light.layout != old_layout and r.light_current()
-        moved = r._light.read().copy()
+        light = r._light
+        assert light.target_layout is not None and light.target_layout != old_layout
+        assert r.light_baking() and not r.light_current() and light.next_layer == 1
+        assert light.layout == old_layout and np.array_equal(light.read(), before)
+        assert light.uniforms()["light_grid_shear"] == old_layout.shear
+        assert light.gpu_bytes > 2 * before.size   # both textures, 16-bit texels
+        slices = 1
+        while not r.light_current():
+            r.bake_light(budget_ms=1e-6)
+            slices += 1
+        assert slices == light.layers and light.target_layout is None
+        assert light.layout != old_layout
+        moved = light.read().copy()
         r.invalidate()
         r.bake_light()
         np.testing.assert_array_equal(moved, r._light.read())

@@ -70,54 +70,74 @@ class LightTransmittance:
         self.precision = precision
         self.program = compute_program(ctx, "light_transmittance.comp",
                                        {"LIGHT_GRID_FORMAT": PRECISIONS[precision]})
-        self.texture: moderngl.Texture3D | None = None
-        self.layout: LightGridLayout | None = None   # of the texture's contents
+        self.texture: moderngl.Texture3D | None = None   # what readers use
+        self.layout: LightGridLayout | None = None       # of the texture's contents
+        # A bake in a new layout goes to its own texture, which replaces the readers' when done.
+        self._target: moderngl.Texture3D | None = None
+        self.target_layout: LightGridLayout | None = None   # of the bake under way
         self.box_grid = (0, 0, 0)     # texels per axis over the box (light_grid_size)
         self.next_layer = 0
-        self.whole = False            # the next bake_layers does every layer left
 
     @property
     def grid(self) -> tuple[int, int, int]:
-        """The texture's texels per axis (x, y, z)."""
-        return self.layout.size if self.layout is not None else (0, 0, 0)
+        """Texels per axis (x, y, z) of the grid being baked (or last baked)."""
+        layout = self.target_layout or self.layout
+        return layout.size if layout is not None else (0, 0, 0)
 
     @property
     def layers(self) -> int:
         """Slabs a sliced bake takes at most: ray rows along the layout's layer axis."""
-        return self.grid[self.layout.layer_axis] if self.layout is not None else 0
+        layout = self.target_layout or self.layout
+        return layout.size[layout.layer_axis] if layout is not None else 0
+
+    def _texture(self, size: tuple[int, int, int]) -> moderngl.Texture3D:
+        texture = self.ctx.texture3d(size, 1, dtype=self.precision)
+        texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        texture.repeat_x = texture.repeat_y = texture.repeat_z = False
+        return texture
 
     def begin(self, resources: SceneResources, sun_direction, min_side: int = MIN_SIDE) -> None:
         """Starts a bake that bake_layers() does a slab of rays at a time (the viewer's budgeted
-        frames). Until it is done the texture holds the new rays below next_layer and the previous
-        grid's above, which readers may use as they are (each ray is marched on its own) when the
-        layout is the same; a new layout (the sun moved, or another size) is baked whole by the
-        next bake_layers, since the old contents would be read at the wrong places."""
+        frames). In the same layout it overwrites the texture in place: until it is done the
+        texture holds the new rays below next_layer and the previous grid's above, which readers
+        may use as they are (each ray is marched on its own). A new layout (the sun moved, or
+        another size) is baked into a texture of its own while readers keep the previous grid
+        whole, and replaces it when done."""
         self.box_grid = light_grid_size(resources.volume.dims, self.max_side, min_side)
         layout = light_grid_layout(self.box_grid, resources.volume.half_extent, sun_direction,
                                    self.max_side)
-        self.whole = self.layout is not None and layout != self.layout
-        if self.texture is None or self.texture.size != layout.size:
-            if self.texture is not None:
-                self.texture.release()
-            self.texture = self.ctx.texture3d(layout.size, 1, dtype=self.precision)
-            self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            self.texture.repeat_x = self.texture.repeat_y = self.texture.repeat_z = False
-        self.layout = layout
+        if self.texture is None or layout == self.layout:
+            if self.texture is None:
+                self.texture = self._texture(layout.size)
+            self.layout = layout
+            self._drop_target()
+        else:
+            if self._target is None or self._target.size != layout.size:
+                self._drop_target()
+                self._target = self._texture(layout.size)
+            self.target_layout = layout
         self.next_layer = 0
+
+    def _drop_target(self) -> None:
+        if self._target is not None:
+            self._target.release()
+        self._target, self.target_layout = None, None
 
     @property
     def done(self) -> bool:
-        return self.texture is not None and self.next_layer >= self.layers
+        return (self.texture is not None and self.target_layout is None
+                and self.next_layer >= self.layers)
 
     def bake_layers(self, resources: SceneResources, layers: int | None = None) -> int:
-        """Bakes the next `layers` slabs of rays (None, or a new layout: all that are left);
-        returns how many ran."""
+        """Bakes the next `layers` slabs of rays (None: all that are left); returns how many ran.
+        The last slab of a bake in a new layout hands its texture to the readers."""
         first = self.next_layer
         left = self.layers - first
-        count = left if layers is None or self.whole else max(0, min(int(layers), left))
+        count = left if layers is None else max(0, min(int(layers), left))
         if count == 0:
             return 0
-        layout = self.layout
+        layout = self.target_layout or self.layout
+        texture = self._target if self.target_layout is not None else self.texture
         grid = layout.size
         resources.bind()
         set_uniforms(self.program, resources.uniforms())
@@ -127,12 +147,15 @@ class LightTransmittance:
         # scattering points 7.6% against 7.4%, for half the time.
         set_uniforms(self.program, {"grid": grid, "first_layer": first,
                                     "march_step": LIGHT_MARCH_VOXELS * resources.march_step})
-        self.texture.bind_to_image(0, read=False, write=True)
+        texture.bind_to_image(0, read=False, write=True)
         rows = grid[(layout.axis + 1) % 3]
         self.program.run((rows + 7) // 8, (count + 7) // 8, 1)
         self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
         self.next_layer = first + count
-        self.whole = False
+        if self.target_layout is not None and self.next_layer >= self.layers:
+            self.texture.release()
+            self.texture, self.layout = self._target, self.target_layout
+            self._target, self.target_layout = None, None
         return count
 
     def uniforms(self) -> dict:
@@ -147,13 +170,14 @@ class LightTransmittance:
 
     @property
     def gpu_bytes(self) -> int:
-        return (0 if self.texture is None else int(self.precision[1]) * self.texture.width
-                * self.texture.height * self.texture.depth)
+        return sum(int(self.precision[1]) * t.width * t.height * t.depth
+                   for t in (self.texture, self._target) if t is not None)
 
     def bind(self) -> None:
         self.texture.use(LIGHT_UNIT)
 
     def release(self) -> None:
         self.program.release()
+        self._drop_target()
         if self.texture is not None:
             self.texture.release()

@@ -69,7 +69,7 @@ RAYMARCH_STAGES = ("compute", "fragment")
 # A budgeted bake's first slice, before any slice of this probe layout was timed: small enough
 # for a frame on llvmpipe (64 walks a probe), and the next slices follow the measured time.
 FIRST_SLICE_PROBES = 64
-# ... and of a sliced light-grid bake: this fraction of its z layers (1/16).
+# ... and of a sliced light-grid bake: this fraction of its slabs of sun rays (1/16).
 FIRST_SLICE_LIGHT_FRACTION = 16
 
 
@@ -125,7 +125,7 @@ class Renderer:
         self._light_key: tuple | None = None
         self._light_pending: tuple | None = None   # the key of a sliced light-grid bake under way
         self._light_spent_ms = 0.0                  # its GPU ms so far
-        self._layer_ms: dict[tuple, float] = {}     # measured GPU ms per light-grid z layer, per size
+        self._layer_ms: dict[tuple, float] = {}     # GPU ms per light-grid slab of rays, per size
         self.method = "pt"
         self._region_key: tuple | None = None
         self._region = None
@@ -368,7 +368,7 @@ class Renderer:
 
     def bake_light(self, budget_ms: float | None = None) -> float:
         """Bakes the sun's transmittance grid for the raymarcher and the walks if stale; GPU ms.
-        `budget_ms` None: all of it (or the rest of a sliced bake); otherwise a slab of z layers
+        `budget_ms` None: all of it (or the rest of a sliced bake); otherwise slabs of sun rays
         that the GPU time per layer measured by earlier slabs of this grid size predicts fits
         (1/16 of the grid before any was timed; at least one layer). An edit in the middle of a
         sliced bake restarts it."""
