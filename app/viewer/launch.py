@@ -10,10 +10,10 @@ from pathlib import Path
 from ..frontend import (apply_options, check_output, render_defaults, render_to_files,
                         scene_from_arg)
 from ..scene import Scene
+from .device_defaults import RENDER_SCALE, probes_named, with_device_probes
+from .files import bundled_scene_for
 from .state import ViewerState
 from .xvfb import Xvfb, XvfbError, has_display
-
-SOFTWARE_RENDER_SCALE = 0.5   # llvmpipe renders half the window's pixels per side by default
 
 
 def initial_state(scene: Scene, args: argparse.Namespace) -> ViewerState:
@@ -96,8 +96,15 @@ def _run_window(args: argparse.Namespace, scene: Scene, volume, steps, scripted:
     except WindowError as exc:
         return headless_fallback(args, str(exc))
     software = any(n in window.viewer.device.lower() for n in ("llvmpipe", "softpipe", "lavapipe"))
-    state.render_scale = args.render_scale or (SOFTWARE_RENDER_SCALE if software else 1.0)
+    device = "software" if software else "gpu"
+    state.render_scale = args.render_scale or RENDER_SCALE[device]
     print(f"view: {window.viewer.device}", file=sys.stderr)
+    bundled = (bundled_scene_for(Path(args.scene).expanduser())
+               if args.scene and not args.scene.lower().endswith(".json") else None)
+    named = probes_named(args.scene, args.probe_grid, args.probe_samples, bundled)
+    state.scene, said = with_device_probes(state.scene, device, named)
+    if said:
+        print(f"view: {said}", file=sys.stderr)
     rc = 0
     try:
         if steps is not None:
