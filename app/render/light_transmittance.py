@@ -79,15 +79,20 @@ class LightTransmittance:
         self.next_layer = 0
 
     @property
+    def baking_layout(self) -> LightGridLayout | None:
+        """The layout of the bake under way, or of the last one."""
+        return self.target_layout or self.layout
+
+    @property
     def grid(self) -> tuple[int, int, int]:
         """Texels per axis (x, y, z) of the grid being baked (or last baked)."""
-        layout = self.target_layout or self.layout
+        layout = self.baking_layout
         return layout.size if layout is not None else (0, 0, 0)
 
     @property
     def layers(self) -> int:
         """Slabs a sliced bake takes at most: ray rows along the layout's layer axis."""
-        layout = self.target_layout or self.layout
+        layout = self.baking_layout
         return layout.size[layout.layer_axis] if layout is not None else 0
 
     def _texture(self, size: tuple[int, int, int]) -> moderngl.Texture3D:
@@ -136,7 +141,7 @@ class LightTransmittance:
         count = left if layers is None else max(0, min(int(layers), left))
         if count == 0:
             return 0
-        layout = self.target_layout or self.layout
+        layout = self.baking_layout
         texture = self._target if self.target_layout is not None else self.texture
         grid = layout.size
         resources.bind()

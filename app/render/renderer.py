@@ -104,8 +104,8 @@ class Renderer:
         self._light: LightTransmittance | None = None
         self.light_max_side = LIGHT_MAX_SIDE   # the light grid's texels per axis at most
         self.light_precision = LIGHT_PRECISION  # "f2" or "f4" (light_transmittance.PRECISIONS)
-        # ... and at least along the longest axis, and whether it follows the probe grid (6 texels
-        # per probe spacing): per device class (light_transmittance.py)
+        # ... and at least along the longest axis, and whether it follows the probe grid
+        # (TEXELS_PER_PROBE per probe spacing): per device class (light_transmittance.py)
         software = is_software(ctx)
         self.light_min_side = SOFTWARE_MIN_SIDE if software else LIGHT_MIN_SIDE
         self.light_follows_probes = not software

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .medium import sigma_t_at
+from .medium import sigma_t_at, trilinear
 from ..render.light_grid_layout import LightGridLayout
 from ..volume import Volume
 
@@ -73,19 +73,4 @@ def light_grid_lookup(optical_depth: np.ndarray, layout: LightGridLayout, points
     pts = np.asarray(points, np.float64)
     q = pts - np.asarray(layout.shear) * pts[..., layout.axis:layout.axis + 1]
     uvw = q / (2.0 * np.asarray(layout.half_extent)) + 0.5
-    size = np.asarray(layout.size, np.float64)
-    coord = uvw * size - 0.5
-    base = np.floor(coord)
-    f = coord - base
-    out = np.zeros(coord.shape[:-1])
-    nx, ny, nz = layout.size
-    for dz in (0, 1):
-        for dy in (0, 1):
-            for dx in (0, 1):
-                ix = np.clip(base[..., 0].astype(np.int64) + dx, 0, nx - 1)
-                iy = np.clip(base[..., 1].astype(np.int64) + dy, 0, ny - 1)
-                iz = np.clip(base[..., 2].astype(np.int64) + dz, 0, nz - 1)
-                w = ((f[..., 0] if dx else 1 - f[..., 0]) * (f[..., 1] if dy else 1 - f[..., 1])
-                     * (f[..., 2] if dz else 1 - f[..., 2]))
-                out += w * optical_depth[iz, iy, ix]
-    return out
+    return trilinear(optical_depth, uvw * np.asarray(layout.size, np.float64) - 0.5)

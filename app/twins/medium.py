@@ -11,13 +11,16 @@ def density_at(volume: Volume, points: np.ndarray) -> np.ndarray:
     """Trilinear, cell-centred, clamped-to-edge density at world points (..., 3), as GL does."""
     he = volume.half_extent.astype(np.float64)
     uvw = np.asarray(points, np.float64) / (2.0 * he) + 0.5
-    data = volume.data
-    dims = np.array(volume.dims, np.float64)  # x, y, z
-    coord = uvw * dims - 0.5
+    return trilinear(volume.data, uvw * np.array(volume.dims, np.float64) - 0.5)
+
+
+def trilinear(data: np.ndarray, coord: np.ndarray) -> np.ndarray:
+    """GL's linear filtering of a 3D texture `data` (z, y, x) at texel coordinates (..., 3) (x, y,
+    z; texel centres at integers), clamped to the edge."""
     base = np.floor(coord)
     f = coord - base
     out = np.zeros(coord.shape[:-1], np.float64)
-    nx, ny, nz = volume.dims
+    nz, ny, nx = data.shape
     for dz in (0, 1):
         for dy in (0, 1):
             for dx in (0, 1):

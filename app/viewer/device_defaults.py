@@ -15,8 +15,8 @@ RENDER_SCALE = {"gpu": 1.0, "software": 0.5}
 # GPU, 128^3 x 64: in the replayed viewer session on the H100 at 1920x1080
 # (bench/h100-interact/report.md, bonsai, the raymarcher) every edit reached 5% within 150 ms of
 # GPU time and 3% within 215 ms, where 64^3 x 256 ended above 3% after the density edit (3.8%)
-# and the load (4.0%); the bake of 128^3 x 64 takes about 140 ms of 8 ms slices. On llvmpipe no setting was measured in a
-# window, so the scene's default (16^3 x 256) stays.
+# and the load (4.0%); the bake of 128^3 x 64 takes about 140 ms of 8 ms slices. On llvmpipe no
+# setting was measured in a window, so the scene's default (16^3 x 256) stays.
 PROBES = {"gpu": (128, 64), "software": None}
 
 
