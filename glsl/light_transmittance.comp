@@ -9,7 +9,11 @@
 // march_step, only where the ray is inside the box) and storing the running sum. Every texel
 // costs one segment, where a march from each texel to the boundary costs the whole way.
 // Once past tau = 104 (exp(-tau) is 0 in float32) it stops adding.
-layout(local_size_x = 8, local_size_y = 8) in;
+//
+// Rays are numbered along the two other axes b < c (LightGridLayout.ray_axes), b across a work
+// group's 32 consecutive invocations: whenever x is not the march axis, neighbouring invocations
+// write neighbouring texels of one row of the texture.
+layout(local_size_x = 32, local_size_y = 2) in;
 #include "lib/medium.glsl"
 #include "lib/lights.glsl"
 #include "lib/light_grid.glsl"
@@ -19,7 +23,7 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #endif
 layout(LIGHT_GRID_FORMAT, binding = 0) uniform writeonly image3D transmittance_image;
 uniform ivec3 grid;
-uniform int first_layer;   // a slab of rays along axis (a + 2) % 3 per dispatch (bake_layers)
+uniform int first_layer;   // a slab of rays along axis c per dispatch (bake_layers)
 uniform float march_step;  // world units between quadrature points at most
 
 // x[a] at the centre of texel k along the axis.
@@ -31,8 +35,8 @@ float column_centre(int k, int a)
 void main()
 {
     int a = light_grid_axis;
-    int b = (a + 1) % 3;
-    int c = (a + 2) % 3;
+    int b = a == 0 ? 1 : 0;
+    int c = a == 2 ? 1 : 2;
     ivec2 ray = ivec2(gl_GlobalInvocationID.xy) + ivec2(0, first_layer);
     if (ray.x >= grid[b] || ray.y >= grid[c])
         return;

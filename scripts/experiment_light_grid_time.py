@@ -1,6 +1,7 @@
 """The light grid's bake time per side: the sheared column march (light_transmittance.comp) for
 the scene's sun and for a sun 45 degrees off two axes (the widest sheared grid), next to the
-per-texel march it replaced (bench/h100-light-time, where that run measured the same box grid).
+per-texel march it replaced (bench/h100-light-time, where that run measured the same box grid),
+for 16- and 32-bit texels.
 Usage:
     python scripts/experiment_light_grid_time.py OUT.json [scene ...]"""
 import dataclasses, json, statistics, sys
@@ -28,14 +29,16 @@ for name in names:
     for sun in ("scene", "oblique"):
         if sun == "oblique":
             r.set_scene(scene.replace(light=dataclasses.replace(scene.light, direction=(0.5, 0.70710678, 0.5))))
-        for side in (128, 256, 384, 512):
+        for side, precision in ((s, p) for s in (128, 256, 384, 512) for p in ("f2", "f4")):
             r.light_min_side = side
+            r.light_precision = precision
             ms = []
             for _ in range(4):
                 r._light_key = None
                 ms.append(r.bake_light())
             light = r._light
-            rec = {"scene": name, "sun": sun, "sun_direction": list(r.scene.light.direction),
+            rec = {"scene": name, "sun": sun, "precision": precision,
+                   "sun_direction": list(r.scene.light.direction),
                    "box_grid": list(light.box_grid), "light_grid": list(light.grid),
                    "ms": statistics.median(ms[1:]),
                    "ms_per_texel_march": before.get((name, tuple(light.box_grid))) if sun == "scene" else None}

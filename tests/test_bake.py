@@ -226,7 +226,7 @@ def test_light_grid_size_and_layout():
     tilted = light_grid_layout((64, 64, 64), (1.0, 1.0, 1.0), (0.6, 0.8, 0.0), 512)
     assert tilted.axis == 1 and tilted.shear == pytest.approx((0.75, 0.0, 0.0))
     assert tilted.size == (112, 80, 64) and tilted.half_extent == pytest.approx((1.75, 1.0, 1.0))
-    assert tilted.layer_axis == 0
+    assert tilted.ray_axes == (0, 2) and tilted.layer_axis == 2
     # the widening is capped per axis (2 x max_side) and in total
     flat = light_grid_layout((512, 512, 8), (1.0, 1.0, 1 / 64), (0.0, 0.6, 0.8), 512)
     assert flat.axis == 2 and flat.size[2] == 10 and max(flat.size) <= 1024

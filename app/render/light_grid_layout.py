@@ -25,9 +25,15 @@ class LightGridLayout:
     size: tuple[int, int, int]          # texels per axis (x, y, z)
 
     @property
+    def ray_axes(self) -> tuple[int, int]:
+        """The two axes b < c other than a, which number the sun rays (one per texel column)."""
+        b, c = (j for j in range(3) if j != self.axis)
+        return b, c
+
+    @property
     def layer_axis(self) -> int:
-        """The axis a sliced bake steps along in slabs of rays: (a + 2) % 3."""
-        return (self.axis + 2) % 3
+        """The axis a sliced bake steps along in slabs of rays: c of ray_axes."""
+        return self.ray_axes[1]
 
     def uniforms(self) -> dict:
         mask = tuple(1.0 if i == self.axis else 0.0 for i in range(3))

@@ -11,6 +11,7 @@ from .light_grid_layout import LightGridLayout, light_grid_layout
 from .resources import SceneResources
 
 LIGHT_UNIT = 9
+RAYS_PER_GROUP = (32, 2)   # light_transmittance.comp's local size (rays along b, c)
 LIGHT_MARCH_VOXELS = 2.0   # march step in half voxels (resources.march_step)
 MIN_SIDE = 128  # texels along the volume's longest axis at least (small volumes are upsampled)
 MAX_SIDE = 512  # texels per axis at most; the volume's own resolution up to that
@@ -58,7 +59,9 @@ SOFTWARE_MIN_SIDE = 1
 # transmittance to tau / 2048 relative: 0.15% at tau = 3), far below the grid's interpolation error,
 # in half the memory of 32-bit ones. Measured on the H100 (bench/h100-light-sheared): the same
 # raymarched rRMSE within 0.01 points at every probe grid and size on bonsai and the foot; 742 MB
-# against 1.48 GB at 512 texels under the bench's sun, but 2x the bake time (6.6 against 3.3 ms).
+# against 1.48 GB at 512 texels under the bench's sun, and the faster bake since the march's
+# neighbouring invocations write neighbouring texels (1.33 against 1.84 ms; bench/h100-light-sheared
+# time_coalesced.json: before that, 6.6 against 3.3 ms).
 PRECISIONS = {"f2": "r16f", "f4": "r32f"}
 PRECISION = "f2"
 
@@ -153,8 +156,9 @@ class LightTransmittance:
         set_uniforms(self.program, {"grid": grid, "first_layer": first,
                                     "march_step": LIGHT_MARCH_VOXELS * resources.march_step})
         texture.bind_to_image(0, read=False, write=True)
-        rows = grid[(layout.axis + 1) % 3]
-        self.program.run((rows + 7) // 8, (count + 7) // 8, 1)
+        rows = grid[layout.ray_axes[0]]
+        self.program.run((rows + RAYS_PER_GROUP[0] - 1) // RAYS_PER_GROUP[0],
+                         (count + RAYS_PER_GROUP[1] - 1) // RAYS_PER_GROUP[1], 1)
         self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
         self.next_layer = first + count
         if self.target_layout is not None and self.next_layer >= self.layers:

@@ -18,7 +18,7 @@ def light_grid_bake(volume: Volume, table: np.ndarray, density_scale: float, sun
     d = np.asarray(sun_direction, np.float64)
     d = d / np.linalg.norm(d)
     a = layout.axis
-    b, c = (a + 1) % 3, (a + 2) % 3
+    b, c = layout.ray_axes
     size = layout.size
     he = volume.half_extent.astype(np.float64)
     half = np.asarray(layout.half_extent, np.float64)
