@@ -43,6 +43,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
             changes["code_label"] = args.code_label
         if args.probe_layouts:
             changes["probe_layouts"] = args.probe_layouts
+        if args.probe_precision:
+            changes["probe_precision"] = args.probe_precision
         if args.adaptive_strength is not None:
             if not 0.0 <= args.adaptive_strength <= 1.0:
                 raise SystemExit(f"error: --adaptive-strength {args.adaptive_strength}: expected "
@@ -140,6 +142,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="probe layouts each probe setting of the sweep is run with, at the same "
                         "probe count: uniform, extinction, sun (adaptive with that indicator); "
                         "default uniform")
+    b.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"),
+                   help="the sweep's probe textures (default: the scene's, rgba32f); the showcase "
+                        "setting is also run with the other")
     b.add_argument("--adaptive-strength", type=float, metavar="S",
                    help="the adaptive layouts' strength in [0, 1] (default: the scene's, 0.5)")
     b.add_argument("--report-only", action="store_true",

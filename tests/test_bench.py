@@ -106,7 +106,8 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
                          probe_samples=(16,), large_grids=(), probe_frames=(1, 4),
                          raymarch_frames=(1,), showcase=(2, 16), raymarch_steps=(0.5, 1.0),
                          samples_per_dispatch=2,
-                         flip_frames=(4,), image_frames=4, probe_layouts=("uniform", "extinction"))
+                         flip_frames=(4,), image_frames=4, probe_layouts=("uniform", "extinction"),
+                         probe_precision="rgba16f")
     path = run_bench(config, tmp_path, command="test")
     data = json.loads(path.read_text())
     records = data["records"]
@@ -118,14 +119,17 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
         assert np.isfinite(r["rrmse"]) and r["rrmse"] > 0
         assert r["frame_ms"] >= 0 and r["total_ms"] >= r["bake_ms"]
         assert r["gpu_bytes"] >= 16 * 16 * 16
+        assert r["speed_check_ms"] > 0   # the device's speed when the record was taken
         if r["method"] == "raymarch":   # every raymarched image pays for its light grid
             assert r["light_ms"] > 0 and r["bake_ms"] >= r["light_ms"]
         if r["method"] == "pt" or r["spp"] in config.flip_frames:
             assert r["flip"] is not None and 0.0 <= r["flip"] <= 1.0
         if r["method"] != "pt":
             assert r["probe_grid"] == 2 and r["probe_samples"] == 16
-    # the showcase setting's variants: 16F probes, a Hann window (g != 0), both raymarch stages
-    assert any(r.get("precision") == "rgba16f" for r in records)
+    # the sweep in the asked-for precision (--probe-precision), and the showcase setting's
+    # variants: the other precision, a Hann window (g != 0), both raymarch stages
+    precisions = [r.get("precision") for r in records if r["method"] != "pt"]
+    assert precisions.count("rgba16f") > precisions.count("rgba32f") > 0
     assert any(r.get("sh_window") == "hann" for r in records)
     assert {r.get("stage") for r in records if r["method"] == "raymarch"} == {"compute", "fragment"}
     # the layouts at the same probe count (--probe-layouts)
@@ -138,6 +142,25 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
     text = report.read_text()
     assert "Time to reach an error" in text and (tmp_path / "error_vs_time.png").is_file()
     assert "Probe layouts at the same probe count" in text and "adaptive-extinction" in text
+    assert "The device's speed during the run" in text
+
+
+def test_records_after_a_slow_speed_check_are_counted(tmp_path):
+    """The report counts the records taken after a speed check slower than the scene's fastest
+    by more than SPEED_CHECK_SLOWER (a shared or clocked-down GPU), and only those."""
+    from app.bench.ceiling import SPEED_CHECK_SLOWER
+    def rec(check):
+        return {"scene": "s", "method": "pt", "rrmse": 0.1, "total_ms": 1.0, "spp": 1,
+                "frame_ms": 1.0, "bake_ms": 0.0, "probe_grid": None, "probe_samples": None,
+                "flip": None, "gpu_bytes": 0, "speed_check_ms": check}
+    checks = [1.0, 1.1, SPEED_CHECK_SLOWER * 0.99, 2.5, 3.0]
+    data = {"meta": {"device": "d", "command": "c", "config": {"width": 4, "height": 4}},
+            "references": {"s": {"noise_rrmse": 0.0}}, "records": [rec(c) for c in checks]}
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps(data))
+    text = write_report(path).read_text()
+    section = text.split("## The device's speed during the run")[1].split("## ")[0]
+    assert "| s | 1.000 | 1.188 | 3.000 | 2 of 5 |" in section
 
 
 def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):

@@ -228,6 +228,7 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
                     "first_frame_wall_ms", "frame_wall_ms_p50", "frame_wall_ms_p99"):
             assert r[key] is not None and np.isfinite(r[key]), key
         assert r["frame_ms_p99"] >= r["frame_ms_p50"] > 0
+        assert r["speed_check_ms"] > 0   # the device's speed after the event's frames
         for key in ("ms_to_10pct", "ms_to_5pct", "ms_to_3pct"):
             assert key in r
             assert r[key] is None or r[key] > 0
@@ -246,6 +247,7 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
                                         "albedo")}
     text = write_report(path).read_text()
     assert "Interaction" in text and "| tiny | 24x16 | 3^3x64 | tf_drag | probes | warm |" in text
+    assert "The device's speed during the run" in text
     assert (tmp_path / "a" / "interact.png").is_file()
     again = run_bench(config.scaled(reference_dir=str(tmp_path / "a")), tmp_path / "b")
     refs = json.loads(again.read_text())["references"]

@@ -31,3 +31,18 @@ def measure_ceiling(renderer, rays: int = 1 << 21, steps: int = 256, repeats: in
         sums.release()
         program.release()
     return {"steps": rays * steps, "ms": best, "steps_per_s": rays * steps / (best / 1e3)}
+
+
+# The benchmark's check on the device's own speed: the same small march before every setting of a
+# scene. The GPU may be shared or clocked down for part of a run (bench/h100's raymarch frames on
+# bonsai and the anisotropic cloud drifted 1.5-3x slower over a few minutes and back, while the same
+# settings timed alone did not); records whose check ran slower than the scene's fastest say so.
+SPEED_CHECK_RAYS = 1 << 18
+SPEED_CHECK_STEPS = 64
+SPEED_CHECK_SLOWER = 1.2   # a check this much slower than the scene's fastest flags its records
+
+
+def speed_check_ms(renderer) -> float:
+    """GPU ms of a fixed trilinear march (SPEED_CHECK_RAYS x SPEED_CHECK_STEPS) through the scene's
+    medium, the best of 3 after a warm-up."""
+    return measure_ceiling(renderer, SPEED_CHECK_RAYS, SPEED_CHECK_STEPS)["ms"]

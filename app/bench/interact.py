@@ -26,6 +26,7 @@ import numpy as np
 
 from ..imageio import save_png
 from ..transfer import opacity_points, rgba_with_opacity
+from .ceiling import speed_check_ms
 from .metrics import corrected_rrmse, rrmse
 from .records import log as _log
 
@@ -178,6 +179,7 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
             return refs[key]
 
         def add(rec):
+            rec["speed_check_ms"] = speed_check_ms(r)   # the device's speed (ceiling.py)
             results.add(rec)
             shown = ", ".join(f"{t}: {rec[f'ms_to_{t}pct']}" for t in (10, 5, 3))
             _log(f"  {tag} {rec['probe_grid']}^3x{rec['probe_samples']} {rec['event']} "

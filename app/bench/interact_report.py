@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .records import caveat
+from .records import caveat, speed_checks
 
 
 def _ms(v) -> str:
@@ -124,6 +124,8 @@ def write_interact_report(data: dict, out: Path) -> Path:
     lines = ["# Interaction", "", f"Device: **{meta['device']}**. Started {meta.get('started')}, "
              f"finished {meta.get('finished', 'not finished (partial run)')}.", "",
              f"Command: `{meta.get('command', '')}`", "", *caveat(meta), *interact_section(data, out)]
+    scenes = list(dict.fromkeys(r["scene"] for r in data["records"]))
+    lines += speed_checks(data, scenes, "after each event's frames")
     path = out / "report.md"
     path.write_text("\n".join(lines))
     return path

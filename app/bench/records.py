@@ -11,6 +11,7 @@ import numpy as np
 
 from ..render.pathtracer import PIXEL_STATE_BYTES
 from .config import BenchConfig
+from .ceiling import SPEED_CHECK_SLOWER
 from .metrics import rrmse
 
 ACCUMULATION_BYTES = 16   # RGBA32F running mean per pixel
@@ -61,3 +62,29 @@ def make_record(base: dict, config: BenchConfig, method: str, frames: int, image
 def caveat(meta: dict) -> list[str]:
     """A run's known shortcoming, stated at the top of its report (results.json's meta.caveat)."""
     return [f"**Caveat:** {meta['caveat']}", ""] if meta.get("caveat") else []
+
+
+def speed_checks(data: dict, scenes: list[str],
+                 when: str = "before the path tracer and before each probe setting") -> list[str]:
+    """The device's speed over the run (ceiling.speed_check_ms before each setting): a check
+    slower than the scene's fastest by SPEED_CHECK_SLOWER means the GPU was shared or clocked down
+    while those records were taken."""
+    rows = []
+    for s in scenes:
+        recs = [r for r in data["records"] if r["scene"] == s and r.get("speed_check_ms")]
+        if not recs:
+            continue
+        checks = sorted({r["speed_check_ms"] for r in recs})
+        fastest = checks[0]
+        slow = [r for r in recs if r["speed_check_ms"] > SPEED_CHECK_SLOWER * fastest]
+        rows.append(f"| {s} | {fastest:.3f} | {checks[len(checks) // 2]:.3f} | {checks[-1]:.3f} | "
+                    f"{len(slow)} of {len(recs)} |")
+    if not rows:
+        return []
+    return ["", "## The device's speed during the run", "",
+            f"{when[0].upper()}{when[1:]} the run times the same small trilinear march through the scene's medium (`speed_check_ms`, app/bench/ceiling.py). "
+            f"Records taken after a check more than {SPEED_CHECK_SLOWER:.1f}x slower than the "
+            "scene's fastest ran on a GPU that was shared or clocked down: their times are not "
+            "comparable.", "",
+            "| scene | fastest check (ms) | median | slowest | records after a slow check |",
+            "|---|---|---|---|---|", *rows]

@@ -8,7 +8,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from .metrics import corrected_floor, corrected_rrmse
-from .records import caveat
+from .records import caveat, speed_checks
 
 METHOD_ORDER = ("pt", "probes", "probes-only", "raymarch")
 COLOURS = {"pt": "#222222", "probes": "#1f77b4", "probes-only": "#2ca02c", "raymarch": "#d62728"}
@@ -71,15 +71,24 @@ def error_of(data: dict, record: dict) -> float:
     return corrected_rrmse(record["rrmse"], _noise(data, record["scene"], record))
 
 
+def sweep_precision(data: dict) -> str:
+    """The probe precision of a run's main sweep (bench --probe-precision; 32F by default)."""
+    return data.get("meta", {}).get("config", {}).get("probe_precision") or "rgba32f"
+
+
 def main_records(data: dict, scene: str) -> list[dict]:
-    """A scene's records of the main sweep (32F, no window, compute stage, default step), each with
-    `error`: its rRMSE corrected for the reference's noise, raised to the floor where below it."""
+    """A scene's records of the main sweep (its precision, no window, compute stage, default step),
+    each with `error`: its rRMSE corrected for the reference's noise, raised to the floor where
+    below it."""
     lo = floor(data, scene)
+    precision = sweep_precision(data)
     out = []
     for r in data["records"]:
         if r["scene"] != scene or r.get("mode") == "cost":
             continue
-        if r.get("precision", "rgba32f") != "rgba32f" or r.get("sh_window", "none") != "none":
+        if r["method"] != "pt" and (r.get("precision") or "rgba32f") != precision:
+            continue
+        if r.get("sh_window", "none") != "none":
             continue
         if r["method"] == "raymarch" and (r.get("stage") != "compute" or r.get("raymarch_step") != 0.5):
             continue
@@ -260,6 +269,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
                 r = equal_time([x for x in recs if x["method"] == m], p["total_ms"])
                 cells.append("-" if r is None else f"{err(r)} ({label(r)})")
             lines.append(f"| {s} | {_ms(p['total_ms'])} ({p['spp']}) | " + " | ".join(cells) + " |")
+    lines += speed_checks(data, scenes)
     lines += _table1(data, scenes)
     lines += _sweeps(data, scenes)
     lines += _layouts(data, scenes)
@@ -277,7 +287,8 @@ def _table1(data: dict, scenes: list[str]) -> list[str]:
              "Bake GPU time; `probes` frame time and rRMSE after the most frames measured.", ""]
     for s in scenes:
         recs = [r for r in data["records"] if r["scene"] == s and r["method"] == "probes"
-                and r.get("mode") != "cost" and r.get("precision") == "rgba32f" and r.get("sh_window") == "none"
+                and r.get("mode") != "cost" and r.get("precision") == sweep_precision(data)
+                and r.get("sh_window") == "none"
                 and r.get("probe_layout", "uniform") == "uniform"]
         if not recs:
             continue
@@ -305,7 +316,8 @@ def _layouts(data: dict, scenes: list[str]) -> list[str]:
     """Probe layouts at the same probe count (bench --probe-layouts): each setting's error and
     bake time per layout, after the most frames measured."""
     recs = [r for r in data["records"] if r.get("mode") != "cost" and r["method"] != "pt"
-            and r.get("precision", "rgba32f") == "rgba32f" and r.get("sh_window", "none") == "none"
+            and r.get("precision", "rgba32f") == sweep_precision(data)
+            and r.get("sh_window", "none") == "none"
             and (r["method"] != "raymarch" or (r.get("stage") == "compute"
                                               and r.get("raymarch_step") == 0.5))]
     if not any(r.get("probe_layout", "uniform") != "uniform" for r in recs):
@@ -351,7 +363,8 @@ def _sweeps(data: dict, scenes: list[str]) -> list[str]:
                 key += f", {r['probe_layout']} layout"
             by_variant[(key, r["probe_grid"], r["probe_samples"])].append(r)
         grids = {(g, n) for (_, g, n), rs in by_variant.items()
-                 if any(r.get("precision") == "rgba16f" or r.get("stage") == "fragment" for r in rs)}
+                 if any(r.get("precision") != sweep_precision(data) or r.get("stage") == "fragment"
+                        for r in rs)}
         for (key, g, n), rs in sorted(by_variant.items()):
             if (g, n) not in grids:
                 continue

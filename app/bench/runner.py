@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..imageio import save_png
+from .ceiling import speed_check_ms
 from .config import BenchConfig
 from .metrics import flip, reference_noise
 from .records import log as _log, make_record, progressive as _progressive
@@ -182,6 +183,7 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
 
     # Path tracer: one progressive run, snapshots at each spp.
     k = config.samples_per_dispatch
+    base["speed_check_ms"] = speed_check_ms(renderer)
     for spp, image, *timing in _progressive(renderer, "pt", config.pt_spp, 5, k):
         record("pt", spp, image, timing)
         if spp == config.image_frames:
@@ -189,19 +191,25 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
     _log(f"  pt: {config.pt_spp[-1]} spp, {results.records[-1]['frame_ms']:.3f} ms per frame, "
          f"rRMSE {results.records[-1]['rrmse']:.4f}")
 
+    # The sweep's probe precision (--probe-precision; the scene's by default), and the other one as
+    # the showcase setting's variant.
+    precision = config.probe_precision or scene.probes.precision
+    other_precision = "rgba32f" if precision == "rgba16f" else "rgba16f"
     settings = [(g, s) for g in config.probe_grids for s in config.probe_samples]
     settings += [gs for gs in config.large_grids if gs not in settings]
     for grid, samples in settings:
         showcase = (grid, samples) == tuple(config.showcase)
         bake_ms = 0.0
-        variants = [{}] + ([{"precision": "rgba16f"}] if showcase else [])
+        variants = [{}] + ([{"precision": other_precision}] if showcase else [])
         if showcase and scene.anisotropy != 0.0:
             # With g = 0 the phase convolution zeroes bands 1 and 2: a window changes nothing.
             variants.append({"sh_window": "hann"})
         variants += [_layout_variant(name, config) for name in config.probe_layouts
                      if name != "uniform"]
         for variant in variants:
-            renderer.set_scene(_with_probes(scene, grid, samples, **variant))
+            base["speed_check_ms"] = speed_check_ms(renderer)
+            renderer.set_scene(_with_probes(scene, grid, samples,
+                                            **{"precision": precision, **variant}))
             # The light grid this setting's images use (its size follows the probe grid; the
             # walks read it too): what it cost, also when an earlier setting baked the same one.
             light_ms = renderer.light_grid_ms()
