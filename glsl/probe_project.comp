@@ -128,7 +128,11 @@ void main()
     float w = warm_walks > 0.0 ? warm_walks / (warm_walks + acc.samples) : 0.0;
     for (int i = 0; i < 7; ++i)
         shown[i] = w > 0.0 ? mix(acc.channels[i], prior[probe].channels[i], w) : acc.channels[i];
+    // Stored relative to the scene's light (lib/probes.glsl: probe_radiance_scale); channel 27,
+    // the sun's transmittance, as it is.
+    float to_stored = 1.0 / probe_radiance_scale;
     for (int i = 0; i < 7; ++i) {
+        shown[i] = i == 6 ? vec4(shown[i].rgb * to_stored, shown[i].a) : shown[i] * to_stored;
         f[4 * i + 0] = shown[i].r;
         f[4 * i + 1] = shown[i].g;
         f[4 * i + 2] = shown[i].b;

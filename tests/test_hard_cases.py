@@ -26,6 +26,8 @@ checked:
   (1e-30, subnormal) values, read from .npy files: the normalised data are exact; renders are clean,
   a volume scaled by 2^100 renders bit for bit as the unscaled one, and densities of 1e-26 (a 1e30
   value range) render the environment;
+* 16-bit probe textures under a sun and environment of 1e6 (coefficients past half floats' 65504)
+  and of 1e-7 (coefficients in their subnormals) raymarch as 32-bit ones do, to half-float rounding;
 * regressions: a new volume is never taken for one already baked (probes and light grid were keyed
   by id(volume), which CPython reuses); paths cut by a tiny loop budget, inside flights and shadow
   rays, resume to the same image (shadow rays cut short used to drop the path: at sigma_t 1e4 on
@@ -46,6 +48,7 @@ import time
 import moderngl
 import numpy as np
 import pytest
+from dataclasses import replace
 
 from app.twins import rng as nrng
 from app.twins.camera import camera_frame
@@ -759,3 +762,26 @@ def test_paths_cut_by_a_tiny_loop_budget_give_the_same_image(renderers, method):
         tracer.loop_budget, tracer.loop_reserve = saved
     assert whole.max() > 0
     np.testing.assert_allclose(cut, whole, rtol=1e-4, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# 16-bit probes at any light level
+
+@pytest.mark.parametrize("level", [1e6, 1e-7])
+def test_16bit_probes_hold_any_light_level(renderers, level):
+    """The probe textures store SH coefficients relative to the scene's brightest light
+    (probes.radiance_scale), so 16-bit texels give the 32-bit image whatever the lights' units:
+    at 1e6 the coefficients pass 65504 (a half float's largest), at 1e-7 they fall below 6.1e-5
+    (its smallest normal number), and unscaled either would break the image."""
+    sun = {"direction": [0.3, 0.8, 0.5], "irradiance": [2.0 * level, 2.5 * level, 3.0 * level]}
+    scene = _scene(volume={"builtin": "cloud", "size": [8, 8, 8]}, transfer_function=WHITE,
+                   density_scale=20.0, albedo=0.9, light=sun, environment=[e * level for e in ENV],
+                   probes={**PROBES, "precision": "rgba16f"})
+    r = renderers(scene)
+    half = _render(r, "raymarch").image
+    stored = np.abs(r.probe_grid.coefficients()[..., :27]).max()
+    assert stored > 65504 if level > 1 else stored < 6.1e-5   # the case is as hard as it says
+    full = _render(renderers(scene.replace(probes=replace(scene.probes, precision="rgba32f"))),
+                   "raymarch").image
+    assert full.max() > 0
+    assert np.abs(half - full).max() <= 2e-3 * full.max()

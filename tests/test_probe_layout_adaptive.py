@@ -187,13 +187,15 @@ def test_probe_fetch_blends_the_probes_at_their_positions(ctx):
                      defines={"PROBE_WARP": 1, "PROBE_GREY": 1, "PROBE_SH_ORDER": 0},
                      uniforms={"probe_warp": UNIT, "probe_sh0": 2, "probe_grid": grid,
                                "probe_box_min": tuple(low), "probe_box_size": tuple(size),
-                               "probe_band_factors": (1.0, 1.0, 1.0)})
+                               "probe_band_factors": (1.0, 1.0, 1.0),
+                               "probe_radiance_scale": 2.0})
     probe_tex.release()
     warp_tex.release()
     s32 = (x.astype(np.float64) - low) / size
     uvw = warp_lookup(table, s32)
-    for channel, column in ((0, 0), (3, 1)):
-        twin = texture_trilinear(values[..., channel].astype(np.float64), uvw)
+    # coefficients come back times probe_radiance_scale, the sun's transmittance as stored
+    for channel, column, scale in ((0, 0, 2.0), (3, 1, 1.0)):
+        twin = scale * texture_trilinear(values[..., channel].astype(np.float64), uvw)
         np.testing.assert_allclose(out[:, column], twin, rtol=2e-5, atol=2e-6)
         # on its own: weights from the planes bracketing each point, clamped beyond the outer ones
         independent = np.zeros(len(x))
@@ -209,7 +211,8 @@ def test_probe_fetch_blends_the_probes_at_their_positions(ctx):
                 for dx in (0, 1):
                     w = ((wts[0] if dx else 1 - wts[0]) * (wts[1] if dy else 1 - wts[1])
                          * (wts[2] if dz else 1 - wts[2]))
-                    independent += w * values[idx[2] + dz, idx[1] + dy, idx[0] + dx, channel]
+                    independent += scale * w * values[idx[2] + dz, idx[1] + dy, idx[0] + dx,
+                                                      channel]
         assert np.abs(out[:, column] - independent).max() < 3 * 1.5 * max(grid) / WARP_COLUMNS
 
 

@@ -45,6 +45,23 @@ WARM_WALKS = 64   # a warm restart's old probes count as this many walks until t
 SH_WINDOW_IDS = {"none": 0, "hann": 1, "lanczos": 2}
 
 
+def radiance_scale(scene, environment=None) -> float:
+    """What the probe textures' coefficients are stored relative to (lib/probes.glsl
+    probe_radiance_scale): the scene's brightest light, the sun's irradiance or the environment's
+    largest radiance (a map's brightest texel times its scale). A probe's radiance is that times
+    a factor of the medium (below 1 for a thin medium, up to about 1 / (1 - albedo) for a thick
+    one), so 16-bit texels (largest 65504, 11 significant bits down to 6e-5) hold it whatever the
+    lights' units: a sun of 1e5 would overflow them unscaled, one of 1e-4 fall to their
+    subnormals. 1 when the scene has no light."""
+    levels = [max(scene.light.irradiance)]
+    if environment is not None and scene.environment_map is not None:
+        levels.append(float(np.max(environment.image)) * float(scene.environment_map.scale))
+    else:
+        levels.append(max(scene.environment))
+    level = max(levels)
+    return float(level) if math.isfinite(level) and level > 0.0 else 1.0
+
+
 def band_factors(g: float, window: str) -> tuple[float, float, float]:
     """Per-band multipliers g^l * window_l (NumPy twin of sh_band_factors in lib/sh.glsl)."""
     from ..sh import sh_band_factors
@@ -92,6 +109,7 @@ class ProbeGrid:
         self.precision = precision
         self.sh_order = int(sh_order)
         self.grey = bool(grey)
+        self.radiance_scale = 1.0   # what the textures are stored relative to (radiance_scale)
         self.texture_ids = texture_ids(self.sh_order, self.grey)
         self.box = None if box is None else (tuple(map(float, box[0])), tuple(map(float, box[1])))
         self.count = self.grid[0] * self.grid[1] * self.grid[2]
@@ -257,6 +275,9 @@ class ProbeGrid:
                          "adaptive_walks": int(self.adaptive > 0),
                          "warm_walks": 0.0 if last_pass else self.warm_walks})
         uniforms.update(self.box_uniforms(resources))
+        if self.passes_done == 0 and self.next_probe == 0:   # a bake starts: the scene's lights
+            self.radiance_scale = radiance_scale(scene, resources.environment)
+        uniforms["probe_radiance_scale"] = self.radiance_scale
         if self.warp_texture is not None:
             self.warp_texture.use(PROBE_WARP_UNIT)
             uniforms["probe_warp"] = PROBE_WARP_UNIT
@@ -406,6 +427,7 @@ class ProbeGrid:
             u["probe_warp"] = PROBE_WARP_UNIT
         u.update(self.box_uniforms(resources))
         u["probe_band_factors"] = band_factors(anisotropy, window)
+        u["probe_radiance_scale"] = self.radiance_scale
         return u
 
     def release(self) -> None:

@@ -31,6 +31,10 @@
 #endif
 #include "lib/probe_warp.glsl"
 uniform ivec3 probe_grid;
+// The textures hold the SH coefficients divided by this (the scene's brightest light, as radiance:
+// app/render/probes.py radiance_scale), so that 16-bit texels keep their range and precision
+// whatever units the scene's lights use; the sun's transmittance is stored as it is.
+uniform float probe_radiance_scale;
 uniform vec3 probe_box_min;    // world corner of the probe box
 uniform vec3 probe_box_size;   // its size (> 0 on every axis)
 
@@ -122,6 +126,8 @@ void probe_fetch(vec3 x, out vec3 coeffs[9], out float sun_transmittance)
 #endif
     sun_transmittance = clamp(t6.a, 0.0, 1.0);
 #endif
+    for (int k = 0; k < 9; ++k)
+        coeffs[k] *= probe_radiance_scale;
 }
 
 // Radiance in-scattered towards a ray travelling along d at x, from the probes' radiance convolved
