@@ -128,3 +128,32 @@ def test_error_falls_as_inverse_sqrt_spp(ctx):
     ratios = [errors[i] / errors[i + 1] for i in range(2)]
     for r in ratios:  # 4x samples: error halves
         assert 1.6 < r < 2.5, (errors, ratios)
+
+
+@pytest.mark.parametrize("method", ["pt", "probes"])
+def test_a_restart_ignores_the_stored_path_states(ctx, method):
+    """A render's first dispatch starts every pixel afresh in the shader (pathtrace.comp's
+    `restart`), with nothing cleared by the host: the same render again, after garbage was
+    written over the path states (and after a render with the loop budget cut so that paths were
+    suspended in flight), gives the same image bit for bit."""
+    scene = _single_scatter_scene(max_bounces=8, environment=[0.1, 0.1, 0.1],
+                                  probes={"grid": [3, 3, 3], "samples": 16})
+    r = Renderer(ctx, scene)
+    try:
+        if method == "probes":
+            r.bake(seed=1)
+        first = r.render(method, spp=4, seed=7).image
+        tracer = r.pass_for(method, r.probe_grid.defines() if method == "probes" else None)
+        budget = tracer.loop_budget, tracer.loop_reserve
+        tracer.loop_budget, tracer.loop_reserve = 40, 8   # leave paths suspended mid-flight
+        acc = r.begin(method, seed=3)
+        tracer.dispatch(r.resources, r.camera, acc, 4, 3,
+                        r.probe_uniforms() if method == "probes" else None)
+        tracer.loop_budget, tracer.loop_reserve = budget
+        garbage = np.random.default_rng(0).integers(0, 2**32, tracer.states.size // 4,
+                                                    dtype=np.uint32)
+        tracer.states.write(garbage.tobytes())
+        again = r.render(method, spp=4, seed=7).image
+    finally:
+        r.release()
+    np.testing.assert_array_equal(first, again)

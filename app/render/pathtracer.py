@@ -41,16 +41,20 @@ class PathTracer:
 
     def dispatch(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
                  target_samples: int, seed: int = 0, extra_uniforms: dict | None = None) -> None:
-        """One dispatch towards `target_samples` per pixel; starts afresh when acc was reset."""
+        """One dispatch towards `target_samples` per pixel; starts afresh when acc was reset (the
+        shader then ignores the stored path states: nothing is cleared or uploaded by the host)."""
+        fresh = self.states is None or self.states.size != acc.width * acc.height * self.state_bytes
         states = self._states_for(acc)
-        if acc.samples == 0:
-            states.clear()
+        if fresh and acc.samples != 0:
+            raise RuntimeError("the path states were reallocated in the middle of an accumulation")
         resources.bind()
         set_uniforms(self.program, resources.uniforms())
         set_uniforms(self.program, extra_uniforms or {})
         set_uniforms(self.program, camera.uniforms())
         set_uniforms(self.program, {"seed": seed & 0xFFFFFFFF, "target_samples": target_samples,
-                                    "loop_budget": self.loop_budget, "loop_reserve": self.loop_reserve})
+                                    "loop_budget": self.loop_budget, "loop_reserve": self.loop_reserve,
+                                    # the shader starts every pixel afresh (no host-side clear)
+                                    "restart": int(acc.samples == 0)})
         acc.bind_image(0)
         states.bind_to_storage_buffer(1)
         self.progress.bind_to_storage_buffer(2)
@@ -65,10 +69,14 @@ class PathTracer:
         """Dispatches until every pixel holds `target_samples` samples (one dispatch where the
         driver has no loop limit; more on llvmpipe, where long paths resume across dispatches)."""
         while True:
+            if loop_budget_unbounded(self.loop_budget):
+                # no driver loop limit: every pixel finishes in this dispatch, and the pending
+                # count is neither reset nor read (a write to a buffer the last dispatch used can
+                # make the driver wait for that dispatch)
+                self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms)
+                return
             self.progress.write(bytes(4))
             self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms)
-            if loop_budget_unbounded(self.loop_budget):
-                return  # no driver loop limit: every pixel finished in this dispatch
             (pending,) = struct.unpack("I", self.progress.read())
             if pending == 0:
                 return
