@@ -82,7 +82,8 @@ def speed_checks(data: dict, scenes: list[str],
     if not rows:
         return []
     return ["", "## The device's speed during the run", "",
-            f"{when[0].upper()}{when[1:]} the run times the same small trilinear march through the scene's medium (`speed_check_ms`, app/bench/ceiling.py). "
+            f"{when[0].upper()}{when[1:]} the run times the same small trilinear march through "
+            "the scene's medium (`speed_check_ms`, app/bench/ceiling.py). "
             f"Records taken after a check more than {SPEED_CHECK_SLOWER:.1f}x slower than the "
             "scene's fastest ran on a GPU that was shared or clocked down: their times are not "
             "comparable.", "",

@@ -285,9 +285,10 @@ def _table1(data: dict, scenes: list[str]) -> list[str]:
     """The paper's Table 1 axes: bake time and error per probe grid and samples per probe."""
     lines = ["", "## Probe grid x samples per probe (the paper's Table 1 axes)", "",
              "Bake GPU time; `probes` frame time and rRMSE after the most frames measured.", ""]
+    precision = sweep_precision(data)
     for s in scenes:
         recs = [r for r in data["records"] if r["scene"] == s and r["method"] == "probes"
-                and r.get("mode") != "cost" and r.get("precision") == sweep_precision(data)
+                and r.get("mode") != "cost" and r.get("precision") == precision
                 and r.get("sh_window") == "none"
                 and r.get("probe_layout", "uniform") == "uniform"]
         if not recs:
@@ -315,8 +316,9 @@ def _table1(data: dict, scenes: list[str]) -> list[str]:
 def _layouts(data: dict, scenes: list[str]) -> list[str]:
     """Probe layouts at the same probe count (bench --probe-layouts): each setting's error and
     bake time per layout, after the most frames measured."""
+    precision = sweep_precision(data)
     recs = [r for r in data["records"] if r.get("mode") != "cost" and r["method"] != "pt"
-            and r.get("precision", "rgba32f") == sweep_precision(data)
+            and r.get("precision", "rgba32f") == precision
             and r.get("sh_window", "none") == "none"
             and (r["method"] != "raymarch" or (r.get("stage") == "compute"
                                               and r.get("raymarch_step") == 0.5))]
@@ -349,6 +351,7 @@ def _sweeps(data: dict, scenes: list[str]) -> list[str]:
     """Raymarch step and stage, 16F against 32F, SH window: at the showcase setting."""
     lines = ["## Raymarch step and stage, precision and SH window (showcase setting)", "",
              "| scene | variant | frame | bake | rRMSE | FLIP | GPU memory |", "|---|---|---|---|---|---|---|"]
+    precision = sweep_precision(data)
     for s in scenes:
         by_variant = defaultdict(list)
         for r in data["records"]:
@@ -363,7 +366,7 @@ def _sweeps(data: dict, scenes: list[str]) -> list[str]:
                 key += f", {r['probe_layout']} layout"
             by_variant[(key, r["probe_grid"], r["probe_samples"])].append(r)
         grids = {(g, n) for (_, g, n), rs in by_variant.items()
-                 if any(r.get("precision") != sweep_precision(data) or r.get("stage") == "fragment"
+                 if any(r.get("precision") != precision or r.get("stage") == "fragment"
                         for r in rs)}
         for (key, g, n), rs in sorted(by_variant.items()):
             if (g, n) not in grids:

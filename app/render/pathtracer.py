@@ -32,8 +32,13 @@ class PathTracer:
         self.dispatches = 0
 
     def _states_for(self, acc: Accumulation) -> moderngl.Buffer:
+        """The per-pixel path states for acc's size; a new buffer's contents are undefined, which
+        only a restart (acc.samples == 0: the shader ignores them) may meet."""
         size = acc.width * acc.height * self.state_bytes
         if self.states is None or self.states.size != size:
+            if acc.samples != 0:
+                raise RuntimeError("the path states were reallocated in the middle of an "
+                                   "accumulation")
             if self.states is not None:
                 self.states.release()
             self.states = self.ctx.buffer(reserve=size)
@@ -43,10 +48,7 @@ class PathTracer:
                  target_samples: int, seed: int = 0, extra_uniforms: dict | None = None) -> None:
         """One dispatch towards `target_samples` per pixel; starts afresh when acc was reset (the
         shader then ignores the stored path states: nothing is cleared or uploaded by the host)."""
-        fresh = self.states is None or self.states.size != acc.width * acc.height * self.state_bytes
         states = self._states_for(acc)
-        if fresh and acc.samples != 0:
-            raise RuntimeError("the path states were reallocated in the middle of an accumulation")
         resources.bind()
         set_uniforms(self.program, resources.uniforms())
         set_uniforms(self.program, extra_uniforms or {})
@@ -68,15 +70,16 @@ class PathTracer:
             target_samples: int, seed: int = 0, extra_uniforms: dict | None = None) -> None:
         """Dispatches until every pixel holds `target_samples` samples (one dispatch where the
         driver has no loop limit; more on llvmpipe, where long paths resume across dispatches)."""
+        # No driver loop limit: every pixel finishes in one dispatch, and the pending count is
+        # neither reset nor read (a write to a buffer the last dispatch used can make the driver
+        # wait for that dispatch).
+        unbounded = loop_budget_unbounded(self.loop_budget)
         while True:
-            if loop_budget_unbounded(self.loop_budget):
-                # no driver loop limit: every pixel finishes in this dispatch, and the pending
-                # count is neither reset nor read (a write to a buffer the last dispatch used can
-                # make the driver wait for that dispatch)
-                self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms)
-                return
-            self.progress.write(bytes(4))
+            if not unbounded:
+                self.progress.write(bytes(4))
             self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms)
+            if unbounded:
+                return
             (pending,) = struct.unpack("I", self.progress.read())
             if pending == 0:
                 return

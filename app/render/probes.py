@@ -51,8 +51,8 @@ def radiance_scale(scene, environment=None) -> float:
     largest radiance (a map's brightest texel times its scale). A probe's radiance is that times
     a factor of the medium (below 1 for a thin medium, up to about 1 / (1 - albedo) for a thick
     one), so 16-bit texels (largest 65504, 11 significant bits down to 6e-5) hold it whatever the
-    lights' units: a sun of 1e5 would overflow them unscaled, one of 1e-4 fall to their
-    subnormals. 1 when the scene has no light."""
+    lights' units: unscaled, a sun and environment of 1e6 overflow them and ones of 1e-7 fall to
+    their subnormals (tests/test_hard_cases.py). 1 when the scene has no light."""
     levels = [max(scene.light.irradiance)]
     if environment is not None and scene.environment_map is not None:
         levels.append(float(np.max(environment.image)) * float(scene.environment_map.scale))
