@@ -9,6 +9,8 @@
 #include "lib/directions.glsl"
 #include "lib/probes.glsl"
 #include "lib/light_grid.glsl"
+#include "lib/cell_walk.glsl"
 uniform int max_bounces;
 uniform float anisotropy;
+#include "lib/running_mean.glsl"
 #include "lib/raymarch.glsl"

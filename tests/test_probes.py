@@ -161,6 +161,47 @@ def test_raymarch_fragment_equals_compute(ctx):
     np.testing.assert_allclose(images["fragment"], images["compute"], rtol=1e-5, atol=1e-6)
 
 
+def _raymarch_frames(r, frames, seed=3):
+    acc = r.begin("raymarch", seed=seed)
+    r.add_samples(frames)
+    return acc.read_rgba()
+
+
+def test_raymarch_skipping_empty_space_changes_nothing(ctx):
+    """The raymarcher jumps over macrocells the majorant grid bounds by 0 (the corners around this
+    ball, whose edge is one voxel wide): the same samples contribute, so the image is the one
+    marched through every step."""
+    r = _renderer(ctx, volume={"builtin": "sphere", "size": [32, 24, 28]}, density_scale=60.0,
+                  camera={**CAMERA, "width": 48, "height": 40})
+    r.bake()
+    assert (r.resources.majorant_grid.read() == 0).mean() > 0.2
+    skipping = _raymarch_frames(r, 3)
+    r.resources.use_majorant_grid = False     # the same probes, every step marched
+    marching = _raymarch_frames(r, 3)
+    assert skipping[..., :3].max() > 0
+    np.testing.assert_array_equal(skipping, marching)
+    r.release()
+
+
+def test_raymarch_frames_in_one_dispatch_equal_one_per_dispatch(ctx, monkeypatch):
+    """Small images march several frames per dispatch into layers, folded in frame order: the
+    same running mean as one dispatch per frame."""
+    from app.render import raymarch
+    r = _renderer(ctx, camera={**CAMERA, "width": 24, "height": 20})
+    r.bake()
+    assert raymarch.frame_layers(24, 20, 5) == 5
+    layered = _raymarch_frames(r, 5)
+    monkeypatch.setattr(raymarch, "LAYER_PIXELS", 1)
+    assert raymarch.frame_layers(24, 20, 5) == 1
+    one_by_one = _raymarch_frames(r, 5)
+    assert layered[..., :3].max() > 0 and (layered[..., 3] == 5).all()
+    np.testing.assert_allclose(layered, one_by_one, rtol=1e-6, atol=1e-7)
+    # and in chunks that do not divide the frames (3 + 2), continuing the same mean
+    monkeypatch.setattr(raymarch, "LAYER_PIXELS", 24 * 20 * 3)
+    np.testing.assert_allclose(_raymarch_frames(r, 5), one_by_one, rtol=1e-6, atol=1e-7)
+    r.release()
+
+
 @pytest.mark.parametrize("case", list(HARD_CASES))
 def test_hard_cases_raymarch_finite(ctx, case):
     r = _renderer(ctx, **HARD_CASES[case])

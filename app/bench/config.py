@@ -26,7 +26,7 @@ class BenchConfig:
     probe_samples: tuple[int, ...] = (16, 64, 128, 256, 512)
     large_grids: tuple[tuple[int, int], ...] = ((128, 64), (128, 256))  # (grid, samples) extras
     probe_frames: tuple[int, ...] = (1, 4, 16, 64, 256)  # probes / probes-only snapshots
-    raymarch_frames: tuple[int, ...] = (1, 16)
+    raymarch_frames: tuple[int, ...] = (1, 2, 4, 8, 16)
     showcase: tuple[int, int] = (32, 256)   # grid, samples: images, step/stage/precision sweeps
     probe_layouts: tuple[str, ...] = ("uniform",)   # of BENCH_PROBE_LAYOUTS, per probe setting
     adaptive_strength: float | None = None  # the adaptive layouts' strength (None: the scene's)

@@ -5,9 +5,28 @@
 // exactly for piecewise-constant sigma_t, so large steps through dense media stay bounded.
 // Shared by raymarch.comp and raymarch.frag; each calls raymarch_pixel for its pixel. With
 // ENVIRONMENT_MAP the environment behind the volume is the map's radiance along the ray.
+// Empty space is skipped exactly: a step whose sample is empty looks up its macrocell in the
+// majorant grid (lib/cell_walk.glsl), and where that bounds sigma_t by 0 every sample before the
+// cell's exit is empty too, so the march goes on from the last sample before the exit. The same
+// samples contribute as without skipping (test_raymarch_skipping_empty_space_changes_nothing).
 uniform float raymarch_step;            // world units
 uniform uint frame_index;               // keys the jitter; frames accumulate into a running mean
 uniform uint seed;
+
+// The index of the last sample before the empty macrocell around sample i (at ray distance t) is
+// left behind; i itself where that cell may hold matter. Rounding can only make the march look at
+// one more sample inside the empty cell (floor), never skip one beyond it.
+int empty_space_last_index(vec3 origin, vec3 d, float t, int i, float t0, float dt, float jitter)
+{
+#if !defined(GLOBAL_MAJORANT)
+    CellWalk w;
+    if (use_majorant_grid == 0 || !cell_walk_begin(origin, d, t, w) || cell_majorant(w) > 0.0)
+        return i;
+    return max(i, int(floor((cell_walk_exit(w) - t0) / dt - jitter)) - 1);
+#else
+    return i;
+#endif
+}
 
 layout(rgba32f, binding = 0) uniform image2D accumulation;  // rgb: running mean, a: frames
 
@@ -29,8 +48,10 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
         vec3 x = origin + (t0 + (float(i) + jitter) * dt) * d;
         vec4 tf = transfer_at(density_at(x));
         float sigma_t = density_scale * tf.a;
-        if (sigma_t <= 0.0)
+        if (sigma_t <= 0.0) {
+            i = empty_space_last_index(origin, d, t0 + (float(i) + jitter) * dt, i, t0, dt, jitter);
             continue;
+        }
         float opacity = 1.0 - exp(-sigma_t * dt);
         float probe_sun;
         vec3 inscattered = probe_inscattered(x, d, probe_sun);
@@ -42,15 +63,20 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
     return radiance + transmittance * environment;
 }
 
+// One jittered frame's radiance through a pixel; the frame number keys the jitter.
+vec3 raymarch_frame(ivec2 pixel, uint frame)
+{
+    uint rng = rng_seed(uint(pixel.y * image_size.x + pixel.x), frame, seed);
+    vec2 sub = vec2(rng_next(rng), rng_next(rng));
+    return raymarch_radiance(camera_eye, camera_ray_direction(vec2(pixel) + sub), rng_next(rng));
+}
+
+// Adds frame frame_index to the pixel's running mean in the accumulation image.
 void raymarch_pixel(ivec2 pixel)
 {
     if (any(greaterThanEqual(pixel, image_size)))
         return;
-    uint rng = rng_seed(uint(pixel.y * image_size.x + pixel.x), frame_index, seed);
-    vec2 sub = vec2(rng_next(rng), rng_next(rng));
-    vec3 value = raymarch_radiance(camera_eye, camera_ray_direction(vec2(pixel) + sub), rng_next(rng));
+    vec3 value = raymarch_frame(pixel, frame_index);
     vec4 mean_and_count = frame_index == 0u ? vec4(0.0) : imageLoad(accumulation, pixel);
-    mean_and_count.a += 1.0;
-    mean_and_count.rgb += (value - mean_and_count.rgb) / mean_and_count.a;
-    imageStore(accumulation, pixel, mean_and_count);
+    imageStore(accumulation, pixel, running_mean_add(mean_and_count, value));
 }
