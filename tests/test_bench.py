@@ -237,3 +237,23 @@ def test_a_runs_caveat_heads_its_report(tmp_path):
     path.write_text(json.dumps(data))
     text = write_report(path).read_text()
     assert "**Caveat:** the light grid is charged once" in text.split("## ")[0]
+
+
+def test_results_are_written_at_most_every_interval_and_all_at_the_end(tmp_path):
+    """Writing results.json after every record left the GPU idle long enough to clock down in the
+    middle of timed runs: records now reach the file at most every flush_every_s seconds, and all
+    of them (with FLIP filled in) at close."""
+    from app.bench.runner import Results
+    path = tmp_path / "results.json"
+    results = Results(path, {"device": "test"})
+    results.flush_every_s = 1e9
+    image = np.full((8, 8, 3), 0.5, np.float32)
+    results.add({"scene": "a", "n": 0}, image, image)        # the first record is written at once
+    assert [r["n"] for r in json.loads(path.read_text())["records"]] == [0]
+    for n in range(1, 5):
+        results.add({"scene": "a", "n": n}, image, image * 1.1)
+    assert [r["n"] for r in json.loads(path.read_text())["records"]] == [0]
+    results.close()
+    written = json.loads(path.read_text())["records"]
+    assert [r["n"] for r in written] == [0, 1, 2, 3, 4]
+    assert written[0]["flip"] == 0.0 and all(r["flip"] > 0 for r in written[1:])

@@ -24,12 +24,22 @@ from .scenes import bench_scene
 PROBE_METHODS = ("probes", "probes-only")
 
 
+# Seconds between two writes of results.json while records come in. Writing it after every record
+# took 0.05 to 0.14 s once it held a few scenes (json.dumps of 1 to 2 MB), and the GPU sat idle
+# meanwhile: between the snapshots of one timed run its clock fell to 390-1665 MHz (nvidia-smi,
+# bench/h100-runs-2), so records of the later scenes were timed on a clocked-down GPU.
+FLUSH_EVERY_S = 30.0
+
+
 class Results:
-    """The growing list of records, flushed to JSON after each change (FLIP fills in later)."""
+    """The growing list of records, written to JSON at most every FLUSH_EVERY_S seconds, after each
+    scene and at the end (FLIP fills in later)."""
 
     def __init__(self, path: Path, meta: dict):
         self.path = path
         self.meta = meta
+        self.flush_every_s = FLUSH_EVERY_S
+        self._flushed_at: float | None = None   # monotonic time of the last write
         self.records: list[dict] = []
         self.pending: list[tuple[dict, Future]] = []
         self.references: dict[str, dict] = {}
@@ -42,7 +52,8 @@ class Results:
         self.records.append(record)
         if image is not None:
             self.pending.append((record, self.pool.submit(flip, image, reference)))
-        self.flush()
+        if self._flushed_at is None or time.monotonic() - self._flushed_at >= self.flush_every_s:
+            self.flush()
 
     def flush(self, wait: bool = False) -> None:
         still = []
@@ -56,6 +67,7 @@ class Results:
         tmp = self.path.with_suffix(".tmp")
         tmp.write_text(json.dumps(data, indent=1))
         tmp.replace(self.path)
+        self._flushed_at = time.monotonic()
 
     def close(self) -> None:
         self.flush(wait=True)
