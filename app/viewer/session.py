@@ -197,10 +197,11 @@ class RenderSession:
     def samples_per_frame(view: MethodView, budget_ms: float) -> int:
         """Samples per pixel for the view's next dispatch: as many as fit in `budget_ms` by the
         dispatches it has timed, modelled as a fixed part plus a part per sample. The fixed part
-        is the dispatch's wait for its longest paths: on an H100 at 1080p one sample of `probes`
-        took 27.5 ms and eight 25 ms (bench/h100-interact), so where one sample already costs
-        more than the budget, the samples that cost at most TAIL_SLACK more are taken (trying
-        TAIL_PROBE_SAMPLES once to see what they cost)."""
+        is what a dispatch costs whatever its samples (on an H100 at 1080p one sample of `probes`
+        took 27.5 ms and eight 25 ms while the path states were cleared from the host,
+        bench/h100-interact-v3; 1.1 and 6.4 ms since, bench/h100-interact), so where one sample
+        already costs more than the budget, the samples that cost at most TAIL_SLACK more are
+        taken (trying TAIL_PROBE_SAMPLES once to see what they cost)."""
         seen = view.dispatch_ms.get(view.shown)
         if not seen:
             return 1
