@@ -257,3 +257,27 @@ def test_results_are_written_at_most_every_interval_and_all_at_the_end(tmp_path)
     written = json.loads(path.read_text())["records"]
     assert [r["n"] for r in written] == [0, 1, 2, 3, 4]
     assert written[0]["flip"] == 0.0 and all(r["flip"] > 0 for r in written[1:])
+
+
+@pytest.mark.parametrize("method", ["pt", "raymarch"])
+def test_progressive_snapshots_are_the_images_read_between_dispatches(ctx, method):
+    """The benchmark's timed runs copy each snapshot on the GPU and read them all afterwards; the
+    images are the ones a read-back after each snapshot's dispatches gives."""
+    from app.bench.records import progressive
+    from app.render.renderer import Renderer
+    from app.scene import parse_scene
+    r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [12, 10, 8]},
+                                   "camera": {"eye": [0, 0.2, 1.3], "target": [0, 0, 0],
+                                              "fov_y": 40.0, "width": 12, "height": 10},
+                                   "probes": {"grid": [3, 3, 3], "samples": 16}}))
+    r.bake()
+    runs = list(progressive(r, method, (1, 3, 4), seed=5, per_dispatch=2))
+    assert [n for n, *_ in runs] == [1, 3, 4]
+    assert runs[-1][3] >= runs[0][3] > 0.0          # cumulative GPU ms
+    r.begin(method, seed=5)
+    for (n, image, *_), add in zip(runs, (1, 2, 1)):
+        r.add_samples(add)
+        assert r.samples == n
+        np.testing.assert_array_equal(image, r.image())
+    assert not np.array_equal(runs[0][1], runs[-1][1])
+    r.release()

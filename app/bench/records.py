@@ -21,24 +21,46 @@ def log(msg: str) -> None:
     print(f"[bench {time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
 
 
+# The untimed warm-up before each timed run: GPU ms at least (at most WARM_UP_DISPATCHES dispatches).
+# nvidia-smi showed the H100 at 390 to 1665 MHz through probe sweeps that leave it mostly idle.
+WARM_UP_MS = 50.0
+WARM_UP_DISPATCHES = 32
+
+
 def progressive(renderer, method: str, snapshots, seed: int, per_dispatch: int):
     """Yields (samples, image, GPU ms per sample, cumulative GPU ms) at each snapshot of one
     progressive run that adds up to `per_dispatch` samples per pixel in each dispatch (1 sample
     per dispatch leaves most of a big GPU idle behind the longest paths of each wave). The per-sample
-    time is the median over full-size dispatches after a warm-up dispatch."""
-    renderer.begin(method, seed=seed + 7919)   # warm-up, not timed
-    renderer.add_samples(per_dispatch)
-    renderer.begin(method, seed=seed)
+    time is the median over full-size dispatches after a warm-up (WARM_UP_MS). The whole run is
+    dispatched first, each snapshot copied on the GPU, and the images are read back afterwards:
+    reading and measuring an image between the timed dispatches left the GPU idle long enough to
+    lower its clock (bench/h100-runs-2's nvidia-smi logs)."""
+    # warm-up, not timed: at least WARM_UP_MS of GPU work, so that a GPU that lowered its clock
+    # while the host measured the previous run's images is back at speed
+    renderer.begin(method, seed=seed + 7919)
+    warm_ms = 0.0
+    for _ in range(WARM_UP_DISPATCHES):
+        warm_ms += renderer.add_samples(per_dispatch)
+        if warm_ms >= WARM_UP_MS:
+            break
+    acc = renderer.begin(method, seed=seed)
     per_sample: list[float] = []
     cumulative = 0.0
-    for target in sorted(snapshots):
-        while renderer.samples < target:
-            n = min(per_dispatch, target - renderer.samples)
-            ms = renderer.add_samples(n)
-            cumulative += ms
-            if n == per_dispatch or not per_sample:
-                per_sample.append(ms / n)
-        yield target, renderer.image(), statistics.median(per_sample), cumulative
+    taken = []
+    try:
+        for target in sorted(snapshots):
+            while renderer.samples < target:
+                n = min(per_dispatch, target - renderer.samples)
+                ms = renderer.add_samples(n)
+                cumulative += ms
+                if n == per_dispatch or not per_sample:
+                    per_sample.append(ms / n)
+            taken.append((target, acc.snapshot(), statistics.median(per_sample), cumulative))
+        for target, snapshot, frame_ms, total in taken:
+            yield target, snapshot.read(), frame_ms, total
+    finally:
+        for _, snapshot, *_ in taken:
+            snapshot.release()
 
 
 def make_record(base: dict, config: BenchConfig, method: str, frames: int, image: np.ndarray,
