@@ -238,6 +238,13 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
         assert times == sorted(times)
         walls = [t for t, _ in r["wall_curve"]]
         assert walls == sorted(walls) and len(walls) == len(times)
+        # one trace entry per frame: its bake slice and samples add up to the frame's GPU time
+        trace = r["frame_trace"]
+        assert len(trace) == r["frames"]
+        assert abs(sum(b + m for b, m, _, _ in trace) - r["total_ms"]) < 1e-2 * max(1.0, r["total_ms"])
+        assert all(n >= 1 and shown in ("probes", "raymarch") for _, _, n, shown in trace)
+        if r["event"] in ("tf_drag", "sun_30deg", "density", "albedo"):
+            assert trace[0][0] > 0    # the re-bake's first slice
     assert recs[-4]["method"] == "raymarch" and recs[1]["orbit_frames"] == 3
     assert recs[1]["frames"] >= 3
     # the edit's re-bake happened in the timed frames: its first frame pays a bake slice

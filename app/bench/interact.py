@@ -92,7 +92,7 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
     s.restart()
     scenes = list(scenes or [])
     lead = len(scenes) - 1 if orbit else 0     # frames before the one the timing starts at
-    frames, walls, curve = [], [], []
+    frames, walls, curve, trace = [], [], [], []
     t = wall_t = 0.0
     checks = {0, 1, 2, 3}
     k = 4
@@ -109,6 +109,8 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
         ms = times.total_ms
         frames.append(ms)
         walls.append(wall)
+        trace.append([round(times.bake_ms, 3), round(times.render_ms, 3), times.samples,
+                      s.views[method].shown])
         t, wall_t = t + ms, wall_t + wall
         after = f - lead
         if after < 0:
@@ -124,7 +126,8 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
         if converged:
             break
     # every frame counts for frame times (the orbit's are camera moves); errors from the event on
-    return {"frames": frames, "walls": walls, "curve": curve, "converged": converged}
+    return {"frames": frames, "walls": walls, "curve": curve, "converged": converged,
+            "trace": trace}
 
 
 def record(base: dict, event: str, method: str, variant, run: dict, **extra) -> dict:
@@ -137,7 +140,10 @@ def record(base: dict, event: str, method: str, variant, run: dict, **extra) -> 
                converged=run["converged"], final_rrmse=curve[-1][2] if curve else None,
                total_ms=sum(frames), total_wall_ms=sum(walls),
                curve=[[float(a), float(c)] for a, _, c in curve],
-               wall_curve=[[float(b), float(c)] for _, b, c in curve])
+               wall_curve=[[float(b), float(c)] for _, b, c in curve],
+               # per frame: bake slice ms, samples' ms, samples per pixel, the method shown (a
+               # probe-lit view shows the raymarcher while it bakes): what a frame over budget spent
+               frame_trace=run.get("trace", []))
     for target in TARGETS:
         pct = round(target * 100)
         rec[f"ms_to_{pct}pct"] = time_to([(a, c) for a, _, c in curve], target)

@@ -61,6 +61,7 @@ class FrameTimes:
     bake_ms: float = 0.0
     render_ms: float = 0.0
     display_ms: float = 0.0
+    samples: int = 0          # samples per pixel dispatched in the frame, over its views
 
     @property
     def total_ms(self) -> float:
@@ -190,6 +191,7 @@ class RenderSession:
             ms = self._add_samples(view, n)
             view.dispatch_ms.setdefault(view.shown, {})[n] = ms
             times.render_ms += ms
+            times.samples += n
         self.last = times
         return times
 
