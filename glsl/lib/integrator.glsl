@@ -295,8 +295,6 @@ bool path_estimate_valid(PathState p, int result)
 // Adds a finished path to a running mean (rgb mean, a count) if its estimate is valid.
 void path_finish(inout vec4 mean_and_count, PathState p, int result)
 {
-    if (!path_estimate_valid(p, result))
-        return;
-    mean_and_count.a += 1.0;
-    mean_and_count.rgb += (p.radiance - mean_and_count.rgb) / mean_and_count.a;
+    if (path_estimate_valid(p, result))
+        mean_and_count = running_mean_add(mean_and_count, p.radiance);
 }

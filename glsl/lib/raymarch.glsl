@@ -13,9 +13,11 @@ uniform float raymarch_step;            // world units
 uniform uint frame_index;               // keys the jitter; frames accumulate into a running mean
 uniform uint seed;
 
-// The index of the last sample before the empty macrocell around sample i (at ray distance t) is
-// left behind; i itself where that cell may hold matter. Rounding can only make the march look at
-// one more sample inside the empty cell (floor), never skip one beyond it.
+// After an empty sample i at ray distance t: where the majorant grid bounds sigma_t by 0 in the
+// sample's macrocell, every sample up to that cell's exit is empty, and the march may go on from
+// the last of them (the index returned; the loop's ++i moves past it); i itself otherwise.
+// Rounding can only make the march look at one more sample inside the empty cell (floor), never
+// skip one beyond it.
 int empty_space_last_index(vec3 origin, vec3 d, float t, int i, float t0, float dt, float jitter)
 {
 #if !defined(GLOBAL_MAJORANT)

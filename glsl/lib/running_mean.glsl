@@ -1,5 +1,5 @@
-// A pixel's running mean over frames (rgb the mean, a the count), one frame at a time: the
-// raymarcher's accumulation image (lib/raymarch.glsl, raymarch_resolve.comp).
+// A running mean (rgb the mean, a the count), one value at a time: the raymarcher's frames
+// (lib/raymarch.glsl, raymarch_resolve.comp) and the paths' estimates (lib/integrator.glsl).
 vec4 running_mean_add(vec4 mean_and_count, vec3 value)
 {
     mean_and_count.a += 1.0;
