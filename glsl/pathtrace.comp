@@ -16,7 +16,6 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #include "lib/directions.glsl"
 #include "lib/probes.glsl"
 #endif
-#include "lib/running_mean.glsl"
 #include "lib/integrator.glsl"
 
 layout(rgba32f, binding = 0) uniform image2D accumulation;  // rgb: running mean, a: sample count

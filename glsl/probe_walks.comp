@@ -29,7 +29,6 @@ layout(local_size_x = 64) in;
 #if defined(WALK_SUN_GRID)
 #include "lib/light_grid.glsl"
 #endif
-#include "lib/running_mean.glsl"
 #include "lib/integrator.glsl"
 #include "lib/walk_profile.glsl"
 #include "lib/probe_accum.glsl"

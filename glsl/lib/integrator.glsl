@@ -292,6 +292,8 @@ bool path_estimate_valid(PathState p, int result)
     return true;
 }
 
+#include "lib/running_mean.glsl"
+
 // Adds a finished path to a running mean (rgb mean, a count) if its estimate is valid.
 void path_finish(inout vec4 mean_and_count, PathState p, int result)
 {
