@@ -1,23 +1,24 @@
-// The raymarcher as a compute pass: one invocation per pixel and frame. Without FRAME_LAYERS a
-// dispatch adds frame frame_index to the accumulation. With FRAME_LAYERS it marches
-// gl_NumWorkGroups.z frames at once (frame_index + layer), each into its layer of frame_values,
-// and raymarch_resolve.comp folds them into the accumulation in frame order: a small image fills a
-// large GPU only with several frames in flight (app/render/raymarch.py LAYER_PIXELS).
+// The raymarcher as a compute pass: one invocation per pixel and frame. With frame_layers 0 a
+// dispatch adds frame frame_index to the accumulation. Otherwise it marches gl_NumWorkGroups.z
+// frames at once (frame_index + layer), each into its layer of frame_values, and
+// raymarch_resolve.comp folds them into the accumulation in frame order: a small image fills a
+// large GPU only with several frames in flight (app/render/raymarch.py LAYER_PIXELS). A uniform,
+// not a define, so that one program (one compile) serves both.
 layout(local_size_x = 8, local_size_y = 8) in;
 #include "raymarch_common.glsl"
-#if defined(FRAME_LAYERS)
+
+uniform int frame_layers;
 layout(rgba32f, binding = 1) uniform writeonly image2DArray frame_values;
-#endif
 
 void main()
 {
-#if defined(FRAME_LAYERS)
     ivec2 pixel = ivec2(gl_GlobalInvocationID.xy);
+    if (frame_layers == 0) {
+        raymarch_pixel(pixel);
+        return;
+    }
     if (any(greaterThanEqual(pixel, image_size)))
         return;
     uint layer = gl_GlobalInvocationID.z;
     imageStore(frame_values, ivec3(pixel, int(layer)), vec4(raymarch_frame(pixel, frame_index + layer), 0.0));
-#else
-    raymarch_pixel(ivec2(gl_GlobalInvocationID.xy));
-#endif
 }

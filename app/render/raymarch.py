@@ -2,6 +2,8 @@
 pass; both are built from the same source and write the same accumulation image."""
 from __future__ import annotations
 
+import weakref
+
 import moderngl
 
 from ..twins.camera import CameraFrame
@@ -51,17 +53,29 @@ def check_step(step_voxels: float, volume) -> None:
                          f"least {low:.3g}")
 
 
+_resolve_programs: "weakref.WeakKeyDictionary[moderngl.Context, moderngl.ComputeShader]" = \
+    weakref.WeakKeyDictionary()
+
+
+def _resolve_program(ctx: moderngl.Context) -> moderngl.ComputeShader:
+    """raymarch_resolve.comp, compiled once per context (it has no defines; every raymarcher
+    shares it)."""
+    program = _resolve_programs.get(ctx)
+    if program is None:
+        program = _resolve_programs[ctx] = compute_program(ctx, "raymarch_resolve.comp")
+    return program
+
+
 class Raymarcher:
     def __init__(self, ctx: moderngl.Context, stage: str = "compute", defines: dict | None = None):
         if stage not in STAGES:
             raise ValueError(f"raymarch stage must be one of {STAGES}, got {stage!r}")
         self.ctx = ctx
         self.stage = stage
-        self._defines = dict(defines or {})
-        self._layered = None            # (march program with FRAME_LAYERS, resolve program)
         self._frame_values = None       # the layers one dispatch writes, one frame each
         if stage == "compute":
             self.program = compute_program(ctx, "raymarch.comp", defines)
+            self._resolve = _resolve_program(ctx)
         else:
             self.program = render_program(ctx, "fullscreen.vert", "raymarch.frag", defines)
             self.vao = ctx.vertex_array(self.program, [])
@@ -75,11 +89,7 @@ class Raymarcher:
                 color_attachments=[self.ctx.renderbuffer((width, height), 1)])
         return self._fbo
 
-    def _layer_passes(self, width: int, height: int):
-        if self._layered is None:
-            self._layered = (compute_program(self.ctx, "raymarch.comp",
-                                             {**self._defines, "FRAME_LAYERS": 1}),
-                             compute_program(self.ctx, "raymarch_resolve.comp"))
+    def _frame_layers(self, width: int, height: int):
         # sized for the most frames a dispatch at this size may take, so that calls with fewer
         # frames (a progressive run's 1, 2, 4, ...) reuse it instead of allocating in a timed span
         size = (width, height, frame_layers(width, height))
@@ -87,7 +97,7 @@ class Raymarcher:
             if self._frame_values is not None:
                 self._frame_values.release()
             self._frame_values = self.ctx.texture_array(size, 4, dtype="f4")
-        return self._layered
+        return self._frame_values
 
     def run(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation, frames: int,
             seed: int, step: float, uniforms: dict) -> None:
@@ -95,27 +105,23 @@ class Raymarcher:
         small images) several frames per dispatch folded in frame order, the same sums."""
         layers = frame_layers(acc.width, acc.height, frames) if self.stage == "compute" else 1
         resources.bind()
-        programs = [self.program]
-        if layers > 1:
-            march, resolve = self._layer_passes(acc.width, acc.height)
-            programs = [march]
-        for program in programs:
-            set_uniforms(program, resources.uniforms())
-            set_uniforms(program, camera.uniforms())
-            set_uniforms(program, uniforms)
-            set_uniforms(program, {"raymarch_step": step, "seed": seed & 0xFFFFFFFF})
+        set_uniforms(self.program, resources.uniforms())
+        set_uniforms(self.program, camera.uniforms())
+        set_uniforms(self.program, uniforms)
+        set_uniforms(self.program, {"raymarch_step": step, "seed": seed & 0xFFFFFFFF,
+                                    "frame_layers": 0})
         acc.bind_image(0)
         if layers > 1:
-            self._frame_values.bind_to_image(1, read=True, write=True)
-            set_uniforms(resolve, {"image_size": (acc.width, acc.height)})
+            self._frame_layers(acc.width, acc.height).bind_to_image(1, read=True, write=True)
+            set_uniforms(self._resolve, {"image_size": (acc.width, acc.height)})
             done = 0
             while done < frames:
                 n = min(layers, frames - done)
-                set_uniforms(march, {"frame_index": acc.samples})
-                march.run(*groups(acc.width, acc.height), n)
+                set_uniforms(self.program, {"frame_index": acc.samples, "frame_layers": n})
+                self.program.run(*groups(acc.width, acc.height), n)
                 self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
-                set_uniforms(resolve, {"frame_index": acc.samples, "layers": n})
-                resolve.run(*groups(acc.width, acc.height))
+                set_uniforms(self._resolve, {"frame_index": acc.samples, "layers": n})
+                self._resolve.run(*groups(acc.width, acc.height))
                 self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
                 acc.samples += n
                 done += n
@@ -133,8 +139,6 @@ class Raymarcher:
 
     def release(self) -> None:
         self.program.release()
-        for p in self._layered or ():
-            p.release()
         if self._frame_values is not None:
             self._frame_values.release()
         if self.stage == "fragment":
