@@ -323,7 +323,7 @@ def test_probe_methods_show_the_raymarcher_while_baking_then_their_own(ctx):
         # samples per frame from the budget the slice left: none left -> one each
         s.set_scene(s.scene.replace(albedo=0.5))
         s.frame_budget_ms = 0.0
-        s.views["probes"].dispatch_ms["raymarch"] = {1: 1.0, 4: 4.0}
+        s.views["probes"].dispatch_ms["raymarch"] = [(1, 1.0), (4, 4.0)]
         s.step(8, True)
         assert view.samples == 1
         s.frame_budget_ms = 1e6
@@ -335,20 +335,21 @@ def test_probe_methods_show_the_raymarcher_while_baking_then_their_own(ctx):
         s.release()
 
 
-def test_samples_per_dispatch_follow_a_fixed_plus_per_sample_cost():
-    """A dispatch that waits for its longest paths costs nearly as much for 8 samples as for 1: the
-    session then takes the 8 (measured once), and fits many where the cost is per sample."""
-    from app.viewer.session import MethodView, RenderSession
+def test_samples_per_frame_follow_the_recent_dispatches_cost_per_sample():
+    """As many samples as fit in the budget at the median GPU ms per sample of the last
+    RECENT_DISPATCHES dispatches: a dispatch that paid for a shader compile does not set the pace,
+    and a change of cost (an edit) takes over within a few frames."""
+    from app.viewer.session import RECENT_DISPATCHES, MethodView, RenderSession
     view = MethodView("probes")
     per_frame = RenderSession.samples_per_frame
     assert per_frame(view, 6.0) == 1                                   # nothing timed yet
-    view.dispatch_ms["probes"] = {1: 27.5}
-    assert per_frame(view, 6.0) == 8                                   # overruns: try 8 once
-    view.dispatch_ms["probes"][8] = 25.0                               # the tail: no dearer
-    assert per_frame(view, 6.0) == 16                                  # so double
-    view.dispatch_ms["probes"][16] = 28.0                              # 22 ms + 0.375 a sample
-    view.dispatch_ms["probes"][32] = 34.0
-    assert per_frame(view, 6.0) == int((1.25 * 22.375 - 22.0) // 0.375)  # 14: at most 25% dearer
-    view.dispatch_ms["raymarch"] = {1: 2.0, 3: 6.0}                    # 2 ms a sample, no tail
+    view.dispatch_ms["probes"] = [(1, 0.8), (8, 6.4)]                  # 0.8 ms a sample
+    assert per_frame(view, 14.0) == 17 and per_frame(view, 0.5) == 1
+    view.dispatch_ms["probes"] += [(16, 400.0), (16, 12.8)]            # one compile among them
+    assert per_frame(view, 14.0) == 17
+    view.dispatch_ms["probes"] += [(8, 12.8), (8, 12.8), (8, 12.8)]    # an edit: 1.6 ms a sample
+    view.dispatch_ms["probes"] = view.dispatch_ms["probes"][-RECENT_DISPATCHES:]
+    assert per_frame(view, 14.0) == 8
+    view.dispatch_ms["raymarch"] = [(1, 2.0), (3, 6.0)]                # per method shown
     view.shown = "raymarch"
     assert per_frame(view, 12.5) == 6 and per_frame(view, 1.0) == 1

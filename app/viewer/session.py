@@ -14,6 +14,7 @@ samples per shown method as the rest of the frame holds by their measured cost, 
 """
 from __future__ import annotations
 
+import statistics
 from collections import deque
 from dataclasses import dataclass
 
@@ -30,8 +31,7 @@ from ..volume import Volume
 
 FRAME_HISTORY = 240
 MAX_SAMPLES_PER_FRAME = 64
-TAIL_PROBE_SAMPLES = 8   # samples of a trial dispatch when one sample overruns the frame
-TAIL_SLACK = 1.25        # ... and how much dearer than one sample's dispatch a frame may then be
+RECENT_DISPATCHES = 5    # dispatches whose GPU ms per sample set the next frame's samples
 # What a probe-lit method shows while its probes bake: the raymarcher over the probes as they are.
 PREVIEW_WHILE_BAKING = "raymarch"
 
@@ -43,7 +43,7 @@ class MethodView:
     acc: Accumulation | None = None
     camera: object = None
     shown: str = ""               # what the accumulation holds: method, or the bake's preview
-    # GPU ms of the last dispatch of n samples per pixel, per method shown: {method: {n: ms}}
+    # the last RECENT_DISPATCHES dispatches per method shown: {method: [(samples, GPU ms), ...]}
     dispatch_ms: dict = None
 
     def __post_init__(self):
@@ -189,7 +189,9 @@ class RenderSession:
         for view in todo:
             n = min(self.samples_per_frame(view, share), max_samples - view.acc.samples)
             ms = self._add_samples(view, n)
-            view.dispatch_ms.setdefault(view.shown, {})[n] = ms
+            recent = view.dispatch_ms.setdefault(view.shown, [])
+            recent.append((n, ms))
+            del recent[:-RECENT_DISPATCHES]
             times.render_ms += ms
             times.samples += n
         self.last = times
@@ -197,31 +199,23 @@ class RenderSession:
 
     @staticmethod
     def samples_per_frame(view: MethodView, budget_ms: float) -> int:
-        """Samples per pixel for the view's next dispatch: as many as fit in `budget_ms` by the
-        dispatches it has timed, modelled as a fixed part plus a part per sample. The fixed part
-        is what a dispatch costs whatever its samples (on an H100 at 1080p one sample of `probes`
-        took 27.5 ms and eight 25 ms while the path states were cleared from the host,
-        bench/h100-interact-v3; 1.1 and 6.4 ms since, bench/h100-interact), so where one sample
-        already costs more than the budget, the samples that cost at most TAIL_SLACK more are
-        taken (trying TAIL_PROBE_SAMPLES once to see what they cost)."""
-        seen = view.dispatch_ms.get(view.shown)
-        if not seen:
+        """Samples per pixel for the view's next dispatch: as many as fit in `budget_ms` at the GPU
+        ms per sample of its recent dispatches (the median of ms / samples over the last
+        RECENT_DISPATCHES), at least one; one before any is timed. The median keeps a dispatch
+        that paid for a shader compile (about 0.3 s on llvmpipe) from setting the pace, and
+        ms / samples counts a dispatch's fixed cost in, so the estimate errs towards fewer samples.
+        (An earlier model fitted a fixed cost plus a per-sample cost to the dispatches of the two
+        largest sample counts, for the 25 ms tail one `probes` dispatch had on an H100 at 1080p
+        while its path states were cleared from the host; a compile in a trial dispatch read as
+        such a tail, and the llvmpipe replay then ran frames of 16 samples at 70 to 120 ms against
+        a 45 ms budget.)"""
+        recent = view.dispatch_ms.get(view.shown)
+        if not recent:
             return 1
-        counts = sorted(seen)
-        if len(counts) == 1:
-            n = counts[0]
-            if n == 1 and seen[1] > budget_ms:
-                return TAIL_PROBE_SAMPLES
-            base, per = 0.0, seen[n] / n
-        else:
-            # the slope between the two largest dispatches timed (the smallest sit on the tail)
-            n_lo, n_hi = counts[-2], counts[-1]
-            per = (seen[n_hi] - seen[n_lo]) / (n_hi - n_lo)
-            if per <= 0.0:   # more samples cost nothing yet: double them
-                return min(MAX_SAMPLES_PER_FRAME, 2 * n_hi)
-            base = max(seen[n_hi] - per * n_hi, 0.0)
-        allowed = max(budget_ms, TAIL_SLACK * (base + per))
-        return int(max(1, min(MAX_SAMPLES_PER_FRAME, (allowed - base) // per)))
+        per = statistics.median(ms / n for n, ms in recent)
+        if per <= 0.0:
+            return MAX_SAMPLES_PER_FRAME
+        return int(max(1, min(MAX_SAMPLES_PER_FRAME, budget_ms // per)))
 
     def _add_samples(self, view: MethodView, n: int) -> float:
         r = self.renderer
