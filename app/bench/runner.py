@@ -131,6 +131,10 @@ def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Pa
         results.close()
         meta["finished"] = time.strftime("%Y-%m-%d %H:%M:%S")
         results.flush()
+        # Its own context stays current until released: a caller's context (the tests' one) would
+        # otherwise receive GL calls meant for this one, and objects made in the caller's context
+        # before (cached programs) would name nothing in it.
+        ctx.release()
     return out / "results.json"
 
 

@@ -2,8 +2,6 @@
 pass; both are built from the same source and write the same accumulation image."""
 from __future__ import annotations
 
-import weakref
-
 import moderngl
 
 from ..twins.camera import CameraFrame
@@ -53,19 +51,6 @@ def check_step(step_voxels: float, volume) -> None:
                          f"least {low:.3g}")
 
 
-_resolve_programs: "weakref.WeakKeyDictionary[moderngl.Context, moderngl.ComputeShader]" = \
-    weakref.WeakKeyDictionary()
-
-
-def _resolve_program(ctx: moderngl.Context) -> moderngl.ComputeShader:
-    """raymarch_resolve.comp, compiled once per context (it has no defines; every raymarcher
-    shares it)."""
-    program = _resolve_programs.get(ctx)
-    if program is None:
-        program = _resolve_programs[ctx] = compute_program(ctx, "raymarch_resolve.comp")
-    return program
-
-
 class Raymarcher:
     def __init__(self, ctx: moderngl.Context, stage: str = "compute", defines: dict | None = None):
         if stage not in STAGES:
@@ -75,7 +60,9 @@ class Raymarcher:
         self._frame_values = None       # the layers one dispatch writes, one frame each
         if stage == "compute":
             self.program = compute_program(ctx, "raymarch.comp", defines)
-            self._resolve = _resolve_program(ctx)
+            # folds layered frames into the accumulation (compiled with the march, so a new
+            # variant costs its compiles at one moment)
+            self._resolve = compute_program(ctx, "raymarch_resolve.comp")
         else:
             self.program = render_program(ctx, "fullscreen.vert", "raymarch.frag", defines)
             self.vao = ctx.vertex_array(self.program, [])
@@ -139,6 +126,8 @@ class Raymarcher:
 
     def release(self) -> None:
         self.program.release()
+        if self.stage == "compute":
+            self._resolve.release()
         if self._frame_values is not None:
             self._frame_values.release()
         if self.stage == "fragment":
