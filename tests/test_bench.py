@@ -281,3 +281,25 @@ def test_progressive_snapshots_are_the_images_read_between_dispatches(ctx, metho
         np.testing.assert_array_equal(image, r.image())
     assert not np.array_equal(runs[0][1], runs[-1][1])
     r.release()
+
+
+def test_gpu_clock_log_summarises_what_nvidia_smi_printed(tmp_path):
+    """The run's clock log (app/bench/clock_log.py): nvidia-smi's samples summarised for the
+    report, half of these below 90% of the maximum clock; nothing where nvidia-smi is absent."""
+    import os
+    import time
+    from app.bench.clock_log import ClockLog, report_lines
+    fake = tmp_path / "nvidia-smi"
+    fake.write_text("#!/bin/sh\nwhile true; do\n echo '2026/11/23 10:00:00.000, 990, 1980, 12'\n"
+                    " echo '2026/11/23 10:00:00.500, 1980, 1980, 99'\n sleep 0.05\ndone\n")
+    fake.chmod(0o755)
+    log = ClockLog(tmp_path / "nvidia-smi.csv", executable=str(fake))
+    assert log.start()
+    time.sleep(0.3)
+    clock = log.stop()
+    assert clock["samples"] >= 2 and clock["sm_mhz_min"] == 990 and clock["sm_mhz_max"] == 1980
+    assert clock["sm_mhz_limit"] == 1980 and abs(clock["below_fraction"] - 0.5) <= 1.0 / clock["samples"]
+    line = report_lines({"gpu_clock": clock})[-1]
+    assert "990 to 1980 MHz" in line and "of at most 1980" in line
+    absent = ClockLog(tmp_path / "none.csv", executable=os.path.join(str(tmp_path), "missing"))
+    assert not absent.start() and absent.stop() is None and report_lines({}) == []

@@ -10,8 +10,9 @@ import time
 import numpy as np
 
 from ..render.pathtracer import PIXEL_STATE_BYTES
-from .config import BenchConfig
 from .ceiling import SPEED_CHECK_SLOWER
+from .clock_log import report_lines as clock_report_lines
+from .config import BenchConfig
 from .metrics import rrmse
 
 ACCUMULATION_BYTES = 16   # RGBA32F running mean per pixel
@@ -110,4 +111,4 @@ def speed_checks(data: dict, scenes: list[str],
             "scene's fastest ran on a GPU that was shared or clocked down: their times are not "
             "comparable.", "",
             "| scene | fastest check (ms) | median | slowest | records after a slow check |",
-            "|---|---|---|---|---|", *rows]
+            "|---|---|---|---|---|", *rows, *clock_report_lines(data.get("meta", {}))]

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..imageio import save_png
 from .ceiling import speed_check_ms
+from .clock_log import ClockLog
 from .config import BenchConfig
 from .metrics import flip, reference_noise
 from .records import log as _log, make_record, progressive as _progressive
@@ -113,6 +114,9 @@ def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Pa
             "started": time.strftime("%Y-%m-%d %H:%M:%S")}
     results = Results(out / "results.json", meta)
     _log(f"device: {device}; writing {out / 'results.json'}")
+    clock_log = ClockLog(out / "nvidia-smi.csv")
+    if clock_log.start():
+        _log(f"GPU clock logged to {clock_log.path}")
     try:
         for si, name in enumerate(config.scenes):
             scene = bench_scene(name, config.width, config.height)
@@ -128,6 +132,9 @@ def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Pa
                 renderer.release()
             results.flush()
     finally:
+        gpu_clock = clock_log.stop()
+        if gpu_clock:
+            meta["gpu_clock"] = gpu_clock
         results.close()
         meta["finished"] = time.strftime("%Y-%m-%d %H:%M:%S")
         results.flush()
