@@ -32,7 +32,7 @@ class ClockLog:
         try:
             self._process = subprocess.Popen(
                 [self.executable, f"--query-gpu={QUERY}", "--format=csv,noheader,nounits",
-                 f"-lms={CLOCK_LOG_MS}"], stdout=self._out, stderr=subprocess.DEVNULL)
+                 f"--loop-ms={CLOCK_LOG_MS}"], stdout=self._out, stderr=subprocess.DEVNULL)
         except OSError:
             self._out.close()
             self._out = None
