@@ -1,4 +1,4 @@
-// Folds the frames one raymarch.comp dispatch marched into layers (FRAME_LAYERS) into the
+// Folds the frames one raymarch.comp dispatch marched into layers (frame_layers > 0) into the
 // accumulation's running mean, in frame order: the same sums as adding them one dispatch at a time.
 layout(local_size_x = 8, local_size_y = 8) in;
 #include "lib/running_mean.glsl"

@@ -12,21 +12,28 @@ class Accumulation:
         self.width, self.height = width, height
         self.texture = ctx.texture((width, height), 4, dtype="f4")
         self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        # cleared on the GPU: writing zeros from the host was a 33 MB upload per restart at 1080p,
-        # and the viewer restarts after every bake slice
-        self._clear_target = ctx.framebuffer(color_attachments=[self.texture])
+        # cleared (and copied, snapshot) on the GPU: writing zeros from the host was a 33 MB upload
+        # per restart at 1080p, and the viewer restarts after every bake slice
+        self._framebuffer = ctx.framebuffer(color_attachments=[self.texture])
         self.samples = 0  # samples per pixel asked for so far
 
     def reset(self) -> None:
-        self._clear_target.clear(0.0, 0.0, 0.0, 0.0)
+        self._framebuffer.clear(0.0, 0.0, 0.0, 0.0)
         self.samples = 0
 
     def bind_image(self, unit: int = 0, read: bool = True) -> None:
         self.texture.bind_to_image(unit, read=read, write=True)
 
-    def snapshot(self) -> "Snapshot":
-        """A copy of the running mean as it is now, made on the GPU (no host transfer)."""
-        return Snapshot(self)
+    def snapshot(self) -> "Accumulation":
+        """A copy of the running mean as it is now, made on the GPU (no host transfer): the
+        benchmark keeps one per snapshot of a timed run and reads them after the run, so the GPU
+        is not left idle mid-run while the host reads an image back and measures it."""
+        copy = Accumulation(self.ctx, self.width, self.height)
+        # the passes wrote this accumulation through image stores: make them visible to the copy
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+        self.ctx.copy_framebuffer(copy._framebuffer, self._framebuffer)
+        copy.samples = self.samples
+        return copy
 
     def read_rgba(self) -> np.ndarray:
         """(height, width, 4) float32, row 0 at the top (the shaders store pixel (c, r) at texel (c, r))."""
@@ -38,29 +45,6 @@ class Accumulation:
         return self.read_rgba()[..., :3].copy()
 
     def release(self) -> None:
-        self._clear_target.release()
+        self._framebuffer.release()
         self.texture.release()
 
-
-class Snapshot:
-    """A GPU-side copy of an accumulation, read later: the benchmark keeps one per snapshot of a
-    timed run and reads them after the run, so the GPU is not left idle mid-run while the host
-    reads an image back and measures it."""
-
-    def __init__(self, acc: Accumulation):
-        ctx = acc.ctx
-        self.width, self.height = acc.width, acc.height
-        self.texture = ctx.texture((acc.width, acc.height), 4, dtype="f4")
-        self._target = ctx.framebuffer(color_attachments=[self.texture])
-        # the passes wrote the accumulation through image stores: make them visible to the copy
-        ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
-        ctx.copy_framebuffer(self._target, acc._clear_target)
-
-    def read(self) -> np.ndarray:
-        """The linear RGB image as Accumulation.read gives it."""
-        raw = np.frombuffer(self.texture.read(), np.float32)
-        return raw.reshape(self.height, self.width, 4)[..., :3].copy()
-
-    def release(self) -> None:
-        self._target.release()
-        self.texture.release()

@@ -12,10 +12,11 @@ from .resources import SceneResources
 
 STAGES = ("compute", "fragment")
 MAX_MARCH_STEPS = 8192   # glsl/lib/raymarch.glsl clamps a ray's step count to this
-# The compute pass marches several frames in one dispatch (raymarch.comp with FRAME_LAYERS, then
-# raymarch_resolve.comp) while the frames' pixels together stay within this many invocations: a
-# 512x512 frame alone leaves a large GPU idle behind its slowest rays (H100: 0.68 ms a frame at
-# 512^2 against 2.07 ms at 1920x1080, eight times the pixels), and an image this big fills it.
+# The compute pass marches several frames in one dispatch (raymarch.comp with frame_layers > 0,
+# then raymarch_resolve.comp) while the frames' pixels together stay within this many
+# invocations: a 512x512 frame alone leaves a large GPU idle behind its slowest rays (H100:
+# 0.68 ms a frame at 512^2 against 2.07 ms at 1920x1080, eight times the pixels), and an image
+# this big fills it.
 LAYER_PIXELS = 1 << 21
 MAX_FRAME_LAYERS = 32   # layers of the frames' texture at most (tiny images)
 
@@ -76,7 +77,7 @@ class Raymarcher:
                 color_attachments=[self.ctx.renderbuffer((width, height), 1)])
         return self._fbo
 
-    def _frame_layers(self, width: int, height: int):
+    def _frame_values_for(self, width: int, height: int):
         # sized for the most frames a dispatch at this size may take, so that calls with fewer
         # frames (a progressive run's 1, 2, 4, ...) reuse it instead of allocating in a timed span
         size = (width, height, frame_layers(width, height))
@@ -99,7 +100,7 @@ class Raymarcher:
                                     "frame_layers": 0})
         acc.bind_image(0)
         if layers > 1:
-            self._frame_layers(acc.width, acc.height).bind_to_image(1, read=True, write=True)
+            self._frame_values_for(acc.width, acc.height).bind_to_image(1, read=True, write=True)
             set_uniforms(self._resolve, {"image_size": (acc.width, acc.height)})
             done = 0
             while done < frames:
