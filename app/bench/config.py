@@ -20,11 +20,12 @@ class BenchConfig:
     height: int = 512
     ref_spp: int = 32768                 # path-traced reference, split into two independent halves
     ref_samples_per_pass: int = 128      # samples per pixel in one dispatch for the reference
-    pt_spp: tuple[int, ...] = (1, 4, 16, 64, 256, 1024)
+    pt_spp: tuple[int, ...] = (1, 4, 16, 64, 256, 1024, 4096)   # 4096: where 2% and 1% lie
     samples_per_dispatch: int = 16          # every progressive method, PT included
     probe_grids: tuple[int, ...] = (8, 16, 32, 64)
     probe_samples: tuple[int, ...] = (16, 64, 128, 256, 512)
-    large_grids: tuple[tuple[int, int], ...] = ((128, 64), (128, 256))  # (grid, samples) extras
+    # (grid, samples) extras; the finest probe spacings fine structure asks for
+    large_grids: tuple[tuple[int, int], ...] = ((128, 64), (128, 256), (192, 64), (256, 16))
     probe_frames: tuple[int, ...] = (1, 4, 16, 64, 256)  # probes / probes-only snapshots
     raymarch_frames: tuple[int, ...] = (1, 2, 4, 8, 16)
     showcase: tuple[int, int] = (32, 256)   # grid, samples: images, step/stage/precision sweeps
