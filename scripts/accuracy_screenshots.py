@@ -3,7 +3,8 @@ reference, the raymarcher after 16 frames with
   - before: 64^3 probes x 512 walks, the light grid capped at 128 texels per axis (the state the
     issue measured),
   - after: the same probes with today's light grid (the sheared column march, 6 texels per probe
-    spacing), and 128^3 x 64 (the most accurate setting within 500 ms),
+    spacing), and 192^3 x 64 (the most accurate setting of the benchmark within 500 ms, bake
+    included: bench/h100),
 each with its GPU time (bake + 16 frames) and rRMSE (corrected for the reference's noise), a heat
 map of the per-pixel error (|image - reference| / mean reference, 0 to 50%), and the probe layout:
 the probes of the 64^3 grid whose cells hold visible medium, every 4th per axis, projected over
@@ -88,7 +89,7 @@ for name in sys.argv[3:] or ("bonsai", "foot"):
     shots = []
     for label, grid, walks, before in (("before: 64^3 x 512, light grid <= 128", 64, 512, True),
                                        ("after: 64^3 x 512", 64, 512, False),
-                                       ("after: 128^3 x 64", 128, 64, False)):
+                                       ("after: 192^3 x 64", 192, 64, False)):
         r.set_scene(scene.replace(probes=replace(scene.probes, grid=(grid,) * 3, samples=walks)))
         r.light_max_side = 128 if before else 512
         r.light_follows_probes = not before
@@ -102,7 +103,7 @@ for name in sys.argv[3:] or ("bonsai", "foot"):
     panels = [(ldr(ref), f"reference, path tracer {spp} spp", "")]
     panels += [(ldr(img), label, sub) for label, sub, img in shots]
     panels += [(layout, "probe layout: 64^3 uniform", "every 4th probe per axis in matter")]
-    panels += [(heat(img, ref), "error " + label.split(":")[0], "0 to 50% of the mean")
+    panels += [(heat(img, ref), "error, " + label.split(", light")[0], "0 to 50% of the mean")
                for label, _, img in shots]
     cols, head = 4, 34
     sheet = Image.new("RGB", (PANEL * cols, 2 * (PANEL + head) + 18), (20, 20, 20))
