@@ -76,6 +76,9 @@ def interact(records: str, method: str, width: int, grid: int) -> None:
     def n(x):
         return "never" if x is None else f"{x:.0f}"
 
+    def ms(x):
+        return "never" if x is None else f"{x:.0f} ms"
+
     print("| scene, event | first frame | frame p50 / p99 (warm, cold) | to 5% | to 3% | converged "
           "| speed check |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
@@ -87,10 +90,10 @@ def interact(records: str, method: str, width: int, grid: int) -> None:
             warm = next(r for r in rows if r.get("variant") in ("warm", None))
             cold = next((r for r in rows if r.get("variant") == "cold"), None)
             if cold is None:
-                print(f"| {scene}, {label} | {n(warm['first_frame_ms'])} ms "
-                      f"({n(warm['first_frame_wall_ms'])} ms) | {warm['frame_ms_p50']:.1f} / "
-                      f"{warm['frame_ms_p99']:.1f} ms | {n(warm['ms_to_5pct'])} ms | "
-                      f"{n(warm['ms_to_3pct'])} ms | {warm['final_rrmse'] * 100:.2f}% | "
+                print(f"| {scene}, {label} | {ms(warm['first_frame_ms'])} "
+                      f"({ms(warm['first_frame_wall_ms'])}) | {warm['frame_ms_p50']:.1f} / "
+                      f"{warm['frame_ms_p99']:.1f} ms | {ms(warm['ms_to_5pct'])} | "
+                      f"{ms(warm['ms_to_3pct'])} | {warm['final_rrmse'] * 100:.2f}% | "
                       f"{warm['speed_check_ms']:.2f} ms |")
                 continue
             both = lambda k: f"{n(warm[k])} / {n(cold[k])} ms"  # noqa: E731
