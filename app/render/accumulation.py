@@ -47,4 +47,3 @@ class Accumulation:
     def release(self) -> None:
         self._framebuffer.release()
         self.texture.release()
-

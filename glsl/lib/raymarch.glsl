@@ -47,11 +47,12 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
     float scatter_allowed = max_bounces > 0 ? 1.0 : 0.0;
     float sun_phase = phase_hg(dot(sun_direction, d), anisotropy);
     for (int i = 0; i < n && transmittance > 1e-6; ++i) {
-        vec3 x = origin + (t0 + (float(i) + jitter) * dt) * d;
+        float t = t0 + (float(i) + jitter) * dt;
+        vec3 x = origin + t * d;
         vec4 tf = transfer_at(density_at(x));
         float sigma_t = density_scale * tf.a;
         if (sigma_t <= 0.0) {
-            i = empty_space_last_index(origin, d, t0 + (float(i) + jitter) * dt, i, t0, dt, jitter);
+            i = empty_space_last_index(origin, d, t, i, t0, dt, jitter);
             continue;
         }
         float opacity = 1.0 - exp(-sigma_t * dt);
