@@ -244,8 +244,8 @@ def _parse_probes(d: Any) -> ProbeSpec:
         kw["precision"] = _choice(d["precision"], "probes.precision", PROBE_PRECISIONS)
     if "sh_order" in d:
         order = d["sh_order"]
-        if order != "auto" and (isinstance(order, bool) or order not in (0, 1, 2)):
-            raise SceneError(f"probes.sh_order: expected \"auto\", 0, 1 or 2, got {order!r}")
+        if order != "auto" and (isinstance(order, bool) or order not in (0, 1, 2, 3, 4)):
+            raise SceneError(f"probes.sh_order: expected \"auto\" or 0 to 4, got {order!r}")
         kw["sh_order"] = order if order == "auto" else int(order)
     if "fit" in d:
         kw["fit"] = _choice(d["fit"], "probes.fit", PROBE_FITS)

@@ -12,7 +12,7 @@ out vec4 frag_colour;
 
 void main()
 {
-    vec3 coeffs[9];
+    vec3 coeffs[SH_COUNT];
     float sun_transmittance;
     probe_fetch(probe_centre, coeffs, sun_transmittance);  // at a texel centre: the probe itself
     vec3 radiance = sh_clamp_nonnegative(sh_evaluate(coeffs, normalize(normal)));

@@ -54,6 +54,7 @@ from app.twins import rng as nrng
 from app.twins.camera import camera_frame
 from app.gl.shaders import compute_program, set_uniforms
 from app.twins.medium import box_intersect
+from app.render.probe_layout import resolve_sh_order
 from app.twins.phase import phase_hg
 from app.render.renderer import Renderer, RenderResult
 from app.scene import Scene, parse_scene
@@ -359,11 +360,13 @@ def test_furnace_returns_the_environment(renderers, case, method):
     tracer returns the environment to float rounding (2e-6); the probe methods up to the
     quadrature error of the probes' higher SH bands (band 0 holds the environment exactly; bands 1
     and 2, which the phase function scales by g and g^2, hold the error of 32 rotated Fibonacci
-    directions per probe, measured at most 0.02 |g|)."""
+    directions per probe, measured at most 0.02 |g|; with so few walks "auto" keeps order 2; orders
+    3 and 4, asked for at g = +-0.99, measured 0.023 |g| and 0.044 |g|, hence the bound by order)."""
     scene = _scene(albedo=1.0, light=SUN_OFF, max_bounces=UNBOUNDED, **FURNACES[case])
     img = _render(renderers(scene), method).image
     rel = np.abs(img / np.asarray(ENV, np.float32) - 1).max()
-    bound = 2e-6 if method == "pt" else 1e-5 + 3e-2 * abs(scene.anisotropy)
+    order = resolve_sh_order(scene.probes.sh_order, scene.anisotropy, scene.probes.samples)
+    bound = 2e-6 if method == "pt" else 1e-5 + (3e-2 if order <= 3 else 5e-2) * abs(scene.anisotropy)
     assert rel < bound, rel
 
 

@@ -8,8 +8,11 @@ import numpy as np
 import pytest
 
 from app.twins.medium import sigma_t_at
-from app.render.probe_layout import (TEXTURES_FOR_ORDER, fitted_grid, resolve_sh_order,
-                                     visible_region)
+from app.render.probe_layout import (AUTO_BAND_WEIGHT, AUTO_MAX_ORDER, AUTO_WALKS_PER_HIGH_BAND,
+                                     GREY_TEXTURES_FOR_ORDER,
+                                     TEXTURES_FOR_ORDER,
+                                     colour_channel, fitted_grid, resolve_sh_order,
+                                     unpack_coefficients, visible_region)
 from app.render.renderer import Renderer
 from app.scene import SceneError, parse_scene
 from app.transfer import transfer_table
@@ -65,10 +68,24 @@ def test_fitted_grid_follows_the_region_aspect():
 
 def test_sh_order_choice_and_validation():
     assert resolve_sh_order("auto", 0.0) == 0 and resolve_sh_order("auto", 0.3) == 2
+    # "auto" keeps the bands the phase function keeps: |g|^l >= AUTO_BAND_WEIGHT, at least 2
+    for g in (0.1, 0.5, 0.6, 0.8, -0.8, 0.99):
+        order = resolve_sh_order("auto", g)
+        assert 2 <= order <= AUTO_MAX_ORDER
+        assert order == AUTO_MAX_ORDER or abs(g) ** (order + 1) < AUTO_BAND_WEIGHT
+        assert order == 2 or abs(g) ** order >= AUTO_BAND_WEIGHT
+    assert resolve_sh_order("auto", 0.8) == 3 and resolve_sh_order("auto", 0.5) == 2
+    # higher bands only for probes with the walks to resolve them
+    assert resolve_sh_order("auto", 0.8, AUTO_WALKS_PER_HIGH_BAND) == 3
+    assert resolve_sh_order("auto", 0.8, AUTO_WALKS_PER_HIGH_BAND - 1) == 2
+    assert resolve_sh_order("auto", 0.0, 4096) == 0 and resolve_sh_order(4, 0.8, 16) == 4
     assert resolve_sh_order(1, 0.0) == 1
-    assert len(TEXTURES_FOR_ORDER[0]) == 2 and len(TEXTURES_FOR_ORDER[2]) == 7
-    with pytest.raises(SceneError, match="probes.sh_order"):
-        parse_scene({"probes": {"sh_order": 3}})
+    assert [len(TEXTURES_FOR_ORDER[o]) for o in range(5)] == [2, 4, 7, 13, 19]
+    assert [len(GREY_TEXTURES_FOR_ORDER[o]) for o in range(5)] == [1, 2, 3, 5, 7]
+    parse_scene({"probes": {"sh_order": 4}})
+    for bad in (5, -1, 2.5, True, "3"):
+        with pytest.raises(SceneError, match="probes.sh_order"):
+            parse_scene({"probes": {"sh_order": bad}})
     with pytest.raises(SceneError, match="probes.fit"):
         parse_scene({"probes": {"fit": "tight"}})
 
@@ -79,9 +96,9 @@ BASE = {"volume": {"builtin": "cloud", "size": [24, 24, 24]}, "density_scale": 6
 
 
 @pytest.mark.parametrize("method", ["probes", "probes-only", "raymarch"])
-def test_order_zero_renders_what_order_two_renders_when_g_is_zero(ctx, method):
+def test_order_zero_renders_what_orders_two_and_four_render_when_g_is_zero(ctx, method):
     images, nbytes = {}, {}
-    for order in (0, 2):
+    for order in (0, 2, 4):
         scene = parse_scene({**BASE, "probes": {**BASE["probes"], "sh_order": order}})
         r = Renderer(ctx, scene)
         try:
@@ -89,8 +106,61 @@ def test_order_zero_renders_what_order_two_renders_when_g_is_zero(ctx, method):
             nbytes[order] = r.probe_grid.gpu_bytes
         finally:
             r.release()
-    assert nbytes[0] * 7 == nbytes[2] * 2
+    assert nbytes[0] * 7 == nbytes[2] * 2 and nbytes[0] * 19 == nbytes[4] * 2
     np.testing.assert_allclose(images[0], images[2], rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(images[0], images[4], rtol=1e-5, atol=1e-7)
+
+
+def test_packing_channels_are_distinct_and_dense():
+    """The colour packing (lib/probe_packing.glsl) puts every coefficient and colour of order 4 in
+    its own channel, keeps orders 0 to 2 where the seven textures had them, and the sun at 27."""
+    channels = [colour_channel(k, c) for k in range(25) for c in range(3)]
+    assert sorted(channels + [27]) == list(range(76))
+    assert [colour_channel(k, c) for k in range(9) for c in range(3)] == list(range(27))
+    packed = np.arange(76.0)
+    coeffs, sun = unpack_coefficients(packed, 4)
+    assert coeffs.shape == (25, 3) and sun == 27 and coeffs[9, 0] == 28 and coeffs[24, 2] == 75
+
+
+@pytest.mark.parametrize("grey", [False, True])
+@pytest.mark.parametrize("order", [0, 1, 2, 3, 4])
+def test_textures_hold_the_running_means_in_their_packing(ctx, order, grey):
+    """What the bake publishes (probe_project.comp, and probe_publish.comp past eight textures)
+    read back texel by texel: each texture's channels are the running means' channels that
+    lib/probe_packing.glsl names for it, divided by the radiance scale (the sun's as it is)."""
+    tf = {"colormap": "grey"} if grey else {"colormap": "plasma"}
+    scene = parse_scene({**BASE, "transfer_function": tf, "anisotropy": 0.5,
+                         "probes": {"grid": [3, 2, 4], "samples": 64, "sh_order": order,
+                                    "channels": 1 if grey else 3, "fit": "box"}})
+    r = Renderer(ctx, scene)
+    try:
+        r.bake(seed=4)
+        grid = r.probe_grid
+        assert grid.grey == grey
+        means = grid.coefficients().reshape(grid.count, -1)
+        coeffs, sun = unpack_coefficients(means, max(order, 2))
+        kept = (order + 1) ** 2
+        expected = {}   # texture number -> (count, 4) expected texels
+        for number in grid.texture_ids:
+            texel = np.zeros((grid.count, 4))
+            for component in range(4):
+                f = 4 * number + component
+                if grey:
+                    k = f if f < 3 else f - 1
+                    value = sun if f == 3 else (coeffs[:, k, 0] / grid.radiance_scale
+                                                if k < kept else 0.0)
+                else:
+                    value = means[:, f] if f == 27 else means[:, f] / grid.radiance_scale
+                texel[:, component] = value
+            expected[number] = texel
+        assert len(grid.textures) == len((GREY_TEXTURES_FOR_ORDER if grey else TEXTURES_FOR_ORDER)[order])
+        for number, tex in zip(grid.texture_ids, grid.textures):
+            got = np.frombuffer(tex.read(), np.float32).reshape(grid.count, 4)
+            np.testing.assert_allclose(got, expected[number], rtol=1e-6, atol=1e-7,
+                                       err_msg=f"texture {number}")
+        assert np.abs(coeffs[:, 9:] if order >= 3 else coeffs[:, 4:9]).max() > 0   # bands baked
+    finally:
+        r.release()
 
 
 def test_fitted_grid_bakes_inside_the_visible_region(ctx):
@@ -138,7 +208,7 @@ GREY = {**BASE, "transfer_function": {"colormap": "grey"}, "anisotropy": 0.6}
 
 
 @pytest.mark.parametrize("method", ["probes", "probes-only", "raymarch"])
-@pytest.mark.parametrize("order", [0, 1, 2])
+@pytest.mark.parametrize("order", [0, 1, 2, 3, 4])
 def test_one_channel_renders_what_three_render_in_a_grey_scene(ctx, method, order):
     images, textures = {}, {}
     for channels in (1, 3):
@@ -151,7 +221,7 @@ def test_one_channel_renders_what_three_render_in_a_grey_scene(ctx, method, orde
             assert r.probe_grid.grey == (channels == 1)
         finally:
             r.release()
-    assert textures[1] == order + 1 and textures[3] == (2, 4, 7)[order]
+    assert textures[1] == (1, 2, 3, 5, 7)[order] and textures[3] == (2, 4, 7, 13, 19)[order]
     assert images[3].max() > 0
     np.testing.assert_allclose(images[1], images[3], rtol=1e-5, atol=1e-7)
 
@@ -191,3 +261,73 @@ def test_the_gpu_visible_region_is_its_twin(ctx, case):
             np.testing.assert_array_equal(got[1], r.resources.volume.half_extent)
     finally:
         r.release()
+
+
+FETCH_ALL_KERNEL = """
+#define PROBE_SAMPLING
+#include "lib/rng.glsl"
+#include "lib/directions.glsl"
+#include "lib/sh.glsl"
+#include "lib/probes.glsl"
+layout(std430, binding = 0) readonly buffer In { float x[]; };
+layout(std430, binding = 1) writeonly buffer Out { float o[]; };
+void main()
+{
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= count) return;
+    vec3 coeffs[SH_COUNT];
+    float sun;
+    probe_fetch(vec3(x[3u * i], x[3u * i + 1u], x[3u * i + 2u]), coeffs, sun);
+    uint base = uint(3 * SH_COUNT + 1) * i;
+    for (int k = 0; k < SH_COUNT; ++k)
+        for (int c = 0; c < 3; ++c)
+            o[base + uint(3 * k + c)] = coeffs[k][c];
+    o[base + uint(3 * SH_COUNT)] = sun;
+}
+"""
+
+
+@pytest.mark.parametrize("grey", [False, True])
+@pytest.mark.parametrize("order", [0, 1, 2, 3, 4])
+def test_probe_fetch_unpacks_every_coefficient(ctx, order, grey):
+    """lib/probes.glsl probe_fetch at the probes' texel centres against the NumPy unpacking of
+    random textures in the packing of lib/probe_packing.glsl: every coefficient up to the order
+    (times the radiance scale), zeros above it, and the sun's transmittance."""
+    import moderngl
+    from glsl_harness import run_kernel
+    from app.render.probes import probe_unit
+    grid = (3, 2, 4)
+    count = grid[0] * grid[1] * grid[2]
+    ids = (GREY_TEXTURES_FOR_ORDER if grey else TEXTURES_FOR_ORDER)[order]
+    rng = np.random.default_rng(order + 10 * grey)
+    texels = {t: rng.uniform(0.05, 1.0, (count, 4)).astype(np.float32) for t in ids}
+    textures = []
+    for t in ids:
+        tex = ctx.texture3d(grid, 4, texels[t].tobytes(), dtype="f4")
+        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        tex.use(probe_unit(t))
+        textures.append(tex)
+    ijk = np.stack(np.meshgrid(*(np.arange(n) for n in grid), indexing="ij"), -1).reshape(-1, 3)
+    order_zyx = np.lexsort((ijk[:, 0], ijk[:, 1], ijk[:, 2]))   # probe index = i + nx (j + ny k)
+    ijk = ijk[order_zyx]
+    x = ((ijk + 0.5) / np.asarray(grid) * 2.0 - 1.0).astype(np.float32)   # box [-1, 1]^3
+    sh_count = (max(order, 2) + 1) ** 2
+    try:
+        out = run_kernel(ctx, FETCH_ALL_KERNEL, [x.ravel()], (count, 3 * sh_count + 1),
+                         defines={"PROBE_SH_ORDER": order, "PROBE_GREY": int(grey)},
+                         uniforms={"probe_textures": tuple(probe_unit(t) for t in ids),
+                                   "probe_grid": grid, "probe_box_min": (-1.0, -1.0, -1.0),
+                                   "probe_box_size": (2.0, 2.0, 2.0),
+                                   "probe_radiance_scale": 3.0})
+    finally:
+        for tex in textures:
+            tex.release()
+    channel = {4 * t + c: texels[t][:, c] for t in ids for c in range(4)}
+    coeffs = out[:, :-1].reshape(count, sh_count, 3)
+    kept = (order + 1) ** 2
+    for k in range(sh_count):
+        for c in range(3):
+            f = (k if k < 3 else k + 1) if grey else colour_channel(k, c)
+            expected = 3.0 * channel[f] if k < kept else np.zeros(count)
+            np.testing.assert_allclose(coeffs[:, k, c], expected, rtol=1e-6, err_msg=f"k={k} c={c}")
+    np.testing.assert_allclose(out[:, -1], channel[3 if grey else 27], rtol=1e-6)

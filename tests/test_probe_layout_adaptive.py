@@ -156,7 +156,7 @@ void main()
 {
     uint i = gl_GlobalInvocationID.x;
     if (i >= count) return;
-    vec3 coeffs[9];
+    vec3 coeffs[SH_COUNT];
     float sun;
     probe_fetch(vec3(x[3u * i], x[3u * i + 1u], x[3u * i + 2u]), coeffs, sun);
     o[2u * i] = coeffs[0].r;
@@ -185,7 +185,7 @@ def test_probe_fetch_blends_the_probes_at_their_positions(ctx):
     x = (low + s * size).astype(np.float32)
     out = run_kernel(ctx, FETCH_KERNEL, [x.ravel()], (len(x), 2),
                      defines={"PROBE_WARP": 1, "PROBE_GREY": 1, "PROBE_SH_ORDER": 0},
-                     uniforms={"probe_warp": UNIT, "probe_sh0": 2, "probe_grid": grid,
+                     uniforms={"probe_warp": UNIT, "probe_textures": (2,), "probe_grid": grid,
                                "probe_box_min": tuple(low), "probe_box_size": tuple(size),
                                "probe_band_factors": (1.0, 1.0, 1.0),
                                "probe_radiance_scale": 2.0})

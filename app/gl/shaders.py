@@ -100,4 +100,9 @@ def set_uniforms(program, values: Mapping[str, object]) -> None:
             member = program[key]
             if hasattr(value, "tolist"):
                 value = value.tolist()
+            if isinstance(value, (list, tuple)) and member.dimension == 1:
+                # an array of scalars (samplers, floats): the compiler keeps elements up to the
+                # last one the shader reads; one kept element is a scalar uniform
+                length = member.array_length
+                value = value[0] if length == 1 else value[:length]
             member.value = value

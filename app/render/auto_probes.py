@@ -1,7 +1,8 @@
 """`auto`: the cheapest probe setting that meets a target error, chosen from measurements the
 renderer makes itself, with the reasons written down.
 
-1. Representation, from the scene alone: SH order 0 when g = 0 (exact, probe_layout.py), else 2;
+1. Representation, from the scene alone: SH order 0 when g = 0 (exact, probe_layout.py), else 2,
+   or 3 for strongly anisotropic scenes and probes of 128 walks or more (resolve_sh_order);
    RGBA16F (the benchmark measured the same error as 32F at half the memory); the grid fitted to
    the visible region.
 2. A pilot: the scene's own view at low resolution, path traced until the reference's measured
@@ -48,7 +49,7 @@ class AutoChoice:
     def report(self) -> str:
         from .probe_layout import resolve_sh_order
         p = self.scene.probes
-        order = resolve_sh_order(p.sh_order, self.scene.anisotropy)
+        order = resolve_sh_order(p.sh_order, self.scene.anisotropy, p.samples)
         head = (f"auto: probes {p.grid[0]}^3 (fitted), {p.samples} walks, SH order {order}, "
                 f"{p.precision}: rRMSE {self.rrmse:.4f} against a {self.pilot_spp}-spp pilot "
                 f"(noise {self.pilot_noise:.4f}); target {self.target:.4f} "
@@ -75,7 +76,8 @@ def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
         raise ValueError(f"auto target must be a relative RMSE in (0, 1), got {target}")
     original = renderer.scene
     order = "auto"
-    reasons = [f"SH order: {'0, since g = 0 zeroes bands 1 and 2' if original.anisotropy == 0 else '2, since g != 0'}",
+    reasons = [("SH order: 0, since g = 0 zeroes bands 1 and up" if original.anisotropy == 0 else
+                "SH order: 2, or 3 where |g|^3 >= 0.2 and a candidate has 128 walks or more"),
                "precision: rgba16f (same error as 32F in the benchmark, half the memory)",
                "grid fitted to the visible region", "one channel when the scene is grey"]
     pilot = _pilot_scene(original, pilot_side)

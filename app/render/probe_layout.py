@@ -3,11 +3,16 @@
 - the grid covers only the region the transfer function makes visible (where sigma_t can be > 0,
   trilinear interpolation and clamp-to-edge included), and a cubic grid request N becomes N probes
   along that region's longest side with the other axes in proportion (equal probe spacing);
-- the SH order: with g = 0 the phase convolution multiplies bands 1 and 2 by g^l = 0, so order 0
-  (one coefficient) gives exactly the same images as order 2 at a fraction of the memory and
-  texture fetches; "auto" picks 0 for g = 0 and 2 otherwise;
+- the SH order: with g = 0 the phase convolution multiplies bands l >= 1 by g^l = 0, so order 0
+  (one coefficient) gives exactly the same images as any higher order at a fraction of the memory
+  and texture fetches; "auto" picks 0 for g = 0, else the highest order (at most AUTO_MAX_ORDER)
+  whose band still carries |g|^l >= AUTO_BAND_WEIGHT of the phase function, and at least 2; bands
+  above 2 only with at least AUTO_WALKS_PER_HIGH_BAND walks per probe;
 - the colour channels: when the transfer function's colours and both lights are grey, r = g = b in
-  every probe, and one channel is stored ("auto" channels), in 1 to 3 textures instead of 2 to 7.
+  every probe, and one channel is stored ("auto" channels), in 1 to 7 textures instead of 2 to 19.
+
+The packing itself (which texture and channel holds what) is lib/probe_packing.glsl's; the
+functions here are its NumPy twin.
 """
 from __future__ import annotations
 
@@ -15,16 +20,60 @@ import numpy as np
 
 from ..twins.visible_region import visible_region  # noqa: F401  (the NumPy twin; the renderer's is on the GPU)
 
-# Probe textures (of the seven in lib/probes.glsl's packing) that each SH order needs: texture 6
-# always, for the sun's transmittance in its alpha channel.
-TEXTURES_FOR_ORDER = {0: (0, 6), 1: (0, 1, 2, 6), 2: (0, 1, 2, 3, 4, 5, 6)}
+SH_ORDERS = (0, 1, 2, 3, 4)
+SUN_CHANNEL = 27            # the colour packing's channel of the sun's transmittance
+# "auto" keeps band l while |g|^l >= this: the phase convolution scales band l by g^l, so a band
+# below it adds at most this fraction of its radiance's band to any pixel (|g| >= 0.59: order 3;
+# 0.5: order 2).
+AUTO_BAND_WEIGHT = 0.2
+# ... and no more than order 3: on the bench's g = 0.8 cloud (bench/h100, "SH orders at the same
+# probe setting") order 4 lowered no error below order 3's, was worse with few walks (its two
+# more bands carry more of the walks' noise) and cost 1.5x order 3's raymarched frame.
+AUTO_MAX_ORDER = 3
+# ... and bands above 2 only for probes of at least this many walks: each added band holds more of
+# the walks' noise, and on that cloud order 3 lowered the error from 128 walks per probe on
+# (64^3 x 512: 4.57 -> 3.67%; 128^3 x 256: 4.07 -> 3.49%) but raised it with 16 or 64
+# (64^3 x 64: 5.99 -> 6.28%; 128^3 x 64: 4.76 -> 5.08%).
+AUTO_WALKS_PER_HIGH_BAND = 128
 
 
-GREY_TEXTURES_FOR_ORDER = {0: (0,), 1: (0, 1), 2: (0, 1, 2)}
+def sh_coefficients(order: int) -> int:
+    return (order + 1) ** 2
+
+
+def colour_channel(k: int, colour: int) -> int:
+    """The colour packing's channel of SH coefficient k, colour 0..2 (probe_colour_channel)."""
+    return 3 * k + colour if k < 9 else 28 + 3 * (k - 9) + colour
+
+
+def colour_textures(order: int) -> int:
+    """Textures of the colour packing (and the bake's running means): 7 up to order 2, 13, 19."""
+    if order <= 2:
+        return 7
+    return (colour_channel(sh_coefficients(order) - 1, 2) + 1 + 3) // 4
 
 
 def texture_ids(order: int, grey: bool) -> tuple[int, ...]:
-    return (GREY_TEXTURES_FOR_ORDER if grey else TEXTURES_FOR_ORDER)[order]
+    """The texture numbers a probe grid of this order has, in slot order (probe_texture_number):
+    texture 6 (colour) or 0 (grey) always, for the sun's transmittance in its alpha channel."""
+    if order not in SH_ORDERS:
+        raise ValueError(f"SH order {order!r}: expected one of {', '.join(map(str, SH_ORDERS))}")
+    if grey:
+        return tuple(range((sh_coefficients(order) + 1 + 3) // 4))
+    return {0: (0, 6), 1: (0, 1, 2, 6)}.get(order, tuple(range(colour_textures(order))))
+
+
+TEXTURES_FOR_ORDER = {order: texture_ids(order, False) for order in SH_ORDERS}
+GREY_TEXTURES_FOR_ORDER = {order: texture_ids(order, True) for order in SH_ORDERS}
+
+
+def unpack_coefficients(channels: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Colour-packed channels (..., 4 * colour_textures) -> SH coefficients (..., K, 3) of bands
+    0 .. order and the sun's transmittance (...)."""
+    channels = np.asarray(channels)
+    k = np.arange(sh_coefficients(order))
+    index = np.array([[colour_channel(int(i), c) for c in range(3)] for i in k])
+    return channels[..., index], channels[..., SUN_CHANNEL]
 
 
 def scene_is_grey(table: np.ndarray, irradiance, environment) -> bool:
@@ -41,9 +90,17 @@ def resolve_channels(channels: str | int, table: np.ndarray, irradiance, environ
     return int(channels)
 
 
-def resolve_sh_order(order: str | int, anisotropy: float) -> int:
+def resolve_sh_order(order: str | int, anisotropy: float, walks: int | None = None) -> int:
+    """The SH order probes are baked with: `order` itself, or for "auto" the scene's choice for
+    probes of `walks` walks each (None: as many as the higher bands want)."""
     if order == "auto":
-        return 0 if anisotropy == 0.0 else 2
+        g = abs(float(anisotropy))
+        if g == 0.0:
+            return 0
+        if walks is not None and walks < AUTO_WALKS_PER_HIGH_BAND:
+            return 2
+        kept = max(l for l in SH_ORDERS if l <= AUTO_MAX_ORDER and g ** l >= AUTO_BAND_WEIGHT)
+        return max(2, kept)
     return int(order)
 
 

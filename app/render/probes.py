@@ -1,8 +1,9 @@
-"""The radiance-probe grid: its seven RGBA 3D textures and the progressive bake that fills them.
+"""The radiance-probe grid: its RGBA 3D textures (seven up to SH order 2, 13 at order 3, 19 at 4;
+lib/probe_packing.glsl) and the progressive bake that fills them.
 
 A bake is a sequence of passes; each pass sends `directions` walks from every probe (a rotated
-spherical Fibonacci set, lib/probes.glsl), projects them onto order-2 SH and folds them into each
-probe's running mean, then publishes the textures, so a viewer can show probes that improve while
+spherical Fibonacci set, lib/probes.glsl), projects them onto SH (order 2, or the grid's order
+where that is higher) and folds them into each probe's running mean, then publishes the textures, so a viewer can show probes that improve while
 it stays interactive. Probes are processed in chunks so the walks' buffers stay within a fixed
 size whatever the grid size.
 
@@ -24,19 +25,19 @@ import numpy as np
 from ..gl.context import UNBOUNDED_LOOP_BUDGET, loop_budget, loop_budget_unbounded
 from ..gl.profiler import GpuProfile
 from ..gl.shaders import compute_program, set_uniforms
-from .probe_layout import texture_ids
+from .probe_layout import colour_textures, texture_ids, unpack_coefficients
 from ..twins.probe_warp import WARP_ROWS, warp_table
 from .resources import SceneResources
 
-PROBE_TEXTURES = 7
-PROBE_UNIT = 2                # probe textures bind to texture units 2..8
+PROBE_UNIT = 2                # probe textures 0..6 bind to texture units 2..8
+PROBE_UNIT_HIGH = 16          # and textures 7..18 (SH orders 3, 4) to units 16..27
 PROBE_WARP_UNIT = 14          # an adaptive layout's warp and planes (lib/probe_warp.glsl)
+PROBE_IMAGE_LIMIT = 8         # textures one dispatch publishes (lib/probe_publish.glsl)
 DIRECTIONS_PER_PASS = 64
 WALKS_PER_CHUNK = 1 << 20     # resumable walks: 80 MiB of walk state and 16 MiB of results at most
 WALKS_PER_CHUNK_UNBOUNDED = 1 << 22   # walks that end in one dispatch: 64 MiB of results at most
 PATH_STATE_BYTES = 80       # PathState of glsl/lib/integrator.glsl, std430
 PATH_STATE_BYTES_ENVIRONMENT_MAP = 112   # the same with ENVIRONMENT_MAP
-PROBE_ACCUM_BYTES = 128     # ProbeAccum of glsl/lib/probe_accum.glsl
 WALK_SUN_MODES = ("ray", "grid")
 WALK_PROFILE_SLOTS = 1024   # rows of 8 counters in glsl/lib/walk_profile.glsl
 WALK_PROFILE_FIELDS = ("walks", "events", "flight_steps", "shadow_steps", "cell_steps",
@@ -62,10 +63,22 @@ def radiance_scale(scene, environment=None) -> float:
     return float(level) if math.isfinite(level) and level > 0.0 else 1.0
 
 
-def band_factors(g: float, window: str) -> tuple[float, float, float]:
-    """Per-band multipliers g^l * window_l (NumPy twin of sh_band_factors in lib/sh.glsl)."""
+def probe_unit(texture_number: int) -> int:
+    """The texture unit probe texture `texture_number` binds to (PROBE_UNIT, PROBE_UNIT_HIGH)."""
+    return PROBE_UNIT + texture_number if texture_number < 7 else PROBE_UNIT_HIGH + texture_number - 7
+
+
+def accum_bytes(sh_order: int) -> int:
+    """Bytes of one ProbeAccum (glsl/lib/probe_accum.glsl): the colour packing's channels and four
+    floats (128 up to order 2)."""
+    return 16 * colour_textures(sh_order) + 16
+
+
+def band_factors(g: float, window: str, sh_order: int = 2) -> tuple[float, ...]:
+    """Per-band multipliers g^l * window_l, l = 0 .. max(sh_order, 2) (NumPy twin of
+    sh_band_factors in lib/sh.glsl, whose SH_ORDER is at least 2)."""
     from ..sh import sh_band_factors
-    return tuple(float(v) for v in sh_band_factors(g, SH_WINDOW_IDS[window]))
+    return tuple(float(v) for v in sh_band_factors(g, SH_WINDOW_IDS[window], max(sh_order, 2)))
 
 
 @dataclass
@@ -84,7 +97,7 @@ class ProbeGrid:
                  sun: str = "ray", adaptive: float = 0.0, environment_map: bool = False,
                  planes: tuple | None = None):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
-        bake time); `sh_order` 0, 1 or 2 decides which of the seven textures exist. `resumable`:
+        bake time); `sh_order` 0 to 4 decides which textures exist (lib/probe_packing.glsl). `resumable`:
         walks that suspend and resume across dispatches (default: where the driver limits loops;
         False on such a driver only for walks short enough to fit its limit, as tests do).
         `sun`: at the walks' scattering events, "ray" traces a ratio-tracked shadow ray towards the
@@ -144,13 +157,14 @@ class ProbeGrid:
         state_bytes = PATH_STATE_BYTES_ENVIRONMENT_MAP if self.environment_map else PATH_STATE_BYTES
         self.walk_states = ctx.buffer(reserve=walks * state_bytes) if self.resumable else None
         self.walk_radiance = ctx.buffer(reserve=walks * 16)
-        self.accums = ctx.buffer(reserve=self.count * PROBE_ACCUM_BYTES)
+        self.accum_floats = accum_bytes(self.sh_order) // 4
+        self.accums = ctx.buffer(reserve=self.count * accum_bytes(self.sh_order))
         self.progress = ctx.buffer(reserve=4)
         self._progress_program = None   # glsl/probe_progress.comp, built on first use
         self._partial_sums = None
         self.noise = ctx.buffer(reserve=8)   # lib/probe_noise.glsl
         defines = {"PROBE_IMAGE_FORMAT": precision, **self.defines()}
-        self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable), **self._warp_defines()}
+        self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable), **self.defines()}
         if sun == "grid":
             self._walk_defines["WALK_SUN_GRID"] = 1
         if self.environment_map:
@@ -158,8 +172,14 @@ class ProbeGrid:
         self.walk_program = compute_program(ctx, "probe_walks.comp", self._walk_defines)
         self._walk_profile_program = None   # the WALK_PROFILE build, compiled when first asked for
         self.project_program = compute_program(ctx, "probe_project.comp", defines)
-        self.sun_program = compute_program(ctx, "probe_sun.comp", self._warp_defines() or None)
-        self.noise_program = compute_program(ctx, "probe_noise.comp") if self.adaptive else None
+        # slots past the first PROBE_IMAGE_LIMIT: published by their own dispatches
+        self.publish_programs = [
+            (first, compute_program(ctx, "probe_publish.comp",
+                                    {**defines, "PROBE_PUBLISH_FIRST": first}))
+            for first in range(PROBE_IMAGE_LIMIT, len(self.texture_ids), PROBE_IMAGE_LIMIT)]
+        self.sun_program = compute_program(ctx, "probe_sun.comp", self.defines())
+        self.noise_program = (compute_program(ctx, "probe_noise.comp", self.defines())
+                              if self.adaptive else None)
         self.dispatches = 0
         self.passes_done = 0
         self.next_probe = 0        # the next probe to walk in the current pass
@@ -288,6 +308,8 @@ class ProbeGrid:
             uniforms.update(light.uniforms())
         set_uniforms(walk_program, uniforms)
         set_uniforms(self.project_program, uniforms)
+        for _, program in self.publish_programs:
+            set_uniforms(program, uniforms)
         if self.walk_states is not None:
             self.walk_states.bind_to_storage_buffer(1)
         self.progress.bind_to_storage_buffer(2)
@@ -297,8 +319,7 @@ class ProbeGrid:
         (self.prior if self.prior is not None else self.accums).bind_to_storage_buffer(7)
         if counters is not None:
             counters.bind_to_storage_buffer(5)
-        for i, tex in zip(self.texture_ids, self.textures):
-            tex.bind_to_image(i, read=False, write=True)
+        self._bind_images(0)
         if self.passes_done == 0 and self.next_probe == 0:
             self.noise.write(struct.pack("2f", -1.0, 0.0))   # no noise target until pass 0 ends
             with section("sun"):
@@ -320,6 +341,15 @@ class ProbeGrid:
                                         | moderngl.TEXTURE_FETCH_BARRIER_BIT
                                         | moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
                 self.dispatches += 1
+                for first_slot, program in self.publish_programs:
+                    self._bind_images(first_slot)
+                    set_uniforms(program, {"first_probe": first, "chunk_probes": n})
+                    program.run((n + 63) // 64)
+                    self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT
+                                            | moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
+                    self.dispatches += 1
+                if self.publish_programs:
+                    self._bind_images(0)
         self.next_probe = end
         if self.next_probe < self.count:
             return
@@ -333,6 +363,11 @@ class ProbeGrid:
                 self.dispatches += 1
         self.next_probe = 0
         self.passes_done += 1
+
+    def _bind_images(self, first_slot: int) -> None:
+        """Slots first_slot .. first_slot + 7 to image units 0 .. 7 (lib/probe_publish.glsl)."""
+        for unit, tex in enumerate(self.textures[first_slot:first_slot + PROBE_IMAGE_LIMIT]):
+            tex.bind_to_image(unit, read=False, write=True)
 
     def _run_walks(self, program, groups: int) -> None:
         """One dispatch where walks end in it; else dispatches until no walk has work left (the
@@ -356,7 +391,8 @@ class ProbeGrid:
 
     def walks_taken(self) -> np.ndarray:
         """Walks averaged into each probe, (nz, ny, nx) (a small read; for tests and the views)."""
-        data = np.frombuffer(self.accums.read(), np.float32).reshape(self.count, 32)[:, 28]
+        n = self.accum_floats
+        data = np.frombuffer(self.accums.read(), np.float32).reshape(self.count, n)[:, n - 4]
         return data.reshape(self.grid[2], self.grid[1], self.grid[0]).copy()
 
     def progress_sums(self) -> tuple[float, float]:
@@ -365,7 +401,8 @@ class ProbeGrid:
         accumulator (268 MB at 128^3 probes)."""
         groups = (self.count + 255) // 256
         if self._progress_program is None:
-            self._progress_program = compute_program(self.ctx, "probe_progress.comp")
+            self._progress_program = compute_program(self.ctx, "probe_progress.comp",
+                                                     self.defines())
         if self._partial_sums is None or self._partial_sums.size != groups * 8:
             if self._partial_sums is not None:
                 self._partial_sums.release()
@@ -390,9 +427,16 @@ class ProbeGrid:
                             self.passes_done * self.directions), rel, se)
 
     def coefficients(self) -> np.ndarray:
-        """The probes' channels as float32 (nz, ny, nx, 28) in texture packing order (for tests)."""
-        data = np.frombuffer(self.accums.read(), np.float32).reshape(self.count, 32)[:, :28]
-        return data.reshape(self.grid[2], self.grid[1], self.grid[0], 28).copy()
+        """The probes' running means as float32 (nz, ny, nx, C) in the colour packing
+        (lib/probe_packing.glsl; C = 28 up to order 2, 52 at order 3, 76 at order 4)."""
+        n = self.accum_floats
+        data = np.frombuffer(self.accums.read(), np.float32).reshape(self.count, n)[:, :n - 4]
+        return data.reshape(self.grid[2], self.grid[1], self.grid[0], n - 4).copy()
+
+    def sh_coefficients(self) -> tuple[np.ndarray, np.ndarray]:
+        """The probes' SH coefficients (nz, ny, nx, K, 3), bands 0 .. max(order, 2), and the sun's
+        transmittance (nz, ny, nx): the running means, unpacked."""
+        return unpack_coefficients(self.coefficients(), max(self.sh_order, 2))
 
     def defines(self) -> dict:
         """Compile-time settings every shader reading these probes needs (lib/probes.glsl)."""
@@ -415,22 +459,24 @@ class ProbeGrid:
 
     def bind(self) -> None:
         for i, tex in zip(self.texture_ids, self.textures):
-            tex.use(PROBE_UNIT + i)
+            tex.use(probe_unit(i))
         if self.warp_texture is not None:
             self.warp_texture.use(PROBE_WARP_UNIT)
 
     def uniforms(self, anisotropy: float, window: str,
                  resources: SceneResources | None = None) -> dict:
-        u = {f"probe_sh{i}": PROBE_UNIT + i for i in self.texture_ids}
+        u = {"probe_textures": tuple(probe_unit(i) for i in self.texture_ids)}
         u["probe_grid"] = self.grid
         if self.warp_texture is not None:
             u["probe_warp"] = PROBE_WARP_UNIT
         u.update(self.box_uniforms(resources))
-        u["probe_band_factors"] = band_factors(anisotropy, window)
+        u["probe_band_factors"] = band_factors(anisotropy, window, self.sh_order)
         u["probe_radiance_scale"] = self.radiance_scale
         return u
 
     def release(self) -> None:
+        for _, program in self.publish_programs:
+            program.release()
         for obj in (*self.textures, self.walk_states, self.walk_radiance, self.accums, self.progress,
                     self.noise, self.noise_program, self.prior, self.warp_texture,
                     self.walk_program, self._walk_profile_program, self.project_program,

@@ -245,7 +245,7 @@ class Renderer:
         planes = (self.adaptive_planes(grid, box)
                   if region and spec.layout == "adaptive" else None)
         return ProbePlan(grid=grid, box=box,
-                         sh_order=resolve_sh_order(spec.sh_order, s.anisotropy),
+                         sh_order=resolve_sh_order(spec.sh_order, s.anisotropy, spec.samples),
                          grey=resolve_channels(spec.channels, self.resources.table,
                                                s.light.irradiance, environment) == 1,
                          planes=planes)

@@ -270,8 +270,9 @@ def probes_section(v) -> None:
     changed, i = imgui.combo("Grid covers", PROBE_FITS.index(spec.fit), ["visible region", "whole box"])
     if changed:
         state.set_probes(fit=PROBE_FITS[i])
-    orders = ["auto", 0, 1, 2]
-    changed, i = imgui.combo("SH order", orders.index(spec.sh_order), ["auto (0 when g = 0)", "0", "1", "2"])
+    orders = ["auto", 0, 1, 2, 3, 4]
+    changed, i = imgui.combo("SH order", orders.index(spec.sh_order),
+                             ["auto (0 when g = 0, more bands as |g| grows)", "0", "1", "2", "3", "4"])
     if changed:
         state.set_probes(sh_order=orders[i])
     layout_section(v)

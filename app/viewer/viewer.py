@@ -330,7 +330,7 @@ class Viewer:
             "rel_rmse": self.error_meter.value if s.display == "error" else None,
             "probe_pixels": self.probe_pixels() if s.probe_view != "off" else [],
             "probes_drawn": self.probes_drawn(),
-            "probe_coefficients": (grid.coefficients().reshape(grid.count, 28).tolist()
+            "probe_coefficients": (grid.coefficients().reshape(grid.count, -1).tolist()
                                    if grid is not None and grid.count <= SNAPSHOT_MAX_PROBES
                                    and s.probe_view != "off" else None),
             "camera_eye": list(s.scene.camera.eye),

@@ -1,9 +1,11 @@
-// Each probe's running mean over the bake's passes (app/render/probes.py PROBE_ACCUM_BYTES = 128):
-// the 28 channels in texture packing order (lib/probes.glsl), the walks averaged so far, the last
-// pass's change, which the host reads for the bake's progress, and the mean square of the walks'
-// radiance, from which the adaptive bake estimates each probe's noise (lib/probe_noise.glsl).
+// Each probe's running mean over the bake's passes (app/render/probes.py accum_bytes): the colour
+// packing's channels (lib/probe_packing.glsl; 28 up to order 2, 52 at order 3, 76 at order 4),
+// the walks averaged so far, the last pass's change, which the host reads for the bake's progress,
+// and the mean square of the walks' radiance, from which the adaptive bake estimates each probe's
+// noise (lib/probe_noise.glsl).
+#include "lib/probe_packing.glsl"
 struct ProbeAccum {
-    vec4 channels[7];   // the 28 channels in texture packing order (see lib/probes.glsl)
+    vec4 channels[PROBE_COLOUR_TEXTURES];   // the colour packing's channels
     float samples;      // walks averaged so far
     float change;       // squared change of the radiance mean (L00) this pass, summed over rgb
     float magnitude;    // squared L00, summed over rgb

@@ -1,34 +1,20 @@
 // Radiance probes: an nx x ny x nz grid over the probe box (the region the transfer function makes
 // visible, or the whole volume box). Probe (i, j, k) sits at the texel centre ((i + 0.5) / nx, ...)
-// of up to seven RGBA 3D textures, so hardware trilinear filtering blends the 8 nearest probes (and
+// of its RGBA 3D textures (seven up to order 2), so hardware trilinear filtering blends the 8 nearest probes (and
 // clamps to the outer probes beyond them, where the medium is empty anyway).
 //
-// Packing of the 28 channels: channel f = 4 * texture + component (texture 0..6, component rgba).
-// For f < 27: SH coefficient k = f / 3 (order of lib/sh.glsl), colour = f % 3 (r, g, b).
-// f = 27 (texture 6, alpha): the sun's transmittance from the probe to the box boundary, which the
-// probes-only mode multiplies with the exact phase function instead of tracing a shadow ray.
+// What the textures hold and where: lib/probe_packing.glsl (SH coefficients of bands 0 ..
+// PROBE_SH_ORDER, colour or grey, and channel 27, the sun's transmittance from the probe to the
+// box boundary, which the probes-only mode multiplies with the exact phase function instead of
+// tracing a shadow ray).
 //
 // A probe stores incident radiance L_in(omega), arriving from omega, of light that scattered at
 // least once on its way plus the attenuated environment; the unscattered sun beam is left out (it
 // is direct light, added at render time).
 //
-// PROBE_SH_ORDER (0, 1 or 2; default 2) keeps bands up to that order: order 0 uses textures 0 and 6,
-// order 1 textures 0, 1, 2 and 6 (app/render/probe_layout.py); the others are neither allocated
-// nor read, and their coefficients read as 0.
-//
-// PROBE_GREY (0 or 1; default 0): when the transfer function's colours and both lights are grey,
-// every probe's r, g and b are equal, and one channel is stored: f = 0, 1, 2 hold coefficients
-// 0, 1, 2; f = 3 the sun's transmittance; f = 4 + (k - 3) coefficient k >= 3. Order 0 then needs
-// texture 0 alone, order 1 textures 0 and 1, order 2 textures 0, 1 and 2.
-//
 // PROBE_WARP (0 or 1; default 0): 1 places the probe planes of each axis where an adaptive layout
 // put them (lib/probe_warp.glsl) instead of evenly; the textures and their packing are the same.
-#ifndef PROBE_SH_ORDER
-#define PROBE_SH_ORDER 2
-#endif
-#ifndef PROBE_GREY
-#define PROBE_GREY 0
-#endif
+#include "lib/probe_packing.glsl"
 #include "lib/probe_warp.glsl"
 uniform ivec3 probe_grid;
 // The textures hold the SH coefficients divided by this (the scene's brightest light, as radiance:
@@ -59,74 +45,41 @@ vec3 probe_walk_direction(uint probe_index, uint pass_index, uint slot, uint dir
 }
 
 #ifdef PROBE_SAMPLING
-#if PROBE_GREY
-uniform sampler3D probe_sh0;
-#if PROBE_SH_ORDER >= 1
-uniform sampler3D probe_sh1;
-#endif
-#if PROBE_SH_ORDER >= 2
-uniform sampler3D probe_sh2;
-#endif
-#else
-uniform sampler3D probe_sh0, probe_sh6;
-#if PROBE_SH_ORDER >= 1
-uniform sampler3D probe_sh1, probe_sh2;
-#endif
-#if PROBE_SH_ORDER >= 2
-uniform sampler3D probe_sh3, probe_sh4, probe_sh5;
-#endif
-#endif
-uniform vec3 probe_band_factors;  // per SH band: g^l (phase convolution) times the SH window
+// The textures this build reads, by slot (lib/probe_packing.glsl; app/render/probes.py binds them).
+uniform sampler3D probe_textures[PROBE_TEXTURE_COUNT];
+uniform float probe_band_factors[SH_BANDS];  // per SH band: g^l (phase convolution) times the SH window
 
-// Trilinearly interpolated SH coefficients and sun transmittance at world point x.
-void probe_fetch(vec3 x, out vec3 coeffs[9], out float sun_transmittance)
+// Trilinearly interpolated SH coefficients and sun transmittance at world point x; coefficients
+// above PROBE_SH_ORDER read as 0.
+void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
 {
 #if PROBE_WARP
     vec3 uvw = probe_warp_uvw((x - probe_box_min) / probe_box_size);
 #else
     vec3 uvw = (x - probe_box_min) / probe_box_size;
 #endif
-    for (int k = 1; k < 9; ++k)
+    vec4 texel[PROBE_TEXTURE_COUNT];
+    for (int slot = 0; slot < PROBE_TEXTURE_COUNT; ++slot)
+        texel[slot] = texture(probe_textures[slot], uvw);
+    for (int k = 0; k < SH_COUNT; ++k)
         coeffs[k] = vec3(0.0);
+    for (int k = 0; k < PROBE_SH_COEFFS; ++k) {
 #if PROBE_GREY
-    vec4 t0 = texture(probe_sh0, uvw);
-    coeffs[0] = vec3(t0.r);
-#if PROBE_SH_ORDER >= 1
-    vec4 t1 = texture(probe_sh1, uvw);
-    coeffs[1] = vec3(t0.g);
-    coeffs[2] = vec3(t0.b);
-    coeffs[3] = vec3(t1.r);
-#endif
-#if PROBE_SH_ORDER >= 2
-    vec4 t2 = texture(probe_sh2, uvw);
-    coeffs[4] = vec3(t1.g);
-    coeffs[5] = vec3(t1.b);
-    coeffs[6] = vec3(t1.a);
-    coeffs[7] = vec3(t2.r);
-    coeffs[8] = vec3(t2.g);
-#endif
-    sun_transmittance = clamp(t0.a, 0.0, 1.0);
+        int f = k < 3 ? k : k + 1;
+        coeffs[k] = vec3(texel[probe_texture_slot(f / 4)][f % 4]);
 #else
-    vec4 t0 = texture(probe_sh0, uvw);
-    vec4 t6 = texture(probe_sh6, uvw);
-    coeffs[0] = t0.rgb;
-#if PROBE_SH_ORDER >= 1
-    vec4 t1 = texture(probe_sh1, uvw), t2 = texture(probe_sh2, uvw);
-    coeffs[1] = vec3(t0.a, t1.rg);
-    coeffs[2] = vec3(t1.ba, t2.r);
-    coeffs[3] = t2.gba;
+        for (int c = 0; c < 3; ++c) {
+            int f = probe_colour_channel(k, c);
+            coeffs[k][c] = texel[probe_texture_slot(f / 4)][f % 4];
+        }
 #endif
-#if PROBE_SH_ORDER >= 2
-    vec4 t3 = texture(probe_sh3, uvw), t4 = texture(probe_sh4, uvw), t5 = texture(probe_sh5, uvw);
-    coeffs[4] = t3.rgb;
-    coeffs[5] = vec3(t3.a, t4.rg);
-    coeffs[6] = vec3(t4.ba, t5.r);
-    coeffs[7] = t5.gba;
-    coeffs[8] = t6.rgb;
+    }
+#if PROBE_GREY
+    sun_transmittance = clamp(texel[0].a, 0.0, 1.0);
+#else
+    sun_transmittance = clamp(texel[probe_texture_slot(6)].a, 0.0, 1.0);
 #endif
-    sun_transmittance = clamp(t6.a, 0.0, 1.0);
-#endif
-    for (int k = 0; k < 9; ++k)
+    for (int k = 0; k < PROBE_SH_COEFFS; ++k)
         coeffs[k] *= probe_radiance_scale;
 }
 
@@ -134,7 +87,7 @@ void probe_fetch(vec3 x, out vec3 coeffs[9], out float sun_transmittance)
 // with the phase function, never negative (SH ringing is clamped).
 vec3 probe_inscattered(vec3 x, vec3 d, out float sun_transmittance)
 {
-    vec3 coeffs[9];
+    vec3 coeffs[SH_COUNT];
     probe_fetch(x, coeffs, sun_transmittance);
     return sh_clamp_nonnegative(sh_evaluate_convolved(coeffs, d, probe_band_factors));
 }

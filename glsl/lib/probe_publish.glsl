@@ -1,0 +1,53 @@
+// Publishing the probes: each probe's running mean (lib/probe_accum.glsl), blended with a warm
+// restart's old one, scaled to what the textures store (lib/probes.glsl probe_radiance_scale) and
+// written into the texels of the textures this build has (lib/probe_packing.glsl), at most
+// PROBE_IMAGE_LIMIT of them per dispatch (OpenGL 4.3 guarantees 8 image units to a compute shader):
+// slots PROBE_PUBLISH_FIRST .. PROBE_PUBLISH_FIRST + PROBE_PUBLISH_COUNT - 1, slot i at image unit
+// i - PROBE_PUBLISH_FIRST. probe_project.comp publishes slots 0 .. 7 as it folds in a pass;
+// probe_publish.comp the rest (orders 3 and 4: 13 and 19 textures).
+#define PROBE_IMAGE_LIMIT 8
+#ifndef PROBE_PUBLISH_FIRST
+#define PROBE_PUBLISH_FIRST 0
+#endif
+#if PROBE_TEXTURE_COUNT - PROBE_PUBLISH_FIRST > PROBE_IMAGE_LIMIT
+#define PROBE_PUBLISH_COUNT PROBE_IMAGE_LIMIT
+#else
+#define PROBE_PUBLISH_COUNT (PROBE_TEXTURE_COUNT - PROBE_PUBLISH_FIRST)
+#endif
+
+layout(PROBE_IMAGE_FORMAT, binding = 0) uniform writeonly image3D probe_images[PROBE_PUBLISH_COUNT];
+
+// A warm restart's old running means (ProbeGrid.restart(warm=True)): what the textures show is the
+// new mean blended with these, weighted as warm_walks walks; 0 (cold, and the last pass): the mean.
+layout(std430, binding = 7) readonly buffer PriorAccums { ProbeAccum prior[]; };
+uniform float warm_walks;
+
+void probe_publish(uint probe, ProbeAccum acc)
+{
+    float w = warm_walks > 0.0 ? warm_walks / (warm_walks + acc.samples) : 0.0;
+    float to_stored = 1.0 / probe_radiance_scale;
+    uint nx = uint(probe_grid.x), ny = uint(probe_grid.y);
+    ivec3 texel = ivec3(probe % nx, (probe / nx) % ny, probe / (nx * ny));
+    for (int i = 0; i < PROBE_PUBLISH_COUNT; ++i) {
+        int number = probe_texture_number(PROBE_PUBLISH_FIRST + i);
+        vec4 value;
+        for (int component = 0; component < 4; ++component) {
+#if PROBE_GREY
+            // r = g = b for grey scenes: each coefficient's red channel
+            int f = probe_grey_source(4 * number + component);
+#else
+            int f = 4 * number + component;
+#endif
+            float shown = 0.0;
+            if (f >= 0) {
+                shown = acc.channels[f / 4][f % 4];
+                if (w > 0.0)
+                    shown = mix(shown, prior[probe].channels[f / 4][f % 4], w);
+                if (f != PROBE_SUN_CHANNEL)   // the sun's transmittance is stored as it is
+                    shown *= to_stored;
+            }
+            value[component] = shown;
+        }
+        imageStore(probe_images[i], texel, value);
+    }
+}
