@@ -45,6 +45,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
             changes["probe_layouts"] = args.probe_layouts
         if args.probe_precision:
             changes["probe_precision"] = args.probe_precision
+        if args.sh_orders:
+            changes["sh_orders"] = args.sh_orders
         if args.adaptive_strength is not None:
             if not 0.0 <= args.adaptive_strength <= 1.0:
                 raise SystemExit(f"error: --adaptive-strength {args.adaptive_strength}: expected "
@@ -73,6 +75,18 @@ def probe_layouts_arg(text: str) -> tuple[str, ...]:
         raise argparse.ArgumentTypeError(f"expected a comma-separated list of "
                                          f"{', '.join(BENCH_PROBE_LAYOUTS)}, got {text!r}")
     return tuple(dict.fromkeys(layouts))
+
+
+def sh_orders_arg(text: str) -> tuple[int, ...]:
+    """`bench --sh-orders`: a comma-separated list of SH orders 0 to 4."""
+    try:
+        orders = tuple(int(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        orders = ()
+    if not orders or any(o not in (0, 1, 2, 3, 4) for o in orders):
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of SH orders 0 to 4, "
+                                         f"got {text!r}")
+    return tuple(dict.fromkeys(orders))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -145,6 +159,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"),
                    help="the sweep's probe textures (default: the scene's, rgba32f); the showcase "
                         "setting is also run with the other")
+    b.add_argument("--sh-orders", type=sh_orders_arg, metavar="N[,N...]",
+                   help="SH orders each probe setting of the sweep is also run with, besides the "
+                        "scene's (report: 'SH orders at the same probe setting')")
     b.add_argument("--adaptive-strength", type=float, metavar="S",
                    help="the adaptive layouts' strength in [0, 1] (default: the scene's, 0.5)")
     b.add_argument("--report-only", action="store_true",

@@ -31,6 +31,7 @@ class BenchConfig:
     showcase: tuple[int, int] = (32, 256)   # grid, samples: images, step/stage/precision sweeps
     probe_layouts: tuple[str, ...] = ("uniform",)   # of BENCH_PROBE_LAYOUTS, per probe setting
     adaptive_strength: float | None = None  # the adaptive layouts' strength (None: the scene's)
+    sh_orders: tuple[int, ...] = ()         # SH orders each probe setting also runs with (--sh-orders)
     probe_precision: str | None = None   # the sweep's probe textures (None: the scene's, rgba32f)
     raymarch_steps: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0)
     flip_frames: tuple[int, ...] = (16, 256)   # FLIP only at these snapshots (it costs CPU time)

@@ -88,7 +88,7 @@ def main_records(data: dict, scene: str) -> list[dict]:
             continue
         if r["method"] != "pt" and (r.get("precision") or "rgba32f") != precision:
             continue
-        if r.get("sh_window", "none") != "none":
+        if r.get("sh_window", "none") != "none" or r.get("sh_order_variant"):
             continue
         if r["method"] == "raymarch" and (r.get("stage") != "compute" or r.get("raymarch_step") != 0.5):
             continue
@@ -273,6 +273,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
     lines += _table1(data, scenes)
     lines += _sweeps(data, scenes)
     lines += _layouts(data, scenes)
+    lines += _sh_orders(data, scenes)
     lines += ["", "## Raw results", "", "`results.json`: one record per scene, method and setting "
               "(`scene, method, probe_grid, probe_samples, spp, bake_ms, frame_ms, total_ms, rrmse, "
               "flip, gpu_bytes, device`, and the sweep's own fields)."]
@@ -289,7 +290,7 @@ def _table1(data: dict, scenes: list[str]) -> list[str]:
     for s in scenes:
         recs = [r for r in data["records"] if r["scene"] == s and r["method"] == "probes"
                 and r.get("mode") != "cost" and r.get("precision") == precision
-                and r.get("sh_window") == "none"
+                and r.get("sh_window") == "none" and not r.get("sh_order_variant")
                 and r.get("probe_layout", "uniform") == "uniform"]
         if not recs:
             continue
@@ -319,7 +320,7 @@ def _layouts(data: dict, scenes: list[str]) -> list[str]:
     precision = sweep_precision(data)
     recs = [r for r in data["records"] if r.get("mode") != "cost" and r["method"] != "pt"
             and r.get("precision", "rgba32f") == precision
-            and r.get("sh_window", "none") == "none"
+            and r.get("sh_window", "none") == "none" and not r.get("sh_order_variant")
             and (r["method"] != "raymarch" or (r.get("stage") == "compute"
                                               and r.get("raymarch_step") == 0.5))]
     if not any(r.get("probe_layout", "uniform") != "uniform" for r in recs):
@@ -347,6 +348,49 @@ def _layouts(data: dict, scenes: list[str]) -> list[str]:
     return lines
 
 
+def _sh_orders(data: dict, scenes: list[str]) -> list[str]:
+    """SH orders at the same probe setting (bench --sh-orders): each order's bake, frame time,
+    probe memory and error, after the most frames measured, beside the scene's own order."""
+    precision = sweep_precision(data)
+    recs = [r for r in data["records"] if r.get("mode") != "cost" and r["method"] != "pt"
+            and r.get("precision", "rgba32f") == precision
+            and r.get("sh_window", "none") == "none"
+            and r.get("probe_layout", "uniform") == "uniform"
+            and (r["method"] != "raymarch" or (r.get("stage") == "compute"
+                                              and r.get("raymarch_step") == 0.5))]
+    if not any(r.get("sh_order_variant") for r in recs):
+        return []
+    lines = ["", "## SH orders at the same probe setting", "",
+             "The scene's own order (the main sweep's) and the `--sh-orders` variants; frame time "
+             "of the raymarcher; errors after the most frames measured.", "",
+             "| scene | grid x walks | SH order | bake | raymarch ms / frame | probe memory | "
+             "probes rRMSE | probes-only rRMSE | raymarch rRMSE |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for s in scenes:
+        cells = defaultdict(dict)
+        for r in recs:
+            if r["scene"] != s or "sh_order" not in r:
+                continue
+            key = (r["probe_grid"], r["probe_samples"], r["sh_order"])
+            best = cells[key].get(r["method"])
+            if best is None or r["spp"] > best["spp"]:
+                cells[key][r["method"]] = r
+        settings = {(g, n) for (g, n, o), by in cells.items()
+                    if any(r.get("sh_order_variant") for r in by.values())}
+        for (g, n, order), by_method in sorted(cells.items()):
+            if (g, n) not in settings:
+                continue
+            any_r = next(iter(by_method.values()))
+            rm = by_method.get("raymarch")
+            frame = "" if rm is None else f"{rm['frame_ms']:.3f}"
+            errors = " | ".join(shown(by_method[m], data) if m in by_method else ""
+                                for m in ("probes", "probes-only", "raymarch"))
+            lines.append(f"| {s} | {g}^3 x {n} | {order} | {_ms(any_r['bake_ms'])} | "
+                         f"{frame} | "
+                         f"{any_r.get('probe_bytes', 0) / 2**20:.1f} MiB | {errors} |")
+    return lines
+
+
 def _sweeps(data: dict, scenes: list[str]) -> list[str]:
     """Raymarch step and stage, 16F against 32F, SH window: at the showcase setting."""
     lines = ["## Raymarch step and stage, precision and SH window (showcase setting)", "",
@@ -355,7 +399,8 @@ def _sweeps(data: dict, scenes: list[str]) -> list[str]:
     for s in scenes:
         by_variant = defaultdict(list)
         for r in data["records"]:
-            if r["scene"] != s or r["method"] == "pt" or r.get("mode") == "cost":
+            if (r["scene"] != s or r["method"] == "pt" or r.get("mode") == "cost"
+                    or r.get("sh_order_variant")):
                 continue
             if r["method"] == "raymarch":
                 key = (f"raymarch {r.get('stage')} step {r.get('raymarch_step')} vox, "

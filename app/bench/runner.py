@@ -20,6 +20,7 @@ from .clock_log import ClockLog
 from .config import BenchConfig
 from .metrics import flip, reference_noise
 from .records import log as _log, make_record, progressive as _progressive
+from ..render.probe_layout import resolve_sh_order
 from .scenes import bench_scene
 
 PROBE_METHODS = ("probes", "probes-only")
@@ -229,6 +230,9 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
             variants.append({"sh_window": "hann"})
         variants += [_layout_variant(name, config) for name in config.probe_layouts
                      if name != "uniform"]
+        main_order = resolve_sh_order(scene.probes.sh_order, scene.anisotropy, samples)
+        if scene.anisotropy != 0.0:   # with g = 0 every order renders order 0's image
+            variants += [{"sh_order": order} for order in config.sh_orders if order != main_order]
         for variant in variants:
             base["speed_check_ms"] = speed_check_ms(renderer)
             renderer.set_scene(_with_probes(scene, grid, samples,
@@ -244,6 +248,8 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
                           "precision": renderer.scene.probes.precision,
                           "sh_window": renderer.scene.probes.sh_window,
                           "probe_bytes": renderer.probe_grid.gpu_bytes,
+                          "sh_order": renderer.probe_grid.sh_order,
+                          **({"sh_order_variant": True} if "sh_order" in variant else {}),
                           **_layout_info(renderer)}
             for method in PROBE_METHODS:
                 for frames, image, *timing in _progressive(renderer, method, config.probe_frames,
