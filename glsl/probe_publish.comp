@@ -20,5 +20,7 @@ void main()
     if (i >= chunk_probes)
         return;
     uint probe = first_probe + i;
-    probe_publish(probe, probes[probe]);
+    float samples = probes[probe].samples;
+    for (int slot = 0; slot < PROBE_PUBLISH_COUNT; ++slot)
+        probe_publish_texture(probe, slot, samples);
 }

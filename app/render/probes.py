@@ -33,7 +33,7 @@ PROBE_UNIT = 2                # probe textures 0..6 bind to texture units 2..8
 PROBE_UNIT_HIGH = 16          # and textures 7..18 (SH orders 3, 4) to units 16..27
 PROBE_WARP_UNIT = 14          # an adaptive layout's warp and planes (lib/probe_warp.glsl)
 PROBE_IMAGE_LIMIT = 8         # textures one dispatch publishes (lib/probe_publish.glsl)
-DIRECTIONS_PER_PASS = 64
+DIRECTIONS_PER_PASS = 64     # = probe_project.comp's local size: one invocation per walk of a pass
 WALKS_PER_CHUNK = 1 << 20     # resumable walks: 80 MiB of walk state and 16 MiB of results at most
 WALKS_PER_CHUNK_UNBOUNDED = 1 << 22   # walks that end in one dispatch: 64 MiB of results at most
 PATH_STATE_BYTES = 80       # PathState of glsl/lib/integrator.glsl, std430

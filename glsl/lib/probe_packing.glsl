@@ -46,6 +46,16 @@ int probe_colour_channel(int k, int colour)
     return k < 9 ? 3 * k + colour : 28 + 3 * (k - 9) + colour;
 }
 
+// The colour packing's channel f: the coefficient it holds, or PROBE_SUN_COEFFICIENT for the
+// sun's transmittance (channel 27).
+const int PROBE_SUN_COEFFICIENT = -1;
+int probe_colour_coefficient(int f)
+{
+    if (f == PROBE_SUN_CHANNEL)
+        return PROBE_SUN_COEFFICIENT;
+    return f < 27 ? f / 3 : 9 + (f - 28) / 3;
+}
+
 // The grey packing's channel f: the colour packing's channel that holds it (red), or -1 if unused.
 int probe_grey_source(int f)
 {

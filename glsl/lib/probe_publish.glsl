@@ -3,8 +3,8 @@
 // written into the texels of the textures this build has (lib/probe_packing.glsl), at most
 // PROBE_IMAGE_LIMIT of them per dispatch (OpenGL 4.3 guarantees 8 image units to a compute shader):
 // slots PROBE_PUBLISH_FIRST .. PROBE_PUBLISH_FIRST + PROBE_PUBLISH_COUNT - 1, slot i at image unit
-// i - PROBE_PUBLISH_FIRST. probe_project.comp publishes slots 0 .. 7 as it folds in a pass;
-// probe_publish.comp the rest (orders 3 and 4: 13 and 19 textures).
+// i - PROBE_PUBLISH_FIRST. probe_project.comp publishes slots 0 .. 7 as it folds in a pass (one
+// invocation a texture); probe_publish.comp the rest (orders 3 and 4: 13 and 19 textures).
 #define PROBE_IMAGE_LIMIT 8
 #ifndef PROBE_PUBLISH_FIRST
 #define PROBE_PUBLISH_FIRST 0
@@ -22,32 +22,35 @@ layout(PROBE_IMAGE_FORMAT, binding = 0) uniform writeonly image3D probe_images[P
 layout(std430, binding = 7) readonly buffer PriorAccums { ProbeAccum prior[]; };
 uniform float warm_walks;
 
-void probe_publish(uint probe, ProbeAccum acc)
+// Texture slot PROBE_PUBLISH_FIRST + i of `probe`, whose running means (PROBE_MEAN(probe, f),
+// channel f of the colour packing: the buffer's, or probe_project.comp's shared copy) average
+// `samples` walks.
+#ifndef PROBE_MEAN
+#define PROBE_MEAN(probe, f) probes[probe].channels[(f) / 4][(f) % 4]
+#endif
+void probe_publish_texture(uint probe, int i, float samples)
 {
-    float w = warm_walks > 0.0 ? warm_walks / (warm_walks + acc.samples) : 0.0;
+    float w = warm_walks > 0.0 ? warm_walks / (warm_walks + samples) : 0.0;
     float to_stored = 1.0 / probe_radiance_scale;
     uint nx = uint(probe_grid.x), ny = uint(probe_grid.y);
     ivec3 texel = ivec3(probe % nx, (probe / nx) % ny, probe / (nx * ny));
-    for (int i = 0; i < PROBE_PUBLISH_COUNT; ++i) {
-        int number = probe_texture_number(PROBE_PUBLISH_FIRST + i);
-        vec4 value;
-        for (int component = 0; component < 4; ++component) {
+    int number = probe_texture_number(PROBE_PUBLISH_FIRST + i);
+    vec4 value = vec4(0.0);
+    for (int component = 0; component < 4; ++component) {
 #if PROBE_GREY
-            // r = g = b for grey scenes: each coefficient's red channel
-            int f = probe_grey_source(4 * number + component);
+        // r = g = b for grey scenes: each coefficient's red channel
+        int f = probe_grey_source(4 * number + component);
 #else
-            int f = 4 * number + component;
+        int f = 4 * number + component;
 #endif
-            float shown = 0.0;
-            if (f >= 0) {
-                shown = acc.channels[f / 4][f % 4];
-                if (w > 0.0)
-                    shown = mix(shown, prior[probe].channels[f / 4][f % 4], w);
-                if (f != PROBE_SUN_CHANNEL)   // the sun's transmittance is stored as it is
-                    shown *= to_stored;
-            }
-            value[component] = shown;
-        }
-        imageStore(probe_images[i], texel, value);
+        if (f < 0)
+            continue;
+        float shown = PROBE_MEAN(probe, f);
+        if (w > 0.0)
+            shown = mix(shown, prior[probe].channels[f / 4][f % 4], w);
+        if (f != PROBE_SUN_CHANNEL)   // the sun's transmittance is stored as it is
+            shown *= to_stored;
+        value[component] = shown;
     }
+    imageStore(probe_images[i], texel, value);
 }
