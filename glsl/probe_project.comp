@@ -108,7 +108,8 @@ void main()
 #if PROJECT_SPLIT > 1
     if (tid < uint(PROBE_COLOUR_CHANNELS * PROJECT_SPLIT)) {
         int part = int(tid) % PROJECT_SPLIT;
-        channel_part[tid] = channel_sum(int(tid) / PROJECT_SPLIT, part * WALKS_PER_PART, WALKS_PER_PART);
+        channel_part[tid] = channel_sum(int(tid) / PROJECT_SPLIT, part * WALKS_PER_PART,
+                                        WALKS_PER_PART);
     }
     barrier();
     if (tid < uint(PROBE_COLOUR_CHANNELS)) {

@@ -3,8 +3,8 @@ lib/probe_packing.glsl) and the progressive bake that fills them.
 
 A bake is a sequence of passes; each pass sends `directions` walks from every probe (a rotated
 spherical Fibonacci set, lib/probes.glsl), projects them onto SH (order 2, or the grid's order
-where that is higher) and folds them into each probe's running mean, then publishes the textures, so a viewer can show probes that improve while
-it stays interactive. Probes are processed in chunks so the walks' buffers stay within a fixed
+where that is higher) and folds them into each probe's running mean, then publishes the textures,
+so a viewer can show probes that improve while it stays interactive. Probes are processed in chunks so the walks' buffers stay within a fixed
 size whatever the grid size.
 
 Nothing goes through the host while a pass runs on a GPU without a loop limit: one walk dispatch
@@ -25,7 +25,7 @@ import numpy as np
 from ..gl.context import UNBOUNDED_LOOP_BUDGET, loop_budget, loop_budget_unbounded
 from ..gl.profiler import GpuProfile
 from ..gl.shaders import compute_program, set_uniforms
-from .probe_layout import colour_textures, texture_ids, unpack_coefficients
+from .probe_layout import colour_textures, texture_ids
 from ..twins.probe_warp import WARP_ROWS, warp_table
 from .resources import SceneResources
 
@@ -97,8 +97,8 @@ class ProbeGrid:
                  sun: str = "ray", adaptive: float = 0.0, environment_map: bool = False,
                  planes: tuple | None = None):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
-        bake time); `sh_order` 0 to 4 decides which textures exist (lib/probe_packing.glsl). `resumable`:
-        walks that suspend and resume across dispatches (default: where the driver limits loops;
+        bake time); `sh_order` 0 to 4 decides which textures exist (lib/probe_packing.glsl).
+        `resumable`: walks that suspend and resume across dispatches (default: where the driver limits loops;
         False on such a driver only for walks short enough to fit its limit, as tests do).
         `sun`: at the walks' scattering events, "ray" traces a ratio-tracked shadow ray towards the
         sun (unbiased); "grid" reads the baked light grid (bake_pass(light=...)), a bias of its
@@ -432,11 +432,6 @@ class ProbeGrid:
         n = self.accum_floats
         data = np.frombuffer(self.accums.read(), np.float32).reshape(self.count, n)[:, :n - 4]
         return data.reshape(self.grid[2], self.grid[1], self.grid[0], n - 4).copy()
-
-    def sh_coefficients(self) -> tuple[np.ndarray, np.ndarray]:
-        """The probes' SH coefficients (nz, ny, nx, K, 3), bands 0 .. max(order, 2), and the sun's
-        transmittance (nz, ny, nx): the running means, unpacked."""
-        return unpack_coefficients(self.coefficients(), max(self.sh_order, 2))
 
     def defines(self) -> dict:
         """Compile-time settings every shader reading these probes needs (lib/probes.glsl)."""

@@ -65,19 +65,8 @@ int probe_grey_source(int f)
     return k < PROBE_SH_COEFFS ? probe_colour_channel(k, 0) : -1;
 }
 
-// Texture number -> slot among the textures this build reads.
-int probe_texture_slot(int texture_number)
-{
-#if !PROBE_GREY && PROBE_SH_ORDER == 0
-    return texture_number == 6 ? 1 : 0;
-#elif !PROBE_GREY && PROBE_SH_ORDER == 1
-    return texture_number == 6 ? 3 : texture_number;
-#else
-    return texture_number;
-#endif
-}
-
-// Slot -> texture number (the inverse of probe_texture_slot).
+// Slot -> texture number: the slots of colour orders 0 and 1 skip textures (lib/probes.glsl reads
+// those two written out).
 int probe_texture_number(int slot)
 {
 #if !PROBE_GREY && PROBE_SH_ORDER == 0

@@ -1,0 +1,77 @@
+"""The anisotropic cloud (g = 0.8, backlit) at SH orders 2, 3 and 4: the raymarcher after 16
+frames with 128^3 x 256 probes against a path-traced reference of 8192 spp (two halves), each with
+its GPU time (bake + 16 frames), rRMSE (corrected for the reference's noise) and a signed error
+map ((image - reference) / mean reference: red too bright, blue too dark, full colour at 25%).
+Run on the GPU (about half a minute):
+    python scripts/sh_order_screenshots.py screenshots
+writes screenshots/sh_orders_anisotropic.png."""
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+sys.path.insert(0, ".")
+from app.bench.metrics import corrected_rrmse, rrmse
+from app.bench.scenes import bench_scene
+from app.gl.context import create_headless_context, describe
+from app.render.renderer import Renderer
+from app.render.tonemap import to_uint8
+from app.volume import load_volume
+
+out = Path(sys.argv[1])
+SIZE, PANEL, REF_SPP = 512, 320, 8192
+ctx = create_headless_context()
+device = describe(ctx)
+
+
+def ldr(image) -> Image.Image:
+    return Image.fromarray(to_uint8(image, 1.0)).resize((PANEL, PANEL), Image.LANCZOS)
+
+
+def signed_error(image, ref) -> Image.Image:
+    err = (image - ref).mean(axis=-1) / max(float(ref.mean()), 1e-12)
+    t = np.clip(np.abs(err) / 0.25, 0, 1)
+    rgb = np.zeros(err.shape + (3,))
+    rgb[..., 0] = np.where(err > 0, t, 0)
+    rgb[..., 2] = np.where(err < 0, t, 0)
+    rgb[..., 1] = 0.25 * t
+    return Image.fromarray((rgb * 255).astype(np.uint8)).resize((PANEL, PANEL), Image.NEAREST)
+
+
+scene = bench_scene("anisotropic", SIZE, SIZE)
+r = Renderer(ctx, scene, load_volume(scene.volume, scene.base_dir))
+halves = [r.render("pt", spp=REF_SPP // 2, seed=100 + i, samples_per_pass=64).image for i in range(2)]
+ref = 0.5 * (halves[0] + halves[1])
+noise = rrmse(halves[0], halves[1]) / 2
+shots = []
+for order in (2, 3, 4):
+    r.set_scene(scene.replace(probes=replace(scene.probes, grid=(128,) * 3, samples=256,
+                                             sh_order=order)))
+    res = r.render("raymarch", spp=16, seed=3, samples_per_pass=16)
+    e = corrected_rrmse(rrmse(res.image, ref), noise)
+    ms = res.bake_ms + res.render_ms
+    print(f"order {order}: {ms:.1f} ms, rRMSE {e:.4f}", flush=True)
+    shots.append((order, ms, e, res.image))
+panels = [(ldr(ref), f"reference, path tracer {REF_SPP} spp", "g = 0.8, lit from behind")]
+panels += [(ldr(img), f"SH order {o}: 128^3 x 256", f"{ms:.0f} ms GPU, rRMSE {100 * e:.2f}%")
+           for o, ms, e, img in shots]
+panels += [(Image.new("RGB", (PANEL, PANEL), (20, 20, 20)), "error maps below:",
+            "red: too bright, blue: too dark, full at 25%")]
+panels += [(signed_error(img, ref), f"error, order {o}", "(image - reference) / mean")
+           for o, _, _, img in shots]
+cols, head = 4, 34
+sheet = Image.new("RGB", (PANEL * cols, 2 * (PANEL + head) + 18), (20, 20, 20))
+draw = ImageDraw.Draw(sheet)
+for i, (img, label, sub) in enumerate(panels):
+    x, y = (i % cols) * PANEL, (i // cols) * (PANEL + head)
+    sheet.paste(img, (x, y + head))
+    draw.text((x + 6, y + 4), label, fill=(235, 235, 235))
+    draw.text((x + 6, y + 18), sub, fill=(190, 190, 190))
+draw.text((6, sheet.height - 15), f"anisotropic cloud, raymarcher 16 frames, {SIZE}x{SIZE}, {device}",
+          fill=(160, 160, 160))
+out.mkdir(parents=True, exist_ok=True)
+target = out / "sh_orders_anisotropic.png"
+sheet.save(target, optimize=True)
+print(f"wrote {target}")
