@@ -289,6 +289,8 @@ def probes_section(v) -> None:
     ui.note("bake progress")
     imgui.text(f"bake GPU time {session.bake_ms:.1f} ms over {grid.passes_done} passes")
     imgui.text(f"probe textures {grid.gpu_bytes / 2**20:.2f} MiB  (bake buffers {grid.bake_bytes / 2**20:.1f} MiB)")
+    imgui.text(f"SH order {grid.sh_order}, {len(grid.textures)} textures"
+               f"{', one channel (grey scene)' if grid.grey else ''}")
     rep = session.bake_report
     if rep is not None and rep.passes_done > 1:
         imgui.text_disabled(f"est. standard error of the probes {100 * rep.standard_error:.2f}%")
