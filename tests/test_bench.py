@@ -107,7 +107,7 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
                          raymarch_frames=(1,), showcase=(2, 16), raymarch_steps=(0.5, 1.0),
                          samples_per_dispatch=2,
                          flip_frames=(4,), image_frames=4, probe_layouts=("uniform", "extinction"),
-                         probe_precision="rgba16f")
+                         probe_precision="rgba16f", sh_orders=(2, 3))
     path = run_bench(config, tmp_path, command="test")
     data = json.loads(path.read_text())
     records = data["records"]
@@ -136,12 +136,20 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
     layouts = {r.get("probe_layout") for r in records if r["method"] != "pt"}
     assert layouts == {"uniform", "adaptive-extinction"}
     assert all("layout_ms" in r for r in records if r.get("probe_layout") == "adaptive-extinction")
+    # the SH orders at the same setting (--sh-orders): g = 0.8 with 16 walks bakes order 2 ("auto"
+    # keeps higher bands for 128 walks or more); order 3 runs as a variant, out of the main tables
+    orders = {(r["sh_order"], bool(r.get("sh_order_variant"))) for r in records if r["method"] != "pt"}
+    assert orders == {(2, False), (3, True)}
+    from app.bench.report import main_records
+    main = main_records(data, "anisotropic")
+    assert main and not any(r.get("sh_order_variant") for r in main)
     assert data["references"]["anisotropic"]["noise_rrmse"] > 0
     assert (tmp_path / "images" / "anisotropic_reference.png").is_file()
     report = write_report(path)
     text = report.read_text()
     assert "Time to reach an error" in text and (tmp_path / "error_vs_time.png").is_file()
     assert "Probe layouts at the same probe count" in text and "adaptive-extinction" in text
+    assert "SH orders at the same probe setting" in text and "| anisotropic | 2^3 x 16 | 3 |" in text
     assert "The device's speed during the run" in text
 
 
@@ -303,3 +311,12 @@ def test_gpu_clock_log_summarises_what_nvidia_smi_printed(tmp_path):
     assert "990 to 1980 MHz" in line and "of at most 1980" in line
     absent = ClockLog(tmp_path / "none.csv", executable=os.path.join(str(tmp_path), "missing"))
     assert not absent.start() and absent.stop() is None and report_lines({}) == []
+
+
+def test_sh_orders_argument_names_what_is_wrong():
+    import argparse
+    from app.cli import sh_orders_arg
+    assert sh_orders_arg("2,3,4,3") == (2, 3, 4)
+    for bad in ("", "5", "2,x", "-1"):
+        with pytest.raises(argparse.ArgumentTypeError, match="SH orders 0 to 4"):
+            sh_orders_arg(bad)
