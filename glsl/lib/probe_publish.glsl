@@ -32,8 +32,7 @@ void probe_publish_texture(uint probe, int i, float samples)
 {
     float w = warm_walks > 0.0 ? warm_walks / (warm_walks + samples) : 0.0;
     float to_stored = 1.0 / probe_radiance_scale;
-    uint nx = uint(probe_grid.x), ny = uint(probe_grid.y);
-    ivec3 texel = ivec3(probe % nx, (probe / nx) % ny, probe / (nx * ny));
+    ivec3 texel = ivec3(probe_ijk(probe));
     int number = probe_texture_number(PROBE_PUBLISH_FIRST + i);
     vec4 value = vec4(0.0);
     for (int component = 0; component < 4; ++component) {

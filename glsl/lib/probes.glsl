@@ -24,10 +24,16 @@ uniform float probe_radiance_scale;
 uniform vec3 probe_box_min;    // world corner of the probe box
 uniform vec3 probe_box_size;   // its size (> 0 on every axis)
 
-vec3 probe_position(uint probe_index)
+// Probe (i, j, k) of index i + nx (j + ny k): its texel in the probe textures.
+uvec3 probe_ijk(uint probe_index)
 {
     uint nx = uint(probe_grid.x), ny = uint(probe_grid.y);
-    uvec3 ijk = uvec3(probe_index % nx, (probe_index / nx) % ny, probe_index / (nx * ny));
+    return uvec3(probe_index % nx, (probe_index / nx) % ny, probe_index / (nx * ny));
+}
+
+vec3 probe_position(uint probe_index)
+{
+    uvec3 ijk = probe_ijk(probe_index);
 #if PROBE_WARP
     return probe_box_min + probe_warp_plane_fractions(ijk) * probe_box_size;
 #else
