@@ -314,50 +314,61 @@ def _table1(data: dict, scenes: list[str]) -> list[str]:
     return lines
 
 
+def _setting_records(data: dict) -> list[dict]:
+    """The probe records that the layout and SH-order tables compare: the sweep's precision, no
+    SH window, the raymarcher's compute stage at its default step."""
+    precision = sweep_precision(data)
+    return [r for r in data["records"] if r.get("mode") != "cost" and r["method"] != "pt"
+            and r.get("precision", "rgba32f") == precision
+            and r.get("sh_window", "none") == "none"
+            and (r["method"] != "raymarch" or (r.get("stage") == "compute"
+                                              and r.get("raymarch_step") == 0.5))]
+
+
+def _latest_by_setting(recs: list[dict], scene: str, variant) -> dict:
+    """{(grid, walks, variant(record)): {method: its record after the most frames}} of a scene."""
+    cells = defaultdict(dict)
+    for r in recs:
+        if r["scene"] != scene:
+            continue
+        key = (r["probe_grid"], r["probe_samples"], variant(r))
+        best = cells[key].get(r["method"])
+        if best is None or r["spp"] > best["spp"]:
+            cells[key][r["method"]] = r
+    return cells
+
+
+def _errors(by_method: dict, data: dict) -> str:
+    return " | ".join(shown(by_method[m], data) if m in by_method else ""
+                      for m in ("probes", "probes-only", "raymarch"))
+
+
 def _layouts(data: dict, scenes: list[str]) -> list[str]:
     """Probe layouts at the same probe count (bench --probe-layouts): each setting's error and
     bake time per layout, after the most frames measured."""
-    precision = sweep_precision(data)
-    recs = [r for r in data["records"] if r.get("mode") != "cost" and r["method"] != "pt"
-            and r.get("precision", "rgba32f") == precision
-            and r.get("sh_window", "none") == "none" and not r.get("sh_order_variant")
-            and (r["method"] != "raymarch" or (r.get("stage") == "compute"
-                                              and r.get("raymarch_step") == 0.5))]
+    recs = [r for r in _setting_records(data) if not r.get("sh_order_variant")]
     if not any(r.get("probe_layout", "uniform") != "uniform" for r in recs):
         return []
     lines = ["", "## Probe layouts at the same probe count", "",
              "| scene | grid x walks | layout | bake | probes rRMSE | probes-only rRMSE | "
              "raymarch rRMSE |", "|---|---|---|---|---|---|---|"]
     for s in scenes:
-        cells = defaultdict(dict)
-        for r in recs:
-            if r["scene"] != s:
-                continue
-            key = (r["probe_grid"], r["probe_samples"], r.get("probe_layout", "uniform"))
-            best = cells[key].get(r["method"])
-            if best is None or r["spp"] > best["spp"]:
-                cells[key][r["method"]] = r
+        cells = _latest_by_setting(recs, s, lambda r: r.get("probe_layout", "uniform"))
         settings = {(g, n) for (g, n, layout) in cells if layout != "uniform"}
         for (g, n, layout), by_method in sorted(cells.items()):
             if (g, n) not in settings:
                 continue
             any_r = next(iter(by_method.values()))
-            errors = " | ".join(shown(by_method[m], data) if m in by_method else ""
-                                for m in ("probes", "probes-only", "raymarch"))
-            lines.append(f"| {s} | {g}^3 x {n} | {layout} | {_ms(any_r['bake_ms'])} | {errors} |")
+            lines.append(f"| {s} | {g}^3 x {n} | {layout} | {_ms(any_r['bake_ms'])} | "
+                         f"{_errors(by_method, data)} |")
     return lines
 
 
 def _sh_orders(data: dict, scenes: list[str]) -> list[str]:
     """SH orders at the same probe setting (bench --sh-orders): each order's bake, frame time,
     probe memory and error, after the most frames measured, beside the scene's own order."""
-    precision = sweep_precision(data)
-    recs = [r for r in data["records"] if r.get("mode") != "cost" and r["method"] != "pt"
-            and r.get("precision", "rgba32f") == precision
-            and r.get("sh_window", "none") == "none"
-            and r.get("probe_layout", "uniform") == "uniform"
-            and (r["method"] != "raymarch" or (r.get("stage") == "compute"
-                                              and r.get("raymarch_step") == 0.5))]
+    recs = [r for r in _setting_records(data)
+            if r.get("probe_layout", "uniform") == "uniform" and "sh_order" in r]
     if not any(r.get("sh_order_variant") for r in recs):
         return []
     lines = ["", "## SH orders at the same probe setting", "",
@@ -367,14 +378,7 @@ def _sh_orders(data: dict, scenes: list[str]) -> list[str]:
              "probes rRMSE | probes-only rRMSE | raymarch rRMSE |",
              "|---|---|---|---|---|---|---|---|---|"]
     for s in scenes:
-        cells = defaultdict(dict)
-        for r in recs:
-            if r["scene"] != s or "sh_order" not in r:
-                continue
-            key = (r["probe_grid"], r["probe_samples"], r["sh_order"])
-            best = cells[key].get(r["method"])
-            if best is None or r["spp"] > best["spp"]:
-                cells[key][r["method"]] = r
+        cells = _latest_by_setting(recs, s, lambda r: r["sh_order"])
         settings = {(g, n) for (g, n, o), by in cells.items()
                     if any(r.get("sh_order_variant") for r in by.values())}
         for (g, n, order), by_method in sorted(cells.items()):
@@ -383,11 +387,9 @@ def _sh_orders(data: dict, scenes: list[str]) -> list[str]:
             any_r = next(iter(by_method.values()))
             rm = by_method.get("raymarch")
             frame = "" if rm is None else f"{rm['frame_ms']:.3f}"
-            errors = " | ".join(shown(by_method[m], data) if m in by_method else ""
-                                for m in ("probes", "probes-only", "raymarch"))
-            lines.append(f"| {s} | {g}^3 x {n} | {order} | {_ms(any_r['bake_ms'])} | "
-                         f"{frame} | "
-                         f"{any_r.get('probe_bytes', 0) / 2**20:.1f} MiB | {errors} |")
+            lines.append(f"| {s} | {g}^3 x {n} | {order} | {_ms(any_r['bake_ms'])} | {frame} | "
+                         f"{any_r.get('probe_bytes', 0) / 2**20:.1f} MiB | "
+                         f"{_errors(by_method, data)} |")
     return lines
 
 
