@@ -19,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw
+from panel_sheet import ldr, panel_sheet
 
 from app.bench.metrics import corrected_rrmse, rrmse
 from app.bench.scenes import bench_scene
 from app.gl.context import create_headless_context, describe
 from app.render.renderer import Renderer
-from app.render.tonemap import to_uint8
 from app.twins.camera import camera_frame
 from app.viewer.orbit import project, view_projection
 from app.viewer.probe_view import probe_centres, visible_cells
@@ -36,10 +36,6 @@ ref_spp = 8192
 SIZE, PANEL = 512, 320
 ctx = create_headless_context()
 device = describe(ctx)
-
-
-def ldr(image, exposure=1.0) -> Image.Image:
-    return Image.fromarray(to_uint8(image, exposure)).resize((PANEL, PANEL), Image.LANCZOS)
 
 
 def heat(image, ref) -> Image.Image:
@@ -62,7 +58,7 @@ def layout_panel(r, image) -> Image.Image:
     centres = centres[::stride, ::stride, ::stride][cells]
     frame = camera_frame(r.scene.camera, SIZE, SIZE)
     px = project(view_projection(frame), centres, PANEL, PANEL)
-    base = ldr(image)
+    base = ldr(image, PANEL)
     base = Image.blend(base, Image.new("RGB", base.size), 0.55)
     draw = ImageDraw.Draw(base)
     for x, y in px[np.isfinite(px).all(axis=1)]:
@@ -100,21 +96,12 @@ for name in sys.argv[3:] or ("bonsai", "foot"):
         shots.append((f"{label}", f"{ms:.0f} ms GPU, rRMSE {100 * e:.1f}%", res.image))
         if grid == 64 and not before:
             layout = layout_panel(r, res.image)
-    panels = [(ldr(ref), f"reference, path tracer {spp} spp", "")]
-    panels += [(ldr(img), label, sub) for label, sub, img in shots]
+    panels = [(ldr(ref, PANEL), f"reference, path tracer {spp} spp", "")]
+    panels += [(ldr(img, PANEL), label, sub) for label, sub, img in shots]
     panels += [(layout, "probe layout: 64^3 uniform", "every 4th probe per axis in matter")]
     panels += [(heat(img, ref), "error, " + label.split(", light")[0], "0 to 50% of the mean")
                for label, _, img in shots]
-    cols, head = 4, 34
-    sheet = Image.new("RGB", (PANEL * cols, 2 * (PANEL + head) + 18), (20, 20, 20))
-    draw = ImageDraw.Draw(sheet)
-    for i, (img, label, sub) in enumerate(panels):
-        x, y = (i % cols) * PANEL, (i // cols) * (PANEL + head)
-        sheet.paste(img, (x, y + head))
-        draw.text((x + 6, y + 4), label, fill=(235, 235, 235))
-        draw.text((x + 6, y + 18), sub, fill=(190, 190, 190))
-    draw.text((6, sheet.height - 15), f"{name}, raymarcher 16 frames, {SIZE}x{SIZE}, {device}",
-              fill=(160, 160, 160))
+    sheet = panel_sheet(panels, PANEL, 4, f"{name}, raymarcher 16 frames, {SIZE}x{SIZE}, {device}")
     out.mkdir(parents=True, exist_ok=True)
     target = out / f"accuracy_{name}.png"
     sheet.save(target, optimize=True)

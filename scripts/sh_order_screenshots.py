@@ -10,24 +10,20 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw
+from PIL import Image
 
 sys.path.insert(0, ".")
 from app.bench.metrics import corrected_rrmse, rrmse
 from app.bench.scenes import bench_scene
 from app.gl.context import create_headless_context, describe
 from app.render.renderer import Renderer
-from app.render.tonemap import to_uint8
 from app.volume import load_volume
+from panel_sheet import ldr, panel_sheet
 
 out = Path(sys.argv[1])
 SIZE, PANEL, REF_SPP = 512, 320, 8192
 ctx = create_headless_context()
 device = describe(ctx)
-
-
-def ldr(image) -> Image.Image:
-    return Image.fromarray(to_uint8(image, 1.0)).resize((PANEL, PANEL), Image.LANCZOS)
 
 
 def signed_error(image, ref) -> Image.Image:
@@ -42,7 +38,8 @@ def signed_error(image, ref) -> Image.Image:
 
 scene = bench_scene("anisotropic", SIZE, SIZE)
 r = Renderer(ctx, scene, load_volume(scene.volume, scene.base_dir))
-halves = [r.render("pt", spp=REF_SPP // 2, seed=100 + i, samples_per_pass=64).image for i in range(2)]
+halves = [r.render("pt", spp=REF_SPP // 2, seed=100 + i, samples_per_pass=64).image
+          for i in range(2)]
 ref = 0.5 * (halves[0] + halves[1])
 noise = rrmse(halves[0], halves[1]) / 2
 shots = []
@@ -54,23 +51,15 @@ for order in (2, 3, 4):
     ms = res.bake_ms + res.render_ms
     print(f"order {order}: {ms:.1f} ms, rRMSE {e:.4f}", flush=True)
     shots.append((order, ms, e, res.image))
-panels = [(ldr(ref), f"reference, path tracer {REF_SPP} spp", "g = 0.8, lit from behind")]
-panels += [(ldr(img), f"SH order {o}: 128^3 x 256", f"{ms:.0f} ms GPU, rRMSE {100 * e:.2f}%")
+panels = [(ldr(ref, PANEL), f"reference, path tracer {REF_SPP} spp", "g = 0.8, lit from behind")]
+panels += [(ldr(img, PANEL), f"SH order {o}: 128^3 x 256", f"{ms:.0f} ms GPU, rRMSE {100 * e:.2f}%")
            for o, ms, e, img in shots]
 panels += [(Image.new("RGB", (PANEL, PANEL), (20, 20, 20)), "error maps below:",
             "red: too bright, blue: too dark, full at 25%")]
 panels += [(signed_error(img, ref), f"error, order {o}", "(image - reference) / mean")
            for o, _, _, img in shots]
-cols, head = 4, 34
-sheet = Image.new("RGB", (PANEL * cols, 2 * (PANEL + head) + 18), (20, 20, 20))
-draw = ImageDraw.Draw(sheet)
-for i, (img, label, sub) in enumerate(panels):
-    x, y = (i % cols) * PANEL, (i // cols) * (PANEL + head)
-    sheet.paste(img, (x, y + head))
-    draw.text((x + 6, y + 4), label, fill=(235, 235, 235))
-    draw.text((x + 6, y + 18), sub, fill=(190, 190, 190))
-draw.text((6, sheet.height - 15), f"anisotropic cloud, raymarcher 16 frames, {SIZE}x{SIZE}, {device}",
-          fill=(160, 160, 160))
+sheet = panel_sheet(panels, PANEL, 4,
+                    f"anisotropic cloud, raymarcher 16 frames, {SIZE}x{SIZE}, {device}")
 out.mkdir(parents=True, exist_ok=True)
 target = out / "sh_orders_anisotropic.png"
 sheet.save(target, optimize=True)

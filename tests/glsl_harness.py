@@ -17,6 +17,31 @@ from app.gl.shaders import compute_program, set_uniforms
 
 HEADER = "layout(local_size_x = 64) in;\nuniform uint count;\n"
 
+# lib/probes.glsl probe_fetch at points x (3 floats each): per point every coefficient's rgb
+# (3 * SH_COUNT floats, coefficient-major) and then the sun's transmittance.
+PROBE_FETCH_KERNEL = """
+#define PROBE_SAMPLING
+#include "lib/rng.glsl"
+#include "lib/directions.glsl"
+#include "lib/sh.glsl"
+#include "lib/probes.glsl"
+layout(std430, binding = 0) readonly buffer In { float x[]; };
+layout(std430, binding = 1) writeonly buffer Out { float o[]; };
+void main()
+{
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= count) return;
+    vec3 coeffs[SH_COUNT];
+    float sun;
+    probe_fetch(vec3(x[3u * i], x[3u * i + 1u], x[3u * i + 2u]), coeffs, sun);
+    uint base = uint(3 * SH_COUNT + 1) * i;
+    for (int k = 0; k < SH_COUNT; ++k)
+        for (int c = 0; c < 3; ++c)
+            o[base + uint(3 * k + c)] = coeffs[k][c];
+    o[base + uint(3 * SH_COUNT)] = sun;
+}
+"""
+
 
 def run_kernel(ctx, text: str, inputs: list[np.ndarray], out: tuple[int, ...],
                out_dtype=np.float32, uniforms: dict | None = None, count: int | None = None,

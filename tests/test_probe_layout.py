@@ -263,30 +263,6 @@ def test_the_gpu_visible_region_is_its_twin(ctx, case):
         r.release()
 
 
-FETCH_ALL_KERNEL = """
-#define PROBE_SAMPLING
-#include "lib/rng.glsl"
-#include "lib/directions.glsl"
-#include "lib/sh.glsl"
-#include "lib/probes.glsl"
-layout(std430, binding = 0) readonly buffer In { float x[]; };
-layout(std430, binding = 1) writeonly buffer Out { float o[]; };
-void main()
-{
-    uint i = gl_GlobalInvocationID.x;
-    if (i >= count) return;
-    vec3 coeffs[SH_COUNT];
-    float sun;
-    probe_fetch(vec3(x[3u * i], x[3u * i + 1u], x[3u * i + 2u]), coeffs, sun);
-    uint base = uint(3 * SH_COUNT + 1) * i;
-    for (int k = 0; k < SH_COUNT; ++k)
-        for (int c = 0; c < 3; ++c)
-            o[base + uint(3 * k + c)] = coeffs[k][c];
-    o[base + uint(3 * SH_COUNT)] = sun;
-}
-"""
-
-
 @pytest.mark.parametrize("grey", [False, True])
 @pytest.mark.parametrize("order", [0, 1, 2, 3, 4])
 def test_probe_fetch_unpacks_every_coefficient(ctx, order, grey):
@@ -294,7 +270,7 @@ def test_probe_fetch_unpacks_every_coefficient(ctx, order, grey):
     random textures in the packing of lib/probe_packing.glsl: every coefficient up to the order
     (times the radiance scale), zeros above it, and the sun's transmittance."""
     import moderngl
-    from glsl_harness import run_kernel
+    from glsl_harness import PROBE_FETCH_KERNEL, run_kernel
     from app.render.probes import probe_unit
     grid = (3, 2, 4)
     count = grid[0] * grid[1] * grid[2]
@@ -313,7 +289,7 @@ def test_probe_fetch_unpacks_every_coefficient(ctx, order, grey):
     x = ((ijk + 0.5) / np.asarray(grid) * 2.0 - 1.0).astype(np.float32)   # box [-1, 1]^3
     sh_count = (max(order, 2) + 1) ** 2
     try:
-        out = run_kernel(ctx, FETCH_ALL_KERNEL, [x.ravel()], (count, 3 * sh_count + 1),
+        out = run_kernel(ctx, PROBE_FETCH_KERNEL, [x.ravel()], (count, 3 * sh_count + 1),
                          defines={"PROBE_SH_ORDER": order, "PROBE_GREY": int(grey)},
                          uniforms={"probe_textures": tuple(probe_unit(t) for t in ids),
                                    "probe_grid": grid, "probe_box_min": (-1.0, -1.0, -1.0),

@@ -25,7 +25,7 @@ from app.scene import SceneError, parse_scene
 from app.twins.probe_warp import (WARP_COLUMNS, probe_fractions, texture_trilinear, uniform_planes,
                                   warp_exact, warp_lookup, warp_table)
 from app.viewer.probe_view import probe_centres
-from glsl_harness import run_kernel
+from glsl_harness import PROBE_FETCH_KERNEL, run_kernel
 
 HALF = (0.5, 0.5, 0.5)
 WHITE = {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]}
@@ -144,27 +144,6 @@ def test_probe_position_matches_the_probe_view(ctx, warp):
         assert np.abs(out - probe_centres(grid, HALF, box)).max() > 0.02
 
 
-FETCH_KERNEL = """
-#define PROBE_SAMPLING
-#include "lib/rng.glsl"
-#include "lib/directions.glsl"
-#include "lib/sh.glsl"
-#include "lib/probes.glsl"
-layout(std430, binding = 0) readonly buffer In { float x[]; };
-layout(std430, binding = 1) writeonly buffer Out { float o[]; };
-void main()
-{
-    uint i = gl_GlobalInvocationID.x;
-    if (i >= count) return;
-    vec3 coeffs[SH_COUNT];
-    float sun;
-    probe_fetch(vec3(x[3u * i], x[3u * i + 1u], x[3u * i + 2u]), coeffs, sun);
-    o[2u * i] = coeffs[0].r;
-    o[2u * i + 1u] = sun;
-}
-"""
-
-
 def test_probe_fetch_blends_the_probes_at_their_positions(ctx):
     """probe_fetch with an adaptive layout is GL's trilinear filter at the warped coordinates (the
     twin), which is trilinear interpolation between the 8 surrounding probes at their real
@@ -183,7 +162,7 @@ def test_probe_fetch_blends_the_probes_at_their_positions(ctx):
     low, size = np.asarray(box[0]), np.asarray(box[1]) - np.asarray(box[0])
     s = rng.uniform(-0.1, 1.1, (5000, 3))
     x = (low + s * size).astype(np.float32)
-    out = run_kernel(ctx, FETCH_KERNEL, [x.ravel()], (len(x), 2),
+    out = run_kernel(ctx, PROBE_FETCH_KERNEL, [x.ravel()], (len(x), 3 * 9 + 1),
                      defines={"PROBE_WARP": 1, "PROBE_GREY": 1, "PROBE_SH_ORDER": 0},
                      uniforms={"probe_warp": UNIT, "probe_textures": (2,), "probe_grid": grid,
                                "probe_box_min": tuple(low), "probe_box_size": tuple(size),
@@ -193,8 +172,8 @@ def test_probe_fetch_blends_the_probes_at_their_positions(ctx):
     warp_tex.release()
     s32 = (x.astype(np.float64) - low) / size
     uvw = warp_lookup(table, s32)
-    # coefficients come back times probe_radiance_scale, the sun's transmittance as stored
-    for channel, column, scale in ((0, 0, 2.0), (3, 1, 1.0)):
+    # coefficients come back times probe_radiance_scale, the sun's transmittance as stored (last)
+    for channel, column, scale in ((0, 0, 2.0), (3, -1, 1.0)):
         twin = scale * texture_trilinear(values[..., channel].astype(np.float64), uvw)
         np.testing.assert_allclose(out[:, column], twin, rtol=2e-5, atol=2e-6)
         # on its own: weights from the planes bracketing each point, clamped beyond the outer ones
