@@ -118,7 +118,8 @@ _OPTION_FIELDS = {"camera.width": "--width", "camera.height": "--height",
                   "probes.grid": "--probe-grid", "probes.samples": "--probe-samples",
                   "probes.sh_window": "--sh-window", "probes.precision": "--probe-precision",
                   "probes.layout": "--probe-layout", "probes.adaptive_strength": "--adaptive-strength",
-                  "probes.adaptive_indicator": "--adaptive-indicator"}
+                  "probes.adaptive_indicator": "--adaptive-indicator",
+                  "probes.interpolation": "--probe-interpolation"}
 
 
 def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
@@ -131,7 +132,8 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
     probes.update({key: value for key, value in (
         ("layout", getattr(args, "probe_layout", None)),
         ("adaptive_strength", getattr(args, "adaptive_strength", None)),
-        ("adaptive_indicator", getattr(args, "adaptive_indicator", None))) if value is not None})
+        ("adaptive_indicator", getattr(args, "adaptive_indicator", None)),
+        ("interpolation", getattr(args, "probe_interpolation", None))) if value is not None})
     camera = {key: value for key, value in (("width", getattr(args, "width", None)),
                                             ("height", getattr(args, "height", None))) if value}
     if not probes and not camera:

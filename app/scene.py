@@ -13,15 +13,16 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from .scene_types import (MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS, MAX_PROBE_SAMPLES,
-                          MAX_TRANSFER_ROWS, PROBE_FITS, PROBE_INDICATORS, PROBE_LAYOUTS,
-                          PROBE_PRECISIONS, SH_WINDOWS, WINDOW_PRESETS,
+                          MAX_TRANSFER_ROWS, PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS,
+                          PROBE_LAYOUTS, PROBE_PRECISIONS, SH_WINDOWS, WINDOW_PRESETS,
                           CameraSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene, SceneError,
                           TransferFunctionSpec, VolumeSpec, scene_to_dict, window_range)
 from .transfer import COLORMAPS
 from .volume import BUILTIN_VOLUMES, RAW_DTYPES
 
 __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_SAMPLES",
-           "MAX_TRANSFER_ROWS", "PROBE_FITS", "PROBE_INDICATORS", "PROBE_LAYOUTS", "PROBE_PRECISIONS",
+           "MAX_TRANSFER_ROWS", "PROBE_FITS", "PROBE_INDICATORS", "PROBE_INTERPOLATIONS",
+           "PROBE_LAYOUTS", "PROBE_PRECISIONS",
            "SH_WINDOWS", "WINDOW_PRESETS",
            "CameraSpec", "EnvironmentMapSpec",
            "LightSpec", "ProbeSpec", "Scene", "SceneError", "TransferFunctionSpec", "VolumeSpec",
@@ -261,6 +262,9 @@ def _parse_probes(d: Any) -> ProbeSpec:
     if "adaptive_indicator" in d:
         kw["adaptive_indicator"] = _choice(d["adaptive_indicator"], "probes.adaptive_indicator",
                                            PROBE_INDICATORS)
+    if "interpolation" in d:
+        kw["interpolation"] = _choice(d["interpolation"], "probes.interpolation",
+                                      PROBE_INTERPOLATIONS)
     return ProbeSpec(**kw)
 
 

@@ -50,6 +50,10 @@ PROBE_LAYOUTS = ("uniform", "adaptive")
 # What drives an adaptive layout's probe density (app/render/probe_planes.py): "extinction", the
 # variation of sigma_t along each axis; "sun", the variation of the sun's transmittance (light grid).
 PROBE_INDICATORS = ("extinction", "sun")
+# How a point blends the 8 probes around it (glsl/lib/probe_visibility.glsl): "trilinear", by
+# distance alone; "visibility", each probe's weight also scaled by how much denser matter than the
+# point's own lies on the straight way to it (no light or darkness through walls).
+PROBE_INTERPOLATIONS = ("trilinear", "visibility")
 
 
 @dataclass(frozen=True)
@@ -145,6 +149,7 @@ class ProbeSpec:
     # 0: uniform; 1: the indicator alone decides (within the spacing bounds of probe_planes.py).
     adaptive_strength: float = 0.5
     adaptive_indicator: str = "extinction"
+    interpolation: str = "trilinear"
 
 
 @dataclass(frozen=True)

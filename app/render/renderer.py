@@ -191,7 +191,15 @@ class Renderer:
 
     def _probe_defines(self) -> dict:
         plan = self.probe_plan(region=False)
-        return plan.defines()
+        return self._read_defines(plan.defines())
+
+    def _read_defines(self, layout: dict) -> dict:
+        """A probe layout's defines plus how the passes that read the probes interpolate them
+        (the scene's probes.interpolation; lib/probe_visibility.glsl)."""
+        if self.scene.probes.interpolation == "visibility":
+            return {**layout, "PROBE_VISIBILITY": getattr(self, "visibility_kind", 1),
+                    "PROBE_VISIBILITY_SAMPLES": getattr(self, "visibility_samples", 2)}
+        return layout
 
     @property
     def pathtracer(self) -> PathTracer:
@@ -340,7 +348,7 @@ class Renderer:
 
     def raymarcher(self) -> Raymarcher:
         # The layout of the textures it will read, and the scene's lights.
-        defines = {**self.probe_grid.defines(), **self.resources.defines()}
+        defines = {**self._read_defines(self.probe_grid.defines()), **self.resources.defines()}
         key = (self.raymarch_stage, tuple(sorted(defines.items())))
         if key not in self._raymarchers:
             self._raymarchers[key] = Raymarcher(self.ctx, self.raymarch_stage, defines)
@@ -515,7 +523,8 @@ class Renderer:
                                   self.raymarch_step_voxels * 2 * self.resources.march_step,
                                   {**extra, **self._light.uniforms()})
         else:
-            defines = self.probe_grid.defines() if method in PROBE_LIGHTING else None
+            defines = (self._read_defines(self.probe_grid.defines()) if method in PROBE_LIGHTING
+                       else None)
             self.pass_for(method, defines).run(self.resources, self.camera, acc, acc.samples + n,
                                                self.seed, extra)
         self.timer.stop()

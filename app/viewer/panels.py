@@ -9,8 +9,8 @@ import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
 from ..render.renderer import METHODS, RAYMARCH_STAGES
-from ..scene import (PROBE_FITS, PROBE_INDICATORS, PROBE_LAYOUTS, PROBE_PRECISIONS,
-                     SH_WINDOWS)
+from ..scene import (PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS,
+                     PROBE_PRECISIONS, SH_WINDOWS)
 from ..volume import BUILTIN_VOLUMES
 from .overlays import shortcut_table
 from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
@@ -301,6 +301,11 @@ def layout_section(v) -> None:
     strength, applied when the slider is let go (each value re-places the planes and re-bakes)."""
     state, ui = v.state, v.widgets
     spec = state.scene.probes
+    changed, i = imgui.combo("Interpolation", PROBE_INTERPOLATIONS.index(spec.interpolation),
+                             ["trilinear", "visibility (no leaks through dense matter)"])
+    ui.note("Interpolation")
+    if changed:   # read-side only: no re-bake
+        state.set_probes(interpolation=PROBE_INTERPOLATIONS[i])
     changed, i = imgui.combo("Layout", PROBE_LAYOUTS.index(spec.layout),
                              ["uniform", "adaptive (denser where it varies)"])
     ui.note("Layout")

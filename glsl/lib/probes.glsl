@@ -31,15 +31,22 @@ uvec3 probe_ijk(uint probe_index)
     return uvec3(probe_index % nx, (probe_index / nx) % ny, probe_index / (nx * ny));
 }
 
-vec3 probe_position(uint probe_index)
+// World position of probe (i, j, k).
+vec3 probe_world_position(ivec3 ijk)
 {
-    uvec3 ijk = probe_ijk(probe_index);
 #if PROBE_WARP
-    return probe_box_min + probe_warp_plane_fractions(ijk) * probe_box_size;
+    return probe_box_min + probe_warp_plane_fractions(uvec3(ijk)) * probe_box_size;
 #else
     return probe_box_min + (vec3(ijk) + 0.5) / vec3(probe_grid) * probe_box_size;
 #endif
 }
+
+vec3 probe_position(uint probe_index)
+{
+    return probe_world_position(ivec3(probe_ijk(probe_index)));
+}
+
+#include "lib/probe_visibility.glsl"
 
 // Direction `slot` of a pass's spherical Fibonacci set, turned by a random rotation drawn per probe
 // and per pass, so that passes and neighbouring probes sample different directions.
@@ -56,7 +63,16 @@ uniform sampler3D probe_textures[PROBE_TEXTURE_COUNT];
 // per SH band: g^l (the phase convolution) times the SH window
 uniform float probe_band_factors[SH_BANDS];
 
-// Trilinearly interpolated SH coefficients and sun transmittance at world point x; coefficients
+// Texture `slot` of the probes at texture coordinate uvw: hardware trilinear, or where
+// PROBE_VISIBILITY found an occluded probe, the visibility-weighted blend of the 8 around it.
+#if PROBE_VISIBILITY
+#define PROBE_TEXEL(slot) (occluded ? probe_corners_texel(probe_textures[slot], corners) : texture(probe_textures[slot], uvw))
+#else
+#define PROBE_TEXEL(slot) texture(probe_textures[slot], uvw)
+#endif
+
+// Trilinearly interpolated (PROBE_VISIBILITY: visibility-weighted) SH coefficients and sun
+// transmittance at world point x; coefficients
 // above PROBE_SH_ORDER read as 0.
 void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
 {
@@ -65,17 +81,21 @@ void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
 #else
     vec3 uvw = (x - probe_box_min) / probe_box_size;
 #endif
+#if PROBE_VISIBILITY
+    ProbeCorners corners;
+    bool occluded = probe_visibility_corners(x, uvw, corners);
+#endif
     for (int k = 0; k < SH_COUNT; ++k)
         coeffs[k] = vec3(0.0);
 #if !PROBE_GREY && PROBE_SH_ORDER <= 1
     // Colour orders 0 and 1 skip textures 1 .. 5 or 3 .. 5, so their slots are not the texture
     // numbers; written out, every index stays a constant (the loop below with a slot mapping put
     // the fetched texels in local memory on an H100: 2 to 4% of a `probes` frame).
-    vec4 t0 = texture(probe_textures[0], uvw);
-    vec4 t6 = texture(probe_textures[PROBE_TEXTURE_COUNT - 1], uvw);
+    vec4 t0 = PROBE_TEXEL(0);
+    vec4 t6 = PROBE_TEXEL(PROBE_TEXTURE_COUNT - 1);
     coeffs[0] = t0.rgb;
 #if PROBE_SH_ORDER == 1
-    vec4 t1 = texture(probe_textures[1], uvw), t2 = texture(probe_textures[2], uvw);
+    vec4 t1 = PROBE_TEXEL(1), t2 = PROBE_TEXEL(2);
     coeffs[1] = vec3(t0.a, t1.rg);
     coeffs[2] = vec3(t1.ba, t2.r);
     coeffs[3] = t2.gba;
@@ -84,7 +104,7 @@ void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
 #else
     vec4 texel[PROBE_TEXTURE_COUNT];   // slot = texture number from here on
     for (int slot = 0; slot < PROBE_TEXTURE_COUNT; ++slot)
-        texel[slot] = texture(probe_textures[slot], uvw);
+        texel[slot] = PROBE_TEXEL(slot);
     for (int k = 0; k < PROBE_SH_COEFFS; ++k) {
 #if PROBE_GREY
         int f = k < 3 ? k : k + 1;
