@@ -163,7 +163,8 @@ class ProbeGrid:
         self._progress_program = None   # glsl/probe_progress.comp, built on first use
         self._partial_sums = None
         self.noise = ctx.buffer(reserve=8)   # lib/probe_noise.glsl
-        defines = {"PROBE_IMAGE_FORMAT": precision, **self.defines()}
+        defines = {"PROBE_IMAGE_FORMAT": precision, "PROBE_IMAGE_LIMIT": PROBE_IMAGE_LIMIT,
+                   **self.defines()}
         self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable), **self.defines()}
         if sun == "grid":
             self._walk_defines["WALK_SUN_GRID"] = 1
