@@ -197,8 +197,7 @@ class Renderer:
         """A probe layout's defines plus how the passes that read the probes interpolate them
         (the scene's probes.interpolation; lib/probe_visibility.glsl)."""
         if self.scene.probes.interpolation == "visibility":
-            return {**layout, "PROBE_VISIBILITY": getattr(self, "visibility_kind", 1),
-                    "PROBE_VISIBILITY_SAMPLES": getattr(self, "visibility_samples", 2)}
+            return {**layout, "PROBE_VISIBILITY": 1}
         return layout
 
     @property

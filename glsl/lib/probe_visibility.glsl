@@ -15,6 +15,11 @@
 // w_i v_i are renormalised (measured from the least occluded probe, so that a point enclosed on
 // all sides keeps the trilinear blend rather than none).
 //
+// Measured (bench/h100-visibility): raymarch error 1-14% lower on foot, bonsai and fuel, up to 5%
+// higher on the anisotropic cloud at 32^3; the frame 1.8-4.3x as long. Counting any difference
+// from sigma_t(x) (|tau_i - sigma_t(x) |p_i - x||, so that a point in dense matter drops the thin
+// medium's probes too) made foot and bonsai worse; 4 samples a segment gave the errors of 2.
+//
 // Where every v_i >= 1 - PROBE_VISIBILITY_TOLERANCE (each weight within that factor of trilinear)
 // the hardware trilinear fetch is used, bit for bit the PROBE_VISIBILITY 0 result; elsewhere each
 // texture is read as 8 weighted texelFetch. Cost: 8 x PROBE_VISIBILITY_SAMPLES + 1 sigma_t lookups
@@ -50,12 +55,7 @@ float probe_excess_optical_depth(vec3 x, float sigma_x, vec3 p)
     float sigma_sum = 0.0;
     for (int j = 0; j < PROBE_VISIBILITY_SAMPLES; ++j)
         sigma_sum += sigma_t_at(x + ((float(j) + 0.5) / float(PROBE_VISIBILITY_SAMPLES)) * segment);
-    float excess = length(segment) * (sigma_sum / float(PROBE_VISIBILITY_SAMPLES) - sigma_x);
-#if PROBE_VISIBILITY == 2
-    return abs(excess);
-#else
-    return max(excess, 0.0);
-#endif
+    return max(length(segment) * (sigma_sum / float(PROBE_VISIBILITY_SAMPLES) - sigma_x), 0.0);
 }
 
 // The corners of x (texture coordinate uvw) and their weights; true when some probe is occluded
