@@ -18,7 +18,8 @@ from app.gl.context import create_headless_context, describe
 from app.render.renderer import Renderer
 from app.volume import load_volume
 
-VARIANTS = ("trilinear", "visibility")
+VARIANTS = {"trilinear": {}, "visibility": {}, "k1": {"PROBE_VISIBILITY_SAMPLES": 1},
+            "offset": {"VIS_OFFSET": 1}, "thin": {"VIS_THIN": 1}}
 parser = argparse.ArgumentParser()
 parser.add_argument("out")
 parser.add_argument("--scenes", default="foot,bonsai")
@@ -43,8 +44,10 @@ for name in args.scenes.split(","):
         grid, walks = (int(v) for v in setting.split("x"))
         for variant in args.variants.split(","):
             s = base.replace(probes=replace(base.probes, grid=(grid,) * 3, samples=walks,
-                                            interpolation=variant))
+                                            interpolation="trilinear" if variant == "trilinear"
+                                            else "visibility"))
             r.set_scene(s)
+            r.visibility_defines = VARIANTS[variant]
             bake_ms = r.bake(seed=11)
             r.render("raymarch", spp=1, seed=5, samples_per_pass=1)     # compile, warm up
             res = r.render("raymarch", spp=args.frames, seed=11, samples_per_pass=1)

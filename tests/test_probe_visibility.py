@@ -45,11 +45,13 @@ def _fetch(ctx, x, *, grid, values, volume, table, density_scale, visibility):
         out = run_kernel(
             ctx, PROBE_FETCH_KERNEL, [np.ascontiguousarray(x, np.float32).ravel()],
             (len(x), 3 * 9 + 1),
-            defines={"PROBE_GREY": 1, "PROBE_SH_ORDER": 0, "PROBE_VISIBILITY": int(visibility)},
+            defines={"PROBE_GREY": 1, "PROBE_SH_ORDER": 0, "PROBE_VISIBILITY": int(visibility),
+                     "PROBE_VISIBILITY_MAX_CELL": 1.0},
             uniforms={"probe_textures": (2,), "probe_grid": grid,
                       "probe_box_min": (-0.5, -0.5, -0.5), "probe_box_size": (1.0, 1.0, 1.0),
                       "probe_radiance_scale": 1.0, "volume_density": 0, "transfer_function": 1,
                       "transfer_size": len(table), "density_scale": density_scale,
+                      "majorant": density_scale * float(table[:, 3].max()),
                       "box_half_extent": tuple(float(v) for v in volume.half_extent)})
     finally:
         for obj in (probe_tex, vt, tt):
@@ -76,7 +78,8 @@ def test_visibility_weights_match_the_numpy_twin(ctx):
     uvw = x + 0.5
     centres = lambda ijk: (ijk + 0.5) / np.asarray(grid) - 0.5
     ijk, weights, occluded = corner_weights(
-        x, uvw, grid, centres, lambda p: sigma_t_at(volume, table, scale, p))
+        x, uvw, grid, (1.0, 1.0, 1.0), centres, lambda p: sigma_t_at(volume, table, scale, p),
+        scale * float(table[:, 3].max()))
     for got, channel in ((l00, 0), (sun, 3)):
         twin = np.where(occluded, blend(values[..., channel], ijk, weights),
                         trilinear(values[..., channel], uvw * np.asarray(grid) - 0.5))

@@ -22,7 +22,7 @@ from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_
                                   PRECISION as LIGHT_PRECISION,
                                   SOFTWARE_MIN_SIDE, LightTransmittance, min_side_for_probes)
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order
-from .probe_planes import MAX_FIELD_SIDE, adaptive_planes, extinction_field, sun_field
+from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
 from .raymarch import Raymarcher, min_step_voxels
@@ -197,7 +197,9 @@ class Renderer:
         """A probe layout's defines plus how the passes that read the probes interpolate them
         (the scene's probes.interpolation; lib/probe_visibility.glsl)."""
         if self.scene.probes.interpolation == "visibility":
-            return {**layout, "PROBE_VISIBILITY": 1}
+            return {**layout, "PROBE_VISIBILITY": 1, **getattr(self, "visibility_defines", {}),
+                    "PROBE_VISIBILITY_MAX_CELL": float(MAX_SPACING if layout.get("PROBE_WARP")
+                                                       else 1.0)}
         return layout
 
     @property

@@ -2,8 +2,9 @@
 around a point (probes.interpolation "visibility").
 
 Probe i's trilinear weight w_i is scaled by v_i = exp(-(e_i - min_j e_j)) with
-e_i = max(0, tau_i - sigma_t(x) |p_i - x|), tau_i the optical depth of the segment from x to the
-probe from `samples` midpoint samples; the weights are renormalised. `occluded` says whether some
+e_i = exp(-sigma_t(x) h) max(0, tau_i - sigma_t(x) |p_i - x|), tau_i the optical depth of the
+segment from x to the probe from `samples` midpoint samples and h the mean probe spacing; the
+weights are renormalised. `occluded` says whether some
 v_i fell below 1 - tolerance (the shader then blends with these weights, else trilinearly).
 """
 from __future__ import annotations
@@ -30,21 +31,26 @@ def excess_optical_depth(sigma_t: Callable[[np.ndarray], np.ndarray], x: np.ndar
     return np.maximum(np.linalg.norm(segment, axis=-1) * (total / samples - sigma_x), 0.0)
 
 
-def corner_weights(x: np.ndarray, uvw: np.ndarray, grid, probe_position: Callable,
-                   sigma_t: Callable[[np.ndarray], np.ndarray], samples: int = SAMPLES,
-                   tolerance: float = TOLERANCE):
-    """For points x (n, 3) at probe-texture coordinates uvw (n, 3): the corners' probe indices
-    (n, 8, 3) (clamped to the grid), their normalised weights (n, 8), and `occluded` (n,).
-    probe_position maps integer (i, j, k) (..., 3) to world positions."""
+def corner_weights(x: np.ndarray, uvw: np.ndarray, grid, box_size, probe_position: Callable,
+                   sigma_t: Callable[[np.ndarray], np.ndarray], majorant: float,
+                   max_cell: float = 1.0, samples: int = SAMPLES, tolerance: float = TOLERANCE):
+    """For points x (n, 3) at probe-texture coordinates uvw (n, 3) of a grid over a probe box of
+    size box_size: the corners' probe indices (n, 8, 3) (clamped to the grid), their normalised
+    weights (n, 8), and `occluded` (n,). probe_position maps integer (i, j, k) (..., 3) to world
+    positions; majorant bounds sigma_t; max_cell is the widest spacing over the uniform one."""
     grid = np.asarray(grid, np.int64)
     c = np.asarray(uvw, np.float64) * grid - 0.5
     lower = np.floor(c)
     f = c - lower
     ijk = np.clip(lower.astype(np.int64)[:, None, :] + CORNERS[None], 0, grid - 1)
     sigma_x = sigma_t(x)
+    spacing = np.asarray(box_size, np.float64) / grid
+    thinness = np.exp(-sigma_x * spacing.mean())
+    # the shader's early out: no way can move a weight past the tolerance
+    possible = thinness * max_cell * np.linalg.norm(spacing) * majorant >= tolerance
     excess = np.stack([excess_optical_depth(sigma_t, x, sigma_x, probe_position(ijk[:, k]), samples)
-                       for k in range(8)], axis=1)
-    visibility = np.exp(excess.min(axis=1, keepdims=True) - excess)
+                       for k in range(8)], axis=1) * thinness[:, None]
+    visibility = np.where(possible[:, None], np.exp(excess.min(axis=1, keepdims=True) - excess), 1.0)
     w3 = np.where(CORNERS[None] == 1, f[:, None, :], 1.0 - f[:, None, :])
     weights = w3.prod(axis=-1) * visibility
     total = weights.sum(axis=1, keepdims=True)

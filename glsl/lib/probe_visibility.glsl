@@ -5,25 +5,24 @@
 // a probe inside an opaque block sees no light and darkens the thin medium next to the block, and a
 // probe on the lit side of a thin dense wall lights the medium on its shadowed side. Here each
 // probe's trilinear weight w_i is multiplied by its visibility from x,
-//     v_i = exp(-(e_i - min_j e_j)),   e_i = max(0, tau_i - sigma_t(x) |p_i - x|),
+//     v_i = exp(-(e_i - min_j e_j)),
+//     e_i = exp(-sigma_t(x) h) max(0, tau_i - sigma_t(x) |p_i - x|),
 // tau_i the optical depth of the straight segment from x to probe i at p_i, estimated from
-// PROBE_VISIBILITY_SAMPLES midpoint samples of sigma_t: e_i is the extinction on the way beyond what
-// x's own medium would give over that length. So in a homogeneous medium, and from a point inside
-// matter at least as dense as anything on the way to its probes (the surface layer of a dense
-// region, whose image needs the dark probes inside it), every v_i = 1 and the blend is trilinear
-// as before; only probes behind matter denser than x's surroundings lose weight. The weights
-// w_i v_i are renormalised (measured from the least occluded probe, so that a point enclosed on
-// all sides keeps the trilinear blend rather than none).
+// PROBE_VISIBILITY_SAMPLES midpoint samples of sigma_t, and h the mean probe spacing. The max(...)
+// is the extinction on the way beyond what x's own medium would give over that length: 0 in a
+// homogeneous medium. exp(-sigma_t(x) h) keeps it to points that are optically thin at the
+// probes' scale: a point that is itself thick over one spacing belongs to the dense region, and
+// its image needs the dark probes inside that region (without the factor, the density's ramp at
+// every dense surface lost its interior probes and came out too bright: `probes-only` on a block
+// lit from above, 14% -> 32% rRMSE, scripts/visibility_screenshots.py). The weights w_i v_i are
+// renormalised (measured from the least occluded probe, so that a point enclosed on all sides
+// keeps the trilinear blend rather than none).
 //
-// Measured (bench/h100-visibility): raymarch error 1-14% lower on foot, bonsai and fuel, up to 5%
-// higher on the anisotropic cloud at 32^3; the frame 1.8-4.3x as long. Counting any difference
-// from sigma_t(x) (|tau_i - sigma_t(x) |p_i - x||, so that a point in dense matter drops the thin
-// medium's probes too) made foot and bonsai worse; 4 samples a segment gave the errors of 2.
-//
-// Where every v_i >= 1 - PROBE_VISIBILITY_TOLERANCE (each weight within that factor of trilinear)
-// the hardware trilinear fetch is used, bit for bit the PROBE_VISIBILITY 0 result; elsewhere each
-// texture is read as 8 weighted texelFetch. Cost: 8 x PROBE_VISIBILITY_SAMPLES + 1 sigma_t lookups
-// per probe read, plus the 8 fetches per texture where a probe is occluded.
+// Where every v_i >= 1 - PROBE_VISIBILITY_TOLERANCE (each weight within that factor of trilinear;
+// known without looking where even a way through the majorant could not do more) the hardware
+// trilinear fetch is used, bit for bit the PROBE_VISIBILITY 0 result; elsewhere each texture is
+// read as 8 weighted texelFetch. Cost: 8 x PROBE_VISIBILITY_SAMPLES + 1 sigma_t lookups per probe
+// read that could be occluded, plus the 8 fetches per texture where a probe is.
 // NumPy twin: app/twins/probe_visibility.py.
 #include "lib/medium.glsl"
 #ifndef PROBE_VISIBILITY
@@ -34,6 +33,11 @@
 #endif
 #if PROBE_VISIBILITY
 const float PROBE_VISIBILITY_TOLERANCE = 0.01;
+// PROBE_VISIBILITY_MAX_CELL: the widest probe spacing over the uniform one (1, or an adaptive
+// layout's bound, probe_planes.py MAX_SPACING), from app/render/renderer.py
+#ifndef PROBE_VISIBILITY_MAX_CELL
+#error "PROBE_VISIBILITY_MAX_CELL: set by app/render/renderer.py with PROBE_VISIBILITY"
+#endif
 
 // The 8 probes around a point and their normalised weights; corner c is base + (c & 1, (c >> 1) & 1,
 // c >> 2), clamped to the grid (beyond the outer probes both corners of an axis are the outer one,
@@ -67,11 +71,22 @@ bool probe_visibility_corners(vec3 x, vec3 uvw, out ProbeCorners corners)
     vec3 f = c - lower;
     corners.base = ivec3(lower);
     float sigma_x = sigma_t_at(x);
+    vec3 spacing = probe_box_size / vec3(probe_grid);
+#ifdef VIS_THIN
+    float thinness = exp(-sigma_x * (spacing.x + spacing.y + spacing.z) / 3.0);
+#else
+    float thinness = 1.0;
+#endif
+    // no way to a probe is longer than a cell's diagonal nor denser than the majorant: where even
+    // that could not move a weight past the tolerance, the trilinear fetch is the answer
+    if (thinness * PROBE_VISIBILITY_MAX_CELL * length(spacing) * (majorant - sigma_x)
+            < PROBE_VISIBILITY_TOLERANCE)
+        return false;
     float excess[8];
     float least = 1e30;
     for (int k = 0; k < 8; ++k) {
-        excess[k] = probe_excess_optical_depth(x, sigma_x,
-                                               probe_world_position(probe_corner(corners.base, k)));
+        excess[k] = thinness * probe_excess_optical_depth(
+            x, sigma_x, probe_world_position(probe_corner(corners.base, k)));
         least = min(least, excess[k]);
     }
     bool occluded = false;
@@ -91,6 +106,15 @@ bool probe_visibility_corners(vec3 x, vec3 uvw, out ProbeCorners corners)
     for (int k = 0; k < 8; ++k)
         corners.weight[k] /= total;
     return occluded;
+}
+
+// The corners' weighted centroid in texture coordinates (VIS_OFFSET: one hardware fetch there).
+vec3 probe_corners_centroid(ProbeCorners corners)
+{
+    vec3 sum = vec3(0.0);
+    for (int k = 0; k < 8; ++k)
+        sum += corners.weight[k] * (vec3(probe_corner(corners.base, k)) + 0.5);
+    return sum / vec3(probe_grid);
 }
 
 // One probe texture at the corners' weights.
