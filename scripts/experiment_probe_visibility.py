@@ -3,9 +3,11 @@ the raymarcher's error and frame time with trilinear interpolation and with visi
 the same baked probes, against a path-traced reference (two halves of 4096 spp, noise-corrected).
 Run on the GPU:
     python scripts/experiment_probe_visibility.py OUT.json [--scenes foot,bonsai] [--settings 32x256,64x128]
-Variants: "trilinear" and "visibility" (the committed record, bench/h100-visibility, also has
-"symmetric", where any difference of the way's extinction from the point's counted, and
-"visibility4", 4 samples a segment: both measured at commit bfa4b31 and dropped)."""
+Variants: "trilinear" and "visibility". The committed records (bench/h100-visibility) also hold
+variants measured and dropped: results.json "symmetric" and "visibility4" (commit bfa4b31: any
+difference from the point's extinction counted; 4 samples a way), variants.json "k1", "offset" and
+"thin" (commit 26da208: 1 sample a way, now the default; one hardware fetch at the weights'
+centroid; weights only for optically thin points), both runs' "visibility" with 2 samples a way."""
 import argparse
 import json
 import sys
@@ -18,8 +20,7 @@ from app.gl.context import create_headless_context, describe
 from app.render.renderer import Renderer
 from app.volume import load_volume
 
-VARIANTS = {"trilinear": {}, "visibility": {}, "k1": {"PROBE_VISIBILITY_SAMPLES": 1},
-            "offset": {"VIS_OFFSET": 1}, "thin": {"VIS_THIN": 1}}
+VARIANTS = ("trilinear", "visibility")
 parser = argparse.ArgumentParser()
 parser.add_argument("out")
 parser.add_argument("--scenes", default="foot,bonsai")
@@ -44,10 +45,8 @@ for name in args.scenes.split(","):
         grid, walks = (int(v) for v in setting.split("x"))
         for variant in args.variants.split(","):
             s = base.replace(probes=replace(base.probes, grid=(grid,) * 3, samples=walks,
-                                            interpolation="trilinear" if variant == "trilinear"
-                                            else "visibility"))
+                                            interpolation=variant))
             r.set_scene(s)
-            r.visibility_defines = VARIANTS[variant]
             bake_ms = r.bake(seed=11)
             r.render("raymarch", spp=1, seed=5, samples_per_pass=1)     # compile, warm up
             res = r.render("raymarch", spp=args.frames, seed=11, samples_per_pass=1)

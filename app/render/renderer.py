@@ -197,7 +197,7 @@ class Renderer:
         """A probe layout's defines plus how the passes that read the probes interpolate them
         (the scene's probes.interpolation; lib/probe_visibility.glsl)."""
         if self.scene.probes.interpolation == "visibility":
-            return {**layout, "PROBE_VISIBILITY": 1, **getattr(self, "visibility_defines", {}),
+            return {**layout, "PROBE_VISIBILITY": 1,
                     "PROBE_VISIBILITY_MAX_CELL": float(MAX_SPACING if layout.get("PROBE_WARP")
                                                        else 1.0)}
         return layout

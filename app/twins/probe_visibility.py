@@ -2,9 +2,8 @@
 around a point (probes.interpolation "visibility").
 
 Probe i's trilinear weight w_i is scaled by v_i = exp(-(e_i - min_j e_j)) with
-e_i = exp(-sigma_t(x) h) max(0, tau_i - sigma_t(x) |p_i - x|), tau_i the optical depth of the
-segment from x to the probe from `samples` midpoint samples and h the mean probe spacing; the
-weights are renormalised. `occluded` says whether some
+e_i = max(0, tau_i - sigma_t(x) |p_i - x|), tau_i the optical depth of the segment from x to the
+probe from `samples` midpoint samples; the weights are renormalised. `occluded` says whether some
 v_i fell below 1 - tolerance (the shader then blends with these weights, else trilinearly).
 """
 from __future__ import annotations
@@ -14,7 +13,7 @@ from typing import Callable
 import numpy as np
 
 TOLERANCE = 0.01   # PROBE_VISIBILITY_TOLERANCE
-SAMPLES = 2        # PROBE_VISIBILITY_SAMPLES' default
+SAMPLES = 1        # PROBE_VISIBILITY_SAMPLES' default
 
 # corner c of a cell: (c & 1, (c >> 1) & 1, c >> 2), as in the shader
 CORNERS = np.array([(c & 1, (c >> 1) & 1, c >> 2) for c in range(8)], np.int64)
@@ -45,11 +44,10 @@ def corner_weights(x: np.ndarray, uvw: np.ndarray, grid, box_size, probe_positio
     ijk = np.clip(lower.astype(np.int64)[:, None, :] + CORNERS[None], 0, grid - 1)
     sigma_x = sigma_t(x)
     spacing = np.asarray(box_size, np.float64) / grid
-    thinness = np.exp(-sigma_x * spacing.mean())
     # the shader's early out: no way can move a weight past the tolerance
-    possible = thinness * max_cell * np.linalg.norm(spacing) * majorant >= tolerance
+    possible = max_cell * np.linalg.norm(spacing) * (majorant - sigma_x) >= tolerance
     excess = np.stack([excess_optical_depth(sigma_t, x, sigma_x, probe_position(ijk[:, k]), samples)
-                       for k in range(8)], axis=1) * thinness[:, None]
+                       for k in range(8)], axis=1)
     visibility = np.where(possible[:, None], np.exp(excess.min(axis=1, keepdims=True) - excess), 1.0)
     w3 = np.where(CORNERS[None] == 1, f[:, None, :], 1.0 - f[:, None, :])
     weights = w3.prod(axis=-1) * visibility

@@ -84,11 +84,6 @@ void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
 #if PROBE_VISIBILITY
     ProbeCorners corners;
     bool occluded = probe_visibility_corners(x, uvw, corners);
-#ifdef VIS_OFFSET
-    if (occluded)
-        uvw = probe_corners_centroid(corners);
-    occluded = false;
-#endif
 #endif
     for (int k = 0; k < SH_COUNT; ++k)
         coeffs[k] = vec3(0.0);
