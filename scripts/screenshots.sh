@@ -21,6 +21,8 @@ $rp render assets/scenes/sky.json --method raymarch --spp 16 --width 256 --heigh
   --out /tmp/rp-shots/sky_raymarch.png
 $py scripts/montage.py screenshots/sky_envmap.png /tmp/rp-shots/sky_pt.png:"path tracer 256 spp" \
   /tmp/rp-shots/sky_raymarch.png:"raymarch 16 frames"
+# A wall in a thin medium: trilinear against visibility-weighted probe interpolation (~1 minute).
+$py scripts/visibility_screenshots.py screenshots
 if [ -f ../shared/datasets/bonsai_256x256x256_uint8.raw ]; then
   $rp render assets/scenes/bonsai.json --spp 128 --out screenshots/bonsai_pt.png
 fi
