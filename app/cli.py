@@ -47,6 +47,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
             changes["probe_precision"] = args.probe_precision
         if args.sh_orders:
             changes["sh_orders"] = args.sh_orders
+        if args.auto_targets:
+            changes["cost_auto_targets"] = args.auto_targets
         if args.adaptive_strength is not None:
             if not 0.0 <= args.adaptive_strength <= 1.0:
                 raise SystemExit(f"error: --adaptive-strength {args.adaptive_strength}: expected "
@@ -75,6 +77,18 @@ def probe_layouts_arg(text: str) -> tuple[str, ...]:
         raise argparse.ArgumentTypeError(f"expected a comma-separated list of "
                                          f"{', '.join(BENCH_PROBE_LAYOUTS)}, got {text!r}")
     return tuple(dict.fromkeys(layouts))
+
+
+def auto_targets_arg(text: str) -> tuple[float, ...]:
+    """`bench --auto-targets`: a comma-separated list of relative RMSE targets in (0, 1)."""
+    try:
+        targets = tuple(float(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        targets = ()
+    if not targets or any(not 0 < t < 1 for t in targets):
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of relative RMSE "
+                                         f"targets in (0, 1), e.g. 0.05,0.02, got {text!r}")
+    return tuple(dict.fromkeys(targets))
 
 
 def sh_orders_arg(text: str) -> tuple[int, ...]:
@@ -168,6 +182,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "scene's (report: 'SH orders at the same probe setting')")
     b.add_argument("--adaptive-strength", type=float, metavar="S",
                    help="the adaptive layouts' strength in [0, 1] (default: the scene's, 0.5)")
+    b.add_argument("--auto-targets", type=auto_targets_arg, metavar="T[,T...]",
+                   help="the errors `auto` is asked for and checked at full resolution in the "
+                        "cost and auto presets (default 0.05,0.10)")
     b.add_argument("--report-only", action="store_true",
                    help="rewrite report.md and plots from an existing results.json")
     b.set_defaults(func=cmd_bench)

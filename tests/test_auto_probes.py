@@ -46,3 +46,16 @@ def test_auto_says_when_the_target_is_out_of_reach(renderer):
 def test_auto_rejects_a_meaningless_target(renderer):
     with pytest.raises(ValueError, match="target"):
         choose_probes(renderer, 0.0)
+
+
+def test_auto_tries_no_grid_finer_than_the_volume(ctx):
+    """Grids of more than two probes a voxel along the volume's longest axis are skipped, and the
+    report says so (the defaults go up to 256^3, which a small volume cannot use)."""
+    r = Renderer(ctx, parse_scene({**SCENE, "volume": {"builtin": "cloud", "size": [3, 2, 2]}}))
+    try:
+        choice = choose_probes(r, 1e-4, "raymarch", grids=(2, 6, 7, 12), walks=(16,),
+                               pilot_side=12, max_pilot_spp=128, frames=1)
+    finally:
+        r.release()
+    assert [t["grid"] for t in choice.trials] == [2, 6]
+    assert any("grids up to 6^3" in reason for reason in choice.reasons), choice.reasons

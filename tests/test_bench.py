@@ -177,7 +177,7 @@ def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):
     config = BenchConfig(mode="cost", scenes=("anisotropic",), width=12,
                          height=12, ref_spp=32, ref_samples_per_pass=16, samples_per_dispatch=2,
                          cost_settings=((3, 16),), cost_probe_frames=2, cost_raymarch_frames=2,
-                         cost_pt_spp=2, cost_auto_targets=(0.9,))
+                         cost_pt_spp=2, cost_auto_targets=(0.9,), auto_check_frames=(1, 2))
     first = run_bench(config, tmp_path / "a")
     # a second run reuses the first one's reference and its measured noise
     again = run_bench(config.scaled(reference_dir=str(tmp_path / "a")), tmp_path / "b")
@@ -191,7 +191,9 @@ def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):
     assert by["rgba16f"]["probe_bytes"] * 2 == by["baseline"]["probe_bytes"]
     assert by["fit visible"]["probe_grid_xyz"] != [3, 3, 3]   # the cloud is flatter than its box
     auto = [r for r in data["records"] if r.get("variant") == "auto 0.9"]
-    assert len(auto) == 1 and auto[0]["auto_met"] == (auto[0]["rrmse"] <= 0.9)
+    assert [r["spp"] for r in auto] == [1, 2]        # checked after each of auto_check_frames
+    assert all(r["auto_met"] == (r["rrmse"] <= 0.9) for r in auto)
+    assert auto[1]["total_ms"] > auto[0]["total_ms"]
     # the image's total charges the whole search (its bakes included), not just the render
     assert auto[0]["bake_ms"] > 0 and auto[0]["auto_search_ms"] >= auto[0]["bake_ms"]
     assert auto[0]["total_ms"] >= auto[0]["auto_search_ms"] + auto[0]["render_ms"] - 1e-9
@@ -320,3 +322,12 @@ def test_sh_orders_argument_names_what_is_wrong():
     for bad in ("", "5", "2,x", "-1"):
         with pytest.raises(argparse.ArgumentTypeError, match="SH orders 0 to 4"):
             sh_orders_arg(bad)
+
+
+def test_auto_targets_argument_names_what_is_wrong():
+    import argparse
+    from app.cli import auto_targets_arg
+    assert auto_targets_arg("0.05,0.02,0.05") == (0.05, 0.02)
+    for bad in ("", "0", "1.5", "0.05,x", "-0.1"):
+        with pytest.raises(argparse.ArgumentTypeError, match=r"targets in \(0, 1\)"):
+            auto_targets_arg(bad)

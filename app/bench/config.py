@@ -44,6 +44,9 @@ class BenchConfig:
     cost_raymarch_frames: int = 16
     cost_pt_spp: int = 256
     cost_auto_targets: tuple[float, ...] = (0.05, 0.10)   # `auto` checked at full resolution
+    # ... after these many raymarched frames: the pilot's trials take 256 (auto_probes.py
+    # PILOT_FRAMES), so the last count judges the probes rather than the frames' own sampling
+    auto_check_frames: tuple[int, ...] = (16, 64)
     bake_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 512), (128, 256))  # grid, walks
     # (sun at walk events, light grid texels per axis at most, adaptive walks factor) per bake
     # setting; see bake.py

@@ -106,7 +106,7 @@ def auto_scene(renderer, target: float, config, record, log, progressive) -> Non
     light_ms = renderer.bake_light()   # 0 when the search's last trial baked this light grid
     bake_ms = renderer.last_bake_ms + (light_ms or renderer.light_cost_ms)
     g = renderer.probe_grid
-    for n, image, *timing in progressive(renderer, "raymarch", (config.cost_raymarch_frames,), 13,
+    for n, image, *timing in progressive(renderer, "raymarch", config.auto_check_frames, 13,
                                          config.samples_per_dispatch):
         r = record("raymarch", n, image, timing, bake_ms, variant=f"auto {target:g}",
                    probe_grid=choice.scene.probes.grid[0], probe_samples=choice.scene.probes.samples,
@@ -115,12 +115,13 @@ def auto_scene(renderer, target: float, config, record, log, progressive) -> Non
                    auto_pilot_rrmse=choice.rrmse, auto_met_on_pilot=choice.met,
                    auto_trials=choice.trials, auto_pilot_spp=choice.pilot_spp,
                    auto_search_ms=choice.search_ms)
-    # Everything this image cost: the whole search (pilot path traces, each trial's bake and
-    # pilot render, the chosen bake among them), the light grid if it was baked now, the render.
-    r["total_ms"] = choice.search_ms + light_ms + r["render_ms"]
-    r["total_includes"] = "auto search (pilot path traces, trial bakes and renders) + render"
-    r["auto_met"] = r["rrmse"] <= target
-    log(f"  auto {target:g}: {choice.scene.probes.grid[0]}^3 x {choice.scene.probes.samples} -> "
-        f"grid {g.grid}; pilot rRMSE {choice.rrmse:.4f}, full-resolution rRMSE {r['rrmse']:.4f} "
-        f"({'met' if r['auto_met'] else 'NOT met'})")
+        # Everything this image cost: the whole search (pilot path traces, each trial's bake and
+        # pilot render, the chosen bake among them), the light grid if it was baked now, the
+        # frames up to this one.
+        r["total_ms"] = choice.search_ms + light_ms + r["render_ms"]
+        r["total_includes"] = "auto search (pilot path traces, trial bakes and renders) + render"
+        r["auto_met"] = r["rrmse"] <= target
+        log(f"  auto {target:g}: {choice.scene.probes.grid[0]}^3 x {choice.scene.probes.samples} -> "
+            f"grid {g.grid}; pilot rRMSE {choice.rrmse:.4f}, full-resolution rRMSE {r['rrmse']:.4f} "
+            f"at {n} frames ({'met' if r['auto_met'] else 'NOT met'})")
     renderer.set_scene(scene)

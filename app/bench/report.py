@@ -450,8 +450,9 @@ def _write_cost_report(data: dict, out: Path, scenes: list[str]) -> Path:
             lines.append("")
         autos = [r for r in recs if str(r.get("variant", "")).startswith("auto")]
         if autos:
-            lines += ["| auto target | chosen (grid, walks) | pilot rRMSE | full-resolution rRMSE | "
-                      "met | bake | raymarch ms/fr | probe memory |", "|---|---|---|---|---|---|---|---|"]
+            lines += ["| auto target | chosen (grid, walks) | pilot rRMSE | frames | full-resolution "
+                      "rRMSE | met | bake | raymarch ms/fr | probe memory |",
+                      "|---|---|---|---|---|---|---|---|---|"]
             for r in autos:
                 met = "yes" if r["rrmse"] <= r["auto_target"] else "**no**"
                 if r["bake_ms"] < 1.0:   # runs before this fix reused the pilot's bake unrecorded
@@ -459,7 +460,7 @@ def _write_cost_report(data: dict, out: Path, scenes: list[str]) -> Path:
                         (t["bake_ms"] for t in r.get("auto_trials", [])
                          if (t["grid"], t["walks"]) == (r["probe_grid"], r["probe_samples"])), 0.0))
                 lines.append(f"| {r['auto_target']:g} | {'x'.join(map(str, r['probe_grid_xyz']))}, "
-                             f"{r['probe_samples']} | {r['auto_pilot_rrmse']:.4f} | "
+                             f"{r['probe_samples']} | {r['auto_pilot_rrmse']:.4f} | {r['spp']} | "
                              f"{shown(r, data)} | {met} | {_ms(r['bake_ms'])} | "
                              f"{r['frame_ms']:.3f} | {r['probe_bytes'] / 2**20:.2f} MiB |")
             lines.append("")

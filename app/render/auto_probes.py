@@ -7,8 +7,9 @@ renderer makes itself, with the reasons written down.
    the visible region.
 2. A pilot: the scene's own view at low resolution, path traced until the reference's measured
    noise (two independent halves) is at most a fifth of the target.
-3. Candidates in order of bake cost (probes x walks): for each grid, the fewest walks whose image
-   comes within PILOT_MARGIN x the target against the pilot. The first grid that meets it wins; if none does, the most
+3. Candidates in order of bake cost (probes x walks): for each grid (8^3 to 256^3, at most two
+   probes a voxel along the volume's longest axis), the fewest walks whose image comes within
+   PILOT_MARGIN x the target against the pilot. The first grid that meets it wins; if none does, the most
    accurate candidate is taken and the report says the target was not met.
 
 The pilot's lower resolution averages away detail finer than its pixels, so the error it measures
@@ -24,9 +25,16 @@ import numpy as np
 from ..bench.metrics import reference_noise, rrmse
 from ..scene import Scene
 
-GRIDS = (8, 16, 32, 64, 128)
+# Up to 256 per axis (MAX_PROBE_AXIS): within 500 ms the benchmark's best bonsai and foot came from
+# 192^3 and 256^3 grids. A grid with more than PROBES_PER_VOXEL_LIMIT probes per voxel along the
+# volume's longest axis is not tried: the medium is trilinear between voxel centres, so light
+# changes on the voxel scale, which probes at half a voxel's spacing already sample (fuel, 64^3
+# voxels, reached 1% with 128^3 probes in the benchmark).
+GRIDS = (8, 16, 32, 64, 128, 192, 256)
+PROBES_PER_VOXEL_LIMIT = 2
 WALKS = (16, 64, 256)
 PILOT_SIDE = 96
+PILOT_FRAMES = 256   # frames (samples per pixel) of each trial at the pilot's resolution
 # The pilot must come within this fraction of the target: at 96 px it sees less fine detail than
 # the full image, and on the benchmark its error was up to 3% below the full-resolution one.
 PILOT_MARGIN = 0.9
@@ -99,10 +107,18 @@ def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
             spp *= 2
         reference = 0.5 * (halves[0] + halves[1])
         pilot_spp = 2 * spp
-        frames = frames or (16 if method == "raymarch" else 64)
+        # Enough frames that the trial's own sampling (the raymarcher's sub-pixel jitter, the
+        # probe methods' paths) does not hide the probes' error: at the pilot's 96 px 16 frames
+        # left bonsai at 2.7% where 256 give 1.1% (the full image, 16 frames: 1.15%).
+        frames = frames or PILOT_FRAMES
         trials: list[dict] = []
         chosen = None
-        for grid in grids:
+        voxels = max(renderer.resources.volume.dims)
+        tried = [g for g in grids if g <= PROBES_PER_VOXEL_LIMIT * voxels] or [min(grids)]
+        if len(tried) < len(grids):
+            reasons.append(f"grids up to {max(tried)}^3: the volume has {voxels} voxels along its "
+                           f"longest axis (at most {PROBES_PER_VOXEL_LIMIT} probes a voxel)")
+        for grid in tried:
             best_here = None
             for n in walks:
                 probes = replace(pilot.probes, grid=(grid, grid, grid), samples=n, sh_order=order,
