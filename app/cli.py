@@ -134,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "transmittance's (sun)")
     r.add_argument("--probe-interpolation", choices=PROBE_INTERPOLATIONS,
                    help="how a point blends its 8 probes: trilinear (default) or weighted by "
-                        "visibility (no light or darkness through dense matter; 1.9-2.8x the "
+                        "visibility (no light or darkness through dense matter; 1.8-2.8x the "
                         "raymarch frame)")
     r.add_argument("--auto-probes", type=fraction, metavar="TARGET",
                    help="choose the cheapest probe setting whose image is within this relative "

@@ -14,7 +14,7 @@
 //
 // Measured (bench/h100-visibility): raymarch error 1-14% lower on foot, bonsai, fuel and the thick
 // cloud at 64^3 and up; up to 45% higher on the smooth clouds at 8^3 (the way to a denser core is
-// a gradient there, not a wall) and 5% on the anisotropic cloud at 32^3; the frame 1.9-2.8x as
+// a gradient there, not a wall) and 5% on the anisotropic cloud at 32^3; the frame 1.8-2.8x as
 // long. As the default the benchmark reached 30 of 32 targets later, so it is opt-in. Rejected:
 // weights only for points optically thin over a probe spacing (exp(-sigma_t(x) h) e_i: most of the
 // gain went, so the dense surfaces the interior probes darken are what the weights fix), any

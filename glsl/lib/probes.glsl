@@ -66,14 +66,13 @@ uniform float probe_band_factors[SH_BANDS];
 // Texture `slot` of the probes at texture coordinate uvw: hardware trilinear, or where
 // PROBE_VISIBILITY found an occluded probe, the visibility-weighted blend of the 8 around it.
 #if PROBE_VISIBILITY
-#define PROBE_TEXEL(slot) (occluded ? probe_corners_texel(probe_textures[slot], corners) : texture(probe_textures[slot], uvw))
+#define PROBE_TEXEL(s) (occluded ? probe_corners_texel(probe_textures[s], corners) : texture(probe_textures[s], uvw))
 #else
 #define PROBE_TEXEL(slot) texture(probe_textures[slot], uvw)
 #endif
 
 // Trilinearly interpolated (PROBE_VISIBILITY: visibility-weighted) SH coefficients and sun
-// transmittance at world point x; coefficients
-// above PROBE_SH_ORDER read as 0.
+// transmittance at world point x; coefficients above PROBE_SH_ORDER read as 0.
 void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
 {
 #if PROBE_WARP
