@@ -68,39 +68,38 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _comma_list(text: str, convert, valid, expected: str) -> tuple:
+    """The bench's list options: comma-separated items, each converted and checked, duplicates
+    dropped in order; an empty list, an item that does not convert or fails the check names what
+    was expected."""
+    try:
+        items = tuple(convert(t.strip()) for t in text.split(",") if t.strip())
+    except ValueError:
+        items = ()
+    if not items or not all(valid(item) for item in items):
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list of {expected}, "
+                                         f"got {text!r}")
+    return tuple(dict.fromkeys(items))
+
+
 def probe_layouts_arg(text: str) -> tuple[str, ...]:
     """`bench --probe-layouts`: a comma-separated list of BENCH_PROBE_LAYOUTS."""
     from .bench.config import BENCH_PROBE_LAYOUTS
-    layouts = tuple(t.strip() for t in text.split(",") if t.strip())
-    unknown = [t for t in layouts if t not in BENCH_PROBE_LAYOUTS]
-    if not layouts or unknown:
-        raise argparse.ArgumentTypeError(f"expected a comma-separated list of "
-                                         f"{', '.join(BENCH_PROBE_LAYOUTS)}, got {text!r}")
-    return tuple(dict.fromkeys(layouts))
+    return _comma_list(text, str, lambda t: t in BENCH_PROBE_LAYOUTS,
+                       ", ".join(BENCH_PROBE_LAYOUTS))
 
 
 def auto_targets_arg(text: str) -> tuple[float, ...]:
     """`bench --auto-targets`: a comma-separated list of relative RMSE targets in (0, 1)."""
-    try:
-        targets = tuple(float(t) for t in text.split(",") if t.strip())
-    except ValueError:
-        targets = ()
-    if not targets or any(not 0 < t < 1 for t in targets):
-        raise argparse.ArgumentTypeError(f"expected a comma-separated list of relative RMSE "
-                                         f"targets in (0, 1), e.g. 0.05,0.02, got {text!r}")
-    return tuple(dict.fromkeys(targets))
+    return _comma_list(text, float, lambda t: 0 < t < 1,
+                       "relative RMSE targets in (0, 1), e.g. 0.05,0.02")
 
 
 def sh_orders_arg(text: str) -> tuple[int, ...]:
     """`bench --sh-orders`: a comma-separated list of SH orders 0 to 4."""
-    try:
-        orders = tuple(int(t) for t in text.split(",") if t.strip())
-    except ValueError:
-        orders = ()
-    if not orders or any(o not in (0, 1, 2, 3, 4) for o in orders):
-        raise argparse.ArgumentTypeError(f"expected a comma-separated list of SH orders 0 to 4, "
-                                         f"got {text!r}")
-    return tuple(dict.fromkeys(orders))
+    from .scene_types import SH_ORDERS
+    return _comma_list(text, int, lambda o: o in SH_ORDERS,
+                       f"SH orders {SH_ORDERS[0]} to {SH_ORDERS[-1]}")
 
 
 def build_parser() -> argparse.ArgumentParser:

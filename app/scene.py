@@ -14,7 +14,7 @@ from typing import Any, Mapping
 
 from .scene_types import (MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS, MAX_PROBE_SAMPLES,
                           MAX_TRANSFER_ROWS, PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS,
-                          PROBE_LAYOUTS, PROBE_PRECISIONS, SH_WINDOWS, WINDOW_PRESETS,
+                          PROBE_LAYOUTS, PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS, WINDOW_PRESETS,
                           CameraSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene, SceneError,
                           TransferFunctionSpec, VolumeSpec, scene_to_dict, window_range)
 from .transfer import COLORMAPS
@@ -245,7 +245,7 @@ def _parse_probes(d: Any) -> ProbeSpec:
         kw["precision"] = _choice(d["precision"], "probes.precision", PROBE_PRECISIONS)
     if "sh_order" in d:
         order = d["sh_order"]
-        if order != "auto" and (isinstance(order, bool) or order not in (0, 1, 2, 3, 4)):
+        if order != "auto" and (isinstance(order, bool) or order not in SH_ORDERS):
             raise SceneError(f"probes.sh_order: expected \"auto\" or 0 to 4, got {order!r}")
         kw["sh_order"] = order if order == "auto" else int(order)
     if "fit" in d:

@@ -54,6 +54,8 @@ PROBE_INDICATORS = ("extinction", "sun")
 # distance alone; "visibility", each probe's weight also scaled by how much denser matter than the
 # point's own lies on the straight way to it (no light or darkness through walls).
 PROBE_INTERPOLATIONS = ("trilinear", "visibility")
+# The SH orders probes can hold (glsl/lib/probe_packing.glsl; "auto" picks among them).
+SH_ORDERS = (0, 1, 2, 3, 4)
 
 
 @dataclass(frozen=True)

@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scene_types import SH_ORDERS
+from ..twins.sh import sh_count
 from ..twins.visible_region import visible_region  # noqa: F401  (the NumPy twin; the renderer's is on the GPU)
 
-SH_ORDERS = (0, 1, 2, 3, 4)
 SUN_CHANNEL = 27            # the colour packing's channel of the sun's transmittance
 # "auto" keeps band l while |g|^l >= this: the phase convolution scales band l by g^l, so a band
 # below it adds at most this fraction of its radiance's band to any pixel (|g| >= 0.59: order 3;
@@ -37,10 +38,6 @@ AUTO_MAX_ORDER = 3
 AUTO_WALKS_PER_HIGH_BAND = 128
 
 
-def sh_coefficients(order: int) -> int:
-    return (order + 1) ** 2
-
-
 def colour_channel(k: int, colour: int) -> int:
     """The colour packing's channel of SH coefficient k, colour 0..2 (probe_colour_channel)."""
     return 3 * k + colour if k < 9 else 28 + 3 * (k - 9) + colour
@@ -50,7 +47,7 @@ def colour_textures(order: int) -> int:
     """Textures of the colour packing (and the bake's running means): 7 up to order 2, 13, 19."""
     if order <= 2:
         return 7
-    return (colour_channel(sh_coefficients(order) - 1, 2) + 1 + 3) // 4
+    return (colour_channel(sh_count(order) - 1, 2) + 1 + 3) // 4
 
 
 def texture_ids(order: int, grey: bool) -> tuple[int, ...]:
@@ -59,7 +56,7 @@ def texture_ids(order: int, grey: bool) -> tuple[int, ...]:
     if order not in SH_ORDERS:
         raise ValueError(f"SH order {order!r}: expected one of {', '.join(map(str, SH_ORDERS))}")
     if grey:
-        return tuple(range((sh_coefficients(order) + 1 + 3) // 4))
+        return tuple(range((sh_count(order) + 1 + 3) // 4))
     return {0: (0, 6), 1: (0, 1, 2, 6)}.get(order, tuple(range(colour_textures(order))))
 
 
@@ -71,7 +68,7 @@ def unpack_coefficients(channels: np.ndarray, order: int) -> tuple[np.ndarray, n
     """Colour-packed channels (..., 4 * colour_textures) -> SH coefficients (..., K, 3) of bands
     0 .. order and the sun's transmittance (...)."""
     channels = np.asarray(channels)
-    k = np.arange(sh_coefficients(order))
+    k = np.arange(sh_count(order))
     index = np.array([[colour_channel(int(i), c) for c in range(3)] for i in k])
     return channels[..., index], channels[..., SUN_CHANNEL]
 

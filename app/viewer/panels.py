@@ -10,7 +10,7 @@ from imgui_bundle import ImVec2, imgui, implot
 
 from ..render.renderer import METHODS, RAYMARCH_STAGES
 from ..scene import (PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS,
-                     PROBE_PRECISIONS, SH_WINDOWS)
+                     PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS)
 from ..volume import BUILTIN_VOLUMES
 from .overlays import shortcut_table
 from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
@@ -270,9 +270,9 @@ def probes_section(v) -> None:
     changed, i = imgui.combo("Grid covers", PROBE_FITS.index(spec.fit), ["visible region", "whole box"])
     if changed:
         state.set_probes(fit=PROBE_FITS[i])
-    orders = ["auto", 0, 1, 2, 3, 4]
+    orders = ["auto", *SH_ORDERS]
     changed, i = imgui.combo("SH order", orders.index(spec.sh_order),
-                             ["auto (0 when g = 0, more bands as |g| grows)", "0", "1", "2", "3", "4"])
+                             ["auto (0 when g = 0, more bands as |g| grows)", *map(str, SH_ORDERS)])
     if changed:
         state.set_probes(sh_order=orders[i])
     layout_section(v)
