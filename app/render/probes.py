@@ -178,7 +178,10 @@ class ProbeGrid:
             (first, compute_program(ctx, "probe_publish.comp",
                                     {**defines, "PROBE_PUBLISH_FIRST": first}))
             for first in range(PROBE_IMAGE_LIMIT, len(self.texture_ids), PROBE_IMAGE_LIMIT)]
-        self.sun_program = compute_program(ctx, "probe_sun.comp", self.defines())
+        # the probes' own sun: from the light grid when the walks read it (probe_sun.comp)
+        self.sun_program = compute_program(ctx, "probe_sun.comp",
+                                           {**self.defines(), **({"PROBE_SUN_GRID": 1}
+                                                                 if sun == "grid" else {})})
         self.noise_program = (compute_program(ctx, "probe_noise.comp", self.defines())
                               if self.adaptive else None)
         self.dispatches = 0

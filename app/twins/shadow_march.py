@@ -11,9 +11,11 @@ from ..volume import Volume
 def sun_optical_depth_march(volume: Volume, table: np.ndarray, density_scale: float,
                             sun_direction, points: np.ndarray, march_step: float) -> np.ndarray:
     """Midpoint quadrature of sigma_t from each point (..., 3) to the box boundary towards the sun,
-    at most 4096 steps; like the GLSL it stops adding once past 104."""
+    at most 4096 steps; like the GLSL it stops adding once past 104. The direction is normalised
+    here, as the scene's is before it reaches the shader."""
     pts = np.asarray(points, np.float64).reshape(-1, 3)
     d = np.asarray(sun_direction, np.float64)
+    d = d / np.linalg.norm(d)
     he = volume.half_extent.astype(np.float64)
     t0, t1, hit = box_intersect(he, pts, np.broadcast_to(d, pts.shape))
     tau = np.zeros(len(pts))
