@@ -105,7 +105,7 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
                          ref_samples_per_pass=32, pt_spp=(1, 4), probe_grids=(2,),
                          probe_samples=(16,), large_grids=(), probe_frames=(1, 4),
                          raymarch_frames=(1,), showcase=(2, 16), raymarch_steps=(0.5, 1.0),
-                         samples_per_dispatch=2,
+                         sweep_raymarch_steps=(0.5, 2.0), samples_per_dispatch=2,
                          flip_frames=(4,), image_frames=4, probe_layouts=("uniform", "extinction"),
                          probe_precision="rgba16f", sh_orders=(2, 3))
     path = run_bench(config, tmp_path, command="test")
@@ -143,6 +143,14 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
     from app.bench.report import main_records
     main = main_records(data, "anisotropic")
     assert main and not any(r.get("sh_order_variant") for r in main)
+    # the raymarch steps: the sweep's at every setting and variant (the main tables take them),
+    # the showcase's own (1.0) only in its table
+    steps = lambda recs: {r["raymarch_step"] for r in recs if r["method"] == "raymarch"}
+    assert steps(main) == {0.5, 2.0}
+    assert steps(r for r in records if r.get("sh_order_variant")) == {0.5, 2.0}
+    assert steps(records) == {0.5, 1.0, 2.0}
+    from app.bench.report import label
+    assert [label(r) for r in main if r.get("raymarch_step") == 2.0][0].endswith(", step 2")
     assert data["references"]["anisotropic"]["noise_rrmse"] > 0
     assert (tmp_path / "images" / "anisotropic_reference.png").is_file()
     report = write_report(path)

@@ -76,12 +76,18 @@ def sweep_precision(data: dict) -> str:
     return data.get("meta", {}).get("config", {}).get("probe_precision") or "rgba32f"
 
 
+def sweep_steps(data: dict) -> tuple[float, ...]:
+    """The raymarch steps every probe setting ran with (runs before sweep_raymarch_steps: 0.5)."""
+    return tuple(data["meta"].get("config", {}).get("sweep_raymarch_steps", (0.5,)))
+
+
 def main_records(data: dict, scene: str) -> list[dict]:
     """A scene's records of the main sweep (its precision, no window, compute stage, default step),
     each with `error`: its rRMSE corrected for the reference's noise, raised to the floor where
     below it."""
     lo = floor(data, scene)
     precision = sweep_precision(data)
+    steps = sweep_steps(data)
     out = []
     for r in data["records"]:
         if r["scene"] != scene or r.get("mode") == "cost":
@@ -90,7 +96,8 @@ def main_records(data: dict, scene: str) -> list[dict]:
             continue
         if r.get("sh_window", "none") != "none" or r.get("sh_order_variant"):
             continue
-        if r["method"] == "raymarch" and (r.get("stage") != "compute" or r.get("raymarch_step") != 0.5):
+        if r["method"] == "raymarch" and (r.get("stage") != "compute"
+                                          or r.get("raymarch_step") not in steps):
             continue
         e = error_of(data, r)
         out.append(dict(r, error=max(e, lo), below_floor=e < lo))
@@ -120,7 +127,9 @@ def pareto(records: list[dict]) -> list[dict]:
 def label(r: dict) -> str:
     if r["method"] == "pt":
         return f"pt {r['spp']} spp"
-    return f"{r['method']} {r['probe_grid']}^3x{r['probe_samples']}, {r['spp']} fr"
+    step = r.get("raymarch_step", 0.5) if r["method"] == "raymarch" else 0.5
+    return (f"{r['method']} {r['probe_grid']}^3x{r['probe_samples']}, {r['spp']} fr"
+            + (f", step {step:g}" if step != 0.5 else ""))
 
 
 def time_to_error(records: list[dict], target: float) -> dict | None:
@@ -205,7 +214,9 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
              "frame is the median GPU time per sample per pixel over those dispatches after a "
              "warm-up; total = bake + the summed GPU time of the dispatches up to that sample count. "
              "Errors are relative RMSE over linear RGB and mean LDR-FLIP of the tone-mapped images "
-             "(SPEC.md) against a path-traced reference.", ""]
+             "(SPEC.md) against a path-traced reference. The raymarcher runs every probe "
+             f"setting at steps of {', '.join(f'{x:g}' for x in sweep_steps(data))} voxels "
+             "(a label names the step where it is not the default 0.5).", ""]
     if scenes:
         plot(data, scenes, out / "error_vs_time.png")
         lines += ["![error against time](error_vs_time.png)", ""]

@@ -200,10 +200,10 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
             "reference_noise": results.references.get(name, {}).get("noise_rrmse")}
 
     def record(method: str, frames: int, image: np.ndarray, timing: tuple[float, float],
-               bake_ms: float = 0.0, **extra) -> None:
+               bake_ms: float = 0.0, flip: bool = True, **extra) -> None:
         rec = make_record(base, config, method, frames, image, reference, timing, bake_ms, **extra)
-        results.add(rec, image if frames in config.flip_frames or method == "pt" else None,
-                    reference)
+        results.add(rec, image if flip and (frames in config.flip_frames or method == "pt")
+                    else None, reference)
 
     # Path tracer: one progressive run, snapshots at each spp.
     k = config.samples_per_dispatch
@@ -258,15 +258,18 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
                            light_ms=walk_light_ms, **probe_info)
                     if showcase and not variant and frames == config.image_frames:
                         save_png(out / "images" / f"{name}_{method}_{grid}x{samples}.png", image)
-            steps = config.raymarch_steps if showcase and not variant else (0.5,)
+            steps = (config.sweep_raymarch_steps if not showcase or variant else
+                     sorted({*config.sweep_raymarch_steps, *config.raymarch_steps}))
             stages = ("compute", "fragment") if showcase and not variant else ("compute",)
             for stage in stages:
                 for step in (steps if stage == "compute" else (0.5,)):
                     renderer.raymarch_stage, renderer.raymarch_step_voxels = stage, step
                     for frames, image, *timing in _progressive(renderer, "raymarch",
                                                                config.raymarch_frames, 17, k):
+                        # FLIP (CPU time) for the default step's images and the showcase's
                         record("raymarch", frames, image, timing, bake_ms + light_ms,
-                               raymarch_step=step, stage=stage, light_ms=light_ms,
+                               flip=step == 0.5 or showcase, raymarch_step=step, stage=stage,
+                               light_ms=light_ms,
                                light_bytes=renderer._light.gpu_bytes,
                                light_grid=list(renderer._light.texture.size),
                                **probe_info)
