@@ -232,6 +232,12 @@ def test_light_grid_size_and_layout():
     assert flat.axis == 2 and flat.size[2] == 10 and max(flat.size) <= 1024
     big = light_grid_layout((512, 512, 512), (1.0, 1.0, 1.0), (0.5, 0.7071, 0.5), 512)
     assert np.prod(big.size) <= (1 << 29) and big.size[1] == 725
+    # columns cut into segments only where there are few of them (a GPU they cannot fill)
+    from app.render.light_transmittance import column_segments
+    small = light_grid_layout((128, 128, 128), (1.0, 1.0, 1.0), (0.0, 1.0, 0.0), 512)
+    assert column_segments(small, 1 << 17) == 8 and column_segments(small, 0) == 1
+    assert column_segments(light_grid_layout((384,) * 3, (1.0,) * 3, (0.0, 1.0, 0.0), 512)) == 1
+    assert column_segments(light_grid_layout((64, 16, 64), (1.0,) * 3, (0.0, 1.0, 0.0), 512)) == 2
 
 
 def test_light_grid_matches_its_numpy_twin(ctx):
@@ -251,6 +257,43 @@ def test_light_grid_matches_its_numpy_twin(ctx):
     assert layout.size[0] > box_grid[0] and layout.size[2] > box_grid[2]
     assert tau.shape == layout.size[::-1] and twin.max() > 1.0
     np.testing.assert_allclose(tau, twin, rtol=2e-4, atol=2e-5)
+
+
+@pytest.mark.parametrize("density_scale", [30.0, 3000.0])
+def test_light_grid_in_segments_equals_whole_columns(ctx, density_scale):
+    """Columns cut into segments (two passes: each run's sum, then each run from the runs before
+    it) store what one march per column stores, up to float rounding, also baked a slab of rays at
+    a time; with an opaque core (density_scale 3000) the texels past tau = 104 hold 104 either
+    way, as the twin's do."""
+    from app.render.light_transmittance import column_segments
+    r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
+                                   "density_scale": density_scale, "camera": CAMERA,
+                                   "light": {"direction": [0.3, 0.8, -0.52]}}))
+    r.light_min_side = 64
+    try:
+        r.light_segment_target = 0
+        whole, layout, twin = _light_grid_and_twin(r)
+        assert r._light.segments == 1
+        r.invalidate()
+        r.light_segment_target = 1 << 16
+        cut, _, _ = _light_grid_and_twin(r)
+        segments = r._light.segments
+        assert segments == column_segments(layout, 1 << 16) > 4
+        light = r._light
+        light.begin(r.resources, r.scene.light.direction, 64)
+        while not light.done:
+            light.bake_layers(r.resources, 5)
+        sliced = light.read()
+    finally:
+        r.release()
+    assert whole.max() > 1.0
+    np.testing.assert_allclose(cut, whole, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(sliced, whole, rtol=1e-5, atol=1e-5)
+    # (the absolute tolerance scales with sigma_t: GL filters the transfer function with 8-bit
+    # weights, the twin exactly)
+    np.testing.assert_allclose(cut, twin, rtol=2e-4, atol=2e-5 * density_scale / 30.0)
+    if density_scale > 1000:
+        assert whole.max() == 104.0 and (whole == 104.0).mean() > 0.05
 
 
 @pytest.mark.parametrize("direction", [[0.3, 0.8, -0.52], [-0.9, 0.1, 0.42], [0.0, 0.0, 1.0]])

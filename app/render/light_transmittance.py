@@ -65,12 +65,37 @@ SOFTWARE_MIN_SIDE = 1
 PRECISIONS = {"f2": "r16f", "f4": "r32f"}
 PRECISION = "f2"
 
+# Columns cut into segments (light_transmittance.comp) for about this many invocations, where a
+# grid has fewer than half as many columns: a small grid's few columns leave a large GPU waiting for
+# each column's chain of fetches. Measured on the H100 (bench/h100-small): 29 to 38 thousand
+# columns (the 8^3 probe grids' light grids) 0.095-0.109 -> 0.062-0.078 ms with 4 or 5 segments;
+# from 86 thousand columns up the GPU is already full (the march runs at about the ceiling's rate
+# of fetches) and the second pass's work made it slower (the foot's 146 thousand: 0.29 -> 0.48 ms
+# with 2). 0 marches every column whole (a CPU rasterizer, where segments only add work).
+SEGMENT_TARGET_INVOCATIONS = 1 << 17
+MIN_SEGMENT_TEXELS = 8     # texels a segment marches at least
+
+
+def column_segments(layout: LightGridLayout, target: int = SEGMENT_TARGET_INVOCATIONS) -> int:
+    """Segments per column for this layout: enough for `target` invocations over all columns, each
+    at least MIN_SEGMENT_TEXELS long; 1 when the columns reach half the target (or target 0)."""
+    a = layout.axis
+    b, c = layout.ray_axes
+    rays = layout.size[b] * layout.size[c]
+    if target <= 0 or 2 * rays > target:
+        return 1
+    return max(1, min(-(-target // rays), layout.size[a] // MIN_SEGMENT_TEXELS))
+
 
 class LightTransmittance:
-    def __init__(self, ctx: moderngl.Context, max_side: int = MAX_SIDE, precision: str = PRECISION):
+    def __init__(self, ctx: moderngl.Context, max_side: int = MAX_SIDE, precision: str = PRECISION,
+                 segment_target: int = SEGMENT_TARGET_INVOCATIONS):
         self.ctx = ctx
         self.max_side = int(max_side)
         self.precision = precision
+        self.segment_target = int(segment_target)   # column_segments; 0: whole columns
+        self._segment_depths: moderngl.Buffer | None = None   # [ray][segment] optical depths
+        self.segments = 1        # per column in the last bake_layers
         self.program = compute_program(ctx, "light_transmittance.comp",
                                        {"LIGHT_GRID_FORMAT": PRECISIONS[precision]})
         self.texture: moderngl.Texture3D | None = None   # what readers use
@@ -157,8 +182,25 @@ class LightTransmittance:
                                     "march_step": LIGHT_MARCH_VOXELS * resources.march_step})
         texture.bind_to_image(0, read=False, write=True)
         rows = grid[layout.ray_axes[0]]
-        self.program.run((rows + RAYS_PER_GROUP[0] - 1) // RAYS_PER_GROUP[0],
-                         (count + RAYS_PER_GROUP[1] - 1) // RAYS_PER_GROUP[1], 1)
+        groups = ((rows + RAYS_PER_GROUP[0] - 1) // RAYS_PER_GROUP[0],
+                  (count + RAYS_PER_GROUP[1] - 1) // RAYS_PER_GROUP[1])
+        segments = column_segments(layout, self.segment_target)
+        self.segments = segments
+        if segments == 1:
+            set_uniforms(self.program, {"segments": 1, "segment_pass": 0})
+            self.program.run(*groups, 1)
+        else:
+            need = 4 * segments * rows * grid[layout.ray_axes[1]]
+            if self._segment_depths is None or self._segment_depths.size < need:
+                if self._segment_depths is not None:
+                    self._segment_depths.release()
+                self._segment_depths = self.ctx.buffer(reserve=need)
+            self._segment_depths.bind_to_storage_buffer(0)
+            for segment_pass in (0, 1):
+                set_uniforms(self.program, {"segments": segments, "segment_pass": segment_pass})
+                self.program.run(*groups, segments)
+                if segment_pass == 0:
+                    self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
         self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
         self.next_layer = first + count
         if self.target_layout is not None and self.next_layer >= self.layers:
@@ -179,8 +221,9 @@ class LightTransmittance:
 
     @property
     def gpu_bytes(self) -> int:
-        return sum(int(self.precision[1]) * t.width * t.height * t.depth
-                   for t in (self.texture, self._target) if t is not None)
+        return (sum(int(self.precision[1]) * t.width * t.height * t.depth
+                    for t in (self.texture, self._target) if t is not None)
+                + (self._segment_depths.size if self._segment_depths is not None else 0))
 
     def bind(self) -> None:
         self.texture.use(LIGHT_UNIT)
@@ -188,5 +231,7 @@ class LightTransmittance:
     def release(self) -> None:
         self.program.release()
         self._drop_target()
+        if self._segment_depths is not None:
+            self._segment_depths.release()
         if self.texture is not None:
             self.texture.release()

@@ -20,7 +20,8 @@ from .limits import check_image_size
 from .pathtracer import PathTracer
 from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_MIN_SIDE,
                                   PRECISION as LIGHT_PRECISION,
-                                  SOFTWARE_MIN_SIDE, LightTransmittance, min_side_for_probes)
+                                  SEGMENT_TARGET_INVOCATIONS, SOFTWARE_MIN_SIDE,
+                                  LightTransmittance, min_side_for_probes)
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order
 from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
 from .visible_region import VisibleRegionPass
@@ -109,6 +110,8 @@ class Renderer:
         software = is_software(ctx)
         self.light_min_side = SOFTWARE_MIN_SIDE if software else LIGHT_MIN_SIDE
         self.light_follows_probes = not software
+        # columns of the light grid cut into segments on a GPU (light_transmittance.py)
+        self.light_segment_target = 0 if software else SEGMENT_TARGET_INVOCATIONS
         # The sun at the bake's walk events: "grid" (the baked light grid; see ProbeGrid) or "ray"
         # (a ratio-tracked shadow ray, unbiased). Walks per probe from each probe's noise
         # (ProbeGrid's `adaptive`; 0: all walks everywhere). Defaults from bench/h100-bake: the
@@ -388,6 +391,7 @@ class Renderer:
                 self._light.release()
             self._light = LightTransmittance(self.ctx, self.light_max_side, self.light_precision)
             self._light_pending = None
+        self._light.segment_target = self.light_segment_target
         if key == self._light_key:
             return 0.0
         light = self._light

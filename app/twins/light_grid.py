@@ -14,7 +14,8 @@ def light_grid_bake(volume: Volume, table: np.ndarray, density_scale: float, sun
                     layout: LightGridLayout, march_step: float) -> np.ndarray:
     """Optical depth (z, y, x) at every texel centre of `layout`: each column along axis a marched
     from the box's sun side, midpoint quadrature of sigma_t over each segment between centres
-    (at most march_step apart, only inside the box), no more added once past 104."""
+    (at most march_step apart, only inside the box), no more added once past 104 and the texels
+    capped there."""
     d = np.asarray(sun_direction, np.float64)
     d = d / np.linalg.norm(d)
     a = layout.axis
@@ -60,7 +61,7 @@ def light_grid_bake(volume: Volume, table: np.ndarray, density_scale: float, sun
                 x[:, b] = QB[step] + shear[b] * s
                 x[:, c] = QC[step] + shear[c] * s
                 tau[step] += sigma_t_at(volume, table, density_scale, x) * ds[step] * per_s
-        out[k] = tau
+        out[k] = np.minimum(tau, 104.0)
         s_from = s_to
     # out is (a, b, c); return (z, y, x)
     axes_xyz = np.argsort([a, b, c])          # position of x, y, z in (a, b, c)
