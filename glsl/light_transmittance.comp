@@ -17,7 +17,7 @@
 // The texels hold min(tau, 104): past it the transmittance is 0 either way, and the cap makes a
 // column's values independent of where the march stopped adding.
 //
-// Segments (`segments` > 1, gl_GlobalInvocationID.z the segment): a column is one chain of
+// Segments (LIGHT_GRID_SEGMENTS 1, gl_GlobalInvocationID.z the segment): a column is one chain of
 // dependent fetches as long as the grid is deep, and a small grid has too few columns to fill a
 // large GPU, which then waits for the chain (on an H100, 0.095 to 0.109 ms for the 8^3 probe
 // grids' light grids of 29 to 38 thousand columns, 0.062 to 0.078 ms in 4 or 5 segments; when
@@ -25,6 +25,8 @@
 // invocation each, in two dispatches: segment_pass 0 sums each run's optical depth into
 // segment_tau; segment_pass 1 starts each run from the sum of the runs before it and stores its
 // texels. The same quadrature points as one march, summed in another order (float rounding).
+// LIGHT_GRID_SEGMENTS 0 (or undefined) marches whole columns, with none of this in the code (the
+// segmented build's code made whole columns 11 to 16% slower on the H100).
 layout(local_size_x = 32, local_size_y = 2) in;
 #include "lib/medium.glsl"
 #include "lib/lights.glsl"
@@ -37,9 +39,11 @@ layout(LIGHT_GRID_FORMAT, binding = 0) uniform writeonly image3D transmittance_i
 uniform ivec3 grid;
 uniform int first_layer;   // a slab of rays along axis c per dispatch (bake_layers)
 uniform float march_step;  // world units between quadrature points at most
-uniform int segments;      // runs of texels per column (1: one march per column)
-uniform int segment_pass;  // with segments > 1: 0 sums each run, 1 stores the texels
+#if LIGHT_GRID_SEGMENTS
+uniform int segments;      // runs of texels per column
+uniform int segment_pass;  // 0 sums each run, 1 stores the texels
 layout(std430, binding = 0) buffer SegmentDepths { float segment_tau[]; };  // [ray][segment]
+#endif
 
 const float TAU_OPAQUE = 104.0;   // exp(-tau) is 0 in float32 from here on
 
@@ -55,9 +59,14 @@ void main()
     int b = a == 0 ? 1 : 0;
     int c = a == 2 ? 1 : 2;
     ivec2 ray = ivec2(gl_GlobalInvocationID.xy) + ivec2(0, first_layer);
+#if LIGHT_GRID_SEGMENTS
     int segment = int(gl_GlobalInvocationID.z);
     if (ray.x >= grid[b] || ray.y >= grid[c] || segment >= segments)
         return;
+#else
+    if (ray.x >= grid[b] || ray.y >= grid[c])
+        return;
+#endif
     // The ray's sheared coordinates: the world point at x[a] = s is q + shear * s.
     vec3 q = vec3(0.0);
     q[b] = ((2.0 * (float(ray.x) + 0.5)) / float(grid[b]) - 1.0) * light_grid_half_extent[b];
@@ -79,19 +88,26 @@ void main()
     }
     float toward_sun = sun_direction[a] > 0.0 ? 1.0 : -1.0;
     float length_per_s = 1.0 / abs(sun_direction[a]);   // world length per unit of s
+    float tau = 0.0;
     // This invocation's texels, in march order n (n = 0 nearest the sun): [n_begin, n_end).
+#if LIGHT_GRID_SEGMENTS
     int run = (grid[a] + segments - 1) / segments;
     int n_begin = segment * run;
     int n_end = min(grid[a], n_begin + run);
-    bool store = segments == 1 || segment_pass == 1;
+    bool store = segment_pass == 1;
     uint ray_index = uint(ray.y * grid[b] + ray.x);
-    float tau = 0.0;
-    if (segments > 1 && segment_pass == 1)
+    if (store)
         for (int j = 0; j < segment; ++j)
             tau += segment_tau[ray_index * uint(segments) + uint(j)];
     // Texel n covers s from the centre of texel n - 1 (the box's sun side for n = 0) to its own.
     int k_from = toward_sun > 0.0 ? grid[a] - n_begin : n_begin - 1;
     float s_from = n_begin == 0 ? toward_sun * h : column_centre(k_from, a);
+#else
+    const int n_begin = 0;
+    int n_end = grid[a];
+    const bool store = true;
+    float s_from = toward_sun * h;
+#endif
     ivec3 texel;
     texel[b] = ray.x;
     texel[c] = ray.y;
@@ -115,6 +131,8 @@ void main()
         }
         s_from = s_to;
     }
+#if LIGHT_GRID_SEGMENTS
     if (!store)
         segment_tau[ray_index * uint(segments) + uint(segment)] = tau;
+#endif
 }

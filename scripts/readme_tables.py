@@ -54,8 +54,10 @@ def speed(records: str, previous: str | None) -> None:
                 best = min((r for r in recs if r["method"] != "pt"), key=lambda r: R.error_of(new, r))
                 pb_cell = f"not reached (best {R.error_of(new, best) * 100:.2f}%)"
             else:
+                step = pb.get("raymarch_step", 0.5) if pb["method"] == "raymarch" else 0.5
                 pb_cell = (f"{_ms(pb['total_ms'])} ({pb['method']}, {pb['probe_grid']}^3 x "
-                           f"{pb['probe_samples']}, {pb['spp']} fr)")
+                           f"{pb['probe_samples']}, {pb['spp']} fr"
+                           + (f", step {step:g}" if step != 0.5 else "") + ")")
             up = "-" if pt is None or pb is None else _times(pt["total_ms"] / pb["total_ms"])
             prev = "-"
             if before:

@@ -65,26 +65,30 @@ SOFTWARE_MIN_SIDE = 1
 PRECISIONS = {"f2": "r16f", "f4": "r32f"}
 PRECISION = "f2"
 
-# Columns cut into segments (light_transmittance.comp) for about this many invocations, where a
-# grid has fewer than half as many columns: a small grid's few columns leave a large GPU waiting for
-# each column's chain of fetches. Measured on the H100 (bench/h100-small): 29 to 38 thousand
-# columns (the 8^3 probe grids' light grids) 0.095-0.109 -> 0.062-0.078 ms with 4 or 5 segments;
-# from 86 thousand columns up the GPU is already full (the march runs at about the ceiling's rate
-# of fetches) and the second pass's work made it slower (the foot's 146 thousand: 0.29 -> 0.48 ms
-# with 2). 0 marches every column whole (a CPU rasterizer, where segments only add work).
-SEGMENT_TARGET_INVOCATIONS = 1 << 17
+# Columns cut into segments (light_transmittance.comp) for about this many invocations (an H100's
+# resident threads: 132 SMs x 2048), where that takes MIN_SEGMENTS or more: a small grid's few
+# columns leave a large GPU waiting for each column's chain of fetches. Measured on the H100
+# (bench/h100-small): 29 to 38 thousand columns (the 8^3 probe grids' light grids) 0.095-0.109 ->
+# 0.064-0.073 ms in 7 to 9 segments; 65 thousand in 4 the same as whole (0.143 ms); from 86
+# thousand up the GPU is already full (the march runs at about the ceiling's rate of fetches) and
+# the second pass only adds work (the foot's 146 thousand: 0.29 -> 0.48 ms in 2). 0 marches every
+# column whole (a CPU rasterizer, where segments only add work).
+SEGMENT_TARGET_INVOCATIONS = 1 << 18
 MIN_SEGMENT_TEXELS = 8     # texels a segment marches at least
+MIN_SEGMENTS = 4           # fewer are no faster (2: 0.109 -> 0.116 ms on hydrogen's 8^3 grid)
 
 
 def column_segments(layout: LightGridLayout, target: int = SEGMENT_TARGET_INVOCATIONS) -> int:
     """Segments per column for this layout: enough for `target` invocations over all columns, each
-    at least MIN_SEGMENT_TEXELS long; 1 when the columns reach half the target (or target 0)."""
+    at least MIN_SEGMENT_TEXELS long; 1 (whole columns) where that is fewer than MIN_SEGMENTS (or
+    target 0)."""
     a = layout.axis
     b, c = layout.ray_axes
     rays = layout.size[b] * layout.size[c]
-    if target <= 0 or 2 * rays > target:
+    if target <= 0:
         return 1
-    return max(1, min(-(-target // rays), layout.size[a] // MIN_SEGMENT_TEXELS))
+    segments = min(-(-target // rays), layout.size[a] // MIN_SEGMENT_TEXELS)
+    return segments if segments >= MIN_SEGMENTS else 1
 
 
 class LightTransmittance:
@@ -98,6 +102,7 @@ class LightTransmittance:
         self.segments = 1        # per column in the last bake_layers
         self.program = compute_program(ctx, "light_transmittance.comp",
                                        {"LIGHT_GRID_FORMAT": PRECISIONS[precision]})
+        self._segment_program = None   # the LIGHT_GRID_SEGMENTS build, compiled when first used
         self.texture: moderngl.Texture3D | None = None   # what readers use
         self.layout: LightGridLayout | None = None       # of the texture's contents
         # A bake in a new layout goes to its own texture, which replaces the readers' when done.
@@ -172,23 +177,27 @@ class LightTransmittance:
         layout = self.baking_layout
         texture = self._target if self.target_layout is not None else self.texture
         grid = layout.size
+        segments = column_segments(layout, self.segment_target)
+        self.segments = segments
+        if segments > 1 and self._segment_program is None:
+            self._segment_program = compute_program(
+                self.ctx, "light_transmittance.comp",
+                {"LIGHT_GRID_FORMAT": PRECISIONS[self.precision], "LIGHT_GRID_SEGMENTS": 1})
+        program = self.program if segments == 1 else self._segment_program
         resources.bind()
-        set_uniforms(self.program, resources.uniforms())
-        set_uniforms(self.program, layout.uniforms())
+        set_uniforms(program, resources.uniforms())
+        set_uniforms(program, layout.uniforms())
         # Quadrature every voxel (the probes' march takes half voxels): the grid's own interpolation
         # error dominates; measured on bonsai at 256^3, RMS error of the sun's transmittance at
         # scattering points 7.6% against 7.4%, for half the time.
-        set_uniforms(self.program, {"grid": grid, "first_layer": first,
-                                    "march_step": LIGHT_MARCH_VOXELS * resources.march_step})
+        set_uniforms(program, {"grid": grid, "first_layer": first,
+                               "march_step": LIGHT_MARCH_VOXELS * resources.march_step})
         texture.bind_to_image(0, read=False, write=True)
         rows = grid[layout.ray_axes[0]]
         groups = ((rows + RAYS_PER_GROUP[0] - 1) // RAYS_PER_GROUP[0],
                   (count + RAYS_PER_GROUP[1] - 1) // RAYS_PER_GROUP[1])
-        segments = column_segments(layout, self.segment_target)
-        self.segments = segments
         if segments == 1:
-            set_uniforms(self.program, {"segments": 1, "segment_pass": 0})
-            self.program.run(*groups, 1)
+            program.run(*groups, 1)
         else:
             need = 4 * segments * rows * grid[layout.ray_axes[1]]
             if self._segment_depths is None or self._segment_depths.size < need:
@@ -197,8 +206,8 @@ class LightTransmittance:
                 self._segment_depths = self.ctx.buffer(reserve=need)
             self._segment_depths.bind_to_storage_buffer(0)
             for segment_pass in (0, 1):
-                set_uniforms(self.program, {"segments": segments, "segment_pass": segment_pass})
-                self.program.run(*groups, segments)
+                set_uniforms(program, {"segments": segments, "segment_pass": segment_pass})
+                program.run(*groups, segments)
                 if segment_pass == 0:
                     self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
         self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
@@ -230,6 +239,8 @@ class LightTransmittance:
 
     def release(self) -> None:
         self.program.release()
+        if self._segment_program is not None:
+            self._segment_program.release()
         self._drop_target()
         if self._segment_depths is not None:
             self._segment_depths.release()
