@@ -19,8 +19,8 @@
 //
 // Segments (LIGHT_GRID_SEGMENTS 1, gl_GlobalInvocationID.z the segment): a column is one chain of
 // dependent fetches as long as the grid is deep, and a small grid has too few columns to fill a
-// large GPU, which then waits for the chain (on an H100, 0.095 to 0.109 ms for the 8^3 probe
-// grids' light grids of 29 to 38 thousand columns, 0.062 to 0.078 ms in 4 or 5 segments; when
+// large GPU, which then waits for the chain (on an H100, 0.081 to 0.091 ms for the 8^3 probe
+// grids' light grids of 29 to 38 thousand columns, 0.064 to 0.072 ms in 7 to 9 segments; when
 // to cut: light_transmittance.py). So each column is cut into `segments` runs of texels, one
 // invocation each, in two dispatches: segment_pass 0 sums each run's optical depth into
 // segment_tau; segment_pass 1 starts each run from the sum of the runs before it and stores its

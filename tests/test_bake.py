@@ -238,8 +238,8 @@ def test_light_grid_size_and_layout():
     assert column_segments(small, 1 << 17) == 8 and column_segments(small, 0) == 1
     assert column_segments(small, 1 << 18) == 16   # at most 128 / MIN_SEGMENT_TEXELS
     assert column_segments(light_grid_layout((384,) * 3, (1.0,) * 3, (0.0, 1.0, 0.0), 512)) == 1
-    assert column_segments(light_grid_layout((256,) * 3, (1.0,) * 3, (0.0, 1.0, 0.0), 512)) == 4
-    assert column_segments(light_grid_layout((300,) * 3, (1.0,) * 3, (0.0, 1.0, 0.0), 512)) == 1
+    assert column_segments(light_grid_layout((224,) * 3, (1.0,) * 3, (0.0, 1.0, 0.0), 512)) == 6
+    assert column_segments(light_grid_layout((256,) * 3, (1.0,) * 3, (0.0, 1.0, 0.0), 512)) == 1
     # runs shorter than MIN_SEGMENT_TEXELS, or fewer than MIN_SEGMENTS of them: whole columns
     assert column_segments(light_grid_layout((64, 24, 64), (1.0,) * 3, (0.0, 1.0, 0.0), 512)) == 1
 

@@ -68,14 +68,14 @@ PRECISION = "f2"
 # Columns cut into segments (light_transmittance.comp) for about this many invocations (an H100's
 # resident threads: 132 SMs x 2048), where that takes MIN_SEGMENTS or more: a small grid's few
 # columns leave a large GPU waiting for each column's chain of fetches. Measured on the H100
-# (bench/h100-small): 29 to 38 thousand columns (the 8^3 probe grids' light grids) 0.095-0.109 ->
-# 0.064-0.073 ms in 7 to 9 segments; 65 thousand in 4 the same as whole (0.143 ms); from 86
-# thousand up the GPU is already full (the march runs at about the ceiling's rate of fetches) and
-# the second pass only adds work (the foot's 146 thousand: 0.29 -> 0.48 ms in 2). 0 marches every
-# column whole (a CPU rasterizer, where segments only add work).
+# (bench/h100-small, bench/h100): 29 to 38 thousand columns (the 8^3 probe grids' light grids)
+# 0.081-0.091 -> 0.064-0.072 ms in 7 to 9 segments; 65 thousand in 4 0.12 -> 0.143 ms, 86 thousand
+# in 4 0.145 -> 0.19 ms: there the GPU is already nearly full (the march runs at about the
+# ceiling's rate of fetches) and the second pass only adds work (the foot's 146 thousand: 0.29 ->
+# 0.48 ms in 2). 0 marches every column whole (a CPU rasterizer, where segments only add work).
 SEGMENT_TARGET_INVOCATIONS = 1 << 18
 MIN_SEGMENT_TEXELS = 8     # texels a segment marches at least
-MIN_SEGMENTS = 4           # fewer are no faster (2: 0.109 -> 0.116 ms on hydrogen's 8^3 grid)
+MIN_SEGMENTS = 5           # fewer were slower (2: 0.109 -> 0.116 ms on hydrogen's 8^3 grid)
 
 
 def column_segments(layout: LightGridLayout, target: int = SEGMENT_TARGET_INVOCATIONS) -> int:
