@@ -490,18 +490,3 @@ def test_accumulation_clears_on_the_gpu_and_leaves_the_framebuffer_alone(ctx):
         ctx.screen.use() if ctx.screen is not None else None
         other.release()
         acc.release()
-
-
-@pytest.mark.parametrize("batch", [2, 4])
-def test_batched_flights_equal_one_at_a_time(renderer, monkeypatch, batch):
-    """Tentative collisions drawn and fetched FLIGHT_BATCH at a time (lib/tracking.glsl) take the
-    same random numbers in the same order as one at a time, so the probes are the same, in one
-    dispatch and cut by a small loop budget (a batch never runs past the steps left)."""
-    serial, _, _ = _bake(renderer, resumable=False)
-    monkeypatch.setattr(probes_module, "WALK_FLIGHT_BATCH", batch)
-    whole, _, _ = _bake(renderer, resumable=False)
-    resumed, _, _ = _bake(renderer, resumable=True, loop_budget=12)
-    assert renderer.resources.read_stats()["truncated_paths"] == 0
-    assert np.abs(serial[..., :27]).max() > 0
-    np.testing.assert_allclose(whole, serial, rtol=2e-5, atol=1e-6)
-    np.testing.assert_allclose(resumed, serial, rtol=2e-5, atol=1e-6)

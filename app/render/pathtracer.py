@@ -12,7 +12,6 @@ from .accumulation import Accumulation
 from .resources import SceneResources
 
 LOCAL_SIZE = 8
-PATH_FLIGHT_BATCH = 1   # tentative collisions tracked together (lib/tracking.glsl FLIGHT_BATCH)
 PIXEL_STATE_BYTES = 96  # PathState (80) + next_sample and padding, std430
 PIXEL_STATE_BYTES_ENVIRONMENT_MAP = 128  # the same with ENVIRONMENT_MAP (PathState 112)
 
@@ -24,8 +23,6 @@ def groups(width: int, height: int) -> tuple[int, int]:
 class PathTracer:
     def __init__(self, ctx: moderngl.Context, defines: dict | None = None):
         self.ctx = ctx
-        if PATH_FLIGHT_BATCH > 1:
-            defines = {**(defines or {}), "FLIGHT_BATCH": int(PATH_FLIGHT_BATCH)}
         self.program = compute_program(ctx, "pathtrace.comp", defines)
         self.state_bytes = (PIXEL_STATE_BYTES_ENVIRONMENT_MAP if (defines or {}).get("ENVIRONMENT_MAP")
                             else PIXEL_STATE_BYTES)

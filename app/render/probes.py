@@ -39,7 +39,6 @@ WALKS_PER_CHUNK_UNBOUNDED = 1 << 22   # walks that end in one dispatch: 64 MiB o
 PATH_STATE_BYTES = 80       # PathState of glsl/lib/integrator.glsl, std430
 PATH_STATE_BYTES_ENVIRONMENT_MAP = 112   # the same with ENVIRONMENT_MAP
 WALK_SUN_MODES = ("ray", "grid")
-WALK_FLIGHT_BATCH = 1   # tentative collisions tracked together (lib/tracking.glsl FLIGHT_BATCH)
 WALK_PROFILE_SLOTS = 1024   # rows of 8 counters in glsl/lib/walk_profile.glsl
 WALK_PROFILE_FIELDS = ("walks", "events", "flight_steps", "shadow_steps", "cell_steps",
                        "dispatch_walks")
@@ -167,8 +166,6 @@ class ProbeGrid:
         defines = {"PROBE_IMAGE_FORMAT": precision, "PROBE_IMAGE_LIMIT": PROBE_IMAGE_LIMIT,
                    **self.defines()}
         self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable), **self.defines()}
-        if WALK_FLIGHT_BATCH > 1:
-            self._walk_defines["FLIGHT_BATCH"] = int(WALK_FLIGHT_BATCH)
         if sun == "grid":
             self._walk_defines["WALK_SUN_GRID"] = 1
         if self.environment_map:

@@ -54,12 +54,6 @@ bool ratio_roulette(inout float transmittance, inout uint rng)
 
 #include "lib/cell_walk.glsl"
 
-// Tentative collisions drawn and fetched together in delta_track_grid (see
-// delta_track_grid_batched); 1: one at a time.
-#ifndef FLIGHT_BATCH
-#define FLIGHT_BATCH 1
-#endif
-
 #if !defined(GLOBAL_MAJORANT)
 // Starts a walk over the macrocells for t in [t, t_max] clipped to the box; m is the first cell's
 // majorant. False when nothing of the range lies in a cell of the grid (or all is vacuum).
@@ -111,91 +105,6 @@ bool majorant_walk_next(inout CellWalk w, inout float m, inout float t, float ce
     return true;
 }
 
-#if FLIGHT_BATCH > 1
-// delta_track_grid's loop, FLIGHT_BATCH tentative collisions of a cell at a time: their distances
-// and acceptance numbers are drawn first (the same random numbers, in the same order, as one at a
-// time), their sigma_t fetched together, then they are taken in order exactly as the serial loop
-// takes them, and the random state and t are set to where that loop would stand. A chain of null
-// collisions costs one fetch latency per batch instead of one per collision: that is what limits
-// a few thousand walks, which leave the GPU idle behind their longest one. Draws and fetches past
-// the first real collision are wasted work, so the many-path passes keep FLIGHT_BATCH 1.
-int delta_track_grid_batched(vec3 origin, vec3 direction, float t, float t_end, float t_max,
-                             CellWalk w, float m, inout uint rng, inout int steps_left,
-                             out float t_collision)
-{
-    t_collision = t_max;
-    while (steps_left > 0) {
-        float cell_end = min(cell_walk_exit(w), t_end);
-        if (m <= 0.0) {
-            --steps_left;
-            PROFILE_COUNT(profile_flight_steps);
-            PROFILE_COUNT(profile_cell_steps);
-            if (!majorant_walk_next(w, m, t, cell_end, t_end, false))
-                return TRACK_ESCAPED;
-            continue;
-        }
-        int n = min(FLIGHT_BATCH, steps_left);
-        float t_k[FLIGHT_BATCH];
-        float u_k[FLIGHT_BATCH];
-        uint rng_k[FLIGHT_BATCH];
-        float sigma_k[FLIGHT_BATCH];
-        uint r = rng;
-        float tt = t;
-        int drawn = 0;          // tentative collisions inside the cell
-        bool exits = false;     // the draw after them left the cell (one more step)
-        for (int k = 0; k < FLIGHT_BATCH; ++k) {
-            t_k[k] = tt;
-            u_k[k] = 2.0;       // never accepted
-            rng_k[k] = r;
-            if (k < n && !exits) {
-                float t_try = tt - log(1.0 - rng_next(r)) / m;
-                if (t_try >= cell_end) {
-                    exits = true;
-                } else {
-                    tt = t_try;
-                    t_k[k] = tt;
-                    u_k[k] = rng_next(r);
-                    rng_k[k] = r;
-                    drawn = k + 1;
-                }
-            }
-        }
-        uint rng_exit = r;
-        for (int k = 0; k < FLIGHT_BATCH; ++k)
-            sigma_k[k] = sigma_t_at(origin + t_k[k] * direction);
-        bool crossed = false;
-        for (int k = 0; k < FLIGHT_BATCH; ++k) {
-            if (k >= drawn)
-                break;
-            --steps_left;
-            PROFILE_COUNT(profile_flight_steps);
-            t = t_k[k];
-            rng = rng_k[k];
-            if (u_k[k] * m < sigma_k[k]) {
-                t_collision = t;
-                return TRACK_COLLIDED;
-            }
-            if (any(cell_walk_faces_at(w, t))) {   // a null collision on a face: the next cell
-                if (!majorant_walk_next(w, m, t, cell_end, t_end, true))
-                    return TRACK_ESCAPED;
-                crossed = true;
-                break;
-            }
-        }
-        if (crossed || !exits)
-            continue;
-        --steps_left;
-        PROFILE_COUNT(profile_flight_steps);
-        PROFILE_COUNT(profile_cell_steps);
-        rng = rng_exit;
-        if (!majorant_walk_next(w, m, t, cell_end, t_end, false))
-            return TRACK_ESCAPED;
-    }
-    t_collision = t;
-    return TRACK_OUT_OF_STEPS;
-}
-#endif
-
 // delta_track with the macrocell majorants (same contract).
 int delta_track_grid(vec3 origin, vec3 direction, float t_min, float t_max, inout uint rng,
                      inout int steps_left, out float t_collision)
@@ -205,10 +114,6 @@ int delta_track_grid(vec3 origin, vec3 direction, float t_min, float t_max, inou
     CellWalk w;
     if (!majorant_walk_begin(origin, direction, t, t_max, t_end, w, m))
         return TRACK_ESCAPED;
-#if FLIGHT_BATCH > 1
-    return delta_track_grid_batched(origin, direction, t, t_end, t_max, w, m, rng, steps_left,
-                                    t_collision);
-#endif
     while (steps_left > 0) {
         --steps_left;
         PROFILE_COUNT(profile_flight_steps);
