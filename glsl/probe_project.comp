@@ -33,6 +33,19 @@ uniform uint seed;
 shared float walk_colour[3][64];          // each walk's radiance (0 for one that does not count)
 shared float walk_counts[64];             // 1 for a walk that counts
 shared float walk_basis[64][SH_COUNT];    // its direction's SH basis
+#if PROBE_SUN_LOBE
+shared float walk_lobe[64];               // and the sun lobe's projection function there
+#endif
+
+// Whether channel coefficient k is projected from the walks (the SH bands, and the sun lobe).
+bool projected_coefficient(int k)
+{
+#if PROBE_SUN_LOBE
+    if (k == PROBE_LOBE_COEFFICIENT)
+        return true;
+#endif
+    return k >= 0 && k < SH_COUNT;
+}
 
 // Invocations per channel: the walks are split between them where the channels leave
 // invocations idle (order 2: 28 channels, two invocations of 32 walks each).
@@ -49,7 +62,7 @@ float updated_mean(uint probe, int f, float projected, float to_mean, float weig
 {
     float mean = probes[probe].channels[f / 4][f % 4];
     int k = probe_colour_coefficient(f);
-    if (k >= 0 && k < SH_COUNT) {
+    if (projected_coefficient(k)) {
         if (pass_index == 0u)
             mean = 0.0;
         mean += (projected * to_mean - mean) * weight;
@@ -63,10 +76,17 @@ float updated_mean(uint probe, int f, float projected, float to_mean, float weig
 float channel_sum(int f, int first, int count)
 {
     int k = probe_colour_coefficient(f);
-    if (k < 0 || k >= SH_COUNT)
+    if (!projected_coefficient(k))
         return 0.0;
     int colour = f - probe_colour_channel(k, 0);
     float sum = 0.0;
+#if PROBE_SUN_LOBE
+    if (k == PROBE_LOBE_COEFFICIENT) {
+        for (int w = first; w < first + count; ++w)
+            sum += walk_colour[colour][w] * walk_lobe[w];
+        return sum;
+    }
+#endif
     for (int w = first; w < first + count; ++w)
         sum += walk_colour[colour][w] * walk_basis[w][k];
     return sum;
@@ -83,14 +103,22 @@ void main()
     float basis[SH_COUNT];
     for (int k = 0; k < SH_COUNT; ++k)
         basis[k] = 0.0;
+    float lobe = 0.0;
     if (tid < directions) {
         vec4 walk = walk_radiance[gl_WorkGroupID.x * directions + tid];
         if (walk.a == 1.0) {   // else dropped (2), or not walked: the probe had converged (3)
             radiance = walk.rgb;
             counts = 1.0;
-            sh_basis(probe_walk_direction(probe, pass_index, tid, directions, seed), basis);
+            vec3 omega = probe_walk_direction(probe, pass_index, tid, directions, seed);
+            sh_basis(omega, basis);
+#if PROBE_SUN_LOBE
+            lobe = sun_lobe_basis(dot(omega, sun_direction), PROBE_SH_ORDER);
+#endif
         }
     }
+#if PROBE_SUN_LOBE
+    walk_lobe[tid] = lobe;
+#endif
     walk_colour[0][tid] = radiance.r;
     walk_colour[1][tid] = radiance.g;
     walk_colour[2][tid] = radiance.b;

@@ -95,7 +95,7 @@ class ProbeGrid:
                  precision: str = "rgba32f", sh_order: int = 2,
                  box: tuple | None = None, grey: bool = False, resumable: bool | None = None,
                  sun: str = "ray", adaptive: float = 0.0, environment_map: bool = False,
-                 planes: tuple | None = None):
+                 planes: tuple | None = None, sun_lobe: float = 0.0):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
         bake time); `sh_order` 0 to 4 decides which textures exist (lib/probe_packing.glsl).
         `resumable`: walks that suspend and resume across dispatches (default: where the driver limits loops;
@@ -108,8 +108,15 @@ class ProbeGrid:
         `environment_map`: the walks' build for a scene whose environment is a map (they sample it
         at each scattering event; lib/integrator.glsl). `planes`: an adaptive layout's probe
         planes per axis, world fractions of the box (app/render/probe_planes.py); None: evenly
-        spaced, and the shaders are built without the warp (PROBE_WARP 0)."""
+        spaced, and the shaders are built without the warp (PROBE_WARP 0). `sun_lobe` > 0: each
+        probe also holds a lobe about the sun's direction of that Henyey-Greenstein g beside its
+        bands (lib/sun_lobe.glsl; SH order 3 only); 0: none."""
         self.environment_map = bool(environment_map)
+        if not (math.isfinite(sun_lobe) and 0.0 <= sun_lobe < 1.0):
+            raise ValueError(f"sun lobe g {sun_lobe!r}: expected a number in [0, 1)")
+        if sun_lobe > 0.0 and int(sh_order) != 3:
+            raise ValueError("a sun lobe needs SH order 3 (the packing's spare channels)")
+        self.sun_lobe = float(sun_lobe)
         if not (math.isfinite(adaptive) and adaptive >= 0.0):
             raise ValueError(f"adaptive walks factor {adaptive!r}: expected a finite number >= 0")
         self.adaptive = float(adaptive)
@@ -302,6 +309,7 @@ class ProbeGrid:
         if self.passes_done == 0 and self.next_probe == 0:   # a bake starts: the scene's lights
             self.radiance_scale = radiance_scale(scene, resources.environment)
         uniforms["probe_radiance_scale"] = self.radiance_scale
+        uniforms["sun_lobe_g"] = self.sun_lobe
         if self.warp_texture is not None:
             self.warp_texture.use(PROBE_WARP_UNIT)
             uniforms["probe_warp"] = PROBE_WARP_UNIT
@@ -440,6 +448,7 @@ class ProbeGrid:
     def defines(self) -> dict:
         """Compile-time settings every shader reading these probes needs (lib/probes.glsl)."""
         return {"PROBE_SH_ORDER": self.sh_order, "PROBE_GREY": int(self.grey),
+                **({"PROBE_SUN_LOBE": 1} if self.sun_lobe > 0 else {}),
                 **self._warp_defines()}
 
     def _warp_defines(self) -> dict:
@@ -471,6 +480,8 @@ class ProbeGrid:
         u.update(self.box_uniforms(resources))
         u["probe_band_factors"] = band_factors(anisotropy, window, self.sh_order)
         u["probe_radiance_scale"] = self.radiance_scale
+        u["sun_lobe_g"] = self.sun_lobe
+        u["sun_lobe_phase_g"] = float(anisotropy)
         return u
 
     def release(self) -> None:

@@ -22,7 +22,7 @@ from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_
                                   PRECISION as LIGHT_PRECISION,
                                   SEGMENT_TARGET_INVOCATIONS, SOFTWARE_MIN_SIDE,
                                   LightTransmittance, min_side_for_probes)
-from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order
+from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, sun_lobe_g
 from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
@@ -120,6 +120,9 @@ class Renderer:
         # less time at the same error.
         self.walk_sun = "grid"
         self.walk_adaptive = 1.0
+        # Probes of order 3 also hold a lobe about the sun's direction where the scene
+        # scatters forward (probe_layout.sun_lobe_g; lib/sun_lobe.glsl); False: never (comparisons).
+        self.probe_sun_lobe = True
         # A bake restarted by an edit starts from the previous probes (ProbeGrid.restart(warm)):
         # they fade out as the new walks come in; the finished probes are the cold bake's.
         self.bake_warm = True
@@ -215,7 +218,7 @@ class Renderer:
         return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
                 spec.layout, spec.adaptive_strength, spec.adaptive_indicator,
                 self.resources.use_majorant_grid, self.walk_sun, self.walk_adaptive,
-                (self.light_max_side, self.light_min_side, self.light_follows_probes,
+                self.probe_sun_lobe, (self.light_max_side, self.light_min_side, self.light_follows_probes,
                  self.light_precision)
                 if self.walk_sun == "grid" else None)
 
@@ -305,16 +308,19 @@ class Renderer:
         plan = self.probe_plan()
         g = self.probe_grid
         env_map = self.resources.environment is not None
+        lobe = (sun_lobe_g(self.scene.anisotropy, plan.sh_order)
+                if self.probe_sun_lobe else 0.0)
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
-                         g.adaptive, g.environment_map, g.planes) != (
+                         g.adaptive, g.environment_map, g.planes, g.sun_lobe) != (
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
-                self.walk_sun, self.walk_adaptive, env_map, plan.planes):
+                self.walk_sun, self.walk_adaptive, env_map, plan.planes, lobe):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
                                         plan.sh_order, plan.box, plan.grey,
                                         sun=self.walk_sun, adaptive=self.walk_adaptive,
-                                        environment_map=env_map, planes=plan.planes)
+                                        environment_map=env_map, planes=plan.planes,
+                                        sun_lobe=lobe)
         self.probe_grid.restart(seed, warm=warm)
         self._baked_key = self.bake_key()
         return self.probe_grid

@@ -22,6 +22,17 @@
 #ifndef PROBE_GREY
 #define PROBE_GREY 0
 #endif
+// PROBE_SUN_LOBE 1: beside the bands, each colour's amplitude of a lobe about the sun's direction
+// (lib/sun_lobe.glsl), packed as the coefficient after the last (PROBE_LOBE_COEFFICIENT): at order
+// 3 the channels that the last texture had spare (colour 49 .. 51 of texture 12, grey 17 of
+// texture 4). Only order 3 so far (order 4's colour textures have no spare channel).
+#ifndef PROBE_SUN_LOBE
+#define PROBE_SUN_LOBE 0
+#endif
+#if PROBE_SUN_LOBE && PROBE_SH_ORDER != 3
+#error "PROBE_SUN_LOBE: SH order 3 only"
+#endif
+#define PROBE_LOBE_COEFFICIENT ((PROBE_SH_ORDER + 1) * (PROBE_SH_ORDER + 1))
 #define PROBE_SH_COEFFS ((PROBE_SH_ORDER + 1) * (PROBE_SH_ORDER + 1))
 #if PROBE_SH_ORDER <= 2
 #define PROBE_COLOUR_TEXTURES 7
@@ -62,6 +73,10 @@ int probe_grey_source(int f)
     if (f == 3)
         return PROBE_SUN_CHANNEL;
     int k = f < 3 ? f : f - 1;
+#if PROBE_SUN_LOBE
+    if (k == PROBE_LOBE_COEFFICIENT)
+        return probe_colour_channel(k, 0);
+#endif
     return k < PROBE_SH_COEFFS ? probe_colour_channel(k, 0) : -1;
 }
 

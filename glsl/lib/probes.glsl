@@ -12,10 +12,17 @@
 // least once on its way plus the attenuated environment; the unscattered sun beam is left out (it
 // is direct light, added at render time).
 //
+// PROBE_SUN_LOBE (0 or 1; default 0): 1 adds to the convolved bands a lobe about the sun's
+// direction, whose amplitude the probes hold beside their coefficients (lib/sun_lobe.glsl; colour
+// order 3, where app/render/probe_layout.py sun_lobe_g turns it on for forward scattering).
+//
 // PROBE_WARP (0 or 1; default 0): 1 places the probe planes of each axis where an adaptive layout
 // put them (lib/probe_warp.glsl) instead of evenly; the textures and their packing are the same.
 #include "lib/probe_packing.glsl"
 #include "lib/probe_warp.glsl"
+// used where PROBE_SUN_LOBE; included here whatever the build (each file is included once, so
+// not inside an #if)
+#include "lib/sun_lobe.glsl"
 uniform ivec3 probe_grid;
 // The textures hold the SH coefficients divided by this (the scene's brightest light, as radiance:
 // app/render/probes.py radiance_scale), so that 16-bit texels keep their range and precision
@@ -58,6 +65,10 @@ vec3 probe_walk_direction(uint probe_index, uint pass_index, uint slot, uint dir
 }
 
 #ifdef PROBE_SAMPLING
+#if PROBE_SUN_LOBE
+uniform float sun_lobe_phase_g;   // the phase function's g, which the lobe is convolved with
+vec3 probe_fetched_lobe;          // the sun lobe's amplitude that probe_fetch read last
+#endif
 // The textures this build reads, by slot (lib/probe_packing.glsl; app/render/probes.py binds them).
 uniform sampler3D probe_textures[PROBE_TEXTURE_COUNT];
 // per SH band: g^l (the phase convolution) times the SH window
@@ -120,6 +131,15 @@ void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
 #else
     sun_transmittance = clamp(texel[6].a, 0.0, 1.0);
 #endif
+#if PROBE_SUN_LOBE && PROBE_GREY
+    probe_fetched_lobe = vec3(texel[(PROBE_LOBE_COEFFICIENT + 1) / 4][(PROBE_LOBE_COEFFICIENT + 1) % 4]
+                              * probe_radiance_scale);
+#elif PROBE_SUN_LOBE
+    for (int c = 0; c < 3; ++c) {
+        int f = probe_colour_channel(PROBE_LOBE_COEFFICIENT, c);
+        probe_fetched_lobe[c] = texel[f / 4][f % 4] * probe_radiance_scale;
+    }
+#endif
 #endif
     for (int k = 0; k < PROBE_SH_COEFFS; ++k)
         coeffs[k] *= probe_radiance_scale;
@@ -131,6 +151,11 @@ vec3 probe_inscattered(vec3 x, vec3 d, out float sun_transmittance)
 {
     vec3 coeffs[SH_COUNT];
     probe_fetch(x, coeffs, sun_transmittance);
-    return sh_clamp_nonnegative(sh_evaluate_convolved(coeffs, d, probe_band_factors));
+    vec3 inscattered = sh_evaluate_convolved(coeffs, d, probe_band_factors);
+#if PROBE_SUN_LOBE
+    inscattered += probe_fetched_lobe
+                   * sun_lobe_convolved(dot(d, sun_direction), sun_lobe_phase_g, PROBE_SH_ORDER);
+#endif
+    return sh_clamp_nonnegative(inscattered);
 }
 #endif

@@ -1,0 +1,35 @@
+"""NumPy twin of glsl/lib/sun_lobe.glsl: the probes' lobe about the sun's direction beside their SH
+bands (derivation there)."""
+from __future__ import annotations
+
+import numpy as np
+
+INV_4PI = 1.0 / (4.0 * np.pi)
+
+
+def hg(mu, g):
+    d = 1.0 + g * g - 2.0 * g * np.asarray(mu, np.float64)
+    return INV_4PI * (1.0 - g * g) / (d * np.sqrt(d))
+
+
+def low_bands(mu, x, n):
+    """sum_{l<=n} (2l+1)/(4 pi) x^l P_l(mu)."""
+    mu = np.asarray(mu, np.float64)
+    return INV_4PI * np.polynomial.legendre.legval(mu, [(2 * l + 1) * x ** l for l in range(n + 1)])
+
+
+def residual(mu, x, n):
+    return hg(mu, x) - low_bands(mu, x, n)
+
+
+def norm(h, n):
+    x = h * h
+    return INV_4PI * ((1.0 + x) / (1.0 - x) ** 2 - sum((2 * l + 1) * x ** l for l in range(n + 1)))
+
+
+def basis(mu, h, n):
+    return residual(mu, h, n) / norm(h, n)
+
+
+def convolved(mu, g, h, n):
+    return residual(mu, g * h, n)
