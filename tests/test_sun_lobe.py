@@ -218,3 +218,17 @@ def test_probe_inscattered_adds_the_convolved_lobe(ctx):
     expected = np.maximum(bands + lobe * sun_lobe.convolved(d @ sun, g, h, order)[:, None], 0.0)
     np.testing.assert_allclose(out, expected, rtol=1e-4, atol=1e-5)
     assert (lobe[:4] * sun_lobe.convolved(1.0, g, h, order)).min() > 0.05   # the lobe shows
+
+
+def test_every_program_that_reads_lobe_probes_compiles(ctx):
+    """The passes and the viewer's probe spheres build with PROBE_SUN_LOBE (the spheres' program
+    once lacked the sun's direction the lobe needs)."""
+    from app.gl.shaders import compute_program, render_program
+    defines = {"PROBE_SH_ORDER": 3, "PROBE_SUN_LOBE": 1}
+    for grey in (0, 1):
+        d = {**defines, "PROBE_GREY": grey}
+        render_program(ctx, "probe_sphere_instanced.vert", "probe_sphere.frag", d).release()
+        compute_program(ctx, "raymarch.comp", d).release()
+        render_program(ctx, "fullscreen.vert", "raymarch.frag", d).release()
+        compute_program(ctx, "pathtrace.comp", {**d, "PROBE_LIGHTING": 1}).release()
+        compute_program(ctx, "pathtrace.comp", {**d, "PROBE_LIGHTING": 2}).release()
