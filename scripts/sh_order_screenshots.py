@@ -1,4 +1,5 @@
-"""The anisotropic cloud (g = 0.8, backlit) at SH orders 2, 3 and 4: the raymarcher after 16
+"""The anisotropic cloud (g = 0.8, backlit) at SH orders 2, 3 (without and with the lobe about
+the sun's direction, lib/sun_lobe.glsl, which order 3 holds by default) and 4: the raymarcher after 16
 frames with 128^3 x 256 probes against a path-traced reference of 8192 spp (two halves), each with
 its GPU time (bake + 16 frames), rRMSE (corrected for the reference's noise) and a signed error
 map ((image - reference) / mean reference: red too bright, blue too dark, full colour at 25%).
@@ -43,22 +44,25 @@ halves = [r.render("pt", spp=REF_SPP // 2, seed=100 + i, samples_per_pass=64).im
 ref = 0.5 * (halves[0] + halves[1])
 noise = rrmse(halves[0], halves[1]) / 2
 shots = []
-for order in (2, 3, 4):
+for order, lobe in ((2, False), (3, False), (3, True), (4, False)):
+    r.probe_sun_lobe = lobe
     r.set_scene(scene.replace(probes=replace(scene.probes, grid=(128,) * 3, samples=256,
                                              sh_order=order)))
     res = r.render("raymarch", spp=16, seed=3, samples_per_pass=16)
+    assert (r.probe_grid.sun_lobe > 0) == lobe
     e = corrected_rrmse(rrmse(res.image, ref), noise)
     ms = res.bake_ms + res.render_ms
-    print(f"order {order}: {ms:.1f} ms, rRMSE {e:.4f}", flush=True)
-    shots.append((order, ms, e, res.image))
+    name = f"{order} + sun lobe" if lobe else f"{order}"
+    print(f"order {name}: {ms:.1f} ms, rRMSE {e:.4f}", flush=True)
+    shots.append((name, ms, e, res.image))
 panels = [(ldr(ref, PANEL), f"reference, path tracer {REF_SPP} spp", "g = 0.8, lit from behind")]
 panels += [(ldr(img, PANEL), f"SH order {o}: 128^3 x 256", f"{ms:.0f} ms GPU, rRMSE {100 * e:.2f}%")
            for o, ms, e, img in shots]
-panels += [(Image.new("RGB", (PANEL, PANEL), (20, 20, 20)), "error maps below:",
-            "red: too bright, blue: too dark, full at 25%")]
-panels += [(signed_error(img, ref), f"error, order {o}", "(image - reference) / mean")
+panels += [(Image.new("RGB", (PANEL, PANEL), (20, 20, 20)), "error maps, (image - reference)",
+            "/ mean: red too bright, blue too dark")]
+panels += [(signed_error(img, ref), f"error, order {o}", "full colour at 25%")
            for o, _, _, img in shots]
-sheet = panel_sheet(panels, PANEL, 4,
+sheet = panel_sheet(panels, PANEL, 5,
                     f"anisotropic cloud, raymarcher 16 frames, {SIZE}x{SIZE}, {device}")
 out.mkdir(parents=True, exist_ok=True)
 target = out / "sh_orders_anisotropic.png"
