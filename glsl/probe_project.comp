@@ -32,10 +32,9 @@ uniform uint seed;
 
 shared float walk_colour[3][64];          // each walk's radiance (0 for one that does not count)
 shared float walk_counts[64];             // 1 for a walk that counts
-shared float walk_basis[64][SH_COUNT];    // its direction's SH basis
-#if PROBE_SUN_LOBE
-shared float walk_lobe[64];               // and the sun lobe's projection function there
-#endif
+// its direction's SH basis, and with PROBE_SUN_LOBE the lobe's projection function there as
+// coefficient SH_COUNT (= PROBE_LOBE_COEFFICIENT)
+shared float walk_basis[64][SH_COUNT + PROBE_SUN_LOBE];
 
 // Whether channel coefficient k is projected from the walks (the SH bands, and the sun lobe).
 bool projected_coefficient(int k)
@@ -80,13 +79,6 @@ float channel_sum(int f, int first, int count)
         return 0.0;
     int colour = f - probe_colour_channel(k, 0);
     float sum = 0.0;
-#if PROBE_SUN_LOBE
-    if (k == PROBE_LOBE_COEFFICIENT) {
-        for (int w = first; w < first + count; ++w)
-            sum += walk_colour[colour][w] * walk_lobe[w];
-        return sum;
-    }
-#endif
     for (int w = first; w < first + count; ++w)
         sum += walk_colour[colour][w] * walk_basis[w][k];
     return sum;
@@ -116,15 +108,15 @@ void main()
 #endif
         }
     }
-#if PROBE_SUN_LOBE
-    walk_lobe[tid] = lobe;
-#endif
     walk_colour[0][tid] = radiance.r;
     walk_colour[1][tid] = radiance.g;
     walk_colour[2][tid] = radiance.b;
     walk_counts[tid] = counts;
     for (int k = 0; k < SH_COUNT; ++k)
         walk_basis[tid][k] = basis[k];
+#if PROBE_SUN_LOBE
+    walk_basis[tid][PROBE_LOBE_COEFFICIENT] = lobe;
+#endif
     barrier();
 
     float n = 0.0;

@@ -17,6 +17,28 @@ from app.gl.shaders import compute_program, set_uniforms
 
 HEADER = "layout(local_size_x = 64) in;\nuniform uint count;\n"
 
+
+def probe_textures(ctx, grid, texels: dict) -> list:
+    """RGBA32F probe textures of `grid` (nx, ny, nz), texture number t holding texels[t] ((count,
+    4), probe index = i + nx (j + ny k)), trilinear, each bound to its unit (probe_unit). Release
+    them when done."""
+    import moderngl
+    from app.render.probes import probe_unit
+    textures = []
+    for t, values in texels.items():
+        tex = ctx.texture3d(grid, 4, np.ascontiguousarray(values, np.float32).tobytes(), dtype="f4")
+        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        tex.use(probe_unit(t))
+        textures.append(tex)
+    return textures
+
+
+def probe_texel_centres(grid) -> np.ndarray:
+    """The probes' positions (count, 3) in probe index order, over the box [-1, 1]^3."""
+    ijk = np.stack(np.meshgrid(*(np.arange(n) for n in grid), indexing="ij"), -1).reshape(-1, 3)
+    ijk = ijk[np.lexsort((ijk[:, 0], ijk[:, 1], ijk[:, 2]))]   # probe index = i + nx (j + ny k)
+    return (ijk + 0.5) / np.asarray(grid) * 2.0 - 1.0
+
 # lib/probes.glsl probe_fetch at points x (3 floats each): per point every coefficient's rgb
 # (3 * SH_COUNT floats, coefficient-major) and then the sun's transmittance.
 PROBE_FETCH_KERNEL = """

@@ -269,24 +269,15 @@ def test_probe_fetch_unpacks_every_coefficient(ctx, order, grey):
     """lib/probes.glsl probe_fetch at the probes' texel centres against the NumPy unpacking of
     random textures in the packing of lib/probe_packing.glsl: every coefficient up to the order
     (times the radiance scale), zeros above it, and the sun's transmittance."""
-    import moderngl
-    from glsl_harness import PROBE_FETCH_KERNEL, run_kernel
+    from glsl_harness import PROBE_FETCH_KERNEL, probe_texel_centres, probe_textures, run_kernel
     from app.render.probes import probe_unit
     grid = (3, 2, 4)
     count = grid[0] * grid[1] * grid[2]
     ids = (GREY_TEXTURES_FOR_ORDER if grey else TEXTURES_FOR_ORDER)[order]
     rng = np.random.default_rng(order + 10 * grey)
     texels = {t: rng.uniform(0.05, 1.0, (count, 4)).astype(np.float32) for t in ids}
-    textures = []
-    for t in ids:
-        tex = ctx.texture3d(grid, 4, texels[t].tobytes(), dtype="f4")
-        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        tex.use(probe_unit(t))
-        textures.append(tex)
-    ijk = np.stack(np.meshgrid(*(np.arange(n) for n in grid), indexing="ij"), -1).reshape(-1, 3)
-    order_zyx = np.lexsort((ijk[:, 0], ijk[:, 1], ijk[:, 2]))   # probe index = i + nx (j + ny k)
-    ijk = ijk[order_zyx]
-    x = ((ijk + 0.5) / np.asarray(grid) * 2.0 - 1.0).astype(np.float32)   # box [-1, 1]^3
+    textures = probe_textures(ctx, grid, texels)
+    x = probe_texel_centres(grid).astype(np.float32)
     sh_count = (max(order, 2) + 1) ** 2
     try:
         out = run_kernel(ctx, PROBE_FETCH_KERNEL, [x.ravel()], (count, 3 * sh_count + 1),

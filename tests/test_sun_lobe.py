@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from app.twins import sun_lobe
-from glsl_harness import run_kernel
+from glsl_harness import probe_texel_centres, probe_textures, run_kernel
 
 MU, W = np.polynomial.legendre.leggauss(200)
 
@@ -172,7 +172,6 @@ def test_probe_inscattered_adds_the_convolved_lobe(ctx):
     """lib/probes.glsl probe_inscattered with PROBE_SUN_LOBE at the probes' texel centres, against
     NumPy: the convolved bands of the unpacked coefficients plus the lobe's amplitude (channels
     49 .. 51) times the convolved residual at d . s, clamped at 0."""
-    import moderngl
     from app.render.probe_layout import TEXTURES_FOR_ORDER, colour_channel
     from app.render.probes import probe_unit
     from app.twins.sh import sh_band_factors, sh_basis
@@ -183,15 +182,8 @@ def test_probe_inscattered_adds_the_convolved_lobe(ctx):
     texels = {t: rng.uniform(-0.05, 0.05, (count, 4)).astype(np.float32) for t in ids}
     texels[0][:, :3] = rng.uniform(0.5, 1.0, (count, 3))   # L00 keeps most results positive
     texels[12][:, 1:] = rng.uniform(2.0, 5.0, (count, 3))  # the lobe
-    textures = []
-    for t in ids:
-        tex = ctx.texture3d(grid, 4, texels[t].tobytes(), dtype="f4")
-        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        tex.use(probe_unit(t))
-        textures.append(tex)
-    ijk = np.stack(np.meshgrid(*(np.arange(n) for n in grid), indexing="ij"), -1).reshape(-1, 3)
-    ijk = ijk[np.lexsort((ijk[:, 0], ijk[:, 1], ijk[:, 2]))]   # probe index = i + nx (j + ny k)
-    x = (ijk + 0.5) / np.asarray(grid) * 2.0 - 1.0
+    textures = probe_textures(ctx, grid, texels)
+    x = probe_texel_centres(grid)
     sun = np.array([-0.3, 0.35, -0.89]) / np.linalg.norm([-0.3, 0.35, -0.89])
     d = rng.normal(size=(count, 3))
     d[:4] = sun                               # the lobe's peak

@@ -42,9 +42,9 @@ AUTO_WALKS_PER_HIGH_BAND = 128
 # backlit cloud, powers 1, 2, 3, 4, 6 and 10 at 128^3 x 256 gave 3.43, 3.07, 2.76, 2.76, 2.97 and
 # 3.17% against 3.49% without; at power 3 on variants of it (g = 0.9 and 0.7, side-, front- and
 # top-lit, albedo 0.8) every probe setting of 64^3 or more gained (front-lit 128^3 x 256: 5.04 ->
-# 3.32%, g = 0.9: 11.4 -> 9.6%), g = 0.6 (h = 0.22) changed nothing, and 32^3 x 256 lost up to 0.8
+# 3.32%, g = 0.9: 11.4 -> 9.6%), g = 0.6 (h = 0.22) changed nothing, and 32^3 x 256 lost up to 1.4
 # points backlit (the lobe's amplitude changes faster near the rim than 32^3 probes resolve) and
-# gained up to 1.6 points front- or side-lit. The lobe costs no memory (texture 12's spare
+# gained up to 1.5 points front- or side-lit. The lobe costs no memory (the last texture's spare
 # channels), about 2% of the bake and 3% of a raymarched frame.
 SUN_LOBE_POWER = 3.0
 SUN_LOBE_MIN_G = 0.2

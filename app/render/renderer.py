@@ -218,7 +218,8 @@ class Renderer:
         return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
                 spec.layout, spec.adaptive_strength, spec.adaptive_indicator,
                 self.resources.use_majorant_grid, self.walk_sun, self.walk_adaptive,
-                self.probe_sun_lobe, (self.light_max_side, self.light_min_side, self.light_follows_probes,
+                self.probe_sun_lobe,
+                (self.light_max_side, self.light_min_side, self.light_follows_probes,
                  self.light_precision)
                 if self.walk_sun == "grid" else None)
 

@@ -4,12 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-INV_4PI = 1.0 / (4.0 * np.pi)
-
-
-def hg(mu, g):
-    d = 1.0 + g * g - 2.0 * g * np.asarray(mu, np.float64)
-    return INV_4PI * (1.0 - g * g) / (d * np.sqrt(d))
+from .phase import INV_4PI, phase_hg as hg
 
 
 def low_bands(mu, x, n):

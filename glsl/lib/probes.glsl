@@ -13,8 +13,8 @@
 // is direct light, added at render time).
 //
 // PROBE_SUN_LOBE (0 or 1; default 0): 1 adds to the convolved bands a lobe about the sun's
-// direction, whose amplitude the probes hold beside their coefficients (lib/sun_lobe.glsl; colour
-// order 3, where app/render/probe_layout.py sun_lobe_g turns it on for forward scattering).
+// direction, whose amplitude the probes hold beside their coefficients (lib/sun_lobe.glsl; order 3,
+// where app/render/probe_layout.py sun_lobe_g turns it on for forward scattering).
 //
 // PROBE_WARP (0 or 1; default 0): 1 places the probe planes of each axis where an adaptive layout
 // put them (lib/probe_warp.glsl) instead of evenly; the textures and their packing are the same.

@@ -10,15 +10,8 @@
 // Zonal functions: HG_h(mu) = sum_l (2l+1)/(4 pi) h^l P_l(mu), so <r, r> = sum_{l>n} (2l+1)/(4 pi)
 // h^(2l) and, Funk-Hecke, the phase function HG_g convolved with r is r's series with (g h)^l:
 // HG_{g h}(mu) minus its bands up to n, evaluated in closed form.
+#include "lib/phase.glsl"
 uniform float sun_lobe_g;   // h, the lobe's Henyey-Greenstein g (> 0)
-
-const float SUN_LOBE_INV_4PI = 0.0795774715459476691;
-
-float sun_lobe_hg(float mu, float g)
-{
-    float d = 1.0 + g * g - 2.0 * g * mu;
-    return SUN_LOBE_INV_4PI * (1.0 - g * g) / (d * sqrt(d));
-}
 
 // sum_{l <= n} (2l+1)/(4 pi) x^l P_l(mu) (Legendre recurrence)
 float sun_lobe_low_bands(float mu, float x, int n)
@@ -34,13 +27,13 @@ float sun_lobe_low_bands(float mu, float x, int n)
         p_prev = p;
         p = p_next;
     }
-    return SUN_LOBE_INV_4PI * sum;
+    return INV_4PI * sum;
 }
 
 // HG_x(mu) above band n
 float sun_lobe_residual(float mu, float x, int n)
 {
-    return sun_lobe_hg(mu, x) - sun_lobe_low_bands(mu, x, n);
+    return phase_hg(mu, x) - sun_lobe_low_bands(mu, x, n);
 }
 
 // <r, r> for lobe g h above band n: (1/4pi) ((1 + h^2) / (1 - h^2)^2 - sum_{l<=n} (2l+1) h^(2l))
@@ -51,7 +44,7 @@ float sun_lobe_norm(float h, int n)
         low += float(2 * l + 1) * x_l;
         x_l *= x;
     }
-    return SUN_LOBE_INV_4PI * ((1.0 + x) / ((1.0 - x) * (1.0 - x)) - low);
+    return INV_4PI * ((1.0 + x) / ((1.0 - x) * (1.0 - x)) - low);
 }
 
 // The function the walks are projected onto: r(mu) / <r, r>, mu = walk direction . s.
