@@ -28,10 +28,10 @@ void main()
     // Four nodes per iteration: at most 1024 iterations for the largest table (4096 rows), well
     // inside llvmpipe's loop limit even at 16 lanes per SIMD batch.
     for (; i <= last; i += 4) {
-        a = max(a, texelFetch(transfer_function, ivec2(i, 0), 0).a);
-        a = max(a, texelFetch(transfer_function, ivec2(min(i + 1, last), 0), 0).a);
-        a = max(a, texelFetch(transfer_function, ivec2(min(i + 2, last), 0), 0).a);
-        a = max(a, texelFetch(transfer_function, ivec2(min(i + 3, last), 0), 0).a);
+        a = max(a, TRANSFER_ENTRY(i).a);
+        a = max(a, TRANSFER_ENTRY(min(i + 1, last)).a);
+        a = max(a, TRANSFER_ENTRY(min(i + 2, last)).a);
+        a = max(a, TRANSFER_ENTRY(min(i + 3, last)).a);
     }
     imageStore(majorant_out, c, vec4(density_scale * a * majorant_safety));
 }

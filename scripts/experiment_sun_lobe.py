@@ -9,7 +9,8 @@ Usage (GPU): python scripts/experiment_sun_lobe.py OUT.json SETTINGS REFERENCE_S
   LOBES     lobe g = (scene's g)^p for each p, 0 for none; e.g. 0,3 (the bands above the order
             extrapolated from the top two instead were measured too: bench/h100-sun-lobe)
   CHANGES   scene changes as JSON, each its own scene: '{"anisotropy": 0.9}',
-            '{"light": [1, 0.2, 0]}' (the sun's direction), '{"albedo": 0.8}'"""
+            '{"light": [1, 0.2, 0]}' (the sun's direction), '{"albedo": 0.8}', and probe
+            settings '{"probes": {"layout": "adaptive", "adaptive_indicator": "sun"}}'"""
 import json
 import sys
 from dataclasses import replace
@@ -55,7 +56,8 @@ for n_change, change in enumerate(changes):
     rim = lum >= np.quantile(lum, 0.9)
     for grid, walks in settings:
         for lobe in lobes:
-            s = base.replace(probes=replace(base.probes, grid=(grid,) * 3, samples=walks, sh_order=3))
+            s = base.replace(probes=replace(base.probes, grid=(grid,) * 3, samples=walks, sh_order=3,
+                                            **change.get("probes", {})))
             layout_module.SUN_LOBE_POWER = lobe
             layout_module.SUN_LOBE_MIN_G = 0.0
             r.probe_sun_lobe = lobe > 0

@@ -24,7 +24,7 @@ import pytest
 
 from app.twins import rng as nrng
 from app.twins.camera import camera_frame
-from app.gl.textures import transfer_texture, volume_texture
+from app.gl.textures import TransferTable, volume_texture
 from app.twins.medium import albedo_at, box_intersect, density_at, sigma_t_at
 from app.scene import CameraSpec
 from app.transfer import lookup
@@ -279,7 +279,7 @@ def _voxel_centres(volume):
 
 def _run_medium(ctx, volume, table, points, albedo=ALBEDO):
     vt = volume_texture(ctx, volume)
-    tt = transfer_texture(ctx, table)
+    tt = TransferTable(ctx, table)
     try:
         vt.use(0)
         tt.use(1)
@@ -346,6 +346,44 @@ def test_constant_table_is_exact(ctx):
     assert np.all(alb == 1.0)
     assert np.all(sigma_t == np.float32(DENSITY_SCALE * 0.75))
     assert d.min() < 0.2 and d.max() > 0.8  # the densities did vary
+
+
+def test_transfer_table_binding_matches_the_shader():
+    """Compute passes read the transfer table from the storage buffer TransferTable.use binds."""
+    import re
+    from app.gl.textures import TRANSFER_TABLE_BINDING
+    from app.paths import GLSL_DIR
+    text = (GLSL_DIR / "lib" / "medium.glsl").read_text()
+    bindings = re.findall(r"binding = (\d+)\) readonly buffer TransferTable", text)
+    assert bindings == [str(TRANSFER_TABLE_BINDING)]
+
+
+@pytest.mark.parametrize("from_buffer", [0, 1])
+def test_transfer_lookup_reads_the_table_it_names(ctx, from_buffer):
+    """TRANSFER_FROM_BUFFER 1 reads the storage buffer, 0 the texture: with the texture holding the
+    table halved, sigma_t follows the buffer's table or exactly half of it."""
+    volume = _float_volume()
+    table = _table()
+    pts = _points(volume, n=500)
+    _, want, _ = _run_medium(ctx, volume, table, pts)
+    halved = TransferTable(ctx, table * 0.5)
+    vt = volume_texture(ctx, volume)
+    tt = TransferTable(ctx, table)
+    try:
+        vt.use(0)
+        tt.use(1)
+        halved.texture.use(1)   # the texture unit holds the halved table, the buffer the table
+        uniforms = {"volume_density": 0, "transfer_function": 1, "transfer_size": len(table),
+                    "density_scale": DENSITY_SCALE, "albedo": ALBEDO,
+                    "box_half_extent": tuple(float(v) for v in volume.half_extent)}
+        p = np.ascontiguousarray(pts, np.float32)
+        out = run_kernel(ctx, MEDIUM_KERNEL, [p.ravel()], (len(p), 5), uniforms=uniforms,
+                         count=len(p), defines={"TRANSFER_FROM_BUFFER": from_buffer})
+    finally:
+        for obj in (halved, vt, tt):
+            obj.release()
+    assert want.max() > 0
+    np.testing.assert_array_equal(out[:, 1], want if from_buffer else want * np.float32(0.5))
 
 
 def test_density_twin_follows_spec():

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.gl.textures import transfer_texture, volume_texture
+from app.gl.textures import TransferTable, volume_texture
 from app.render.renderer import Renderer
 from app.scene import parse_scene
 from app.twins.medium import sigma_t_at
@@ -37,7 +37,7 @@ def _fetch(ctx, x, *, grid, values, volume, table, density_scale, visibility):
     probe_tex = ctx.texture3d(grid, 4, values.astype(np.float32).tobytes(), dtype="f4")
     probe_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
     probe_tex.repeat_x = probe_tex.repeat_y = probe_tex.repeat_z = False
-    vt, tt = volume_texture(ctx, volume), transfer_texture(ctx, table)
+    vt, tt = volume_texture(ctx, volume), TransferTable(ctx, table)
     try:
         probe_tex.use(2)
         vt.use(0)

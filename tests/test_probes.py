@@ -161,6 +161,22 @@ def test_raymarch_fragment_equals_compute(ctx):
     np.testing.assert_allclose(images["fragment"], images["compute"], rtol=1e-5, atol=1e-6)
 
 
+def test_transfer_table_from_buffer_changes_no_image(ctx, monkeypatch):
+    """Compute passes read the transfer table from a storage buffer on a GPU and with texelFetch on
+    llvmpipe (app/gl/shaders.py transfer_from_buffer): the same values, so the same images."""
+    import app.gl.shaders as shaders
+    images = {}
+    for from_buffer in (False, True):
+        monkeypatch.setattr(shaders, "transfer_from_buffer", lambda ctx, v=from_buffer: v)
+        r = _renderer(ctx, probes={"grid": [4, 4, 4], "samples": 32})
+        r.bake(seed=1)
+        images[from_buffer] = [r.render(m, spp=2, seed=1).image for m in ("pt", "raymarch", "probes")]
+        r.release()
+    for texture_image, buffer_image in zip(images[False], images[True]):
+        assert texture_image.max() > 0
+        np.testing.assert_array_equal(buffer_image, texture_image)
+
+
 def _raymarch_frames(r, frames, seed=3):
     acc = r.begin("raymarch", seed=seed)
     r.add_samples(frames)

@@ -89,7 +89,8 @@ def _release_check(argv: list[str]) -> int:
         seen.extend(view.acc.texture for view in s.views.values() if view.acc is not None)
         if s.probe_grid is not None:
             seen.extend(s.probe_grid.textures)
-        seen.extend([s.renderer.resources.volume_tex, s.renderer.resources.transfer_tex])
+        transfer = s.renderer.resources.transfer_gpu
+        seen.extend([s.renderer.resources.volume_tex, transfer.texture, transfer.buffer])
         seen.extend(p.program for p in v._passes.values())
         original_close(self)
 

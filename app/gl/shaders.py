@@ -12,6 +12,7 @@ from typing import Mapping
 import moderngl
 
 from ..paths import GLSL_DIR
+from .context import is_software
 
 GLSL_VERSION = "#version 430 core"
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
@@ -72,10 +73,23 @@ def _translate(log: str, files: list[str]) -> str:
     return re.sub(r"\b(\d+)[:(](\d+)\)?", repl, log)
 
 
+def transfer_from_buffer(ctx: moderngl.Context) -> bool:
+    """Whether compute passes read the transfer table from its storage buffer (lib/medium.glsl
+    TRANSFER_FROM_BUFFER) rather than with texelFetch: measured faster on the H100 (raymarched
+    frame 5 to 17%, path-traced sample 4 to 6%; bench/h100-transfer-buffer), slower on llvmpipe
+    (raymarched frame about 50%, bake about 30%), so on a GPU only. The same values either way."""
+    return not is_software(ctx)
+
+
+def compute_defines(ctx: moderngl.Context) -> dict:
+    """Defines every compute pass on this device gets (a caller's own defines win)."""
+    return {"TRANSFER_FROM_BUFFER": 1} if transfer_from_buffer(ctx) else {}
+
+
 def compute_program(ctx: moderngl.Context, name: str,
                     defines: Mapping[str, object] | None = None,
                     text: str | None = None) -> moderngl.ComputeShader:
-    source, files = load_source(name, defines, text)
+    source, files = load_source(name, {**compute_defines(ctx), **(defines or {})}, text)
     try:
         return ctx.compute_shader(source)
     except moderngl.Error as exc:

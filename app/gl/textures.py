@@ -66,10 +66,29 @@ def volume_texture(ctx: moderngl.Context, volume: Volume) -> moderngl.Texture3D:
     return tex
 
 
-def transfer_texture(ctx: moderngl.Context, table: np.ndarray) -> moderngl.Texture:
-    """The RGBA table as an N x 1 RGBA32F texture (read with texelFetch and interpolated exactly)."""
-    table = np.ascontiguousarray(table, np.float32)
-    tex = ctx.texture((len(table), 1), 4, table.tobytes(), dtype="f4")
-    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-    tex.repeat_x = tex.repeat_y = False
-    return tex
+# Storage-buffer binding of the transfer table (lib/medium.glsl TransferTable; bindings 0 to 7 are
+# the passes' own buffers).
+TRANSFER_TABLE_BINDING = 8
+
+
+class TransferTable:
+    """The RGBA table on the GPU twice, with the same float32 values: an N x 1 RGBA32F texture
+    (read with texelFetch and interpolated exactly) and a storage buffer, which compute passes
+    read on a GPU (lib/medium.glsl TRANSFER_FROM_BUFFER; app/gl/shaders.py transfer_from_buffer)."""
+
+    def __init__(self, ctx: moderngl.Context, table: np.ndarray):
+        data = np.ascontiguousarray(table, np.float32)
+        self.texture = ctx.texture((len(data), 1), 4, data.tobytes(), dtype="f4")
+        self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.texture.repeat_x = self.texture.repeat_y = False
+        self.buffer = ctx.buffer(data.tobytes())
+
+    def use(self, unit: int) -> None:
+        """Binds the texture to `unit` and the buffer to TRANSFER_TABLE_BINDING."""
+        self.texture.use(unit)
+        self.buffer.bind_to_storage_buffer(TRANSFER_TABLE_BINDING)
+
+    def release(self) -> None:
+        self.texture.release()
+        self.buffer.release()
+

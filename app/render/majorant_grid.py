@@ -12,10 +12,11 @@ import moderngl
 import numpy as np
 
 from ..gl.shaders import compute_program, set_uniforms
+from ..gl.textures import TransferTable
 from ..twins.majorant_grid import MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_bound
 from ..volume import Volume
 
-# Texture units: 0 volume, 1 transfer function, 2..8 probes, 9 light transmittance (raymarcher).
+# Texture units: 0 volume, 1 transfer function (and its storage buffer, binding 8), 2..8 probes, 9 light transmittance (raymarcher).
 MAJORANT_UNIT = 10   # the majorant grid, read by the tracking passes
 RANGE_UNIT = 11      # the density ranges, read only while the grid is built
 
@@ -59,11 +60,11 @@ class MajorantGrid:
             self.cells = cells
         self.range_tex.write(payload.tobytes())
 
-    def build(self, transfer_tex: moderngl.Texture, table: np.ndarray, density_scale: float,
+    def build(self, transfer: TransferTable, table: np.ndarray, density_scale: float,
               transfer_unit: int) -> None:
         """Majorant per macrocell under the current transfer function and density_scale (GPU)."""
         program = _program(self.ctx)
-        transfer_tex.use(transfer_unit)
+        transfer.use(transfer_unit)
         self.range_tex.use(RANGE_UNIT)
         set_uniforms(program, {"density_range": RANGE_UNIT, "transfer_function": transfer_unit,
                                "transfer_size": int(len(table)),

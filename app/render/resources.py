@@ -9,7 +9,7 @@ import moderngl
 import numpy as np
 
 from ..environment_map import EnvironmentMap, load_scene_environment
-from ..gl.textures import transfer_texture, volume_texture
+from ..gl.textures import TransferTable, volume_texture
 from ..twins.environment_map import Distribution
 from ..twins.medium import majorant
 from ..scene import Scene
@@ -50,7 +50,7 @@ class SceneResources:
         self.scene: Scene | None = None
         self.volume: Volume | None = None
         self.volume_tex = None
-        self.transfer_tex = None
+        self.transfer_gpu = None
         self.table: np.ndarray | None = None
         self.environment: EnvironmentMap | None = None   # the scene's map, None: constant
         self.environment_tex = None
@@ -91,9 +91,9 @@ class SceneResources:
             self.volume_version += 1
         if old is None or scene.transfer_function != old.transfer_function:
             self.table = transfer_table(scene.transfer_function)
-            if self.transfer_tex is not None:
-                self.transfer_tex.release()
-            self.transfer_tex = transfer_texture(self.ctx, self.table)
+            if self.transfer_gpu is not None:
+                self.transfer_gpu.release()
+            self.transfer_gpu = TransferTable(self.ctx, self.table)
             changed.add("transfer")
         if old is None or (scene.density_scale, scene.albedo, scene.anisotropy, scene.max_bounces) != (
                 old.density_scale, old.albedo, old.anisotropy, old.max_bounces):
@@ -109,7 +109,7 @@ class SceneResources:
             self.majorant_grid.set_volume(self.volume)
         key = (self.volume_version, scene.transfer_function, scene.density_scale)
         if key != self._majorant_key:
-            self.majorant_grid.build(self.transfer_tex, self.table, scene.density_scale, TRANSFER_UNIT)
+            self.majorant_grid.build(self.transfer_gpu, self.table, scene.density_scale, TRANSFER_UNIT)
             self._majorant_key = key
         return changed
 
@@ -184,7 +184,7 @@ class SceneResources:
 
     def bind(self) -> None:
         self.volume_tex.use(VOLUME_UNIT)
-        self.transfer_tex.use(TRANSFER_UNIT)
+        self.transfer_gpu.use(TRANSFER_UNIT)
         self.majorant_grid.bind()
         if self.environment_tex is not None:
             self.environment_tex.use(ENVIRONMENT_MAP_UNIT)
@@ -199,7 +199,7 @@ class SceneResources:
         return {"truncated_paths": truncated, "nonfinite_samples": nonfinite}
 
     def release(self) -> None:
-        for obj in (self.volume_tex, self.transfer_tex, self.stats, self.environment_tex,
+        for obj in (self.volume_tex, self.transfer_gpu, self.stats, self.environment_tex,
                     self.environment_cdf_tex):
             if obj is not None:
                 obj.release()

@@ -9,6 +9,21 @@ uniform float albedo;
 uniform vec3 box_half_extent;
 uniform float majorant;               // >= sigma_t everywhere in the box
 
+// The transfer table's entry i. Every tracking step waits on this lookup after its density fetch.
+// TRANSFER_FROM_BUFFER (compute passes on a GPU, app/gl/shaders.py transfer_from_buffer): from a
+// storage buffer holding the same floats as the texture (app/gl/textures.py TransferTable), a
+// load through the data cache that waits less than a texelFetch through the texture unit; else
+// (fragment shaders, which need not have storage buffers, and llvmpipe) from the texture.
+#if !defined(TRANSFER_FROM_BUFFER)
+#define TRANSFER_FROM_BUFFER 0
+#endif
+#if TRANSFER_FROM_BUFFER
+layout(std430, binding = 8) readonly buffer TransferTable { vec4 transfer_entries[]; };
+#define TRANSFER_ENTRY(i) transfer_entries[i]
+#else
+#define TRANSFER_ENTRY(i) texelFetch(transfer_function, ivec2(i, 0), 0)
+#endif
+
 float density_at(vec3 p)
 {
     return texture(volume_density, p / (2.0 * box_half_extent) + 0.5).r;
@@ -20,8 +35,8 @@ vec4 transfer_at(float d)
 {
     float x = clamp(d, 0.0, 1.0) * float(transfer_size - 1);
     int i0 = min(int(x), transfer_size - 2);
-    vec4 a = texelFetch(transfer_function, ivec2(i0, 0), 0);
-    vec4 b = texelFetch(transfer_function, ivec2(i0 + 1, 0), 0);
+    vec4 a = TRANSFER_ENTRY(i0);
+    vec4 b = TRANSFER_ENTRY(i0 + 1);
     return a + (b - a) * (x - float(i0));
 }
 
