@@ -358,6 +358,18 @@ def test_transfer_table_binding_matches_the_shader():
     assert bindings == [str(TRANSFER_TABLE_BINDING)]
 
 
+def test_transfer_buffer_only_on_a_gpu_with_its_binding():
+    from types import SimpleNamespace
+    from app.gl.shaders import transfer_from_buffer
+
+    def device(renderer, bindings):
+        return SimpleNamespace(info={"GL_RENDERER": renderer,
+                                     "GL_MAX_SHADER_STORAGE_BUFFER_BINDINGS": bindings})
+    assert transfer_from_buffer(device("NVIDIA H100 80GB HBM3/PCIe/SSE2", 96))
+    assert not transfer_from_buffer(device("NVIDIA H100 80GB HBM3/PCIe/SSE2", 8))   # GL's minimum
+    assert not transfer_from_buffer(device("llvmpipe (LLVM 15.0.7, 256 bits)", 80))
+
+
 @pytest.mark.parametrize("from_buffer", [0, 1])
 def test_transfer_lookup_reads_the_table_it_names(ctx, from_buffer):
     """TRANSFER_FROM_BUFFER 1 reads the storage buffer, 0 the texture: with the texture holding the

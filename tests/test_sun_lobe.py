@@ -27,7 +27,9 @@ def test_twin_is_the_hg_series_above_band_n(h, n):
     np.testing.assert_allclose(2 * np.pi * np.sum(W * sun_lobe.residual(MU, h, n) ** 2),
                                sun_lobe.norm(h, n), rtol=1e-9)
     b = sun_lobe.hg(MU, h)
-    np.testing.assert_allclose(2 * np.pi * np.sum(W * b * sun_lobe.basis(MU, h, n)), 1.0, rtol=1e-9)
+    for g in (1.0, 0.8, 0.6):
+        np.testing.assert_allclose(2 * np.pi * np.sum(W * b * sun_lobe.basis(MU, h, n, g)), 1.0,
+                                   rtol=1e-9)
     # the phase function HG_g convolved with r: coefficients (g h)^l above band n (Funk-Hecke)
     g = 0.7
     c = legendre_coefficients(sun_lobe.convolved(MU, g, h, n), 40)
@@ -44,7 +46,7 @@ void main()
 {
     uint i = gl_GlobalInvocationID.x;
     if (i < count)
-        o[i] = vec2(sun_lobe_basis(mu[i], order), sun_lobe_convolved(mu[i], phase_g, order));
+        o[i] = vec2(sun_lobe_basis(mu[i], phase_g, order), sun_lobe_convolved(mu[i], phase_g, order));
 }
 """
 
@@ -54,7 +56,7 @@ def test_glsl_against_twin(ctx, h, g, n):
     mu = np.linspace(-1.0, 1.0, 1001)
     got = run_kernel(ctx, KERNEL, [mu.astype(np.float32)], (len(mu), 2),
                      uniforms={"sun_lobe_g": h, "phase_g": g, "order": n})
-    basis = sun_lobe.basis(mu, h, n)
+    basis = sun_lobe.basis(mu, h, n, g)
     conv = sun_lobe.convolved(mu, g, h, n)
     np.testing.assert_allclose(got[:, 0], basis, atol=2e-5 * np.abs(basis).max())
     np.testing.assert_allclose(got[:, 1], conv, atol=2e-5 * np.abs(conv).max())

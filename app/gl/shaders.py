@@ -13,6 +13,7 @@ import moderngl
 
 from ..paths import GLSL_DIR
 from .context import is_software
+from .textures import transfer_buffer_bindable
 
 GLSL_VERSION = "#version 430 core"
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
@@ -77,8 +78,9 @@ def transfer_from_buffer(ctx: moderngl.Context) -> bool:
     """Whether compute passes read the transfer table from its storage buffer (lib/medium.glsl
     TRANSFER_FROM_BUFFER) rather than with texelFetch: measured faster on the H100 (raymarched
     frame 5 to 17%, path-traced sample 4 to 6%; bench/h100-transfer-buffer), slower on llvmpipe
-    (raymarched frame about 50%, bake about 30%), so on a GPU only. The same values either way."""
-    return not is_software(ctx)
+    (raymarched frame about 50%, bake about 30%), so on a GPU only, and one with the buffer's
+    binding. The same values either way."""
+    return not is_software(ctx) and transfer_buffer_bindable(ctx)
 
 
 def compute_defines(ctx: moderngl.Context) -> dict:

@@ -71,6 +71,12 @@ def volume_texture(ctx: moderngl.Context, volume: Volume) -> moderngl.Texture3D:
 TRANSFER_TABLE_BINDING = 8
 
 
+def transfer_buffer_bindable(ctx: moderngl.Context) -> bool:
+    """Whether the device has storage-buffer binding TRANSFER_TABLE_BINDING (GL 4.3 promises only
+    0 to 7; NVIDIA's and Mesa's drivers have dozens)."""
+    return int(ctx.info.get("GL_MAX_SHADER_STORAGE_BUFFER_BINDINGS", 0)) > TRANSFER_TABLE_BINDING
+
+
 class TransferTable:
     """The RGBA table on the GPU twice, with the same float32 values: an N x 1 RGBA32F texture
     (read with texelFetch and interpolated exactly) and a storage buffer, which compute passes
@@ -82,11 +88,13 @@ class TransferTable:
         self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.texture.repeat_x = self.texture.repeat_y = False
         self.buffer = ctx.buffer(data.tobytes())
+        self.bindable = transfer_buffer_bindable(ctx)
 
     def use(self, unit: int) -> None:
-        """Binds the texture to `unit` and the buffer to TRANSFER_TABLE_BINDING."""
+        """Binds the texture to `unit` and the buffer to TRANSFER_TABLE_BINDING (where it exists)."""
         self.texture.use(unit)
-        self.buffer.bind_to_storage_buffer(TRANSFER_TABLE_BINDING)
+        if self.bindable:
+            self.buffer.bind_to_storage_buffer(TRANSFER_TABLE_BINDING)
 
     def release(self) -> None:
         self.texture.release()

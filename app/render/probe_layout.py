@@ -45,7 +45,10 @@ AUTO_WALKS_PER_HIGH_BAND = 128
 # 3.32%, g = 0.9: 11.4 -> 9.6%), g = 0.6 (h = 0.22) changed nothing, and 32^3 x 256 lost up to 1.4
 # points backlit (the lobe's amplitude changes faster near the rim than 32^3 probes resolve) and
 # gained up to 1.5 points front- or side-lit. The lobe costs no memory (the last texture's spare
-# channels), about 2% of the bake and 3% of a raymarched frame.
+# channels), about 2% of the bake and 3% of a raymarched frame. Those powers were measured with the
+# amplitude fitted to the radiance; fitted for the phase function (lib/sun_lobe.glsl, today's),
+# power 3 stays: backlit 2.73% (2 gives 2.94, 4 2.78), front-lit 2.84% (2.59, 3.03), g = 0.9
+# 8.34% (9.10, 7.45) at 128^3 x 256 (bench/h100-sun-lobe/fit_phase_weighted.json).
 SUN_LOBE_POWER = 3.0
 SUN_LOBE_MIN_G = 0.2
 

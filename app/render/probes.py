@@ -310,6 +310,7 @@ class ProbeGrid:
             self.radiance_scale = radiance_scale(scene, resources.environment)
         uniforms["probe_radiance_scale"] = self.radiance_scale
         uniforms["sun_lobe_g"] = self.sun_lobe
+        uniforms["sun_lobe_phase_g"] = float(scene.anisotropy)   # what the lobe's fit weights by
         if self.warp_texture is not None:
             self.warp_texture.use(PROBE_WARP_UNIT)
             uniforms["probe_warp"] = PROBE_WARP_UNIT

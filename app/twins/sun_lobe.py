@@ -22,8 +22,10 @@ def norm(h, n):
     return INV_4PI * ((1.0 + x) / (1.0 - x) ** 2 - sum((2 * l + 1) * x ** l for l in range(n + 1)))
 
 
-def basis(mu, h, n):
-    return residual(mu, h, n) / norm(h, n)
+def basis(mu, h, n, g):
+    """What the walks are projected onto for phase-function g: HG_{g^2 h} above band n over
+    <r_gh, r_gh> (the amplitude that minimises the error the renderers see)."""
+    return residual(mu, g * g * h, n) / norm(g * h, n)
 
 
 def convolved(mu, g, h, n):

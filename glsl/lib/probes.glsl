@@ -66,7 +66,6 @@ vec3 probe_walk_direction(uint probe_index, uint pass_index, uint slot, uint dir
 
 #ifdef PROBE_SAMPLING
 #if PROBE_SUN_LOBE
-uniform float sun_lobe_phase_g;   // the phase function's g, which the lobe is convolved with
 vec3 probe_fetched_lobe;          // the sun lobe's amplitude that probe_fetch read last
 #endif
 // The textures this build reads, by slot (lib/probe_packing.glsl; app/render/probes.py binds them).

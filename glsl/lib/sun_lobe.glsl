@@ -4,14 +4,23 @@
 // above the probes' order still carry much of that peak, which truncated SH spread and ring.
 //
 // The probes store L ~ P_n L + a r(omega . s), P_n L the SH projection up to order n, and
-// r = b - P_n b the part of the lobe b(mu) = HG_h(mu) above band n (h = sun_lobe_g). r is
-// orthogonal to every band up to n, so the least-squares a is <L, r> / <r, r>: one more projection
-// of the walks, onto r / <r, r>, and a = 0 where L has nothing of the lobe beyond band n.
+// r = b - P_n b the part of the lobe b(mu) = HG_h(mu) above band n (h = sun_lobe_g).
 // Zonal functions: HG_h(mu) = sum_l (2l+1)/(4 pi) h^l P_l(mu), so <r, r> = sum_{l>n} (2l+1)/(4 pi)
 // h^(2l) and, Funk-Hecke, the phase function HG_g convolved with r is r's series with (g h)^l:
 // HG_{g h}(mu) minus its bands up to n, evaluated in closed form.
+//
+// Which a: the renderers never see L, only L convolved with the phase function, which scales band l
+// by g^l. So a minimises what they see wrong, sum_{l>n} g^(2l) |L_l - a r_l|^2 (L_l: band l of
+// L; the bands up to n are the same either way, r being orthogonal to them):
+//     a = sum_{l>n} g^(2l) <L_l, r_l> / sum_{l>n} g^(2l) |r_l|^2 = <L, r'> / <r_gh, r_gh>,
+// r' = the part above band n of HG_{g^2 h} (its band-l coefficient g^(2l) h^l), r_gh that of
+// HG_{g h}. One more projection of the walks, onto r' / <r_gh, r_gh>; a lobe of amplitude A
+// (L_l = A r_l above n) still gives a = A, and L with nothing of the lobe beyond band n gives 0.
+// (Fitting L itself, a = <L, r> / <r, r>, weights the high bands the renderer damps as much as the
+// low ones; projecting onto the broader r' also has less noise: bench/h100-sun-lobe.)
 #include "lib/phase.glsl"
-uniform float sun_lobe_g;   // h, the lobe's Henyey-Greenstein g (> 0)
+uniform float sun_lobe_g;         // h, the lobe's Henyey-Greenstein g (> 0)
+uniform float sun_lobe_phase_g;   // the scene's phase-function g: the lobe is fitted for it and convolved with it
 
 // sum_{l <= n} (2l+1)/(4 pi) x^l P_l(mu) (Legendre recurrence)
 float sun_lobe_low_bands(float mu, float x, int n)
@@ -47,10 +56,11 @@ float sun_lobe_norm(float h, int n)
     return INV_4PI * ((1.0 + x) / ((1.0 - x) * (1.0 - x)) - low);
 }
 
-// The function the walks are projected onto: r(mu) / <r, r>, mu = walk direction . s.
-float sun_lobe_basis(float mu, int n)
+// The function the walks are projected onto for a phase function of g: r'(mu) / <r_gh, r_gh>,
+// mu = walk direction . s.
+float sun_lobe_basis(float mu, float g, int n)
 {
-    return sun_lobe_residual(mu, sun_lobe_g, n) / sun_lobe_norm(sun_lobe_g, n);
+    return sun_lobe_residual(mu, g * g * sun_lobe_g, n) / sun_lobe_norm(g * sun_lobe_g, n);
 }
 
 // The phase function (g) convolved with r, at mu = d . s: what a lobe of amplitude a in-scatters
