@@ -6,8 +6,9 @@ reference's pixels (image / reference there, its share of the squared error), ba
 Usage (GPU): python scripts/experiment_sun_lobe.py OUT.json SETTINGS REFERENCE_SPP_PER_HALF LOBES
 [CHANGES ...]
   SETTINGS  GRIDxWALKS,...   e.g. 128x256,64x512
-  LOBES     lobe g = (scene's g)^p for each p, 0 for none; e.g. 0,3 (the bands above the order
-            extrapolated from the top two instead were measured too: bench/h100-sun-lobe)
+  LOBES     lobe g = (scene's g)^p for each p, 0 for none, "auto" for the shape the pilot chooses
+            (app/render/sun_lobe_fit.py); e.g. 0,3,auto (the bands above the order extrapolated
+            from the top two instead were measured too: bench/h100-sun-lobe)
   CHANGES   scene changes as JSON, each its own scene: '{"anisotropy": 0.9}',
             '{"light": [1, 0.2, 0]}' (the sun's direction), '{"albedo": 0.8}', and probe
             settings '{"probes": {"layout": "adaptive", "adaptive_indicator": "sun"}}'"""
@@ -28,7 +29,7 @@ from app.volume import load_volume
 out_path = sys.argv[1]
 settings = [tuple(int(v) for v in s.split("x")) for s in sys.argv[2].split(",")]
 half_spp = int(sys.argv[3])
-lobes = [float(p) for p in sys.argv[4].split(",")]
+lobes = [p if p == "auto" else float(p) for p in sys.argv[4].split(",")]
 changes = [json.loads(a) for a in sys.argv[5:]] or [{}]
 ctx = create_headless_context()
 device = describe(ctx)
@@ -58,9 +59,11 @@ for n_change, change in enumerate(changes):
         for lobe in lobes:
             s = base.replace(probes=replace(base.probes, grid=(grid,) * 3, samples=walks, sh_order=3,
                                             **change.get("probes", {})))
-            layout_module.SUN_LOBE_POWER = lobe
+            auto = lobe == "auto"
+            layout_module.SUN_LOBE_POWER = 3.0 if auto else lobe
             layout_module.SUN_LOBE_MIN_G = 0.0
-            r.probe_sun_lobe = lobe > 0
+            r.probe_sun_lobe = auto or lobe > 0
+            r.sun_lobe_fit = auto
             r.set_scene(s)
             r.invalidate()
             r.bake(seed=11)
@@ -75,6 +78,10 @@ for n_change, change in enumerate(changes):
                        rim_ratio=float(img[rim].mean() / ref[rim].mean()),
                        rim_share=float(sq[rim].sum() / sq.sum()),
                        bake_ms=bake_ms, render_ms=res.render_ms, frame_ms=res.render_ms / 16)
+            fit = r.last_sun_lobe_fit
+            if fit is not None:
+                row.update(fit_h=fit.h, fit_candidates=fit.candidates, fit_gains=fit.gains,
+                           fit_ms=fit.gpu_ms)
             print(json.dumps(row), flush=True)
             rows.append(row)
             if n_change == 0 and grid == 128 and walks == 256:

@@ -226,3 +226,104 @@ def test_every_program_that_reads_lobe_probes_compiles(ctx):
         render_program(ctx, "fullscreen.vert", "raymarch.frag", d).release()
         compute_program(ctx, "pathtrace.comp", {**d, "PROBE_LIGHTING": 1}).release()
         compute_program(ctx, "pathtrace.comp", {**d, "PROBE_LIGHTING": 2}).release()
+
+
+# ---------------------------------------------------------------------------------------------
+# The lobe's shape chosen per scene (app/render/sun_lobe_fit.py, glsl/sun_lobe_fit.comp)
+
+DIRECTIONS_KERNEL = """
+#include "lib/rng.glsl"
+#include "lib/directions.glsl"
+#include "lib/probes.glsl"
+layout(std430, binding = 0) writeonly buffer Out { vec4 o[]; };
+uniform uint directions;
+uniform uint walk_seed;
+uniform uint walk_pass;
+void main()
+{
+    uint i = gl_GlobalInvocationID.x;
+    if (i < count)
+        o[i] = vec4(probe_walk_direction(i / directions, walk_pass, i % directions, directions,
+                                         walk_seed), 0.0);
+}
+"""
+
+
+def test_lobe_amplitudes_glsl_against_twin(ctx):
+    import moderngl
+    from app.gl.shaders import compute_program, set_uniforms
+    probes, directions, seed, pass_index, g = 37, 64, 12345, 1, 0.8
+    hs = (0.64, 0.512, 0.4096)
+    dirs = run_kernel(ctx, DIRECTIONS_KERNEL, [], (probes * directions, 4),
+                      uniforms={"directions": directions, "walk_seed": seed,
+                                "walk_pass": pass_index},
+                      count=probes * directions, defines={"PROBE_SH_ORDER": 3, "PROBE_GREY": 0})
+    sun = np.array([-0.3, 0.35, -0.89])
+    sun /= np.linalg.norm(sun)
+    mu = (dirs[:, :3].astype(np.float64) @ sun).reshape(probes, directions)
+    rng = np.random.default_rng(7)
+    radiance = (0.3 + rng.uniform(size=(probes, directions, 3))
+                + 2.0 * sun_lobe.hg(mu, 0.6)[..., None]).astype(np.float32)
+    valid = rng.uniform(size=(probes, directions)) > 0.05
+    walks = np.concatenate([radiance, np.where(valid, 1.0, 2.0)[..., None]], axis=-1)
+    program = compute_program(ctx, "sun_lobe_fit.comp", {"PROBE_SH_ORDER": 3, "PROBE_GREY": 0,
+                                                         "PROBE_SUN_LOBE": 1,
+                                                         "SUN_LOBE_CANDIDATES": len(hs)})
+    first = 5   # outputs before this one's
+    walk_buffer = ctx.buffer(walks.astype(np.float32).tobytes())
+    out = ctx.buffer(reserve=16 * (first + probes * len(hs)))
+    try:
+        set_uniforms(program, {"probe_count": probes, "directions": directions, "seed": seed,
+                               "pass_index": pass_index, "first_output": first,
+                               "candidate_h": hs, "sun_lobe_g": hs[0], "sun_lobe_phase_g": g,
+                               "sun_direction": tuple(sun)})
+        walk_buffer.bind_to_storage_buffer(3)
+        out.bind_to_storage_buffer(0)
+        program.run((probes + 63) // 64)
+        ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
+        got = np.frombuffer(out.read(), np.float32).reshape(-1, 4)[first:].reshape(probes, len(hs), 4)
+    finally:
+        walk_buffer.release()
+        out.release()
+        program.release()
+    want, count = sun_lobe.lobe_amplitudes(mu, radiance, valid, hs, g, 3)
+    assert np.abs(want).max() > 0
+    np.testing.assert_allclose(got[..., :3], want, rtol=1e-4, atol=1e-4 * np.abs(want).max())
+    np.testing.assert_array_equal(got[..., 3], np.repeat(count[:, None], len(hs), axis=1))
+
+
+def test_fit_gains_twin_on_synthetic_amplitudes():
+    """Two independent noisy estimates of known amplitudes: the gain estimate is unbiased for the
+    error each lobe takes out less the noise of a bake of main_walks walks."""
+    rng = np.random.default_rng(3)
+    hs, g, n = (0.64, 0.512), 0.8, 3
+    true = np.stack([np.full((4000, 3), 0.5), np.full((4000, 3), 0.8)], axis=1)
+    sigma = np.array([0.6, 0.3])[None, :, None]   # one pass's noise per candidate
+    a = true + sigma * rng.standard_normal(true.shape)
+    b = true + sigma * rng.standard_normal(true.shape)
+    gains = sun_lobe.fit_gains(a, b, hs, g, n, pilot_walks=64, main_walks=256)
+    norms = np.array([sun_lobe.norm(g * h, n) for h in hs])
+    want = norms * 4000 * 3 * (np.array([0.25, 0.64]) - np.array([0.36, 0.09]) * 64 / 256)
+    np.testing.assert_allclose(gains, want, rtol=0.05)
+
+
+@pytest.mark.parametrize("power", [2, 4])
+def test_fit_chooses_the_lobe_the_probes_see(ctx, tmp_path, power):
+    """Probes under an environment map base + A HG_h(omega . s): the pilot picks h among g^2, g^3
+    and g^4 (the error the lobe removes is largest for the lobe that is there), and the bake's
+    probes hold it."""
+    from app.render.renderer import Renderer
+    g = 0.8
+    scene = _lobe_scene(tmp_path, g, g ** power, 0.7, 0.4, (-0.3, 0.35, -0.89))
+    scene = scene.replace(probes=scene.probes.__class__(**{**scene.probes.__dict__,
+                                                           "grid": (8, 8, 8), "samples": 256}))
+    r = Renderer(ctx, scene)
+    r.sun_lobe_fit = True
+    try:
+        r.bake(seed=3)
+        fit = r.last_sun_lobe_fit
+        assert fit is not None and fit.candidates == pytest.approx((g ** 2, g ** 3, g ** 4))
+        assert fit.h == pytest.approx(g ** power), fit
+        assert r.probe_grid.sun_lobe == pytest.approx(g ** power)
+    finally:
+        r.release()

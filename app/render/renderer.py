@@ -23,6 +23,7 @@ from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_
                                   SEGMENT_TARGET_INVOCATIONS, SOFTWARE_MIN_SIDE,
                                   LightTransmittance, min_side_for_probes)
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, sun_lobe_g
+from .sun_lobe_fit import SunLobeFit, SunLobeFitter
 from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
@@ -123,6 +124,14 @@ class Renderer:
         # Probes of order 3 also hold a lobe about the sun's direction where the scene
         # scatters forward (probe_layout.sun_lobe_g; lib/sun_lobe.glsl); False: never (comparisons).
         self.probe_sun_lobe = True
+        # True: the lobe's shape h = g^p chosen per scene by a pilot bake at each bake start
+        # (sun_lobe_fit.py); False (default): p = probe_layout.SUN_LOBE_POWER. Measured on the
+        # H100 (bench/h100-sun-lobe): 0.8-0.9 points better at g = 0.9, up to 0.14 worse
+        # elsewhere, the bench's cloud unchanged, and the pilot costs 2.5-7 ms a bake.
+        self.sun_lobe_fit = False
+        self.last_sun_lobe_fit: SunLobeFit | None = None   # the last bake start's choice
+        self._sun_lobe_fitter = SunLobeFitter(ctx)
+        self._fit_ms = 0.0   # GPU ms of the last bake start's pilot, not yet counted in a bake's time
         # A bake restarted by an edit starts from the previous probes (ProbeGrid.restart(warm)):
         # they fade out as the new walks come in; the finished probes are the cold bake's.
         self.bake_warm = True
@@ -311,6 +320,13 @@ class Renderer:
         env_map = self.resources.environment is not None
         lobe = (sun_lobe_g(self.scene.anisotropy, plan.sh_order)
                 if self.probe_sun_lobe else 0.0)
+        self.last_sun_lobe_fit = None
+        if lobe > 0.0 and self.sun_lobe_fit:
+            fit = self._sun_lobe_fitter.fit(self.resources, plan.box, plan.grid, spec.samples,
+                                            plan.grey, env_map, seed)
+            lobe = fit.h
+            self.last_sun_lobe_fit = fit
+            self._fit_ms += fit.gpu_ms
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
                          g.adaptive, g.environment_map, g.planes, g.sun_lobe) != (
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
@@ -334,7 +350,7 @@ class Renderer:
         if self.probes_current():
             return 0.0
         grid = self.start_bake(seed)
-        total = self._light_for_walks()
+        total = self._light_for_walks() + self._take_fit_ms()
         light = self._light if grid.sun == "grid" else None
         if progress is None:
             # One timed span: the passes queue up on the GPU with no wait between them.
@@ -351,6 +367,11 @@ class Renderer:
             progress(grid)
         self.last_bake_ms = total
         return total
+
+    def _take_fit_ms(self) -> float:
+        """The sun-lobe pilot's GPU ms since a bake's time last counted it (then 0)."""
+        ms, self._fit_ms = self._fit_ms, 0.0
+        return ms
 
     def _light_for_walks(self) -> float:
         """The light grid the walks read when walk_sun is "grid" (GPU ms if it was baked now; the
@@ -509,6 +530,7 @@ class Renderer:
                 seen = ms / ran
                 # (the first slice of a bake also runs the sun's pass)
                 self._probe_ms[key] = _slice_estimate(per_probe, seen)
+        ms += self._take_fit_ms()
         self.last_slice_ms = light_ms + ms
         return light_ms + ms
 
@@ -583,5 +605,6 @@ class Renderer:
         if self._acc is not None:
             self._acc.release()
         self._region_pass.release()
+        self._sun_lobe_fitter.release()
         self.resources.release()
         self.timer.release()
