@@ -104,7 +104,8 @@ void main()
             vec3 omega = probe_walk_direction(probe, pass_index, tid, directions, seed);
             sh_basis(omega, basis);
 #if PROBE_SUN_LOBE
-            lobe = sun_lobe_basis(dot(omega, sun_direction), sun_lobe_phase_g, PROBE_SH_ORDER);
+            lobe = sun_lobe_basis(dot(omega, sun_direction), sun_lobe_phase_g, sun_lobe_g,
+                                  PROBE_SH_ORDER);
 #endif
         }
     }

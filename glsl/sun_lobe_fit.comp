@@ -2,7 +2,7 @@
 // these numbers; NumPy twin: app/twins/sun_lobe.py lobe_amplitudes). One invocation per probe of a
 // pilot bake's pass, whose walks are in walk_radiance (probe_walks.comp): for each candidate h
 // (the lobe HG_h about the sun's direction, lib/sun_lobe.glsl) the lobe's amplitude as the bake
-// estimates it from these walks, a = 4 pi / N sum L_i r'(mu_i) / <r_gh, r_gh> per colour, and N.
+// estimates it from these walks, a = 4 pi / N sum L_i sun_lobe_basis(mu_i) per colour, and N.
 // Two passes (independent random rotations of the walks' direction set) give two independent
 // estimates; halves of one pass would not be (the two halves of a Fibonacci set are
 // complementary: their quadrature errors cancel, so their product is biased low).
@@ -47,13 +47,11 @@ void main()
         float mu = dot(probe_walk_direction(probe, pass_index, slot, directions, seed),
                        sun_direction);
         for (int k = 0; k < SUN_LOBE_CANDIDATES; ++k)
-            sum[k] += walk.rgb * sun_lobe_residual(mu, g * g * candidate_h[k], PROBE_SH_ORDER);
+            sum[k] += walk.rgb * sun_lobe_basis(mu, g, candidate_h[k], PROBE_SH_ORDER);
         count += 1.0;
     }
     for (int k = 0; k < SUN_LOBE_CANDIDATES; ++k) {
-        vec3 a = count > 0.0
-            ? 4.0 * PI * sum[k] / (count * sun_lobe_norm(g * candidate_h[k], PROBE_SH_ORDER))
-            : vec3(0.0);
+        vec3 a = count > 0.0 ? 4.0 * PI * sum[k] / count : vec3(0.0);
         lobe_amplitudes[first_output + probe * uint(SUN_LOBE_CANDIDATES) + uint(k)] = vec4(a, count);
     }
 }

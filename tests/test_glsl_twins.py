@@ -277,21 +277,27 @@ def _voxel_centres(volume):
     return (uvw - 0.5) * 2 * volume.half_extent.astype(np.float64)
 
 
-def _run_medium(ctx, volume, table, points, albedo=ALBEDO):
+def _run_medium(ctx, volume, table, points, albedo=ALBEDO, defines=None, texture_table=None):
+    """density, sigma_t and albedo at `points`; `texture_table`: another table in the texture
+    (the storage buffer keeps `table`), to see which of the two a build reads."""
     vt = volume_texture(ctx, volume)
     tt = TransferTable(ctx, table)
+    other = None if texture_table is None else TransferTable(ctx, texture_table)
     try:
         vt.use(0)
         tt.use(1)
+        if other is not None:
+            other.texture.use(1)
         uniforms = {"volume_density": 0, "transfer_function": 1, "transfer_size": len(table),
                     "density_scale": DENSITY_SCALE, "albedo": albedo,
                     "box_half_extent": tuple(float(v) for v in volume.half_extent)}
         pts = np.ascontiguousarray(points, np.float32)
         out = run_kernel(ctx, MEDIUM_KERNEL, [pts.ravel()], (len(pts), 5), uniforms=uniforms,
-                         count=len(pts))
+                         count=len(pts), defines=defines)
     finally:
-        vt.release()
-        tt.release()
+        for obj in (vt, tt, other):
+            if obj is not None:
+                obj.release()
     return out[:, 0], out[:, 1], out[:, 2:]
 
 
@@ -378,24 +384,10 @@ def test_transfer_lookup_reads_the_table_it_names(ctx, from_buffer):
     table = _table()
     pts = _points(volume, n=500)
     _, want, _ = _run_medium(ctx, volume, table, pts)
-    halved = TransferTable(ctx, table * 0.5)
-    vt = volume_texture(ctx, volume)
-    tt = TransferTable(ctx, table)
-    try:
-        vt.use(0)
-        tt.use(1)
-        halved.texture.use(1)   # the texture unit holds the halved table, the buffer the table
-        uniforms = {"volume_density": 0, "transfer_function": 1, "transfer_size": len(table),
-                    "density_scale": DENSITY_SCALE, "albedo": ALBEDO,
-                    "box_half_extent": tuple(float(v) for v in volume.half_extent)}
-        p = np.ascontiguousarray(pts, np.float32)
-        out = run_kernel(ctx, MEDIUM_KERNEL, [p.ravel()], (len(p), 5), uniforms=uniforms,
-                         count=len(p), defines={"TRANSFER_FROM_BUFFER": from_buffer})
-    finally:
-        for obj in (halved, vt, tt):
-            obj.release()
+    _, got, _ = _run_medium(ctx, volume, table, pts, defines={"TRANSFER_FROM_BUFFER": from_buffer},
+                            texture_table=table * 0.5)
     assert want.max() > 0
-    np.testing.assert_array_equal(out[:, 1], want if from_buffer else want * np.float32(0.5))
+    np.testing.assert_array_equal(got, want if from_buffer else want * np.float32(0.5))
 
 
 def test_density_twin_follows_spec():

@@ -3,6 +3,8 @@ series it is derived from, and the GLSL against the twin.
 
 Tolerances: the twin against Gauss-Legendre quadrature of its Legendre series, 1e-9 (float64);
 the GLSL (float32) against the twin, 2e-5 relative to the lobe's peak."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -46,7 +48,8 @@ void main()
 {
     uint i = gl_GlobalInvocationID.x;
     if (i < count)
-        o[i] = vec2(sun_lobe_basis(mu[i], phase_g, order), sun_lobe_convolved(mu[i], phase_g, order));
+        o[i] = vec2(sun_lobe_basis(mu[i], phase_g, sun_lobe_g, order),
+                    sun_lobe_convolved(mu[i], phase_g, order));
 }
 """
 
@@ -315,8 +318,7 @@ def test_fit_chooses_the_lobe_the_probes_see(ctx, tmp_path, power):
     from app.render.renderer import Renderer
     g = 0.8
     scene = _lobe_scene(tmp_path, g, g ** power, 0.7, 0.4, (-0.3, 0.35, -0.89))
-    scene = scene.replace(probes=scene.probes.__class__(**{**scene.probes.__dict__,
-                                                           "grid": (8, 8, 8), "samples": 256}))
+    scene = scene.replace(probes=replace(scene.probes, grid=(8, 8, 8), samples=256))
     r = Renderer(ctx, scene)
     r.sun_lobe_fit = True
     try:

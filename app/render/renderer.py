@@ -130,7 +130,7 @@ class Renderer:
         # elsewhere, the bench's cloud unchanged, and the pilot costs 2.5-7 ms a bake.
         self.sun_lobe_fit = False
         self.last_sun_lobe_fit: SunLobeFit | None = None   # the last bake start's choice
-        self._sun_lobe_fitter = SunLobeFitter(ctx)
+        self._sun_lobe_fitter: SunLobeFitter | None = None   # made when first asked for
         self._fit_ms = 0.0   # GPU ms of the last bake start's pilot, not yet counted in a bake's time
         # A bake restarted by an edit starts from the previous probes (ProbeGrid.restart(warm)):
         # they fade out as the new walks come in; the finished probes are the cold bake's.
@@ -322,6 +322,8 @@ class Renderer:
                 if self.probe_sun_lobe else 0.0)
         self.last_sun_lobe_fit = None
         if lobe > 0.0 and self.sun_lobe_fit:
+            if self._sun_lobe_fitter is None:
+                self._sun_lobe_fitter = SunLobeFitter(self.ctx)
             fit = self._sun_lobe_fitter.fit(self.resources, plan.box, plan.grid, spec.samples,
                                             plan.grey, env_map, seed)
             lobe = fit.h
@@ -605,6 +607,7 @@ class Renderer:
         if self._acc is not None:
             self._acc.release()
         self._region_pass.release()
-        self._sun_lobe_fitter.release()
+        if self._sun_lobe_fitter is not None:
+            self._sun_lobe_fitter.release()
         self.resources.release()
         self.timer.release()

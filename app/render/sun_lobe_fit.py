@@ -96,16 +96,16 @@ class SunLobeFitter:
         amplitudes = self.ctx.buffer(reserve=16 * 2 * outputs)
         try:
             pilot.restart((int(seed) * 0x9E3779B1 + PILOT_SEED) & 0xFFFFFFFF)
-            uniforms = {"probe_count": pilot.count, "directions": PILOT_WALKS,
-                        "seed": pilot.seed & 0xFFFFFFFF, "candidate_h": hs,
-                        "sun_lobe_g": hs[0], "sun_lobe_phase_g": float(scene.anisotropy)}
+            set_uniforms(self._program, {
+                **resources.uniforms(), **pilot.box_uniforms(resources), "probe_grid": pilot.grid,
+                "probe_count": pilot.count, "directions": PILOT_WALKS,
+                "seed": pilot.seed & 0xFFFFFFFF, "candidate_h": hs,
+                "sun_lobe_phase_g": float(scene.anisotropy)})
             self.timer.start()
             for pass_index in (0, 1):   # two independent passes of PILOT_WALKS walks
                 pilot.bake_pass(resources)   # its walks stay in walk_radiance
                 resources.bind()
-                set_uniforms(self._program, {**resources.uniforms(), **pilot.box_uniforms(resources),
-                                             **uniforms, "probe_grid": pilot.grid,
-                                             "pass_index": pass_index,
+                set_uniforms(self._program, {"pass_index": pass_index,
                                              "first_output": pass_index * outputs})
                 pilot.walk_radiance.bind_to_storage_buffer(3)
                 amplitudes.bind_to_storage_buffer(0)

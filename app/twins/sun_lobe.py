@@ -42,9 +42,8 @@ def lobe_amplitudes(mu, radiance, valid, hs, g, n):
     count = np.sum(valid, axis=1).astype(np.float64)
     out = np.zeros((mu.shape[0], len(hs), 3))
     for k, h in enumerate(hs):
-        s = np.sum(radiance * residual(mu, g * g * h, n)[..., None], axis=1)
-        out[:, k] = np.where(count[:, None] > 0,
-                             4.0 * np.pi * s / (np.maximum(count, 1)[:, None] * norm(g * h, n)), 0.0)
+        s = np.sum(radiance * basis(mu, h, n, g)[..., None], axis=1)
+        out[:, k] = np.where(count[:, None] > 0, 4.0 * np.pi * s / np.maximum(count, 1)[:, None], 0.0)
     return out, count
 
 

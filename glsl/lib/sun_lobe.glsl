@@ -56,11 +56,11 @@ float sun_lobe_norm(float h, int n)
     return INV_4PI * ((1.0 + x) / ((1.0 - x) * (1.0 - x)) - low);
 }
 
-// The function the walks are projected onto for a phase function of g: r'(mu) / <r_gh, r_gh>,
-// mu = walk direction . s.
-float sun_lobe_basis(float mu, float g, int n)
+// The function the walks are projected onto for a lobe h and a phase function of g:
+// r'(mu) / <r_gh, r_gh>, mu = walk direction . s.
+float sun_lobe_basis(float mu, float g, float h, int n)
 {
-    return sun_lobe_residual(mu, g * g * sun_lobe_g, n) / sun_lobe_norm(g * sun_lobe_g, n);
+    return sun_lobe_residual(mu, g * g * h, n) / sun_lobe_norm(g * h, n);
 }
 
 // The phase function (g) convolved with r, at mu = d . s: what a lobe of amplitude a in-scatters
