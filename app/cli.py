@@ -55,12 +55,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
                                  "a number in [0, 1]")
             changes["adaptive_strength"] = args.adaptive_strength
         if args.ref_dir:
-            if not (Path(args.ref_dir) / "results.json").is_file():
+            from .bench.report import results_path
+            if not results_path(args.ref_dir).is_file():
                 raise SystemExit(f"error: --ref-dir {args.ref_dir} has no results.json")
             changes["reference_dir"] = args.ref_dir
         config = config.scaled(**changes)
         run_bench(config, out, command="radiance-probes " + " ".join(sys.argv[1:]))
-    results = out / "results.json"
+    from .bench.report import results_path
+    results = results_path(out) if args.report_only else out / "results.json"
     if not results.is_file():
         raise SystemExit(f"error: no results at {results}")
     print(f"results: {results.resolve()}")

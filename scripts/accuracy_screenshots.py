@@ -12,7 +12,6 @@ the image. Run on the GPU (about a minute):
     python scripts/accuracy_screenshots.py screenshots [REF_DIR|-] [scene ...]
 REF_DIR: a bench run's folder, whose refs/NAME.npy and measured noise are the reference (as
 `bench --ref-dir`); without it a reference of 8192 spp in two halves is rendered."""
-import json
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -22,6 +21,7 @@ from PIL import Image, ImageDraw
 from panel_sheet import ldr, panel_sheet
 
 from app.bench.metrics import corrected_rrmse, rrmse
+from app.bench.report import load as load_results
 from app.bench.scenes import bench_scene
 from app.gl.context import create_headless_context, describe
 from app.render.renderer import Renderer
@@ -75,7 +75,7 @@ for name in sys.argv[3:] or ("bonsai", "foot"):
     r = Renderer(ctx, scene, vol)
     if ref_dir is not None:
         ref = np.load(ref_dir / "refs" / f"{name}.npy")
-        known = json.loads((ref_dir / "results.json").read_text())["references"][name]
+        known = load_results(ref_dir)["references"][name]
         noise, spp = known["noise_rrmse"], known["spp"]
     else:
         halves = [r.render("pt", spp=ref_spp // 2, seed=100 + i, samples_per_pass=64).image

@@ -9,7 +9,6 @@ raymarcher (or --method), per event warm / cold."""
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -37,8 +36,8 @@ def _times(ratio: float) -> str:
 
 
 def speed(records: str, previous: str | None) -> None:
-    new = R.load(Path(records) / "results.json")
-    old = R.load(Path(previous) / "results.json") if previous else None
+    new = R.load(records)
+    old = R.load(previous) if previous else None
     print("| scene | target | path tracer | best probe method | speed-up | previous stop |")
     print("| --- | --- | --- | --- | --- | --- |")
     for scene, label, targets in SPEED_ROWS:
@@ -71,7 +70,7 @@ def speed(records: str, previous: str | None) -> None:
 
 
 def interact(records: str, method: str, width: int, grid: int) -> None:
-    data = json.loads((Path(records) / "results.json").read_text())
+    data = R.load(records)
     recs = [r for r in data["records"] if r.get("mode") == "interact" and r["width"] == width
             and r["probe_grid"] == grid and r["method"] == method]
 

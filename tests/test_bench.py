@@ -339,3 +339,25 @@ def test_auto_targets_argument_names_what_is_wrong():
     for bad in ("", "0", "1.5", "0.05,x", "-0.1"):
         with pytest.raises(argparse.ArgumentTypeError, match=r"targets in \(0, 1\)"):
             auto_targets_arg(bad)
+
+
+def test_archived_runs_load_and_report_as_the_plain_ones(tmp_path):
+    """A superseded run's results.json.gz (archived so the checkout fits the GPU machine's
+    transfer) reads as the same records, and its folder reports as the plain one's does."""
+    import gzip
+
+    from app.bench.report import load, results_path
+    data = {"meta": {"device": "test", "command": "x"}, "references": {},
+            "records": [{"scene": "s", "method": "pt", "rrmse": 0.1, "total_ms": 1.0}]}
+    plain, archived = tmp_path / "plain", tmp_path / "archived"
+    plain.mkdir()
+    archived.mkdir()
+    (plain / "results.json").write_text(json.dumps(data))
+    (archived / "results.json.gz").write_bytes(gzip.compress(json.dumps(data).encode()))
+    assert results_path(plain).name == "results.json"
+    assert results_path(archived).name == "results.json.gz"
+    assert load(archived) == load(plain) == load(plain / "results.json") == data
+    # a folder with both reads the plain file (a run written again after archiving)
+    (archived / "results.json").write_text(json.dumps({**data, "records": []}))
+    assert load(archived)["records"] == []
+    assert results_path(tmp_path / "missing").name == "results.json"

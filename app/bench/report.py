@@ -2,6 +2,7 @@
 time-to-error, equal-time error and a Table-1-style grid of bake times."""
 from __future__ import annotations
 
+import gzip
 import json
 import math
 from collections import defaultdict
@@ -15,8 +16,24 @@ COLOURS = {"pt": "#222222", "probes": "#1f77b4", "probes-only": "#2ca02c", "raym
 TARGETS = (0.20, 0.10, 0.05, 0.02, 0.01)
 
 
+def results_path(folder: str | Path) -> Path:
+    """A run folder's records: results.json, or results.json.gz where a superseded run was
+    archived (compressed, so that the checkout, which travels whole to the lent GPU machine with
+    its 64 MiB limit, keeps room for the datasets). results.json when neither is there."""
+    folder = Path(folder)
+    archived = folder / "results.json.gz"
+    return archived if archived.is_file() and not (folder / "results.json").is_file() else \
+        folder / "results.json"
+
+
 def load(path: str | Path) -> dict:
-    return json.loads(Path(path).read_text())
+    """A run's results: a results.json or results.json.gz file, or a run folder holding either."""
+    p = Path(path)
+    if p.is_dir():
+        p = results_path(p)
+    if p.suffix == ".gz":
+        return json.loads(gzip.decompress(p.read_bytes()))
+    return json.loads(p.read_text())
 
 
 def merge(paths: list[str | Path], out: str | Path) -> Path:

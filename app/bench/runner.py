@@ -20,6 +20,7 @@ from .clock_log import ClockLog
 from .config import BenchConfig
 from .metrics import flip, reference_noise
 from .records import log as _log, make_record, progressive as _progressive
+from .report import load as load_results
 from ..render.probe_layout import resolve_sh_order
 from .scenes import bench_scene
 
@@ -153,7 +154,7 @@ def _reference(renderer, name: str, config: BenchConfig, results: Results, out: 
     if config.reference_dir:
         src = Path(config.reference_dir)
         path = src / "refs" / f"{name}.npy"
-        known = json.loads((src / "results.json").read_text())["references"].get(name)
+        known = load_results(src)["references"].get(name)
         if path.is_file() and known:
             reference = np.load(path)
             if reference.shape != (config.height, config.width, 3):
