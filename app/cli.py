@@ -137,6 +137,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="how a point blends its 8 probes: trilinear (default) or weighted by "
                         "visibility (no light or darkness through dense matter; 1.8-2.8x the "
                         "raymarch frame)")
+    r.add_argument("--gather-event", type=positive_int, metavar="K",
+                   help="probes: read the probes at scattering event K, path tracing the events "
+                        "before it (a final gather: less of the probes' error, K-1 more flights "
+                        "and shadow rays per sample; default 1, the paper's renderer)")
     r.add_argument("--auto-probes", type=fraction, metavar="TARGET",
                    help="choose the cheapest probe setting whose image is within this relative "
                         "RMSE of a path-traced pilot (e.g. 0.05), report why, then render")

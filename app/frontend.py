@@ -228,7 +228,8 @@ def render_defaults() -> dict:
     return dict(scene=None, method="pt", spp=64, samples_per_pass=1, out="render.png", linear=None,
                 exr=None, probe_grid=None, probe_samples=None, sh_window=None, probe_precision=None,
                 auto_probes=None, raymarch_stage="compute", raymarch_step=None, seed=0, width=None,
-                height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True)
+                height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True,
+                gather_event=None)
 
 
 def render_to_files(args: argparse.Namespace) -> int:
@@ -244,6 +245,15 @@ def render_to_files(args: argparse.Namespace) -> int:
 
     if args.auto_probes is not None and args.method == "pt":
         raise OptionError("--auto-probes chooses probe settings: use it with a probe method")
+    gather_event = getattr(args, "gather_event", None)
+    if gather_event is not None:
+        from .render.renderer import MAX_GATHER_EVENT
+        if args.method != "probes":
+            raise OptionError(f"--gather-event: the probes method's option (a final gather), "
+                              f"not {args.method}'s")
+        if not 1 <= gather_event <= MAX_GATHER_EVENT:
+            raise OptionError(f"--gather-event: expected an integer from 1 to "
+                              f"{MAX_GATHER_EVENT}, got {gather_event}")
     scene = apply_options(scene_from_arg(args.scene), args)
     check_outputs(args)
     volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
@@ -258,6 +268,8 @@ def render_to_files(args: argparse.Namespace) -> int:
     renderer = Renderer(ctx, scene, volume, raymarch_stage=args.raymarch_stage,
                         raymarch_step=args.raymarch_step or DEFAULT_RAYMARCH_STEP,
                         empty_space_skipping=args.empty_space_skipping)
+    if gather_event is not None:
+        renderer.probe_gather_event = gather_event
     if args.auto_probes is not None:
         from .render.auto_probes import choose_probes
         choice = choose_probes(renderer, args.auto_probes, args.method,
@@ -288,6 +300,9 @@ def render_to_files(args: argparse.Namespace) -> int:
               f"bake GPU time: {result.bake_ms:.1f} ms; last pass changed the probes by "
               f"{100 * rep.relative_change:.2f}% (est. standard error "
               f"{'n/a, one pass' if rep.passes_done < 2 else f'{100 * rep.standard_error:.2f}%'})")
+        if args.method == "probes" and renderer.probe_gather_event > 1:
+            print(f"final gather: the probes read at scattering event "
+                  f"{renderer.probe_gather_event}, the events before it path traced")
         if scene.probes.layout == "adaptive":
             spacing = ("evenly spaced (no variation to follow)" if g.planes is None else
                        "spacing per axis from " + ", ".join(

@@ -107,7 +107,8 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
                          raymarch_frames=(1,), showcase=(2, 16), raymarch_steps=(0.5, 1.0),
                          sweep_raymarch_steps=(0.5, 2.0), samples_per_dispatch=2,
                          flip_frames=(4,), image_frames=4, probe_layouts=("uniform", "extinction"),
-                         probe_precision="rgba16f", sh_orders=(2, 3))
+                         probe_precision="rgba16f", sh_orders=(2, 3), gather_events=(2,),
+                         gather_settings=((2, 16),), gather_frames=(2, 4))
     path = run_bench(config, tmp_path, command="test")
     data = json.loads(path.read_text())
     records = data["records"]
@@ -159,6 +160,17 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
     assert "Probe layouts at the same probe count" in text and "adaptive-extinction" in text
     assert "SH orders at the same probe setting" in text and "| anisotropic | 2^3 x 16 | 3 |" in text
     assert "The device's speed during the run" in text
+    # the final gather: `probes` at event 2 at the gather setting, to its own frames, in the
+    # main tables with its own label, kept out of the per-setting tables
+    gathered = [r for r in records if r.get("gather_event", 1) > 1]
+    assert {(r["method"], r["gather_event"], r["spp"]) for r in gathered} == {
+        ("probes", 2, 2), ("probes", 2, 4)}
+    assert all(r["precision"] == "rgba16f" and not r.get("sh_order_variant") for r in gathered)
+    assert sum(1 for r in main if r.get("gather_event") == 2) == 2
+    assert all(label(r).endswith(", gather 2") for r in gathered)
+    assert "## Final gather" in text and "| 2^3 x 16 | 2 |" in text
+    table1 = text.split("## Probe grid x samples per probe")[1].split("## ")[0]
+    assert "gather" not in table1
 
 
 def test_records_after_a_slow_speed_check_are_counted(tmp_path):

@@ -27,6 +27,12 @@ class BenchConfig:
     # (grid, samples) extras; the finest probe spacings fine structure asks for
     large_grids: tuple[tuple[int, int], ...] = ((128, 64), (128, 256), (192, 64), (256, 16))
     probe_frames: tuple[int, ...] = (1, 4, 16, 64, 256)  # probes / probes-only snapshots
+    # `probes` with a final gather (Renderer.probe_gather_event, lib/integrator.glsl): at these
+    # probe settings, each gather event also runs, to these frames (its error keeps falling long
+    # after the first event's levels off: bench/h100-final-gather)
+    gather_events: tuple[int, ...] = (2, 3)
+    gather_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 128), (128, 64), (128, 256))
+    gather_frames: tuple[int, ...] = (16, 64, 256, 1024, 4096)
     raymarch_frames: tuple[int, ...] = (1, 2, 4, 8, 16)
     showcase: tuple[int, int] = (32, 256)   # grid, samples: images, step/stage/precision sweeps
     probe_layouts: tuple[str, ...] = ("uniform",)   # of BENCH_PROBE_LAYOUTS, per probe setting
@@ -100,6 +106,7 @@ PRESETS = {
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),
+                         gather_events=(2,), gather_settings=((8, 64),), gather_frames=(4, 16),
                          showcase=(8, 64), raymarch_steps=(0.5, 1.0),
                          sweep_raymarch_steps=(0.5, 1.0), flip_frames=(16,),
                          image_frames=16),

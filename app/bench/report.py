@@ -141,12 +141,19 @@ def pareto(records: list[dict]) -> list[dict]:
     return front
 
 
+def gathered(r: dict) -> bool:
+    """A `probes` record that read the probes after more than one scattering event (a final
+    gather): in the time-to-error tables and the front, kept out of the per-setting tables."""
+    return r.get("gather_event", 1) > 1
+
+
 def label(r: dict) -> str:
     if r["method"] == "pt":
         return f"pt {r['spp']} spp"
     step = r.get("raymarch_step", 0.5) if r["method"] == "raymarch" else 0.5
     return (f"{r['method']} {r['probe_grid']}^3x{r['probe_samples']}, {r['spp']} fr"
-            + (f", step {step:g}" if step != 0.5 else ""))
+            + (f", step {step:g}" if step != 0.5 else "")
+            + (f", gather {r['gather_event']}" if gathered(r) else ""))
 
 
 def time_to_error(records: list[dict], target: float) -> dict | None:
@@ -302,6 +309,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
     lines += _sweeps(data, scenes)
     lines += _layouts(data, scenes)
     lines += _sh_orders(data, scenes)
+    lines += _gathers(data, scenes)
     lines += ["", "## Raw results", "", "`results.json`: one record per scene, method and setting "
               "(`scene, method, probe_grid, probe_samples, spp, bake_ms, frame_ms, total_ms, rrmse, "
               "flip, gpu_bytes, device`, and the sweep's own fields)."]
@@ -319,7 +327,7 @@ def _table1(data: dict, scenes: list[str]) -> list[str]:
         recs = [r for r in data["records"] if r["scene"] == s and r["method"] == "probes"
                 and r.get("mode") != "cost" and r.get("precision") == precision
                 and r.get("sh_window") == "none" and not r.get("sh_order_variant")
-                and r.get("probe_layout", "uniform") == "uniform"]
+                and r.get("probe_layout", "uniform") == "uniform" and not gathered(r)]
         if not recs:
             continue
         frames = max(r["spp"] for r in recs)
@@ -347,7 +355,7 @@ def _setting_records(data: dict) -> list[dict]:
     SH window, the raymarcher's compute stage at its default step."""
     precision = sweep_precision(data)
     return [r for r in data["records"] if r.get("mode") != "cost" and r["method"] != "pt"
-            and r.get("precision", "rgba32f") == precision
+            and not gathered(r) and r.get("precision", "rgba32f") == precision
             and r.get("sh_window", "none") == "none"
             and (r["method"] != "raymarch" or (r.get("stage") == "compute"
                                               and r.get("raymarch_step") == 0.5))]
@@ -421,6 +429,39 @@ def _sh_orders(data: dict, scenes: list[str]) -> list[str]:
     return lines
 
 
+def _gathers(data: dict, scenes: list[str]) -> list[str]:
+    """`probes` at each gather event (1: the first scattering event, the main sweep's), at the
+    settings the gathers ran at: error and total time after each number of frames."""
+    recs = [r for r in _setting_records(data) + [r for r in data["records"] if gathered(r)]
+            if r["method"] == "probes" and r.get("probe_layout", "uniform") == "uniform"
+            and not r.get("sh_order_variant")]
+    if not any(gathered(r) for r in recs):
+        return []
+    lines = ["", "## Final gather", "",
+             "`probes` reading the probes at scattering event k: events before k are traced as "
+             "the path tracer traces them (lib/integrator.glsl). Error (total time, bake "
+             "included) after each number of frames.", ""]
+    for s in scenes:
+        cells = defaultdict(dict)
+        for r in recs:
+            if r["scene"] == s:
+                cells[(r["probe_grid"], r["probe_samples"], r.get("gather_event", 1))][r["spp"]] = r
+        settings = {(g, n) for (g, n, k) in cells if k > 1}
+        if not settings:
+            continue
+        frames = sorted({f for (g, n, k), by in cells.items() if (g, n) in settings for f in by})
+        lines += [f"### {s}", "", "| grid x walks | gather | " + " | ".join(f"{f} fr" for f in frames)
+                  + " |", "|---|---|" + "---|" * len(frames)]
+        for (g, n, k), by in sorted(cells.items()):
+            if (g, n) not in settings:
+                continue
+            row = [f"{shown(by[f], data)} ({_ms(by[f]['total_ms'])})" if f in by else ""
+                   for f in frames]
+            lines.append(f"| {g}^3 x {n} | {k} | " + " | ".join(row) + " |")
+        lines.append("")
+    return lines
+
+
 def _sweeps(data: dict, scenes: list[str]) -> list[str]:
     """Raymarch step and stage, 16F against 32F, SH window: at the showcase setting."""
     lines = ["## Raymarch step and stage, precision and SH window (showcase setting)", "",
@@ -430,7 +471,7 @@ def _sweeps(data: dict, scenes: list[str]) -> list[str]:
         by_variant = defaultdict(list)
         for r in data["records"]:
             if (r["scene"] != s or r["method"] == "pt" or r.get("mode") == "cost"
-                    or r.get("sh_order_variant")):
+                    or r.get("sh_order_variant") or gathered(r)):
                 continue
             if r["method"] == "raymarch":
                 key = (f"raymarch {r.get('stage')} step {r.get('raymarch_step')} vox, "

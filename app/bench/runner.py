@@ -259,6 +259,14 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
                            light_ms=walk_light_ms, **probe_info)
                     if showcase and not variant and frames == config.image_frames:
                         save_png(out / "images" / f"{name}_{method}_{grid}x{samples}.png", image)
+            if not variant and (grid, samples) in config.gather_settings:
+                for event in config.gather_events:
+                    renderer.probe_gather_event = event
+                    for frames, image, *timing in _progressive(renderer, "probes",
+                                                               config.gather_frames, 13, k):
+                        record("probes", frames, image, timing, bake_ms + walk_light_ms,
+                               light_ms=walk_light_ms, gather_event=event, **probe_info)
+                renderer.probe_gather_event = 1
             steps = (config.sweep_raymarch_steps if not showcase or variant else
                      sorted({*config.sweep_raymarch_steps, *config.raymarch_steps}))
             stages = ("compute", "fragment") if showcase and not variant else ("compute",)

@@ -33,6 +33,9 @@ from .resources import SceneResources
 METHODS = ("pt", "probes", "probes-only", "raymarch")
 # Variants of glsl/pathtrace.comp: the probe renderers stop at the first scattering event.
 PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
+# The latest event `probes` may gather at: beyond a few events the path tracer's own sampling
+# is most of the cost, and the probes stand in for little.
+MAX_GATHER_EVENT = 8
 
 
 @dataclass(frozen=True)
@@ -129,6 +132,10 @@ class Renderer:
         # H100 (bench/h100-sun-lobe): 0.8-0.9 points better at g = 0.9, up to 0.14 worse
         # elsewhere, the bench's cloud unchanged, and the pilot costs 2.5-7 ms a bake.
         self.sun_lobe_fit = False
+        # `probes` reads the probes at this scattering event (lib/integrator.glsl
+        # probe_gather_event): 1, the paper's renderer; k > 1 traces events 1 .. k-1 as the path
+        # tracer does first (a final gather). Read-side only: changing it never re-bakes.
+        self._gather_event = 1
         self.last_sun_lobe_fit: SunLobeFit | None = None   # the last bake start's choice
         self._sun_lobe_fitter: SunLobeFitter | None = None   # made when first asked for
         self._fit_ms = 0.0   # GPU ms of the last bake start's pilot, not yet counted in a bake's time
@@ -176,6 +183,19 @@ class Renderer:
                 math.isfinite(step) and step > 0):
             raise ValueError(f"raymarch step: expected a finite number of voxels > 0, got {step!r}")
         self._raymarch_step = float(step)
+
+    @property
+    def probe_gather_event(self) -> int:
+        """The scattering event at which `probes` reads the probes (1: the first)."""
+        return self._gather_event
+
+    @probe_gather_event.setter
+    def probe_gather_event(self, event: int) -> None:
+        if isinstance(event, bool) or not isinstance(event, int) or not (
+                1 <= event <= MAX_GATHER_EVENT):
+            raise ValueError(f"probe gather event: expected an integer from 1 to "
+                             f"{MAX_GATHER_EVENT}, got {event!r}")
+        self._gather_event = event
 
     @property
     def effective_raymarch_step_voxels(self) -> float:
@@ -551,6 +571,8 @@ class Renderer:
             if self.probe_grid is None:
                 raise RuntimeError("probe methods need a bake first (bake() or bake_step())")
             extra = self.probe_uniforms()
+            # probes-only traces no shadow rays, which the events before a later gather need
+            extra["probe_gather_event"] = self._gather_event if method == "probes" else 1
         # a sliced light-grid bake under way (bake_step) is read as it is, not finished here
         light_ms = self.bake_light() if method == "raymarch" and not self.light_baking() else 0.0
         self.timer.start()

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
-from ..render.renderer import METHODS, RAYMARCH_STAGES
+from ..render.renderer import MAX_GATHER_EVENT, METHODS, RAYMARCH_STAGES
 from ..scene import (PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS,
                      PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS)
 from ..volume import BUILTIN_VOLUMES
@@ -108,6 +108,16 @@ def render_section(v) -> None:
     if changed:
         r.raymarch_stage = RAYMARCH_STAGES[i]
         v.session.restart(["raymarch"])
+    if "probes" in state.shown_methods():
+        changed, value = imgui.slider_int("Gather at event", r.probe_gather_event, 1,
+                                          MAX_GATHER_EVENT)
+        ui.note("Gather at event")
+        if changed:   # read-side only: the probes stay
+            r.probe_gather_event = min(max(int(value), 1), MAX_GATHER_EVENT)
+            v.session.restart(["probes"])
+        if r.probe_gather_event > 1:
+            imgui.text_disabled(f"probes: events 1-{r.probe_gather_event - 1} path traced, "
+                                f"probes read at event {r.probe_gather_event}")
     changed, value = imgui.checkbox("Empty-space skipping", r.resources.use_majorant_grid)
     ui.note("Empty-space skipping")
     if changed:   # the same images either way (unbiased); the probes re-bake by their key

@@ -25,6 +25,17 @@
 uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
 uniform int max_path_steps;   // hang guard: tracking steps one path may take in all
+#if defined(PROBE_LIGHTING)
+// The scattering event at which a probe renderer reads the probes and ends the path (>= 1). 1 is
+// the paper's renderer: the probes stand in for all light arriving at the first event but the
+// sun. With k > 1 (PROBE_LIGHTING 1, `probes`: a final gather), events 1 .. k-1 are traced as the
+// path tracer traces them (the sun by a shadow ray, the next direction from the phase function,
+// escapes see the environment) and the probes stand in only for what arrives at event k, light
+// that has scattered k times or more on its way to the eye: their error reaches the image weighted
+// by the smaller share of those orders, at the cost of k - 1 more flights and shadow rays.
+// probes-only takes 1 (it traces no shadow rays, which the events before k need).
+uniform int probe_gather_event;
+#endif
 
 #if defined(ENVIRONMENT_MAP) && !defined(ENVIRONMENT_MAP_SAMPLING)
 #define ENVIRONMENT_MAP_SAMPLING 1
@@ -152,16 +163,19 @@ int path_flight(inout PathState p, inout int steps_left)
     if (all(equal(p.throughput, vec3(0.0))))
         return STEP_DONE;
 #if defined(PROBE_LIGHTING)
-    // Render from probes: at the first scattering event, light arriving by further bounces comes
-    // from the probes (convolved with the phase function); the sun from a shadow ray (probes) or
-    // from the probes' stored sun transmittance (probes-only). The path ends here.
-    float probe_sun_transmittance;
-    p.radiance += p.throughput * probe_inscattered(p.x, p.w, probe_sun_transmittance);
+    // Render from probes: at the gather event (the first unless probe_gather_event says
+    // otherwise), light arriving by further bounces comes from the probes (convolved with the
+    // phase function); the sun from a shadow ray (probes) or from the probes' stored sun
+    // transmittance (probes-only). The path ends there.
+    if (p.bounce >= probe_gather_event) {
+        float probe_sun_transmittance;
+        p.radiance += p.throughput * probe_inscattered(p.x, p.w, probe_sun_transmittance);
 #if PROBE_LIGHTING == 2
-    p.radiance += p.throughput * sun_irradiance
-                  * (probe_sun_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy));
-    return STEP_DONE;
+        p.radiance += p.throughput * sun_irradiance
+                      * (probe_sun_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy));
+        return STEP_DONE;
 #endif
+    }
 #endif
 #if defined(ENVIRONMENT_MAP) && !defined(PROBE_LIGHTING)
     // A direction from the map's distribution; its shadow ray runs after the sun's.
@@ -232,9 +246,15 @@ int path_step(inout PathState p, inout int steps_left)
     }
 #endif
 #if defined(PROBE_LIGHTING)
-    return STEP_DONE;
+    if (p.bounce >= probe_gather_event)
+        return STEP_DONE;
 #endif
-#if defined(ENVIRONMENT_MAP)
+#if defined(ENVIRONMENT_MAP) && defined(PROBE_LIGHTING)
+    // The probe renderers take no map samples at the events before the gather: an escape counts
+    // in full (phase_pdf 0), as it would with ENVIRONMENT_MAP_SAMPLING 0.
+    p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
+    p.phase_pdf = 0.0;
+#elif defined(ENVIRONMENT_MAP)
     vec3 w_in = p.w;
     p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
     p.phase_pdf = phase_hg(dot(w_in, p.w), anisotropy);
