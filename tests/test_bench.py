@@ -373,3 +373,30 @@ def test_archived_runs_load_and_report_as_the_plain_ones(tmp_path):
     (archived / "results.json").write_text(json.dumps({**data, "records": []}))
     assert load(archived)["records"] == []
     assert results_path(tmp_path / "missing").name == "results.json"
+
+
+def test_merged_runs_keep_every_runs_clock_log(tmp_path):
+    """Runs of one device merged into one report: their records and references together, and
+    their clock logs one after the other, summarised over all of them (a slow second run shows)."""
+    from app.bench.report import merge
+    rows = {"a": ["2026/11/25 06:00:00.000, 1980, 1980, 90"] * 3,
+            "b": ["2026/11/25 06:05:00.000, 405, 1980, 10", "2026/11/25 06:05:00.500, 1980, 1980, 95"]}
+    paths = []
+    for name, lines in rows.items():
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "nvidia-smi.csv").write_text("\n".join(lines) + "\n")
+        data = {"meta": {"device": "gpu", "command": f"run {name}",
+                         "gpu_clock": {"samples": len(lines)}},
+                "references": {name: {"noise_rrmse": 0.01}},
+                "records": [{"scene": name, "method": "pt", "rrmse": 0.1, "total_ms": 1.0}]}
+        (folder / "results.json").write_text(json.dumps(data))
+        paths.append(folder / "results.json")
+    out = merge(paths, tmp_path / "merged" / "results.json")
+    merged = json.loads(out.read_text())
+    assert {r["scene"] for r in merged["records"]} == {"a", "b"}
+    assert set(merged["references"]) == {"a", "b"}
+    assert merged["meta"]["command"] == "run a ; run b"
+    clock = merged["meta"]["gpu_clock"]
+    assert clock["samples"] == 5 and clock["sm_mhz_min"] == 405 and clock["sm_mhz_max"] == 1980
+    assert (tmp_path / "merged" / "nvidia-smi.csv").read_text().count("\n") == 5

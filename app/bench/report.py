@@ -50,6 +50,18 @@ def merge(paths: list[str | Path], out: str | Path) -> Path:
         merged["records"] += r["records"]
     path = Path(out)
     path.parent.mkdir(parents=True, exist_ok=True)
+    # The runs' clock logs (each beside its results), one after the other, and their summary:
+    # the first run's alone would speak for the others' records too.
+    logs = [Path(p).parent / "nvidia-smi.csv" for p in paths]
+    merged["meta"].pop("gpu_clock", None)
+    if logs and all(log.is_file() for log in logs):
+        from .clock_log import summary
+        combined = path.parent / "nvidia-smi.csv"
+        text = "".join(log.read_text() for log in logs)
+        combined.write_text(text)
+        clock = summary(combined)
+        if clock is not None:
+            merged["meta"]["gpu_clock"] = clock
     path.write_text(json.dumps(merged, indent=1))
     return path
 
