@@ -4,6 +4,11 @@
 // (lib/medium.glsl: the density texture, trilinear, then the transfer-function table), and wraps
 // around the box instead of leaving it. No random numbers, no logarithms, no branches: the cost of
 // the fetches alone, which is what every tracking step of a walk must pay at least.
+//
+// DEPENDENT_CHAIN (defined or not): each step's position waits on the sigma_t the step before read,
+// as a walk's next tracking step waits on the last (its distance and its accept test depend on
+// it). Run with as many invocations as a small bake has walks, this is the latency floor of a walk
+// of `steps` tracking steps: what no exact walk of that many steps can beat, however it is coded.
 layout(local_size_x = 64) in;
 
 #include "lib/rng.glsl"
@@ -26,7 +31,11 @@ void main()
     vec3 box = 2.0 * box_half_extent;
     float sum = 0.0;
     for (int i = 0; i < steps; ++i) {
+#if defined(DEPENDENT_CHAIN)
+        x += (step_length + 1e-30 * sum) * d;   // waits on the last fetch (1e-30: no real move)
+#else
         x += step_length * d;
+#endif
         x -= box * floor(x / box + 0.5);   // wrap into [-half, half)
         sum += sigma_t_at(x);
     }

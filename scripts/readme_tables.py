@@ -56,7 +56,8 @@ def speed(records: str, previous: str | None) -> None:
                 step = pb.get("raymarch_step", 0.5) if pb["method"] == "raymarch" else 0.5
                 pb_cell = (f"{_ms(pb['total_ms'])} ({pb['method']}, {pb['probe_grid']}^3 x "
                            f"{pb['probe_samples']}, {pb['spp']} fr"
-                           + (f", step {step:g}" if step != 0.5 else "") + ")")
+                           + (f", step {step:g}" if step != 0.5 else "")
+                           + (f", gather {pb['gather_event']}" if R.gathered(pb) else "") + ")")
             up = "-" if pt is None or pb is None else _times(pt["total_ms"] / pb["total_ms"])
             prev = "-"
             if before:

@@ -119,6 +119,10 @@ def test_bake_profile_sections_and_counters(renderer):
         # every walk starts with a flight; most scatter at least once in this cloud
         assert c["flight_steps"] >= c["walks"] and 0 < c["events"] <= 5 * c["walks"]
         assert c["shadow_steps"] > 0 and c["cell_steps"] > 0
+        # the longest walk: at least the mean, at most the scene's bounces
+        assert c["events"] / c["walks"] <= c["longest_walk_events"]
+        assert c["longest_walk_events"] <= renderer.scene.max_bounces
+        assert (c["flight_steps"] + c["shadow_steps"]) / c["walks"] <= c["longest_walk_steps"]
         profiled = grid.coefficients()
     finally:
         counters.release()

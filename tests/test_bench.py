@@ -400,3 +400,18 @@ def test_merged_runs_keep_every_runs_clock_log(tmp_path):
     clock = merged["meta"]["gpu_clock"]
     assert clock["samples"] == 5 and clock["sm_mhz_min"] == 405 and clock["sm_mhz_max"] == 1980
     assert (tmp_path / "merged" / "nvidia-smi.csv").read_text().count("\n") == 5
+
+
+def test_the_dependent_chain_marches_the_same_steps_as_the_ceiling(ctx):
+    """The walk latency floor (DEPENDENT_CHAIN in glsl/ceiling_march.comp) reads the same sigma_t
+    at the same points as the throughput ceiling; only the order of waiting differs."""
+    from app.bench.ceiling import measure_ceiling
+    from app.render.renderer import Renderer
+    from app.scene import parse_scene
+    r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [16, 12, 14]},
+                                   "density_scale": 50.0}))
+    plain = measure_ceiling(r, rays=256, steps=32, repeats=1)
+    chain = measure_ceiling(r, rays=256, steps=32, repeats=1, chain=True)
+    assert plain["sigma_t_sum"] > 0 and chain["sigma_t_sum"] == plain["sigma_t_sum"]
+    assert chain["steps"] == plain["steps"] == 256 * 32 and chain["ms"] > 0
+    r.release()

@@ -71,7 +71,9 @@ def _profile(renderer, seed: int) -> dict:
             "shadow_steps_per_walk": counts["shadow_steps"] / walks,
             "cell_steps_per_walk": counts["cell_steps"] / walks,
             "events_per_walk": counts["events"] / walks,
-            "dispatches_per_walk": counts["dispatch_walks"] / walks}
+            "dispatches_per_walk": counts["dispatch_walks"] / walks,
+            "longest_walk_events": counts["longest_walk_events"],
+            "longest_walk_steps": counts["longest_walk_steps"]}
 
 
 def bake_scene(renderer, name: str, config, results, out, device: str,

@@ -4,13 +4,19 @@ runs on. A walk's tracking step does at least this work (plus random numbers and
 tracking steps per second over this rate says how close the bake runs to the hardware."""
 from __future__ import annotations
 
+import numpy as np
+
 from ..gl.shaders import compute_program, set_uniforms
 from ..gl.timer import GpuTimer
 
 
-def measure_ceiling(renderer, rays: int = 1 << 21, steps: int = 256, repeats: int = 3) -> dict:
+def measure_ceiling(renderer, rays: int = 1 << 21, steps: int = 256, repeats: int = 3,
+                    chain: bool = False) -> dict:
+    """The best of `repeats` timed marches of `rays` x `steps` trilinear steps through the scene's
+    medium. chain=True: each step waits on the one before (DEPENDENT_CHAIN in the shader), so with
+    as many rays as a small bake has walks the time is a walk of `steps` steps' latency floor."""
     ctx, resources = renderer.ctx, renderer.resources
-    program = compute_program(ctx, "ceiling_march.comp")
+    program = compute_program(ctx, "ceiling_march.comp", {"DEPENDENT_CHAIN": 1} if chain else None)
     sums = ctx.buffer(reserve=rays * 4)
     timer = GpuTimer(ctx)
     try:
@@ -26,11 +32,13 @@ def measure_ceiling(renderer, rays: int = 1 << 21, steps: int = 256, repeats: in
             program.run((rays + 63) // 64)
             timer.stop()
             best = min(best, timer.elapsed_ms)
+        total = float(np.frombuffer(sums.read(), np.float32).astype(np.float64).sum())
     finally:
         timer.release()
         sums.release()
         program.release()
-    return {"steps": rays * steps, "ms": best, "steps_per_s": rays * steps / (best / 1e3)}
+    return {"steps": rays * steps, "ms": best, "steps_per_s": rays * steps / (best / 1e3),
+            "sigma_t_sum": total}
 
 
 # The benchmark's check on the device's own speed: the same small march before every setting of a

@@ -42,6 +42,7 @@ WALK_SUN_MODES = ("ray", "grid")
 WALK_PROFILE_SLOTS = 1024   # rows of 8 counters in glsl/lib/walk_profile.glsl
 WALK_PROFILE_FIELDS = ("walks", "events", "flight_steps", "shadow_steps", "cell_steps",
                        "dispatch_walks")
+WALK_PROFILE_MAXIMA = ("longest_walk_events", "longest_walk_steps")   # the rows' last two
 WARM_WALKS = 64   # a warm restart's old probes count as this many walks until the last pass
 SH_WINDOW_IDS = {"none": 0, "hann": 1, "lanczos": 2}
 
@@ -247,7 +248,9 @@ class ProbeGrid:
     def read_walk_counters(buffer: moderngl.Buffer) -> dict[str, int]:
         rows = np.frombuffer(buffer.read(), np.uint32).reshape(WALK_PROFILE_SLOTS, 8)
         sums = rows.astype(np.uint64).sum(0)
-        return {name: int(v) for name, v in zip(WALK_PROFILE_FIELDS, sums)}
+        counts = {name: int(v) for name, v in zip(WALK_PROFILE_FIELDS, sums)}
+        counts.update({name: int(v) for name, v in zip(WALK_PROFILE_MAXIMA, rows[:, 6:].max(0))})
+        return counts
 
     def _walk_program(self, counters: bool):
         if not counters:

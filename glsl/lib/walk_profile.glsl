@@ -7,7 +7,8 @@
 const uint WALK_PROFILE_SLOTS = 1024u;
 layout(std430, binding = 5) buffer WalkProfile {
     // per row: walks finished, scattering events, free-flight steps, shadow-ray steps,
-    // macrocell crossings, dispatches a walk ran in, two spare
+    // macrocell crossings, dispatches a walk ran in, the most events and the most tracking steps
+    // one finished walk took (maxima, not sums: a small bake waits for its longest walk)
     uint walk_profile[];
 };
 
@@ -20,6 +21,10 @@ void walk_profile_flush(int finished, int events)
     atomicAdd(walk_profile[row + 3u], profile_shadow_steps);
     atomicAdd(walk_profile[row + 4u], profile_cell_steps);
     atomicAdd(walk_profile[row + 5u], 1u);
+    if (finished != 0) {
+        atomicMax(walk_profile[row + 6u], uint(events));
+        atomicMax(walk_profile[row + 7u], profile_flight_steps + profile_shadow_steps);
+    }
 }
 #else
 void walk_profile_flush(int finished, int events) {}
