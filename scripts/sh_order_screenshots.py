@@ -10,7 +10,6 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 from PIL import Image
 
 sys.path.insert(0, ".")
@@ -19,22 +18,12 @@ from app.bench.scenes import bench_scene
 from app.gl.context import create_headless_context, describe
 from app.render.renderer import Renderer
 from app.volume import load_volume
-from panel_sheet import ldr, panel_sheet
+from panel_sheet import ldr, panel_sheet, signed_error
 
 out = Path(sys.argv[1])
 SIZE, PANEL, REF_SPP = 512, 320, 8192
 ctx = create_headless_context()
 device = describe(ctx)
-
-
-def signed_error(image, ref) -> Image.Image:
-    err = (image - ref).mean(axis=-1) / max(float(ref.mean()), 1e-12)
-    t = np.clip(np.abs(err) / 0.25, 0, 1)
-    rgb = np.zeros(err.shape + (3,))
-    rgb[..., 0] = np.where(err > 0, t, 0)
-    rgb[..., 2] = np.where(err < 0, t, 0)
-    rgb[..., 1] = 0.25 * t
-    return Image.fromarray((rgb * 255).astype(np.uint8)).resize((PANEL, PANEL), Image.NEAREST)
 
 
 scene = bench_scene("anisotropic", SIZE, SIZE)
@@ -60,7 +49,7 @@ panels += [(ldr(img, PANEL), f"SH order {o}: 128^3 x 256", f"{ms:.0f} ms GPU, rR
            for o, ms, e, img in shots]
 panels += [(Image.new("RGB", (PANEL, PANEL), (20, 20, 20)), "error maps, (image - reference)",
             "/ mean: red too bright, blue too dark")]
-panels += [(signed_error(img, ref), f"error, order {o}", "full colour at 25%")
+panels += [(signed_error(img, ref, PANEL), f"error, order {o}", "full colour at 25%")
            for o, _, _, img in shots]
 sheet = panel_sheet(panels, PANEL, 5,
                     f"anisotropic cloud, raymarcher 16 frames, {SIZE}x{SIZE}, {device}")
