@@ -498,6 +498,27 @@ def test_unseen_volume_with_an_explicit_table_and_a_fine_probe_grid(display, tmp
     assert switched["bakes_started"] == over["bakes_started"] + 1 and switched["probes_ready"]
 
 
+def test_gather_slider_regathers_without_a_rebake(display, tmp_path):
+    """The Render panel's "Gather at event" (probes): dragging it right reads the probes at a later
+    event; the image starts again, the probes stay, and the picture changes."""
+    scene = {"volume": {"builtin": "cloud", "size": [16, 12, 14]}, "density_scale": 30.0,
+             "camera": {"width": 48, "height": 48}, "probes": {"grid": [3, 3, 3], "samples": 16}}
+    (tmp_path / "cloud.json").write_text(json.dumps(scene))
+    script = write_script(tmp_path / "s.json", [
+        {"until": "done"}, {"dump": "first.json"}, {"screenshot": "first.png"},
+        {"drag": "Gather at event", "by": [200, 0]}, {"until": "done"}, {"dump": "later.json"},
+        {"screenshot": "later.png"}, {"close": True}])
+    view(["cloud.json", "--script", str(script), "--method", "probes", "--spp", "8",
+          "--window", "640x400"], tmp_path, display)
+    first, later = dump(tmp_path / "first.json"), dump(tmp_path / "later.json")
+    assert first["gather_event"] == 1 and later["gather_event"] > 1
+    assert later["bakes_started"] == first["bakes_started"] and later["probes_ready"]
+    assert later["samples"] == {"probes": 8}
+    a = view_pixels(png(tmp_path / "first.png"), first)
+    b = view_pixels(png(tmp_path / "later.png"), later)
+    assert np.abs(a.astype(float) - b).mean() > 0.2
+
+
 def test_ct_series_with_a_window_and_its_level_dragged(display, tmp_path):
     """A DICOM CT series opened through its scene with the bone window: the panel shows the
     window, and dragging its level re-normalises the volume (the scene's window changes, no
