@@ -301,8 +301,18 @@ def render_to_files(args: argparse.Namespace) -> int:
               f"{100 * rep.relative_change:.2f}% (est. standard error "
               f"{'n/a, one pass' if rep.passes_done < 2 else f'{100 * rep.standard_error:.2f}%'})")
         if args.method == "probes" and renderer.probe_gather_event > 1:
-            print(f"final gather: the probes read at scattering event "
-                  f"{renderer.probe_gather_event}, the events before it path traced")
+            from .render.renderer import GATHER_BOUNCES_NOTE
+            k = renderer.probe_gather_event
+            print(f"final gather: the probes read at scattering event {k}, the events before it "
+                  f"path traced" + (f" (past max_bounces {scene.max_bounces}: no path reaches "
+                                    f"it, the path tracer's image)" if k > scene.max_bounces
+                                    else ""))
+            if k <= scene.max_bounces <= GATHER_BOUNCES_NOTE:   # past max_bounces: the path tracer
+                print(f"note: the probes hold up to max_bounces - 1 = {scene.max_bounces - 1} "
+                      f"scattering events whatever the gather event, so with {k} a path may "
+                      f"scatter up to {scene.max_bounces + k - 1} times, not {scene.max_bounces} "
+                      f"(a few percent brighter where max_bounces is this small; --gather-event 1 "
+                      f"keeps the limit exactly)", file=sys.stderr)
         if scene.probes.layout == "adaptive":
             spacing = ("evenly spaced (no variation to follow)" if g.planes is None else
                        "spacing per axis from " + ", ".join(

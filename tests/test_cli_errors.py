@@ -260,6 +260,24 @@ def test_default_raymarch_step_lengthened_by_the_shader_is_said(tmp_path, capsys
                     tmp_path / "o.png"], capsys, "--raymarch-step", "at least 0.977")
 
 
+@pytest.mark.parametrize("max_bounces, event, said",
+                         [(3, 2, True), (3, 3, True), (3, 1, False), (3, 4, False), (64, 3, False)])
+def test_a_gather_past_a_small_max_bounces_is_said(tmp_path, capsys, max_bounces, event, said):
+    """The probes hold max_bounces - 1 events whatever the gather event, so a later gather lets
+    a path scatter past max_bounces; where that is large enough to see, the render says so."""
+    p = tmp_path / "s.json"
+    p.write_text(json.dumps({"volume": {"builtin": "cloud", "size": [8, 8, 8]},
+                             "max_bounces": max_bounces, "camera": {"width": 4, "height": 4},
+                             "probes": {"grid": 2, "samples": 1}}))
+    rc, lines, out = run(["render", p, "--method", "probes", "--spp", 1, "--gather-event", event,
+                          "--out", tmp_path / "o.png"], capsys)
+    assert rc == 0 and (event > 1) == ("final gather: the probes read at scattering event" in out)
+    note = [line for line in lines if line.startswith("note: the probes hold")]
+    assert bool(note) == said
+    if said:
+        assert f"up to {max_bounces + event - 1} times, not {max_bounces}" in note[0]
+
+
 def test_view_with_a_missing_volume_is_one_line_before_any_window(tmp_path, capsys, no_gpu,
                                                                   monkeypatch):
     import app.viewer.xvfb

@@ -36,6 +36,12 @@ PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
 # The latest event `probes` may gather at: beyond a few events the path tracer's own sampling
 # is most of the cost, and the probes stand in for little.
 MAX_GATHER_EVENT = 8
+# The probes hold max_bounces - 1 events whatever the gather event, so a gather at event k lets a
+# path scatter up to max_bounces + k - 1 times. Up to this max_bounces the CLI and the viewer say
+# so: measured on llvmpipe (a cloud of albedo 0.95, 8^3 probes), gather 2 at max_bounces 2 came out
+# 2% brighter than the path tracer, gather 3 at max_bounces 4 0.8%; at 16 the difference is below
+# the probes' own error.
+GATHER_BOUNCES_NOTE = 8
 
 
 @dataclass(frozen=True)
