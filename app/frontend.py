@@ -247,13 +247,14 @@ def render_to_files(args: argparse.Namespace) -> int:
         raise OptionError("--auto-probes chooses probe settings: use it with a probe method")
     gather_event = getattr(args, "gather_event", None)
     if gather_event is not None:
-        from .render.renderer import MAX_GATHER_EVENT
+        from .render.renderer import check_gather_event
         if args.method != "probes":
             raise OptionError(f"--gather-event: the probes method's option (a final gather), "
                               f"not {args.method}'s")
-        if not 1 <= gather_event <= MAX_GATHER_EVENT:
-            raise OptionError(f"--gather-event: expected an integer from 1 to "
-                              f"{MAX_GATHER_EVENT}, got {gather_event}")
+        try:
+            check_gather_event(gather_event)
+        except ValueError as exc:
+            raise OptionError(f"--gather-event: {exc}") from None
     scene = apply_options(scene_from_arg(args.scene), args)
     check_outputs(args)
     volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
@@ -301,16 +302,16 @@ def render_to_files(args: argparse.Namespace) -> int:
               f"{100 * rep.relative_change:.2f}% (est. standard error "
               f"{'n/a, one pass' if rep.passes_done < 2 else f'{100 * rep.standard_error:.2f}%'})")
         if args.method == "probes" and renderer.probe_gather_event > 1:
-            from .render.renderer import GATHER_BOUNCES_NOTE
             k = renderer.probe_gather_event
             print(f"final gather: the probes read at scattering event {k}, the events before it "
                   f"path traced" + (f" (past max_bounces {scene.max_bounces}: no path reaches "
                                     f"it, the path tracer's image)" if k > scene.max_bounces
                                     else ""))
-            if k <= scene.max_bounces <= GATHER_BOUNCES_NOTE:   # past max_bounces: the path tracer
+            most = renderer.gather_bounces_past_limit()
+            if most is not None:
                 print(f"note: the probes hold up to max_bounces - 1 = {scene.max_bounces - 1} "
                       f"scattering events whatever the gather event, so with {k} a path may "
-                      f"scatter up to {scene.max_bounces + k - 1} times, not {scene.max_bounces} "
+                      f"scatter up to {most} times, not {scene.max_bounces} "
                       f"(a few percent brighter where max_bounces is this small; --gather-event 1 "
                       f"keeps the limit exactly)", file=sys.stderr)
         if scene.probes.layout == "adaptive":

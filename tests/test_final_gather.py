@@ -102,3 +102,13 @@ def test_a_gather_event_out_of_range_is_refused_by_name(ctx, bad):
         r.probe_gather_event = bad
     assert r.probe_gather_event == 1
     r.release()
+
+
+@pytest.mark.parametrize("max_bounces, event, most", [(4, 1, None), (4, 2, 5), (4, 4, 7),
+                                                      (4, 5, None), (64, 3, None)])
+def test_scattering_past_max_bounces_is_counted_where_a_gather_is_reached(ctx, max_bounces,
+                                                                          event, most):
+    r = _renderer(ctx, max_bounces=max_bounces)
+    r.probe_gather_event = event
+    assert r.gather_bounces_past_limit() == most
+    r.release()

@@ -44,6 +44,14 @@ MAX_GATHER_EVENT = 8
 GATHER_BOUNCES_NOTE = 8
 
 
+def check_gather_event(event) -> int:
+    """The gather event `probes` may take (an integer from 1 to MAX_GATHER_EVENT), or ValueError."""
+    if isinstance(event, bool) or not isinstance(event, int) or not 1 <= event <= MAX_GATHER_EVENT:
+        raise ValueError(f"probe gather event: expected an integer from 1 to {MAX_GATHER_EVENT}, "
+                         f"got {event!r}")
+    return event
+
+
 @dataclass(frozen=True)
 class ProbePlan:
     """The probe grid a scene gets (Renderer.probe_plan): probes per axis, the world box they
@@ -197,11 +205,15 @@ class Renderer:
 
     @probe_gather_event.setter
     def probe_gather_event(self, event: int) -> None:
-        if isinstance(event, bool) or not isinstance(event, int) or not (
-                1 <= event <= MAX_GATHER_EVENT):
-            raise ValueError(f"probe gather event: expected an integer from 1 to "
-                             f"{MAX_GATHER_EVENT}, got {event!r}")
-        self._gather_event = event
+        self._gather_event = check_gather_event(event)
+
+    def gather_bounces_past_limit(self) -> int | None:
+        """With a later gather the probes (max_bounces - 1 events whatever the gather) let a
+        `probes` path scatter up to max_bounces + k - 1 times: that count where it is worth saying
+        (k > 1 reached, max_bounces at most GATHER_BOUNCES_NOTE), else None. A gather past
+        max_bounces is never reached: the image is the path tracer's."""
+        k, bounces = self._gather_event, self.scene.max_bounces
+        return bounces + k - 1 if 1 < k <= bounces <= GATHER_BOUNCES_NOTE else None
 
     @property
     def effective_raymarch_step_voxels(self) -> float:

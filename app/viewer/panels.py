@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
-from ..render.renderer import GATHER_BOUNCES_NOTE, MAX_GATHER_EVENT, METHODS, RAYMARCH_STAGES
+from ..render.renderer import MAX_GATHER_EVENT, METHODS, RAYMARCH_STAGES
 from ..scene import (PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS,
                      PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS)
 from ..volume import BUILTIN_VOLUMES
@@ -118,11 +118,12 @@ def render_section(v) -> None:
         if r.probe_gather_event > 1:
             imgui.text_disabled(f"probes: events 1-{r.probe_gather_event - 1} path traced, "
                                 f"probes read at event {r.probe_gather_event}")
-            bounces = r.scene.max_bounces
-            if r.probe_gather_event <= bounces <= GATHER_BOUNCES_NOTE:   # else: never gathered
-                imgui.text_wrapped(f"max_bounces is {bounces}: paths may scatter up to "
-                                   f"{bounces + r.probe_gather_event - 1} times (the probes hold "
-                                   f"{bounces - 1} events whatever the gather)")
+            most = r.gather_bounces_past_limit()
+            if most is not None:
+                bounces = r.scene.max_bounces
+                imgui.text_wrapped(f"max_bounces is {bounces}: paths may scatter up to {most} "
+                                   f"times (the probes hold {bounces - 1} events whatever the "
+                                   f"gather)")
     changed, value = imgui.checkbox("Empty-space skipping", r.resources.use_majorant_grid)
     ui.note("Empty-space skipping")
     if changed:   # the same images either way (unbiased); the probes re-bake by their key

@@ -249,17 +249,14 @@ int path_step(inout PathState p, inout int steps_left)
     if (p.bounce >= probe_gather_event)
         return STEP_DONE;
 #endif
+    vec3 w_in = p.w;
+    p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
 #if defined(ENVIRONMENT_MAP) && defined(PROBE_LIGHTING)
     // The probe renderers take no map samples at the events before the gather: an escape counts
     // in full (phase_pdf 0), as it would with ENVIRONMENT_MAP_SAMPLING 0.
-    p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
     p.phase_pdf = 0.0;
 #elif defined(ENVIRONMENT_MAP)
-    vec3 w_in = p.w;
-    p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
     p.phase_pdf = phase_hg(dot(w_in, p.w), anisotropy);
-#else
-    p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
 #endif
     if (p.bounce >= RR_START_BOUNCE) {
         float q = max(p.throughput.r, max(p.throughput.g, p.throughput.b));
