@@ -222,6 +222,7 @@ class Renderer:
         return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
                 spec.layout, spec.adaptive_strength, spec.adaptive_indicator,
                 self.resources.use_majorant_grid, st.walk_sun, st.walk_adaptive, st.sun_lobe,
+                st.walk_sun_correction if st.walk_sun == "grid" else None,
                 (st.light_max_side, st.light_min_side, st.light_follows_probes,
                  st.light_precision)
                 if st.walk_sun == "grid" else None)
@@ -321,12 +322,14 @@ class Renderer:
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
                          g.adaptive, g.environment_map, g.planes, g.sun_lobe) != (
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
-                st.walk_sun, st.walk_adaptive, env_map, plan.planes, lobe):
+                st.walk_sun, st.walk_adaptive, env_map, plan.planes, lobe) or (
+                g.sun_correction != st.walk_sun_correction):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
                                         plan.sh_order, plan.box, plan.grey,
                                         sun=st.walk_sun, adaptive=st.walk_adaptive,
+                                        sun_correction=st.walk_sun_correction,
                                         environment_map=env_map, planes=plan.planes,
                                         sun_lobe=lobe)
         self.probe_grid.dispatch_target_ms = dispatch_target_ms(self)
@@ -561,14 +564,14 @@ class Renderer:
         # Cut into dispatches of at most the device's target (dispatch_budget.py) by the GPU ms
         # per sample this pass took at this size last time: several samples a dispatch where they
         # fit, bands of rows where one sample of the whole image would not. Unknown yet: one
-        # sample first (one more wait for the timer).
+        # sample first on a GPU (one more wait for the timer).
         key = (id(tracer), acc.width, acc.height)
         target = dispatch_target_ms(self)
         total = 0.0
         while n > 0:
             per_sample = self._sample_ms.get(key)
-            if per_sample is None:
-                k, bands = 1, 1
+            if per_sample is None or math.isinf(target):   # (a CPU rasteriser: no cutting)
+                k, bands = (n if math.isinf(target) else 1), 1
             else:
                 bands = max(1, math.ceil(per_sample / target))
                 k = 1 if bands > 1 else max(1, min(n, int(target / max(per_sample, 1e-9))))
