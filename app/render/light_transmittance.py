@@ -100,6 +100,7 @@ class LightTransmittance:
         self.segment_target = int(segment_target)   # column_segments; 0: whole columns
         self._segment_depths: moderngl.Buffer | None = None   # [ray][segment] optical depths
         self.segments = 1        # per column in the last bake_layers
+        self.march_step = 1.0    # the bake's quadrature step (world units), set by begin()
         self.program = compute_program(ctx, "light_transmittance.comp",
                                        {"LIGHT_GRID_FORMAT": PRECISIONS[precision]})
         self._segment_program = None   # the LIGHT_GRID_SEGMENTS build, compiled when first used
@@ -142,6 +143,7 @@ class LightTransmittance:
         another size) is baked into a texture of its own while readers keep the previous grid
         whole, and replaces it when done."""
         self.box_grid = light_grid_size(resources.volume.dims, self.max_side, min_side)
+        self.march_step = LIGHT_MARCH_VOXELS * resources.march_step
         layout = light_grid_layout(self.box_grid, resources.volume.half_extent, sun_direction,
                                    self.max_side)
         if self.texture is None or layout == self.layout:
@@ -220,7 +222,10 @@ class LightTransmittance:
 
     def uniforms(self) -> dict:
         """What a reader of the grid (lib/light_grid.glsl) needs besides the texture unit."""
-        return {"light_transmittance": LIGHT_UNIT, **self.layout.uniforms()}
+        # lib/light_grid.glsl marches the last texel before the box's sun side itself
+        texel = float(np.max(2.0 * np.asarray(self.layout.half_extent) / np.asarray(self.layout.size)))
+        return {"light_transmittance": LIGHT_UNIT, **self.layout.uniforms(),
+                "light_grid_texel": texel, "light_grid_march_step": self.march_step}
 
     def read(self) -> np.ndarray:
         """The optical depth (z, y, x) of the texture, in the layout's sheared coordinates."""
