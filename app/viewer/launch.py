@@ -145,5 +145,9 @@ def headless_fallback(args: argparse.Namespace, reason: str) -> int:
     options.update(scene=args.scene, method=args.method, spp=args.spp or 64, out=out,
                    probe_grid=args.probe_grid, probe_samples=args.probe_samples,
                    sh_window=args.sh_window, probe_precision=args.probe_precision, seed=args.seed,
-                   exposure=args.exposure, gl_backend=args.gl_backend)
+                   exposure=args.exposure, gl_backend=args.gl_backend,
+                   **{k: getattr(args, k, None) for k in ("crop", "crop_voxels", "clip_plane",
+                                                          "transfer_function")},
+                   no_crop=getattr(args, "no_crop", False),
+                   no_clip_plane=getattr(args, "no_clip_plane", False))
     return render_to_files(argparse.Namespace(**options))
