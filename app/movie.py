@@ -60,50 +60,85 @@ def movie_cameras(scene: Scene, frames: int, turntable_degrees: float | None = N
     return keyframes(cams, frames, base=scene.camera)
 
 
+class MovieFrames:
+    """Renders a movie's frames one at a time with a renderer it borrows (the CLI runs them all
+    at once; the viewer's recorder one per window frame, so the window stays live). The probes are
+    baked before the first frame if they are not current; a camera move never makes them stale.
+    The renderer's scene and accumulation are given back after every frame."""
+
+    def __init__(self, renderer, cameras: list[CameraSpec], method: str = "raymarch",
+                 spp: int = 16, seed: int = 0, exposure: float = 1.0,
+                 samples_per_pass: int = 16, overlay=None):
+        from .render.accumulation import Accumulation
+        from .render.frame_readback import FrameReadback
+        self.renderer, self.cameras, self.method = renderer, list(cameras), method
+        self.spp, self.seed, self.exposure = int(spp), int(seed), float(exposure)
+        self.samples_per_pass, self.overlay = int(samples_per_pass), overlay
+        self.width, self.height = self.cameras[0].width, self.cameras[0].height
+        self.acc = Accumulation(renderer.ctx, self.width, self.height)
+        self.readback = FrameReadback(renderer.ctx)
+        self.next = 0
+        self.bakes, self.bake_ms, self.render_ms = 0, 0.0, 0.0
+
+    @property
+    def done(self) -> bool:
+        return self.next >= len(self.cameras)
+
+    def frame(self, keep_linear: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """The next frame as 8-bit RGB (the overlay drawn in), and its linear image if asked."""
+        r = self.renderer
+        scene, lent = r.scene, r._acc
+        r._acc = self.acc
+        try:
+            r.set_scene(scene.replace(camera=self.cameras[self.next]))
+            if r.needs_probes(self.method) and not r.probes_current():
+                self.bake_ms += r.bake(self.seed)     # before the first frame only (tests count)
+                self.bakes += 1
+            if self.method == "raymarch":
+                self.bake_ms += r.bake_light()
+            acc = r.begin(self.method, seed=self.seed)
+            while acc.samples < self.spp:
+                self.render_ms += r.add_samples(min(self.samples_per_pass, self.spp - acc.samples))
+            linear = acc.read() if keep_linear else None
+            pixels = self.readback.read(acc, self.exposure)
+        finally:
+            r._acc = lent
+            r.set_scene(scene)
+        if self.overlay is not None:
+            pixels = self.overlay.apply(pixels)
+        self.next += 1
+        return pixels, linear
+
+    def release(self) -> None:
+        self.acc.release()
+        self.readback.release()
+
+
 def render_movie(renderer, cameras: list[CameraSpec], writer, method: str = "raymarch",
                  spp: int = 16, seed: int = 0, exposure: float = 1.0, samples_per_pass: int = 16,
-                 overlay=None, progress=None, keep: tuple[int, ...] = (),
-                 frame_hook=None) -> MovieResult:
+                 overlay=None, progress=None, keep: tuple[int, ...] = ()) -> MovieResult:
     """Renders every camera into `writer` (None: frames are not written, only kept or timed);
     `overlay`: a colorbar.ColorbarOverlay laid over each frame; `progress(done, total)` after each
-    frame; `keep`: frame indices whose linear images come back in MovieResult.kept;
-    `frame_hook(index, pixels)`: called with each finished 8-bit frame."""
-    from .render.frame_readback import FrameReadback
+    frame; `keep`: frame indices whose linear images come back in MovieResult.kept."""
     start = time.perf_counter()
-    scene = renderer.scene
-    width, height = cameras[0].width, cameras[0].height
-    bakes, bake_ms, render_ms = 0, 0.0, 0.0
-    readback = FrameReadback(renderer.ctx)
+    frames = MovieFrames(renderer, cameras, method, spp, seed, exposure, samples_per_pass, overlay)
     kept = {}
     try:
-        for index, camera in enumerate(cameras):
-            renderer.set_scene(scene.replace(camera=camera))
-            if renderer.needs_probes(method) and not renderer.probes_current():
-                bake_ms += renderer.bake(seed)     # before the first frame only (tests count)
-                bakes += 1
-            if method == "raymarch":
-                bake_ms += renderer.bake_light()
-            acc = renderer.begin(method, seed=seed)
-            while acc.samples < spp:
-                render_ms += renderer.add_samples(min(samples_per_pass, spp - acc.samples))
-            if index in keep:
-                kept[index] = acc.read()
-            pixels = readback.read(acc, exposure)
-            if overlay is not None:
-                pixels = overlay.apply(pixels)
-            if frame_hook is not None:
-                frame_hook(index, pixels)
+        while not frames.done:
+            index = frames.next
+            pixels, linear = frames.frame(keep_linear=index in keep)
+            if linear is not None:
+                kept[index] = linear
             if writer is not None:
                 writer.add(pixels)
             if progress is not None:
                 progress(index + 1, len(cameras))
         path = str(writer.close()) if writer is not None else ""
     finally:
-        readback.release()
-        renderer.set_scene(scene)
-    return MovieResult(path=path, frames=len(cameras), width=width, height=height, method=method,
-                       spp=spp, bakes=bakes, bake_ms=bake_ms, render_ms=render_ms,
-                       wall_s=time.perf_counter() - start, kept=kept)
+        frames.release()
+    return MovieResult(path=path, frames=len(cameras), width=frames.width, height=frames.height,
+                       method=method, spp=spp, bakes=frames.bakes, bake_ms=frames.bake_ms,
+                       render_ms=frames.render_ms, wall_s=time.perf_counter() - start, kept=kept)
 
 
 def sized(cameras: list[CameraSpec], width: int, height: int) -> list[CameraSpec]:

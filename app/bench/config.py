@@ -78,6 +78,17 @@ class BenchConfig:
     interact_orbit_frames: int = 60
     interact_ref_spp: int = 1024                     # reference per event state (two halves)
     interact_tail_k: int = 8                         # samples per dispatch against 1
+    # --preset movie (movie.py): a turntable raymarched over probes baked once, timed whole,
+    # its error at a few frames against path-traced references, the path tracer's time beside
+    movie_frames: int = 120
+    movie_degrees: float = 360.0
+    movie_spp: int = 16                              # raymarched frames accumulated per frame
+    movie_probes: tuple[int, int] = (128, 64)        # the viewer's GPU default (device_defaults)
+    movie_check_frames: tuple[int, ...] = (0, 40, 80)
+    movie_ref_spp: int = 8192                        # per check frame, in two halves
+    movie_pt_max_spp: int = 8192                     # the path tracer's progressive run at most
+    movie_fps: float = 30.0
+    movie_target: float = 0.05                       # per-frame relative RMSE asked for
 
     def scaled(self, **changes) -> "BenchConfig":
         return replace(self, **changes)
@@ -103,6 +114,16 @@ PRESETS = {
                                   interact_target_spp=(("probes", 16), ("raymarch", 4)),
                                   interact_max_frames=60, interact_orbit_frames=12,
                                   interact_ref_spp=512, ref_samples_per_pass=16, interact_tail_k=4),
+    # the movie of the issue: 120 frames of bonsai at 1080p on the lent GPU (about 4 minutes,
+    # most of it the three references and the path tracer's runs)
+    "movie": BenchConfig(mode="movie", scenes=("bonsai",), width=1920, height=1080,
+                         ref_samples_per_pass=64),
+    # the same at tiny size for llvmpipe (a test runs it)
+    "movie-quick": BenchConfig(mode="movie", scenes=("tiny",), width=48, height=32,
+                               movie_frames=12, movie_spp=4, movie_probes=(8, 32),
+                               movie_check_frames=(0, 6), movie_ref_spp=256,
+                               movie_pt_max_spp=256, ref_samples_per_pass=16,
+                               samples_per_dispatch=8),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),
