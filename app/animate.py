@@ -58,8 +58,10 @@ def add_animate_parser(sub, func) -> argparse.ArgumentParser:
     a.add_argument("--raymarch-step", type=positive_float, help="raymarch step in voxels")
     add_scene_edit_options(a)
     add_colorbar_options(a)
-    from .cli import add_gl_backend
-    add_gl_backend(a)
+    from .gl.context import BACKENDS
+    a.add_argument("--gl-backend", choices=BACKENDS,
+                   help=f"headless OpenGL backend (default: the first that works of "
+                        f"{', '.join(BACKENDS)})")
     a.set_defaults(func=func)
     return a
 

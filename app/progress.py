@@ -23,8 +23,10 @@ class ProgressBar:
         rate = done / elapsed if elapsed > 0 else 0.0
         left = (self.total - done) / rate if rate > 0 else float("nan")
         eta = f", {left:.0f} s left" if done < self.total and rate > 0 else f", {elapsed:.1f} s"
+        speed = (f"{rate:.1f} {self.unit}/s" if rate >= 1 or rate == 0 else
+                 f"{1 / rate:.1f} s per {self.unit.rstrip('s')}")
         return (f"{self.label} [{'#' * filled}{'.' * (BAR_WIDTH - filled)}] {done}/{self.total} "
-                f"{self.unit} ({100 * frac:.0f}%), {rate:.1f} {self.unit}/s{eta}")
+                f"{self.unit} ({100 * frac:.0f}%), {speed}{eta}")
 
     def update(self, done: int) -> None:
         if self.interactive:

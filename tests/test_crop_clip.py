@@ -389,3 +389,23 @@ def test_clipped_matter_neither_scatters_nor_shadows(ctx):
         r.release()
     assert _rms(a, b) <= 1.3 * _rms(b, c) + 1e-4
     assert _rms(full, b) > 2.0 * _rms(b, c)   # and the cut is not nothing
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--crop", "0", "0", "0", "0", "1", "1"], r"--crop: crop.max\[0\]: must be > crop.min\[0\]"),
+    (["--crop", "nan", "0", "0", "1", "1", "1"], r"--crop: crop.min\[0\]: must be finite"),
+    (["--crop-voxels", "0", "0", "0", "65", "64", "64"],
+     r"--crop-voxels: crop.max\[0\]: 65 is beyond the volume's 64 voxels along x"),
+    (["--crop", "0.2", "-1", "-1", "0.21", "1", "1"], "--crop: crop: keeps no voxel of the volume"),
+    (["--crop", "0", "0", "0", "1", "1", "1", "--crop-voxels", "0", "0", "0", "1", "1", "1"],
+     "give one of them"),
+    (["--clip-plane", "0", "0", "0", "1"], "--clip-plane: clip_plane.normal: must not be the zero"),
+])
+def test_crop_and_clip_options_refused_with_the_option_named(tmp_path, capsys, args, message):
+    import re
+    from app.cli import main
+    rc = main(["render", "--spp", "1", "--width", "8", "--height", "8",
+               "--out", str(tmp_path / "x.png"), *args])
+    err = capsys.readouterr().err
+    assert rc == 2 and re.search(message, err), err
+    assert err.count("\n") == 1                      # one line
