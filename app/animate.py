@@ -107,8 +107,10 @@ def run_animate(args: argparse.Namespace) -> int:
                                      probes_named(args.scene, args.probe_grid, args.probe_samples))
     if said and args.method != "pt":
         print(f"animate: {said}", file=sys.stderr)
-    renderer = Renderer(ctx, scene, volume, raymarch_stage=args.raymarch_stage,
-                        raymarch_step=args.raymarch_step or DEFAULT_RAYMARCH_STEP)
+    from .render.settings import RenderSettings
+    renderer = Renderer(ctx, scene, volume, RenderSettings(
+        raymarch_stage=args.raymarch_stage,
+        raymarch_step=args.raymarch_step or DEFAULT_RAYMARCH_STEP))
     overlay = (scene_colorbar_overlay(cam.width, cam.height, scene, volume, args.colorbar,
                                       args.colorbar_title) if args.colorbar else None)
     bar = ProgressBar("animate", len(cameras))

@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from app.clip_region import clip_region  # noqa: E402
 from app.gl.context import create_headless_context, describe  # noqa: E402
 from app.render.renderer import Renderer  # noqa: E402
+from app.render.settings import RenderSettings  # noqa: E402
 from app.scene import load_scene, parse_scene  # noqa: E402
 from app.volume import load_scene_volume  # noqa: E402
 
@@ -75,7 +76,7 @@ def main() -> int:
         spp = args.frames if method == "raymarch" else args.spp
         images, times = [], []
         for vol, sc, seed in ((volume, crop_scene, 1), (half, moved, 2), (half, moved, 3)):
-            r = Renderer(ctx, sc, vol, raymarch_stage=stage)
+            r = Renderer(ctx, sc, vol, RenderSettings(raymarch_stage=stage))
             start = time.perf_counter()
             res = r.render(method, spp=spp, seed=seed, samples_per_pass=16)
             times.append({"wall_s": time.perf_counter() - start, "render_ms": res.render_ms,

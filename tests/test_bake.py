@@ -10,6 +10,7 @@ import pytest
 import app.render.probes as probes_module
 from app.gl.profiler import GpuProfile
 from app.render.renderer import Renderer
+from app.render.settings import RenderSettings
 from app.scene import parse_scene
 
 CAMERA = {"eye": [0.0, 0.2, 1.3], "target": [0, 0, 0], "fov_y": 40.0, "width": 8, "height": 8}
@@ -142,7 +143,7 @@ def test_furnace_stays_exact_with_every_shortcut_on(ctx):
                                    "albedo": 1.0, "density_scale": 40.0, "environment": env,
                                    "max_bounces": 100000, "light": {"irradiance": [0, 0, 0]},
                                    "camera": CAMERA, "probes": {"grid": [3, 3, 2], "samples": 256}}))
-    r.walk_sun, r.walk_adaptive = "grid", 1.0
+    r.configure(walk_sun="grid", walk_adaptive=1.0)
     try:
         r.bake()
         assert r.probe_grid.sun == "grid" and r.probe_grid.passes_done == 4
@@ -156,7 +157,7 @@ def test_furnace_stays_exact_with_every_shortcut_on(ctx):
 
 
 def _l00(r, walk_sun, seeds):
-    r.walk_sun = walk_sun
+    r.configure(walk_sun=walk_sun)
     out = []
     for seed in seeds:
         r._baked_key = None
@@ -180,7 +181,7 @@ def test_sun_from_the_light_grid_has_a_small_measured_bias(ctx):
         seeds = range(4)
         ray = _l00(r, "ray", seeds).mean(0)
         grid = _l00(r, "grid", seeds).mean(0)
-        r.light_max_side = 8
+        r.configure(light_max_side=8)
         coarse = _l00(r, "grid", seeds).mean(0)
     finally:
         r.release()
@@ -196,7 +197,7 @@ def _light_grid_and_twin(r):
     """The renderer's baked light grid (z, y, x), its layout, and the NumPy twin's bake of it."""
     from app.render.light_transmittance import LIGHT_MARCH_VOXELS
     from app.twins.light_grid import light_grid_bake
-    r.light_precision = "f4"     # exact float32 sums (the default 16-bit texels round them)
+    r.configure(light_precision="f4")     # exact float32 sums (the default 16-bit texels round them)
     r.bake_light()
     s = r.scene
     twin = light_grid_bake(r.resources.volume, r.resources.table, s.density_scale,
@@ -254,7 +255,7 @@ def test_light_grid_matches_its_numpy_twin(ctx):
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
                                    "density_scale": 30.0, "camera": CAMERA,
                                    "light": {"direction": [0.3, 0.8, -0.52]}}))
-    r.light_min_side, r.light_follows_probes = 128, True   # a GPU's defaults (llvmpipe: 1, off)
+    r.configure(light_min_side=128, light_follows_probes=True)   # a GPU's defaults (llvmpipe: 1, off)
     try:
         tau, layout, twin = _light_grid_and_twin(r)
         box_grid = r._light.box_grid
@@ -277,13 +278,13 @@ def test_light_grid_in_segments_equals_whole_columns(ctx, density_scale):
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
                                    "density_scale": density_scale, "camera": CAMERA,
                                    "light": {"direction": [0.3, 0.8, -0.52]}}))
-    r.light_min_side = 64
+    r.configure(light_min_side=64)
     try:
-        r.light_segment_target = 0
+        r.configure(light_segment_target=0)
         whole, layout, twin = _light_grid_and_twin(r)
         assert r._light.segments == 1
         r.invalidate()
-        r.light_segment_target = 1 << 16
+        r.configure(light_segment_target=1 << 16)
         cut, _, _ = _light_grid_and_twin(r)
         segments = r._light.segments
         assert segments == column_segments(layout, 1 << 16) > 4
@@ -315,11 +316,11 @@ def test_light_grid_is_exact_in_a_homogeneous_box(ctx, direction):
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "constant", "size": [12, 10, 8]},
                                    "density_scale": 3.0, "camera": CAMERA,
                                    "light": {"direction": direction}}))
-    r.light_min_side = 1
+    r.configure(light_min_side=1)
     try:
         r.bake_light()
         half = r._light.read()           # the default 16-bit texels
-        r.light_precision = "f4"
+        r.configure(light_precision="f4")
         r.bake_light()
         tau, layout = r._light.read(), r._light.layout
         np.testing.assert_allclose(half, tau, rtol=1 / 1024, atol=1e-4)
@@ -355,7 +356,7 @@ def test_light_grid_lookup_agrees_with_a_march_from_each_point(ctx):
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [16, 12, 14]},
                                    "density_scale": 8.0, "camera": CAMERA,
                                    "light": {"direction": [0.5, 0.7, -0.3]}}))
-    r.light_min_side = 64
+    r.configure(light_min_side=64)
     try:
         r.bake_light()
         tau, layout = r._light.read(), r._light.layout
@@ -386,11 +387,11 @@ def test_probes_sun_from_the_light_grid_or_a_march(ctx):
                                    "density_scale": 8.0, "max_bounces": 2, "camera": CAMERA,
                                    "light": {"direction": sun},
                                    "probes": {"grid": [4, 3, 4], "samples": 16}}))
-    r.light_min_side, r.light_precision = 64, "f4"
+    r.configure(light_min_side=64, light_precision="f4")
     out = {}
     try:
         for walk_sun in ("grid", "ray"):
-            r.walk_sun = walk_sun
+            r.configure(walk_sun=walk_sun)
             r.invalidate()
             r.bake(seed=1)
             g = r.probe_grid
@@ -429,33 +430,69 @@ def test_walk_counters_start_from_zero_every_time(renderer):
     assert counts[0] == counts[1] == counts[2] and counts[0]["walks"] == grid.count * 64
 
 
-def test_adaptive_walks_follow_the_noise_with_a_small_measured_bias(ctx):
-    """Adaptive walks (factor 1): quiet probes stop early, noisy ones take every walk; probe
-    radiance agrees with full bakes within the bound below (measured: see the print), and the
-    adaptive bake is deterministic for a seed."""
-    scene = parse_scene({"volume": {"builtin": "cloud", "size": [32, 24, 28]}, "density_scale": 60.0,
-                         "albedo": 0.9, "max_bounces": 8, "camera": CAMERA,
+def test_adaptive_walks_follow_the_neighbours_noise_and_are_deterministic(ctx):
+    """Adaptive walks (factor 1) on a cloud with empty space around it: probes among quiet
+    neighbours stop after the first pass, noisy ones take every walk (16^3 probes, so that a
+    probe's 26 neighbours are a neighbourhood and not most of the grid); the budgets are the same
+    for a seed; probe radiance agrees with full bakes within the noise of the bakes. (Measured
+    here: 19% of the walks saved, 18% with 12^3 probes.)"""
+    scene = parse_scene({"volume": {"builtin": "cloud", "size": [24, 24, 24]}, "density_scale": 60.0,
+                         "albedo": 0.9, "max_bounces": 6, "camera": CAMERA,
                          "light": {"direction": [0.3, 0.8, 0.5], "irradiance": [3, 3, 3]},
-                         "probes": {"grid": [5, 4, 5], "samples": 512}})
-    r = Renderer(ctx, scene)
+                         "probes": {"grid": [12, 12, 12], "samples": 256, "fit": "box",
+                                    "sh_order": 0}})
+    r = Renderer(ctx, scene, settings=RenderSettings(walk_adaptive=0.0))
     try:
-        seeds = range(4)
+        seeds = range(3)
         full = _l00(r, "ray", seeds)
-        r.walk_adaptive = 1.0
+        r.configure(walk_adaptive=1.0)
         adaptive = _l00(r, "ray", seeds)
         taken = r.probe_grid.walks_taken()
         again = _l00(r, "ray", [seeds[-1]])[0]
+        taken_again = r.probe_grid.walks_taken()
     finally:
         r.release()
     np.testing.assert_array_equal(again, adaptive[-1])
-    assert taken.min() == 64 and taken.max() == 512
-    saved = 1 - taken.mean() / 512
-    scale = np.sqrt(np.mean(full.mean(0) ** 2))
-    diff = np.sqrt(np.mean((adaptive.mean(0) - full.mean(0)) ** 2)) / scale
-    noise = np.sqrt(np.mean(adaptive.var(0, ddof=1) / len(seeds))) / scale
-    print(f"walks saved {saved:.2f}; L00 difference {diff:.4f}, adaptive bakes' noise {noise:.4f}")
-    assert saved > 0.2
-    assert diff < 0.02
+    np.testing.assert_array_equal(taken_again, taken)
+    assert taken.min() == 64 and taken.max() == 256
+    saved = 1 - taken.mean() / 256
+    diff = adaptive.mean(0).sum() - full.mean(0).sum()
+    se = np.hypot(adaptive.sum(axis=(1, 2, 3, 4)).std(ddof=1),
+                  full.sum(axis=(1, 2, 3, 4)).std(ddof=1)) / np.sqrt(len(seeds))
+    print(f"walks saved {saved:.2f}; summed L00 difference {diff:.4g} (standard error {se:.3g})")
+    assert saved > 0.1
+    assert abs(diff) < 4 * se + 1e-6 * full.mean(0).sum()
+
+
+def test_adaptive_walks_are_unbiased_behind_a_backlit_shell(ctx):
+    """Known answer on a heavy-tailed case: probes in and around a thin dense shell (albedo 0.99,
+    g = 0.6) lit from behind, where a walk's radiance is large only when it finds the lit side of
+    the rim. The mean probe radiance over 30 seeds with adaptive walks is within 3 standard errors
+    of the same over 30 full bakes (the exact value's estimate). The rule that decided each probe's
+    walks from its own running variance failed this: 3.4% dark at z = -4.6 (lib/probe_noise.glsl)."""
+    from app.bench.scenes import battery_scene
+    from dataclasses import replace
+    scene = battery_scene("shell-g06", 16, 8, 8, grid=4, samples=256)
+    scene = scene.replace(probes=replace(scene.probes, fit="box", sh_order=0), max_bounces=32)
+    means = {}
+    for adaptive in (1.0, 0.0):
+        r = Renderer(ctx, scene, settings=RenderSettings(walk_adaptive=adaptive))
+        try:
+            per_seed = []
+            for seed in range(30):
+                r.invalidate()
+                r.bake(seed=seed)
+                per_seed.append(float(r.probe_grid.coefficients()[..., 0].mean()))
+                if adaptive:
+                    saved = 1 - r.probe_grid.walks_taken().mean() / 256
+        finally:
+            r.release()
+        per_seed = np.array(per_seed)
+        means[adaptive] = (per_seed.mean(), per_seed.std(ddof=1) / np.sqrt(len(per_seed)))
+    (a, se_a), (b, se_b) = means[1.0], means[0.0]
+    z = (a - b) / np.hypot(se_a, se_b)
+    print(f"adaptive / full {a / b:.4f} (z = {z:.2f}); walks saved {saved:.2f}")
+    assert abs(z) < 3.0
 
 
 def test_progress_sums_on_the_gpu_are_the_probes_column_sums(ctx):

@@ -19,6 +19,7 @@ import pytest
 from app.clip_region import clip_region
 from app.gl.textures import TransferTable, volume_texture
 from app.render.renderer import Renderer
+from app.render.settings import RenderSettings
 from app.scene import SceneError, parse_scene, scene_to_dict
 from app.transfer import transfer_table
 from app.twins.majorant_grid import density_range_grid, macrocell_counts, majorant_grid
@@ -308,7 +309,7 @@ RENDERS = {  # method, raymarch stage, samples
 
 
 def _render(ctx, volume, scene: dict, method, stage, spp, seed) -> tuple[np.ndarray, Renderer]:
-    r = Renderer(ctx, parse_scene(scene), volume, raymarch_stage=stage)
+    r = Renderer(ctx, parse_scene(scene), volume, RenderSettings(raymarch_stage=stage))
     return r.render(method, spp=spp, seed=seed).image, r
 
 

@@ -81,13 +81,13 @@ def movie_scene(renderer, name: str, config, results, out: Path, device: str) ->
     cameras = turntable(scene.camera, config.movie_degrees, config.movie_frames)
     check = [i for i in config.movie_check_frames if i < len(cameras)]
     # warm-up, not timed: the shaders compile and the GPU clocks up
-    warm = Renderer(renderer.ctx, scene, renderer.resources.volume)
+    warm = Renderer(renderer.ctx, scene, renderer.resources.volume, renderer.settings)
     try:
         render_movie(warm, cameras[:2], None, "raymarch", config.movie_spp)
     finally:
         warm.release()
     movie_path = out / f"{name}_movie.mp4"
-    timed = Renderer(renderer.ctx, scene, renderer.resources.volume)
+    timed = Renderer(renderer.ctx, scene, renderer.resources.volume, renderer.settings)
     try:
         writer = MovieWriter(str(movie_path), scene.camera.width, scene.camera.height,
                              fps=config.movie_fps)
