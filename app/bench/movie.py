@@ -18,6 +18,7 @@ One record per scene:
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -89,10 +90,12 @@ def movie_scene(renderer, name: str, config, results, out: Path, device: str) ->
     movie_path = out / f"{name}_movie.mp4"
     timed = Renderer(renderer.ctx, scene, renderer.resources.volume, renderer.settings)
     try:
+        start = time.perf_counter()   # from the encoder's start to its last frame written
         writer = MovieWriter(str(movie_path), scene.camera.width, scene.camera.height,
                              fps=config.movie_fps)
         movie = render_movie(timed, cameras, writer, "raymarch", config.movie_spp,
                              samples_per_pass=config.movie_spp, keep=tuple(check))
+        movie.wall_s = time.perf_counter() - start
         probes = timed.probe_grid
         probe_info = {"probe_grid": list(probes.grid), "probe_samples": probes.samples,
                       "probe_box": probes.box, "light_grid": list(timed._light.texture.size)}
