@@ -55,7 +55,8 @@ void main()
     if (any(greaterThanEqual(c, cells)))
         return;
     vec2 range = kept_density_range(c);
-    if (range.x > range.y) {
+    if (range.x > range.y) {   // no point of the cell is kept: skipped like empty space
+        CHECK_TEXEL(c, imageSize(majorant_out), CHECK_SITE_IMAGE_TEXEL);
         imageStore(majorant_out, c, vec4(0.0));
         return;
     }
