@@ -5,8 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from .frontend import (ArgumentParser, OptionError, fraction, grid_arg, positive_float,
-                       positive_int, render_to_files)
+from .frontend import (ArgumentParser, OptionError, add_colorbar_options, add_scene_edit_options,
+                       fraction, grid_arg, positive_float, positive_int, render_to_files)
 from .scene import SceneError
 
 
@@ -17,6 +17,11 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 def cmd_render(args: argparse.Namespace) -> int:
     return render_to_files(args)
+
+
+def cmd_animate(args: argparse.Namespace) -> int:
+    from .animate import run_animate
+    return run_animate(args)
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -156,8 +161,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-empty-space-skipping", dest="empty_space_skipping", action="store_false",
                    help="track with one global majorant instead of the macrocell grid (the same "
                         "image; for comparisons)")
+    add_scene_edit_options(r)
+    add_colorbar_options(r)
     add_gl_backend(r)
     r.set_defaults(func=cmd_render)
+
+    from .animate import add_animate_parser
+    add_animate_parser(sub, cmd_animate)
 
     from .bench.config import PRESETS
     from .bench.scenes import ALL_SCENES, BATTERY_SCENES

@@ -91,6 +91,16 @@ def column_segments(layout: LightGridLayout, target: int = SEGMENT_TARGET_INVOCA
     return segments if segments >= MIN_SEGMENTS else 1
 
 
+def covered_box(resources: SceneResources) -> tuple[tuple[int, int, int], np.ndarray, np.ndarray]:
+    """The box the light grid covers, as (voxels per axis, half extent, centre): the volume's, or
+    with a crop or clip plane the kept box and the voxels the crop keeps (the grid a cropped
+    volume of those voxels would get, at the same place)."""
+    clip, volume = resources.clip, resources.volume
+    if clip is None or clip.empty:
+        return (tuple(volume.dims), np.asarray(volume.half_extent, np.float64), np.zeros(3))
+    return tuple(clip.voxel_count), clip.half_extent, clip.centre
+
+
 class LightTransmittance:
     def __init__(self, ctx: moderngl.Context, max_side: int = MAX_SIDE, precision: str = PRECISION,
                  segment_target: int = SEGMENT_TARGET_INVOCATIONS):
@@ -142,10 +152,10 @@ class LightTransmittance:
         may use as they are (each ray is marched on its own). A new layout (the sun moved, or
         another size) is baked into a texture of its own while readers keep the previous grid
         whole, and replaces it when done."""
-        self.box_grid = light_grid_size(resources.volume.dims, self.max_side, min_side)
+        dims, half, centre = covered_box(resources)
+        self.box_grid = light_grid_size(dims, self.max_side, min_side)
         self.march_step = LIGHT_MARCH_VOXELS * resources.march_step
-        layout = light_grid_layout(self.box_grid, resources.volume.half_extent, sun_direction,
-                                   self.max_side)
+        layout = light_grid_layout(self.box_grid, half, sun_direction, self.max_side, centre)
         if self.texture is None or layout == self.layout:
             if self.texture is None:
                 self.texture = self._texture(layout.size)

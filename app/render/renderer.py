@@ -236,7 +236,8 @@ class Renderer:
         the volume, glsl/visible_region.comp, redone when the volume or the transfer function
         changes)."""
         s = self.scene
-        key = (self.resources.volume_version, s.transfer_function, s.density_scale > 0)
+        key = (self.resources.volume_version, s.transfer_function, s.density_scale > 0,
+               self.resources.clip)
         if self._region_key != key:
             self._region = self._region_pass.region(self.resources)
             self._region_key = key
@@ -249,10 +250,13 @@ class Renderer:
         s = self.scene
         spec = s.probes
         grid, box = tuple(spec.grid), None
+        clip = self.resources.clip
         if spec.fit == "visible" and region:
             low, high = self.visible_region()
             grid = fitted_grid(spec.grid, low, high)
             box = (tuple(map(float, low)), tuple(map(float, high)))
+        elif clip is not None and not clip.empty:   # "box": the kept box of a crop or clip plane
+            box = (tuple(map(float, clip.box_min)), tuple(map(float, clip.box_max)))
         env = self.resources.environment
         # A map is grey when its three channels are equal everywhere; (1, 0, 0) stands for colour.
         environment = s.environment if env is None else ((1, 1, 1) if env.grey else (1, 0, 0))
@@ -389,7 +393,8 @@ class Renderer:
         min_side = (min_side_for_probes(s.probes.grid, st.light_min_side)
                     if st.light_follows_probes else st.light_min_side)
         key = (self.resources.volume_version, s.transfer_function, s.density_scale,
-               s.light.direction, st.light_max_side, min_side, st.light_precision)
+               s.light.direction, st.light_max_side, min_side, st.light_precision,
+               self.resources.clip)
         return key, min_side
 
     def light_current(self) -> bool:

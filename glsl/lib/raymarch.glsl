@@ -53,7 +53,7 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
     for (int i = 0; i < n && transmittance > 1e-6; ++i) {
         float t = t0 + (float(i) + jitter) * dt;
         vec3 x = origin + t * d;
-        vec4 tf = transfer_at(density_at(x));
+        vec4 tf = classified_at(x);
         float sigma_t = density_scale * tf.a;
         if (sigma_t <= 0.0) {
             int last = empty_space_last_index(origin, d, t, i, t0, dt, jitter);
