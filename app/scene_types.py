@@ -199,8 +199,9 @@ class BookmarkSpec:
                                    fov_y=self.fov_y)
 
 
-# The viewer's render methods and display modes (app/render/renderer.py METHODS and
-# app/viewer/state.py DISPLAY_MODES name the same; a test keeps them equal).
+# The viewer's render methods and display modes (app/render/renderer.py METHODS but `guided`,
+# which the viewer does not offer yet, and app/viewer/state.py DISPLAY_MODES; a test keeps them
+# so).
 VIEWER_METHODS = ("pt", "probes", "probes-only", "raymarch")
 VIEWER_DISPLAYS = ("image", "split", "error")
 VIEWER_PROBE_VIEWS = ("off", "over", "alone")

@@ -210,10 +210,11 @@ class ProbeGrid:
                               if self.adaptive else None)
         self.budget_program = (compute_program(ctx, "probe_walk_budget.comp", self.defines())
                                if self.adaptive else None)
-        # Walk dispatches sized by time (_chunk): the target (None: fixed chunks) and the GPU ms
-        # per walk of the last timed chunk, kept across restarts of this grid.
+        # Walk dispatches sized by time (_chunk): the target (None: fixed chunks) and the walks and
+        # GPU ms of the last timed chunk, kept across restarts of this grid.
         self.dispatch_target_ms: float | None = None
-        self.walk_ms: float | None = None
+        self._chunk_walks: int = FIRST_CHUNK_WALKS
+        self._chunk_ms: float | None = None
         self._chunk_timer = GpuTimer(ctx)
         self.dispatches = 0
         self.passes_done = 0
@@ -380,7 +381,8 @@ class ProbeGrid:
                 self._run_walks(walk_program, groups)
                 if timed:
                     self._chunk_timer.stop()
-                    self.walk_ms = self._chunk_timer.elapsed_ms / (n * directions)
+                    self._chunk_walks = n * directions
+                    self._chunk_ms = self._chunk_timer.elapsed_ms
             with section("project"):
                 self.project_program.run(n)
                 self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT
@@ -418,18 +420,23 @@ class ProbeGrid:
     def _chunk(self, left: int, directions: int) -> tuple[int, bool]:
         """Probes the next walk dispatch takes (of `left` still to walk in this call) and whether
         to time it. Where walks end in one dispatch and a dispatch target is set
-        (dispatch_target_ms, by the Renderer), chunks hold the walks that the GPU ms per walk of
-        the last timed chunk says fit the target: timed (one wait for the GPU) whenever the rest
-        of the pass does not fit in one, or no chunk was timed yet (the first holds
-        FIRST_CHUNK_WALKS); a pass that fits is not waited for. Else the fixed chunk_probes."""
+        (dispatch_target_ms, by the Renderer), chunks follow the last timed chunk's GPU time
+        towards the target: timed (one wait for the GPU) whenever the rest of the pass does not
+        fit in one, or no chunk was timed yet (the first holds FIRST_CHUNK_WALKS); a pass that fits
+        is not waited for. Else the fixed chunk_probes."""
         if self.resumable or self.dispatch_target_ms is None or math.isinf(self.dispatch_target_ms):
             return min(self.chunk_probes, left), False
-        if self.walk_ms is None:
+        if self._chunk_ms is None:
             walks = FIRST_CHUNK_WALKS
         else:
-            walks = int(self.dispatch_target_ms / max(self.walk_ms, 1e-12))
+            # A dispatch's time is not proportional to its walks: a small one waits for its
+            # longest walk whatever its size (measured on the battery's shells, sizing each chunk
+            # by the last one's time per walk kept chunks small and bakes 2.7x slower). So the
+            # next chunk scales the last one by target / time, by at most 4x up and 2x down.
+            scale = self.dispatch_target_ms / max(self._chunk_ms, 1e-6)
+            walks = int(self._chunk_walks * min(max(scale, 0.5), 4.0))
         n = max(1, min(self.chunk_probes, left, walks // directions))
-        return n, self.walk_ms is None or n < left
+        return n, self._chunk_ms is None or n < left
 
     def _bind_images(self, first_slot: int) -> None:
         """Slots first_slot .. first_slot + 7 to image units 0 .. 7 (lib/probe_publish.glsl)."""

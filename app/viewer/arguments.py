@@ -5,7 +5,7 @@ import argparse
 
 from ..frontend import (add_scene_edit_options, grid_arg, positive_float, positive_int,
                         render_scale, window_size)
-from ..render.renderer import METHODS
+from ..scene_types import VIEWER_METHODS as METHODS
 
 
 def add_view_parser(sub, func) -> argparse.ArgumentParser:

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
-from ..render.renderer import MAX_GATHER_EVENT, METHODS, RAYMARCH_STAGES
+from ..render.renderer import MAX_GATHER_EVENT, RAYMARCH_STAGES
+from ..scene_types import VIEWER_METHODS as METHODS
 from ..scene import (PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS,
                      PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS)
 from ..volume import BUILTIN_VOLUMES

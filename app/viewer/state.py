@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from ..render.renderer import METHODS
+from ..scene_types import VIEWER_METHODS as METHODS
 from ..scene import BookmarkSpec, CameraSpec, ClipPlaneSpec, CropSpec, Scene, ViewerSpec
 from .history import SceneHistory
 
