@@ -1,6 +1,6 @@
 """The README's benchmark tables, regenerated from the committed records (markdown on stdout).
 
-    python scripts/readme_tables.py speed [--records bench/h100] [--previous bench/h100-v7]
+    python scripts/readme_tables.py speed [--records bench/h100] [--previous bench/archive/h100-v10]
     python scripts/readme_tables.py interact [--records bench/h100-interact]
 
 `speed`: time to each target rRMSE (bake included) for the path tracer and the best probe method,
@@ -111,7 +111,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("table", choices=("speed", "interact"))
     parser.add_argument("--records", help="the run's folder (default bench/h100, bench/h100-interact)")
-    parser.add_argument("--previous", default="bench/h100-v7", help="speed: the run to compare with")
+    parser.add_argument("--previous", default="bench/archive/h100-v10", help="speed: the run to compare with")
     parser.add_argument("--method", default="raymarch", help="interact: the method's rows")
     parser.add_argument("--width", type=int, default=1920)
     parser.add_argument("--grid", type=int, default=128)

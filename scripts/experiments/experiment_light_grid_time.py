@@ -3,7 +3,7 @@ the scene's sun and for a sun 45 degrees off two axes (the widest sheared grid),
 per-texel march it replaced (bench/h100-light-time, where that run measured the same box grid),
 for 16- and 32-bit texels.
 Usage:
-    python scripts/experiment_light_grid_time.py OUT.json [scene ...]"""
+    python scripts/experiments/experiment_light_grid_time.py OUT.json [scene ...]"""
 import dataclasses, json, statistics, sys
 from pathlib import Path
 from app.gl.context import create_headless_context, describe
@@ -11,7 +11,7 @@ from app.render.renderer import Renderer
 from app.bench.scenes import bench_scene
 from app.volume import load_volume
 
-BEFORE = Path(__file__).resolve().parent.parent / "bench/h100-light-time/results.json"
+BEFORE = Path(__file__).resolve().parents[2] / "bench/h100-light-time/results.json"
 before = {}
 if BEFORE.is_file():
     for rec in json.load(open(BEFORE))["records"]:

@@ -3,9 +3,9 @@ event) and the raymarcher's GPU time per frame (it reads the grid at every step)
 light-grid precision (16- and 32-bit texels), median of 3 after a warm-up; with --after-reference,
 first a path-traced reference's worth of work (as the benchmark does before a scene's probes).
 Written to explain the anisotropic cloud's 2-3x slower walks and frames in bench/h100 against
-bench/h100-v3 (the bench runs use 16-bit texels; the A/B that found no difference used 32-bit).
+bench/archive/h100-v3 (the bench runs use 16-bit texels; the A/B that found no difference used 32-bit).
 Usage:
-    python scripts/experiment_light_grid_reads.py OUT.json [--size N] [--grids 8,64] [--after-reference]
+    python scripts/experiments/experiment_light_grid_reads.py OUT.json [--size N] [--grids 8,64] [--after-reference]
         [--scenes anisotropic,bonsai,thick,foot]"""
 import argparse, json, statistics
 from dataclasses import replace
