@@ -5,8 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from .frontend import (ArgumentParser, OptionError, fraction, grid_arg, positive_float,
-                       positive_int, render_to_files)
+from .frontend import (ArgumentParser, OptionError, add_volume_options, fraction, grid_arg,
+                       positive_float, positive_int, render_to_files)
 from .scene import SceneError
 
 
@@ -17,6 +17,27 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 def cmd_render(args: argparse.Namespace) -> int:
     return render_to_files(args)
+
+
+def cmd_series(args: argparse.Namespace) -> int:
+    """Lists a DICOM folder tree's or DICOMDIR's series, and which one opens by default."""
+    from .dicom import list_series
+    from .scene_types import VolumeError
+    listing = list_series(args.path)
+    try:
+        default = listing.largest().number
+    except VolumeError:
+        default = None
+    print(f"{listing.where}: {len(listing.series)} DICOM series")
+    for s in listing.series:
+        mark = "*" if s.number == default else " "
+        print(f"{mark} {s.label()}")
+        print(f"      SeriesInstanceUID {s.uid}")
+    if listing.skipped:
+        print(f"({len(listing.skipped)} files that are not DICOM passed over)")
+    print("* opens by default (the largest that makes a volume); open another with --series N or "
+          "--series UID" if default is not None else "none of them makes one volume")
+    return 0
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -156,8 +177,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-empty-space-skipping", dest="empty_space_skipping", action="store_false",
                    help="track with one global majorant instead of the macrocell grid (the same "
                         "image; for comparisons)")
+    add_volume_options(r)
     add_gl_backend(r)
     r.set_defaults(func=cmd_render)
+
+    s = sub.add_parser("series", help="list the series of a DICOM folder tree or DICOMDIR "
+                                      "(description, modality, size, slices) and which opens")
+    s.add_argument("path", help="a folder (searched recursively) or a DICOMDIR file")
+    s.set_defaults(func=cmd_series)
 
     from .bench.config import PRESETS
     from .bench.scenes import ALL_SCENES

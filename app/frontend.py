@@ -102,6 +102,32 @@ class ArgumentParser(argparse.ArgumentParser):
 
 # ---- the scene ---------------------------------------------------------------------------------
 
+def series_arg(text: str) -> int | str:
+    """--series: a number in the folder's listing (from 1) or a SeriesInstanceUID."""
+    text = text.strip()
+    if text.isdigit():
+        if int(text) < 1:
+            raise argparse.ArgumentTypeError(f"expected a series number from 1 or a "
+                                             f"SeriesInstanceUID, got {text!r}")
+        return int(text)
+    if not text:
+        raise argparse.ArgumentTypeError("expected a series number or a SeriesInstanceUID")
+    return text
+
+
+def add_volume_options(parser: argparse.ArgumentParser) -> None:
+    """The options that say how a volume file is read (render and view)."""
+    from .scene_types import ORIENTATIONS
+    parser.add_argument("--series", type=series_arg, metavar="N|UID",
+                        help="a DICOM folder or DICOMDIR's series: its number in the listing "
+                             "(`radiance-probes series PATH`) or its SeriesInstanceUID (default: "
+                             "the largest that makes a volume)")
+    parser.add_argument("--orientation", choices=ORIENTATIONS,
+                        help="data: the array's axes as stored (default); patient: turned so that "
+                             "+x is the patient's left, +y superior, +z anterior (NIfTI, DICOM, "
+                             "NRRD)")
+
+
 def scene_from_arg(arg: str | None) -> Scene:
     """The scene argument: a scene JSON file, a volume file (in the default scene), or none (the
     default scene)."""
@@ -119,7 +145,8 @@ _OPTION_FIELDS = {"camera.width": "--width", "camera.height": "--height",
                   "probes.sh_window": "--sh-window", "probes.precision": "--probe-precision",
                   "probes.layout": "--probe-layout", "probes.adaptive_strength": "--adaptive-strength",
                   "probes.adaptive_indicator": "--adaptive-indicator",
-                  "probes.interpolation": "--probe-interpolation"}
+                  "probes.interpolation": "--probe-interpolation", "volume.series": "--series",
+                  "volume.orientation": "--orientation"}
 
 
 def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
@@ -136,11 +163,15 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
         ("interpolation", getattr(args, "probe_interpolation", None))) if value is not None})
     camera = {key: value for key, value in (("width", getattr(args, "width", None)),
                                             ("height", getattr(args, "height", None))) if value}
-    if not probes and not camera:
+    volume = {key: value for key, value in (("series", getattr(args, "series", None)),
+                                            ("orientation", getattr(args, "orientation", None)))
+              if value is not None}
+    if not probes and not camera and not volume:
         return scene
     data = scene_to_dict(scene)
     data["probes"].update(probes)
     data["camera"].update(camera)
+    data["volume"].update(volume)
     try:
         return parse_scene(data, base_dir=scene.base_dir)
     except SceneError as exc:
@@ -229,7 +260,7 @@ def render_defaults() -> dict:
                 exr=None, probe_grid=None, probe_samples=None, sh_window=None, probe_precision=None,
                 auto_probes=None, raymarch_stage="compute", raymarch_step=None, seed=0, width=None,
                 height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True,
-                gather_event=None)
+                gather_event=None, series=None, orientation=None)
 
 
 def render_to_files(args: argparse.Namespace) -> int:
@@ -258,6 +289,8 @@ def render_to_files(args: argparse.Namespace) -> int:
     scene = apply_options(scene_from_arg(args.scene), args)
     check_outputs(args)
     volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
+    for note in volume.notes:
+        print(f"note: {note}", file=sys.stderr)
     load_scene_environment(scene)          # so does an environment map (kept in its cache)
     if args.method == "raymarch" and args.raymarch_step is not None:
         try:

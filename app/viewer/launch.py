@@ -66,6 +66,8 @@ def run_view(args: argparse.Namespace) -> int:
         # A volume that does not load fails here, before a window, an X server or a GL context.
         volume = load_scene_volume(scene)
         load_scene_environment(scene)   # and an environment map (kept in its cache)
+        for note in volume.notes:
+            print(f"view: note: {note}", file=sys.stderr)
     else:
         volume = None   # the headless fallback loads it
     xvfb = None
@@ -145,5 +147,7 @@ def headless_fallback(args: argparse.Namespace, reason: str) -> int:
     options.update(scene=args.scene, method=args.method, spp=args.spp or 64, out=out,
                    probe_grid=args.probe_grid, probe_samples=args.probe_samples,
                    sh_window=args.sh_window, probe_precision=args.probe_precision, seed=args.seed,
-                   exposure=args.exposure, gl_backend=args.gl_backend)
+                   exposure=args.exposure, gl_backend=args.gl_backend,
+                   series=getattr(args, "series", None),
+                   orientation=getattr(args, "orientation", None))
     return render_to_files(argparse.Namespace(**options))
