@@ -19,6 +19,18 @@ def cmd_render(args: argparse.Namespace) -> int:
     return render_to_files(args)
 
 
+def cmd_schema(args: argparse.Namespace) -> int:
+    """The scene file's JSON Schema (or its key table), generated from the scene's types."""
+    from .scene_schema import key_table, schema_text
+    text = key_table() if args.table else schema_text()
+    if args.out:
+        Path(args.out).write_text(text)
+        print(f"wrote {Path(args.out).resolve()}")
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
 def cmd_series(args: argparse.Namespace) -> int:
     """Lists a DICOM folder tree's or DICOMDIR's series, and which one opens by default."""
     from .dicom import list_series
@@ -185,6 +197,13 @@ def build_parser() -> argparse.ArgumentParser:
                                       "(description, modality, size, slices) and which opens")
     s.add_argument("path", help="a folder (searched recursively) or a DICOMDIR file")
     s.set_defaults(func=cmd_series)
+
+    j = sub.add_parser("schema", help="the scene file's JSON Schema (docs/scene.schema.json), "
+                                      "generated from the scene's types")
+    j.add_argument("--out", help="write it to this file instead of stdout")
+    j.add_argument("--table", action="store_true",
+                   help="the key table of docs/scene-format.md (markdown) instead")
+    j.set_defaults(func=cmd_schema)
 
     from .bench.config import PRESETS
     from .bench.scenes import ALL_SCENES

@@ -293,7 +293,9 @@ TOP_LEVEL_VOLUME_KEYS = ("orientation", "series")
 def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
     """Validate a JSON-like dictionary into a :class:`Scene`."""
     d = _object(data, "", (_fields(Scene) - {"base_dir", "environment_map"})
-                | set(TOP_LEVEL_VOLUME_KEYS))
+                | set(TOP_LEVEL_VOLUME_KEYS) | {"$schema"})
+    if "$schema" in d and not isinstance(d["$schema"], str):   # for editors; nothing else reads it
+        raise SceneError(f"$schema: expected the schema's address, got {d['$schema']!r}")
     kw: dict[str, Any] = {}
     lifted = {k: d[k] for k in TOP_LEVEL_VOLUME_KEYS if k in d}
     if lifted:
