@@ -278,7 +278,7 @@ def render_to_files(args: argparse.Namespace) -> int:
         raise OptionError("--auto-probes chooses probe settings: use it with a probe method")
     gather_event = getattr(args, "gather_event", None)
     if gather_event is not None:
-        from .render.renderer import check_gather_event
+        from .render.settings import check_gather_event
         if args.method != "probes":
             raise OptionError(f"--gather-event: the probes method's option (a final gather), "
                               f"not {args.method}'s")
@@ -299,11 +299,12 @@ def render_to_files(args: argparse.Namespace) -> int:
             raise OptionError(f"--raymarch-step: {exc}") from None
     ctx = create_headless_context(args.gl_backend)
     check_image_size(ctx, scene.camera.width, scene.camera.height)
-    renderer = Renderer(ctx, scene, volume, raymarch_stage=args.raymarch_stage,
-                        raymarch_step=args.raymarch_step or DEFAULT_RAYMARCH_STEP,
-                        empty_space_skipping=args.empty_space_skipping)
-    if gather_event is not None:
-        renderer.probe_gather_event = gather_event
+    from .render.settings import RenderSettings
+    renderer = Renderer(ctx, scene, volume, RenderSettings(
+        raymarch_stage=args.raymarch_stage,
+        raymarch_step=args.raymarch_step or DEFAULT_RAYMARCH_STEP,
+        empty_space_skipping=args.empty_space_skipping,
+        gather_event=gather_event if gather_event is not None else 1))
     if args.auto_probes is not None:
         from .render.auto_probes import choose_probes
         choice = choose_probes(renderer, args.auto_probes, args.method,

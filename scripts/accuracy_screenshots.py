@@ -87,8 +87,8 @@ for name in sys.argv[3:] or ("bonsai", "foot"):
                                        ("after: 64^3 x 512", 64, 512, False),
                                        ("after: 192^3 x 64", 192, 64, False)):
         r.set_scene(scene.replace(probes=replace(scene.probes, grid=(grid,) * 3, samples=walks)))
-        r.light_max_side = 128 if before else 512
-        r.light_follows_probes = not before
+        r.configure(light_max_side=128 if before else 512)
+        r.configure(light_follows_probes=not before)
         res = r.render("raymarch", spp=16, seed=3, samples_per_pass=16)
         e = corrected_rrmse(rrmse(res.image, ref), noise)
         ms = res.bake_ms + res.render_ms

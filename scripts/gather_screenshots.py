@@ -41,7 +41,7 @@ for name in ("anisotropic", "bonsai"):
     bake_ms = r.bake(seed=11)   # once: the gather event is read-side, each image pays for it
     shots = []
     for event in EVENTS:
-        r.probe_gather_event = event
+        r.configure(gather_event=event)
         res = r.render("probes", spp=FRAMES, seed=3, samples_per_pass=16)
         e = corrected_rrmse(rrmse(res.image, ref), noise)
         ms = bake_ms + res.render_ms

@@ -34,7 +34,7 @@ ref = 0.5 * (halves[0] + halves[1])
 noise = rrmse(halves[0], halves[1]) / 2
 shots = []
 for order, lobe in ((2, False), (3, False), (3, True), (4, False)):
-    r.probe_sun_lobe = lobe
+    r.configure(sun_lobe=lobe)
     r.set_scene(scene.replace(probes=replace(scene.probes, grid=(128,) * 3, samples=256,
                                              sh_order=order)))
     res = r.render("raymarch", spp=16, seed=3, samples_per_pass=16)

@@ -142,7 +142,7 @@ def test_furnace_stays_exact_with_every_shortcut_on(ctx):
                                    "albedo": 1.0, "density_scale": 40.0, "environment": env,
                                    "max_bounces": 100000, "light": {"irradiance": [0, 0, 0]},
                                    "camera": CAMERA, "probes": {"grid": [3, 3, 2], "samples": 256}}))
-    r.walk_sun, r.walk_adaptive = "grid", 1.0
+    r.configure(walk_sun="grid", walk_adaptive=1.0)
     try:
         r.bake()
         assert r.probe_grid.sun == "grid" and r.probe_grid.passes_done == 4
@@ -156,7 +156,7 @@ def test_furnace_stays_exact_with_every_shortcut_on(ctx):
 
 
 def _l00(r, walk_sun, seeds):
-    r.walk_sun = walk_sun
+    r.configure(walk_sun=walk_sun)
     out = []
     for seed in seeds:
         r._baked_key = None
@@ -180,7 +180,7 @@ def test_sun_from_the_light_grid_has_a_small_measured_bias(ctx):
         seeds = range(4)
         ray = _l00(r, "ray", seeds).mean(0)
         grid = _l00(r, "grid", seeds).mean(0)
-        r.light_max_side = 8
+        r.configure(light_max_side=8)
         coarse = _l00(r, "grid", seeds).mean(0)
     finally:
         r.release()
@@ -196,7 +196,7 @@ def _light_grid_and_twin(r):
     """The renderer's baked light grid (z, y, x), its layout, and the NumPy twin's bake of it."""
     from app.render.light_transmittance import LIGHT_MARCH_VOXELS
     from app.twins.light_grid import light_grid_bake
-    r.light_precision = "f4"     # exact float32 sums (the default 16-bit texels round them)
+    r.configure(light_precision="f4")     # exact float32 sums (the default 16-bit texels round them)
     r.bake_light()
     s = r.scene
     twin = light_grid_bake(r.resources.volume, r.resources.table, s.density_scale,
@@ -254,7 +254,7 @@ def test_light_grid_matches_its_numpy_twin(ctx):
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
                                    "density_scale": 30.0, "camera": CAMERA,
                                    "light": {"direction": [0.3, 0.8, -0.52]}}))
-    r.light_min_side, r.light_follows_probes = 128, True   # a GPU's defaults (llvmpipe: 1, off)
+    r.configure(light_min_side=128, light_follows_probes=True)   # a GPU's defaults (llvmpipe: 1, off)
     try:
         tau, layout, twin = _light_grid_and_twin(r)
         box_grid = r._light.box_grid
@@ -277,13 +277,13 @@ def test_light_grid_in_segments_equals_whole_columns(ctx, density_scale):
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
                                    "density_scale": density_scale, "camera": CAMERA,
                                    "light": {"direction": [0.3, 0.8, -0.52]}}))
-    r.light_min_side = 64
+    r.configure(light_min_side=64)
     try:
-        r.light_segment_target = 0
+        r.configure(light_segment_target=0)
         whole, layout, twin = _light_grid_and_twin(r)
         assert r._light.segments == 1
         r.invalidate()
-        r.light_segment_target = 1 << 16
+        r.configure(light_segment_target=1 << 16)
         cut, _, _ = _light_grid_and_twin(r)
         segments = r._light.segments
         assert segments == column_segments(layout, 1 << 16) > 4
@@ -315,11 +315,11 @@ def test_light_grid_is_exact_in_a_homogeneous_box(ctx, direction):
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "constant", "size": [12, 10, 8]},
                                    "density_scale": 3.0, "camera": CAMERA,
                                    "light": {"direction": direction}}))
-    r.light_min_side = 1
+    r.configure(light_min_side=1)
     try:
         r.bake_light()
         half = r._light.read()           # the default 16-bit texels
-        r.light_precision = "f4"
+        r.configure(light_precision="f4")
         r.bake_light()
         tau, layout = r._light.read(), r._light.layout
         np.testing.assert_allclose(half, tau, rtol=1 / 1024, atol=1e-4)
@@ -355,7 +355,7 @@ def test_light_grid_lookup_agrees_with_a_march_from_each_point(ctx):
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [16, 12, 14]},
                                    "density_scale": 8.0, "camera": CAMERA,
                                    "light": {"direction": [0.5, 0.7, -0.3]}}))
-    r.light_min_side = 64
+    r.configure(light_min_side=64)
     try:
         r.bake_light()
         tau, layout = r._light.read(), r._light.layout
@@ -386,11 +386,11 @@ def test_probes_sun_from_the_light_grid_or_a_march(ctx):
                                    "density_scale": 8.0, "max_bounces": 2, "camera": CAMERA,
                                    "light": {"direction": sun},
                                    "probes": {"grid": [4, 3, 4], "samples": 16}}))
-    r.light_min_side, r.light_precision = 64, "f4"
+    r.configure(light_min_side=64, light_precision="f4")
     out = {}
     try:
         for walk_sun in ("grid", "ray"):
-            r.walk_sun = walk_sun
+            r.configure(walk_sun=walk_sun)
             r.invalidate()
             r.bake(seed=1)
             g = r.probe_grid
@@ -441,7 +441,7 @@ def test_adaptive_walks_follow_the_noise_with_a_small_measured_bias(ctx):
     try:
         seeds = range(4)
         full = _l00(r, "ray", seeds)
-        r.walk_adaptive = 1.0
+        r.configure(walk_adaptive=1.0)
         adaptive = _l00(r, "ray", seeds)
         taken = r.probe_grid.walks_taken()
         again = _l00(r, "ray", [seeds[-1]])[0]

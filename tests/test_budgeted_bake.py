@@ -156,14 +156,14 @@ def test_warm_restart_ends_at_the_cold_bake(renderer):
     old = _textures(r)
     edited = r.scene.replace(density_scale=36.0)
     r.set_scene(edited)
-    r.bake_warm = False
+    r.configure(bake_warm=False)
     r.bake(seed=9)
     cold = _textures(r)
     r.set_scene(r.scene.replace(density_scale=30.0))
     r.bake(seed=2)
     assert all(np.array_equal(a, b) for a, b in zip(old, _textures(r)))
     r.set_scene(edited)
-    r.bake_warm = True
+    r.configure(bake_warm=True)
     r.bake_step(9)          # the first pass: blended with the old probes
     first = _textures(r)
     assert r.probe_grid.warm_walks > 0
@@ -189,7 +189,7 @@ def test_an_edit_in_the_middle_of_a_bake_is_not_lost(renderer):
         r.bake_step(4, budget_ms=1e-6)
     assert r._baked_key == r.bake_key()
     got = _textures(r)
-    r.bake_warm = False
+    r.configure(bake_warm=False)
     r.invalidate()
     r.bake(seed=4)
     assert all(np.array_equal(a, b) for a, b in zip(got, _textures(r)))

@@ -197,21 +197,28 @@ def test_image_beyond_the_device_is_one_line_before_the_scene_is_uploaded(scene,
 
 def test_renderer_options_are_checked(ctx):
     from app.render.renderer import Renderer
+    from app.render.settings import RenderSettings
     from app.scene import parse_scene
     scene = parse_scene({"volume": {"builtin": "sphere", "size": [4, 4, 4]},
                          "camera": {"width": 4, "height": 4}})
     for bad in (0, -1.0, math.nan, math.inf, "0.5", True):
         with pytest.raises(ValueError, match="raymarch step"):
-            Renderer(ctx, scene, raymarch_step=bad)
+            RenderSettings(raymarch_step=bad)
     with pytest.raises(ValueError, match="raymarch stage"):
-        Renderer(ctx, scene, raymarch_stage="geometry")
-    r = Renderer(ctx, scene, raymarch_step=2, empty_space_skipping=False)
+        RenderSettings(raymarch_stage="geometry")
+    for bad in ({"walk_sun": "sky"}, {"walk_adaptive": -1.0}, {"light_precision": "f8"},
+                {"gather_event": 0}, {"light_max_side": 0}, {"sun_lobe": 1}):
+        with pytest.raises(ValueError, match=next(iter(bad)).split("_")[-1]):
+            RenderSettings(**bad)
+    with pytest.raises(ValueError, match="unknown render setting.*walk_sunn"):
+        RenderSettings.from_dict({"walk_sunn": "ray"})
+    r = Renderer(ctx, scene, settings=RenderSettings(raymarch_step=2, empty_space_skipping=False))
     try:
         assert r.raymarch_step_voxels == 2.0 and not r.resources.use_majorant_grid
         with pytest.raises(ValueError, match="raymarch step"):
-            r.raymarch_step_voxels = math.nan
+            r.configure(raymarch_step=math.nan)
         assert r.raymarch_step_voxels == 2.0
-        r.raymarch_step_voxels = 1e-4   # finer than 8192 steps across a 4^3 box: said, not hidden
+        r.configure(raymarch_step=1e-4)   # finer than 8192 steps across a 4^3 box: said, not hidden
         assert r.effective_raymarch_step_voxels == pytest.approx(3 ** 0.5 / 8192 * 4)
     finally:
         r.release()

@@ -266,7 +266,7 @@ def test_white_furnace_with_a_constant_map(ctx, constant_map):
         se = img.std(axis=(0, 1)) / math.sqrt(img.shape[0] * img.shape[1])
         assert (np.abs(img.mean(axis=(0, 1)) - ENV) < 4 * se + 1e-6).all(), (img.mean(axis=(0, 1)), se)
         assert (np.abs(img.mean(axis=(0, 1)) / ENV - 1) < 0.03).all()
-        r.walk_sun, r.walk_adaptive = "ray", 0.0
+        r.configure(walk_sun="ray", walk_adaptive=0.0)
         r.bake()
         l00 = r.probe_grid.coefficients()[..., 0:3] / math.sqrt(4 * math.pi)
         rel = l00 / ENV

@@ -25,7 +25,7 @@ def _renderer(ctx, **kw):
 
 
 def _render(r, method, spp, event=1, seed=5):
-    r.probe_gather_event = event
+    r.configure(gather_event=event)
     result = r.render(method, spp=spp, seed=seed, samples_per_pass=spp)
     assert result.stats["truncated_paths"] == 0 and result.stats["nonfinite_samples"] == 0
     return result.image
@@ -99,7 +99,7 @@ def test_probes_only_reads_its_probes_at_the_first_event_whatever_the_setting(ct
 def test_a_gather_event_out_of_range_is_refused_by_name(ctx, bad):
     r = _renderer(ctx)
     with pytest.raises(ValueError, match="probe gather event"):
-        r.probe_gather_event = bad
+        r.configure(gather_event=bad)
     assert r.probe_gather_event == 1
     r.release()
 
@@ -109,6 +109,6 @@ def test_a_gather_event_out_of_range_is_refused_by_name(ctx, bad):
 def test_scattering_past_max_bounces_is_counted_where_a_gather_is_reached(ctx, max_bounces,
                                                                           event, most):
     r = _renderer(ctx, max_bounces=max_bounces)
-    r.probe_gather_event = event
+    r.configure(gather_event=event)
     assert r.gather_bounces_past_limit() == most
     r.release()

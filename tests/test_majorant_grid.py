@@ -474,7 +474,7 @@ def test_probe_bake_with_grid_matches_global_majorant(ctx):
     scene = parse_scene({"volume": {"builtin": "cloud", "size": [24, 20, 16]}, "density_scale": 40.0,
                          "camera": CAMERA, "probes": {"grid": [3, 3, 2], "samples": 128}})
     r = Renderer(ctx, scene)
-    r.walk_sun = "ray"   # shadow rays from every walk event: the tracking this test is about
+    r.configure(walk_sun="ray")   # shadow rays from every walk event: the tracking this test is about
     bakes = 6
     coefficients = {}
     try:

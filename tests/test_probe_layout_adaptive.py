@@ -240,7 +240,7 @@ def test_identity_warp_reproduces_the_uniform_image(ctx, method, monkeypatch):
         r = Renderer(ctx, parse_scene(_with_probes(SCENE, layout=layout)))
         monkeypatch.setattr(r, "adaptive_planes",
                             lambda grid, box: tuple(tuple(uniform_planes(n)) for n in grid))
-        r.raymarch_stage = "compute"
+        r.configure(raymarch_stage="compute")
         out[layout] = (r.render(method, spp=4).image, r.probe_grid.coefficients())
         assert (r.probe_grid.planes is not None) == (layout == "adaptive")
         assert r.probe_grid.defines().get("PROBE_WARP", 0) == (layout == "adaptive")
@@ -410,7 +410,7 @@ def test_fragment_raymarch_reads_the_warp_too(ctx):
     for stage in ("compute", "fragment"):
         r = Renderer(ctx, parse_scene(_with_probes(SCENE, layout="adaptive",
                                                    adaptive_strength=1.0)))
-        r.raymarch_stage = stage
+        r.configure(raymarch_stage=stage)
         images[stage] = r.render("raymarch", spp=2).image
         assert r.probe_grid.planes is not None
         r.release()

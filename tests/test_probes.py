@@ -154,7 +154,7 @@ def test_raymarch_fragment_equals_compute(ctx):
     images = {}
     for stage in ("compute", "fragment"):
         r = _renderer(ctx, probes={"grid": [4, 4, 4], "samples": 32})
-        r.raymarch_stage = stage
+        r.configure(raymarch_stage=stage)
         images[stage] = r.render("raymarch", spp=2).image
         r.release()
     assert images["compute"].max() > 0

@@ -100,12 +100,12 @@ def test_bake_projects_the_lobe_and_leaves_the_bands_alone(ctx, tmp_path):
     assert h == pytest.approx(g ** 3)
     scene = _lobe_scene(tmp_path, g, h, amplitude, 0.4, (-0.3, 0.35, -0.89))
     r = Renderer(ctx, scene)
-    r.walk_adaptive = 0.0   # every probe takes all its walks
+    r.configure(walk_adaptive=0.0)   # every probe takes all its walks
     try:
         r.bake(seed=5)
         with_lobe = r.probe_grid.coefficients()
         assert r.probe_grid.sun_lobe == pytest.approx(h)
-        r.probe_sun_lobe = False
+        r.configure(sun_lobe=False)
         r.bake(seed=5)
         without = r.probe_grid.coefficients()
         assert r.probe_grid.sun_lobe == 0.0
@@ -320,7 +320,7 @@ def test_fit_chooses_the_lobe_the_probes_see(ctx, tmp_path, power):
     scene = _lobe_scene(tmp_path, g, g ** power, 0.7, 0.4, (-0.3, 0.35, -0.89))
     scene = scene.replace(probes=replace(scene.probes, grid=(8, 8, 8), samples=256))
     r = Renderer(ctx, scene)
-    r.sun_lobe_fit = True
+    r.configure(sun_lobe_fit=True)
     try:
         r.bake(seed=3)
         fit = r.last_sun_lobe_fit

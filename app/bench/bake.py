@@ -86,13 +86,11 @@ def bake_scene(renderer, name: str, config, results, out, device: str,
     _log(f"  ceiling: trilinear march {ceiling['steps_per_s'] / 1e9:.2f} G steps/s "
          f"({ceiling['ms']:.2f} ms for {ceiling['steps'] / 1e6:.0f} M steps)")
     profiled = _profiling_supported(renderer)
-    default_light_side = getattr(renderer, "light_max_side", None)
-    variants = config.bake_variants if hasattr(renderer, "walk_sun") else ((None, None, None),)
+    defaults = renderer.settings
+    variants = config.bake_variants
     for (grid, samples), (walk_sun, light_side, adaptive) in ((s, v) for s in config.bake_settings
                                                               for v in variants):
-        if walk_sun is not None:
-            renderer.walk_sun, renderer.light_max_side = walk_sun, light_side
-            renderer.walk_adaptive = adaptive
+        renderer.configure(walk_sun=walk_sun, light_max_side=light_side, walk_adaptive=adaptive)
         probes = replace(scene.probes, grid=(grid, grid, grid), samples=samples)
         renderer.set_scene(scene.replace(probes=probes))
         _rebake(renderer, 7)    # warm-up (shader compilation, clocks), not timed
@@ -103,8 +101,8 @@ def bake_scene(renderer, name: str, config, results, out, device: str,
         info = {"probe_grid": grid, "probe_samples": samples, "probe_grid_xyz": list(g.grid),
                 "probe_bytes": g.gpu_bytes, "bake_repeats_ms": times, "walks": walks,
                 "walks_per_s": walks / (bake_ms / 1e3) if bake_ms > 0 else None,
-                "ceiling_steps_per_s": ceiling["steps_per_s"], "walk_sun": walk_sun or "ray",
-                "walk_adaptive": adaptive or 0.0}
+                "ceiling_steps_per_s": ceiling["steps_per_s"], "walk_sun": walk_sun,
+                "walk_adaptive": adaptive, "settings": renderer.settings.as_dict()}
         if profiled:
             info.update(_profile(renderer, 11))
             if info["bake_walk_ms"] > 0:
@@ -125,7 +123,7 @@ def bake_scene(renderer, name: str, config, results, out, device: str,
                               light_bytes=renderer._light.gpu_bytes,
                               light_grid=list(renderer._light.texture.size), **info)
             results.add(rec, image, reference)
-        tag = f"{label}_{walk_sun or 'ray'}{light_side or ''}_a{adaptive or 0:g}_{grid}x{samples}"
+        tag = f"{label}_{walk_sun}{light_side}_a{adaptive:g}_{grid}x{samples}"
         save_png(out / "images" / f"{name}_bake_{tag}.png", image)
         prof = (f"walks {info['bake_walk_ms']:.1f}, project {info['bake_project_ms']:.1f}, sun "
                 f"{info['bake_sun_ms']:.1f}, other {info['bake_other_ms']:.1f} ms; "
@@ -135,7 +133,5 @@ def bake_scene(renderer, name: str, config, results, out, device: str,
              f"{light_side} adaptive {adaptive}: bake {bake_ms:.1f} ms "
              f"(runs {', '.join(f'{t:.1f}' for t in times)}), {info['walks_per_s'] / 1e6:.0f} M "
              f"walks/s; {prof}; raymarch rRMSE {rec['rrmse']:.4f}")
-    if hasattr(renderer, "walk_sun"):
-        renderer.walk_sun, renderer.light_max_side = "ray", default_light_side
-        renderer.walk_adaptive = 0.0
+    renderer.settings = defaults
     renderer.set_scene(scene)

@@ -31,12 +31,12 @@ PROBE_VARIANTS = (
 
 def skipping_modes(renderer) -> tuple[bool, ...]:
     """Empty-space skipping on and off where the renderer can switch it, else just as it is."""
-    return (True, False) if hasattr(renderer, "set_empty_space_skipping") else (None,)
+    return (True, False) if hasattr(renderer, "configure") else (None,)
 
 
 def _set_skipping(renderer, on) -> None:
     if on is not None:
-        renderer.set_empty_space_skipping(on)
+        renderer.configure(empty_space_skipping=on)
 
 
 def cost_scene(renderer, name: str, config, results, out, device: str,
@@ -68,7 +68,7 @@ def cost_scene(renderer, name: str, config, results, out, device: str,
                 renderer.set_scene(scene.replace(probes=probes))
                 # the light grid (the walks' sun and the raymarcher's): charged to every setting
                 light_ms = renderer.light_grid_ms()
-                walk_light_ms = light_ms if renderer.walk_sun == "grid" else 0.0
+                walk_light_ms = light_ms if renderer.settings.walk_sun == "grid" else 0.0
                 bake_ms = renderer.bake(seed=11) + walk_light_ms
                 g = renderer.probe_grid
                 info = {"variant": label, "empty_space_skipping": skipping, "probe_grid": grid,

@@ -227,15 +227,15 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                     reference, noise = ref(event)
                     for variant in ("warm", "cold"):
                         session.set_scene(before)
-                        r.bake_warm = False
+                        r.configure(bake_warm=False)
                         r.bake(seed=100 + i)        # the state before the edit, finished (untimed)
-                        r.bake_warm = variant == "warm"
+                        r.configure(bake_warm=variant == "warm")
                         run = run_frames(session, method, config, reference, noise, seed=3 + i,
                                          scenes=[after])
                         add(record(base, event, method, variant, run))
                     state = after
                 save_png(out / "images" / f"{tag}_{grid}_{method}_final.png", session.image(method))
-            r.bake_warm = True
+            r.configure(bake_warm=True)
             # switch probes -> raymarcher: the same state, so the albedo reference serves
             run = run_frames(session, "raymarch", config, reference, noise, seed=9)
             add(record(base, "raymarch_switch", "raymarch", None, run))

@@ -128,6 +128,7 @@ def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Pa
             _log(f"scene {si + 1}/{len(config.scenes)}: {name}")
             volume = load_volume(scene.volume, scene.base_dir)
             renderer = Renderer(ctx, scene, volume)
+            meta.setdefault("settings", renderer.settings.as_dict())
             try:
                 _bench_scene(renderer, name, config, results, out, device)
             finally:
@@ -196,6 +197,7 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
         return bake_scene(renderer, name, config, results, out, device,
                           _reference(renderer, name, config, results, out), config.code_label)
     scene = renderer.scene
+    defaults = renderer.settings
     reference = _reference(renderer, name, config, results, out)
     base = {"scene": name, "device": device, "width": config.width, "height": config.height,
             "reference_noise": results.references.get(name, {}).get("noise_rrmse")}
@@ -203,6 +205,9 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
     def record(method: str, frames: int, image: np.ndarray, timing: tuple[float, float],
                bake_ms: float = 0.0, flip: bool = True, **extra) -> None:
         rec = make_record(base, config, method, frames, image, reference, timing, bake_ms, **extra)
+        changed = defaults.differences(renderer.settings)   # the run's defaults in meta.settings
+        if changed:
+            rec["settings"] = changed
         results.add(rec, image if flip and (frames in config.flip_frames or method == "pt")
                     else None, reference)
 
@@ -244,7 +249,7 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
             baked_ms = renderer.bake(seed=11)
             # An SH window is applied at render time: the probes stay, and so does their cost.
             bake_ms = baked_ms if baked_ms > 0 else bake_ms
-            walk_light_ms = light_ms if renderer.walk_sun == "grid" else 0.0
+            walk_light_ms = light_ms if renderer.settings.walk_sun == "grid" else 0.0
             probe_info = {"probe_grid": grid, "probe_samples": samples,
                           "precision": renderer.scene.probes.precision,
                           "sh_window": renderer.scene.probes.sh_window,
@@ -261,18 +266,18 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
                         save_png(out / "images" / f"{name}_{method}_{grid}x{samples}.png", image)
             if not variant and (grid, samples) in config.gather_settings:
                 for event in config.gather_events:
-                    renderer.probe_gather_event = event
+                    renderer.configure(gather_event=event)
                     for frames, image, *timing in _progressive(renderer, "probes",
                                                                config.gather_frames, 13, k):
                         record("probes", frames, image, timing, bake_ms + walk_light_ms,
                                light_ms=walk_light_ms, gather_event=event, **probe_info)
-                renderer.probe_gather_event = 1
+                renderer.configure(gather_event=1)
             steps = (config.sweep_raymarch_steps if not showcase or variant else
                      sorted({*config.sweep_raymarch_steps, *config.raymarch_steps}))
             stages = ("compute", "fragment") if showcase and not variant else ("compute",)
             for stage in stages:
                 for step in (steps if stage == "compute" else (0.5,)):
-                    renderer.raymarch_stage, renderer.raymarch_step_voxels = stage, step
+                    renderer.configure(raymarch_stage=stage, raymarch_step=step)
                     for frames, image, *timing in _progressive(renderer, "raymarch",
                                                                config.raymarch_frames, 17, k):
                         # FLIP (CPU time) for the default step's images and the showcase's
@@ -285,7 +290,7 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
                         if (showcase and not variant and stage == "compute" and step == 0.5
                                 and frames == config.raymarch_frames[-1]):
                             save_png(out / "images" / f"{name}_raymarch_{grid}x{samples}.png", image)
-            renderer.raymarch_stage, renderer.raymarch_step_voxels = "compute", 0.5
+            renderer.configure(raymarch_stage="compute", raymarch_step=0.5)
             last = {m: next(r for r in reversed(results.records) if r["method"] == m)
                     for m in (*PROBE_METHODS, "raymarch")}
             _log(f"  {grid}^3 x {samples} {variant or ''}: bake {bake_ms:.1f} ms, "

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import moderngl
@@ -18,10 +18,7 @@ from ..volume import Volume
 from .accumulation import Accumulation
 from .limits import check_image_size
 from .pathtracer import PathTracer
-from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_MIN_SIDE,
-                                  PRECISION as LIGHT_PRECISION,
-                                  SEGMENT_TARGET_INVOCATIONS, SOFTWARE_MIN_SIDE,
-                                  LightTransmittance, min_side_for_probes)
+from .light_transmittance import LightTransmittance, min_side_for_probes
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, sun_lobe_g
 from .sun_lobe_fit import SunLobeFit, SunLobeFitter
 from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
@@ -29,27 +26,18 @@ from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
 from .raymarch import Raymarcher, min_step_voxels
 from .resources import SceneResources
+from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noqa: F401 (re-exported)
+                       check_gather_event)
 
 METHODS = ("pt", "probes", "probes-only", "raymarch")
 # Variants of glsl/pathtrace.comp: the probe renderers stop at the first scattering event.
 PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
-# The latest event `probes` may gather at: beyond a few events the path tracer's own sampling
-# is most of the cost, and the probes stand in for little.
-MAX_GATHER_EVENT = 8
 # The probes hold max_bounces - 1 events whatever the gather event, so a gather at event k lets a
 # path scatter up to max_bounces + k - 1 times. Up to this max_bounces the CLI and the viewer say
 # so: measured on llvmpipe (a cloud of albedo 0.95, 8^3 probes), gather 2 at max_bounces 2 came out
 # 2% brighter than the path tracer, gather 3 at max_bounces 4 0.8%; at 16 the difference is below
 # the probes' own error.
 GATHER_BOUNCES_NOTE = 8
-
-
-def check_gather_event(event) -> int:
-    """The gather event `probes` may take (an integer from 1 to MAX_GATHER_EVENT), or ValueError."""
-    if isinstance(event, bool) or not isinstance(event, int) or not 1 <= event <= MAX_GATHER_EVENT:
-        raise ValueError(f"probe gather event: expected an integer from 1 to {MAX_GATHER_EVENT}, "
-                         f"got {event!r}")
-    return event
 
 
 @dataclass(frozen=True)
@@ -84,7 +72,6 @@ class RenderResult:
         return self.render_ms / max(self.spp, 1)
 
 
-RAYMARCH_STAGES = ("compute", "fragment")
 # A budgeted bake's first slice, before any slice of this probe layout was timed: small enough
 # for a frame on llvmpipe (64 walks a probe), and the next slices follow the measured time.
 FIRST_SLICE_PROBES = 64
@@ -103,17 +90,16 @@ def _slice_estimate(estimate: float | None, seen: float) -> float:
 
 
 class Renderer:
-    def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None, *,
-                 empty_space_skipping: bool = True, raymarch_stage: str = "compute",
-                 raymarch_step: float = 0.5):
-        """`empty_space_skipping`: tracking over the macrocell majorant grid (default) or one
-        global majorant (the same unbiased estimator, for comparisons); `raymarch_stage`: the
-        raymarcher as a compute (default) or the design card's fragment pass; `raymarch_step`:
-        its step in voxels of the smallest spacing (finite, > 0)."""
-        self.raymarch_stage = raymarch_stage          # checked before anything is allocated
-        self.raymarch_step_voxels = raymarch_step
+    def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
+                 settings: RenderSettings | None = None):
+        """`settings`: how it renders and bakes (RenderSettings; None: the defaults), resolved
+        for this device (RenderSettings.resolved)."""
         self.ctx = ctx
-        self.resources = SceneResources(ctx, scene, volume, use_majorant_grid=empty_space_skipping)
+        self._software = is_software(ctx)
+        settings = (settings or RenderSettings()).resolved(self._software)  # checked first
+        self.resources = SceneResources(ctx, scene, volume,
+                                        use_majorant_grid=settings.empty_space_skipping)
+        self._settings = settings
         self._passes: dict[str, PathTracer] = {}
         self._acc: Accumulation | None = None
         self.timer = GpuTimer(ctx)
@@ -121,41 +107,9 @@ class Renderer:
         self._baked_key: tuple | None = None
         self._raymarchers: dict[str, Raymarcher] = {}
         self._light: LightTransmittance | None = None
-        self.light_max_side = LIGHT_MAX_SIDE   # the light grid's texels per axis at most
-        self.light_precision = LIGHT_PRECISION  # "f2" or "f4" (light_transmittance.PRECISIONS)
-        # ... and at least along the longest axis, and whether it follows the probe grid
-        # (TEXELS_PER_PROBE per probe spacing): per device class (light_transmittance.py)
-        software = is_software(ctx)
-        self.light_min_side = SOFTWARE_MIN_SIDE if software else LIGHT_MIN_SIDE
-        self.light_follows_probes = not software
-        # columns of the light grid cut into segments on a GPU (light_transmittance.py)
-        self.light_segment_target = 0 if software else SEGMENT_TARGET_INVOCATIONS
-        # The sun at the bake's walk events: "grid" (the baked light grid; see ProbeGrid) or "ray"
-        # (a ratio-tracked shadow ray, unbiased). Walks per probe from each probe's noise
-        # (ProbeGrid's `adaptive`; 0: all walks everywhere). Defaults from bench/h100-bake: the
-        # grid's sun made the bake 3.3-4.2x faster at the same raymarch error within 0.3% on
-        # bonsai (bias bounded in tests/test_bake.py); adaptive 1 took 20% fewer walks for 12%
-        # less time at the same error.
-        self.walk_sun = "grid"
-        self.walk_adaptive = 1.0
-        # Probes of order 3 also hold a lobe about the sun's direction where the scene
-        # scatters forward (probe_layout.sun_lobe_g; lib/sun_lobe.glsl); False: never (comparisons).
-        self.probe_sun_lobe = True
-        # True: the lobe's shape h = g^p chosen per scene by a pilot bake at each bake start
-        # (sun_lobe_fit.py); False (default): p = probe_layout.SUN_LOBE_POWER. Measured on the
-        # H100 (bench/h100-sun-lobe): 0.8-0.9 points better at g = 0.9, up to 0.14 worse
-        # elsewhere, the bench's cloud unchanged, and the pilot costs 2.5-7 ms a bake.
-        self.sun_lobe_fit = False
-        # `probes` reads the probes at this scattering event (lib/integrator.glsl
-        # probe_gather_event): 1, the paper's renderer; k > 1 traces events 1 .. k-1 as the path
-        # tracer does first (a final gather). Read-side only: changing it never re-bakes.
-        self._gather_event = 1
         self.last_sun_lobe_fit: SunLobeFit | None = None   # the last bake start's choice
         self._sun_lobe_fitter: SunLobeFitter | None = None   # made when first asked for
         self._fit_ms = 0.0   # GPU ms of the last bake start's pilot, not yet counted in a bake's time
-        # A bake restarted by an edit starts from the previous probes (ProbeGrid.restart(warm)):
-        # they fade out as the new walks come in; the finished probes are the cold bake's.
-        self.bake_warm = True
         self._probe_ms: dict[tuple, float] = {}   # measured GPU ms per probe walked, per layout
         self.last_slice_ms = 0.0
         self._light_key: tuple | None = None
@@ -176,43 +130,44 @@ class Renderer:
         self.light_cost_ms = 0.0   # GPU ms the light grid in hand took to bake
 
     @property
-    def raymarch_stage(self) -> str:
-        return self._raymarch_stage
+    def settings(self) -> RenderSettings:
+        """How this renderer renders and bakes (resolved for the device). Assign a new object
+        (or call configure) to change it: what the change makes stale (probes, light grid,
+        compiled passes) is redone when next needed."""
+        return self._settings
 
-    @raymarch_stage.setter
-    def raymarch_stage(self, stage: str) -> None:
-        if stage not in RAYMARCH_STAGES:
-            raise ValueError(f"raymarch stage: expected one of {', '.join(RAYMARCH_STAGES)}, "
-                             f"got {stage!r}")
-        self._raymarch_stage = stage
+    @settings.setter
+    def settings(self, settings: RenderSettings) -> None:
+        if not isinstance(settings, RenderSettings):
+            raise TypeError(f"settings: expected a RenderSettings, got {type(settings).__name__}")
+        self._settings = settings.resolved(self._software)
+        self.resources.use_majorant_grid = self._settings.empty_space_skipping
+
+    def configure(self, **changes) -> RenderSettings:
+        """Replaces the named settings (RenderSettings' fields; checked); returns the new ones."""
+        self.settings = replace(self._settings, **changes)
+        return self._settings
+
+    @property
+    def raymarch_stage(self) -> str:
+        return self._settings.raymarch_stage
 
     @property
     def raymarch_step_voxels(self) -> float:
         """The raymarch step in voxels of the smallest spacing."""
-        return self._raymarch_step
-
-    @raymarch_step_voxels.setter
-    def raymarch_step_voxels(self, step: float) -> None:
-        if isinstance(step, bool) or not isinstance(step, (int, float)) or not (
-                math.isfinite(step) and step > 0):
-            raise ValueError(f"raymarch step: expected a finite number of voxels > 0, got {step!r}")
-        self._raymarch_step = float(step)
+        return self._settings.raymarch_step
 
     @property
     def probe_gather_event(self) -> int:
         """The scattering event at which `probes` reads the probes (1: the first)."""
-        return self._gather_event
-
-    @probe_gather_event.setter
-    def probe_gather_event(self, event: int) -> None:
-        self._gather_event = check_gather_event(event)
+        return self._settings.gather_event
 
     def gather_bounces_past_limit(self) -> int | None:
         """With a later gather the probes (max_bounces - 1 events whatever the gather) let a
         `probes` path scatter up to max_bounces + k - 1 times: that count where it is worth saying
         (k > 1 reached, max_bounces at most GATHER_BOUNCES_NOTE), else None. A gather past
         max_bounces is never reached: the image is the path tracer's."""
-        k, bounces = self._gather_event, self.scene.max_bounces
+        k, bounces = self._settings.gather_event, self.scene.max_bounces
         return bounces + k - 1 if 1 < k <= bounces <= GATHER_BOUNCES_NOTE else None
 
     @property
@@ -261,19 +216,13 @@ class Renderer:
 
     # ---- probes -------------------------------------------------------------------------------
     def bake_key(self) -> tuple:
-        spec = self.scene.probes
+        spec, st = self.scene.probes, self._settings
         return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
                 spec.layout, spec.adaptive_strength, spec.adaptive_indicator,
-                self.resources.use_majorant_grid, self.walk_sun, self.walk_adaptive,
-                self.probe_sun_lobe,
-                (self.light_max_side, self.light_min_side, self.light_follows_probes,
-                 self.light_precision)
-                if self.walk_sun == "grid" else None)
-
-    def set_empty_space_skipping(self, on: bool) -> None:
-        """Tracking over the macrocell majorant grid (on, the default) or one global majorant
-        (the same unbiased estimator, slower where the box is mostly empty): for comparisons."""
-        self.resources.use_majorant_grid = bool(on)
+                self.resources.use_majorant_grid, st.walk_sun, st.walk_adaptive, st.sun_lobe,
+                (st.light_max_side, st.light_min_side, st.light_follows_probes,
+                 st.light_precision)
+                if st.walk_sun == "grid" else None)
 
     def probes_current(self) -> bool:
         return (self.probe_grid is not None and self.probe_grid.done
@@ -321,8 +270,8 @@ class Renderer:
         sun = spec.adaptive_indicator == "sun"
         key = (self.resources.volume_version, s.transfer_function, s.density_scale, grid, box,
                spec.adaptive_strength, spec.adaptive_indicator,
-               (s.light.direction, self.light_max_side, self.light_min_side,
-                self.light_follows_probes) if sun else None)
+               (s.light.direction, self._settings.light_max_side, self._settings.light_min_side,
+                self._settings.light_follows_probes) if sun else None)
         if key != self._planes_key:
             start = time.perf_counter()
             if sun:
@@ -356,10 +305,10 @@ class Renderer:
         plan = self.probe_plan()
         g = self.probe_grid
         env_map = self.resources.environment is not None
-        lobe = (sun_lobe_g(self.scene.anisotropy, plan.sh_order)
-                if self.probe_sun_lobe else 0.0)
+        st = self._settings
+        lobe = sun_lobe_g(self.scene.anisotropy, plan.sh_order) if st.sun_lobe else 0.0
         self.last_sun_lobe_fit = None
-        if lobe > 0.0 and self.sun_lobe_fit:
+        if lobe > 0.0 and st.sun_lobe_fit:
             if self._sun_lobe_fitter is None:
                 self._sun_lobe_fitter = SunLobeFitter(self.ctx)
             fit = self._sun_lobe_fitter.fit(self.resources, plan.box, plan.grid, spec.samples,
@@ -370,12 +319,12 @@ class Renderer:
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
                          g.adaptive, g.environment_map, g.planes, g.sun_lobe) != (
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
-                self.walk_sun, self.walk_adaptive, env_map, plan.planes, lobe):
+                st.walk_sun, st.walk_adaptive, env_map, plan.planes, lobe):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
                                         plan.sh_order, plan.box, plan.grey,
-                                        sun=self.walk_sun, adaptive=self.walk_adaptive,
+                                        sun=st.walk_sun, adaptive=st.walk_adaptive,
                                         environment_map=env_map, planes=plan.planes,
                                         sun_lobe=lobe)
         self.probe_grid.restart(seed, warm=warm)
@@ -430,11 +379,11 @@ class Renderer:
     def _light_target(self) -> tuple[tuple, int]:
         """The light grid the current scene needs: its key and least texels along the longest
         axis (it follows the probe grid: light_transmittance.TEXELS_PER_PROBE)."""
-        s = self.scene
-        min_side = (min_side_for_probes(s.probes.grid, self.light_min_side)
-                    if self.light_follows_probes else self.light_min_side)
+        s, st = self.scene, self._settings
+        min_side = (min_side_for_probes(s.probes.grid, st.light_min_side)
+                    if st.light_follows_probes else st.light_min_side)
         key = (self.resources.volume_version, s.transfer_function, s.density_scale,
-               s.light.direction, self.light_max_side, min_side, self.light_precision)
+               s.light.direction, st.light_max_side, min_side, st.light_precision)
         return key, min_side
 
     def light_current(self) -> bool:
@@ -453,13 +402,14 @@ class Renderer:
         (1/16 of the grid before any was timed; at least one layer). An edit in the middle of a
         sliced bake restarts it."""
         key, min_side = self._light_target()
-        if (self._light is None or self._light.max_side != self.light_max_side
-                or self._light.precision != self.light_precision):
+        st = self._settings
+        if (self._light is None or self._light.max_side != st.light_max_side
+                or self._light.precision != st.light_precision):
             if self._light is not None:
                 self._light.release()
-            self._light = LightTransmittance(self.ctx, self.light_max_side, self.light_precision)
+            self._light = LightTransmittance(self.ctx, st.light_max_side, st.light_precision)
             self._light_pending = None
-        self._light.segment_target = self.light_segment_target
+        self._light.segment_target = st.light_segment_target
         if key == self._light_key:
             return 0.0
         light = self._light
@@ -541,7 +491,7 @@ class Renderer:
         if self.probes_current():
             return 0.0
         if self.probe_grid is None or self._baked_key != self.bake_key():
-            self.start_bake(seed, warm=self.bake_warm)
+            self.start_bake(seed, warm=self._settings.bake_warm)
         grid = self.probe_grid
         if grid.sun == "grid":
             # the walks read the light grid: it comes first, in slices of the same budget
@@ -590,7 +540,8 @@ class Renderer:
                 raise RuntimeError("probe methods need a bake first (bake() or bake_step())")
             extra = self.probe_uniforms()
             # probes-only traces no shadow rays, which the events before a later gather need
-            extra["probe_gather_event"] = self._gather_event if method == "probes" else 1
+            extra["probe_gather_event"] = (self._settings.gather_event if method == "probes"
+                                           else 1)
         # a sliced light-grid bake under way (bake_step) is read as it is, not finished here
         light_ms = self.bake_light() if method == "raymarch" and not self.light_baking() else 0.0
         self.timer.start()

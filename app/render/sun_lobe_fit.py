@@ -12,7 +12,7 @@ the candidate with the largest sum over probes wins. Its cost (the pilot's walks
 time) is part of the bake's time; its read-back (two passes' amplitudes, 96 bytes a pilot probe)
 is one wait per bake start.
 
-Built and measured, not the default (Renderer.sun_lobe_fit; bench/h100-sun-lobe/auto_fit_*.json,
+Built and measured, not the default (RenderSettings.sun_lobe_fit; bench/h100-sun-lobe/auto_fit_*.json,
 H100, five variants of the bench's cloud at 32^3 to 192^3 probes): at g = 0.9 it chose p = 4 and
 gained 0.8 to 0.9 points (128^3 x 256: 8.34 -> 7.45%); on the bench's cloud it kept p = 3 (64^3 x
 128: 4); elsewhere it lost up to 0.14 points, and front-lit it kept p = 3 where p = 2 measured

@@ -106,14 +106,14 @@ def render_section(v) -> None:
     r = v.session.renderer
     changed, i = imgui.combo("Raymarch stage", RAYMARCH_STAGES.index(r.raymarch_stage), list(RAYMARCH_STAGES))
     if changed:
-        r.raymarch_stage = RAYMARCH_STAGES[i]
+        r.configure(raymarch_stage=RAYMARCH_STAGES[i])
         v.session.restart(["raymarch"])
     if "probes" in state.shown_methods():
         changed, value = imgui.slider_int("Gather at event", r.probe_gather_event, 1,
                                           MAX_GATHER_EVENT)
         ui.note("Gather at event")
         if changed:   # read-side only: the probes stay
-            r.probe_gather_event = min(max(int(value), 1), MAX_GATHER_EVENT)
+            r.configure(gather_event=min(max(int(value), 1), MAX_GATHER_EVENT))
             v.session.restart(["probes"])
         if r.probe_gather_event > 1:
             imgui.text_disabled(f"probes: events 1-{r.probe_gather_event - 1} path traced, "
@@ -127,7 +127,7 @@ def render_section(v) -> None:
     changed, value = imgui.checkbox("Empty-space skipping", r.resources.use_majorant_grid)
     ui.note("Empty-space skipping")
     if changed:   # the same images either way (unbiased); the probes re-bake by their key
-        r.set_empty_space_skipping(value)
+        r.configure(empty_space_skipping=bool(value))
         v.session.restart()
     for method in state.shown_methods():
         n = v.session.samples(method)

@@ -323,6 +323,7 @@ class Viewer:
             "bake_passes_run": session.bake_passes_run, "bakes_started": session.bake_generation,
             "empty_space_skipping": session.renderer.resources.use_majorant_grid,
             "gather_event": session.renderer.probe_gather_event,
+            "settings": session.renderer.settings.as_dict(),
             "probes_ready": session.probes_ready(),
             "probe_grid": list(grid.grid) if grid is not None else None,
             "probe_box": grid.box if grid is not None else None,

@@ -68,13 +68,13 @@ for bounces in (None, 1):
     tag = "all bounces" if bounces is None else "single scattering"
     measure(f"{tag}: default", r, scene, reference, noise)
     if bounces is None:
-        r.raymarch_step_voxels = 0.25
+        r.configure(raymarch_step=0.25)
         measure(f"{tag}: raymarch step 0.25", r, scene, reference, noise)
-        r.raymarch_step_voxels = 0.5
-        saved_precision = r.light_precision
-        r.light_precision = "f4"
+        r.configure(raymarch_step=0.5)
+        saved_precision = r.settings.light_precision
+        r.configure(light_precision="f4")
         measure(f"{tag}: light grid 32-bit", r, scene, reference, noise)
-        r.light_precision = saved_precision
+        r.configure(light_precision=saved_precision)
         saved = light_module.VOLUME_UPSAMPLING
         light_module.VOLUME_UPSAMPLING = 4
         measure(f"{tag}: light grid 4 texels a voxel", r, scene, reference, noise)

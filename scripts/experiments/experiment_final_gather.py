@@ -76,7 +76,7 @@ for name in args.scenes.split(","):
             rrmse=rrmse(res.image, reference), render_ms=res.render_ms, bake_ms=bake_ms,
             light_ms=light_ms, sh_order=r.probe_grid.sh_order)
         for event in events:
-            r.probe_gather_event = event
+            r.configure(gather_event=event)
             acc_ms = 0.0
             r.begin("probes", seed=11)
             for spp in checkpoints:
@@ -86,7 +86,7 @@ for name in args.scenes.split(","):
                     spp=spp, rrmse=rrmse(r.image(), reference), render_ms=acc_ms,
                     bake_ms=bake_ms, light_ms=light_ms, sh_order=r.probe_grid.sh_order,
                     truncated=r.resources.read_stats().get("truncated_paths"))
-        r.probe_gather_event = 1
+        r.configure(gather_event=1)
     r.release()
     (out / "final_gather.json").write_text(json.dumps(rows, indent=1))
 (out / "final_gather.json").write_text(json.dumps(rows, indent=1))

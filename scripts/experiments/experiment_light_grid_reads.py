@@ -35,7 +35,7 @@ for name in args.scenes.split(","):
         if args.after_reference:
             r.render("pt", spp=256, seed=9, samples_per_pass=64)
         for precision in ("f2", "f4"):
-            r.light_precision = precision
+            r.configure(light_precision=precision)
             bakes, frames = [], []
             for i in range(4):
                 r._baked_key = None

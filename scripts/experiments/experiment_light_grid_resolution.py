@@ -24,10 +24,10 @@ for name, refdir in refs.items():
     for grid in (32, 64, 128):
         probes = replace(scene.probes, grid=(grid,) * 3, samples=64)
         r = Renderer(ctx, scene.replace(probes=probes), vol)
-        r.light_follows_probes = False
+        r.configure(light_follows_probes=False)
         for side, precision in ((s, p) for s in (256, 384, 512) for p in ("f2", "f4")):
-            r.light_min_side = side
-            r.light_precision = precision
+            r.configure(light_min_side=side)
+            r.configure(light_precision=precision)
             r._light_key = None
             r._baked_key = None
             res = r.render("raymarch", spp=16, seed=3, samples_per_pass=16)

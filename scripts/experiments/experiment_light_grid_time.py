@@ -25,13 +25,13 @@ for name in names:
     if scene is None:
         continue
     r = Renderer(ctx, scene, load_volume(scene.volume, scene.base_dir))
-    r.light_follows_probes = False
+    r.configure(light_follows_probes=False)
     for sun in ("scene", "oblique"):
         if sun == "oblique":
             r.set_scene(scene.replace(light=dataclasses.replace(scene.light, direction=(0.5, 0.70710678, 0.5))))
         for side, precision in ((s, p) for s in (128, 256, 384, 512) for p in ("f2", "f4")):
-            r.light_min_side = side
-            r.light_precision = precision
+            r.configure(light_min_side=side)
+            r.configure(light_precision=precision)
             ms = []
             for _ in range(4):
                 r._light_key = None

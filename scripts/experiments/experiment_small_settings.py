@@ -42,20 +42,20 @@ for name in sys.argv[2].split(","):
         if mb is None and walks == 16 and hasattr(r, "light_segment_target"):
             seg = {}
             for target in (0, 1 << 16, 1 << 17, 1 << 18, 1 << 19):
-                r.light_segment_target = target
+                r.configure(light_segment_target=target)
                 ts = []
                 for rep in range(5):
                     r.invalidate(); ts.append(r.bake_light())
                 seg[target] = (med(ts), r._light.segments)
-            r.light_segment_target = 1 << 18
+            r.configure(light_segment_target=1 << 18)
             row["light_by_segment_target"] = seg
         if mb is None and walks == 16:
             fr = {}
             for step in (0.5, 1.0, 2.0):
-                r.raymarch_step_voxels = step
+                r.configure(raymarch_step=step)
                 out = list(progressive(r, "raymarch", [1, 16], 17, 1))
                 fr[step] = dict(first_ms=out[0][3], median_ms=out[1][2])
-            r.raymarch_step_voxels = 0.5
+            r.configure(raymarch_step=0.5)
             row["raymarch"] = fr
         print(json.dumps(row), flush=True); rows.append(row)
     r.release()

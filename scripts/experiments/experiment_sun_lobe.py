@@ -62,8 +62,8 @@ for n_change, change in enumerate(changes):
             auto = lobe == "auto"
             layout_module.SUN_LOBE_POWER = 3.0 if auto else lobe
             layout_module.SUN_LOBE_MIN_G = 0.0
-            r.probe_sun_lobe = auto or lobe > 0
-            r.sun_lobe_fit = auto
+            r.configure(sun_lobe=auto or lobe > 0)
+            r.configure(sun_lobe_fit=auto)
             r.set_scene(s)
             r.invalidate()
             r.bake(seed=11)

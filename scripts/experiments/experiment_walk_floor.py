@@ -53,7 +53,7 @@ for name in args.scenes.split(","):
     if base is None:
         continue
     r = Renderer(ctx, base, load_volume(base.volume, base.base_dir))
-    r.raymarch_step_voxels = 2.0
+    r.configure(raymarch_step=2.0)
     for setting in args.settings.split(","):
         grid, walks = (int(v) for v in setting.split("x"))
         r.set_scene(base.replace(probes=replace(base.probes, grid=(grid,) * 3, samples=walks)))
