@@ -18,14 +18,15 @@ and releases its own headless GL context. In Jupyter an Image shows inline and
 `Renderer.widget()` orbits the camera with sliders (where ipywidgets is installed).
 """
 from app.dicom import DicomSeries, list_series
+from app.render.settings import RenderSettings
 from app.scene import Scene, SceneError
 from app.scene_types import VolumeError
 
 from ._api import DEFAULT_SPP, METHODS, Renderer, render, view
 from ._image import Image
 
-__all__ = ["DEFAULT_SPP", "METHODS", "DicomSeries", "Image", "Renderer", "Scene", "SceneError",
-           "VolumeError", "dicom_series", "render", "view"]
+__all__ = ["DEFAULT_SPP", "METHODS", "DicomSeries", "Image", "RenderSettings", "Renderer", "Scene",
+           "SceneError", "VolumeError", "dicom_series", "render", "view"]
 
 
 def dicom_series(path) -> list[DicomSeries]:

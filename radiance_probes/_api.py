@@ -192,8 +192,8 @@ class Renderer:
                 frames.append(r.render())
     """
 
-    def __init__(self, data: Any = None, *, scene: Any = None, gl_backend: str | None = None,
-                 **scene_options):
+    def __init__(self, data: Any = None, *, scene: Any = None, settings=None,
+                 gl_backend: str | None = None, **scene_options):
         from app.gl.context import create_headless_context
         from app.render.renderer import Renderer as AppRenderer
         self._data = data
@@ -204,7 +204,7 @@ class Renderer:
         self._ctx = create_headless_context(gl_backend)
         try:
             with self._ctx:
-                self._renderer = AppRenderer(self._ctx, self.scene, self.volume)
+                self._renderer = AppRenderer(self._ctx, self.scene, self.volume, settings)
         except BaseException:
             self._ctx.release()
             raise
@@ -219,6 +219,17 @@ class Renderer:
     def device(self) -> str:
         from app.gl.context import describe
         return describe(self._ctx)
+
+    @property
+    def settings(self):
+        """How it renders and bakes (app.render.settings.RenderSettings, resolved for the
+        device); change it with configure()."""
+        return self._renderer.settings
+
+    def configure(self, **changes) -> None:
+        """Changes RenderSettings fields (gather_event=2, walk_sun="ray", ...)."""
+        with self._ctx:
+            self._renderer.configure(**changes)
 
     def update(self, **scene_options) -> None:
         """Changes the scene (any scene key or shortcut, as the constructor takes them)."""
@@ -305,13 +316,15 @@ class Renderer:
 
 def render(data: Any = None, method: str = "raymarch", spp: int | None = None, *,
            scene: Any = None, camera: Any = None, seed: int = 0, exposure: float = 1.0,
-           gl_backend: str | None = None, **scene_options) -> Image:
+           settings=None, gl_backend: str | None = None, **scene_options) -> Image:
     """Renders `data` once and releases the GL context. `data`: a NumPy array [z, y, x] of any
     numeric dtype (give spacing=(x, y, z) where voxels are not cubes), a volume file, a folder
     (TIFF slices or DICOM, searched recursively), a scene JSON file, or None (the built-in
     cloud). Keywords are scene keys or their shortcuts (colormap=, opacity=, width=, window=,
-    series=, orientation=, density_scale=, ...)."""
-    with Renderer(data, scene=scene, gl_backend=gl_backend, **scene_options) as r:
+    series=, orientation=, density_scale=, ...); `settings` a RenderSettings (how it bakes and
+    renders)."""
+    with Renderer(data, scene=scene, settings=settings, gl_backend=gl_backend,
+                  **scene_options) as r:
         return r.render(method, spp, camera=camera, seed=seed, exposure=exposure)
 
 

@@ -213,3 +213,14 @@ def test_the_issues_one_liner(tmp_path):
                          text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "(512, 512, 3)"
+
+
+def test_the_api_takes_render_settings():
+    """The Renderer's settings object goes through the API unchanged: a final gather changes the
+    probes image, never the bake."""
+    with rp.Renderer(blob(), settings=rp.RenderSettings(gather_event=1), **SMALL) as r:
+        first = r.render("probes", spp=2)
+        r.configure(gather_event=2)
+        assert r.settings.gather_event == 2
+        second = r.render("probes", spp=2)
+        assert r.bakes == 1 and np.abs(first.linear - second.linear).mean() > 0
