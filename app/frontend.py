@@ -115,6 +115,20 @@ def series_arg(text: str) -> int | str:
     return text
 
 
+def window_arg(text: str) -> str | dict:
+    """--window: a preset name (soft_tissue, bone, lung, air) or LEVEL,WIDTH in data units."""
+    from .scene_types import WINDOW_PRESETS
+    if text.strip().lower() in WINDOW_PRESETS:
+        return text.strip().lower()
+    parts = text.split(",")
+    try:
+        level, width = (float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a preset ({', '.join(WINDOW_PRESETS)}) or "
+                                         f"LEVEL,WIDTH, got {text!r}") from None
+    return {"level": level, "width": width}
+
+
 def add_volume_options(parser: argparse.ArgumentParser) -> None:
     """The options that say how a volume file is read (render and view)."""
     from .scene_types import ORIENTATIONS
@@ -122,6 +136,10 @@ def add_volume_options(parser: argparse.ArgumentParser) -> None:
                         help="a DICOM folder or DICOMDIR's series: its number in the listing "
                              "(`radiance-probes series PATH`) or its SeriesInstanceUID (default: "
                              "the largest that makes a volume)")
+    parser.add_argument("--data-window", dest="data_window", type=window_arg,
+                        metavar="PRESET|LEVEL,WIDTH",
+                        help="the values shown, as radiology gives them: soft_tissue, bone, lung, "
+                             "air, or level and width in data units (Hounsfield units for CT)")
     parser.add_argument("--orientation", choices=ORIENTATIONS,
                         help="data: the array's axes as stored (default); patient: turned so that "
                              "+x is the patient's left, +y superior, +z anterior (NIfTI, DICOM, "
@@ -146,7 +164,7 @@ _OPTION_FIELDS = {"camera.width": "--width", "camera.height": "--height",
                   "probes.layout": "--probe-layout", "probes.adaptive_strength": "--adaptive-strength",
                   "probes.adaptive_indicator": "--adaptive-indicator",
                   "probes.interpolation": "--probe-interpolation", "volume.series": "--series",
-                  "volume.orientation": "--orientation"}
+                  "volume.orientation": "--orientation", "volume.window": "--data-window"}
 
 
 def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
@@ -164,13 +182,16 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
     camera = {key: value for key, value in (("width", getattr(args, "width", None)),
                                             ("height", getattr(args, "height", None))) if value}
     volume = {key: value for key, value in (("series", getattr(args, "series", None)),
-                                            ("orientation", getattr(args, "orientation", None)))
+                                            ("orientation", getattr(args, "orientation", None)),
+                                            ("window", getattr(args, "data_window", None)))
               if value is not None}
     if not probes and not camera and not volume:
         return scene
     data = scene_to_dict(scene)
     data["probes"].update(probes)
     data["camera"].update(camera)
+    if "window" in volume:
+        data["volume"].pop("value_range", None)   # the window given replaces the scene's range
     data["volume"].update(volume)
     try:
         return parse_scene(data, base_dir=scene.base_dir)
@@ -260,7 +281,7 @@ def render_defaults() -> dict:
                 exr=None, probe_grid=None, probe_samples=None, sh_window=None, probe_precision=None,
                 auto_probes=None, raymarch_stage="compute", raymarch_step=None, seed=0, width=None,
                 height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True,
-                gather_event=None, series=None, orientation=None)
+                gather_event=None, series=None, orientation=None, data_window=None)
 
 
 def render_to_files(args: argparse.Namespace) -> int:

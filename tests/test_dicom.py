@@ -187,3 +187,18 @@ def test_render_takes_series_and_says_what_it_opened(tmp_path, capsys):
         assert main(argv + ["--out", str(tmp_path / "c.png")]) == 2
         lines = capsys.readouterr().err.strip().splitlines()
         assert len(lines) == 1 and needle in lines[0], lines
+
+
+def test_window_and_orientation_options(tmp_path, capsys):
+    """--data-window (a preset or LEVEL,WIDTH) and --orientation reach the scene as its keys would."""
+    import argparse
+    from app.frontend import apply_options, scene_from_arg, window_arg
+    scene = scene_from_arg(str(tmp_path))
+    args = argparse.Namespace(data_window=window_arg("bone"), orientation="patient", series=2)
+    out = apply_options(scene, args)
+    assert out.volume.window == (400.0, 1800.0) and out.volume.orientation == "patient"
+    assert out.volume.series == 2
+    args = argparse.Namespace(data_window=window_arg("40,400"))
+    assert apply_options(scene, args).volume.window == (40.0, 400.0)
+    with pytest.raises(argparse.ArgumentTypeError, match="LEVEL,WIDTH"):
+        window_arg("wide")

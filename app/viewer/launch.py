@@ -149,5 +149,6 @@ def headless_fallback(args: argparse.Namespace, reason: str) -> int:
                    sh_window=args.sh_window, probe_precision=args.probe_precision, seed=args.seed,
                    exposure=args.exposure, gl_backend=args.gl_backend,
                    series=getattr(args, "series", None),
-                   orientation=getattr(args, "orientation", None))
+                   orientation=getattr(args, "orientation", None),
+                   data_window=getattr(args, "data_window", None))
     return render_to_files(argparse.Namespace(**options))
