@@ -330,7 +330,9 @@ def read_dicom(path: str | Path, need_spacing: bool, wanted: str | int | None = 
                      f"(volume.series); `radiance-probes series {p}` lists them all")
     if listing.skipped:
         names = ", ".join(f.name for f in listing.skipped[:NAMED_SKIPPED])
-        notes.append(f"{p.name}: passed over {len(listing.skipped)} files that are not DICOM "
+        n = len(listing.skipped)
+        notes.append(f"{p.name}: passed over {n} file{'s' if n != 1 else ''} that "
+                     f"{'are' if n != 1 else 'is'} not DICOM "
                      f"({names}{', ...' if len(listing.skipped) > NAMED_SKIPPED else ''})")
     direction = None
     if chosen.orientation is not None:
