@@ -128,3 +128,25 @@ def test_the_example_script_runs(tmp_path):
     assert out.returncode == 0, out.stderr[-3000:]
     assert "turntable: 6 frames, 1 bake" in out.stdout and "series 1: example CT" in out.stdout
     assert len(list((tmp_path / "o").glob("*.png"))) == 8   # the ball, 6 turns, the CT
+
+
+def test_the_experiments_index_names_every_script_and_record():
+    page = (ROOT / "docs" / "experiments.md").read_text()
+    index = page[page.index("## Index"):page.index("## Tried and not kept")]
+    scripts = sorted(p.name for p in (ROOT / "scripts" / "experiments").glob("*.py"))
+    assert len(scripts) >= 19 and not list((ROOT / "scripts").glob("experiment_*.py"))
+    rows = [line for line in index.splitlines() if line.startswith("| `")]
+    assert sorted(re.match(r"\| `([^`]+)`", r).group(1) for r in rows) == scripts
+    for row in rows:   # each row says what it found and where the record is (or that there is none)
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        assert len(cells) == 4 and cells[2] and cells[3], row
+
+
+def test_every_archived_run_is_listed_and_readable():
+    from app.bench.report import results_path
+    archive = ROOT / "bench" / "archive"
+    listed = (archive / "README.md").read_text()
+    for run in sorted(p for p in archive.iterdir() if p.is_dir()):
+        assert run.name in listed or run.name.rstrip("0123456789") in listed, run.name
+        if run.name.startswith(("h100-v", "h100-interact-v", "llvmpipe-interact")):
+            assert results_path(run).is_file(), f"{run} lost its records"
