@@ -98,6 +98,10 @@ void main()
     uint ray_index = uint(ray.y * grid[b] + ray.x);
     if (store)
         for (int j = 0; j < segment; ++j)
+            CHECK_INDEX(ray_index * uint(segments) + uint(j), segment_tau.length(),
+                        CHECK_SITE_SEGMENT_INDEX);
+    if (store)
+        for (int j = 0; j < segment; ++j)
             tau += segment_tau[ray_index * uint(segments) + uint(j)];
     // Texel n covers s from the centre of texel n - 1 (the box's sun side for n = 0) to its own.
     int k_from = toward_sun > 0.0 ? grid[a] - n_begin : n_begin - 1;
@@ -127,11 +131,15 @@ void main()
         }
         if (store) {
             texel[a] = k;
+            CHECK_TEXEL(texel, imageSize(transmittance_image), CHECK_SITE_IMAGE_TEXEL);
             imageStore(transmittance_image, texel, vec4(min(tau, TAU_OPAQUE)));
         }
         s_from = s_to;
     }
 #if LIGHT_GRID_SEGMENTS
+    if (!store)
+        CHECK_INDEX(ray_index * uint(segments) + uint(segment), segment_tau.length(),
+                    CHECK_SITE_SEGMENT_INDEX);
     if (!store)
         segment_tau[ray_index * uint(segments) + uint(segment)] = tau;
 #endif

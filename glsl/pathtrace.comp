@@ -43,6 +43,8 @@ void main()
     if (any(greaterThanEqual(pixel, image_size)))
         return;
     uint key = uint(pixel.y * image_size.x + pixel.x);
+    CHECK_INDEX(key, pixel_states.length(), CHECK_SITE_PATH_INDEX);
+    CHECK_TEXEL(pixel, imageSize(accumulation), CHECK_SITE_IMAGE_TEXEL);
     PixelState state = pixel_states[key];
     if (restart != 0) {
         state.path.status = PATH_IDLE;   // path_begin sets every other field before use

@@ -1,13 +1,11 @@
-// The adaptive bake's noise target (lib/probe_noise.glsl), after the first pass: one work group
-// averages the walk variance over all probes.
+// The adaptive bake (lib/probe_noise.glsl), when the first pass ends: one work group sums the
+// walk variance over all probes; probe_walk_budget.comp then sets each probe's passes from it.
 layout(local_size_x = 256) in;
 
 #include "lib/probe_accum.glsl"
 #include "lib/probe_noise.glsl"
 
 uniform uint probe_count;
-uniform float adaptive_factor;   // target = factor^2 x mean variance / walks_asked
-uniform float walks_asked;       // walks per probe of the whole bake
 
 shared float partial[256];
 
@@ -25,7 +23,7 @@ void main()
         barrier();
     }
     if (tid == 0u) {
-        mean_walk_variance = partial[0] / float(probe_count);
-        noise_target_squared = adaptive_factor * adaptive_factor * mean_walk_variance / walks_asked;
+        noise_variance_sum = partial[0];
+        noise_probe_count = float(probe_count);
     }
 }

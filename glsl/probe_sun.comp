@@ -29,6 +29,7 @@ void main()
     uint probe = gl_GlobalInvocationID.x;
     if (probe >= probe_count)
         return;
+    CHECK_INDEX(probe, probes.length(), CHECK_SITE_PROBE_INDEX);
 #if defined(PROBE_SUN_GRID)
     probes[probe].channels[6].a = light_grid_transmittance(probe_position(probe));
 #else

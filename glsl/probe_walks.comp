@@ -8,8 +8,9 @@
 // chunk, so nothing is cleared from the CPU. RESUMABLE_WALKS 0 (no loop limit): every walk runs to
 // its end in one dispatch; there is no walk state at all, and nothing is read back.
 //
-// With adaptive_walks != 0, a probe whose noise reached the target (lib/probe_noise.glsl) takes
-// no walks in this pass: its walks leave a = 3 and the projection leaves it as it is.
+// With adaptive_walks != 0, a probe whose budget (decided from its neighbours when the first pass
+// ended, lib/probe_noise.glsl) does not reach this pass takes no walks in it: its walks leave
+// a = 3 and the projection leaves it as it is.
 //
 // WALK_SUN_GRID (defined or not): the sun at each scattering event from the baked light grid
 // (lib/light_grid.glsl) instead of a ratio-tracked shadow ray.
@@ -48,20 +49,25 @@ uniform uint pass_index;
 uniform uint seed;
 uniform int loop_budget;
 uniform int loop_reserve;
-uniform int adaptive_walks;   // 1: skip probes that reached the noise target
+uniform int adaptive_walks;   // 1: skip probes whose walk budget ends before this pass
 
 // Walk `local` of the chunk from its start to its end (or, resumable, to the dispatch's budget).
 void run_walk(uint local)
 {
     uint probe = first_probe + local / directions;
     uint slot = local % directions;
+    CHECK_INDEX(probe, probes.length(), CHECK_SITE_PROBE_INDEX);
+    CHECK_INDEX(local, walk_radiance.length(), CHECK_SITE_WALK_INDEX);
+#if RESUMABLE_WALKS
+    CHECK_INDEX(local, walks.length(), CHECK_SITE_WALK_INDEX);
+#endif
     PathState p;
 #if RESUMABLE_WALKS
     bool fresh = first_dispatch != 0u;
 #else
     const bool fresh = true;
 #endif
-    if (fresh && adaptive_walks != 0 && probe_converged(probes[probe])) {
+    if (fresh && adaptive_walks != 0 && !probe_takes_pass(probe, pass_index)) {
         walk_radiance[local] = vec4(0.0, 0.0, 0.0, 3.0);
         return;
     }

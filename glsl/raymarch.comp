@@ -20,5 +20,6 @@ void main()
     if (any(greaterThanEqual(pixel, image_size)))
         return;
     uint layer = gl_GlobalInvocationID.z;
+    CHECK_TEXEL(ivec3(pixel, int(layer)), imageSize(frame_values), CHECK_SITE_IMAGE_TEXEL);
     imageStore(frame_values, ivec3(pixel, int(layer)), vec4(raymarch_frame(pixel, frame_index + layer), 0.0));
 }

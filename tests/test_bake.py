@@ -10,6 +10,7 @@ import pytest
 import app.render.probes as probes_module
 from app.gl.profiler import GpuProfile
 from app.render.renderer import Renderer
+from app.render.settings import RenderSettings
 from app.scene import parse_scene
 
 CAMERA = {"eye": [0.0, 0.2, 1.3], "target": [0, 0, 0], "fov_y": 40.0, "width": 8, "height": 8}
@@ -429,33 +430,69 @@ def test_walk_counters_start_from_zero_every_time(renderer):
     assert counts[0] == counts[1] == counts[2] and counts[0]["walks"] == grid.count * 64
 
 
-def test_adaptive_walks_follow_the_noise_with_a_small_measured_bias(ctx):
-    """Adaptive walks (factor 1): quiet probes stop early, noisy ones take every walk; probe
-    radiance agrees with full bakes within the bound below (measured: see the print), and the
-    adaptive bake is deterministic for a seed."""
-    scene = parse_scene({"volume": {"builtin": "cloud", "size": [32, 24, 28]}, "density_scale": 60.0,
-                         "albedo": 0.9, "max_bounces": 8, "camera": CAMERA,
+def test_adaptive_walks_follow_the_neighbours_noise_and_are_deterministic(ctx):
+    """Adaptive walks (factor 1) on a cloud with empty space around it: probes among quiet
+    neighbours stop after the first pass, noisy ones take every walk (16^3 probes, so that a
+    probe's 26 neighbours are a neighbourhood and not most of the grid); the budgets are the same
+    for a seed; probe radiance agrees with full bakes within the noise of the bakes. (Measured
+    here: 19% of the walks saved, 18% with 12^3 probes.)"""
+    scene = parse_scene({"volume": {"builtin": "cloud", "size": [24, 24, 24]}, "density_scale": 60.0,
+                         "albedo": 0.9, "max_bounces": 6, "camera": CAMERA,
                          "light": {"direction": [0.3, 0.8, 0.5], "irradiance": [3, 3, 3]},
-                         "probes": {"grid": [5, 4, 5], "samples": 512}})
-    r = Renderer(ctx, scene)
+                         "probes": {"grid": [12, 12, 12], "samples": 256, "fit": "box",
+                                    "sh_order": 0}})
+    r = Renderer(ctx, scene, settings=RenderSettings(walk_adaptive=0.0))
     try:
-        seeds = range(4)
+        seeds = range(3)
         full = _l00(r, "ray", seeds)
         r.configure(walk_adaptive=1.0)
         adaptive = _l00(r, "ray", seeds)
         taken = r.probe_grid.walks_taken()
         again = _l00(r, "ray", [seeds[-1]])[0]
+        taken_again = r.probe_grid.walks_taken()
     finally:
         r.release()
     np.testing.assert_array_equal(again, adaptive[-1])
-    assert taken.min() == 64 and taken.max() == 512
-    saved = 1 - taken.mean() / 512
-    scale = np.sqrt(np.mean(full.mean(0) ** 2))
-    diff = np.sqrt(np.mean((adaptive.mean(0) - full.mean(0)) ** 2)) / scale
-    noise = np.sqrt(np.mean(adaptive.var(0, ddof=1) / len(seeds))) / scale
-    print(f"walks saved {saved:.2f}; L00 difference {diff:.4f}, adaptive bakes' noise {noise:.4f}")
-    assert saved > 0.2
-    assert diff < 0.02
+    np.testing.assert_array_equal(taken_again, taken)
+    assert taken.min() == 64 and taken.max() == 256
+    saved = 1 - taken.mean() / 256
+    diff = adaptive.mean(0).sum() - full.mean(0).sum()
+    se = np.hypot(adaptive.sum(axis=(1, 2, 3, 4)).std(ddof=1),
+                  full.sum(axis=(1, 2, 3, 4)).std(ddof=1)) / np.sqrt(len(seeds))
+    print(f"walks saved {saved:.2f}; summed L00 difference {diff:.4g} (standard error {se:.3g})")
+    assert saved > 0.1
+    assert abs(diff) < 4 * se + 1e-6 * full.mean(0).sum()
+
+
+def test_adaptive_walks_are_unbiased_behind_a_backlit_shell(ctx):
+    """Known answer on a heavy-tailed case: probes in and around a thin dense shell (albedo 0.99,
+    g = 0.6) lit from behind, where a walk's radiance is large only when it finds the lit side of
+    the rim. The mean probe radiance over 30 seeds with adaptive walks is within 3 standard errors
+    of the same over 30 full bakes (the exact value's estimate). The rule that decided each probe's
+    walks from its own running variance failed this: 3.4% dark at z = -4.6 (lib/probe_noise.glsl)."""
+    from app.bench.scenes import battery_scene
+    from dataclasses import replace
+    scene = battery_scene("shell-g06", 16, 8, 8, grid=4, samples=256)
+    scene = scene.replace(probes=replace(scene.probes, fit="box", sh_order=0), max_bounces=32)
+    means = {}
+    for adaptive in (1.0, 0.0):
+        r = Renderer(ctx, scene, settings=RenderSettings(walk_adaptive=adaptive))
+        try:
+            per_seed = []
+            for seed in range(30):
+                r.invalidate()
+                r.bake(seed=seed)
+                per_seed.append(float(r.probe_grid.coefficients()[..., 0].mean()))
+                if adaptive:
+                    saved = 1 - r.probe_grid.walks_taken().mean() / 256
+        finally:
+            r.release()
+        per_seed = np.array(per_seed)
+        means[adaptive] = (per_seed.mean(), per_seed.std(ddof=1) / np.sqrt(len(per_seed)))
+    (a, se_a), (b, se_b) = means[1.0], means[0.0]
+    z = (a - b) / np.hypot(se_a, se_b)
+    print(f"adaptive / full {a / b:.4f} (z = {z:.2f}); walks saved {saved:.2f}")
+    assert abs(z) < 3.0
 
 
 def test_progress_sums_on_the_gpu_are_the_probes_column_sums(ctx):

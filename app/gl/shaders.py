@@ -84,8 +84,13 @@ def transfer_from_buffer(ctx: moderngl.Context) -> bool:
 
 
 def compute_defines(ctx: moderngl.Context) -> dict:
-    """Defines every compute pass on this device gets (a caller's own defines win)."""
-    return {"TRANSFER_FROM_BUFFER": 1} if transfer_from_buffer(ctx) else {}
+    """Defines every compute pass on this device gets (a caller's own defines win): the transfer
+    table's source, and SHADER_CHECKS in a context with the checking build (app/gl/checks.py)."""
+    from .checks import SHADER_CHECKS_BINDING, checks_for
+    defines = {"TRANSFER_FROM_BUFFER": 1} if transfer_from_buffer(ctx) else {}
+    if checks_for(ctx) is not None:
+        defines.update(SHADER_CHECKS=1, SHADER_CHECKS_BINDING=SHADER_CHECKS_BINDING)
+    return defines
 
 
 def compute_program(ctx: moderngl.Context, name: str,

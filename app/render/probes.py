@@ -103,8 +103,9 @@ class ProbeGrid:
         False on such a driver only for walks short enough to fit its limit, as tests do).
         `sun`: at the walks' scattering events, "ray" traces a ratio-tracked shadow ray towards the
         sun (unbiased); "grid" reads the baked light grid (bake_pass(light=...)), a bias of its
-        resolution. `adaptive` > 0: walks per probe follow each probe's noise (lib/probe_noise.glsl):
-        a probe stops taking walks once its standard error is at most `adaptive` times what the
+        resolution. `adaptive` > 0: walks per probe follow the noise of each probe's neighbours
+        (lib/probe_noise.glsl, unbiased): when the first pass ends, each probe gets the walks
+        that give its neighbours' mean variance `adaptive` times the standard error the
         asked-for walks give a probe of average noise; 0 (default): every probe takes them all.
         `environment_map`: the walks' build for a scene whose environment is a map (they sample it
         at each scattering event; lib/integrator.glsl). `planes`: an adaptive layout's probe
@@ -170,7 +171,8 @@ class ProbeGrid:
         self.progress = ctx.buffer(reserve=4)
         self._progress_program = None   # glsl/probe_progress.comp, built on first use
         self._partial_sums = None
-        self.noise = ctx.buffer(reserve=8)   # lib/probe_noise.glsl
+        # lib/probe_noise.glsl: the variance sum, the probe count, then each probe's passes
+        self.noise = ctx.buffer(reserve=8 + 4 * self.count)
         defines = {"PROBE_IMAGE_FORMAT": precision, "PROBE_IMAGE_LIMIT": PROBE_IMAGE_LIMIT,
                    **self.defines()}
         self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable), **self.defines()}
@@ -192,6 +194,8 @@ class ProbeGrid:
                                                                  if sun == "grid" else {})})
         self.noise_program = (compute_program(ctx, "probe_noise.comp", self.defines())
                               if self.adaptive else None)
+        self.budget_program = (compute_program(ctx, "probe_walk_budget.comp", self.defines())
+                               if self.adaptive else None)
         self.dispatches = 0
         self.passes_done = 0
         self.next_probe = 0        # the next probe to walk in the current pass
@@ -332,12 +336,12 @@ class ProbeGrid:
         self.walk_radiance.bind_to_storage_buffer(3)
         self.accums.bind_to_storage_buffer(4)
         self.noise.bind_to_storage_buffer(6)
-        (self.prior if self.prior is not None else self.accums).bind_to_storage_buffer(7)
+        (self.prior if self.prior is not None else self.accums).bind_to_storage_buffer(0)
         if counters is not None:
             counters.bind_to_storage_buffer(5)
         self._bind_images(0)
         if self.passes_done == 0 and self.next_probe == 0:
-            self.noise.write(struct.pack("2f", -1.0, 0.0))   # no noise target until pass 0 ends
+            self.noise.write(struct.pack("2f", -1.0, 0.0))   # no walk budgets until pass 0 ends
             with section("sun"):
                 set_uniforms(self.sun_program, {**uniforms, "probe_count": self.count})
                 self.sun_program.run((self.count + 63) // 64)
@@ -371,12 +375,16 @@ class ProbeGrid:
             return
         if self.passes_done == 0 and self.adaptive > 0:
             with section("project"):
-                set_uniforms(self.noise_program, {"probe_count": self.count,
-                                                  "adaptive_factor": self.adaptive,
-                                                  "walks_asked": float(self.samples)})
+                set_uniforms(self.noise_program, {"probe_count": self.count})
                 self.noise_program.run(1)
                 self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
-                self.dispatches += 1
+                set_uniforms(self.budget_program, {
+                    "probe_grid": self.grid, "adaptive_factor": self.adaptive,
+                    "walks_asked": float(self.samples), "directions": self.directions,
+                    "passes_total": self.passes_total})
+                self.budget_program.run((self.count + 63) // 64)
+                self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+                self.dispatches += 2
         self.next_probe = 0
         self.passes_done += 1
 
@@ -492,7 +500,8 @@ class ProbeGrid:
         for _, program in self.publish_programs:
             program.release()
         for obj in (*self.textures, self.walk_states, self.walk_radiance, self.accums, self.progress,
-                    self.noise, self.noise_program, self.prior, self.warp_texture,
+                    self.noise, self.noise_program, self.budget_program, self.prior,
+                    self.warp_texture,
                     self.walk_program, self._walk_profile_program, self.project_program,
                     self.sun_program, self._progress_program, self._partial_sums):
             if obj is not None:

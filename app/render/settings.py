@@ -48,9 +48,9 @@ class RenderSettings:
     # The sun at the bake's walk events: "grid" (the baked light grid, lib/light_grid.glsl) or
     # "ray" (a ratio-tracked shadow ray, unbiased).
     walk_sun: str = "grid"
-    # Walks per probe from the noise of its neighbours (lib/probe_noise.glsl; 0: every probe
-    # takes all its walks): a probe stops once the walks its neighbours' first pass asks for
-    # are done.
+    # Walks per probe from the noise of its neighbours (lib/probe_noise.glsl, unbiased; 0: every
+    # probe takes all its walks): a probe stops once the walks its neighbours' first pass asks
+    # for are done.
     walk_adaptive: float = 1.0
     # Probes of SH order 3 also hold a lobe about the sun's direction where the scene scatters
     # forward (probe_layout.sun_lobe_g; lib/sun_lobe.glsl); False: never (comparisons).

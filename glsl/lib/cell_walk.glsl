@@ -3,6 +3,7 @@
 // every cell's majorant bounds sigma_t in it). Tracking (lib/tracking.glsl) draws free flights per
 // cell.
 // Needs box_half_extent (lib/medium.glsl). Absent where GLOBAL_MAJORANT is defined.
+#include "lib/checks.glsl"
 #if !defined(GLOBAL_MAJORANT)
 uniform sampler3D majorant_grid;    // R32F per macrocell (texelFetch), >= sigma_t in the cell
 uniform float majorant_grid_bound;  // >= every cell's majorant; 0: the whole volume is vacuum
@@ -70,6 +71,7 @@ float cell_walk_exit(CellWalk w)
 
 float cell_majorant(CellWalk w)
 {
+    CHECK_TEXEL(w.cell, w.cells, CHECK_SITE_MAJORANT_CELL);
     return texelFetch(majorant_grid, w.cell, 0).r;
 }
 #endif

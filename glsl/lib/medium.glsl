@@ -1,6 +1,7 @@
 // The participating medium of SPEC.md (post-classification): density from a 3D texture
 // (cell-centred, trilinear, clamped to the edge voxel), a transfer function table, and the box.
 // NumPy twin: app/medium.py.
+#include "lib/checks.glsl"
 uniform sampler3D volume_density;     // normalised density in [0, 1]
 uniform sampler2D transfer_function;  // N x 1 RGBA32F, entries at densities linspace(0, 1, N)
 uniform int transfer_size;            // N
@@ -35,6 +36,7 @@ vec4 transfer_at(float d)
 {
     float x = clamp(d, 0.0, 1.0) * float(transfer_size - 1);
     int i0 = min(int(x), transfer_size - 2);
+    CHECK_INDEX(i0, transfer_size - 1, CHECK_SITE_TRANSFER_ENTRY);
     vec4 a = TRANSFER_ENTRY(i0);
     vec4 b = TRANSFER_ENTRY(i0 + 1);
     return a + (b - a) * (x - float(i0));

@@ -22,7 +22,10 @@ layout(PROBE_IMAGE_FORMAT, binding = 0) uniform writeonly image3D probe_images[P
 
 // A warm restart's old running means (ProbeGrid.restart(warm=True)): what the textures show is the
 // new mean blended with these, weighted as warm_walks walks; 0 (cold, and the last pass): the mean.
-layout(std430, binding = 7) readonly buffer PriorAccums { ProbeAccum prior[]; };
+// Binding 0, which the walks do not use. It was 7, TrackingStats' binding: bound for the bake, it
+// replaced the walks' stats buffer, so a walk dropped as truncated or non-finite was counted into
+// the first word of probe 0's running mean (or of its warm prior) instead of the stats.
+layout(std430, binding = 0) readonly buffer PriorAccums { ProbeAccum prior[]; };
 uniform float warm_walks;
 
 // Texture slot PROBE_PUBLISH_FIRST + i of `probe`, whose running means (PROBE_MEAN(probe, f),
@@ -47,12 +50,16 @@ void probe_publish_texture(uint probe, int i, float samples)
 #endif
         if (f < 0)
             continue;
+        CHECK_INDEX(probe, probes.length(), CHECK_SITE_PROBE_INDEX);
         float shown = PROBE_MEAN(probe, f);
+        if (w > 0.0)
+            CHECK_INDEX(probe, prior.length(), CHECK_SITE_PROBE_INDEX);
         if (w > 0.0)
             shown = mix(shown, prior[probe].channels[f / 4][f % 4], w);
         if (f != PROBE_SUN_CHANNEL)   // the sun's transmittance is stored as it is
             shown *= to_stored;
         value[component] = shown;
     }
+    CHECK_TEXEL(texel, imageSize(probe_images[i]), CHECK_SITE_IMAGE_TEXEL);
     imageStore(probe_images[i], texel, value);
 }

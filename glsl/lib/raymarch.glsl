@@ -52,7 +52,9 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
         vec4 tf = transfer_at(density_at(x));
         float sigma_t = density_scale * tf.a;
         if (sigma_t <= 0.0) {
-            i = empty_space_last_index(origin, d, t, i, t0, dt, jitter);
+            int last = empty_space_last_index(origin, d, t, i, t0, dt, jitter);
+            CHECK_TRUE(last >= i, CHECK_SITE_MARCH_LOOP);   // never back
+            i = last;
             continue;
         }
         float opacity = 1.0 - exp(-sigma_t * dt);
@@ -80,6 +82,7 @@ void raymarch_pixel(ivec2 pixel)
     if (any(greaterThanEqual(pixel, image_size)))
         return;
     vec3 value = raymarch_frame(pixel, frame_index);
+    CHECK_TEXEL(pixel, imageSize(accumulation), CHECK_SITE_IMAGE_TEXEL);
     vec4 mean_and_count = frame_index == 0u ? vec4(0.0) : imageLoad(accumulation, pixel);
     imageStore(accumulation, pixel, running_mean_add(mean_and_count, value));
 }

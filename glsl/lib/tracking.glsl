@@ -114,6 +114,7 @@ int delta_track_grid(vec3 origin, vec3 direction, float t_min, float t_max, inou
     CellWalk w;
     if (!majorant_walk_begin(origin, direction, t, t_max, t_end, w, m))
         return TRACK_ESCAPED;
+    CHECK_LOOP_COUNTER(crossings);   // a straight ray crosses at most the grid's three sides
     while (steps_left > 0) {
         --steps_left;
         PROFILE_COUNT(profile_flight_steps);
@@ -121,6 +122,8 @@ int delta_track_grid(vec3 origin, vec3 direction, float t_min, float t_max, inou
         bool tentative = majorant_walk_sample(m, t, cell_end, rng);
         if (!tentative)
             PROFILE_COUNT(profile_cell_steps);
+        if (!tentative)
+            CHECK_LOOP(crossings, w.cells.x + w.cells.y + w.cells.z + 3, CHECK_SITE_CELL_LOOP);
         if (tentative && rng_next(rng) * m < sigma_t_at(origin + t * direction)) {
             t_collision = t;
             return TRACK_COLLIDED;
@@ -140,6 +143,7 @@ bool ratio_track_continue_grid(vec3 origin, vec3 direction, inout float t, float
     CellWalk w;
     if (!majorant_walk_begin(origin, direction, t, t_max, t_end, w, m))
         return true;
+    CHECK_LOOP_COUNTER(crossings);   // a straight ray crosses at most the grid's three sides
     while (steps_left > 0) {
         --steps_left;
         PROFILE_COUNT(profile_shadow_steps);
@@ -147,6 +151,8 @@ bool ratio_track_continue_grid(vec3 origin, vec3 direction, inout float t, float
         bool tentative = majorant_walk_sample(m, t, cell_end, rng);
         if (!tentative)
             PROFILE_COUNT(profile_cell_steps);
+        if (!tentative)
+            CHECK_LOOP(crossings, w.cells.x + w.cells.y + w.cells.z + 3, CHECK_SITE_CELL_LOOP);
         if (tentative) {
             transmittance *= max(0.0, 1.0 - sigma_t_at(origin + t * direction) / m);
             if (ratio_roulette(transmittance, rng))
