@@ -21,7 +21,12 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def cmd_schema(args: argparse.Namespace) -> int:
     """The scene file's JSON Schema (or its key table), generated from the scene's types."""
-    from .scene_schema import key_table, schema_text
+    from .scene_schema import key_table, schema_text, update_docs
+    if args.update_docs:
+        from .paths import ASSETS_DIR
+        for written in update_docs(ASSETS_DIR.parent / "docs"):
+            print(f"wrote {written}")
+        return 0
     text = key_table() if args.table else schema_text()
     if args.out:
         Path(args.out).write_text(text)
@@ -205,6 +210,9 @@ def build_parser() -> argparse.ArgumentParser:
     j.add_argument("--out", help="write it to this file instead of stdout")
     j.add_argument("--table", action="store_true",
                    help="the key table of docs/scene-format.md (markdown) instead")
+    j.add_argument("--update-docs", action="store_true",
+                   help="rewrite docs/scene.schema.json and docs/scene-format.md's key table in "
+                        "this checkout")
     j.set_defaults(func=cmd_schema)
 
     from .bench.config import PRESETS
