@@ -123,9 +123,9 @@ def keys() -> dict[str, Key]:
             "data: the array's axes on world x, y, z as stored; patient: permuted and flipped so "
             "that +x is the patient's left, +y superior, +z anterior (NIfTI, DICOM, NRRD files "
             "that say so).", choice(ORIENTATIONS)),
-        "orientation": Key("The same as volume.orientation (SPEC.md's spelling).",
+        "orientation": Key("volume.orientation, given at the scene's top level.",
                            choice(ORIENTATIONS), default="data"),
-        "series": Key("The same as volume.series (SPEC.md's spelling).",
+        "series": Key("volume.series, given at the scene's top level.",
                       {"oneOf": [number(1, integer=True), {"type": "string", "minLength": 1}]},
                       default="the largest series", values="a number from 1 or a SeriesInstanceUID"),
         "transfer_function": Key("Density to colour and opacity.", {}),
