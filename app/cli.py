@@ -62,7 +62,7 @@ def cmd_series(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from .bench.config import PRESETS
     from .bench.report import write_report
-    from .bench.scenes import ALL_SCENES
+    from .bench.scenes import ALL_SCENES, BATTERY_SCENES
     out = Path(args.out)
     if args.merge:
         from .bench.report import merge
@@ -72,10 +72,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         config = PRESETS[args.preset]
         changes = {}
         if args.scenes:
-            unknown = [s for s in args.scenes if s not in ALL_SCENES]
+            unknown = [s for s in args.scenes if s not in (*ALL_SCENES, *BATTERY_SCENES)]
             if unknown:
                 raise SystemExit(f"error: unknown bench scene(s) {', '.join(unknown)} "
-                                 f"(known: {', '.join(ALL_SCENES)})")
+                                 f"(known: {', '.join((*ALL_SCENES, *BATTERY_SCENES))})")
             changes["scenes"] = tuple(args.scenes)
         if args.ref_spp:
             changes["ref_spp"] = args.ref_spp
@@ -216,13 +216,14 @@ def build_parser() -> argparse.ArgumentParser:
     j.set_defaults(func=cmd_schema)
 
     from .bench.config import PRESETS
-    from .bench.scenes import ALL_SCENES
+    from .bench.scenes import ALL_SCENES, BATTERY_SCENES
     b = sub.add_parser("bench", help="speed against error for every method; writes results.json, "
                                      "report.md and plots")
     b.add_argument("--preset", choices=sorted(PRESETS), default="gpu",
                    help="gpu: the full sweep for the lent GPU; quick: small sizes for llvmpipe")
     b.add_argument("--scenes", type=lambda t: t.split(","), default=None,
-                   help=f"comma-separated subset of {','.join(ALL_SCENES)}")
+                   help=f"comma-separated subset of {','.join(ALL_SCENES)} or of the stress "
+                        f"battery ({','.join(BATTERY_SCENES)}; --preset bias)")
     b.add_argument("--out", default="bench/out", help="output folder (default bench/out)")
     b.add_argument("--ref-spp", type=positive_int, help="reference samples per pixel")
     b.add_argument("--ref-dir", help="reuse the references (refs/*.npy and their measured noise "

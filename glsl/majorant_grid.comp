@@ -28,10 +28,12 @@ void main()
     // Four nodes per iteration: at most 1024 iterations for the largest table (4096 rows), well
     // inside llvmpipe's loop limit even at 16 lanes per SIMD batch.
     for (; i <= last; i += 4) {
+        CHECK_INDEX(i, transfer_size, CHECK_SITE_TRANSFER_ENTRY);
         a = max(a, TRANSFER_ENTRY(i).a);
         a = max(a, TRANSFER_ENTRY(min(i + 1, last)).a);
         a = max(a, TRANSFER_ENTRY(min(i + 2, last)).a);
         a = max(a, TRANSFER_ENTRY(min(i + 3, last)).a);
     }
+    CHECK_TEXEL(c, imageSize(majorant_out), CHECK_SITE_IMAGE_TEXEL);
     imageStore(majorant_out, c, vec4(density_scale * a * majorant_safety));
 }

@@ -149,6 +149,7 @@ def test_a_restart_ignores_the_stored_path_states(ctx, method):
         acc = r.begin(method, seed=3)
         tracer.dispatch(r.resources, r.camera, acc, 4, 3,
                         r.probe_uniforms() if method == "probes" else None)
+        acc.samples = 4
         tracer.loop_budget, tracer.loop_reserve = budget
         garbage = np.random.default_rng(0).integers(0, 2**32, tracer.states.size // 4,
                                                     dtype=np.uint32)

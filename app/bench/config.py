@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from .scenes import ALL_SCENES
+from .scenes import ALL_SCENES, BATTERY_SCENES
 from ..render.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 
 # The sweep's probe layouts (`--probe-layouts`): "uniform", or an adaptive layout driven by that
@@ -78,6 +78,11 @@ class BenchConfig:
     interact_orbit_frames: int = 60
     interact_ref_spp: int = 1024                     # reference per event state (two halves)
     interact_tail_k: int = 8                         # samples per dispatch against 1
+    # --preset bias (bias.py): each default shortcut against its exact variant on the battery
+    bias_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 256))   # grid, walks
+    bias_seeds: int = 4                              # independent bakes per variant (paired)
+    bias_frames: int = 16                            # raymarched frames per image
+    bias_probe_spp: int = 64                         # `probes` samples per image
 
     def scaled(self, **changes) -> "BenchConfig":
         return replace(self, **changes)
@@ -103,6 +108,12 @@ PRESETS = {
                                   interact_target_spp=(("probes", 16), ("raymarch", 4)),
                                   interact_max_frames=60, interact_orbit_frames=12,
                                   interact_ref_spp=512, ref_samples_per_pass=16, interact_tail_k=4),
+    # the bias table over the stress battery (bias.py): 256^2, references of 16384 spp
+    "bias": BenchConfig(mode="bias", scenes=BATTERY_SCENES, width=256, height=256, ref_spp=16384,
+                        ref_samples_per_pass=256),
+    "bias-quick": BenchConfig(mode="bias", scenes=BATTERY_SCENES, width=32, height=32,
+                              ref_spp=256, ref_samples_per_pass=64, bias_settings=((4, 64),),
+                              bias_seeds=2, bias_frames=2, bias_probe_spp=2),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),

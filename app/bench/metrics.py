@@ -20,6 +20,24 @@ def rrmse(image: np.ndarray, reference: np.ndarray) -> float:
     return float(np.sqrt(np.mean((x - ref) ** 2)) / denom)
 
 
+def block_rrmse(image: np.ndarray, reference: np.ndarray, block: int = 16) -> float:
+    """rRMSE of the images' means over block x block pixel tiles (partial tiles at the right and
+    bottom edges left out): the error a person sees at the scale of features rather than of
+    pixels, and what the held-out checks report (16 px blocks)."""
+    x = np.asarray(image, np.float64)
+    ref = np.asarray(reference, np.float64)
+    if x.shape != ref.shape:
+        raise ValueError(f"image shape {x.shape} differs from the reference's {ref.shape}")
+    h, w = (x.shape[0] // block) * block, (x.shape[1] // block) * block
+    if h == 0 or w == 0:
+        raise ValueError(f"image {x.shape[1]}x{x.shape[0]} is smaller than one {block}-pixel block")
+
+    def tiles(a):
+        a = a[:h, :w]
+        return a.reshape(h // block, block, w // block, block, -1).mean(axis=(1, 3))
+    return rrmse(tiles(x), tiles(ref))
+
+
 def reference_noise(half_a: np.ndarray, half_b: np.ndarray) -> float:
     """Relative RMS noise of the mean of two independent, equal-sized halves of a Monte Carlo
     estimate: var(a - b) = 4 var(mean), so it is rrmse(a, b) / 2 (relative to the mean's RMS)."""

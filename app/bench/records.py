@@ -9,6 +9,8 @@ import time
 
 import numpy as np
 
+from ..gl.dispatch_log import active_log
+
 from ..render.pathtracer import PIXEL_STATE_BYTES
 from .ceiling import SPEED_CHECK_SLOWER
 from .clock_log import report_lines as clock_report_lines
@@ -79,6 +81,9 @@ def make_record(base: dict, config: BenchConfig, method: str, frames: int, image
     per_pixel = ACCUMULATION_BYTES + (0 if method == "raymarch" else PIXEL_STATE_BYTES)
     rec["image_bytes"] = config.width * config.height * per_pixel
     rec["gpu_bytes"] = rec["image_bytes"] + rec.get("probe_bytes", 0) + rec.get("light_bytes", 0)
+    log = active_log()
+    if log is not None:   # the longest dispatch since the last record (run_bench keeps a log)
+        rec["longest_dispatch_ms"], rec["longest_dispatch"] = log.take()
     return rec
 
 

@@ -237,6 +237,9 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
         return _write_cost_report(data, out, scenes)
     if all(r.get("mode") == "bake" for r in data["records"]) and data["records"]:
         return _write_bake_report(data, out, scenes)
+    if all(r.get("mode") == "bias" for r in data["records"]) and data["records"]:
+        from .bias import write_bias_report
+        return write_bias_report(data, out)
     if all(r.get("mode") == "interact" for r in data["records"]) and data["records"]:
         from .interact_report import write_interact_report
         return write_interact_report(data, out)

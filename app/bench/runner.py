@@ -19,6 +19,8 @@ from .ceiling import speed_check_ms
 from .clock_log import ClockLog
 from .config import BenchConfig
 from .metrics import flip, reference_noise
+from ..gl.checks import checks_for
+from ..gl.dispatch_log import DispatchLog
 from .records import log as _log, make_record, progressive as _progressive
 from .report import load as load_results
 from ..render.probe_layout import resolve_sh_order
@@ -119,6 +121,7 @@ def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Pa
     clock_log = ClockLog(out / "nvidia-smi.csv")
     if clock_log.start():
         _log(f"GPU clock logged to {clock_log.path}")
+    dispatches = DispatchLog().__enter__()   # every record's longest dispatch (records.py)
     try:
         for si, name in enumerate(config.scenes):
             scene = bench_scene(name, config.width, config.height)
@@ -133,8 +136,19 @@ def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Pa
                 _bench_scene(renderer, name, config, results, out, device)
             finally:
                 renderer.release()
+            checks = checks_for(ctx)   # the checking build (RADIANCE_PROBES_SHADER_CHECKS=1)
+            if checks is not None:
+                hits = checks.hits()
+                meta.setdefault("shader_check_hits", {})[name] = hits
+                _log(f"  checking build: {hits or 'no hits'}")
+                checks.reset()
             results.flush()
     finally:
+        dispatches.take()
+        dispatches.__exit__(None, None, None)
+        meta["longest_dispatch_ms"] = dispatches.longest_ms
+        meta["longest_dispatch"] = dispatches.longest_name
+        meta["dispatches"] = dispatches.dispatches
         gpu_clock = clock_log.stop()
         if gpu_clock:
             meta["gpu_clock"] = gpu_clock
@@ -192,6 +206,11 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
         from .interact import interact_scene
         return interact_scene(renderer, name, config, results, out, device,
                               lambda r, key, cfg: _reference(r, key, cfg, results, out))
+    if config.mode == "bias":
+        from .bias import bias_scene
+        reference = _reference(renderer, name, config, results, out)
+        return bias_scene(renderer, name, config, results, out, device, reference,
+                          results.references[name]["noise_rrmse"])
     if config.mode == "bake":
         from .bake import bake_scene
         return bake_scene(renderer, name, config, results, out, device,

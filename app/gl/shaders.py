@@ -13,6 +13,7 @@ import moderngl
 
 from ..paths import GLSL_DIR
 from .context import is_software
+from .dispatch_log import active_log
 from .textures import transfer_buffer_bindable
 
 GLSL_VERSION = "#version 430 core"
@@ -93,12 +94,45 @@ def compute_defines(ctx: moderngl.Context) -> dict:
     return defines
 
 
+class ComputeProgram:
+    """A compiled compute pass: moderngl's ComputeShader (uniforms by name, release) whose `run`
+    is timed by the active DispatchLog, if any (app/gl/dispatch_log.py)."""
+
+    def __init__(self, shader: moderngl.ComputeShader, name: str):
+        self.shader = shader
+        self.name = name
+
+    def run(self, group_x: int = 1, group_y: int = 1, group_z: int = 1) -> None:
+        log = active_log()
+        if log is None:
+            self.shader.run(group_x, group_y, group_z)
+            return
+        queries = log.begin(self.shader.ctx)
+        self.shader.run(group_x, group_y, group_z)
+        log.end(self.name, queries)
+
+    def __contains__(self, key) -> bool:
+        return key in self.shader
+
+    def __getitem__(self, key):
+        return self.shader[key]
+
+    def __setitem__(self, key, value) -> None:
+        self.shader[key] = value
+
+    def get(self, key, default=None):
+        return self.shader.get(key, default)
+
+    def release(self) -> None:
+        self.shader.release()
+
+
 def compute_program(ctx: moderngl.Context, name: str,
                     defines: Mapping[str, object] | None = None,
-                    text: str | None = None) -> moderngl.ComputeShader:
+                    text: str | None = None) -> ComputeProgram:
     source, files = load_source(name, {**compute_defines(ctx), **(defines or {})}, text)
     try:
-        return ctx.compute_shader(source)
+        return ComputeProgram(ctx.compute_shader(source), name)
     except moderngl.Error as exc:
         raise ShaderError(f"{name} failed to compile:\n{_translate(str(exc), files)}") from None
 

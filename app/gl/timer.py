@@ -130,3 +130,62 @@ class GpuTimer:
                 attachment.release()
             self._flush_fbo.release()
             self._flush_fbo = None
+
+
+GL_QUERY_RESULT_AVAILABLE = 0x8867
+
+
+class SpanClock:
+    """GPU time of spans of work read without waiting: `start()`/`stop(units)` bracket a span with
+    timestamps, and `poll()` returns the GPU ms per unit of the newest span whose result is in
+    (None while none is), never blocking. For sizing the next dispatch from the last ones while
+    the GPU stays busy (ProbeGrid's walk chunks). Needs libOpenGL (timestamps); on a software
+    rasteriser its spans would be binned late, so callers use it on GPUs only."""
+
+    def __init__(self):
+        self._gl = _lib()
+        self._open = None
+        self._spans: list[tuple[int, int, float]] = []   # (start query, end query, units)
+
+    @property
+    def available(self) -> bool:
+        return self._gl is not None
+
+    def start(self) -> None:
+        if self._gl is None:
+            return
+        q = (ctypes.c_uint * 2)()
+        self._gl.glGenQueries(2, q)
+        self._gl.glQueryCounter(q[0], GL_TIMESTAMP)
+        self._open = (q[0], q[1])
+
+    def stop(self, units: float) -> None:
+        if self._gl is None or self._open is None:
+            return
+        self._gl.glQueryCounter(self._open[1], GL_TIMESTAMP)
+        self._spans.append((*self._open, float(units)))
+        self._open = None
+
+    def poll(self) -> float | None:
+        """GPU ms per unit of the newest finished span (older finished ones are dropped)."""
+        newest = None
+        while self._spans:
+            start, end, units = self._spans[0]
+            ready = ctypes.c_uint64()
+            self._gl.glGetQueryObjectui64v(end, GL_QUERY_RESULT_AVAILABLE, ctypes.byref(ready))
+            if not ready.value:
+                break
+            a, b = ctypes.c_uint64(), ctypes.c_uint64()
+            self._gl.glGetQueryObjectui64v(start, GL_QUERY_RESULT, ctypes.byref(a))
+            self._gl.glGetQueryObjectui64v(end, GL_QUERY_RESULT, ctypes.byref(b))
+            self._gl.glDeleteQueries(2, (ctypes.c_uint * 2)(start, end))
+            self._spans.pop(0)
+            newest = (b.value - a.value) / 1e6 / max(units, 1e-9)
+        return newest
+
+    def release(self) -> None:
+        if self._gl is None:
+            return
+        for start, end, _ in self._spans:
+            self._gl.glDeleteQueries(2, (ctypes.c_uint * 2)(start, end))
+        self._spans.clear()

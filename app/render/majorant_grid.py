@@ -11,7 +11,7 @@ import weakref
 import moderngl
 import numpy as np
 
-from ..gl.shaders import compute_program, set_uniforms
+from ..gl.shaders import ComputeProgram, compute_program, set_uniforms
 from ..gl.textures import TransferTable
 from ..twins.majorant_grid import MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_bound
 from ..volume import Volume
@@ -20,11 +20,11 @@ from ..volume import Volume
 MAJORANT_UNIT = 10   # the majorant grid, read by the tracking passes
 RANGE_UNIT = 11      # the density ranges, read only while the grid is built
 
-_programs: "weakref.WeakKeyDictionary[moderngl.Context, moderngl.ComputeShader]" = \
+_programs: "weakref.WeakKeyDictionary[moderngl.Context, ComputeProgram]" = \
     weakref.WeakKeyDictionary()
 
 
-def _program(ctx: moderngl.Context) -> moderngl.ComputeShader:
+def _program(ctx: moderngl.Context) -> ComputeProgram:
     """One compiled build pass per context (every SceneResources shares it)."""
     program = _programs.get(ctx)
     if program is None:

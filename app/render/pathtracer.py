@@ -45,9 +45,13 @@ class PathTracer:
         return self.states
 
     def dispatch(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
-                 target_samples: int, seed: int = 0, extra_uniforms: dict | None = None) -> None:
-        """One dispatch towards `target_samples` per pixel; starts afresh when acc was reset (the
-        shader then ignores the stored path states: nothing is cleared or uploaded by the host)."""
+                 target_samples: int, seed: int = 0, extra_uniforms: dict | None = None,
+                 rows: tuple[int, int] | None = None, restart: bool | None = None) -> None:
+        """One dispatch towards `target_samples` per pixel of image rows [rows) (None: all);
+        `restart` (default: acc was reset, acc.samples == 0) starts every pixel afresh (the
+        shader then ignores the stored path states: nothing is cleared or uploaded by the host).
+        acc.samples is the caller's to advance."""
+        first, last = rows if rows is not None else (0, acc.height)
         states = self._states_for(acc)
         resources.bind()
         set_uniforms(self.program, resources.uniforms())
@@ -56,33 +60,44 @@ class PathTracer:
         set_uniforms(self.program, {"seed": seed & 0xFFFFFFFF, "target_samples": target_samples,
                                     "loop_budget": self.loop_budget, "loop_reserve": self.loop_reserve,
                                     # the shader starts every pixel afresh (no host-side clear)
-                                    "restart": int(acc.samples == 0)})
+                                    "restart": int(acc.samples == 0 if restart is None
+                                                   else restart),
+                                    "row_offset": first})
         acc.bind_image(0)
         states.bind_to_storage_buffer(1)
         self.progress.bind_to_storage_buffer(2)
-        self.program.run(*groups(acc.width, acc.height))
+        self.program.run(*groups(acc.width, last - first))
         self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT
                                 | moderngl.SHADER_STORAGE_BARRIER_BIT)
-        acc.samples = target_samples
         self.dispatches += 1
 
     def run(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
-            target_samples: int, seed: int = 0, extra_uniforms: dict | None = None) -> None:
-        """Dispatches until every pixel holds `target_samples` samples (one dispatch where the
-        driver has no loop limit; more on llvmpipe, where long paths resume across dispatches)."""
+            target_samples: int, seed: int = 0, extra_uniforms: dict | None = None,
+            bands: int = 1) -> None:
+        """Dispatches until every pixel holds `target_samples` samples: per band of rows (the
+        image cut into `bands` of about equal height), one dispatch where the driver has no loop
+        limit; more on llvmpipe, where long paths resume across dispatches."""
         # No driver loop limit: every pixel finishes in one dispatch, and the pending count is
         # neither reset nor read (a write to a buffer the last dispatch used can make the driver
         # wait for that dispatch).
         unbounded = loop_budget_unbounded(self.loop_budget)
-        while True:
-            if not unbounded:
-                self.progress.write(bytes(4))
-            self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms)
-            if unbounded:
-                return
-            (pending,) = struct.unpack("I", self.progress.read())
-            if pending == 0:
-                return
+        bands = max(1, min(int(bands), acc.height))
+        edges = [acc.height * b // bands for b in range(bands + 1)]
+        fresh = acc.samples == 0
+        for rows in zip(edges[:-1], edges[1:]):
+            restart = fresh   # a band's first dispatch only; resumed dispatches continue
+            while True:
+                if not unbounded:
+                    self.progress.write(bytes(4))
+                self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms, rows,
+                              restart)
+                restart = False
+                if unbounded:
+                    break
+                (pending,) = struct.unpack("I", self.progress.read())
+                if pending == 0:
+                    break
+        acc.samples = target_samples
 
     def release(self) -> None:
         self.program.release()

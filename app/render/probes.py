@@ -16,6 +16,7 @@ every walk has ended; the first dispatch of a chunk starts its walks afresh, so 
 from __future__ import annotations
 
 import math
+import os
 import struct
 from dataclasses import dataclass
 
@@ -25,6 +26,7 @@ import numpy as np
 from ..gl.context import UNBOUNDED_LOOP_BUDGET, loop_budget, loop_budget_unbounded
 from ..gl.profiler import GpuProfile
 from ..gl.shaders import compute_program, set_uniforms
+from ..gl.timer import GpuTimer
 from .probe_layout import colour_textures, texture_ids
 from ..twins.probe_warp import WARP_ROWS, warp_table
 from .resources import SceneResources
@@ -36,6 +38,11 @@ PROBE_IMAGE_LIMIT = 8         # textures one dispatch publishes (lib/probe_publi
 DIRECTIONS_PER_PASS = 64     # = probe_project.comp's local size: one invocation per walk of a pass
 WALKS_PER_CHUNK = 1 << 20     # resumable walks: 80 MiB of walk state and 16 MiB of results at most
 WALKS_PER_CHUNK_UNBOUNDED = 1 << 22   # walks that end in one dispatch: 64 MiB of results at most
+# The probes' own sun marched by shadow_march.glsl (walk_sun "ray") jumps over empty macrocells:
+# taken out after the H100 lost its context with it (commit 03404d4); off until the cause is
+# known. RADIANCE_PROBES_SUN_MARCH_SKIPS=1 turns it on for that investigation.
+SUN_MARCH_SKIPS_EMPTY_CELLS = os.environ.get("RADIANCE_PROBES_SUN_MARCH_SKIPS", "0") == "1"
+FIRST_CHUNK_WALKS = 1 << 18   # a bake's first timed chunk: about one wave of an H100's threads
 PATH_STATE_BYTES = 80       # PathState of glsl/lib/integrator.glsl, std430
 PATH_STATE_BYTES_ENVIRONMENT_MAP = 112   # the same with ENVIRONMENT_MAP
 WALK_SUN_MODES = ("ray", "grid")
@@ -189,13 +196,19 @@ class ProbeGrid:
                                     {**defines, "PROBE_PUBLISH_FIRST": first}))
             for first in range(PROBE_IMAGE_LIMIT, len(self.texture_ids), PROBE_IMAGE_LIMIT)]
         # the probes' own sun: from the light grid when the walks read it (probe_sun.comp)
-        self.sun_program = compute_program(ctx, "probe_sun.comp",
-                                           {**self.defines(), **({"PROBE_SUN_GRID": 1}
-                                                                 if sun == "grid" else {})})
+        self.sun_program = compute_program(
+            ctx, "probe_sun.comp",
+            {**self.defines(), **({"PROBE_SUN_GRID": 1} if sun == "grid" else {}),
+             **({"SUN_MARCH_SKIPS_EMPTY_CELLS": 1} if SUN_MARCH_SKIPS_EMPTY_CELLS else {})})
         self.noise_program = (compute_program(ctx, "probe_noise.comp", self.defines())
                               if self.adaptive else None)
         self.budget_program = (compute_program(ctx, "probe_walk_budget.comp", self.defines())
                                if self.adaptive else None)
+        # Walk dispatches sized by time (_chunk): the target (None: fixed chunks) and the GPU ms
+        # per walk of the last timed chunk, kept across restarts of this grid.
+        self.dispatch_target_ms: float | None = None
+        self.walk_ms: float | None = None
+        self._chunk_timer = GpuTimer(ctx)
         self.dispatches = 0
         self.passes_done = 0
         self.next_probe = 0        # the next probe to walk in the current pass
@@ -348,13 +361,19 @@ class ProbeGrid:
                 self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
                 self.dispatches += 1
         end = self.next_probe + k
-        for first in range(self.next_probe, end, self.chunk_probes):
-            n = min(self.chunk_probes, end - first)
+        first = self.next_probe
+        while first < end:
+            n, timed = self._chunk(end - first, directions)
             set_uniforms(walk_program, {"first_probe": first, "chunk_probes": n})
             set_uniforms(self.project_program, {"first_probe": first})
             groups = (n * directions + 63) // 64
             with section("walks"):
+                if timed:
+                    self._chunk_timer.start()
                 self._run_walks(walk_program, groups)
+                if timed:
+                    self._chunk_timer.stop()
+                    self.walk_ms = self._chunk_timer.elapsed_ms / (n * directions)
             with section("project"):
                 self.project_program.run(n)
                 self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT
@@ -370,6 +389,7 @@ class ProbeGrid:
                     self.dispatches += 1
                 if self.publish_programs:
                     self._bind_images(0)
+            first += n
         self.next_probe = end
         if self.next_probe < self.count:
             return
@@ -387,6 +407,22 @@ class ProbeGrid:
                 self.dispatches += 2
         self.next_probe = 0
         self.passes_done += 1
+
+    def _chunk(self, left: int, directions: int) -> tuple[int, bool]:
+        """Probes the next walk dispatch takes (of `left` still to walk in this call) and whether
+        to time it. Where walks end in one dispatch and a dispatch target is set
+        (dispatch_target_ms, by the Renderer), chunks hold the walks that the GPU ms per walk of
+        the last timed chunk says fit the target: timed (one wait for the GPU) whenever the rest
+        of the pass does not fit in one, or no chunk was timed yet (the first holds
+        FIRST_CHUNK_WALKS); a pass that fits is not waited for. Else the fixed chunk_probes."""
+        if self.resumable or self.dispatch_target_ms is None:
+            return min(self.chunk_probes, left), False
+        if self.walk_ms is None:
+            walks = FIRST_CHUNK_WALKS
+        else:
+            walks = int(self.dispatch_target_ms / max(self.walk_ms, 1e-12))
+        n = max(1, min(self.chunk_probes, left, walks // directions))
+        return n, self.walk_ms is None or n < left
 
     def _bind_images(self, first_slot: int) -> None:
         """Slots first_slot .. first_slot + 7 to image units 0 .. 7 (lib/probe_publish.glsl)."""
@@ -503,7 +539,8 @@ class ProbeGrid:
                     self.noise, self.noise_program, self.budget_program, self.prior,
                     self.warp_texture,
                     self.walk_program, self._walk_profile_program, self.project_program,
-                    self.sun_program, self._progress_program, self._partial_sums):
+                    self.sun_program, self._progress_program, self._partial_sums,
+                    self._chunk_timer):
             if obj is not None:
                 obj.release()
 

@@ -24,6 +24,7 @@ from .sun_lobe_fit import SunLobeFit, SunLobeFitter
 from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
+from .dispatch_budget import dispatch_target_ms
 from .raymarch import Raymarcher, min_step_voxels
 from .resources import SceneResources
 from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noqa: F401 (re-exported)
@@ -111,6 +112,7 @@ class Renderer:
         self._sun_lobe_fitter: SunLobeFitter | None = None   # made when first asked for
         self._fit_ms = 0.0   # GPU ms of the last bake start's pilot, not yet counted in a bake's time
         self._probe_ms: dict[tuple, float] = {}   # measured GPU ms per probe walked, per layout
+        self._sample_ms: dict[tuple, float] = {}  # GPU ms per sample of a path-state pass, per size
         self.last_slice_ms = 0.0
         self._light_key: tuple | None = None
         self._light_pending: tuple | None = None   # the key of a sliced light-grid bake under way
@@ -327,6 +329,7 @@ class Renderer:
                                         sun=st.walk_sun, adaptive=st.walk_adaptive,
                                         environment_map=env_map, planes=plan.planes,
                                         sun_lobe=lobe)
+        self.probe_grid.dispatch_target_ms = dispatch_target_ms(self)
         self.probe_grid.restart(seed, warm=warm)
         self._baked_key = self.bake_key()
         return self.probe_grid
@@ -544,19 +547,39 @@ class Renderer:
                                            else 1)
         # a sliced light-grid bake under way (bake_step) is read as it is, not finished here
         light_ms = self.bake_light() if method == "raymarch" and not self.light_baking() else 0.0
-        self.timer.start()
+        self.last_light_ms = light_ms
         if method == "raymarch":
+            self.timer.start()
             self.raymarcher().run(self.resources, self.camera, acc, n, self.seed,
                                   self.raymarch_step_voxels * 2 * self.resources.march_step,
                                   {**extra, **self._light.uniforms()})
-        else:
-            defines = (self._read_defines(self.probe_grid.defines()) if method in PROBE_LIGHTING
-                       else None)
-            self.pass_for(method, defines).run(self.resources, self.camera, acc, acc.samples + n,
-                                               self.seed, extra)
-        self.timer.stop()
-        self.last_light_ms = light_ms
-        return self.timer.elapsed_ms
+            self.timer.stop()
+            return self.timer.elapsed_ms
+        defines = (self._read_defines(self.probe_grid.defines()) if method in PROBE_LIGHTING
+                   else None)
+        tracer = self.pass_for(method, defines)
+        # Cut into dispatches of at most the device's target (dispatch_budget.py) by the GPU ms
+        # per sample this pass took at this size last time: several samples a dispatch where they
+        # fit, bands of rows where one sample of the whole image would not. Unknown yet: one
+        # sample first (one more wait for the timer).
+        key = (id(tracer), acc.width, acc.height)
+        target = dispatch_target_ms(self)
+        total = 0.0
+        while n > 0:
+            per_sample = self._sample_ms.get(key)
+            if per_sample is None:
+                k, bands = 1, 1
+            else:
+                bands = max(1, math.ceil(per_sample / target))
+                k = 1 if bands > 1 else max(1, min(n, int(target / max(per_sample, 1e-9))))
+            self.timer.start()
+            tracer.run(self.resources, self.camera, acc, acc.samples + k, self.seed, extra, bands)
+            self.timer.stop()
+            ms = self.timer.elapsed_ms
+            self._sample_ms[key] = ms / k
+            total += ms
+            n -= k
+        return total
 
     def image(self) -> np.ndarray:
         """The current accumulated linear RGB image (H, W, 3), row 0 at the top."""

@@ -7,7 +7,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from ..gl.shaders import compute_program, set_uniforms
+from ..gl.shaders import ComputeProgram, compute_program, set_uniforms
 from ..twins.visible_region import positive_node_counts, region_from_cells
 from .resources import TRANSFER_UNIT, VOLUME_UNIT, SceneResources
 
@@ -19,7 +19,7 @@ class VisibleRegionPass:
 
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
-        self.program: moderngl.ComputeShader | None = None
+        self.program: ComputeProgram | None = None
 
     def region(self, resources: SceneResources) -> tuple[np.ndarray, np.ndarray]:
         """World (low, high) corners of where sigma_t can be > 0 (the whole box when nowhere)."""

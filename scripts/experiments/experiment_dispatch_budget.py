@@ -60,6 +60,7 @@ for method in args.methods.split(","):
             target = target + 1 if budget == 0 else target + 64
             timer.start()
             tracer.dispatch(r.resources, r.camera, acc, target, r.seed, extra)
+            acc.samples = target
             timer.stop()
             ms.append(timer.elapsed_ms)
             count = acc.read_rgba()[..., 3]
@@ -89,6 +90,7 @@ for method in (args.methods.split(",") if args.compare_renderer else []):
                 return r.add_samples(n)
             timer.start()
             tracer.dispatch(r.resources, r.camera, acc, acc.samples + n, r.seed, extra)
+            acc.samples += n
             timer.stop()
             return timer.elapsed_ms
         step(1)
