@@ -497,3 +497,34 @@ def test_probe_bake_with_grid_matches_global_majorant(ctx):
     assert live.sum() > 100
     assert np.mean(z ** 2) < 1.8, np.mean(z ** 2)
     assert np.abs(z).max() < 9.0
+
+
+@pytest.mark.parametrize("density_scale", [100.0, 1e4])
+def test_opaque_box_single_scattering_has_its_closed_form_with_and_without_the_grid(
+        ctx, density_scale):
+    """A homogeneous box, single scattering only, seen face on: near the middle of the face it is a
+    semi-infinite medium, whose radiance albedo E p mu_s / (mu_s + mu_v) does not depend on
+    sigma_t (mu_s, mu_v: the sun's and the view's cosines to the face's normal). Both tracking
+    modes must give it at sigma_t = 100 and 1e4. The grid's walk used to end at its last face's
+    snap distance and skip the sliver of medium there: +86% at sigma_t = 1e4."""
+    from app.render.settings import RenderSettings
+    sun = np.array([0.3, 0.8, 0.52])
+    sun /= np.linalg.norm(sun)
+    scene = parse_scene({"volume": {"builtin": "constant", "size": [8, 8, 8]},
+                         "transfer_function": WHITE, "density_scale": density_scale,
+                         "albedo": 0.8, "max_bounces": 1,
+                         "light": {"direction": sun.tolist(), "irradiance": [3, 3, 3]},
+                         "environment": [0, 0, 0],
+                         "camera": {"eye": [0, 0, 2.2], "target": [0, 0, 0], "fov_y": 10.0,
+                                    "width": 8, "height": 8}})
+    # the view's rays through the middle pixels are within 1 degree of the face's normal
+    expected = 0.8 * 3.0 / (4 * np.pi) * sun[2] / (sun[2] + 1.0)
+    means = []
+    for skipping in (True, False):
+        r = Renderer(ctx, scene, settings=RenderSettings(empty_space_skipping=skipping))
+        try:
+            image = r.render("pt", spp=256, seed=3, samples_per_pass=256).image
+        finally:
+            r.release()
+        means.append(float(image[2:6, 2:6].mean()))
+    np.testing.assert_allclose(means, expected, rtol=0.01)

@@ -49,8 +49,9 @@ bool cell_walk_cross(inout CellWalk w, float t)
     return all(greaterThanEqual(w.cell, ivec3(0))) && all(lessThan(w.cell, w.cells));
 }
 
-// Starts the walk at origin + t * direction; false when that point is leaving the grid.
-bool cell_walk_begin(vec3 origin, vec3 direction, float t, out CellWalk w)
+// Sets the walk up at origin + t * direction in the macrocell holding that point (clamped into the
+// grid), before crossing any face: cell_walk_begin's first half.
+void cell_walk_start(vec3 origin, vec3 direction, float t, out CellWalk w)
 {
     w.cells = textureSize(majorant_grid, 0);
     vec3 per_world = vec3(w.cells) / (2.0 * box_half_extent);   // macrocells per unit length
@@ -61,6 +62,14 @@ bool cell_walk_begin(vec3 origin, vec3 direction, float t, out CellWalk w)
     w.dir_step = ivec3(sign(d));
     w.cell = clamp(ivec3(floor(w.o + t * d)), ivec3(0), w.cells - 1);
     cell_walk_exits(w);
+}
+
+// Starts the walk at origin + t * direction; false when that point is leaving the grid (within
+// CELL_WALK_SNAP of its last face: tracking keeps that last cell's majorant for the sliver left,
+// lib/tracking.glsl).
+bool cell_walk_begin(vec3 origin, vec3 direction, float t, out CellWalk w)
+{
+    cell_walk_start(origin, direction, t, w);
     return cell_walk_cross(w, t);
 }
 

@@ -56,7 +56,19 @@ bool ratio_roulette(inout float transmittance, inout uint rng)
 
 #if !defined(GLOBAL_MAJORANT)
 // Starts a walk over the macrocells for t in [t, t_max] clipped to the box; m is the first cell's
-// majorant. False when nothing of the range lies in a cell of the grid (or all is vacuum).
+// majorant. False when nothing of the range lies in the box (or all is vacuum).
+//
+// The grid's last faces are the box's. A point within CELL_WALK_SNAP of one (lib/cell_walk.glsl)
+// counts as having reached it, so the walk leaves the grid there while the box still holds a
+// sliver of medium up to t_end: that sliver keeps the last cell's majorant (it lies inside that
+// cell, whose majorant bounds it) and is tracked like the rest. Ending the walk there instead
+// skipped the sliver: a path tracer biased bright wherever sigma_t times the snap distance was not
+// small (a fully opaque box, sigma_t = 1e4: +86% single scattering; tests/test_majorant_grid.py).
+// Where the last cell's exit and the box's exit differ by float rounding only (a few ulps), the
+// walk ends as it reaches the grid's last face: a resumed walk then takes the same steps as the
+// uninterrupted one (tests/test_majorant_grid.py), and what that leaves out is a few ulps of path.
+const float SLIVER_ROUNDING = 1e-6;
+
 bool majorant_walk_begin(vec3 origin, vec3 direction, inout float t, float t_max,
                          out float t_end, out CellWalk w, out float m)
 {
@@ -67,9 +79,14 @@ bool majorant_walk_begin(vec3 origin, vec3 direction, inout float t, float t_max
         return false;
     t = max(t, b0);
     t_end = min(t_max, b1);
-    if (t >= t_end || !cell_walk_begin(origin, direction, t, w))
+    if (t >= t_end)
         return false;
-    m = cell_majorant(w);
+    cell_walk_start(origin, direction, t, w);
+    m = cell_majorant(w);                 // the cell holding the start (clamped into the grid)
+    if (cell_walk_cross(w, t))
+        m = cell_majorant(w);
+    else if (!(t_end - t > SLIVER_ROUNDING * max(abs(t_end), 1.0)))
+        return false;
     return true;
 }
 
@@ -88,6 +105,8 @@ bool majorant_walk_sample(float m, inout float t, float cell_end, inout uint rng
 
 // After a null collision at t (tentative) or a flight past the cell (not tentative): crosses the
 // faces reached, if any, and loads the next cell's majorant. False once the ray has left the range.
+// A walk that leaves the grid before t_end (within the snap of its last face) keeps the last
+// cell's majorant m for the sliver left (see majorant_walk_begin).
 bool majorant_walk_next(inout CellWalk w, inout float m, inout float t, float cell_end,
                         float t_end, bool tentative)
 {
@@ -100,7 +119,7 @@ bool majorant_walk_next(inout CellWalk w, inout float m, inout float t, float ce
             return false;
     }
     if (!cell_walk_cross(w, t))
-        return false;
+        return t_end - t > SLIVER_ROUNDING * max(abs(t_end), 1.0);
     m = cell_majorant(w);
     return true;
 }
