@@ -5,8 +5,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from .frontend import (ArgumentParser, OptionError, add_volume_options, fraction, grid_arg,
-                       positive_float, positive_int, render_to_files)
+from .frontend import (ArgumentParser, OptionError, add_colorbar_options, add_scene_edit_options,
+                       add_volume_options, fraction, grid_arg, positive_float, positive_int,
+                       render_to_files)
 from .scene import SceneError
 
 
@@ -57,6 +58,11 @@ def cmd_series(args: argparse.Namespace) -> int:
     print("* opens by default (the largest that makes a volume); open another with --series N or "
           "--series UID" if default is not None else "none of them makes one volume")
     return 0
+
+
+def cmd_animate(args: argparse.Namespace) -> int:
+    from .animate import run_animate
+    return run_animate(args)
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -197,6 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="track with one global majorant instead of the macrocell grid (the same "
                         "image; for comparisons)")
     add_volume_options(r)
+    add_scene_edit_options(r)
+    add_colorbar_options(r)
     add_gl_backend(r)
     r.set_defaults(func=cmd_render)
 
@@ -214,6 +222,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rewrite docs/scene.schema.json and docs/scene-format.md's key table in "
                         "this checkout")
     j.set_defaults(func=cmd_schema)
+
+    from .animate import add_animate_parser
+    add_animate_parser(sub, cmd_animate)
 
     from .bench.config import PRESETS
     from .bench.scenes import ALL_SCENES, BATTERY_SCENES

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from dataclasses import replace
 import os
 import sys
 import tempfile
@@ -157,8 +158,78 @@ def scene_from_arg(arg: str | None) -> Scene:
     return parse_scene({"volume": {"path": str(p)}})
 
 
+def add_scene_edit_options(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The options `render`, `view` and `animate` share that edit the scene: the crop box, the
+    clip plane and a transfer function kept in a file (docs/crop-and-movies.md)."""
+    parser.add_argument("--crop", nargs=6, type=float, metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
+                        help="keep only the box between these world corners (the volume's longest "
+                             "side is 1, centred at the origin)")
+    parser.add_argument("--crop-voxels", nargs=6, type=int,
+                        metavar=("I0", "J0", "K0", "I1", "J1", "K1"),
+                        help="keep only voxels I0 <= i < I1, J0 <= j < J1, K0 <= k < K1 (x, y, z): "
+                             "renders as the cropped volume data[K0:K1, J0:J1, I0:I1]")
+    parser.add_argument("--clip-plane", nargs=4, type=float, metavar=("NX", "NY", "NZ", "D"),
+                        help="keep only the points x with dot(n, x) <= D (world units)")
+    parser.add_argument("--no-crop", action="store_true", help="switch off the scene's crop box")
+    parser.add_argument("--no-clip-plane", action="store_true",
+                        help="switch off the scene's clip plane")
+    parser.add_argument("--transfer-function", metavar="JSON",
+                        help="a transfer function saved on its own (the scene's transfer_function "
+                             "key as a file) instead of the scene's")
+    return parser
+
+
+def add_colorbar_options(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """`render` and `animate`: a colour bar drawn into the PNG (or every frame)."""
+    from .colorbar import POSITIONS
+    parser.add_argument("--colorbar", nargs="?", const="right", choices=POSITIONS,
+                        help="draw the transfer function's colour bar, labelled in data units, "
+                             "at the right (default) or bottom edge of the image")
+    parser.add_argument("--colorbar-title", default="value", metavar="TEXT",
+                        help="the colour bar's title: the data's unit (default 'value')")
+    return parser
+
+
+def check_clip(scene: Scene, volume, args: argparse.Namespace | None = None) -> None:
+    """The crop box and clip plane against the volume, before any GPU work: a voxel crop beyond
+    it names the field (and the option that gave it), and one that keeps nothing is refused (an
+    empty image is never meant)."""
+    from .clip_region import clip_region
+    option = None
+    if args is not None:
+        option = ("--crop-voxels" if getattr(args, "crop_voxels", None) is not None else
+                  "--crop" if getattr(args, "crop", None) is not None else None)
+    try:
+        region = clip_region(scene, volume.dims, volume.half_extent)
+    except SceneError as exc:
+        raise (OptionError(f"{option}: {exc}") if option else exc) from None
+    if region is not None and region.empty:
+        raise (OptionError if option else SceneError)(
+            (f"{option}: " if option else "") + f"crop: keeps no voxel of the volume (min {list(scene.crop.min)}, max "
+                         f"{list(scene.crop.max)} in {scene.crop.units} units; the volume box is "
+                         f"{' x '.join(f'{2 * h:.4g}' for h in volume.half_extent)} world units "
+                         f"centred at the origin, {' x '.join(map(str, volume.dims))} voxels)")
+
+
+def _scene_edits(args: argparse.Namespace) -> dict:
+    """Scene keys the crop, clip and transfer-function options set (JSON form)."""
+    edits: dict = {}
+    crop, voxels = getattr(args, "crop", None), getattr(args, "crop_voxels", None)
+    if crop is not None and voxels is not None:
+        raise OptionError("--crop and --crop-voxels: give one of them")
+    if crop is not None:
+        edits["crop"] = {"min": list(crop[:3]), "max": list(crop[3:]), "units": "world"}
+    if voxels is not None:
+        edits["crop"] = {"min": list(voxels[:3]), "max": list(voxels[3:]), "units": "voxels"}
+    plane = getattr(args, "clip_plane", None)
+    if plane is not None:
+        edits["clip_plane"] = {"normal": list(plane[:3]), "distance": plane[3]}
+    return edits
+
+
 # Scene fields the options set, for messages that name the option as well as the field.
-_OPTION_FIELDS = {"camera.width": "--width", "camera.height": "--height",
+_OPTION_FIELDS = {"crop.": "--crop", "clip_plane.": "--clip-plane",
+                  "camera.width": "--width", "camera.height": "--height",
                   "probes.grid": "--probe-grid", "probes.samples": "--probe-samples",
                   "probes.sh_window": "--sh-window", "probes.precision": "--probe-precision",
                   "probes.layout": "--probe-layout", "probes.adaptive_strength": "--adaptive-strength",
@@ -185,7 +256,18 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
                                             ("orientation", getattr(args, "orientation", None)),
                                             ("window", getattr(args, "data_window", None)))
               if value is not None}
-    if not probes and not camera and not volume:
+    edits = _scene_edits(args)
+    if getattr(args, "transfer_function", None):
+        from .scene import load_transfer_function
+        try:
+            scene = scene.replace(transfer_function=load_transfer_function(args.transfer_function))
+        except SceneError as exc:
+            raise OptionError(f"--transfer-function: {exc}") from None
+    if getattr(args, "no_crop", False) and scene.crop is not None:
+        scene = scene.replace(crop=replace(scene.crop, enabled=False))
+    if getattr(args, "no_clip_plane", False) and scene.clip_plane is not None:
+        scene = scene.replace(clip_plane=replace(scene.clip_plane, enabled=False))
+    if not probes and not camera and not volume and not edits:
         return scene
     data = scene_to_dict(scene)
     data["probes"].update(probes)
@@ -193,12 +275,15 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
     if "window" in volume:
         data["volume"].pop("value_range", None)   # the window given replaces the scene's range
     data["volume"].update(volume)
+    data.update(edits)
     try:
         return parse_scene(data, base_dir=scene.base_dir)
     except SceneError as exc:
         text = str(exc)
         for name, option in _OPTION_FIELDS.items():
             if text.startswith(name):
+                if name == "crop." and data.get("crop", {}).get("units") == "voxels":
+                    option = "--crop-voxels"
                 raise OptionError(f"{option}: {text}") from None
         raise
 
@@ -281,7 +366,9 @@ def render_defaults() -> dict:
                 exr=None, probe_grid=None, probe_samples=None, sh_window=None, probe_precision=None,
                 auto_probes=None, raymarch_stage="compute", raymarch_step=None, seed=0, width=None,
                 height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True,
-                gather_event=None, series=None, orientation=None, data_window=None)
+                gather_event=None, series=None, orientation=None, data_window=None, crop=None,
+                crop_voxels=None, clip_plane=None, no_crop=False, no_clip_plane=False,
+                transfer_function=None, colorbar=None, colorbar_title="value")
 
 
 def render_to_files(args: argparse.Namespace) -> int:
@@ -313,6 +400,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     for note in volume.notes:
         print(f"note: {note}", file=sys.stderr)
     load_scene_environment(scene)          # so does an environment map (kept in its cache)
+    check_clip(scene, volume, args)        # and a crop that does not fit the volume
     if args.method == "raymarch" and args.raymarch_step is not None:
         try:
             check_step(args.raymarch_step, volume)   # a step asked for is taken, or refused
@@ -343,7 +431,15 @@ def render_to_files(args: argparse.Namespace) -> int:
                              progress=progress_printer(f"{args.method} samples"),
                              bake_progress=on_bake_pass)
     errors = []
-    out, err = save_or_rescue(save_png, args.out, "--out", result.image, args.exposure)
+    if getattr(args, "colorbar", None):
+        from .colorbar import scene_colorbar
+        from .imageio import save_png8
+        from .render.tonemap import to_uint8
+        pixels = scene_colorbar(to_uint8(result.image, args.exposure), scene,
+                                renderer.resources.volume, args.colorbar, args.colorbar_title)
+        out, err = save_or_rescue(save_png8, args.out, "--out", pixels)
+    else:
+        out, err = save_or_rescue(save_png, args.out, "--out", result.image, args.exposure)
     errors.append(err)
     print(f"device: {describe(ctx)}")
     cam = scene.camera

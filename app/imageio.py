@@ -16,6 +16,15 @@ def save_png(path: str | Path, image: np.ndarray, exposure: float = 1.0) -> Path
     return p
 
 
+def save_png8(path: str | Path, pixels: np.ndarray) -> Path:
+    """An 8-bit RGB image (H, W, 3) as it is (already tone mapped)."""
+    from PIL import Image
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(np.ascontiguousarray(pixels, np.uint8), "RGB").save(p)
+    return p
+
+
 def save_npy(path: str | Path, image: np.ndarray) -> Path:
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)

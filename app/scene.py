@@ -12,11 +12,14 @@ import math
 from pathlib import Path
 from typing import Any, Mapping
 
-from .scene_types import (MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS, MAX_PROBE_SAMPLES,
-                          MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS,
-                          PROBE_LAYOUTS, PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS, WINDOW_PRESETS,
-                          CameraSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene, SceneError,
-                          TransferFunctionSpec, VolumeSpec, scene_to_dict, window_range)
+from .scene_types import (CROP_UNITS, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
+                          MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
+                          PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
+                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
+                          VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
+                          ClipPlaneSpec, CropSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene,
+                          SceneError, TransferFunctionSpec, ViewerSpec, VolumeSpec, scene_to_dict,
+                          transfer_to_dict, window_range)
 from .transfer import COLORMAPS
 from .volume import BUILTIN_VOLUMES, RAW_DTYPES
 
@@ -24,7 +27,9 @@ __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_S
            "MAX_TRANSFER_ROWS", "ORIENTATIONS", "PROBE_FITS", "PROBE_INDICATORS", "PROBE_INTERPOLATIONS",
            "PROBE_LAYOUTS", "PROBE_PRECISIONS",
            "SH_WINDOWS", "WINDOW_PRESETS",
-           "CameraSpec", "EnvironmentMapSpec",
+           "BookmarkSpec", "CameraSpec", "ClipPlaneSpec", "CropSpec", "EnvironmentMapSpec",
+           "ViewerSpec", "load_transfer_function", "parse_transfer_function",
+           "save_transfer_function", "transfer_to_dict",
            "LightSpec", "ProbeSpec", "Scene", "SceneError", "TransferFunctionSpec", "VolumeSpec",
            "default_scene", "load_scene", "parse_scene", "scene_to_dict"]
 
@@ -156,34 +161,176 @@ def _parse_window(w: Any) -> tuple[float, float]:
     return (level, width)
 
 
-def _parse_transfer(d: Any) -> TransferFunctionSpec:
-    d = _object(d, "transfer_function", _fields(TransferFunctionSpec))
+def _parse_transfer(d: Any, name: str = "transfer_function") -> TransferFunctionSpec:
+    d = _object(d, name, _fields(TransferFunctionSpec))
     kw: dict[str, Any] = {}
-    if "rgba" in d and ("colormap" in d or "opacity" in d):
-        raise SceneError("transfer_function: give either rgba rows or colormap/opacity, not both")
-    if "colormap" in d:
-        kw["colormap"] = _choice(d["colormap"], "transfer_function.colormap", tuple(COLORMAPS))
-    if "opacity" in d:
-        pts = d["opacity"]
-        if not isinstance(pts, (list, tuple)) or len(pts) < 1:
-            raise SceneError("transfer_function.opacity: expected a list of [density, opacity] points")
-        parsed = tuple(_vector(p, f"transfer_function.opacity[{i}]", 2, lo=0.0, hi=1.0)
+    if "rgba" in d and ("colormap" in d or "opacity" in d or "colors" in d):
+        raise SceneError(f"{name}: give either rgba rows or colormap/colors and opacity, not both")
+    if "colormap" in d and "colors" in d:
+        raise SceneError(f"{name}: give either a colormap or colour points (colors), not both")
+    if "colors" in d:
+        pts = d["colors"]
+        if not isinstance(pts, (list, tuple)) or not 1 <= len(pts) <= MAX_TRANSFER_ROWS:
+            raise SceneError(f"{name}.colors: expected a list of 1 to {MAX_TRANSFER_ROWS} "
+                             "[density, r, g, b] points")
+        parsed = tuple(_vector(p, f"{name}.colors[{i}]", 4, lo=0.0, hi=1.0)
                        for i, p in enumerate(pts))
         xs = [p[0] for p in parsed]
         if any(b < a for a, b in zip(xs, xs[1:])):
-            raise SceneError("transfer_function.opacity: densities must not decrease")
+            raise SceneError(f"{name}.colors: densities must not decrease")
+        kw["colors"] = parsed
+    if "colormap" in d:
+        kw["colormap"] = _choice(d["colormap"], f"{name}.colormap", tuple(COLORMAPS))
+    if "opacity" in d:
+        pts = d["opacity"]
+        if not isinstance(pts, (list, tuple)) or len(pts) < 1:
+            raise SceneError(f"{name}.opacity: expected a list of [density, opacity] points")
+        parsed = tuple(_vector(p, f"{name}.opacity[{i}]", 2, lo=0.0, hi=1.0)
+                       for i, p in enumerate(pts))
+        xs = [p[0] for p in parsed]
+        if any(b < a for a, b in zip(xs, xs[1:])):
+            raise SceneError(f"{name}.opacity: densities must not decrease")
         kw["opacity"] = parsed
     if "rgba" in d:
         rows = d["rgba"]
         if not isinstance(rows, (list, tuple)) or not 2 <= len(rows) <= MAX_TRANSFER_ROWS:
-            raise SceneError(f"transfer_function.rgba: expected 2 to {MAX_TRANSFER_ROWS} rows of "
+            raise SceneError(f"{name}.rgba: expected 2 to {MAX_TRANSFER_ROWS} rows of "
                              "[r, g, b, a]")
-        kw["rgba"] = tuple(_vector(r, f"transfer_function.rgba[{i}]", 4, lo=0.0, hi=1.0)
+        kw["rgba"] = tuple(_vector(r, f"{name}.rgba[{i}]", 4, lo=0.0, hi=1.0)
                            for i, r in enumerate(rows))
     if "resolution" in d:
-        kw["resolution"] = _integer(d["resolution"], "transfer_function.resolution", 2,
+        kw["resolution"] = _integer(d["resolution"], f"{name}.resolution", 2,
                                     MAX_TRANSFER_ROWS)
     return TransferFunctionSpec(**kw)
+
+
+def _boolean(value: Any, name: str) -> bool:
+    if not isinstance(value, bool):
+        raise SceneError(f"{name}: expected true or false, got {value!r}")
+    return value
+
+
+def _parse_crop(d: Any) -> CropSpec:
+    """{"min": [x, y, z], "max": [x, y, z], "units": "world" | "voxels", "enabled": true}."""
+    d = _object(d, "crop", _fields(CropSpec))
+    for key in ("min", "max"):
+        if key not in d:
+            raise SceneError(f"crop.{key}: missing (a crop box needs both min and max corners)")
+    units = _choice(d.get("units", "world"), "crop.units", CROP_UNITS)
+    if units == "voxels":
+        lo = tuple(_integer(v, f"crop.min[{i}]", 0, 1 << 20)
+                   for i, v in enumerate(_vector(d["min"], "crop.min", 3)))
+        hi = tuple(_integer(v, f"crop.max[{i}]", 0, 1 << 20)
+                   for i, v in enumerate(_vector(d["max"], "crop.max", 3)))
+    else:
+        lo, hi = _vector(d["min"], "crop.min", 3), _vector(d["max"], "crop.max", 3)
+    for i, axis in enumerate("xyz"):
+        if not hi[i] > lo[i]:
+            raise SceneError(f"crop.max[{i}]: must be > crop.min[{i}] (the box's {axis} extent), "
+                             f"got min {lo[i]:g}, max {hi[i]:g}")
+    enabled = _boolean(d.get("enabled", True), "crop.enabled")
+    return CropSpec(min=lo, max=hi, units=units, enabled=enabled)
+
+
+def _parse_clip_plane(d: Any) -> ClipPlaneSpec:
+    """{"normal": [nx, ny, nz], "distance": d, "enabled": true}: keeps dot(normal, x) <= d."""
+    d = _object(d, "clip_plane", _fields(ClipPlaneSpec))
+    if "normal" not in d:
+        raise SceneError("clip_plane.normal: missing (the plane keeps the points x with "
+                         "dot(normal, x) <= distance)")
+    normal = _vector(d["normal"], "clip_plane.normal", 3)
+    if math.sqrt(sum(c * c for c in normal)) < 1e-9:
+        raise SceneError("clip_plane.normal: must not be the zero vector")
+    distance = _number(d.get("distance", 0.0), "clip_plane.distance")
+    enabled = _boolean(d.get("enabled", True), "clip_plane.enabled")
+    return ClipPlaneSpec(normal=normal, distance=distance, enabled=enabled)
+
+
+def _check_view(eye, target, up, name: str) -> None:
+    """A view direction (target - eye) that exists and an up vector not parallel to it."""
+    forward = [t - e for t, e in zip(target, eye)]
+    if math.sqrt(sum(c * c for c in forward)) < 1e-9:
+        raise SceneError(f"{name}.target: must differ from {name}.eye")
+    cross = (forward[1] * up[2] - forward[2] * up[1], forward[2] * up[0] - forward[0] * up[2],
+             forward[0] * up[1] - forward[1] * up[0])
+    # |forward x up| = |forward| |up| sin(angle): reject sin(angle) < 1e-6 whatever the lengths.
+    norm_f = math.sqrt(sum(c * c for c in forward))
+    norm_u = math.sqrt(sum(c * c for c in up))
+    if norm_u < 1e-12 or math.sqrt(sum(c * c for c in cross)) < 1e-6 * norm_f * norm_u:
+        raise SceneError(f"{name}.up: must not be zero or parallel to the view direction")
+
+
+def _parse_bookmarks(d: Any) -> tuple[BookmarkSpec, ...]:
+    """[{"name": "front", "eye": [...], "target": [...], "up": [...], "fov_y": 35}, ...]."""
+    if not isinstance(d, (list, tuple)):
+        raise SceneError(f"bookmarks: expected a list of cameras with names, got {d!r}")
+    out, seen = [], set()
+    for i, b in enumerate(d):
+        name = f"bookmarks[{i}]"
+        b = _object(b, name, _fields(BookmarkSpec))
+        label = b.get("name")
+        if not isinstance(label, str) or not label.strip():
+            raise SceneError(f"{name}.name: expected a non-empty name, got {label!r}")
+        if label in seen:
+            raise SceneError(f"{name}.name: {label!r} is used twice (names are unique)")
+        seen.add(label)
+        if "eye" not in b:
+            raise SceneError(f"{name}.eye: missing")
+        kw: dict[str, Any] = {"name": label}
+        for key in ("eye", "target", "up"):
+            if key in b:
+                kw[key] = _vector(b[key], f"{name}.{key}", 3)
+        if "fov_y" in b:
+            kw["fov_y"] = _number(b["fov_y"], f"{name}.fov_y", 0.0, 179.0, lo_open=True)
+        spec = BookmarkSpec(**kw)
+        _check_view(spec.eye, spec.target, spec.up, name)
+        out.append(spec)
+    return tuple(out)
+
+
+def _parse_viewer(d: Any) -> ViewerSpec:
+    d = _object(d, "viewer", _fields(ViewerSpec))
+    kw: dict[str, Any] = {}
+    for key, choices in (("method", VIEWER_METHODS), ("split_method", VIEWER_METHODS),
+                         ("display", VIEWER_DISPLAYS), ("probe_view", VIEWER_PROBE_VIEWS)):
+        if key in d:
+            kw[key] = _choice(d[key], f"viewer.{key}", choices)
+    if "exposure" in d:
+        kw["exposure"] = _number(d["exposure"], "viewer.exposure", 0.0, 1e6, lo_open=True)
+    if "show_box" in d:
+        kw["show_box"] = _boolean(d["show_box"], "viewer.show_box")
+    return ViewerSpec(**kw)
+
+
+def parse_transfer_function(data: Any, name: str = "transfer_function") -> TransferFunctionSpec:
+    """A transfer function from JSON data (the scene's transfer_function key, or a file's)."""
+    return _parse_transfer(data, name)
+
+
+def load_transfer_function(path: str | Path) -> TransferFunctionSpec:
+    """A transfer function kept on its own: a JSON file holding what a scene's transfer_function
+    key holds. Errors name the file and the field."""
+    p = Path(path).expanduser()
+    if not p.is_file():
+        raise SceneError(f"transfer function file not found: {p}")
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+        raise SceneError(f"{p}: not a valid JSON transfer function ({exc})") from None
+    except OSError as exc:
+        raise SceneError(f"{p}: cannot read the transfer function ({exc})") from None
+    try:
+        return _parse_transfer(data, "transfer_function")
+    except SceneError as exc:
+        raise SceneError(f"{p}: {exc}") from None
+
+
+def save_transfer_function(path: str | Path, spec: TransferFunctionSpec) -> Path:
+    """Writes the transfer function as JSON (load_transfer_function reads it back equal)."""
+    p = Path(path).expanduser()
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(transfer_to_dict(spec), indent=2) + "\n", encoding="utf-8")
+    return p
 
 
 def _parse_light(d: Any) -> LightSpec:
@@ -230,17 +377,7 @@ def _parse_camera(d: Any) -> CameraSpec:
         if key in d:
             kw[key] = _integer(d[key], f"camera.{key}", 1, MAX_IMAGE_SIDE)
     cam = CameraSpec(**kw)
-    forward = [t - e for t, e in zip(cam.target, cam.eye)]
-    if math.sqrt(sum(c * c for c in forward)) < 1e-9:
-        raise SceneError("camera.target: must differ from camera.eye")
-    up = cam.up
-    cross = (forward[1] * up[2] - forward[2] * up[1], forward[2] * up[0] - forward[0] * up[2],
-             forward[0] * up[1] - forward[1] * up[0])
-    # |forward x up| = |forward| |up| sin(angle): reject sin(angle) < 1e-6 whatever the lengths.
-    norm_f = math.sqrt(sum(c * c for c in forward))
-    norm_u = math.sqrt(sum(c * c for c in up))
-    if norm_u < 1e-12 or math.sqrt(sum(c * c for c in cross)) < 1e-6 * norm_f * norm_u:
-        raise SceneError("camera.up: must not be zero or parallel to the view direction")
+    _check_view(cam.eye, cam.target, cam.up, "camera")
     return cam
 
 
@@ -309,7 +446,17 @@ def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
     if "volume" in d:
         kw["volume"] = _parse_volume(d["volume"])
     if "transfer_function" in d:
-        kw["transfer_function"] = _parse_transfer(d["transfer_function"])
+        tf = d["transfer_function"]
+        if isinstance(tf, str):   # a transfer-function file, relative to the scene's folder
+            p = Path(tf).expanduser()
+            if not p.is_absolute() and base_dir is not None:
+                p = Path(base_dir) / p
+            try:
+                kw["transfer_function"] = load_transfer_function(p)
+            except SceneError as exc:
+                raise SceneError(f"transfer_function: {exc}") from None
+        else:
+            kw["transfer_function"] = _parse_transfer(tf)
     if "density_scale" in d:
         kw["density_scale"] = _number(d["density_scale"], "density_scale", 0.0, 1e7)
     if "albedo" in d:
@@ -324,6 +471,14 @@ def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
     kw["camera"] = _parse_camera(d.get("camera", {}))
     if "probes" in d:
         kw["probes"] = _parse_probes(d["probes"])
+    if d.get("crop") is not None:
+        kw["crop"] = _parse_crop(d["crop"])
+    if d.get("clip_plane") is not None:
+        kw["clip_plane"] = _parse_clip_plane(d["clip_plane"])
+    if d.get("bookmarks") is not None:
+        kw["bookmarks"] = _parse_bookmarks(d["bookmarks"])
+    if d.get("viewer") is not None:
+        kw["viewer"] = _parse_viewer(d["viewer"])
     if base_dir is not None:
         kw["base_dir"] = str(base_dir)
     return Scene(**kw)

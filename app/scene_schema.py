@@ -19,18 +19,29 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
-from .scene_types import (MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS, MAX_PROBE_SAMPLES,
-                          MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS, PROBE_INDICATORS,
-                          PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS, SH_ORDERS,
-                          SH_WINDOWS, WINDOW_PRESETS, CameraSpec, LightSpec, ProbeSpec, Scene,
-                          TransferFunctionSpec, VolumeSpec)
+from .scene_types import (CROP_UNITS, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
+                          MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
+                          PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
+                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
+                          VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
+                          ClipPlaneSpec, CropSpec, LightSpec, ProbeSpec, Scene,
+                          TransferFunctionSpec, ViewerSpec, VolumeSpec)
 
 SCHEMA_ID = "https://radiance-probes.invalid/scene.schema.json"
 # Scene fields that are not JSON keys: where relative paths are looked up, and the environment map
 # (written as "environment": {"map": ...}).
 NOT_KEYS = {"base_dir", "environment_map"}
 NESTED = {"volume": VolumeSpec, "transfer_function": TransferFunctionSpec, "light": LightSpec,
-          "camera": CameraSpec, "probes": ProbeSpec}
+          "camera": CameraSpec, "probes": ProbeSpec, "crop": CropSpec,
+          "clip_plane": ClipPlaneSpec, "viewer": ViewerSpec}
+# Scene fields that are lists of objects (each item's keys are named "bookmarks[].name", ...).
+LISTS = {"bookmarks": BookmarkSpec}
+# What a nested object's key takes besides the object: a transfer-function file's name in place of
+# the transfer function; null for the optional ones (as if absent).
+ALSO = {"transfer_function": ("string",), "crop": ("null",), "clip_plane": ("null",),
+        "viewer": ("null",), "bookmarks": ("null",)}
+# Keys an object must hold (the loader names the one missing), and a voxel crop's integer corners.
+REQUIRED = {"crop": ["min", "max"], "clip_plane": ["normal"], "bookmarks[]": ["name", "eye"]}
 
 
 @dataclass(frozen=True)
@@ -56,6 +67,13 @@ def vector(n: int, item: dict | None = None) -> dict:
 
 def choice(values) -> dict:
     return {"type": "string", "enum": list(values)}
+
+
+BOOLEAN = {"type": "boolean"}
+# crop with "units": "voxels": its corners are voxel boundaries, integers from 0.
+VOXEL_CROP = {"if": {"required": ["units"], "properties": {"units": {"const": "voxels"}}},
+              "then": {"properties": {"min": vector(3, number(0, 1 << 20, integer=True)),
+                                      "max": vector(3, number(0, 1 << 20, integer=True))}}}
 
 
 def _colormaps() -> tuple[str, ...]:
@@ -128,16 +146,24 @@ def keys() -> dict[str, Key]:
         "series": Key("volume.series, given at the scene's top level.",
                       {"oneOf": [number(1, integer=True), {"type": "string", "minLength": 1}]},
                       default="the largest series", values="a number from 1 or a SeriesInstanceUID"),
-        "transfer_function": Key("Density to colour and opacity.", {}),
-        "transfer_function.colormap": Key("The colour along density 0 to 1.",
-                                          choice(_colormaps())),
+        "transfer_function": Key(
+            "Density to colour and opacity; or the name of a transfer-function file that holds "
+            "this object (relative to the scene file's folder; radiance-probes render "
+            "--transfer-function FILE and the viewer's Save TF).", {}),
+        "transfer_function.colormap": Key("The colour along density 0 to 1. Excludes "
+                                          "transfer_function.colors.", choice(_colormaps())),
+        "transfer_function.colors": Key(
+            "Colour control points [density, r, g, b], densities not decreasing; linear between "
+            "them, constant beyond. Replace the colormap (excludes transfer_function.colormap).",
+            {"type": "array", "minItems": 1, "maxItems": MAX_TRANSFER_ROWS,
+             "items": vector(4, unit)}, default="none (the colormap)"),
         "transfer_function.opacity": Key(
             "Opacity control points [density, opacity], densities not decreasing; linear between "
             "them, constant beyond.",
             {"type": "array", "minItems": 1, "items": vector(2, unit)}),
         "transfer_function.rgba": Key(
             f"Explicit rows [r, g, b, a] at densities evenly spaced from 0 to 1 (2 to "
-            f"{MAX_TRANSFER_ROWS} rows). Excludes colormap and opacity.",
+            f"{MAX_TRANSFER_ROWS} rows). Excludes colormap, colors and opacity.",
             {"type": "array", "minItems": 2, "maxItems": MAX_TRANSFER_ROWS,
              "items": vector(4, unit)}, default="none (colormap and opacity)"),
         "transfer_function.resolution": Key("Rows of the table the colormap and opacity make.",
@@ -202,6 +228,55 @@ def keys() -> dict[str, Key]:
         "probes.interpolation": Key("How a point blends its 8 probes: trilinear, or weighted by "
                                     "visibility (against leaks through dense matter).",
                                     choice(PROBE_INTERPOLATIONS)),
+        "crop": Key("A crop box: only the part of the volume between its corners is kept, for "
+                    "every ray and every method (docs/crop-and-movies.md). Absent or null: none.",
+                    {}),
+        "crop.min": Key("The box's low corner along x, y, z: world coordinates, or with units "
+                        "voxels the first voxel kept along each axis (integers from 0).",
+                        vector(3), default="required"),
+        "crop.max": Key("The box's high corner, above min on every axis: world coordinates, or "
+                        "with units voxels one past the last voxel kept (at most the volume's "
+                        "voxels along that axis).", vector(3), default="required"),
+        "crop.units": Key("world: the corners in world units (the volume box centred at the "
+                          "origin, its longest side 1); voxels: voxel boundaries along the "
+                          "volume's x, y, z (as placed, after orientation), keeping min <= i < "
+                          "max, which renders as data[z0:z1, y0:y1, x0:x1].",
+                          choice(CROP_UNITS)),
+        "crop.enabled": Key("false: the box stays in the file but cuts nothing.", BOOLEAN),
+        "clip_plane": Key("A clip plane: keeps the points x with dot(normal, x) <= distance "
+                          "(world units), with the crop box their intersection. Absent or null: "
+                          "none.", {}),
+        "clip_plane.normal": Key("The normal, pointing to the side cut away (not zero; a normal "
+                                 "not of unit length scales the distance with it).", vector(3),
+                                 default="required"),
+        "clip_plane.distance": Key("The plane's offset along the normal, world units.",
+                                   {"type": "number"}),
+        "clip_plane.enabled": Key("false: the plane stays in the file but cuts nothing.",
+                                  BOOLEAN),
+        "bookmarks": Key("Cameras saved under names: the viewer recalls them (ctrl+1..9 save, "
+                         "shift+1..9 recall) and radiance-probes animate --keyframes flies through "
+                         "them. The image size stays the camera's.", {}),
+        "bookmarks[].name": Key("The bookmark's name, unique in the scene.",
+                                {"type": "string", "minLength": 1}, default="required",
+                                values="text"),
+        "bookmarks[].eye": Key("Where the camera is (world units).", vector(3),
+                               default="required"),
+        "bookmarks[].target": Key("The point it looks at (not the eye).", vector(3)),
+        "bookmarks[].up": Key("Up on the image (not along the view).", vector(3)),
+        "bookmarks[].fov_y": Key("Vertical field of view, degrees.",
+                                 number(0.0, 179.0, lo_open=True)),
+        "viewer": Key("How the viewer showed the scene when it was saved (Ctrl+S); it opens the "
+                      "same way. Other commands ignore it. Absent or null: the viewer's "
+                      "defaults.", {}),
+        "viewer.method": Key("The method shown.", choice(VIEWER_METHODS)),
+        "viewer.display": Key("image, split (against split_method) or error (a heat map "
+                              "against the path tracer).", choice(VIEWER_DISPLAYS)),
+        "viewer.split_method": Key("The method on the split view's other side.",
+                                   choice(VIEWER_METHODS)),
+        "viewer.exposure": Key("The display's exposure.", number(0.0, 1e6, lo_open=True)),
+        "viewer.probe_view": Key("The probe spheres: off, over the volume, or alone.",
+                                 choice(VIEWER_PROBE_VIEWS)),
+        "viewer.show_box": Key("The volume's box drawn.", BOOLEAN),
     }
 
 
@@ -234,6 +309,14 @@ def scene_schema() -> dict:
             out["default"] = default
         return out
 
+    def also(name: str, sub: dict) -> dict:
+        """The key's schema taking what ALSO says besides its own type."""
+        if name in ALSO:
+            sub["type"] = [sub["type"], *ALSO[name]]
+            if "string" in ALSO[name]:
+                sub["minLength"] = 1
+        return sub
+
     def obj(prefix: str, cls) -> dict:
         props = {}
         for f in dataclasses.fields(cls):
@@ -241,10 +324,20 @@ def scene_schema() -> dict:
                 continue
             path = f"{prefix}{f.name}"
             if f.name in NESTED and cls is Scene:
-                props[f.name] = {**entry(path, None), **obj(f"{path}.", NESTED[f.name])}
+                props[f.name] = also(f.name, {**entry(path, None),
+                                              **obj(f"{path}.", NESTED[f.name])})
+            elif f.name in LISTS and cls is Scene:
+                props[f.name] = also(f.name, {**entry(path, None), "type": "array",
+                                              "items": obj(f"{path}[].", LISTS[f.name])})
             else:
                 props[f.name] = entry(path, f)
-        return {"type": "object", "additionalProperties": False, "properties": props}
+        out = {"type": "object", "additionalProperties": False, "properties": props}
+        name = prefix.rstrip(".")
+        if name in REQUIRED:
+            out["required"] = REQUIRED[name]
+        if cls is CropSpec:
+            out.update(VOXEL_CROP)
+        return out
 
     schema = {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": SCHEMA_ID,
               "title": "radiance-probes scene",
@@ -273,6 +366,8 @@ def _num(v) -> str:
 
 
 def _range(schema: dict) -> str:
+    if schema.get("type") == "boolean":
+        return "true, false"
     if schema.get("type") == "string" and "enum" not in schema:
         return "text"
     if "enum" in schema:
@@ -308,9 +403,16 @@ def key_table() -> str:
                 continue
             path = f"{prefix}{name}"
             key = table[path]
-            if "properties" in sub and sub.get("type") == "object" and not key.schema:
-                rows.append(f"| `{path}` | | object | {key.meaning} |")
+            if "properties" in sub and not key.schema:
+                kinds = {"string": "a file name", "null": "null"}
+                kind = " or ".join(["object", *(kinds[t] for t in ALSO.get(path, ()))])
+                rows.append(f"| `{path}` | | {kind} | {key.meaning} |")
                 walk(f"{path}.", sub["properties"])
+                continue
+            if "properties" in sub.get("items", {}) and not key.schema:
+                kind = " or ".join(["list of objects", *ALSO.get(path, ())])
+                rows.append(f"| `{path}` | [] | {kind} | {key.meaning} |")
+                walk(f"{path}[].", sub["items"]["properties"])
                 continue
             default = key.default if key.default is not None else (
                 json.dumps(sub["default"]) if "default" in sub else "none")

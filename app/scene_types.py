@@ -97,6 +97,9 @@ class TransferFunctionSpec:
     opacity: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.2, 0.0), (1.0, 1.0))
     rgba: tuple[tuple[float, float, float, float], ...] | None = None
     resolution: int = 256
+    # Colour control points (density, r, g, b), linearly interpolated and constant beyond the
+    # first and last: they replace the colormap's colours (JSON "colors"; excludes "colormap").
+    colors: tuple[tuple[float, float, float, float], ...] | None = None
 
 
 def _unit(v: tuple, name: str) -> tuple[float, float, float]:
@@ -162,6 +165,66 @@ class ProbeSpec:
     interpolation: str = "trilinear"
 
 
+# Crop boxes are given in world units or in voxel indices (docs/crop-and-movies.md).
+CROP_UNITS = ("world", "voxels")
+
+
+@dataclass(frozen=True)
+class CropSpec:
+    """A crop box (SPEC.md, Crop and clip): the part of the volume box between its six planes is
+    kept. units "world": `min` and `max` are world coordinates; "voxels": they are voxel
+    boundaries, keeping voxels min <= i < max along each axis (NumPy's data[z0:z1, y0:y1, x0:x1]).
+    Within the box the density is the cropped volume's (clamped to its outermost voxels, as a
+    volume is at its own faces), so a crop on voxel boundaries renders as the cropped volume does."""
+    min: tuple[float, float, float]
+    max: tuple[float, float, float]
+    units: str = "world"
+    enabled: bool = True
+
+
+@dataclass(frozen=True)
+class ClipPlaneSpec:
+    """A clip plane (SPEC.md): keeps the points x with dot(normal, x) <= distance (world units;
+    a normal that is not of unit length scales the distance with it, the same kept half-space)."""
+    normal: tuple[float, float, float]
+    distance: float = 0.0
+    enabled: bool = True
+
+
+@dataclass(frozen=True)
+class BookmarkSpec:
+    """A camera saved under a name (the viewer's keys recall it; `animate --keyframes` flies
+    through bookmarks). The image size stays the scene camera's."""
+    name: str
+    eye: tuple[float, float, float]
+    target: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    fov_y: float = 35.0
+
+    def camera(self, base: "CameraSpec") -> "CameraSpec":
+        """The bookmark as a camera of `base`'s image size."""
+        return dataclasses.replace(base, eye=self.eye, target=self.target, up=self.up,
+                                   fov_y=self.fov_y)
+
+
+# The viewer's render methods and display modes (app/render/renderer.py METHODS and
+# app/viewer/state.py DISPLAY_MODES name the same; a test keeps them equal).
+VIEWER_METHODS = ("pt", "probes", "probes-only", "raymarch")
+VIEWER_DISPLAYS = ("image", "split", "error")
+VIEWER_PROBE_VIEWS = ("off", "over", "alone")
+
+
+@dataclass(frozen=True)
+class ViewerSpec:
+    """How the viewer showed the scene when it was saved (JSON "viewer"): it opens the same way."""
+    method: str = "pt"
+    display: str = "image"
+    split_method: str = "probes"
+    exposure: float = 1.0
+    probe_view: str = "off"
+    show_box: bool = False
+
+
 @dataclass(frozen=True)
 class Scene:
     volume: VolumeSpec = field(default_factory=VolumeSpec)
@@ -176,6 +239,10 @@ class Scene:
     max_bounces: int = 64
     camera: CameraSpec = field(default_factory=CameraSpec)
     probes: ProbeSpec = field(default_factory=ProbeSpec)
+    crop: CropSpec | None = None
+    clip_plane: ClipPlaneSpec | None = None
+    bookmarks: tuple[BookmarkSpec, ...] = ()
+    viewer: ViewerSpec | None = None
     # Folder that relative volume paths are also looked up in (the scene file's folder).
     base_dir: str | None = field(default=None, compare=False)
 
@@ -198,6 +265,10 @@ def scene_to_dict(scene: Scene) -> dict:
         if f.name in ("base_dir", "environment_map"):
             continue
         v = getattr(scene, f.name)
+        if f.name in OPTIONAL_FIELDS:
+            if v:   # written only where the scene has them, so older scenes stay as they were
+                out[f.name] = ([_plain(b) for b in v] if f.name == "bookmarks" else _plain(v))
+            continue
         if f.name == "environment" and scene.environment_map is not None:
             m = scene.environment_map
             out[f.name] = {"map": m.path, "scale": m.scale, "rotation": m.rotation}
@@ -214,12 +285,32 @@ def scene_to_dict(scene: Scene) -> dict:
                     sub.pop("builtin", None)
                     sub.pop("size", None)
             if f.name == "transfer_function":
-                if v.rgba is not None:
-                    sub.pop("colormap")
-                    sub.pop("opacity")
-                else:
-                    sub.pop("rgba")
+                sub = transfer_to_dict(v)
             out[f.name] = sub
         else:
             out[f.name] = conv(v)
     return out
+
+
+# Scene fields written only where the scene has them (None or empty: left out).
+OPTIONAL_FIELDS = ("crop", "clip_plane", "bookmarks", "viewer")
+
+
+def _plain(spec) -> dict:
+    """A small spec dataclass as JSON data (tuples as lists)."""
+    def conv(x):
+        return [conv(v) for v in x] if isinstance(x, tuple) else x
+    return {k.name: conv(getattr(spec, k.name)) for k in dataclasses.fields(spec)}
+
+
+def transfer_to_dict(tf: TransferFunctionSpec) -> dict:
+    """The transfer function as the JSON the scene's transfer_function key (and a transfer-function
+    file) holds: rgba rows, or colour points or a colormap with the opacity curve."""
+    sub = _plain(tf)
+    if tf.rgba is not None:
+        for key in ("colormap", "opacity", "colors"):
+            sub.pop(key)
+    else:
+        sub.pop("rgba")
+        sub.pop("colormap" if tf.colors is not None else "colors")
+    return sub

@@ -41,13 +41,28 @@ def opacity_curve(points: tuple[tuple[float, float], ...], n: int) -> np.ndarray
     return np.interp(np.linspace(0.0, 1.0, n), xs, ys)
 
 
+def colour_points_rgb(points, n: int) -> np.ndarray:
+    """Colour control points (density, r, g, b) sampled at ``n`` evenly spaced densities, linear
+    between points and constant beyond the first and last, shape (n, 3)."""
+    pts = np.asarray(points, np.float64).reshape(-1, 4)
+    dst = np.linspace(0.0, 1.0, n)
+    return np.stack([np.interp(dst, pts[:, 0], pts[:, 1 + c]) for c in range(3)], axis=1)
+
+
+def transfer_rgb(spec: TransferFunctionSpec, n: int) -> np.ndarray:
+    """The colours of a colormap/colour-point transfer function at ``n`` densities, (n, 3)."""
+    if spec.colors is not None:
+        return colour_points_rgb(spec.colors, n)
+    return colormap_rgb(spec.colormap, n)
+
+
 def transfer_table(spec: TransferFunctionSpec) -> np.ndarray:
     """The RGBA table of a transfer function, float32 shape (N, 4)."""
     if spec.rgba is not None:
         table = np.asarray(spec.rgba, np.float64)
     else:
         n = spec.resolution
-        table = np.concatenate([colormap_rgb(spec.colormap, n),
+        table = np.concatenate([transfer_rgb(spec, n),
                                 opacity_curve(spec.opacity, n)[:, None]], axis=1)
     return np.clip(table, 0.0, 1.0).astype(np.float32)
 

@@ -39,6 +39,9 @@ layout(LIGHT_GRID_FORMAT, binding = 0) uniform writeonly image3D transmittance_i
 uniform ivec3 grid;
 uniform int first_layer;   // a slab of rays along axis c per dispatch (bake_layers)
 uniform float march_step;  // world units between quadrature points at most
+// The box the grid covers (the volume box, or a crop's kept box), centred at light_grid_centre:
+// rays are marched inside it alone (beyond it sigma_t is 0).
+uniform vec3 light_box_half_extent;
 #if LIGHT_GRID_SEGMENTS
 uniform int segments;      // runs of texels per column
 uniform int segment_pass;  // 0 sums each run, 1 stores the texels
@@ -50,7 +53,7 @@ const float TAU_OPAQUE = 104.0;   // exp(-tau) is 0 in float32 from here on
 // x[a] at the centre of texel k along the axis.
 float column_centre(int k, int a)
 {
-    return ((2.0 * (float(k) + 0.5)) / float(grid[a]) - 1.0) * box_half_extent[a];
+    return ((2.0 * (float(k) + 0.5)) / float(grid[a]) - 1.0) * light_box_half_extent[a];
 }
 
 void main()
@@ -72,12 +75,12 @@ void main()
     q[b] = ((2.0 * (float(ray.x) + 0.5)) / float(grid[b]) - 1.0) * light_grid_half_extent[b];
     q[c] = ((2.0 * (float(ray.y) + 0.5)) / float(grid[c]) - 1.0) * light_grid_half_extent[c];
     // Where the ray is inside the box, as an interval of s.
-    float h = box_half_extent[a];
+    float h = light_box_half_extent[a];
     float lo = -h, hi = h;
     for (int i = 1; i <= 2; ++i) {
         int j = (a + i) % 3;
         float k = light_grid_shear[j];
-        float e = box_half_extent[j];
+        float e = light_box_half_extent[j];
         if (k == 0.0) {
             if (abs(q[j]) > e) { lo = 1.0; hi = -1.0; }
         } else {
@@ -126,7 +129,7 @@ void main()
                 float s = s0 + (float(i) + 0.5) * ds;
                 vec3 x = q + light_grid_shear * s;
                 x[a] = s;
-                tau += sigma_t_at(x) * ds * length_per_s;
+                tau += sigma_t_at(light_grid_centre + x) * ds * length_per_s;
             }
         }
         if (store) {

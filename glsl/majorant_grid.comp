@@ -1,7 +1,11 @@
-// Majorant per macrocell for empty-space skipping (NumPy twin: app/majorant.py majorant_grid).
-// Rebuilt whenever the transfer function or density_scale changes: density_scale times the largest
-// opacity of the transfer function over the cell's density range. The opacity is piecewise linear
-// in the density, so its maximum over [lo, hi] is at lo, at hi, or at a table node between them.
+// Majorant per macrocell for empty-space skipping (NumPy twin: app/twins/majorant_grid.py
+// majorant_grid). Rebuilt whenever the transfer function, density_scale, the crop or the clip plane
+// changes: density_scale times the largest opacity of the transfer function over the cell's
+// density range. The opacity is piecewise linear in the density, so its maximum over [lo, hi] is
+// at lo, at hi, or at a table node between them.
+// With a crop or clip plane (lib/clip_region.glsl): a cell with no kept point gets 0 (skipped like
+// empty space); a kept cell's points read the density at kept_sample_point, up to a voxel inside
+// the crop, so its range is the union of the cells that the clamped points fall in.
 layout(local_size_x = 4, local_size_y = 4, local_size_z = 4) in;
 
 #include "lib/medium.glsl"
@@ -11,14 +15,51 @@ layout(local_size_x = 4, local_size_y = 4, local_size_z = 4) in;
 uniform sampler3D density_range;
 uniform ivec3 cells;
 uniform float majorant_safety;   // app/majorant.py MAJORANT_SAFETY
+// How far beyond its faces (in cells) a cell counts for the crop and clip plane: rounding may put a
+// collision a few ulps outside the cell the DDA walks (app/twins/majorant_grid.py CELL_SLACK).
+const float CELL_SLACK = 1.0 / 256.0;
 layout(r32f, binding = 0) uniform writeonly image3D majorant_out;
+
+// The density range of the points of cell c that are kept (x: least, y: largest; x > y when no
+// point of the cell is kept).
+vec2 kept_density_range(ivec3 c)
+{
+    if (clip_region_on == 0)
+        return texelFetch(density_range, c, 0).rg;
+    vec3 cell_size = 2.0 * box_half_extent / vec3(cells);
+    vec3 lo = -box_half_extent + vec3(c) * cell_size;
+    vec3 hi = lo + cell_size;
+    vec3 slack = cell_size * CELL_SLACK;
+    if (clip_region_cuts_box(lo - slack, hi + slack))
+        return vec2(1.0, 0.0);
+    // Where the kept points of the cell read the density: the cell clamped as the points are. Its
+    // own range covers points on its faces (and a little beyond: app/twins/majorant_grid.py
+    // SUPPORT_SLACK), so a clamped box ending on a face adds no neighbour.
+    vec3 s_lo = kept_sample_point(max(lo, kept_box_min));
+    vec3 s_hi = kept_sample_point(min(hi, kept_box_max));
+    ivec3 first = clamp(ivec3(floor((s_lo + box_half_extent) / cell_size)), ivec3(0), cells - 1);
+    ivec3 last = clamp(ivec3(ceil((s_hi + box_half_extent) / cell_size)) - 1, first, cells - 1);
+    vec2 range = vec2(1e30, -1e30);
+    for (int z = first.z; z <= last.z; ++z)
+        for (int y = first.y; y <= last.y; ++y)
+            for (int x = first.x; x <= last.x; ++x) {
+                vec2 r = texelFetch(density_range, ivec3(x, y, z), 0).rg;
+                range = vec2(min(range.x, r.x), max(range.y, r.y));
+            }
+    return range;
+}
 
 void main()
 {
     ivec3 c = ivec3(gl_GlobalInvocationID);
     if (any(greaterThanEqual(c, cells)))
         return;
-    vec2 range = texelFetch(density_range, c, 0).rg;
+    vec2 range = kept_density_range(c);
+    if (range.x > range.y) {   // no point of the cell is kept: skipped like empty space
+        CHECK_TEXEL(c, imageSize(majorant_out), CHECK_SITE_IMAGE_TEXEL);
+        imageStore(majorant_out, c, vec4(0.0));
+        return;
+    }
     float lo = clamp(range.x, 0.0, 1.0);
     float hi = clamp(range.y, 0.0, 1.0);
     float a = max(transfer_at(lo).a, transfer_at(hi).a);

@@ -9,6 +9,7 @@
 #include "lib/directions.glsl"
 #include "lib/probes.glsl"
 #include "lib/light_grid.glsl"
+#include "lib/segment_sun.glsl"
 #include "lib/cell_walk.glsl"
 uniform int max_bounces;
 uniform float anisotropy;

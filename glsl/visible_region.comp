@@ -4,6 +4,10 @@
 // cell is visible when the piecewise-linear opacity is > 0 anywhere in [lo, hi] of its 8 voxels.
 // Each workgroup reduces its first and last visible cell per axis in shared memory and adds them
 // to the global ones with one atomic each.
+// With a crop (lib/clip_region.glsl) the pass runs over the kept voxels alone, the first and last
+// of them repeated as the volume's edge voxels are (the density of a kept point never reads a
+// voxel cut away), and the outer cells reach the kept box's faces; with a clip plane, a cell
+// wholly on its far side is not visible. Without either, voxel_first is 0 and voxel_count dims.
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 4) in;
 
 uniform sampler3D volume_density;        // as lib/medium.glsl: normalised density, texelFetch here
@@ -11,6 +15,10 @@ uniform sampler2D transfer_function;     // N x 1 RGBA32F
 uniform int transfer_size;               // N
 uniform isampler2D positive_node_counts; // (N + 1) x 1: nodes before k with opacity > 0
 uniform ivec3 dims;                      // voxels per axis
+uniform ivec3 voxel_first;               // the kept voxels: first and count per axis
+uniform ivec3 voxel_count;
+uniform vec3 box_half_extent;            // the volume box, for the cells' world corners
+#include "lib/clip_region.glsl"
 
 layout(std430, binding = 0) buffer VisibleCells {
     uint first_cell[3];                  // x, y, z; start at 0xffffffff
@@ -50,6 +58,20 @@ bool opacity_positive_between(float lo, float hi)
     return inside_positive_segment(t_lo) || inside_positive_segment(t_hi);
 }
 
+// Whether the clip plane leaves nothing of the cell (between voxel centres voxel_first + cell - 1
+// and voxel_first + cell, the outer cells reaching the kept box's faces).
+bool cell_cut_away(ivec3 cell)
+{
+    if (clip_region_on == 0)
+        return false;
+    vec3 lo = ((2.0 * (vec3(voxel_first + cell) - 0.5)) / vec3(dims) - 1.0) * box_half_extent;
+    vec3 hi = ((2.0 * (vec3(voxel_first + cell) + 0.5)) / vec3(dims) - 1.0) * box_half_extent;
+    lo = mix(lo, kept_box_min, equal(cell, ivec3(0)));
+    hi = mix(hi, kept_box_max, equal(cell, voxel_count));
+    vec3 slack = box_half_extent / vec3(dims) * (1.0 / 64.0);
+    return clip_region_cuts_box(lo - slack, hi + slack);
+}
+
 void main()
 {
     if (gl_LocalInvocationIndex == 0u) {
@@ -60,8 +82,10 @@ void main()
     }
     barrier();
     ivec3 cell = ivec3(gl_GlobalInvocationID);
-    if (all(lessThanEqual(cell, dims))) {
-        ivec3 v0 = clamp(cell - 1, ivec3(0), dims - 1), v1 = min(cell, dims - 1);
+    if (all(lessThanEqual(cell, voxel_count)) && !cell_cut_away(cell)) {
+        ivec3 last_voxel = voxel_first + voxel_count - 1;
+        ivec3 v0 = clamp(voxel_first + cell - 1, voxel_first, last_voxel);
+        ivec3 v1 = min(voxel_first + cell, last_voxel);
         float lo = 1.0, hi = 0.0;
         for (int k = 0; k < 8; ++k) {
             ivec3 v = ivec3((k & 1) != 0 ? v1.x : v0.x, (k & 2) != 0 ? v1.y : v0.y,

@@ -30,9 +30,13 @@ from ._image import Image
 SHORTCUTS = {
     **{k: "volume" for k in ("spacing", "value_range", "window", "series", "orientation",
                              "builtin", "size", "dims", "dtype", "replace_nonfinite")},
-    **{k: "transfer_function" for k in ("colormap", "opacity", "rgba", "resolution")},
+    **{k: "transfer_function" for k in ("colormap", "colors", "opacity", "rgba", "resolution")},
     **{k: "camera" for k in ("width", "height", "fov_y", "eye", "target", "up")},
 }
+# A transfer function's colours come from one of these: giving one replaces the others the base
+# scene had (update(colormap="viridis") after colour points, update(rgba=...) after a colormap).
+COLOUR_SOURCES = {"colormap": ("colors", "rgba"), "colors": ("colormap", "rgba"),
+                  "rgba": ("colormap", "colors", "opacity"), "opacity": ("rgba",)}
 SCENE_KEYS = tuple(f.name for f in dataclasses.fields(Scene)
                    if f.name not in ("base_dir", "environment_map"))
 METHODS = ("raymarch", "probes", "probes-only", "pt")
@@ -52,10 +56,22 @@ def _merge(base: dict, options: dict) -> dict:
         if isinstance(value, tuple):
             value = list(value)
         if key in SHORTCUTS:
-            out.setdefault(SHORTCUTS[key], {})[key] = value
+            sub = out.setdefault(SHORTCUTS[key], {})
+            if not isinstance(sub, dict):   # a transfer-function file's name in a scene dict
+                raise SceneError(f"{key}: the scene's {SHORTCUTS[key]} is {sub!r}, not an object "
+                                 f"to change; give {SHORTCUTS[key]}= whole, or the scene as a "
+                                 "file or Scene (which read the file)")
+            if SHORTCUTS[key] == "transfer_function":
+                for other in COLOUR_SOURCES.get(key, ()):
+                    sub.pop(other, None)
+            sub[key] = value
         elif key in SCENE_KEYS:
             if isinstance(value, dict) and isinstance(out.get(key), dict) and key != "environment":
-                out[key] = {**out[key], **value}
+                kept = out[key]
+                if key == "transfer_function":
+                    kept = {k: v for k, v in kept.items()
+                            if not any(k in COLOUR_SOURCES.get(g, ()) for g in value)}
+                out[key] = {**kept, **value}
             else:
                 out[key] = value
         else:
@@ -167,7 +183,15 @@ def build_scene(data: Any = None, scene: Any = None, options: dict | None = None
         volume = auto_window(volume)
         parsed = parsed.replace(volume=dataclasses.replace(parsed.volume,
                                                            value_range=volume.value_range))
+    check_clip(parsed, volume)
     return parsed, volume
+
+
+def check_clip(scene: Scene, volume: Volume) -> None:
+    """A crop beyond the volume, or one that keeps nothing, is refused before any GPU work (as the
+    command line does): an empty image is never meant."""
+    from app.frontend import check_clip as check
+    check(scene, volume)
 
 
 def _camera(scene: Scene, camera: Any) -> Scene:
@@ -244,6 +268,7 @@ class Renderer:
         else:
             scene = parse_scene(_merge(scene_to_dict(self.scene), scene_options),
                                 base_dir=self.scene.base_dir)
+            check_clip(scene, self.volume)
             volume = None
             self._options.update(scene_options)
         with self._ctx:

@@ -224,3 +224,28 @@ def test_the_api_takes_render_settings():
         assert r.settings.gather_event == 2
         second = r.render("probes", spp=2)
         assert r.bakes == 1 and np.abs(first.linear - second.linear).mean() > 0
+
+
+def test_crop_clip_and_colour_points_are_scene_options():
+    """Issue 32's scene keys pass through **scene_options: a voxel crop renders less of the
+    volume, a crop beyond it or keeping nothing is refused before the GPU (naming the key), colour
+    points are a transfer-function shortcut, and a colormap given later replaces them."""
+    from radiance_probes._api import build_scene
+    half = {"min": [0, 0, 0], "max": [8, 14, 12], "units": "voxels"}
+    scene, _ = build_scene(blob(), None, {"crop": half, "clip_plane": {"normal": [0, 1, 0]},
+                                          "colors": [[0, 0, 0, 1], [1, 1, 0, 0]]})
+    assert scene.crop.max == (8, 14, 12) and scene.clip_plane.distance == 0.0
+    assert scene.transfer_function.colors[1] == (1.0, 1.0, 0.0, 0.0)
+    with pytest.raises(SceneError, match=r"crop.max\[0\]: 99 is beyond the volume's 16 voxels"):
+        build_scene(blob(), None, {"crop": {**half, "max": [99, 14, 12]}})
+    with pytest.raises(SceneError, match="crop: keeps no voxel"):
+        build_scene(blob(), None, {"crop": {"min": [0.6, 0.6, 0.6], "max": [0.7, 0.7, 0.7]}})
+    with rp.Renderer(blob(), colors=[[0, 0, 0, 1], [1, 1, 0, 0]], **SMALL) as r:
+        whole = r.render(spp=1)
+        cropped = r.render(spp=1, crop=half)
+        assert covered(cropped) < covered(whole) - 0.05        # the x half beyond 8 is gone
+        r.update(colormap="viridis")                           # replaces the colour points
+        assert r.scene.transfer_function.colors is None
+        assert r.scene.transfer_function.colormap == "viridis"
+        with pytest.raises(SceneError, match="keeps no voxel"):
+            r.update(crop={"min": [0.6, 0.6, 0.6], "max": [0.7, 0.7, 0.7], "units": "world"})

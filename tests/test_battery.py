@@ -12,6 +12,8 @@ from app.bench.scenes import BATTERY_SCENES, battery_scene
 from app.gl.checks import check_sites, enable_checks
 from app.gl.context import create_headless_context
 from app.gl.shaders import compute_program, set_uniforms
+from app.gl.dispatch_log import DispatchLog
+from app.render.dispatch_budget import DISPATCH_BOUND_MS, device_slowdown
 from app.render.renderer import METHODS, Renderer
 
 
@@ -71,6 +73,7 @@ def test_battery_scene_renders_clean_with_every_method(checked_ctx, name):
     scene = scene.replace(max_bounces=min(scene.max_bounces, 16))
     r = Renderer(ctx, scene)
     checks.reset()
+    log = DispatchLog().__enter__()
     try:
         for method in METHODS:
             result = r.render(method, spp=2, seed=1)
@@ -85,7 +88,12 @@ def test_battery_scene_renders_clean_with_every_method(checked_ctx, name):
         r.invalidate()
         r.render("probes-only", spp=1, seed=2)
         assert checks.hits() == {}, f"{name} ray-sun bake: {checks.hits()}"
+        # no dispatch beyond the bound, scaled by this device's speed against the H100's (on
+        # llvmpipe a dispatch's host time includes compiling its shader on first use)
+        longest, program = log.take()
+        assert longest < DISPATCH_BOUND_MS * device_slowdown(r), (program, longest)
     finally:
+        log.__exit__(None, None, None)
         r.release()
 
 

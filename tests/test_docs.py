@@ -91,8 +91,10 @@ def test_the_readme_names_every_viewer_shortcut():
         key = shortcut.keys
         if key in ("left", "right", "up", "down"):
             shown = "arrows"
-        elif key.startswith("ctrl+"):
-            shown = "Ctrl+" + key[5:].upper()
+        elif "+" in key:   # ctrl+s as Ctrl+S, ctrl+shift+z as Ctrl+Shift+Z; the numbered ones
+            *mods, last = key.split("+")   # (ctrl+1 .. ctrl+9) as one row: Ctrl+1..9
+            shown = "+".join([m.capitalize() for m in mods]
+                             + ["1..9" if last.isdigit() else last.upper()])
         elif key.startswith("f") and key[1:].isdigit():
             shown = key.upper()
         elif key == "tab":

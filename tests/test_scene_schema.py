@@ -56,8 +56,44 @@ def test_the_default_scene_and_a_saved_one_validate(validator):
                                    "orientation": "patient"},
                         "environment": {"map": "sky.exr", "rotation": 30},
                         "probes": {"grid": 32, "sh_order": 3, "channels": 1},
+                        "transfer_function": {"colors": [[0, 0, 0, 1], [1, 1, 0.5, 0]]},
+                        "crop": {"min": [2, 0, 1], "max": [10, 16, 9], "units": "voxels"},
+                        "clip_plane": {"normal": [0, 1, 0.3], "distance": 0.1, "enabled": False},
+                        "bookmarks": [{"name": "front", "eye": [0, 0.3, 2.2], "fov_y": 30},
+                                      {"name": "top", "eye": [0, 2.2, 0.3]}],
+                        "viewer": {"method": "raymarch", "display": "split", "exposure": 2.0,
+                                   "show_box": True},
                         "$schema": "../docs/scene.schema.json"})
-    validator.validate(scene_to_dict(full))
+    saved = scene_to_dict(full)
+    assert {"crop", "clip_plane", "bookmarks", "viewer"} <= set(saved)
+    validator.validate(saved)
+
+
+def test_the_optional_keys_and_a_transfer_function_file(validator, tmp_path):
+    """null for the optional objects, a transfer function named by its file: the loader takes
+    them, so the schema does; a voxel crop's corners are integers for both, a crop needs both
+    corners and a bookmark its eye for both."""
+    (tmp_path / "bone_tf.json").write_text(json.dumps({"colormap": "grey",
+                                                       "opacity": [[0, 0], [1, 1]]}))
+    for data in ({"crop": None, "clip_plane": None, "bookmarks": None, "viewer": None},
+                 {"transfer_function": "bone_tf.json"},
+                 {"crop": {"min": [-0.5, -0.5, -0.1], "max": [0.5, 0.5, 0.4]}}):
+        validator.validate(data)
+        parse_scene(data, base_dir=tmp_path)
+    for data, message in (
+            ({"crop": {"min": [0, 0, 0.5], "max": [4, 4, 4], "units": "voxels"}},
+             "crop.min[2]: expected an integer"),
+            ({"crop": {"min": [0, 0, 0], "max": [4, 4, 4], "units": "voxels", "size": 2}},
+             "unknown field crop.size"),
+            ({"crop": {"min": [0, 0, 0]}}, "crop.max: missing"),
+            ({"clip_plane": {"distance": 0.1}}, "clip_plane.normal: missing"),
+            ({"bookmarks": [{"name": "a"}]}, "bookmarks[0].eye: missing"),
+            ({"transfer_function": ""}, "transfer_function"),
+            ({"viewer": {"method": "guided?"}}, "viewer.method")):
+        assert list(validator.iter_errors(data)), f"the schema took {data}"
+        with pytest.raises(SceneError) as err:
+            parse_scene(data, base_dir=tmp_path)
+        assert message in str(err.value), str(err.value)
 
 
 @pytest.mark.parametrize("data, path", [
@@ -79,7 +115,7 @@ def _numeric_keys(schema: dict, prefix: str = ""):
     """(dotted key, its number schema, whether it is an array's item) for every bounded number."""
     for name, sub in schema.get("properties", {}).items():
         path = f"{prefix}{name}"
-        if sub.get("type") == "object" and "properties" in sub:
+        if "properties" in sub:      # an object (the optional ones may also be null)
             yield from _numeric_keys(sub, f"{path}.")
             continue
         for option in sub.get("oneOf", [sub]):
@@ -99,6 +135,10 @@ def _scene_with(path: str, value) -> dict:
     node[parts[-1]] = value
     if path.startswith("volume.") and path.split(".")[1] in ("dims", "series"):
         data["volume"]["path"] = "a.raw"   # keys of a file's volume
+    for key, required in (("crop", {"min": [0, 0, 0], "max": [1, 1, 1]}),
+                          ("clip_plane", {"normal": [0, 1, 0]})):
+        if key in data:                    # the keys these objects cannot be without
+            data[key] = {**required, **data[key]}
     return data
 
 
@@ -140,7 +180,7 @@ def test_choices_agree(validator):
     both."""
     def choices(schema, prefix=""):
         for name, sub in schema.get("properties", {}).items():
-            if sub.get("type") == "object" and "properties" in sub:
+            if "properties" in sub:
                 yield from choices(sub, f"{prefix}{name}.")
             elif "enum" in sub and sub.get("type") == "string":
                 yield f"{prefix}{name}", sub["enum"]
@@ -155,4 +195,4 @@ def test_choices_agree(validator):
         with pytest.raises(SceneError, match=path.split(".")[-1]):
             parse_scene(data)
         seen += 1
-    assert seen >= 10
+    assert seen >= 14   # the probes', the volume's, the crop's units and the viewer's modes

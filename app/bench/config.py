@@ -78,6 +78,17 @@ class BenchConfig:
     interact_orbit_frames: int = 60
     interact_ref_spp: int = 1024                     # reference per event state (two halves)
     interact_tail_k: int = 8                         # samples per dispatch against 1
+    # --preset movie (movie.py): a turntable raymarched over probes baked once, timed whole,
+    # its error at a few frames against path-traced references, the path tracer's time beside
+    movie_frames: int = 120
+    movie_degrees: float = 360.0
+    movie_spp: int = 16                              # raymarched frames accumulated per frame
+    movie_probes: tuple[int, int] = (128, 64)        # the viewer's GPU default (device_defaults)
+    movie_check_frames: tuple[int, ...] = (0, 40, 80)
+    movie_ref_spp: int = 8192                        # per check frame, in two halves
+    movie_pt_max_spp: int = 8192                     # the path tracer's progressive run at most
+    movie_fps: float = 30.0
+    movie_target: float = 0.05                       # per-frame relative RMSE asked for
     # --preset bias (bias.py): each default shortcut against its exact variant on the battery
     bias_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 256))   # grid, walks
     bias_seeds: int = 4                              # independent bakes per variant (paired)
@@ -108,6 +119,16 @@ PRESETS = {
                                   interact_target_spp=(("probes", 16), ("raymarch", 4)),
                                   interact_max_frames=60, interact_orbit_frames=12,
                                   interact_ref_spp=512, ref_samples_per_pass=16, interact_tail_k=4),
+    # the movie of the issue: 120 frames of bonsai at 1080p on the lent GPU (about 4 minutes,
+    # most of it the three references and the path tracer's runs)
+    "movie": BenchConfig(mode="movie", scenes=("bonsai",), width=1920, height=1080,
+                         ref_samples_per_pass=64),
+    # the same at tiny size for llvmpipe (a test runs it)
+    "movie-quick": BenchConfig(mode="movie", scenes=("tiny",), width=48, height=32,
+                               movie_frames=12, movie_spp=4, movie_probes=(8, 32),
+                               movie_check_frames=(0, 6), movie_ref_spp=256,
+                               movie_pt_max_spp=256, ref_samples_per_pass=16,
+                               samples_per_dispatch=8),
     # the bias table over the stress battery (bias.py): 256^2, references of 16384 spp
     "bias": BenchConfig(mode="bias", scenes=BATTERY_SCENES, width=256, height=256, ref_spp=16384,
                         ref_samples_per_pass=256),

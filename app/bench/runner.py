@@ -206,6 +206,9 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
         from .interact import interact_scene
         return interact_scene(renderer, name, config, results, out, device,
                               lambda r, key, cfg: _reference(r, key, cfg, results, out))
+    if config.mode == "movie":
+        from .movie import movie_scene
+        return movie_scene(renderer, name, config, results, out, device)
     if config.mode == "bias":
         from .bias import bias_scene
         reference = _reference(renderer, name, config, results, out)

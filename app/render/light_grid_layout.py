@@ -23,6 +23,10 @@ class LightGridLayout:
     shear: tuple[float, float, float]   # sun_direction / sun_direction[a], component a zero
     half_extent: tuple[float, float, float]   # half the sheared coordinates' range per axis
     size: tuple[int, int, int]          # texels per axis (x, y, z)
+    # The box the grid covers: the volume box, or the kept box of a crop or clip plane
+    # (app/clip_region.py), centred at `centre`; sheared coordinates are relative to the centre.
+    box_half_extent: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    centre: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def ray_axes(self) -> tuple[int, int]:
@@ -38,11 +42,12 @@ class LightGridLayout:
     def uniforms(self) -> dict:
         mask = tuple(1.0 if i == self.axis else 0.0 for i in range(3))
         return {"light_grid_axis": self.axis, "light_grid_axis_mask": mask,
-                "light_grid_shear": self.shear, "light_grid_half_extent": self.half_extent}
+                "light_grid_shear": self.shear, "light_grid_half_extent": self.half_extent,
+                "light_grid_centre": self.centre, "light_box_half_extent": self.box_half_extent}
 
 
 def light_grid_layout(box_grid: tuple[int, int, int], box_half_extent, sun_direction,
-                      max_side: int) -> LightGridLayout:
+                      max_side: int, centre=(0.0, 0.0, 0.0)) -> LightGridLayout:
     """The sheared layout holding `box_grid` texels' density (texels per axis over the box, of
     light_grid_size) for this sun: along the axis a of the sun's largest component, the box's
     extent in box_grid[a] / |sun_a| texels (the box grid's spacing along the ray); along each
@@ -68,4 +73,5 @@ def light_grid_layout(box_grid: tuple[int, int, int], box_half_extent, sun_direc
                 size[j] = np.floor(size[j] * scale)
     size = np.maximum(size, 1).astype(int)
     return LightGridLayout(a, tuple(float(v) for v in shear), tuple(float(v) for v in half),
-                           tuple(int(v) for v in size))
+                           tuple(int(v) for v in size), tuple(float(v) for v in h),
+                           tuple(float(v) for v in centre))

@@ -91,6 +91,16 @@ def column_segments(layout: LightGridLayout, target: int = SEGMENT_TARGET_INVOCA
     return segments if segments >= MIN_SEGMENTS else 1
 
 
+def covered_box(resources: SceneResources) -> tuple[tuple[int, int, int], np.ndarray, np.ndarray]:
+    """The box the light grid covers, as (voxels per axis, half extent, centre): the volume's, or
+    with a crop or clip plane the kept box and the voxels the crop keeps (the grid a cropped
+    volume of those voxels would get, at the same place)."""
+    clip, volume = resources.clip, resources.volume
+    if clip is None or clip.empty:
+        return (tuple(volume.dims), np.asarray(volume.half_extent, np.float64), np.zeros(3))
+    return tuple(clip.voxel_count), clip.half_extent, clip.centre
+
+
 class LightTransmittance:
     def __init__(self, ctx: moderngl.Context, max_side: int = MAX_SIDE, precision: str = PRECISION,
                  segment_target: int = SEGMENT_TARGET_INVOCATIONS):
@@ -100,6 +110,7 @@ class LightTransmittance:
         self.segment_target = int(segment_target)   # column_segments; 0: whole columns
         self._segment_depths: moderngl.Buffer | None = None   # [ray][segment] optical depths
         self.segments = 1        # per column in the last bake_layers
+        self.march_step = 1.0    # the bake's quadrature step (world units), set by begin()
         self.program = compute_program(ctx, "light_transmittance.comp",
                                        {"LIGHT_GRID_FORMAT": PRECISIONS[precision]})
         self._segment_program = None   # the LIGHT_GRID_SEGMENTS build, compiled when first used
@@ -141,9 +152,10 @@ class LightTransmittance:
         may use as they are (each ray is marched on its own). A new layout (the sun moved, or
         another size) is baked into a texture of its own while readers keep the previous grid
         whole, and replaces it when done."""
-        self.box_grid = light_grid_size(resources.volume.dims, self.max_side, min_side)
-        layout = light_grid_layout(self.box_grid, resources.volume.half_extent, sun_direction,
-                                   self.max_side)
+        dims, half, centre = covered_box(resources)
+        self.box_grid = light_grid_size(dims, self.max_side, min_side)
+        self.march_step = LIGHT_MARCH_VOXELS * resources.march_step
+        layout = light_grid_layout(self.box_grid, half, sun_direction, self.max_side, centre)
         if self.texture is None or layout == self.layout:
             if self.texture is None:
                 self.texture = self._texture(layout.size)
@@ -220,7 +232,10 @@ class LightTransmittance:
 
     def uniforms(self) -> dict:
         """What a reader of the grid (lib/light_grid.glsl) needs besides the texture unit."""
-        return {"light_transmittance": LIGHT_UNIT, **self.layout.uniforms()}
+        # lib/light_grid.glsl marches the last texel before the box's sun side itself
+        texel = float(np.max(2.0 * np.asarray(self.layout.half_extent) / np.asarray(self.layout.size)))
+        return {"light_transmittance": LIGHT_UNIT, **self.layout.uniforms(),
+                "light_grid_texel": texel, "light_grid_march_step": self.march_step}
 
     def read(self) -> np.ndarray:
         """The optical depth (z, y, x) of the texture, in the layout's sheared coordinates."""

@@ -11,6 +11,7 @@ import weakref
 import moderngl
 import numpy as np
 
+from ..clip_region import ClipRegion, region_uniforms
 from ..gl.shaders import ComputeProgram, compute_program, set_uniforms
 from ..gl.textures import TransferTable
 from ..twins.majorant_grid import MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_bound
@@ -61,15 +62,19 @@ class MajorantGrid:
         self.range_tex.write(payload.tobytes())
 
     def build(self, transfer: TransferTable, table: np.ndarray, density_scale: float,
-              transfer_unit: int) -> None:
-        """Majorant per macrocell under the current transfer function and density_scale (GPU)."""
+              transfer_unit: int, clip: ClipRegion | None = None, half_extent=None) -> None:
+        """Majorant per macrocell under the current transfer function and density_scale (GPU);
+        with a crop or clip plane (`clip`, in the box of `half_extent`) cells cut away get 0."""
         program = _program(self.ctx)
         transfer.use(transfer_unit)
         self.range_tex.use(RANGE_UNIT)
         set_uniforms(program, {"density_range": RANGE_UNIT, "transfer_function": transfer_unit,
                                "transfer_size": int(len(table)),
                                "density_scale": float(density_scale), "cells": self.cells,
-                               "majorant_safety": float(MAJORANT_SAFETY)})
+                               "majorant_safety": float(MAJORANT_SAFETY),
+                               **region_uniforms(clip)})
+        if clip is not None:
+            set_uniforms(program, {"box_half_extent": tuple(float(v) for v in half_extent)})
         self.texture.bind_to_image(0, read=False, write=True)
         program.run(*((c + 3) // 4 for c in self.cells))
         self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT

@@ -103,7 +103,8 @@ class ProbeGrid:
                  precision: str = "rgba32f", sh_order: int = 2,
                  box: tuple | None = None, grey: bool = False, resumable: bool | None = None,
                  sun: str = "ray", adaptive: float = 0.0, environment_map: bool = False,
-                 planes: tuple | None = None, sun_lobe: float = 0.0):
+                 planes: tuple | None = None, sun_lobe: float = 0.0,
+                 sun_correction: float = 0.0):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
         bake time); `sh_order` 0 to 4 decides which textures exist (lib/probe_packing.glsl).
         `resumable`: walks that suspend and resume across dispatches (default: where the driver limits loops;
@@ -132,6 +133,8 @@ class ProbeGrid:
         if sun not in WALK_SUN_MODES:
             raise ValueError(f"walk sun mode {sun!r}: expected one of {', '.join(WALK_SUN_MODES)}")
         self.sun = sun
+        # sun "grid": the probability of a shadow ray correcting the grid's sun (lib/integrator.glsl)
+        self.sun_correction = float(sun_correction)
         self.ctx = ctx
         self.grid = tuple(int(v) for v in grid)
         self.samples = int(samples)
@@ -324,6 +327,7 @@ class ProbeGrid:
                          "loop_budget": self.loop_budget, "loop_reserve": self.loop_reserve,
                          "march_step": resources.march_step,
                          "adaptive_walks": int(self.adaptive > 0),
+                         "walk_sun_correction": self.sun_correction,
                          "warm_walks": 0.0 if last_pass else self.warm_walks})
         uniforms.update(self.box_uniforms(resources))
         if self.passes_done == 0 and self.next_probe == 0:   # a bake starts: the scene's lights
@@ -415,7 +419,7 @@ class ProbeGrid:
         the last timed chunk says fit the target: timed (one wait for the GPU) whenever the rest
         of the pass does not fit in one, or no chunk was timed yet (the first holds
         FIRST_CHUNK_WALKS); a pass that fits is not waited for. Else the fixed chunk_probes."""
-        if self.resumable or self.dispatch_target_ms is None:
+        if self.resumable or self.dispatch_target_ms is None or math.isinf(self.dispatch_target_ms):
             return min(self.chunk_probes, left), False
         if self.walk_ms is None:
             walks = FIRST_CHUNK_WALKS

@@ -222,6 +222,7 @@ class Renderer:
         return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
                 spec.layout, spec.adaptive_strength, spec.adaptive_indicator,
                 self.resources.use_majorant_grid, st.walk_sun, st.walk_adaptive, st.sun_lobe,
+                st.walk_sun_correction if st.walk_sun == "grid" else None,
                 (st.light_max_side, st.light_min_side, st.light_follows_probes,
                  st.light_precision)
                 if st.walk_sun == "grid" else None)
@@ -235,7 +236,8 @@ class Renderer:
         the volume, glsl/visible_region.comp, redone when the volume or the transfer function
         changes)."""
         s = self.scene
-        key = (self.resources.volume_version, s.transfer_function, s.density_scale > 0)
+        key = (self.resources.volume_version, s.transfer_function, s.density_scale > 0,
+               self.resources.clip)
         if self._region_key != key:
             self._region = self._region_pass.region(self.resources)
             self._region_key = key
@@ -248,10 +250,13 @@ class Renderer:
         s = self.scene
         spec = s.probes
         grid, box = tuple(spec.grid), None
+        clip = self.resources.clip
         if spec.fit == "visible" and region:
             low, high = self.visible_region()
             grid = fitted_grid(spec.grid, low, high)
             box = (tuple(map(float, low)), tuple(map(float, high)))
+        elif clip is not None and not clip.empty:   # "box": the kept box of a crop or clip plane
+            box = (tuple(map(float, clip.box_min)), tuple(map(float, clip.box_max)))
         env = self.resources.environment
         # A map is grey when its three channels are equal everywhere; (1, 0, 0) stands for colour.
         environment = s.environment if env is None else ((1, 1, 1) if env.grey else (1, 0, 0))
@@ -321,12 +326,14 @@ class Renderer:
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
                          g.adaptive, g.environment_map, g.planes, g.sun_lobe) != (
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
-                st.walk_sun, st.walk_adaptive, env_map, plan.planes, lobe):
+                st.walk_sun, st.walk_adaptive, env_map, plan.planes, lobe) or (
+                g.sun_correction != st.walk_sun_correction):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
                                         plan.sh_order, plan.box, plan.grey,
                                         sun=st.walk_sun, adaptive=st.walk_adaptive,
+                                        sun_correction=st.walk_sun_correction,
                                         environment_map=env_map, planes=plan.planes,
                                         sun_lobe=lobe)
         self.probe_grid.dispatch_target_ms = dispatch_target_ms(self)
@@ -386,7 +393,8 @@ class Renderer:
         min_side = (min_side_for_probes(s.probes.grid, st.light_min_side)
                     if st.light_follows_probes else st.light_min_side)
         key = (self.resources.volume_version, s.transfer_function, s.density_scale,
-               s.light.direction, st.light_max_side, min_side, st.light_precision)
+               s.light.direction, st.light_max_side, min_side, st.light_precision,
+               self.resources.clip)
         return key, min_side
 
     def light_current(self) -> bool:
@@ -561,14 +569,14 @@ class Renderer:
         # Cut into dispatches of at most the device's target (dispatch_budget.py) by the GPU ms
         # per sample this pass took at this size last time: several samples a dispatch where they
         # fit, bands of rows where one sample of the whole image would not. Unknown yet: one
-        # sample first (one more wait for the timer).
+        # sample first on a GPU (one more wait for the timer).
         key = (id(tracer), acc.width, acc.height)
         target = dispatch_target_ms(self)
         total = 0.0
         while n > 0:
             per_sample = self._sample_ms.get(key)
-            if per_sample is None:
-                k, bands = 1, 1
+            if per_sample is None or math.isinf(target):   # (a CPU rasteriser: no cutting)
+                k, bands = (n if math.isinf(target) else 1), 1
             else:
                 bands = max(1, math.ceil(per_sample / target))
                 k = 1 if bands > 1 else max(1, min(n, int(target / max(per_sample, 1e-9))))

@@ -8,6 +8,7 @@ import struct
 import moderngl
 import numpy as np
 
+from ..clip_region import ClipRegion, clip_region, region_uniforms
 from ..environment_map import EnvironmentMap, load_scene_environment
 from ..gl.textures import TransferTable, volume_texture
 from ..twins.environment_map import Distribution
@@ -68,6 +69,9 @@ class SceneResources:
         self.use_majorant_grid = bool(use_majorant_grid)
         self.majorant_grid = MajorantGrid(ctx)
         self._majorant_key: tuple | None = None
+        # The crop box and clip plane resolved against the volume (app/clip_region.py); None: the
+        # whole volume is kept.
+        self.clip: ClipRegion | None = None
         self.update(scene, volume)
 
     def update(self, scene: Scene, volume: Volume | None = None) -> set[str]:
@@ -83,6 +87,9 @@ class SceneResources:
         elif old is None or scene.volume != old.volume or scene.base_dir != old.base_dir:
             volume = load_scene_volume(scene)
             changed.add("volume")
+        # A crop that does not fit the volume fails before anything on the GPU changes.
+        new_volume = volume if "volume" in changed else self.volume
+        clip = clip_region(scene, new_volume.dims, new_volume.half_extent)
         if "volume" in changed:
             tex = volume_texture(self.ctx, volume)
             if self.volume_tex is not None:
@@ -104,12 +111,16 @@ class SceneResources:
         self._set_environment(environment)
         if old is None or scene.camera != old.camera:
             changed.add("camera")
+        if clip != self.clip:
+            changed.add("clip")
+        self.clip = clip
         self.scene = scene
         if "volume" in changed:
             self.majorant_grid.set_volume(self.volume)
-        key = (self.volume_version, scene.transfer_function, scene.density_scale)
+        key = (self.volume_version, scene.transfer_function, scene.density_scale, clip)
         if key != self._majorant_key:
-            self.majorant_grid.build(self.transfer_gpu, self.table, scene.density_scale, TRANSFER_UNIT)
+            self.majorant_grid.build(self.transfer_gpu, self.table, scene.density_scale, TRANSFER_UNIT,
+                                     clip=clip, half_extent=self.volume.half_extent)
             self._majorant_key = key
         return changed
 
@@ -148,7 +159,7 @@ class SceneResources:
         s = self.scene
         return (self.volume_version, s.transfer_function, s.density_scale, s.albedo, s.anisotropy,
                 s.light, s.environment, s.environment_map, s.max_bounces, s.probes.grid, s.probes.samples,
-                s.probes.precision)
+                s.probes.precision, self.clip)
 
     def uniforms(self) -> dict:
         s = self.scene
@@ -170,6 +181,7 @@ class SceneResources:
             "anisotropy": float(s.anisotropy),
             "max_path_steps": int(self.max_path_steps),
             **self.environment_uniforms(),
+            **region_uniforms(self.clip),
         }
 
     def environment_uniforms(self) -> dict:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from ..clip_region import region_uniforms
 from ..gl.shaders import ComputeProgram, compute_program, set_uniforms
 from ..twins.visible_region import positive_node_counts, region_from_cells
 from .resources import TRANSFER_UNIT, VOLUME_UNIT, SceneResources
@@ -22,11 +23,15 @@ class VisibleRegionPass:
         self.program: ComputeProgram | None = None
 
     def region(self, resources: SceneResources) -> tuple[np.ndarray, np.ndarray]:
-        """World (low, high) corners of where sigma_t can be > 0 (the whole box when nowhere)."""
+        """World (low, high) corners of where sigma_t can be > 0 (the whole box, or the kept box
+        of a crop or clip plane, when nowhere)."""
         ctx = self.ctx
         half = np.asarray(resources.volume.half_extent, np.float64)
-        if resources.scene.density_scale <= 0:
-            return -half, half
+        clip = resources.clip
+        whole = ((-half, half) if clip is None else
+                 (np.asarray(clip.box_min, np.float64), np.asarray(clip.box_max, np.float64)))
+        if resources.scene.density_scale <= 0 or (clip is not None and clip.empty):
+            return whole
         if self.program is None:
             self.program = compute_program(ctx, "visible_region.comp")
         program = self.program
@@ -38,19 +43,24 @@ class VisibleRegionPass:
         try:
             resources.bind()
             counts_tex.use(COUNTS_UNIT)
+            first = (0, 0, 0) if clip is None else clip.voxel_first
+            count = dims if clip is None else clip.voxel_count
             set_uniforms(program, {"volume_density": VOLUME_UNIT, "transfer_function": TRANSFER_UNIT,
                                    "transfer_size": int(len(resources.table)),
-                                   "positive_node_counts": COUNTS_UNIT, "dims": dims})
+                                   "positive_node_counts": COUNTS_UNIT, "dims": dims,
+                                   "voxel_first": tuple(first), "voxel_count": tuple(count),
+                                   "box_half_extent": tuple(float(v) for v in half),
+                                   **region_uniforms(clip)})
             cells.bind_to_storage_buffer(0)
-            program.run((dims[0] + 8) // 8, (dims[1] + 8) // 8, (dims[2] + 4) // 4)
+            program.run((count[0] + 8) // 8, (count[1] + 8) // 8, (count[2] + 4) // 4)
             ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
             found = np.frombuffer(cells.read(), np.uint32)
         finally:
             counts_tex.release()
             cells.release()
         if found[0] == NONE_VISIBLE:
-            return -half, half
-        return region_from_cells(found[:3], found[3:], dims, half)
+            return whole
+        return region_from_cells(found[:3], found[3:], dims, half, clip)
 
     def release(self) -> None:
         if self.program is not None:

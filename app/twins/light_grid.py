@@ -11,17 +11,18 @@ from ..volume import Volume
 
 
 def light_grid_bake(volume: Volume, table: np.ndarray, density_scale: float, sun_direction,
-                    layout: LightGridLayout, march_step: float) -> np.ndarray:
+                    layout: LightGridLayout, march_step: float, clip=None) -> np.ndarray:
     """Optical depth (z, y, x) at every texel centre of `layout`: each column along axis a marched
     from the box's sun side, midpoint quadrature of sigma_t over each segment between centres
-    (at most march_step apart, only inside the box), no more added once past 104 and the texels
-    capped there."""
+    (at most march_step apart, only inside the box the layout covers), no more added once past 104
+    and the texels capped there. `clip`: a crop or clip plane (app.clip_region.ClipRegion)."""
     d = np.asarray(sun_direction, np.float64)
     d = d / np.linalg.norm(d)
     a = layout.axis
     b, c = layout.ray_axes
     size = layout.size
-    he = volume.half_extent.astype(np.float64)
+    he = np.asarray(layout.box_half_extent, np.float64)
+    centre = np.asarray(layout.centre, np.float64)
     half = np.asarray(layout.half_extent, np.float64)
     shear = np.asarray(layout.shear, np.float64)
     qb = ((2.0 * (np.arange(size[b]) + 0.5)) / size[b] - 1.0) * half[b]
@@ -60,7 +61,8 @@ def light_grid_bake(volume: Volume, table: np.ndarray, density_scale: float, sun
                 x[:, a] = s
                 x[:, b] = QB[step] + shear[b] * s
                 x[:, c] = QC[step] + shear[c] * s
-                tau[step] += sigma_t_at(volume, table, density_scale, x) * ds[step] * per_s
+                tau[step] += sigma_t_at(volume, table, density_scale, x + centre,
+                                        clip) * ds[step] * per_s
         out[k] = np.minimum(tau, 104.0)
         s_from = s_to
     # out is (a, b, c); return (z, y, x)
@@ -71,7 +73,7 @@ def light_grid_bake(volume: Volume, table: np.ndarray, density_scale: float, sun
 def light_grid_lookup(optical_depth: np.ndarray, layout: LightGridLayout, points) -> np.ndarray:
     """Optical depth at world points (..., 3) from the grid (z, y, x), as light_grid.glsl reads
     it: sheared coordinates, then trilinear filtering of texel centres, clamped to the edge."""
-    pts = np.asarray(points, np.float64)
+    pts = np.asarray(points, np.float64) - np.asarray(layout.centre, np.float64)
     q = pts - np.asarray(layout.shear) * pts[..., layout.axis:layout.axis + 1]
     uvw = q / (2.0 * np.asarray(layout.half_extent)) + 0.5
     return trilinear(optical_depth, uvw * np.asarray(layout.size, np.float64) - 0.5)

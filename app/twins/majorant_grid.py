@@ -129,10 +129,63 @@ def max_alpha(table: np.ndarray, d_min: np.ndarray, d_max: np.ndarray) -> np.nda
     return np.maximum(ends, inner)
 
 
+# How far beyond its faces (in cells) a cell counts for the crop and clip plane's test: a cell is
+# cut away only when no point of it, widened by this, is kept.
+CELL_SLACK = 1.0 / 256.0
+
+
+def kept_density_ranges(d_min: np.ndarray, d_max: np.ndarray, clip, half_extent,
+                        rounding: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(min, max, cut) per macrocell under a crop or clip plane (app.clip_region.ClipRegion), as
+    glsl/majorant_grid.comp's kept_density_range: `cut` where no point of the cell is kept; else
+    the union of the ranges of the cells that the cell's kept points read the density in (the
+    cell clamped as kept_sample_point clamps points, up to a voxel inside the crop).
+    `rounding` (in cells) widens (> 0) or narrows (< 0) that span of cells: where a crop face lies
+    on a cell face, float32 on the GPU may take the neighbour in or leave it out; tests bound the
+    GPU's grid between the two."""
+    d_min, d_max = np.asarray(d_min), np.asarray(d_max)
+    cz, cy, cx = d_min.shape
+    cells = np.array([cx, cy, cz])
+    he = np.asarray(half_extent, np.float32).astype(np.float64)
+    size = 2.0 * he / cells
+    k, j, i = np.meshgrid(np.arange(cz), np.arange(cy), np.arange(cx), indexing="ij")
+    index = np.stack([i, j, k], axis=-1)
+    lo = -he + index * size
+    hi = lo + size
+    slack = size * CELL_SLACK
+    cut = clip.cuts_box(lo - slack, hi + slack)
+    kmin = np.asarray(clip.box_min, np.float32).astype(np.float64)
+    kmax = np.asarray(clip.box_max, np.float32).astype(np.float64)
+    s_lo = clip.sample_points(np.maximum(lo, kmin))
+    s_hi = clip.sample_points(np.minimum(hi, kmax))
+    first = np.clip(np.floor((s_lo + he) / size - rounding).astype(np.int64), 0, cells - 1)
+    last = np.clip(np.ceil((s_hi + he) / size + rounding).astype(np.int64) - 1, first, cells - 1)
+    out_lo = np.full(d_min.shape, np.inf)
+    out_hi = np.full(d_min.shape, -np.inf)
+    span = int((last - first).max(initial=0)) + 1
+    for dz in range(span):
+        for dy in range(span):
+            for dx in range(span):
+                c = first + np.array([dx, dy, dz])
+                use = np.all(c <= last, axis=-1)
+                c = np.minimum(c, cells - 1)
+                out_lo = np.where(use, np.minimum(out_lo, d_min[c[..., 2], c[..., 1], c[..., 0]]), out_lo)
+                out_hi = np.where(use, np.maximum(out_hi, d_max[c[..., 2], c[..., 1], c[..., 0]]), out_hi)
+    return out_lo, out_hi, cut
+
+
 def majorant_grid(d_min: np.ndarray, d_max: np.ndarray, table: np.ndarray,
-                  density_scale: float) -> np.ndarray:
-    """The majorant per macrocell, float32 [cz, cy, cx] (the twin of glsl/majorant_grid.comp)."""
+                  density_scale: float, clip=None, half_extent=None,
+                  rounding: float = 0.0) -> np.ndarray:
+    """The majorant per macrocell, float32 [cz, cy, cx] (the twin of glsl/majorant_grid.comp);
+    with a crop or clip plane (`clip`, in the box of `half_extent`), 0 in cells cut away
+    (`rounding`: kept_density_ranges')."""
+    cut = None
+    if clip is not None:
+        d_min, d_max, cut = kept_density_ranges(d_min, d_max, clip, half_extent, rounding)
     m = float(density_scale) * max_alpha(table, d_min, d_max) * MAJORANT_SAFETY
+    if cut is not None:
+        m = np.where(cut, 0.0, m)
     return m.astype(np.float32)
 
 

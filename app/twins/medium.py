@@ -1,16 +1,20 @@
-"""NumPy twin of glsl/lib/medium.glsl: density sampling, sigma_t, albedo, the volume box."""
+"""NumPy twin of glsl/lib/medium.glsl: density sampling, sigma_t, albedo, the volume box, and the
+crop and clip plane of lib/clip_region.glsl (`clip`: an app.clip_region.ClipRegion, None: all kept)."""
 from __future__ import annotations
 
 import numpy as np
 
+from ..clip_region import ClipRegion
 from ..transfer import lookup
 from ..volume import Volume
 
 
-def density_at(volume: Volume, points: np.ndarray) -> np.ndarray:
-    """Trilinear, cell-centred, clamped-to-edge density at world points (..., 3), as GL does."""
+def density_at(volume: Volume, points: np.ndarray, clip: ClipRegion | None = None) -> np.ndarray:
+    """Trilinear, cell-centred, clamped-to-edge density at world points (..., 3), as GL does;
+    with a crop, read at the point clamped inside the kept voxels' centres (kept_sample_point)."""
     he = volume.half_extent.astype(np.float64)
-    uvw = np.asarray(points, np.float64) / (2.0 * he) + 0.5
+    points = np.asarray(points, np.float64) if clip is None else clip.sample_points(points)
+    uvw = points / (2.0 * he) + 0.5
     return trilinear(volume.data, uvw * np.array(volume.dims, np.float64) - 0.5)
 
 
@@ -33,20 +37,37 @@ def trilinear(data: np.ndarray, coord: np.ndarray) -> np.ndarray:
     return out
 
 
-def sigma_t_at(volume: Volume, table: np.ndarray, density_scale: float, points: np.ndarray) -> np.ndarray:
-    return density_scale * lookup(table, density_at(volume, points))[..., 3]
+def classified_at(volume: Volume, table: np.ndarray, points: np.ndarray,
+                  clip: ClipRegion | None = None) -> np.ndarray:
+    """The transfer function's RGBA at world points (..., 4), zero where the crop or clip plane
+    cut the medium away."""
+    rgba = lookup(table, density_at(volume, points, clip))
+    if clip is not None:
+        rgba = np.where(clip.kept(points)[..., None], rgba, 0.0)
+    return rgba
 
 
-def albedo_at(volume: Volume, table: np.ndarray, albedo: float, points: np.ndarray) -> np.ndarray:
-    return albedo * lookup(table, density_at(volume, points))[..., :3]
+def sigma_t_at(volume: Volume, table: np.ndarray, density_scale: float, points: np.ndarray,
+               clip: ClipRegion | None = None) -> np.ndarray:
+    return density_scale * classified_at(volume, table, points, clip)[..., 3]
 
 
-def box_intersect(half_extent: np.ndarray, origin: np.ndarray, direction: np.ndarray):
-    """(t_near, t_far, hit) for rays against the box, t_near clamped at 0, as in GLSL."""
+def albedo_at(volume: Volume, table: np.ndarray, albedo: float, points: np.ndarray,
+              clip: ClipRegion | None = None) -> np.ndarray:
+    return albedo * lookup(table, density_at(volume, points, clip))[..., :3]
+
+
+def box_intersect(half_extent: np.ndarray, origin: np.ndarray, direction: np.ndarray,
+                  clip: ClipRegion | None = None):
+    """(t_near, t_far, hit) for rays against the box (the kept box with a crop or clip plane),
+    t_near clamped at 0, as in GLSL."""
     d = np.where(direction == 0.0, 1e-30, direction)
     inv = 1.0 / d
-    ta = (-half_extent - origin) * inv
-    tb = (half_extent - origin) * inv
+    lo, hi = -np.asarray(half_extent, np.float64), np.asarray(half_extent, np.float64)
+    if clip is not None:
+        lo, hi = np.asarray(clip.box_min, np.float64), np.asarray(clip.box_max, np.float64)
+    ta = (lo - origin) * inv
+    tb = (hi - origin) * inv
     t_near = np.maximum(np.max(np.minimum(ta, tb), axis=-1), 0.0)
     t_far = np.min(np.maximum(ta, tb), axis=-1)
     return t_near, t_far, t_far > t_near

@@ -43,9 +43,16 @@ def opacity_positive_between(lo: np.ndarray, hi: np.ndarray, table_alpha: np.nda
     return inside_positive_segment(t_lo) | inside_positive_segment(t_hi) | nodes
 
 
-def visible_cells(data: np.ndarray, table_alpha: np.ndarray) -> np.ndarray:
-    """bool [z, y, x], (n + 1) per axis: can sigma_t be > 0 in the cell (density scale > 0)?"""
-    d = np.pad(np.asarray(data, np.float32), 1, mode="edge")
+def visible_cells(data: np.ndarray, table_alpha: np.ndarray, clip=None,
+                  half_extent=None) -> np.ndarray:
+    """bool [z, y, x], (n + 1) per axis: can sigma_t be > 0 in the cell (density scale > 0)?
+    With a crop or clip plane (`clip`, an app.clip_region.ClipRegion in the box of `half_extent`):
+    over the kept voxels alone, (count + 1) per axis, and False where the plane cuts a cell away."""
+    data = np.asarray(data, np.float32)
+    if clip is not None:
+        (fx, fy, fz), (nx, ny, nz) = clip.voxel_first, clip.voxel_count
+        data = data[fz:fz + nz, fy:fy + ny, fx:fx + nx]
+    d = np.pad(data, 1, mode="edge")
     lo = hi = None
     for dz in (0, 1):
         for dy in (0, 1):
@@ -53,36 +60,70 @@ def visible_cells(data: np.ndarray, table_alpha: np.ndarray) -> np.ndarray:
                 s = d[dz:d.shape[0] - 1 + dz, dy:d.shape[1] - 1 + dy, dx:d.shape[2] - 1 + dx]
                 lo = s if lo is None else np.minimum(lo, s)
                 hi = s if hi is None else np.maximum(hi, s)
-    return opacity_positive_between(lo, hi, table_alpha)
+    visible = opacity_positive_between(lo, hi, table_alpha)
+    if clip is not None:
+        visible &= ~_cells_cut_away(clip, half_extent, np.asarray(data.shape[::-1]) + 1)
+    return visible
 
 
-def region_from_cells(first: np.ndarray, last: np.ndarray, dims, half_extent) -> tuple[np.ndarray, np.ndarray]:
+def _cell_faces(clip, half_extent, axis: int) -> np.ndarray:
+    """World positions of the kept cells' faces along an axis: the kept box's low face, the kept
+    voxels' centres, its high face (count + 2 values; cell k spans faces k and k + 1)."""
+    half = np.asarray(half_extent, np.float32).astype(np.float64)
+    first, count = clip.voxel_first[axis], clip.voxel_count[axis]
+    n = clip.dims[axis]
+    centres = ((2.0 * (first + np.arange(count) + 0.5)) / n - 1.0) * half[axis]
+    return np.concatenate([[clip.box_min[axis]], centres, [clip.box_max[axis]]])
+
+
+def _cells_cut_away(clip, half_extent, cells) -> np.ndarray:
+    faces = [_cell_faces(clip, half_extent, a) for a in range(3)]
+    half = np.asarray(half_extent, np.float32).astype(np.float64)
+    slack = half / np.asarray(clip.dims) / 64.0
+    k, j, i = np.meshgrid(*(np.arange(c) for c in cells[::-1]), indexing="ij")
+    lo = np.stack([faces[0][i], faces[1][j], faces[2][k]], -1)
+    hi = np.stack([faces[0][i + 1], faces[1][j + 1], faces[2][k + 1]], -1)
+    return clip.cuts_box(lo - slack, hi + slack)
+
+
+def region_from_cells(first: np.ndarray, last: np.ndarray, dims, half_extent,
+                      clip=None) -> tuple[np.ndarray, np.ndarray]:
     """World (low, high) corners from the first and last visible cell per axis (x, y, z): cell k's
     low face is the box face (k = 0) or voxel centre k - 1; its high face voxel centre k or the
-    box face (k = n)."""
+    box face (k = n). With a crop (`clip`), cells count over the kept voxels and the box is the
+    kept box."""
     half = np.asarray(half_extent, np.float64)
     low, high = np.empty(3), np.empty(3)
     for axis in range(3):
         n = int(dims[axis])
-        pos = np.concatenate([[-half[axis]],
-                              ((np.arange(n) + 0.5) / n * 2.0 - 1.0) * half[axis], [half[axis]]])
+        if clip is None:
+            pos = np.concatenate([[-half[axis]], ((np.arange(n) + 0.5) / n * 2.0 - 1.0) * half[axis],
+                                  [half[axis]]])
+        else:
+            v0, count = clip.voxel_first[axis], clip.voxel_count[axis]
+            pos = np.concatenate([[clip.box_min[axis]],
+                                  ((v0 + np.arange(count) + 0.5) / n * 2.0 - 1.0) * half[axis],
+                                  [clip.box_max[axis]]])
         low[axis], high[axis] = pos[int(first[axis])], pos[int(last[axis]) + 1]
     return low, high
 
 
 def visible_region(data: np.ndarray, half_extent, table_alpha: np.ndarray,
-                   density_scale: float) -> tuple[np.ndarray, np.ndarray]:
+                   density_scale: float, clip=None) -> tuple[np.ndarray, np.ndarray]:
     """World-space (low, high) corners of the smallest box outside which sigma_t is 0 everywhere.
-    The whole volume box when nothing is visible (then no light scatters anywhere)."""
+    The whole volume box (the kept box with a crop or clip plane) when nothing is visible (then
+    no light scatters anywhere)."""
     half = np.asarray(half_extent, np.float64)
-    if density_scale <= 0:
-        return -half, half
-    visible = visible_cells(data, table_alpha)
+    whole = ((-half, half) if clip is None else
+             (np.asarray(clip.box_min, np.float64), np.asarray(clip.box_max, np.float64)))
+    if density_scale <= 0 or (clip is not None and clip.empty):
+        return whole
+    visible = visible_cells(data, table_alpha, clip, half_extent)
     if not visible.any():
-        return -half, half
+        return whole
     dims = np.asarray(data).shape[::-1]
     first, last = np.empty(3, np.int64), np.empty(3, np.int64)
     for axis, reduce_axes in ((0, (0, 1)), (1, (0, 2)), (2, (1, 2))):  # x, y, z
         used = np.flatnonzero(visible.any(axis=reduce_axes))
         first[axis], last[axis] = used[0], used[-1]
-    return region_from_cells(first, last, dims, half)
+    return region_from_cells(first, last, dims, half, clip)

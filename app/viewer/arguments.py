@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..frontend import (add_volume_options, grid_arg, positive_float, positive_int, render_scale,
-                        window_size)
+from ..frontend import (add_scene_edit_options, add_volume_options, grid_arg, positive_float,
+                        positive_int, render_scale, window_size)
 from ..render.renderer import METHODS
 
 
@@ -12,7 +12,8 @@ def add_view_parser(sub, func) -> argparse.ArgumentParser:
     v = sub.add_parser("view", help="the interactive viewer: a window with panels over the same "
                                     "renderers; with --screenshot/--frames/--script it runs unattended")
     v.add_argument("scene", nargs="?", help="scene JSON or a volume file (default: built-in scene)")
-    v.add_argument("--method", choices=METHODS, default="pt")
+    v.add_argument("--method", choices=METHODS,
+                   help="render method (default: the one the scene was saved with, else pt)")
     v.add_argument("--split", choices=METHODS, metavar="METHOD",
                    help="split view: --method on the left, this method on the right")
     v.add_argument("--error-view", action="store_true",
@@ -30,7 +31,8 @@ def add_view_parser(sub, func) -> argparse.ArgumentParser:
                    help="window size WxH (default 1280x800)")
     v.add_argument("--render-scale", type=render_scale,
                    help="render pixels per window pixel (default 1; 0.5 on a software renderer)")
-    v.add_argument("--exposure", type=positive_float, default=1.0)
+    v.add_argument("--exposure", type=positive_float,
+                   help="display exposure (default: the scene's saved one, else 1)")
     v.add_argument("--probe-grid", type=grid_arg, help="probes per axis: N or NX,NY,NZ (1..256)")
     v.add_argument("--probe-samples", type=positive_int, help="walks per probe")
     v.add_argument("--sh-window", choices=("none", "hann", "lanczos"))
@@ -40,6 +42,7 @@ def add_view_parser(sub, func) -> argparse.ArgumentParser:
                    help="auto: the system's file dialog where one is installed (zenity, kdialog), "
                         "else the viewer's own; builtin: always the viewer's own")
     add_volume_options(v)
+    add_scene_edit_options(v)
     v.set_defaults(func=func)
     return v
 

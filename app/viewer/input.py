@@ -20,6 +20,7 @@ class Shortcut:
     keys: str                       # as shown in the help panel and accepted by scripts
     what: str
     action: Callable                # action(viewer)
+    listed: bool = True             # in the help table itself (a family: one line in GROUP_HELP)
 
 
 def _method(name: str) -> Callable:
@@ -48,11 +49,27 @@ SHORTCUTS = (
     Shortcut("tab", "hide/show the panels", lambda v: setattr(v.state, "show_ui", not v.state.show_ui)),
     Shortcut("f1", "help on/off", lambda v: setattr(v.state, "show_help", not v.state.show_help)),
     Shortcut("f12", "save a screenshot (PNG, with the panels)", lambda v: v.request_screenshot()),
-    Shortcut("ctrl+s", "save the scene JSON", lambda v: v.save_scene()),
+    Shortcut("x", "crop box and clip plane on/off (a crop box to drag when there is none)",
+             lambda v: v.state.toggle_clipping(v.session.volume.dims)),
+    Shortcut("h", "crop and clip handles on/off", lambda v: setattr(v.state, "show_handles",
+                                                                    not v.state.show_handles)),
+    Shortcut("ctrl+z", "undo the last scene edit", lambda v: v.state.undo()),
+    Shortcut("ctrl+y", "redo", lambda v: v.state.redo()),
+    Shortcut("ctrl+shift+z", "redo", lambda v: v.state.redo()),
+    Shortcut("ctrl+r", "record the movie set in 'Bookmarks and movie' (again: stop)",
+             lambda v: v.toggle_recording()),
+    *(Shortcut(f"ctrl+{n}", f"save the view as bookmark {n}",
+               (lambda k: lambda v: v.state.save_bookmark(k))(n), listed=False) for n in range(1, 10)),
+    *(Shortcut(f"shift+{n}", f"go to bookmark {n}",
+               (lambda k: lambda v: v.state.go_to_bookmark(k))(n), listed=False) for n in range(1, 10)),
+    Shortcut("ctrl+s", "save the scene JSON (with bookmarks and how the viewer shows it)",
+             lambda v: v.save_scene()),
     Shortcut("ctrl+o", "open a scene or volume file", lambda v: v.files.open_dialog()),
     Shortcut("ctrl+q", "quit", lambda v: v.request_close()),
 )
-MOUSE_HELP = (("left drag", "orbit"), ("right or middle drag", "pan"), ("wheel", "zoom"),
+GROUP_HELP = (("ctrl+1 .. ctrl+9", "save the view as bookmark N"),
+              ("shift+1 .. shift+9", "go to bookmark N"))
+MOUSE_HELP = (("left drag", "orbit (on a crop or clip handle: move that face or the plane)"), ("right or middle drag", "pan"), ("wheel", "zoom"),
               ("drop a file", "open a scene (.json), a volume (.raw, .nrrd, .npy, .nii, .nii.gz, .tif) "
                                "or a folder (TIFF stack, DICOM series)"))
 
@@ -89,7 +106,8 @@ DIVIDER_GRAB_PIXELS = 6.0
 @dataclass
 class Drag:
     button: int
-    kind: str          # orbit, pan or divider
+    kind: str          # orbit, pan, divider or handle
+    handle: object = None   # the crop or clip handle being dragged (crop_handles.Handle)
 
 
 class InputRouter:
@@ -144,6 +162,9 @@ class InputRouter:
         if self.drag.kind == "divider":
             self.divider_x = float(x)
             return
+        if self.drag.kind == "handle":
+            self.viewer.drag_handle(self.drag.handle, dx, dy)
+            return
         target = self.orbit_pixels if self.drag.kind == "orbit" else self.pan_pixels
         target[0] += dx
         target[1] += dy
@@ -152,7 +173,11 @@ class InputRouter:
         imgui.backends.glfw_mouse_button_callback(self.address, button, action, mods)
         if action == glfw.PRESS and self.drag is None and self._over_view():
             divider = self.viewer.divider_x_window()
-            if button == glfw.MOUSE_BUTTON_LEFT and divider is not None \
+            handle = (self.viewer.handle_at(*self.cursor) if button == glfw.MOUSE_BUTTON_LEFT
+                      else None)
+            if handle is not None:
+                self.drag = Drag(button, "handle", handle)
+            elif button == glfw.MOUSE_BUTTON_LEFT and divider is not None \
                     and abs(self.cursor[0] - divider) <= DIVIDER_GRAB_PIXELS:
                 self.drag = Drag(button, "divider")
             else:
@@ -173,8 +198,8 @@ class InputRouter:
         if io.want_text_input or (io.want_capture_keyboard and not mods & glfw.MOD_CONTROL):
             return
         mods &= glfw.MOD_CONTROL | glfw.MOD_SHIFT | glfw.MOD_ALT
-        shortcut = _BINDINGS.get((_ALIASES.get(key, key), mods & ~glfw.MOD_SHIFT)) \
-            or _BINDINGS.get((_ALIASES.get(key, key), mods))
+        key = _ALIASES.get(key, key)
+        shortcut = _BINDINGS.get((key, mods)) or _BINDINGS.get((key, mods & ~glfw.MOD_SHIFT))
         if shortcut is not None:
             self.viewer.run_action(shortcut)
 

@@ -17,8 +17,9 @@ from .xvfb import Xvfb, XvfbError, has_display
 
 
 def initial_state(scene: Scene, args: argparse.Namespace) -> ViewerState:
-    state = ViewerState.for_scene(scene)
-    state.set_method(args.method)
+    state = ViewerState.for_scene(scene)   # shown as the scene's "viewer" key says, if it has one
+    if args.method:
+        state.set_method(args.method)
     if args.split:
         state.split_method = args.split
         state.set_display("split")
@@ -26,8 +27,9 @@ def initial_state(scene: Scene, args: argparse.Namespace) -> ViewerState:
         state.set_display("error")
     if args.probe_view:
         state.probe_view = args.probe_view
-    state.show_box = args.box
-    state.exposure = args.exposure
+    state.show_box = args.box or state.show_box
+    if args.exposure is not None:
+        state.exposure = args.exposure
     if args.spp:
         state.max_samples = args.spp
     if args.scene and args.scene.lower().endswith(".json"):
@@ -141,14 +143,17 @@ def _run_window(args: argparse.Namespace, scene: Scene, volume, steps, scripted:
 def headless_fallback(args: argparse.Namespace, reason: str) -> int:
     """Renders the scene as `render` does when no window can be opened."""
     out = args.screenshot or "view.png"
+    method = args.method or "pt"
     print(f"view: no display available ({reason}), so no window can open. Rendering the scene "
-          f"headless instead ({args.method}, {args.spp or 64} spp) to {out}.", file=sys.stderr)
+          f"headless instead ({method}, {args.spp or 64} spp) to {out}.", file=sys.stderr)
     options = render_defaults()
-    options.update(scene=args.scene, method=args.method, spp=args.spp or 64, out=out,
+    options.update(scene=args.scene, method=method, spp=args.spp or 64, out=out,
                    probe_grid=args.probe_grid, probe_samples=args.probe_samples,
                    sh_window=args.sh_window, probe_precision=args.probe_precision, seed=args.seed,
-                   exposure=args.exposure, gl_backend=args.gl_backend,
-                   series=getattr(args, "series", None),
-                   orientation=getattr(args, "orientation", None),
-                   data_window=getattr(args, "data_window", None))
+                   exposure=args.exposure or 1.0, gl_backend=args.gl_backend,
+                   **{k: getattr(args, k, None) for k in ("series", "orientation", "data_window",
+                                                          "crop", "crop_voxels", "clip_plane",
+                                                          "transfer_function")},
+                   no_crop=getattr(args, "no_crop", False),
+                   no_clip_plane=getattr(args, "no_clip_plane", False))
     return render_to_files(argparse.Namespace(**options))

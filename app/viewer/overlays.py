@@ -4,14 +4,15 @@ from __future__ import annotations
 
 from imgui_bundle import ImVec2, imgui
 
-from .input import MOUSE_HELP, SHORTCUTS
+from .input import GROUP_HELP, MOUSE_HELP, SHORTCUTS
 
 ERROR_COLOUR = (1.0, 0.45, 0.4, 1.0)
 
 
 def shortcut_table() -> None:
     if imgui.begin_table("shortcuts", 2, imgui.TableFlags_.row_bg):
-        for keys, what in (*MOUSE_HELP, *((s.keys, s.what) for s in SHORTCUTS)):
+        for keys, what in (*MOUSE_HELP, *((s.keys, s.what) for s in SHORTCUTS if s.listed),
+                           *GROUP_HELP):
             imgui.table_next_row()
             imgui.table_next_column()
             imgui.text(keys)
@@ -111,3 +112,52 @@ def view_labels(v) -> None:
         label(x + 8, f"|{state.method} - pt|  rel. RMSE {rmse:.4f}  (pt {v.error_meter.samples[1]} spp)")
     else:
         label(x + 8, v.session.label(state.method))
+
+
+CROP_COLOUR = (1.0, 0.8, 0.25, 0.95)
+PLANE_COLOUR = (0.35, 0.85, 1.0, 0.95)
+
+
+def crop_overlay(v) -> None:
+    """The crop box's edges and the clip plane's outline over the view, with their handles (drag
+    one to move that face or the plane; 'h' hides them)."""
+    from .crop_handles import kept_box, plane_polygon
+    state = v.state
+    scene = state.scene
+    crop_on = scene.crop is not None and scene.crop.enabled
+    plane_on = scene.clip_plane is not None and scene.clip_plane.enabled
+    if not state.show_handles or not (crop_on or plane_on) or state.probe_view == "alone":
+        return
+    volume = v.session.volume
+    lo, hi = kept_box(scene, volume)
+    x, y, w, h = v.view_rect_window()
+    draw = imgui.get_foreground_draw_list()
+    draw.push_clip_rect(ImVec2(x, y), ImVec2(x + w, y + h), True)
+    scale = v.ui_scale
+    if crop_on:
+        corners = [[(lo, hi)[(k >> a) & 1][a] for a in range(3)] for k in range(8)]
+        pts = v.world_to_window(corners)
+        colour = imgui.get_color_u32(CROP_COLOUR)
+        for i in range(8):
+            for a in range(3):
+                j = i | (1 << a)
+                if j != i:
+                    draw.add_line(ImVec2(*pts[i]), ImVec2(*pts[j]), colour, 1.5 * scale)
+    if plane_on:
+        outline = plane_polygon(scene.clip_plane.normal, scene.clip_plane.distance, lo, hi)
+        if len(outline):
+            pts = v.world_to_window(outline)
+            colour = imgui.get_color_u32(PLANE_COLOUR)
+            for i in range(len(pts)):
+                draw.add_line(ImVec2(*pts[i]), ImVec2(*pts[(i + 1) % len(pts)]), colour,
+                              2.0 * scale)
+    mouse = imgui.get_io().mouse_pos
+    for mark, (hx, hy) in v.handle_points():
+        colour = CROP_COLOUR if mark.kind == "crop" else PLANE_COLOUR
+        hovered = (mouse.x - hx) ** 2 + (mouse.y - hy) ** 2 <= (9.0 * scale) ** 2
+        radius = (7.0 if hovered else 5.5) * scale
+        draw.add_circle_filled(ImVec2(hx, hy), radius, imgui.get_color_u32(colour))
+        draw.add_circle(ImVec2(hx, hy), radius, imgui.get_color_u32((0.1, 0.1, 0.1, 1.0)),
+                        0, 1.5 * scale)
+        v.widgets.note_point(f"handle {mark.name}", hx, hy)
+    draw.pop_clip_rect()

@@ -14,6 +14,8 @@ from ..scene import (ORIENTATIONS, PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLA
 from ..volume import BUILTIN_VOLUMES
 from .overlays import shortcut_table
 from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
+from .crop_panel import crop_section
+from .movie_panel import movie_section
 from .tf_editor import data_ticks, heat_legend, transfer_panel
 
 SIDEBAR_WIDTH = 370           # logical pixels, before the UI scale
@@ -412,7 +414,7 @@ def stats_section(v) -> None:
     if history.size and implot.begin_plot("##frame times", ImVec2(-1, 90 * v.ui_scale),
                                           implot.Flags_.no_menus | implot.Flags_.no_box_select
                                           | implot.Flags_.no_legend | implot.Flags_.no_inputs):
-        implot.setup_axes(None, "ms", implot.AxisFlags_.no_tick_labels, implot.AxisFlags_.auto_fit)
+        implot.setup_axes("", "ms", implot.AxisFlags_.no_tick_labels, implot.AxisFlags_.auto_fit)
         implot.setup_axis_limits(implot.ImAxis_.x1, 0, max(len(history), 2), implot.Cond_.always)
         implot.plot_line("GPU ms", history)
         implot.end_plot()
@@ -454,6 +456,8 @@ def help_section(v) -> None:
 
 
 SECTIONS = (("Render", render_section), ("Data", data_section), ("Transfer function", transfer_panel),
-            ("Light", light_section), ("Probes", probes_section), ("Stats", stats_section),
+            ("Crop and clip", crop_section), ("Light", light_section), ("Probes", probes_section),
+            ("Bookmarks and movie", movie_section), ("Stats", stats_section),
             ("Camera and files", camera_section), ("Help (F1)", help_section))
-CLOSED_AT_START = ("Help (F1)", "Data", "Camera and files")
+CLOSED_AT_START = ("Help (F1)", "Data", "Camera and files", "Crop and clip",
+                   "Bookmarks and movie")

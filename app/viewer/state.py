@@ -6,7 +6,8 @@ import math
 from dataclasses import dataclass, field, replace
 
 from ..render.renderer import METHODS
-from ..scene import CameraSpec, Scene
+from ..scene import BookmarkSpec, CameraSpec, ClipPlaneSpec, CropSpec, Scene, ViewerSpec
+from .history import SceneHistory
 
 DISPLAY_MODES = ("image", "split", "error")   # one method; two side by side; error heat map
 PROBE_VIEWS = ("off", "over", "alone")        # probe spheres: none, over the volume, alone
@@ -31,12 +32,124 @@ class ViewerState:
     show_ui: bool = True
     show_help: bool = False
     scene_path: str | None = None          # the scene file it came from (saving writes elsewhere)
+    show_handles: bool = True              # the crop box's and clip plane's handles over the view
     errors: list[str] = field(default_factory=list)
     messages: list[str] = field(default_factory=list)
+    history: SceneHistory | None = None    # undo and redo (ctrl+z, ctrl+y)
+
+    def __post_init__(self):
+        if self.history is None:
+            self.history = SceneHistory(self.scene)
 
     @classmethod
     def for_scene(cls, scene: Scene, **kw) -> "ViewerState":
-        return cls(scene=scene, home_camera=scene.camera, **kw)
+        state = cls(scene=scene, home_camera=scene.camera, **kw)
+        state.apply_viewer_spec(scene.viewer)
+        return state
+
+    # ---- the viewer's state kept in the scene file ("viewer") -----------------------------------
+    def apply_viewer_spec(self, spec: ViewerSpec | None) -> None:
+        """Shows the scene as the viewer that saved it did: method, view, exposure, probe view."""
+        if spec is None:
+            return
+        self.set_method(spec.method)
+        self.split_method = spec.split_method
+        self.set_display(spec.display)
+        self.exposure = spec.exposure
+        self.probe_view = spec.probe_view
+        self.show_box = spec.show_box
+
+    def viewer_spec(self) -> ViewerSpec:
+        return ViewerSpec(method=self.method, display=self.display, split_method=self.split_method,
+                          exposure=float(self.exposure), probe_view=self.probe_view,
+                          show_box=bool(self.show_box))
+
+    # ---- undo and redo -------------------------------------------------------------------------
+    def undo(self) -> None:
+        scene = self.history.undo(self.scene)
+        if scene is None:
+            self.note("nothing to undo")
+        else:
+            self.scene = scene
+
+    def redo(self) -> None:
+        scene = self.history.redo(self.scene)
+        if scene is None:
+            self.note("nothing to redo")
+        else:
+            self.scene = scene
+
+    # ---- bookmarks -----------------------------------------------------------------------------
+    def save_bookmark(self, slot: int | None = None, name: str | None = None) -> BookmarkSpec:
+        """The current camera as bookmark number `slot` (1-based; it replaces the one there, keeping
+        its name) or as a new last one."""
+        cam = self.scene.camera
+        marks = list(self.scene.bookmarks)
+        index = len(marks) if slot is None or slot > len(marks) else slot - 1
+        if name is None:
+            name = marks[index].name if index < len(marks) else _free_bookmark_name(marks)
+        mark = BookmarkSpec(name=name, eye=cam.eye, target=cam.target, up=cam.up, fov_y=cam.fov_y)
+        if index < len(marks):
+            marks[index] = mark
+        else:
+            marks.append(mark)
+        self.scene = self.scene.replace(bookmarks=tuple(marks))
+        self.note(f"bookmark {index + 1} '{name}' saved")
+        return mark
+
+    def go_to_bookmark(self, slot: int) -> None:
+        """The camera of bookmark number `slot` (1-based)."""
+        marks = self.scene.bookmarks
+        if not 1 <= slot <= len(marks):
+            self.note(f"no bookmark {slot} (the scene has {len(marks)}; ctrl+{slot} saves one)")
+            return
+        self.set_camera(marks[slot - 1].camera(self.scene.camera))
+        self.note(f"bookmark {slot} '{marks[slot - 1].name}'")
+
+    def delete_bookmark(self, slot: int) -> None:
+        marks = list(self.scene.bookmarks)
+        if 1 <= slot <= len(marks):
+            del marks[slot - 1]
+            self.scene = self.scene.replace(bookmarks=tuple(marks))
+
+    # ---- crop box and clip plane ---------------------------------------------------------------
+    def set_crop(self, lo, hi, units: str | None = None, enabled: bool = True) -> None:
+        crop = self.scene.crop
+        units = units or (crop.units if crop is not None else "voxels")
+        if units == "voxels":
+            lo, hi = tuple(int(round(v)) for v in lo), tuple(int(round(v)) for v in hi)
+        else:
+            lo, hi = tuple(float(v) for v in lo), tuple(float(v) for v in hi)
+        if any(b <= a for a, b in zip(lo, hi)):
+            return   # an empty box is never meant: the edit is not taken
+        self.scene = self.scene.replace(crop=CropSpec(min=lo, max=hi, units=units,
+                                                      enabled=enabled))
+
+    def set_clip_plane(self, normal=None, distance: float | None = None,
+                       enabled: bool | None = None) -> None:
+        plane = self.scene.clip_plane or ClipPlaneSpec(normal=(1.0, 0.0, 0.0), distance=0.0,
+                                                       enabled=False)
+        changes = {k: v for k, v in (("normal", None if normal is None else tuple(map(float, normal))),
+                                     ("distance", None if distance is None else float(distance)),
+                                     ("enabled", enabled)) if v is not None}
+        self.scene = self.scene.replace(clip_plane=replace(plane, **changes))
+
+    def toggle_clipping(self, dims=None) -> None:
+        """The crop box and the clip plane on or off together (key x); with neither in the scene,
+        a crop box around the whole volume, its handles shown, to drag."""
+        crop, plane = self.scene.crop, self.scene.clip_plane
+        if crop is None and plane is None:
+            if dims is None:
+                return
+            self.set_crop((0, 0, 0), tuple(dims), "voxels")
+            self.show_handles = True
+            return
+        on = not any(x is not None and x.enabled for x in (crop, plane))
+        if crop is not None:
+            self.scene = self.scene.replace(crop=replace(crop, enabled=on))
+        if plane is not None:
+            self.scene = self.scene.replace(clip_plane=replace(plane, enabled=on))
+        self.note(f"crop and clip {'on' if on else 'off'}")
 
     # ---- what is rendered ----------------------------------------------------------------------
     def shown_methods(self) -> list[str]:
@@ -123,11 +236,13 @@ class ViewerState:
         from ..transfer import opacity_points, rgba_with_opacity
         tf = self.scene.transfer_function
         if tf.rgba is not None:
-            if "colormap" in changes:
+            if "colormap" in changes or "colors" in changes:
                 changes.setdefault("opacity", opacity_points(tf)[0])
                 tf = replace(tf, rgba=None)
             elif "opacity" in changes:
                 changes["rgba"] = rgba_with_opacity(tf, changes.pop("opacity"))
+        if "colormap" in changes:      # a colormap replaces colour points
+            changes.setdefault("colors", None)
         self.scene = self.scene.replace(transfer_function=replace(tf, **changes))
 
     def cycle_colormap(self, step: int = 1) -> None:
@@ -144,6 +259,8 @@ class ViewerState:
 
     def load_scene(self, scene: Scene, path: str | None = None) -> None:
         self.scene, self.home_camera = scene, scene.camera
+        self.history.reset(scene)   # another scene: the steps were the last one's
+        self.apply_viewer_spec(scene.viewer)
         if path is not None and path.lower().endswith(".json"):
             self.scene_path = path
 
@@ -156,6 +273,11 @@ class ViewerState:
     def note(self, text: str) -> None:
         self.messages.append(text)
         del self.messages[:-MAX_MESSAGES]
+
+
+def _free_bookmark_name(marks) -> str:
+    taken = {m.name for m in marks}
+    return next(f"view {i}" for i in range(1, len(marks) + 2) if f"view {i}" not in taken)
 
 
 def _next_step(value: int, step: int) -> int:

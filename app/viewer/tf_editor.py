@@ -10,8 +10,11 @@ from dataclasses import replace
 
 from imgui_bundle import ImVec2, imgui, implot
 
+from ..colorbar import data_ticks as data_ticks  # noqa: F401 (the panels import it from here)
+from ..scene import SceneError, load_transfer_function, save_transfer_function
 from ..scene_types import WINDOW_PRESETS
 from ..transfer import ALIASES, COLORMAPS
+from ..transfer_presets import colour_points_from, opacity_presets
 from .state import add_point, move_point, remove_point
 
 PRESETS = tuple(c for c in COLORMAPS if c not in ALIASES)
@@ -25,22 +28,6 @@ def histogram_curve(volume, bins: int = HISTOGRAM_BINS) -> tuple[np.ndarray, np.
     logc = np.log1p(counts)
     height = logc / logc.max() if logc.max() > 0 else logc
     return (np.arange(bins) + 0.5) / bins, height
-
-
-def data_ticks(value_range: tuple[float, float], target: int = 5) -> tuple[list[float], list[str]]:
-    """Ticks for an axis drawn over normalised density [0, 1] but labelled in data units (HU for
-    CT): round data values in the range (steps of 1, 2 or 5 times a power of ten) and where they
-    fall on [0, 1], as value_range (or the window) maps them."""
-    lo, hi = (float(v) for v in value_range)
-    span = hi - lo
-    if not (math.isfinite(span) and span > 0):
-        return [0.0, 1.0], [f"{lo:.4g}", f"{hi:.4g}"]
-    raw = span / max(target - 1, 1)
-    mag = 10.0 ** math.floor(math.log10(raw))
-    step = next(m * mag for m in (1.0, 2.0, 5.0, 10.0) if m * mag >= raw)
-    first = math.ceil(lo / step - 1e-9)
-    values = [k * step for k in range(first, math.floor(hi / step + 1e-9) + 1)]
-    return [(val - lo) / span for val in values], [f"{val:.4g}" for val in values]
 
 
 WINDOW_CHOICES = ("value range",) + tuple(WINDOW_PRESETS) + ("custom",)
@@ -104,13 +91,22 @@ def transfer_panel(v) -> None:
                            "curve rewrites its opacity and keeps its colours; choosing a colormap "
                            "replaces its colours and keeps the curve.")
     current = ALIASES.get(tf.colormap, tf.colormap)
-    changed, index = imgui.combo("Colormap", PRESETS.index(current) if current in PRESETS else 0, list(PRESETS))
+    names = list(PRESETS) if tf.colors is None else ["colour points", *PRESETS]
+    shown = current if tf.colors is None else "colour points"
+    changed, index = imgui.combo("Colormap", names.index(shown) if shown in names else 0, names)
     ui.note("Colormap")
-    if changed:
-        state.set_transfer(colormap=PRESETS[index])
+    if changed and names[index] != "colour points":
+        state.set_transfer(colormap=names[index])
     table = v.session.renderer.resources.table
-    colour_bar(table[:, :3], width, 14 * v.ui_scale)
+    if tf.colors is None:
+        colour_bar(table[:, :3], width, 14 * v.ui_scale)
+        if imgui.button("Edit colours as points"):
+            state.set_transfer(colors=colour_points_from(table[:, :3]))
+        ui.note("Edit colours as points")
+    else:
+        _colour_points_editor(v, width)
     window_editor(v)
+    _opacity_presets(v)
     _opacity_editor(v, width)
     changed, value = imgui.slider_float("Density scale", state.scene.density_scale, 0.1, 10000.0, "%.1f",
                                         imgui.SliderFlags_.logarithmic)
@@ -125,6 +121,110 @@ def transfer_panel(v) -> None:
     ui.note("Anisotropy g")
     if changed:
         state.edit(anisotropy=float(value))
+    _transfer_file(v)
+
+
+def _transfer_file(v) -> None:
+    """Save the transfer function on its own, or load one (JSON, the scene's key as a file)."""
+    state, ui = v.state, v.widgets
+    changed, text = imgui.input_text("TF file", v.transfer_file)
+    ui.note("TF file")
+    if changed:
+        v.transfer_file = text
+    if imgui.button("Save TF"):
+        try:
+            path = save_transfer_function(v.transfer_file, state.scene.transfer_function)
+            state.note(f"saved the transfer function to {path}")
+        except OSError as exc:
+            state.error(f"could not save the transfer function to {v.transfer_file}: {exc}")
+    ui.note("Save TF")
+    imgui.same_line()
+    if imgui.button("Load TF"):
+        try:
+            state.edit(transfer_function=load_transfer_function(v.transfer_file))
+            state.note(f"loaded the transfer function {v.transfer_file}")
+        except SceneError as exc:
+            state.error(str(exc))
+    ui.note("Load TF")
+
+
+def _opacity_presets(v) -> None:
+    """Ramps, and tents over the histogram's peaks (transfer_presets.py), as the opacity curve."""
+    state, ui = v.state, v.widgets
+    volume = v.session.volume
+    cached = getattr(v, "_opacity_presets", (None, None))
+    if cached[0] is not volume:
+        cached = (volume, opacity_presets(volume))
+        v._opacity_presets = cached
+    presets = cached[1]
+    names = ["choose..."] + list(presets)
+    changed, index = imgui.combo("Opacity preset", 0, names)
+    ui.note("Opacity preset")
+    if changed and index > 0:
+        state.set_transfer(opacity=presets[names[index]])
+
+
+POINT_MARKER = (10.0, 12.0)   # a colour point's marker under the bar, logical pixels
+
+
+def _colour_points_editor(v, width: float) -> None:
+    """The colour points on the bar they make: drag a marker along it, click one to pick its
+    colour, right-click one to remove it, double-click the bar to add one there."""
+    state, ui = v.state, v.widgets
+    tf = state.scene.transfer_function
+    points = [list(p) for p in tf.colors]
+    table = v.session.renderer.resources.table
+    s = v.ui_scale
+    bar_h = 16 * s
+    origin = imgui.get_cursor_screen_pos()
+    colour_bar(table[:, :3], width, bar_h)
+    ui.note("colour bar")
+    if imgui.is_item_hovered() and imgui.is_mouse_double_clicked(imgui.MouseButton_.left):
+        x = min(max((imgui.get_io().mouse_pos.x - origin.x) / width, 0.0), 1.0)
+        rgb = table[int(round(x * (len(table) - 1))), :3]
+        points.append([x, *map(float, rgb)])
+        points.sort(key=lambda p: p[0])
+        state.set_transfer(colors=tuple(map(tuple, points)))
+        return
+    draw = imgui.get_window_draw_list()
+    mw, mh = POINT_MARKER[0] * s, POINT_MARKER[1] * s
+    top = origin.y + bar_h + 1
+    new = None
+    for i, (x, r, g, b) in enumerate(points):
+        cx = origin.x + x * width
+        imgui.set_cursor_screen_pos(ImVec2(cx - mw / 2, top))
+        imgui.invisible_button(f"##colour point {i}", ImVec2(mw, mh))
+        ui.note_point(f"colour point {i}", cx, top + mh / 2)
+        active = imgui.is_item_active()
+        if active and imgui.is_mouse_dragging(imgui.MouseButton_.left, 2.0):
+            v.colour_point_dragged = True    # a drag, not a click: no colour picker after it
+            nx = min(max((imgui.get_io().mouse_pos.x - origin.x) / width, 0.0), 1.0)
+            lo = points[i - 1][0] if i > 0 else 0.0
+            hi = points[i + 1][0] if i + 1 < len(points) else 1.0
+            new = [p[:] for p in points]
+            new[i][0] = min(max(nx, lo), hi)
+        elif imgui.is_item_deactivated():
+            if not getattr(v, "colour_point_dragged", False):
+                imgui.open_popup(f"colour point {i}")
+            v.colour_point_dragged = False
+        if imgui.is_item_clicked(imgui.MouseButton_.right) and len(points) > 1:
+            new = [p for j, p in enumerate(points) if j != i]
+        colour = imgui.get_color_u32((r, g, b, 1.0))
+        edge = imgui.get_color_u32((1.0, 1.0, 1.0, 1.0) if active else (0.1, 0.1, 0.1, 1.0))
+        a, b2, c = ImVec2(cx, top), ImVec2(cx - mw / 2, top + mh), ImVec2(cx + mw / 2, top + mh)
+        draw.add_triangle_filled(a, b2, c, colour)
+        draw.add_triangle(a, b2, c, edge, 1.5)
+        if imgui.begin_popup(f"colour point {i}"):
+            changed, rgb = imgui.color_picker3(f"##pick {i}", [r, g, b])
+            if changed:
+                new = [p[:] for p in points]
+                new[i][1:] = [float(c) for c in rgb]
+            imgui.end_popup()
+    imgui.set_cursor_screen_pos(ImVec2(origin.x, top + mh + 4 * s))
+    imgui.text_disabled(f"{len(points)} colour points: drag a marker, click it for its colour, "
+                        "right-click removes, double-click the bar adds")
+    if new is not None:
+        state.set_transfer(colors=tuple(tuple(float(c) for c in p) for p in new))
 
 
 def _opacity_editor(v, width: float) -> None:

@@ -20,7 +20,9 @@ from ..volume import VolumeError, load_scene_volume
 from . import layout, orbit, overlays, panels
 from .display import BACKGROUND, DisplayPass, ErrorMeter
 from .files import FileDialogs, builtin_scene, datasets, scene_for_path
+from . import crop_handles
 from .probe_view import BoxOutline, ProbeSpheres, probe_centres
+from .recorder import MovieRecorder
 from .session import FrameTimes, RenderSession
 from .state import ViewerState
 from ..transfer import opacity_points
@@ -65,6 +67,11 @@ class Viewer:
         self.frame_index = 0
         self._histogram = (None, None)
         self._opacity_points = (None, None)
+        self._drag_start = None                  # what a handle's drag moves from
+        self._drag_distance = 0.0                # world units dragged so far
+        self.recorder: MovieRecorder | None = None   # the movie being recorded, one frame a frame
+        self.movie = MovieRecorder.default_settings()  # the panel's movie settings
+        self.transfer_file = "transfer_function.json"  # the transfer-function panel's file field
 
     # ---- geometry ------------------------------------------------------------------------------
     def sidebar_width(self) -> float:
@@ -116,11 +123,13 @@ class Viewer:
         self.close_requested = True
 
     def save_scene(self, path: str | None = None) -> Path | None:
-        """Writes the scene JSON, the camera's image size set to the current render size."""
+        """Writes the scene JSON, the camera's image size set to the current render size, with
+        the bookmarks and how the viewer shows it (method, view, exposure: the "viewer" key)."""
         target = Path(path or self.scene_file)
         w, h = self.render_size()
         scene = self.state.scene
-        data = scene_to_dict(scene.replace(camera=replace(scene.camera, width=w, height=h)))
+        data = scene_to_dict(scene.replace(camera=replace(scene.camera, width=w, height=h),
+                                           viewer=self.state.viewer_spec()))
         volume = data.get("volume", {})
         if volume.get("path") and scene.base_dir and not Path(volume["path"]).is_absolute():
             candidate = Path(scene.base_dir) / volume["path"]
@@ -155,6 +164,85 @@ class Viewer:
         for note in volume.notes:
             self.state.note(note)
         return True
+
+    # ---- the crop box's and clip plane's handles -------------------------------------------------
+    def world_to_window(self, points) -> np.ndarray:
+        """World points (k, 3) as window coordinates (what the cursor reports), (k, 2)."""
+        w, h = self.session.size
+        if w <= 0 or h <= 0:
+            return np.zeros((0, 2))
+        pixels = orbit.project(self.view_projection(), np.asarray(points, np.float64).reshape(-1, 3),
+                               w, h)
+        x0, y0, rw, rh = self.view_rect_window()
+        return np.stack([x0 + pixels[:, 0] / w * rw, y0 + pixels[:, 1] / h * rh], axis=1)
+
+    def handle_points(self) -> list[tuple]:
+        """(handle, window position) of every handle shown."""
+        if not self.state.show_handles:
+            return []
+        marks = crop_handles.handles(self.state.scene, self.session.volume)
+        if not marks:
+            return []
+        where = self.world_to_window([m.position for m in marks])
+        return list(zip(marks, map(tuple, where.tolist())))
+
+    def handle_at(self, x: float, y: float):
+        """The handle under the cursor (within GRAB_PIXELS), its drag begun; None if none."""
+        best, best_d = None, crop_handles.GRAB_PIXELS
+        for mark, (hx, hy) in self.handle_points():
+            d = float(np.hypot(hx - x, hy - y))
+            if d <= best_d:
+                best, best_d = mark, d
+        if best is not None:
+            self._drag_start = crop_handles.drag_start(self.state.scene, best)
+            self._drag_distance = 0.0
+        return best
+
+    def drag_handle(self, mark, dx: float, dy: float) -> None:
+        """Moves a handle by a cursor move (window pixels): the part of it along the handle's
+        direction as the view shows that direction."""
+        p0 = np.asarray(mark.position, np.float64)
+        ends = self.world_to_window([p0, p0 + 0.1 * np.asarray(mark.direction)])
+        screen = (ends[1] - ends[0]) / 0.1            # window pixels per world unit along it
+        length2 = float(screen @ screen)
+        if length2 < 1e-6 or self._drag_start is None:
+            return                                    # seen end-on: a drag cannot say how far
+        self._drag_distance += float(np.array([dx, dy]) @ screen) / length2
+        try:
+            self.state.scene = crop_handles.dragged(self.state.scene, self.session.volume, mark,
+                                                    self._drag_start, self._drag_distance)
+        except RECOVERABLE as exc:
+            self.state.error(f"crop: {exc}")
+
+    # ---- movies --------------------------------------------------------------------------------
+    def toggle_recording(self) -> None:
+        """Starts recording the movie the panel sets up, or stops the one under way."""
+        if self.recorder is not None:
+            path = self.recorder.stop()
+            self.recorder = None
+            self.state.note(f"stopped recording ({path} holds what was recorded)")
+            return
+        try:
+            self.recorder = MovieRecorder(self.session.renderer, self.state.scene,
+                                          self.session.volume, self.movie)
+        except RECOVERABLE as exc:
+            self.state.error(f"movie: {exc}")
+            return
+        self.state.note(f"recording {self.recorder.total} frames to {self.movie['out']}")
+
+    def _record_step(self) -> None:
+        if self.recorder is None:
+            return
+        try:
+            done = self.recorder.step()
+        except RECOVERABLE as exc:
+            self.state.error(f"movie: {exc}")
+            self.recorder.stop()
+            self.recorder = None
+            return
+        if done:
+            self.state.note(self.recorder.finish_note())
+            self.recorder = None
 
     def open_builtin(self, name: str) -> None:
         size = self.state.scene.volume.size if self.state.scene.volume.path is None else (64, 64, 64)
@@ -197,7 +285,9 @@ class Viewer:
     def render_frame(self) -> FrameTimes:
         """Advances the renderers and draws the picture into the window's framebuffer."""
         state = self.state
+        state.history.observe(state.scene, busy=self._mouse_held())
         self._sync()
+        self._record_step()
         times = FrameTimes()
         if self._halted_scene is not None and self._halted_scene is not state.scene:
             self._halted_scene = None
@@ -254,6 +344,16 @@ class Viewer:
                 self.ctx.viewport = rect
                 box.draw(matrix, session.volume.half_extent)
 
+    def _mouse_held(self) -> bool:
+        """A mouse button down (a drag under way: a slider, a curve point, a handle)."""
+        if self.input is not None and self.input.drag is not None:
+            return True
+        try:
+            from imgui_bundle import imgui
+            return any(imgui.is_mouse_down(b) for b in range(3))
+        except Exception:   # no ImGui frame yet
+            return False
+
     def _pass(self, name: str, cls):
         """A drawing pass, built on first use; a shader that fails is reported once and skipped."""
         if name in self._passes:
@@ -278,6 +378,7 @@ class Viewer:
         if self.state.show_ui:
             panels.sidebar(self)
         overlays.view_labels(self)
+        overlays.crop_overlay(self)
         overlays.help_window(self)
         overlays.file_browser(self)
         overlays.error_window(self)
@@ -344,6 +445,13 @@ class Viewer:
                              if session.volume.dicom_series is not None else None),
             "volume_notes": list(session.volume.notes),
             "opacity_points": [list(p) for p in self.opacity_points()[0]],
+            "clip_region": (None if session.renderer.resources.clip is None else
+                            {"box_min": list(session.renderer.resources.clip.box_min),
+                             "box_max": list(session.renderer.resources.clip.box_max),
+                             "plane": list(session.renderer.resources.clip.plane)}),
+            "handles": {m.name: list(p) for m, p in self.handle_points()},
+            "undo_steps": len(s.history.undo_steps), "redo_steps": len(s.history.redo_steps),
+            "recording": None if self.recorder is None else self.recorder.progress(),
             "errors": list(s.errors), "messages": list(s.messages),
             "widgets": {k: list(v) for k, v in self.widgets.rects.items()},
         }

@@ -25,6 +25,9 @@
 uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
 uniform int max_path_steps;   // hang guard: tracking steps one path may take in all
+#if defined(WALK_SUN_GRID)
+uniform float walk_sun_correction;   // probability of a shadow ray correcting the grid's sun
+#endif
 #if defined(PROBE_LIGHTING)
 // The scattering event at which a probe renderer reads the probes and ends the path (>= 1). 1 is
 // the paper's renderer: the probes stand in for all light arriving at the first event but the
@@ -198,10 +201,26 @@ int path_flight(inout PathState p, inout int steps_left)
     }
 #endif
 #if defined(WALK_SUN_GRID)
-    // The sun's transmittance from the baked light grid (lib/light_grid.glsl), no shadow ray.
-    p.radiance += p.throughput * sun_irradiance
-                  * (light_grid_transmittance(p.x) * phase_hg(dot(sun_direction, p.w), anisotropy));
-    return STEP_CONTINUE;
+    // The sun's transmittance from the baked light grid (lib/light_grid.glsl), corrected without
+    // bias: with probability q = walk_sun_correction a ratio-tracked shadow ray T_ray is traced and
+    // the event adds T_grid + (T_ray - T_grid) / q, otherwise T_grid; the mean is E[T_ray], the
+    // sun's exact transmittance, whatever the grid's error (which on a thin backlit shell or a
+    // pinhole's beam made probes 2.6-6% dark: bench/h100-bias). The correction's shadow ray
+    // starts with weight 1 / q in shadow_transmittance. q = 0: the grid alone (biased).
+    {
+        float sun_phase = phase_hg(dot(sun_direction, p.w), anisotropy);
+        float grid = light_grid_transmittance(p.x);
+        bool correct = walk_sun_correction > 0.0 && any(greaterThan(sun_irradiance, vec3(0.0)))
+                       && rng_next(p.rng) < walk_sun_correction;
+        float grid_weight = correct ? 1.0 - 1.0 / walk_sun_correction : 1.0;
+        p.radiance += p.throughput * sun_irradiance * (grid * grid_weight * sun_phase);
+        if (!correct)
+            return STEP_CONTINUE;
+        p.shadow_t = -1.0;
+        p.shadow_transmittance = 1.0 / walk_sun_correction;
+        p.shadow_pending = 1;
+        return STEP_CONTINUE;
+    }
 #endif
     if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
         p.shadow_t = -1.0;

@@ -1,7 +1,8 @@
 // The participating medium of SPEC.md (post-classification): density from a 3D texture
-// (cell-centred, trilinear, clamped to the edge voxel), a transfer function table, and the box.
-// NumPy twin: app/medium.py.
+// (cell-centred, trilinear, clamped to the edge voxel), a transfer function table, and the box;
+// a crop box and a clip plane cut it (lib/clip_region.glsl). NumPy twin: app/twins/medium.py.
 #include "lib/checks.glsl"
+#include "lib/clip_region.glsl"
 uniform sampler3D volume_density;     // normalised density in [0, 1]
 uniform sampler2D transfer_function;  // N x 1 RGBA32F, entries at densities linspace(0, 1, N)
 uniform int transfer_size;            // N
@@ -27,7 +28,7 @@ layout(std430, binding = 8) readonly buffer TransferTable { vec4 transfer_entrie
 
 float density_at(vec3 p)
 {
-    return texture(volume_density, p / (2.0 * box_half_extent) + 0.5).r;
+    return texture(volume_density, kept_sample_point(p) / (2.0 * box_half_extent) + 0.5).r;
 }
 
 // Linear interpolation between table entries, written a + (b - a) f so that equal entries give
@@ -42,9 +43,16 @@ vec4 transfer_at(float d)
     return a + (b - a) * (x - float(i0));
 }
 
+// The transfer function's RGBA at p: zero where the crop or the clip plane cut the medium away
+// (the one place that test is made; sigma_t_at and the raymarcher read the medium through it).
+vec4 classified_at(vec3 p)
+{
+    return kept_at(p) ? transfer_at(density_at(p)) : vec4(0.0);
+}
+
 float sigma_t_at(vec3 p)
 {
-    return density_scale * transfer_at(density_at(p)).a;
+    return density_scale * classified_at(p).a;
 }
 
 // Single-scattering albedo per channel (sigma_s / sigma_t) at p.
@@ -53,12 +61,13 @@ vec3 albedo_at(vec3 p)
     return albedo * transfer_at(density_at(p)).rgb;
 }
 
-// Slab test against the volume box; robust to zero direction components.
+// Slab test against the volume box (the kept box where a crop or clip plane is on: beyond it
+// the medium is vacuum); robust to zero direction components.
 bool box_intersect(vec3 origin, vec3 direction, out float t_near, out float t_far)
 {
     vec3 inv = 1.0 / mix(direction, vec3(1e-30), equal(direction, vec3(0.0)));
-    vec3 ta = (-box_half_extent - origin) * inv;
-    vec3 tb = (box_half_extent - origin) * inv;
+    vec3 ta = ((clip_region_on == 0 ? -box_half_extent : kept_box_min) - origin) * inv;
+    vec3 tb = ((clip_region_on == 0 ? box_half_extent : kept_box_max) - origin) * inv;
     vec3 tmin = min(ta, tb);
     vec3 tmax = max(ta, tb);
     t_near = max(max(tmin.x, tmin.y), max(tmin.z, 0.0));

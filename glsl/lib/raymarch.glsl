@@ -46,23 +46,33 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
     vec3 radiance = vec3(0.0);
     float scatter_allowed = max_bounces > 0 ? 1.0 : 0.0;
     float sun_phase = phase_hg(dot(sun_direction, d), anisotropy);
+    // Segment i is [t0 + i dt, t0 + (i + 1) dt], sampled at its jittered point for sigma_t, the
+    // colour and the probes; the sun's optical depth at its two ends, the end carried over to the
+    // next segment (-1: not fetched, after a jump over empty space).
+    float tau_start = -1.0;
     for (int i = 0; i < n && transmittance > 1e-6; ++i) {
         float t = t0 + (float(i) + jitter) * dt;
         vec3 x = origin + t * d;
-        vec4 tf = transfer_at(density_at(x));
+        vec4 tf = classified_at(x);
         float sigma_t = density_scale * tf.a;
         if (sigma_t <= 0.0) {
             int last = empty_space_last_index(origin, d, t, i, t0, dt, jitter);
             CHECK_TRUE(last >= i, CHECK_SITE_MARCH_LOOP);   // never back
             i = last;
+            tau_start = -1.0;
             continue;
         }
         float opacity = 1.0 - exp(-sigma_t * dt);
         float probe_sun;
         vec3 inscattered = probe_inscattered(x, d, probe_sun);
-        float sun_t = light_grid_transmittance(x);
-        vec3 source = albedo * tf.rgb * (inscattered + sun_irradiance * (sun_t * sun_phase));
-        radiance += transmittance * opacity * scatter_allowed * source;
+        if (tau_start < 0.0)
+            tau_start = light_grid_optical_depth(origin + (t0 + float(i) * dt) * d);
+        float tau_end = light_grid_optical_depth(origin + (t0 + float(i + 1) * dt) * d);
+        float sun_weight = segment_sun_weight(sigma_t, dt, tau_start, tau_end);
+        tau_start = tau_end;
+        vec3 source = albedo * tf.rgb * (opacity * inscattered
+                                         + sun_irradiance * (sun_weight * sun_phase));
+        radiance += transmittance * scatter_allowed * source;
         transmittance *= 1.0 - opacity;
     }
     return radiance + transmittance * environment;

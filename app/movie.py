@@ -1,0 +1,160 @@
+"""Movies: `radiance-probes animate SCENE`, the viewer's recorder and `bench --preset movie` all
+render a camera path (app/camera_path.py) here, frame after frame, into a MovieWriter.
+
+The probes (and the light grid) are baked once, before the first frame: a camera move never
+touches the bake key (Renderer.bake_key), so every frame reads the same probes, and a movie of
+raymarched frames costs one bake plus a raymarch per frame. Each frame is its own accumulation of
+`spp` samples (for the raymarcher, jittered frames) with the same seed, tone mapped on the GPU and
+handed to the encoder, which writes while the next frame renders.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .camera_path import keyframes, turntable
+from .scene_types import CameraSpec, Scene
+
+
+@dataclass
+class MovieResult:
+    path: str
+    frames: int
+    width: int
+    height: int
+    method: str
+    spp: int
+    bakes: int                 # probe bakes the movie ran (1 for a probe method, 0 for pt)
+    bake_ms: float             # their GPU time, the light grid's included
+    render_ms: float           # GPU time of the frames' samples
+    wall_s: float              # the whole movie on the host's clock: bake, frames, encoding
+    kept: dict = field(default_factory=dict)   # frame index -> linear image (bench)
+
+    def summary(self) -> str:
+        return (f"{self.frames} frames {self.width}x{self.height}, {self.method} at {self.spp} "
+                f"{'frames' if self.method == 'raymarch' else 'spp'} each: {self.wall_s:.2f} s in "
+                f"all; probes baked {self.bakes}x ({self.bake_ms:.1f} ms GPU), frames "
+                f"{self.render_ms:.1f} ms GPU ({self.render_ms / max(self.frames, 1):.2f} ms a frame)")
+
+
+def movie_cameras(scene: Scene, frames: int, turntable_degrees: float | None = None,
+                  bookmarks: list[str] | None = None) -> list[CameraSpec]:
+    """The cameras of a movie: a turntable from the scene's camera, or a flight through the named
+    bookmarks (all of the scene's, in order, when `bookmarks` is an empty list)."""
+    if turntable_degrees is not None:
+        return turntable(scene.camera, turntable_degrees, frames)
+    if bookmarks is None:
+        raise ValueError("a movie needs a turntable or keyframes through bookmarks")
+    known = {b.name: b for b in scene.bookmarks}
+    if not known:
+        raise ValueError("keyframes: the scene has no bookmarks (save some in the viewer with "
+                         "ctrl+1 .. ctrl+9, or add \"bookmarks\" to the scene file)")
+    names = bookmarks or [b.name for b in scene.bookmarks]
+    missing = [n for n in names if n not in known]
+    if missing:
+        raise ValueError(f"keyframes: no bookmark named {', '.join(map(repr, missing))} (the scene "
+                         f"has {', '.join(map(repr, known))})")
+    cams = [known[n].camera(scene.camera) for n in names]
+    return keyframes(cams, frames, base=scene.camera)
+
+
+class MovieFrames:
+    """Renders a movie's frames one at a time with a renderer it borrows (the CLI runs them all
+    at once; the viewer's recorder one per window frame, so the window stays live). The probes are
+    baked before the first frame if they are not current; a camera move never makes them stale.
+    The renderer's scene and accumulation are given back after every frame."""
+
+    def __init__(self, renderer, cameras: list[CameraSpec], method: str = "raymarch",
+                 spp: int = 16, seed: int = 0, exposure: float = 1.0,
+                 samples_per_pass: int = 16, overlay=None):
+        from .render.accumulation import Accumulation
+        from .render.frame_readback import FrameReadback
+        self.renderer, self.cameras, self.method = renderer, list(cameras), method
+        self.spp, self.seed, self.exposure = int(spp), int(seed), float(exposure)
+        self.samples_per_pass, self.overlay = int(samples_per_pass), overlay
+        self.width, self.height = self.cameras[0].width, self.cameras[0].height
+        self.acc = Accumulation(renderer.ctx, self.width, self.height)
+        self.readback = FrameReadback(renderer.ctx)
+        self.next = 0
+        self.bakes, self.bake_ms, self.render_ms = 0, 0.0, 0.0
+
+    @property
+    def done(self) -> bool:
+        return self.next >= len(self.cameras)
+
+    def frame(self, keep_linear: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """The next frame as 8-bit RGB (the overlay drawn in), and its linear image if asked."""
+        r = self.renderer
+        scene, lent = r.scene, r._acc
+        r._acc = self.acc
+        try:
+            r.set_scene(scene.replace(camera=self.cameras[self.next]))
+            if r.needs_probes(self.method) and not r.probes_current():
+                self.bake_ms += r.bake(self.seed)     # before the first frame only (tests count)
+                self.bakes += 1
+            if self.method == "raymarch":
+                self.bake_ms += r.bake_light()
+            acc = r.begin(self.method, seed=self.seed)
+            while acc.samples < self.spp:
+                self.render_ms += r.add_samples(min(self.samples_per_pass, self.spp - acc.samples))
+            linear = acc.read() if keep_linear else None
+            pixels = self.readback.read(acc, self.exposure)
+        finally:
+            r._acc = lent
+            r.set_scene(scene)
+        if self.overlay is not None:
+            pixels = self.overlay.apply(pixels)
+        self.next += 1
+        return pixels, linear
+
+    def release(self) -> None:
+        self.acc.release()
+        self.readback.release()
+
+
+def render_movie(renderer, cameras: list[CameraSpec], writer, method: str = "raymarch",
+                 spp: int = 16, seed: int = 0, exposure: float = 1.0, samples_per_pass: int = 16,
+                 overlay=None, progress=None, keep: tuple[int, ...] = ()) -> MovieResult:
+    """Renders every camera into `writer` (None: frames are not written, only kept or timed);
+    `overlay`: a colorbar.ColorbarOverlay laid over each frame; `progress(done, total)` after each
+    frame; `keep`: frame indices whose linear images come back in MovieResult.kept."""
+    start = time.perf_counter()
+    frames = MovieFrames(renderer, cameras, method, spp, seed, exposure, samples_per_pass, overlay)
+    kept = {}
+    try:
+        while not frames.done:
+            index = frames.next
+            pixels, linear = frames.frame(keep_linear=index in keep)
+            if linear is not None:
+                kept[index] = linear
+            if writer is not None:
+                writer.add(pixels)
+            if progress is not None:
+                progress(index + 1, len(cameras))
+        path = str(writer.close()) if writer is not None else ""
+    finally:
+        frames.release()
+    return MovieResult(path=path, frames=len(cameras), width=frames.width, height=frames.height,
+                       method=method, spp=spp, bakes=frames.bakes, bake_ms=frames.bake_ms,
+                       render_ms=frames.render_ms, wall_s=time.perf_counter() - start, kept=kept)
+
+
+def sized(cameras: list[CameraSpec], width: int, height: int) -> list[CameraSpec]:
+    return [replace(c, width=width, height=height) for c in cameras]
+
+
+def frame_count_note(path: str, expected: int) -> str | None:
+    """A line saying how many frames a media player finds in the file, when it can be counted
+    (MP4 through ffmpeg, GIF through Pillow); a mismatch is an error line."""
+    from .movie_writer import count_frames
+    if not str(path).lower().endswith((".mp4", ".gif")):
+        return None
+    try:
+        n = count_frames(path)
+    except Exception as exc:   # a decoder's failure says the file is broken
+        return f"error: {path} could not be read back ({exc})"
+    if n != expected:
+        return f"error: {path} holds {n} frames, not {expected}"
+    return f"{path}: {n} frames as a media player reads them"
