@@ -42,7 +42,10 @@ WALKS_PER_CHUNK_UNBOUNDED = 1 << 22   # walks that end in one dispatch: 64 MiB o
 # taken out after the H100 lost its context with it (commit 03404d4); off until the cause is
 # known. RADIANCE_PROBES_SUN_MARCH_SKIPS=1 turns it on for that investigation.
 SUN_MARCH_SKIPS_EMPTY_CELLS = os.environ.get("RADIANCE_PROBES_SUN_MARCH_SKIPS", "0") == "1"
-FIRST_CHUNK_WALKS = 1 << 18   # a bake's first timed chunk: about one wave of an H100's threads
+# A bake's first timed chunk: its walks' cost is not known yet. 2^18 walks (about one wave of an
+# H100's threads) took 135 ms on the battery's backlit shells (bench/h100-bias: albedo 0.99, up to
+# 256 events a walk); a sixteenth of that stays under the target there.
+FIRST_CHUNK_WALKS = 1 << 14
 PATH_STATE_BYTES = 80       # PathState of glsl/lib/integrator.glsl, std430
 PATH_STATE_BYTES_ENVIRONMENT_MAP = 112   # the same with ENVIRONMENT_MAP
 WALK_SUN_MODES = ("ray", "grid")
