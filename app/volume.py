@@ -15,17 +15,19 @@ from typing import Callable
 
 import numpy as np
 
+from . import dicom
 from . import volume_formats as formats
+from .orientation import NRRD_SPACES, patient_axes, to_patient, unit_columns
 from .scene_types import Scene, VolumeError, VolumeSpec
 
-# What load_volume takes, by file name ending (a folder is a TIFF stack or a DICOM series).
+# What load_volume takes, by file name ending (a folder is a TIFF stack or DICOM images; a file
+# named DICOMDIR indexes a DICOM set).
 VOLUME_SUFFIXES = (".raw", ".nrrd", ".nhdr", ".npy") + formats.NIFTI_SUFFIXES + formats.TIFF_SUFFIXES
 
 
 def is_volume_path(p: Path) -> bool:
-    """A file load_volume reads by its name, or a folder (a TIFF stack or a DICOM series)."""
-    return p.is_dir() or formats.has_suffix(p, VOLUME_SUFFIXES)
-
+    """A file load_volume reads by its name, a DICOMDIR, or a folder (a TIFF stack or DICOM)."""
+    return p.is_dir() or formats.has_suffix(p, VOLUME_SUFFIXES) or dicom.is_dicomdir(p)
 
 
 RAW_DTYPES = {
@@ -44,6 +46,17 @@ class Volume:
     raw_dtype: str
     raw_min: float
     raw_max: float
+    # What a person should know about how the file was read (the other series of a DICOM folder,
+    # an oblique scan shown axis-aligned, files passed over); the CLI prints them, the viewer shows
+    # them.
+    notes: tuple[str, ...] = ()
+    # The array axes' directions in the patient's LPS frame (columns x, y, z) as shown, where the
+    # file says; None: it does not (app/orientation.py).
+    direction: np.ndarray | None = None
+    orientation: str = "data"            # how the axes were placed: "data" or "patient"
+    oblique_degrees: float = 0.0         # "patient": the residual rotation not applied
+    dicom_listing: dicom.DicomListing | None = None   # a DICOM folder's series
+    dicom_series: dicom.DicomSeries | None = None     # ... and the one shown
 
     @property
     def dims(self) -> tuple[int, int, int]:
@@ -318,7 +331,9 @@ def _read_raw(p: Path, dims: tuple[int, int, int] | None, dtype: str | None) -> 
     return np.fromfile(p, dtype=np_dtype).reshape(dims[2], dims[1], dims[0])
 
 
-def _read_nrrd(p: Path) -> tuple[np.ndarray, tuple[float, float, float] | None]:
+def _read_nrrd(p: Path) -> tuple[np.ndarray, tuple[float, float, float] | None, np.ndarray | None]:
+    """The array (first, fastest axis = x), its spacing, and its axes' directions in LPS where the
+    header gives an anatomical `space` and `space directions`."""
     import warnings
 
     import nrrd
@@ -342,7 +357,16 @@ def _read_nrrd(p: Path) -> tuple[np.ndarray, tuple[float, float, float] | None]:
         raise VolumeError(f"{p}: cannot read the NRRD's spacing ({_one_line(exc)})") from None
     if spacing is not None and len(spacing) != 3:
         raise VolumeError(f"{p}: the NRRD gives {len(spacing)} spacings for 3 axes")
-    return data, spacing
+    direction = None
+    signs = NRRD_SPACES.get(str(header.get("space", "")).strip().lower())
+    if signs is not None and "space directions" in header:
+        try:
+            dirs = np.asarray(header["space directions"], dtype=np.float64)
+        except (TypeError, ValueError):
+            dirs = None
+        if dirs is not None and dirs.shape == (3, 3):   # rows: axes x, y, z
+            direction = unit_columns(np.diag(signs) @ dirs.T)
+    return data, spacing, direction
 
 
 def _read_npy(p: Path) -> np.ndarray:
@@ -400,43 +424,67 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
 
     p = _resolve(spec.path, base_dir)
     need_spacing = spec.spacing is None
-    file_spacing = None
-    if p.is_dir():
-        if formats.tiff_files(p):
-            raw = formats.read_tiff_folder(p)
-        else:
-            raw, file_spacing = formats.read_dicom_folder(p, need_spacing)
+    file_spacing = direction = None
+    notes: tuple[str, ...] = ()
+    listing = series = None
+    if spec.series is not None and not (p.is_dir() or dicom.is_dicomdir(p)):
+        raise VolumeError(f"{p}: volume.series {spec.series} names a DICOM series, but this is "
+                          "not a DICOM folder or DICOMDIR")
+    if p.is_dir() and spec.series is None and formats.tiff_files(p):
+        raw = formats.read_tiff_folder(p)
+    elif p.is_dir() or dicom.is_dicomdir(p):
+        got = dicom.read_dicom(p, need_spacing, spec.series)
+        raw, file_spacing, direction, notes = got.data, got.spacing, got.direction, got.notes
+        listing, series = got.listing, got.series
     elif not p.is_file():
         raise VolumeError(f"{p}: volume file not found")
     elif formats.has_suffix(p, formats.NIFTI_SUFFIXES):
-        raw, file_spacing = formats.read_nifti(p, need_spacing)
+        raw, file_spacing, direction = formats.read_nifti(p, need_spacing)
     elif formats.has_suffix(p, formats.TIFF_SUFFIXES):
         raw = formats.read_tiff(p)
-    elif formats.has_suffix(p, formats.DICOM_SUFFIXES):
+    elif formats.has_suffix(p, dicom.DICOM_SUFFIXES):
         raise VolumeError(f"{p}: a single DICOM file; give the folder holding its series")
     else:
         suffix = p.suffix.lower()
         if suffix == ".raw":
             raw = _read_raw(p, spec.dims, spec.dtype)
         elif suffix in (".nrrd", ".nhdr"):
-            raw, file_spacing = _read_nrrd(p)
+            raw, file_spacing, direction = _read_nrrd(p)
         elif suffix == ".npy":
             raw = _read_npy(p)
         else:
             raise VolumeError(f"{p}: unknown volume format '{suffix}' (known: "
-                              f"{', '.join(VOLUME_SUFFIXES)}, or a folder of TIFF or DICOM "
-                              "slices)")
+                              f"{', '.join(VOLUME_SUFFIXES)}, a DICOMDIR, or a folder of TIFF or "
+                              "DICOM slices)")
     if file_spacing is not None and need_spacing:
         spacing = file_spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
     if min(raw.shape) < 1:
         raise VolumeError(f"{p}: volume has zero size, shape {raw.shape[::-1]} (x, y, z)")
     if any(not (s > 0 and np.isfinite(s)) for s in spacing):
         raise VolumeError(f"{p}: spacing must be positive, got {spacing}")
+    oblique = 0.0
+    orientation = "data"
+    if spec.orientation == "patient":
+        if direction is None:
+            notes += (f"{p.name} says nothing of the patient's orientation: shown as stored "
+                      "(orientation \"data\")",)
+        else:
+            placed = to_patient(raw, spacing, direction)
+            raw, direction, orientation = placed.data, placed.direction, "patient"
+            # a scene's spacing is given along the file's axes, like the header's
+            spacing = placed.spacing
+            oblique = placed.oblique_degrees
+            if oblique:
+                notes += (f"{p.name} was scanned obliquely: its axes lie {oblique:.1f} degrees "
+                          "from the patient's; shown on the nearest patient axes (permuted and "
+                          f"flipped, not resampled: {patient_axes(direction)})",)
     norm, vr = normalise(raw, spec.domain, str(p), spec.replace_nonfinite)
     finite = raw[np.isfinite(raw)] if raw.dtype.kind == "f" else raw
     return Volume(norm, tuple(float(s) for s in spacing), p.name, vr, raw.dtype.name,
                   float(finite.min()) if finite.size else 0.0,
-                  float(finite.max()) if finite.size else 0.0)
+                  float(finite.max()) if finite.size else 0.0,
+                  notes=notes, direction=direction, orientation=orientation,
+                  oblique_degrees=oblique, dicom_listing=listing, dicom_series=series)
 
 
 def load_scene_volume(scene: Scene) -> Volume:

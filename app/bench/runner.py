@@ -32,7 +32,7 @@ PROBE_METHODS = ("probes", "probes-only")
 # Seconds between two writes of results.json while records come in. Writing it after every record
 # took 0.05 to 0.14 s once it held a few scenes (json.dumps of 1 to 2 MB), and the GPU sat idle
 # meanwhile: between the snapshots of one timed run its clock fell to 390-1665 MHz (nvidia-smi,
-# bench/h100-runs-2), so records of the later scenes were timed on a clocked-down GPU.
+# bench/archive/h100-runs-2), so records of the later scenes were timed on a clocked-down GPU.
 FLUSH_EVERY_S = 30.0
 
 

@@ -88,7 +88,7 @@ def accum_bytes(sh_order: int) -> int:
 def band_factors(g: float, window: str, sh_order: int = 2) -> tuple[float, ...]:
     """Per-band multipliers g^l * window_l, l = 0 .. max(sh_order, 2) (NumPy twin of
     sh_band_factors in lib/sh.glsl, whose SH_ORDER is at least 2)."""
-    from ..sh import sh_band_factors
+    from ..twins.sh import sh_band_factors
     return tuple(float(v) for v in sh_band_factors(g, SH_WINDOW_IDS[window], max(sh_order, 2)))
 
 

@@ -161,6 +161,8 @@ class Viewer:
         self.state.load_scene(scene, scene_path)
         self._pending_volume = volume
         self.state.note(f"opened {path}")
+        for note in volume.notes:
+            self.state.note(note)
         return True
 
     # ---- the crop box's and clip plane's handles -------------------------------------------------
@@ -439,6 +441,9 @@ class Viewer:
             "camera_eye": list(s.scene.camera.eye),
             "half_extent": [float(x) for x in session.volume.half_extent],
             "volume": {"name": session.volume.name, "dims": list(session.volume.dims)},
+            "dicom_series": (session.volume.dicom_series.number
+                             if session.volume.dicom_series is not None else None),
+            "volume_notes": list(session.volume.notes),
             "opacity_points": [list(p) for p in self.opacity_points()[0]],
             "clip_region": (None if session.renderer.resources.clip is None else
                             {"box_min": list(session.renderer.resources.clip.box_min),
