@@ -48,9 +48,10 @@ class RenderSettings:
     # The sun at the bake's walk events: "grid" (the baked light grid, lib/light_grid.glsl) or
     # "ray" (a ratio-tracked shadow ray, unbiased).
     walk_sun: str = "grid"
-    # ... corrected without bias (walk_sun "grid"): at this fraction of the walks' events a
-    # ratio-tracked shadow ray corrects the grid's transmittance (lib/integrator.glsl); 0: the
-    # grid alone, whose interpolation made probes up to 7.5% dark on the stress battery.
+    # ... corrected without bias (walk_sun "grid"): at this fraction of the walks' events at
+    # least (more where the grid's optical depth changes fast, up to half) a ratio-tracked shadow
+    # ray corrects the grid's transmittance (lib/integrator.glsl); 0: the grid alone, whose
+    # interpolation made probes up to 7.5% dark on the stress battery.
     walk_sun_correction: float = 0.05
     # Walks per probe from the noise of its neighbours (lib/probe_noise.glsl, unbiased; 0: every
     # probe takes all its walks): a probe stops once the walks its neighbours' first pass asks

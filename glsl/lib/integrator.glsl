@@ -223,15 +223,20 @@ int path_flight(inout PathState p, inout int steps_left)
     // T_grid + (T_ray - T_grid) / q, otherwise T_grid; the mean is E[T_ray], the sun's exact
     // transmittance, whatever the grid's error (which on a thin backlit shell or a pinhole's beam
     // made probes 2.3-7.5% dark: bench/h100-bias). The correction's shadow ray starts with weight
-    // 1 / q in shadow_transmittance, q = walk_sun_correction (any q > 0 keeps the mean exact).
-    // Measured on the H100 (bench/h100-bias-v1, bench/archive/h100-v11): a q that rose to 0.5
-    // where the grid's depth changes fast made the bench's bakes 3-15x slower; a fixed 0.05 costs
-    // a twentieth of the shadow rays. walk_sun_correction = 0: the grid alone (biased).
+    // 1 / q in shadow_transmittance. Any q > 0 that does not depend on the walk's random numbers
+    // keeps the mean exact; q follows where the grid's interpolation errs, where its optical depth
+    // changes fast: walk_sun_correction where it is flat, up to 0.5 where it changes by a unit or
+    // more over the texel towards the sun (one more fetch). walk_sun_correction = 0: the grid
+    // alone (biased).
     if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
         float sun_phase = phase_hg(dot(sun_direction, p.w), anisotropy);
         float tau = light_grid_optical_depth(p.x);
         float grid = exp(-tau);
-        float q = walk_sun_correction;
+        float q = 0.0;
+        if (walk_sun_correction > 0.0) {
+            float change = tau - light_grid_optical_depth(p.x + light_grid_texel * sun_direction);
+            q = clamp(walk_sun_correction * (1.0 + 8.0 * change), walk_sun_correction, 0.5);
+        }
         bool correct = q > 0.0 && rng_next(p.rng) < q;
         float grid_weight = correct ? 1.0 - 1.0 / q : 1.0;
         p.radiance += p.throughput * sun_irradiance * (grid * grid_weight * sun_phase);
