@@ -313,7 +313,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
         recs = main_records(data, s)
         for t in TARGETS:
             if t < floor(data, s):
-                lines.append(f"| {s} | {t:.0%} | " + " | ".join("-" for _ in METHOD_ORDER)
+                lines.append(f"| {s} | {100 * t:g}% | " + " | ".join("-" for _ in METHOD_ORDER)
                              + f" | below the reference floor {floor(data, s):.4f} |")
                 continue
             cells, best = [], {}
@@ -333,7 +333,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
                 verdict = "no probe method reaches it"
             else:
                 verdict = "-"
-            lines.append(f"| {s} | {t:.0%} | " + " | ".join(cells) + f" | {verdict} |")
+            lines.append(f"| {s} | {100 * t:g}% | " + " | ".join(cells) + f" | {verdict} |")
     lines += ["", "## Equal-time error", "",
               "At the time the path tracer needs for each of its sample counts: the lowest error "
               "each method reaches within that time, bake included.", "",
