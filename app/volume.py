@@ -17,6 +17,7 @@ import numpy as np
 
 from . import volume_formats as formats
 from .scene_types import Scene, VolumeError, VolumeSpec
+from .volume_axes import resolve_axes, to_canonical
 
 # What load_volume takes, by file name ending (a folder is a TIFF stack or a DICOM series).
 VOLUME_SUFFIXES = (".raw", ".nrrd", ".nhdr", ".npy") + formats.NIFTI_SUFFIXES + formats.TIFF_SUFFIXES
@@ -37,19 +38,38 @@ _RAW_NAME = re.compile(r"_(\d+)x(\d+)x(\d+)_([a-z]+\d+)\.raw$", re.IGNORECASE)
 
 @dataclass(frozen=True, eq=False)
 class Volume:
-    data: np.ndarray                    # float32 [z, y, x], normalised density in [0, 1]
+    # float32 normalised density in [0, 1]: [z, y, x], or [z, y, x, c] for several channels
+    # (SPEC.md, Channels; each channel normalised by its own window, channel_ranges)
+    data: np.ndarray
     spacing: tuple[float, float, float]  # voxel size along x, y, z (any unit)
     name: str
-    value_range: tuple[float, float]     # raw values mapped to 0 and 1
+    value_range: tuple[float, float]     # raw values mapped to 0 and 1 (channel 0's)
     raw_dtype: str
     raw_min: float
     raw_max: float
+    # Several channels: the raw values each channel maps to 0 and 1, and each one's raw min and
+    # max; empty for a one-channel volume.
+    channel_ranges: tuple[tuple[float, float], ...] = ()
+    channel_raw: tuple[tuple[float, float], ...] = ()
 
     @property
     def dims(self) -> tuple[int, int, int]:
         """Voxel counts along x, y, z."""
-        z, y, x = self.data.shape
+        z, y, x = self.data.shape[:3]
         return (x, y, z)
+
+    @property
+    def channel_count(self) -> int:
+        """1 for a one-channel volume ([z, y, x]), else the last axis of data."""
+        return 1 if self.data.ndim == 3 else int(self.data.shape[3])
+
+    def channel(self, c: int) -> np.ndarray:
+        """Channel c's normalised density [z, y, x] (the data itself for one channel)."""
+        if self.data.ndim == 3:
+            if c != 0:
+                raise IndexError(f"channel {c} of a one-channel volume")
+            return self.data
+        return self.data[..., c]
 
     @property
     def half_extent(self) -> np.ndarray:
@@ -59,11 +79,13 @@ class Volume:
 
     @property
     def exact_uint8(self) -> bool:
-        """True when the data is 8-bit with the default range, so an R8 texture stores it exactly."""
-        return self.raw_dtype == "uint8" and self.value_range == (0.0, 255.0)
+        """True when the data is 8-bit with the default range (in every channel), so a 16-bit
+        normalised texture stores it exactly."""
+        return self.raw_dtype == "uint8" and all(
+            r == (0.0, 255.0) for r in (self.channel_ranges or (self.value_range,)))
 
-    def histogram(self, bins: int = 128) -> np.ndarray:
-        counts, _ = np.histogram(self.data, bins=bins, range=(0.0, 1.0))
+    def histogram(self, bins: int = 128, channel: int = 0) -> np.ndarray:
+        counts, _ = np.histogram(self.channel(channel), bins=bins, range=(0.0, 1.0))
         return counts
 
 
@@ -350,8 +372,9 @@ def _read_npy(p: Path) -> np.ndarray:
         data = np.load(p, allow_pickle=False)
     except Exception as exc:
         raise VolumeError(f"{p}: cannot read .npy ({_one_line(exc)})") from None
-    if data.ndim != 3:
-        raise VolumeError(f"{p}: expected a 3D array [z, y, x], got shape {data.shape}")
+    if data.ndim < 3:
+        raise VolumeError(f"{p}: expected a 3D array [z, y, x] (or 4D or 5D with channels and "
+                          f"time steps: see volume.axes), got shape {list(data.shape)}")
     return data
 
 
@@ -385,25 +408,18 @@ def normalise(raw: np.ndarray, value_range: tuple[float, float] | None, where: s
     return np.clip(data, 0.0, 1.0).astype(np.float32), (float(lo), float(hi))
 
 
-def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
-    """Load the volume a scene names: a built-in or a file; errors name the file and the problem."""
-    spacing = spec.spacing if spec.spacing is not None else (1.0, 1.0, 1.0)
-    if spec.path is None:
-        name = spec.builtin or "cloud"
-        if name not in BUILTIN_VOLUMES:
-            raise VolumeError(f"unknown built-in volume '{name}' (known: {', '.join(BUILTIN_VOLUMES)})")
-        data = BUILTIN_VOLUMES[name](tuple(spec.size))
-        vr = spec.domain or (0.0, 1.0)
-        norm, vr = normalise(data, vr, f"built-in '{name}'")
-        return Volume(norm, tuple(float(v) for v in spacing), f"builtin:{name}", vr, "float32",
-                      float(data.min()), float(data.max()))
-
+def read_volume_array(spec: VolumeSpec, base_dir: str | None = None
+                      ) -> tuple[np.ndarray, tuple[float, float, float] | None, str]:
+    """The raw values of a volume file as (t, c, z, y, x) (app/volume_axes.py: axes from the
+    file's metadata or volume.axes, refused where neither says), the file's own spacing (None
+    where it has none or the scene gives one) and the file's name."""
     p = _resolve(spec.path, base_dir)
     need_spacing = spec.spacing is None
     file_spacing = None
+    axes: str | None = "zyx"
     if p.is_dir():
         if formats.tiff_files(p):
-            raw = formats.read_tiff_folder(p)
+            raw, axes = formats.read_tiff_folder(p)
         else:
             raw, file_spacing = formats.read_dicom_folder(p, need_spacing)
     elif not p.is_file():
@@ -411,7 +427,7 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
     elif formats.has_suffix(p, formats.NIFTI_SUFFIXES):
         raw, file_spacing = formats.read_nifti(p, need_spacing)
     elif formats.has_suffix(p, formats.TIFF_SUFFIXES):
-        raw = formats.read_tiff(p)
+        raw, axes = formats.read_tiff(p)
     elif formats.has_suffix(p, formats.DICOM_SUFFIXES):
         raise VolumeError(f"{p}: a single DICOM file; give the folder holding its series")
     else:
@@ -421,23 +437,85 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
         elif suffix in (".nrrd", ".nhdr"):
             raw, file_spacing = _read_nrrd(p)
         elif suffix == ".npy":
-            raw = _read_npy(p)
+            raw, axes = _read_npy(p), None
         else:
             raise VolumeError(f"{p}: unknown volume format '{suffix}' (known: "
                               f"{', '.join(VOLUME_SUFFIXES)}, or a folder of TIFF or DICOM "
                               "slices)")
-    if file_spacing is not None and need_spacing:
-        spacing = file_spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
+    raw = to_canonical(raw, resolve_axes(axes, tuple(raw.shape), spec.axes, str(p)), str(p))
     if min(raw.shape) < 1:
-        raise VolumeError(f"{p}: volume has zero size, shape {raw.shape[::-1]} (x, y, z)")
+        raise VolumeError(f"{p}: volume has zero size, shape {raw.shape[:1:-1]} (x, y, z)")
+    return raw, (file_spacing if need_spacing else None), p.name
+
+
+def load_volume(spec: VolumeSpec, base_dir: str | None = None,
+                channels: tuple | None = None) -> Volume:
+    """Load the volume a scene names: a built-in or a file; errors name the file and the problem.
+    `channels`: the channels to show (app/channels.py effective_channels; None: a file of one
+    channel, or its channels with their defaults)."""
+    spacing = spec.spacing if spec.spacing is not None else (1.0, 1.0, 1.0)
+    if spec.path is None:
+        name = spec.builtin or "cloud"
+        if name not in BUILTIN_VOLUMES:
+            raise VolumeError(f"unknown built-in volume '{name}' (known: {', '.join(BUILTIN_VOLUMES)})")
+        data = BUILTIN_VOLUMES[name](tuple(spec.size))
+        domain = spec.domain
+        if channels is not None:
+            from .channels import check_channel_count
+            check_channel_count(channels, 1, f"built-in '{name}'")
+            domain = channels[0].domain(spec)
+        vr = domain or (0.0, 1.0)
+        norm, vr = normalise(data, vr, f"built-in '{name}'")
+        return Volume(norm, tuple(float(v) for v in spacing), f"builtin:{name}", vr, "float32",
+                      float(data.min()), float(data.max()))
+    raw, file_spacing, name = read_volume_array(spec, base_dir)
+    where = str(_resolve(spec.path, base_dir))
+    if file_spacing is not None:
+        spacing = file_spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
     if any(not (s > 0 and np.isfinite(s)) for s in spacing):
-        raise VolumeError(f"{p}: spacing must be positive, got {spacing}")
-    norm, vr = normalise(raw, spec.domain, str(p), spec.replace_nonfinite)
+        raise VolumeError(f"{where}: spacing must be positive, got {spacing}")
+    steps = raw.shape[0]
+    if steps > 1:
+        raise VolumeError(f"{where}: a time series of {steps} steps; time series are not read "
+                          "yet (one step: volume.axes without t)")
+    return volume_from_canonical(raw[0], tuple(float(s) for s in spacing), name, spec, channels,
+                                 where)
+
+
+def volume_from_canonical(raw: np.ndarray, spacing: tuple[float, float, float], name: str,
+                          spec: VolumeSpec, channels: tuple | None, where: str) -> Volume:
+    """A Volume from raw values (c, z, y, x): one channel normalised by the volume's domain, or
+    the channels to show each by its own (ChannelSpec.domain)."""
+    from .channels import check_channel_count, default_channels
+    count = raw.shape[0]
+    if channels is None:
+        channels = default_channels(count, where) if count > 1 else None
+    if channels is None:
+        data = raw[0]
+        norm, vr = normalise(data, spec.domain, where, spec.replace_nonfinite)
+        lo, hi = _finite_min_max(data)
+        return Volume(norm, spacing, name, vr, data.dtype.name, lo, hi)
+    check_channel_count(channels, count, where)
+    norms, ranges, raws = [], [], []
+    for i, ch in enumerate(channels):
+        index = i if ch.index is None else ch.index
+        data = raw[index]
+        label = f"{where} (channel {index}{f' {ch.name}' if ch.name else ''})"
+        norm, vr = normalise(data, ch.domain(spec), label, spec.replace_nonfinite)
+        norms.append(norm)
+        ranges.append(vr)
+        raws.append(_finite_min_max(data))
+    if len(norms) == 1:
+        return Volume(norms[0], spacing, name, ranges[0], raw.dtype.name, *raws[0])
+    return Volume(np.stack(norms, axis=-1), spacing, name, ranges[0], raw.dtype.name,
+                  raws[0][0], raws[0][1], tuple(ranges), tuple(raws))
+
+
+def _finite_min_max(raw: np.ndarray) -> tuple[float, float]:
     finite = raw[np.isfinite(raw)] if raw.dtype.kind == "f" else raw
-    return Volume(norm, tuple(float(s) for s in spacing), p.name, vr, raw.dtype.name,
-                  float(finite.min()) if finite.size else 0.0,
-                  float(finite.max()) if finite.size else 0.0)
+    return (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)
 
 
 def load_scene_volume(scene: Scene) -> Volume:
-    return load_volume(scene.volume, scene.base_dir)
+    from .channels import scene_channels
+    return load_volume(scene.volume, scene.base_dir, scene_channels(scene))

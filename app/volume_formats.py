@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .scene_types import VolumeError
+from .volume_axes import tiff_axes
 
 NIFTI_SUFFIXES = (".nii", ".nii.gz")
 TIFF_SUFFIXES = (".tif", ".tiff")
@@ -90,27 +91,40 @@ class _LogCollector(logging.Handler):
         self.messages.append(record.getMessage())
 
 
-def _tiff_pages(p: Path) -> list[np.ndarray]:
+def _tiff_series(p: Path) -> tuple[np.ndarray, str]:
+    """The file's image as tifffile reads its first series, with that series' axes in our
+    letters (app/volume_axes.py tiff_axes); a file of several series of single pages (a stack
+    written page by page) as those pages, unnamed ("?yx")."""
     import tifffile
     errors = _LogCollector()
     log = logging.getLogger("tifffile")
     log.addHandler(errors)
     try:
         with tifffile.TiffFile(str(p)) as tif:
-            pages = [page.asarray() for page in tif.pages]
+            series = list(tif.series)
+            if len(series) == 1:
+                data, axes, shape = series[0].asarray(), series[0].axes, series[0].shape
+            elif series and all(len(s.shape) == 2 for s in series):
+                pages = [s.asarray() for s in series]
+                data, axes, shape = None, "IYX", None
+            elif series:
+                shapes = ", ".join(f"{s.axes} {list(s.shape)}" for s in series[:4])
+                raise VolumeError(f"{p}: the TIFF holds {len(series)} images ({shapes}); "
+                                  "expected one volume")
+    except VolumeError:
+        raise
     except Exception as exc:
         raise VolumeError(f"{p}: cannot read TIFF ({_one_line(exc)})") from None
     finally:
         log.removeHandler(errors)
     if errors.messages:  # tifffile logs (and skips) what it cannot read, e.g. a truncated file
         raise VolumeError(f"{p}: cannot read TIFF ({' '.join(errors.messages[0].split())})")
-    if not pages:
+    if not series:
         raise VolumeError(f"{p}: the TIFF has no pages")
-    for i, page in enumerate(pages):
-        if page.ndim != 2:
-            raise VolumeError(f"{p}: page {i} has shape {list(page.shape)}; expected one channel "
-                              "(rows x columns)")
-    return pages
+    if data is None:
+        data = _stack(pages, [f"page {i}" for i in range(len(pages))], str(p))
+        shape = data.shape
+    return data, tiff_axes(axes, tuple(shape), str(p))
 
 
 def _stack(pages: list[np.ndarray], names: list[str], where: str) -> np.ndarray:
@@ -126,10 +140,11 @@ def _stack(pages: list[np.ndarray], names: list[str], where: str) -> np.ndarray:
     return np.stack(pages)
 
 
-def read_tiff(p: Path) -> np.ndarray:
-    """One multi-page file (page = z, page row = y, column = x)."""
-    pages = _tiff_pages(p)
-    return _stack(pages, [f"page {i}" for i in range(len(pages))], str(p))
+def read_tiff(p: Path) -> tuple[np.ndarray, str]:
+    """One TIFF file (a multi-page stack: page = z, page row = y, column = x; or an image whose
+    metadata, ImageJ's or OME's or tifffile's own, names its axes: [c, z, y, x], [t, z, c, y, x],
+    ...): the array and its axes ("?" where the file leaves one unnamed)."""
+    return _tiff_series(p)
 
 
 def tiff_files(folder: Path) -> list[Path]:
@@ -137,18 +152,19 @@ def tiff_files(folder: Path) -> list[Path]:
                    and has_suffix(f, TIFF_SUFFIXES)), key=lambda f: f.name)
 
 
-def read_tiff_folder(folder: Path) -> np.ndarray:
+def read_tiff_folder(folder: Path) -> tuple[np.ndarray, str]:
     """A folder of single-page TIFFs, sorted by file name (plain string order: zero-pad numbers)."""
     files = tiff_files(folder)
     if not files:
         raise VolumeError(f"{folder}: no .tif/.tiff files in the folder")
     pages = []
     for f in files:
-        got = _tiff_pages(f)
-        if len(got) != 1:
-            raise VolumeError(f"{f}: {len(got)} pages; a folder stack takes single-page TIFFs")
-        pages.append(got[0])
-    return _stack(pages, [f.name for f in files], str(folder))
+        data, axes = _tiff_series(f)
+        if data.ndim != 2:
+            raise VolumeError(f"{f}: an image of axes {axes} (shape {list(data.shape)}); a "
+                              "folder stack takes single-page TIFFs")
+        pages.append(data)
+    return _stack(pages, [f.name for f in files], str(folder)), "zyx"
 
 
 # ---- DICOM ---------------------------------------------------------------------------------------
