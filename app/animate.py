@@ -94,6 +94,9 @@ def run_animate(args: argparse.Namespace) -> int:
         raise OptionError(f"--keyframes: {exc}") from None
     volume = load_scene_volume(scene)
     load_scene_environment(scene)
+    if getattr(args, "colorbar", None) and volume.channel_count > 1:
+        raise OptionError(f"--colorbar: a colour bar shows one transfer function; this volume has "
+                          f"{volume.channel_count} channels, each with its own")
     check_clip(scene, volume, args)
     if args.method == "raymarch" and args.raymarch_step is not None:
         try:
