@@ -42,6 +42,7 @@ class Viewer:
         self.state = state
         self.device = device
         self.session = RenderSession(ctx, state.scene, volume)
+        state.show_channels(self.session.volume.channel_count)
         self.widgets = WidgetRects()
         self.error_meter = ErrorMeter()
         self.files = FileDialogs(self.open_path, dialog=file_dialog)
@@ -65,7 +66,7 @@ class Viewer:
         self.last_screenshot: tuple | None = None   # (path asked for, where it went, error line)
         self.close_requested = False
         self.frame_index = 0
-        self._histogram = (None, None)
+        self._histogram = (None, None, None)
         self._opacity_points = (None, None)
         self._drag_start = None                  # what a handle's drag moves from
         self._drag_distance = 0.0                # world units dragged so far
@@ -98,16 +99,33 @@ class Viewer:
     def opacity_points(self):
         """The scene's opacity curve as the editor's control points (transfer.opacity_points),
         cached while the transfer function stays the same."""
-        tf = self.state.scene.transfer_function
+        tf = self.state.transfer_function
         if self._opacity_points[0] != tf:
             self._opacity_points = (tf, opacity_points(tf))
         return self._opacity_points[1]
 
     def histogram(self):
+        """The edited channel's histogram (of one channel, the volume's), cached."""
         volume = self.session.volume
-        if self._histogram[0] is not volume:
-            self._histogram = (volume, histogram_curve(volume))
+        channel = self.edited_channel()
+        if self._histogram[0] is not volume or self._histogram[2] != channel:
+            self._histogram = (volume, histogram_curve(volume, channel=channel), channel)
         return self._histogram[1]
+
+    def edited_channel(self) -> int:
+        """Which channel of the volume the editor shows (0 for a one-channel volume)."""
+        c = self.state.edited_channel
+        return c if c < self.session.volume.channel_count else 0
+
+    def edited_table(self):
+        """The table the renderers use for the edited channel (of one channel, the scene's)."""
+        res = self.session.renderer.resources
+        return res.table if res.tables is None else res.tables.tables[self.edited_channel()]
+
+    def edited_value_range(self) -> tuple[float, float]:
+        """The data values the edited channel's densities 0 and 1 are."""
+        vol = self.session.volume
+        return vol.channel_ranges[self.edited_channel()] if vol.channel_ranges else vol.value_range
 
     # ---- actions (panels, shortcuts, scripts) --------------------------------------------------
     def run_action(self, shortcut) -> None:
@@ -159,6 +177,7 @@ class Viewer:
             self.state.error(f"could not open {path}: {exc}")
             return False
         self.state.load_scene(scene, scene_path)
+        self.state.show_channels(volume.channel_count)
         self._pending_volume = volume
         self.state.note(f"opened {path}")
         return True
