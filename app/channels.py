@@ -60,10 +60,11 @@ def effective_channels(scene: Scene, count: int) -> tuple[ChannelSpec, ...] | No
 
 
 def volume_inputs(scene: Scene) -> tuple:
-    """What the volume's texture depends on: the volume key and the channels' files indices and
-    windows (not their transfer functions or switches, which leave the texture as it is)."""
+    """What the volume's texture depends on: the volume key, the channels' file indices and
+    windows (not their transfer functions or switches, which leave the texture as it is) and the
+    time step."""
     return (scene.volume, scene.base_dir,
-            tuple((c.index, c.value_range, c.window) for c in scene.channels))
+            tuple((c.index, c.value_range, c.window) for c in scene.channels), scene.time)
 
 
 @dataclass(frozen=True, eq=False)

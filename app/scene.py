@@ -531,6 +531,8 @@ def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
         kw["bookmarks"] = _parse_bookmarks(d["bookmarks"])
     if d.get("viewer") is not None:
         kw["viewer"] = _parse_viewer(d["viewer"])
+    if d.get("time") is not None:
+        kw["time"] = _integer(d["time"], "time", 0, 1 << 24)
     if d.get("channels") is not None:
         kw["channels"] = _parse_channels(d["channels"], "transfer_function" in d, base_dir)
     if base_dir is not None:

@@ -279,6 +279,8 @@ class Scene:
     # Several channels (SPEC.md, Channels): empty for a one-channel volume, or a file's channels
     # each with the default colour of its place (app/channels.py effective_channels).
     channels: tuple[ChannelSpec, ...] = ()
+    # Time series (SPEC.md, Time series): the step shown of a volume with a time axis.
+    time: int = 0
     # Folder that relative volume paths are also looked up in (the scene file's folder).
     base_dir: str | None = field(default=None, compare=False)
 
@@ -307,7 +309,7 @@ def scene_to_dict(scene: Scene) -> dict:
             if v:   # written only where the scene has them, so older scenes stay as they were
                 out[f.name] = ([_plain(b) for b in v] if f.name == "bookmarks" else
                                [channel_to_dict(c) for c in v] if f.name == "channels" else
-                               _plain(v))
+                               v if f.name == "time" else _plain(v))
             continue
         if f.name == "environment" and scene.environment_map is not None:
             m = scene.environment_map
@@ -331,7 +333,7 @@ def scene_to_dict(scene: Scene) -> dict:
 
 
 # Scene fields written only where the scene has them (None or empty: left out).
-OPTIONAL_FIELDS = ("crop", "clip_plane", "bookmarks", "viewer", "channels")
+OPTIONAL_FIELDS = ("crop", "clip_plane", "bookmarks", "viewer", "channels", "time")
 
 
 def _plain(spec) -> dict:

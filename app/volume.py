@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -51,6 +52,12 @@ class Volume:
     # max; empty for a one-channel volume.
     channel_ranges: tuple[tuple[float, float], ...] = ()
     channel_raw: tuple[tuple[float, float], ...] = ()
+    # A step of a time series: which, and of how many (1: no time axis).
+    time: int = 0
+    time_steps: int = 1
+    # What is computed from the data once and kept with it (the majorant grid's density ranges,
+    # keyed by their cells): a step shown again costs nothing.
+    derived: dict = field(default_factory=dict, repr=False)
 
     @property
     def dims(self) -> tuple[int, int, int]:
@@ -425,7 +432,7 @@ def read_volume_array(spec: VolumeSpec, base_dir: str | None = None
     elif not p.is_file():
         raise VolumeError(f"{p}: volume file not found")
     elif formats.has_suffix(p, formats.NIFTI_SUFFIXES):
-        raw, file_spacing = formats.read_nifti(p, need_spacing)
+        raw, file_spacing, axes = formats.read_nifti(p, need_spacing)
     elif formats.has_suffix(p, formats.TIFF_SUFFIXES):
         raw, axes = formats.read_tiff(p)
     elif formats.has_suffix(p, formats.DICOM_SUFFIXES):
@@ -449,15 +456,20 @@ def read_volume_array(spec: VolumeSpec, base_dir: str | None = None
 
 
 def load_volume(spec: VolumeSpec, base_dir: str | None = None,
-                channels: tuple | None = None) -> Volume:
+                channels: tuple | None = None, time: int = 0) -> Volume:
     """Load the volume a scene names: a built-in or a file; errors name the file and the problem.
     `channels`: the channels to show (app/channels.py effective_channels; None: a file of one
-    channel, or its channels with their defaults)."""
+    channel, or its channels with their defaults). `time`: the step of a time series (SPEC.md,
+    Time series: every step normalised alike, by the whole series' range where the scene gives
+    none)."""
     spacing = spec.spacing if spec.spacing is not None else (1.0, 1.0, 1.0)
     if spec.path is None:
         name = spec.builtin or "cloud"
         if name not in BUILTIN_VOLUMES:
             raise VolumeError(f"unknown built-in volume '{name}' (known: {', '.join(BUILTIN_VOLUMES)})")
+        if time != 0:
+            raise VolumeError(f"built-in '{name}': time step {time} asked for, but the volume has "
+                              "no time axis (one step); see the scene's time")
         data = BUILTIN_VOLUMES[name](tuple(spec.size))
         domain = spec.domain
         if channels is not None:
@@ -468,31 +480,75 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
         norm, vr = normalise(data, vr, f"built-in '{name}'")
         return Volume(norm, tuple(float(v) for v in spacing), f"builtin:{name}", vr, "float32",
                       float(data.min()), float(data.max()))
-    raw, file_spacing, name = read_volume_array(spec, base_dir)
+    raw, file_spacing, name = _read_series(spec, base_dir)
     where = str(_resolve(spec.path, base_dir))
     if file_spacing is not None:
         spacing = file_spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
     if any(not (s > 0 and np.isfinite(s)) for s in spacing):
         raise VolumeError(f"{where}: spacing must be positive, got {spacing}")
     steps = raw.shape[0]
-    if steps > 1:
-        raise VolumeError(f"{where}: a time series of {steps} steps; time series are not read "
-                          "yet (one step: volume.axes without t)")
-    return volume_from_canonical(raw[0], tuple(float(s) for s in spacing), name, spec, channels,
-                                 where)
+    if not 0 <= time < steps:
+        raise VolumeError(f"{where}: time step {time} asked for, but the volume has "
+                          + (f"{steps} time steps (0 to {steps - 1})" if steps > 1 else
+                             "no time axis (one step)") + "; see the scene's time")
+    fallback = _series_domains(raw, spec) if steps > 1 else None
+    volume = volume_from_canonical(raw[time], tuple(float(s) for s in spacing), name, spec,
+                                   channels, where, fallback)
+    return dataclasses.replace(volume, time=time, time_steps=steps) if steps > 1 else volume
+
+
+# The last time series read (app/volume.py _read_series): its key and (raw, spacing, name).
+_SERIES_CACHE: list = []
+
+
+def _read_series(spec: VolumeSpec, base_dir: str | None):
+    """read_volume_array, kept in memory for a time series (one at a time), so that showing
+    another step normalises that step and never reads the file again."""
+    p = _resolve(spec.path, base_dir)
+    try:
+        stamp = p.stat().st_mtime_ns
+    except OSError:
+        stamp = None
+    key = (str(p.resolve()) if stamp is not None else str(p), stamp, spec.axes, spec.dims,
+           spec.dtype, spec.spacing)
+    if _SERIES_CACHE and _SERIES_CACHE[0][0] == key and stamp is not None:
+        return _SERIES_CACHE[0][1]
+    found = read_volume_array(spec, base_dir)
+    _SERIES_CACHE.clear()
+    if found[0].shape[0] > 1:
+        _SERIES_CACHE.append((key, found))
+    return found
+
+
+def _series_domains(raw: np.ndarray, spec: VolumeSpec) -> tuple:
+    """Per channel, the values a time series' steps map to 0 and 1 where neither the scene nor
+    the type says (normalise's own default): the least and largest over every step, so that one
+    value is one density at every step (None where the type decides: 8-bit data)."""
+    out = []
+    for c in range(raw.shape[1]):
+        data = raw[:, c]
+        if data.dtype in (np.uint8, np.int8):
+            out.append(None)
+            continue
+        lo, hi = _finite_min_max(data)
+        out.append((lo, hi) if hi > lo else None)
+    return tuple(out)
 
 
 def volume_from_canonical(raw: np.ndarray, spacing: tuple[float, float, float], name: str,
-                          spec: VolumeSpec, channels: tuple | None, where: str) -> Volume:
+                          spec: VolumeSpec, channels: tuple | None, where: str,
+                          fallback: tuple | None = None) -> Volume:
     """A Volume from raw values (c, z, y, x): one channel normalised by the volume's domain, or
-    the channels to show each by its own (ChannelSpec.domain)."""
+    the channels to show each by its own (ChannelSpec.domain); `fallback`, per file channel, the
+    domain where neither says (None: normalise's default, the data's own range)."""
     from .channels import check_channel_count, default_channels
     count = raw.shape[0]
     if channels is None:
         channels = default_channels(count, where) if count > 1 else None
     if channels is None:
         data = raw[0]
-        norm, vr = normalise(data, spec.domain, where, spec.replace_nonfinite)
+        domain = spec.domain or (fallback[0] if fallback else None)
+        norm, vr = normalise(data, domain, where, spec.replace_nonfinite)
         lo, hi = _finite_min_max(data)
         return Volume(norm, spacing, name, vr, data.dtype.name, lo, hi)
     check_channel_count(channels, count, where)
@@ -501,7 +557,8 @@ def volume_from_canonical(raw: np.ndarray, spacing: tuple[float, float, float], 
         index = i if ch.index is None else ch.index
         data = raw[index]
         label = f"{where} (channel {index}{f' {ch.name}' if ch.name else ''})"
-        norm, vr = normalise(data, ch.domain(spec), label, spec.replace_nonfinite)
+        domain = ch.domain(spec) or (fallback[index] if fallback else None)
+        norm, vr = normalise(data, domain, label, spec.replace_nonfinite)
         norms.append(norm)
         ranges.append(vr)
         raws.append(_finite_min_max(data))
@@ -518,4 +575,4 @@ def _finite_min_max(raw: np.ndarray) -> tuple[float, float]:
 
 def load_scene_volume(scene: Scene) -> Volume:
     from .channels import scene_channels
-    return load_volume(scene.volume, scene.base_dir, scene_channels(scene))
+    return load_volume(scene.volume, scene.base_dir, scene_channels(scene), scene.time)

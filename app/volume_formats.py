@@ -51,10 +51,12 @@ def _spacing_or_none(values, where: str, need: bool) -> tuple[float, float, floa
 
 # ---- NIfTI ---------------------------------------------------------------------------------------
 
-def read_nifti(p: Path, need_spacing: bool) -> tuple[np.ndarray, tuple[float, float, float] | None]:
-    """The stored array ``[i, j, k]`` becomes ``data[k, j, i]``; spacing from the voxel sizes
-    (pixdim); scl_slope/scl_inter applied (nibabel's array proxy applies them, keeping the stored
-    integer type where they are the identity)."""
+def read_nifti(p: Path, need_spacing: bool
+               ) -> tuple[np.ndarray, tuple[float, float, float] | None, str]:
+    """The stored array ``[i, j, k]`` becomes ``data[k, j, i]`` (a 4D ``[i, j, k, t]``, a time
+    series, ``data[t, k, j, i]``); spacing from the voxel sizes (pixdim); scl_slope/scl_inter
+    applied (nibabel's array proxy applies them, keeping the stored integer type where they are
+    the identity). Returns the array, the spacing and its axes ("zyx" or "tzyx")."""
     import nibabel as nib
     try:
         img = nib.load(str(p))
@@ -67,8 +69,9 @@ def read_nifti(p: Path, need_spacing: bool) -> tuple[np.ndarray, tuple[float, fl
             zooms = type(img.header).from_fileobj(fobj, check=False).get_zooms()
         if len(shape) == 4 and shape[3] == 1:
             shape = shape[:3]
-        if len(shape) != 3:
-            raise VolumeError(f"{p}: expected a 3D volume, the NIfTI has shape {list(img.shape)}")
+        if len(shape) not in (3, 4):
+            raise VolumeError(f"{p}: expected a 3D volume or a 4D time series [i, j, k, t], the "
+                              f"NIfTI has shape {list(img.shape)}")
         data = np.asanyarray(img.dataobj).reshape(shape)
     except VolumeError:
         raise
@@ -77,7 +80,9 @@ def read_nifti(p: Path, need_spacing: bool) -> tuple[np.ndarray, tuple[float, fl
     if data.dtype.names is not None:
         raise VolumeError(f"{p}: NIfTI with {data.dtype.names} channels; expected one scalar")
     spacing = _spacing_or_none(zooms[:3], str(p), need_spacing)
-    return np.ascontiguousarray(data.transpose(2, 1, 0)), spacing
+    if data.ndim == 4:
+        return np.ascontiguousarray(data.transpose(3, 2, 1, 0)), spacing, "tzyx"
+    return np.ascontiguousarray(data.transpose(2, 1, 0)), spacing, "zyx"
 
 
 # ---- TIFF ----------------------------------------------------------------------------------------
@@ -153,18 +158,37 @@ def tiff_files(folder: Path) -> list[Path]:
 
 
 def read_tiff_folder(folder: Path) -> tuple[np.ndarray, str]:
-    """A folder of single-page TIFFs, sorted by file name (plain string order: zero-pad numbers)."""
+    """A folder of TIFFs sorted by file name (plain string order: zero-pad numbers): single pages
+    are the z slices of one volume; volumes (multi-page files, or files whose metadata names their
+    axes) are the steps of a time series, which must all have the same axes and shape."""
     files = tiff_files(folder)
     if not files:
         raise VolumeError(f"{folder}: no .tif/.tiff files in the folder")
-    pages = []
-    for f in files:
-        data, axes = _tiff_series(f)
-        if data.ndim != 2:
-            raise VolumeError(f"{f}: an image of axes {axes} (shape {list(data.shape)}); a "
-                              "folder stack takes single-page TIFFs")
-        pages.append(data)
-    return _stack(pages, [f.name for f in files], str(folder)), "zyx"
+    images = [(f, *_tiff_series(f)) for f in files]
+    flat = [f.name for f, data, _ in images if data.ndim == 2]
+    if len(flat) == len(images):
+        return _stack([data for _, data, _ in images], [f.name for f in files], str(folder)), "zyx"
+    if flat:
+        volume = next(f.name for f, data, _ in images if data.ndim > 2)
+        raise VolumeError(f"{folder}: mixes single pages ({flat[0]}) and volumes ({volume}): a "
+                          "folder is one volume's z slices or one volume per time step")
+    f0, first, axes0 = images[0]
+    for f, data, axes in images[1:]:
+        if axes != axes0 or data.shape != first.shape:
+            raise VolumeError(f"{folder}: time steps that do not match: {f0.name} is "
+                              f"{_shape_text(axes0, first.shape)} but {f.name} is "
+                              f"{_shape_text(axes, data.shape)}")
+        if data.dtype != first.dtype:
+            raise VolumeError(f"{folder}: time steps of different types: {f0.name} is "
+                              f"{first.dtype} but {f.name} is {data.dtype}")
+    if "t" in axes0:
+        raise VolumeError(f"{folder}: {f0.name} is itself a time series (axes {axes0}); a folder "
+                          "of time steps takes one volume per file")
+    return np.stack([data for _, data, _ in images]), "t" + axes0
+
+
+def _shape_text(axes: str, shape) -> str:
+    return "[" + ", ".join(f"{a} {n}" for a, n in zip(axes, shape)) + "]"
 
 
 # ---- DICOM ---------------------------------------------------------------------------------------

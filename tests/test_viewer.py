@@ -699,3 +699,33 @@ def test_channel_panels_switch_a_channel_and_drag_its_window(display, tmp_path):
     assert moved["level"] > 500.0 and moved["width"] == 1000.0
     assert level["scene"]["channels"][1:] == off["scene"]["channels"][1:]
     assert np.abs(png(tmp_path / "off.png") - png(tmp_path / "before.png")).mean() > 0.5
+
+
+def test_time_series_plays_steps_and_pauses(display, tmp_path):
+    """A 4-step series: the Time panel's play button plays it (the step shown changes, each a
+    warm restart of the bake, no undo step), '.' steps on and pauses, the slider sets a step."""
+    from test_time_series import moving_blob
+    np.save(tmp_path / "series.npy", moving_blob(steps=4))
+    scene = {"volume": {"path": "series.npy", "axes": "tzyx"}, "density_scale": 40,
+             "camera": {"width": 48, "height": 48}, "probes": {"grid": 4, "samples": 16}}
+    (tmp_path / "series.json").write_text(json.dumps(scene))
+    script = write_script(tmp_path / "s.json", [
+        {"frames": 2}, {"dump": "start.json"}, {"screenshot": "start.png"},
+        {"click": "Play"}, {"frames": 4}, {"dump": "playing.json"},
+        {"key": "."}, {"frames": 2}, {"dump": "stepped.json"},
+        {"drag": "Time step", "by": [-400, 0]}, {"frames": 1}, {"dump": "slider.json"},
+        {"close": True}])
+    # (a quarter of the pixels: on llvmpipe every step played restarts the image)
+    view(["series.json", "--script", str(script), "--method", "raymarch", "--window", "900x640",
+          "--render-scale", "0.25"], tmp_path, display)
+    start, playing, stepped, slider = (dump(tmp_path / f"{n}.json")
+                                       for n in ("start", "playing", "stepped", "slider"))
+    assert all(d["errors"] == [] for d in (start, playing, stepped, slider))
+    assert start["volume"]["time_steps"] == 4 and start["volume"]["time"] == 0
+    assert playing["playing"] and playing["bakes_started"] > start["bakes_started"]
+    assert playing["undo_steps"] == 0                      # playing is not an edit
+    assert not stepped["playing"]
+    assert stepped["volume"]["time"] == (playing["volume"]["time"] + 1) % 4
+    assert stepped["scene"].get("time", 0) == stepped["volume"]["time"]
+    assert slider["scene"].get("time", 0) == 0 and slider["volume"]["time"] == 0
+    assert "Time step" in start["widgets"]

@@ -58,12 +58,16 @@ class MajorantGrid:
         of the largest, a component a channel)."""
         cells = macrocell_counts(volume.dims)
         channels = volume.channel_count
+        ranges = volume.derived.get(("density ranges", cells))   # a step of a series seen before
+        if ranges is None:
+            ranges = volume.derived[("density ranges", cells)] = (
+                channel_density_ranges(volume, cells) if channels > 1
+                else density_range_grid(volume.data, cells))
+        self.d_min, self.d_max = ranges
         if channels > 1:
-            self.d_min, self.d_max = channel_density_ranges(volume, cells)
             payloads = [np.ascontiguousarray(np.moveaxis(r, 0, -1), np.float32)
                         for r in (self.d_min, self.d_max)]
         else:
-            self.d_min, self.d_max = density_range_grid(volume.data, cells)
             payloads = [np.ascontiguousarray(np.stack([self.d_min, self.d_max], axis=-1),
                                              np.float32)]
         if self.cells != cells or self.channels != channels:

@@ -251,7 +251,9 @@ class Renderer:
         spec = s.probes
         grid, box = tuple(spec.grid), None
         clip = self.resources.clip
-        if spec.fit == "visible" and region:
+        # A time series' probes cover the whole box: its visible region moves from step to step,
+        # and one grid for every step lets each step's bake start warm from the last one's.
+        if spec.fit == "visible" and region and self.resources.volume.time_steps == 1:
             low, high = self.visible_region()
             grid = fitted_grid(spec.grid, low, high)
             box = (tuple(map(float, low)), tuple(map(float, high)))

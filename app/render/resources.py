@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections import OrderedDict
 
 import moderngl
 import numpy as np
@@ -28,6 +29,8 @@ STATS_BINDING = 7
 # dropped and counted as truncated. Far beyond what max_bounces = 64 needs even at sigma_t = 1e4;
 # it only stops a pathological scene from hanging the GPU.
 DEFAULT_MAX_PATH_STEPS = 1 << 24
+# A time series' steps kept for showing again (host data and GPU texture together).
+STEP_CACHE_BYTES = 1 << 30
 
 
 def environment_textures(ctx: moderngl.Context, image: np.ndarray, distribution: Distribution):
@@ -74,6 +77,10 @@ class SceneResources:
         # The crop box and clip plane resolved against the volume (app/clip_region.py); None: the
         # whole volume is kept.
         self.clip: ClipRegion | None = None
+        # A time series' steps shown, kept (volume and texture) up to this many bytes in all:
+        # stepping back and forth, or playing the series again, uploads nothing.
+        self.step_cache_bytes = STEP_CACHE_BYTES
+        self._steps: OrderedDict = OrderedDict()
         self.update(scene, volume)
 
     def update(self, scene: Scene, volume: Volume | None = None) -> set[str]:
@@ -84,10 +91,17 @@ class SceneResources:
         old_map = None if old is None else (old.environment_map, old.base_dir)
         new_map = (scene.environment_map, scene.base_dir)
         environment = load_scene_environment(scene) if new_map != old_map else self.environment
+        inputs = volume_inputs(scene)
+        kept_texture = None
         if volume is not None and volume is not self.volume:
             changed.add("volume")
-        elif old is None or volume_inputs(scene) != volume_inputs(old):
-            volume = load_scene_volume(scene)
+        elif old is None or inputs != volume_inputs(old):
+            kept = self._steps.get(inputs)   # a time series' step shown before
+            if kept is not None:
+                volume, kept_texture = kept
+                self._steps.move_to_end(inputs)
+            else:
+                volume = load_scene_volume(scene)
             changed.add("volume")
         # A crop that does not fit the volume, or channels it lacks, fail before anything on the
         # GPU changes.
@@ -95,11 +109,16 @@ class SceneResources:
         clip = clip_region(scene, new_volume.dims, new_volume.half_extent)
         channels = effective_channels(scene, new_volume.channel_count)
         if "volume" in changed:
-            tex = volume_texture(self.ctx, volume)
-            if self.volume_tex is not None:
+            if any(key[:-1] != inputs[:-1] for key in self._steps):   # another series, or none
+                self._drop_steps()
+            tex = kept_texture if kept_texture is not None else volume_texture(self.ctx, volume)
+            if self.volume_tex is not None and not self._step_kept(self.volume_tex):
                 self.volume_tex.release()
             self.volume, self.volume_tex = volume, tex
             self.volume_version += 1
+            if volume.time_steps > 1 and kept_texture is None:
+                self._keep_step(inputs, volume, tex)
+            self._trim_steps()
         if (old is None or "volume" in changed or scene.transfer_function != old.transfer_function
                 or scene.channels != old.channels):
             if channels is None or len(channels) == 1:   # one channel: the classic medium
@@ -136,6 +155,37 @@ class SceneResources:
                                      half_extent=self.volume.half_extent)
             self._majorant_key = key
         return changed
+
+    def _step_kept(self, texture) -> bool:
+        return any(t is texture for _, t in self._steps.values())
+
+    def _keep_step(self, key: tuple, volume: Volume, texture) -> None:
+        """Keeps a time series' step (its volume and texture) for when it is shown again, the
+        least recently shown dropped while the kept ones hold more than step_cache_bytes."""
+        self._steps[key] = (volume, texture)
+        self._steps.move_to_end(key)
+        self._trim_steps()
+
+    def _trim_steps(self) -> None:
+        """Drops the least recently shown steps while the kept ones hold more than
+        step_cache_bytes (never the one shown)."""
+        def size(entry) -> int:
+            v, t = entry
+            return int(v.data.nbytes) + int(t.width * t.height * t.depth * t.components
+                                            * (2 if v.exact_uint8 else 4))
+
+        while len(self._steps) > 1 and sum(map(size, self._steps.values())) > self.step_cache_bytes:
+            key, (v, t) = next(iter(self._steps.items()))
+            if t is self.volume_tex:        # the one shown: keep it, drop the next oldest
+                self._steps.move_to_end(key)
+                continue
+            del self._steps[key]
+            t.release()
+
+    @property
+    def steps_kept(self) -> int:
+        """How many steps of a time series are kept (host and GPU) for showing again."""
+        return len(self._steps)
 
     def _set_environment(self, env: EnvironmentMap | None) -> None:
         """Uploads the map (radiance with its (u, v) density in alpha, and the CDFs) if it is new."""
@@ -244,7 +294,15 @@ class SceneResources:
         truncated, nonfinite, _, _ = struct.unpack("4I", self.stats.read())
         return {"truncated_paths": truncated, "nonfinite_samples": nonfinite}
 
+    def _drop_steps(self) -> None:
+        """Forgets the kept steps (their textures released, but the one shown now)."""
+        for _, t in self._steps.values():
+            if t is not self.volume_tex:
+                t.release()
+        self._steps.clear()
+
     def release(self) -> None:
+        self._drop_steps()
         for obj in (self.volume_tex, self.transfer_gpu, self.stats, self.environment_tex,
                     self.environment_cdf_tex):
             if obj is not None:

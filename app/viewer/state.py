@@ -39,6 +39,9 @@ class ViewerState:
     # Several channels: the one whose transfer function and window the editor changes now (its
     # panel sets it while it draws); None: the scene's own transfer function.
     channel: int | None = None
+    # A time series: playing (a step every 1 / play_rate seconds, looping) or paused.
+    playing: bool = False
+    play_rate: float = 10.0                # steps a second
 
     def __post_init__(self):
         if self.history is None:
@@ -247,6 +250,14 @@ class ViewerState:
             self.set_channel(self.edited_channel, transfer_function=tf)
         else:
             self.scene = self.scene.replace(transfer_function=tf)
+
+    def set_time(self, step: int, steps: int) -> None:
+        """Shows step `step` of a series of `steps` (wrapping around at either end)."""
+        if steps > 1:
+            self.scene = self.scene.replace(time=int(step) % int(steps))
+
+    def step_time(self, delta: int, steps: int) -> None:
+        self.set_time(self.scene.time + delta, steps)
 
     def set_channel(self, index: int, **changes) -> None:
         """Edits channel `index` (enabled, transfer_function, window, value_range, name); the last

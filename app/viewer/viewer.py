@@ -5,6 +5,7 @@ panel; the viewer keeps running with what last worked."""
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -67,6 +68,7 @@ class Viewer:
         self.close_requested = False
         self.frame_index = 0
         self._histogram = (None, None, None)
+        self._last_step_at = 0.0                 # when playback last showed another step
         self._opacity_points = (None, None)
         self._drag_start = None                  # what a handle's drag moves from
         self._drag_distance = 0.0                # world units dragged so far
@@ -111,6 +113,32 @@ class Viewer:
         if self._histogram[0] is not volume or self._histogram[2] != channel:
             self._histogram = (volume, histogram_curve(volume, channel=channel), channel)
         return self._histogram[1]
+
+    # ---- a time series ---------------------------------------------------------------------------
+    @property
+    def time_steps(self) -> int:
+        """Steps of the volume's time axis (1: none)."""
+        return self.session.volume.time_steps
+
+    def toggle_playing(self) -> None:
+        if self.time_steps > 1:
+            self.state.playing = not self.state.playing
+            self._last_step_at = time.perf_counter()
+
+    def step_time(self, delta: int) -> None:
+        self.state.playing = False
+        self.state.step_time(delta, self.time_steps)
+
+    def advance_playback(self) -> None:
+        """While playing, the next step once 1 / play_rate seconds have passed since the last
+        (one step a frame at most: a slow frame slows the playback, it skips no step)."""
+        state = self.state
+        if not state.playing or self.time_steps <= 1:
+            return
+        now = time.perf_counter()
+        if now - self._last_step_at >= 1.0 / max(state.play_rate, 1e-3):
+            self._last_step_at = now
+            state.step_time(+1, self.time_steps)
 
     def edited_channel(self) -> int:
         """Which channel of the volume the editor shows (0 for a one-channel volume)."""
@@ -302,6 +330,7 @@ class Viewer:
     def render_frame(self) -> FrameTimes:
         """Advances the renderers and draws the picture into the window's framebuffer."""
         state = self.state
+        self.advance_playback()
         state.history.observe(state.scene, busy=self._mouse_held())
         self._sync()
         self._record_step()
@@ -457,7 +486,12 @@ class Viewer:
                                    and s.probe_view != "off" else None),
             "camera_eye": list(s.scene.camera.eye),
             "half_extent": [float(x) for x in session.volume.half_extent],
-            "volume": {"name": session.volume.name, "dims": list(session.volume.dims)},
+            "volume": {"name": session.volume.name, "dims": list(session.volume.dims),
+                       **({"time": session.volume.time, "time_steps": session.volume.time_steps}
+                          if session.volume.time_steps > 1 else {}),
+                       **({"channels": session.volume.channel_count}
+                          if session.volume.channel_count > 1 else {})},
+            "playing": s.playing,
             "opacity_points": [list(p) for p in self.opacity_points()[0]],
             "clip_region": (None if session.renderer.resources.clip is None else
                             {"box_min": list(session.renderer.resources.clip.box_min),
