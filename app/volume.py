@@ -21,7 +21,8 @@ from .scene_types import Scene, VolumeError, VolumeSpec
 from .volume_axes import resolve_axes, to_canonical
 
 # What load_volume takes, by file name ending (a folder is a TIFF stack or a DICOM series).
-VOLUME_SUFFIXES = (".raw", ".nrrd", ".nhdr", ".npy") + formats.NIFTI_SUFFIXES + formats.TIFF_SUFFIXES
+VOLUME_SUFFIXES = ((".raw", ".nrrd", ".nhdr", ".npy") + formats.NIFTI_SUFFIXES
+                   + formats.TIFF_SUFFIXES + formats.ZARR_SUFFIXES)
 
 
 def is_volume_path(p: Path) -> bool:
@@ -424,7 +425,9 @@ def read_volume_array(spec: VolumeSpec, base_dir: str | None = None
     need_spacing = spec.spacing is None
     file_spacing = None
     axes: str | None = "zyx"
-    if p.is_dir():
+    if formats.is_zarr(p):
+        raw, file_spacing, axes = formats.read_zarr(p, need_spacing)
+    elif p.is_dir():
         if formats.tiff_files(p):
             raw, axes = formats.read_tiff_folder(p)
         else:

@@ -17,6 +17,9 @@ from .scene_types import VolumeError
 from .volume_axes import tiff_axes
 
 NIFTI_SUFFIXES = (".nii", ".nii.gz")
+ZARR_SUFFIXES = (".zarr",)
+# Files that make a folder a Zarr store (version 2: .zarray or .zgroup; version 3: zarr.json).
+ZARR_MARKERS = (".zarray", ".zgroup", "zarr.json")
 TIFF_SUFFIXES = (".tif", ".tiff")
 DICOM_SUFFIXES = (".dcm",)
 
@@ -189,6 +192,73 @@ def read_tiff_folder(folder: Path) -> tuple[np.ndarray, str]:
 
 def _shape_text(axes: str, shape) -> str:
     return "[" + ", ".join(f"{a} {n}" for a, n in zip(axes, shape)) + "]"
+
+
+# ---- Zarr and OME-Zarr ---------------------------------------------------------------------------
+
+def is_zarr(p: Path) -> bool:
+    """A Zarr store: a folder named *.zarr, or one holding a Zarr array's or group's metadata."""
+    return p.is_dir() and (has_suffix(p, ZARR_SUFFIXES)
+                           or any((p / m).is_file() for m in ZARR_MARKERS))
+
+
+# Axis names as Zarr files give them (OME-Zarr's axes, version 3's dimension_names, xarray's
+# _ARRAY_DIMENSIONS) in our letters; other names are unnamed ("?").
+ZARR_AXIS_NAMES = {"t": "t", "time": "t", "c": "c", "channel": "c", "ch": "c", "z": "z",
+                   "y": "y", "x": "x"}
+ZARR_AXIS_TYPES = {"time": "t", "channel": "c"}
+
+
+def _zarr_axes(names) -> str | None:
+    if not names or any(n is None for n in names):
+        return None
+    return "".join(ZARR_AXIS_NAMES.get(str(n).lower(), "?") for n in names)
+
+
+def read_zarr(p: Path, need_spacing: bool
+              ) -> tuple[np.ndarray, tuple[float, float, float] | None, str | None]:
+    """A Zarr array, or an OME-Zarr image (a group whose multiscales metadata, version 0.4 or
+    0.5, names its axes and the scale of its finest level, which is read). Returns the array, the
+    spacing (OME's scale along x, y, z; None where the store has none) and the axes as the store
+    names them (None where it names none: volume.axes must)."""
+    try:
+        import zarr
+    except ImportError:
+        raise VolumeError(f"{p}: reading Zarr needs the zarr package (pip install zarr)") from None
+    try:
+        node = zarr.open(str(p), mode="r")
+        spacing = None
+        if isinstance(node, zarr.Group):
+            attrs = node.attrs.asdict()
+            multiscales = attrs.get("multiscales") or attrs.get("ome", {}).get("multiscales")
+            if not multiscales:
+                arrays = sorted(name for name, _ in node.arrays())
+                raise VolumeError(f"{p}: a Zarr group without OME-Zarr multiscales metadata; give "
+                                  f"the path of one of its arrays ({', '.join(arrays) or 'none'})")
+            image = multiscales[0]
+            level = image["datasets"][0]
+            axes_meta = image.get("axes")
+            names = None
+            if axes_meta:
+                names = [a.get("name") if isinstance(a, dict) else a for a in axes_meta]
+                types = [a.get("type") if isinstance(a, dict) else None for a in axes_meta]
+                names = [ZARR_AXIS_TYPES.get(t, n) for n, t in zip(names, types)]
+            array = node[level["path"]]
+            for transform in level.get("coordinateTransformations", []):
+                if transform.get("type") == "scale" and names:
+                    scale = dict(zip(_zarr_axes(names) or "", transform["scale"]))
+                    values = [scale.get(a) for a in "xyz"]
+                    spacing = _spacing_or_none(values, str(p), False)
+        else:
+            array = node
+            names = getattr(array.metadata, "dimension_names", None) or \
+                array.attrs.asdict().get("_ARRAY_DIMENSIONS")
+        data = np.asarray(array[...])
+    except VolumeError:
+        raise
+    except Exception as exc:   # zarr and its codecs raise many types for broken stores
+        raise VolumeError(f"{p}: cannot read Zarr ({_one_line(exc)})") from None
+    return data, spacing, _zarr_axes(names)   # (no spacing: the scene's, or 1, 1, 1)
 
 
 # ---- DICOM ---------------------------------------------------------------------------------------

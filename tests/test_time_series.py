@@ -153,3 +153,61 @@ def test_steps_shown_again_are_kept_on_the_gpu(ctx, tmp_path):
         assert res.steps_kept == 1 and res.volume.time == 2
     finally:
         r.release()
+
+
+def test_animate_plays_the_series_one_bake_a_step(tmp_path, capsys):
+    """`animate --time-series`: one frame a step by default (or each step held over several
+    frames), the camera still, each step's probes baked before its first frame and not again;
+    the frames follow the ball. A volume without a time axis is refused."""
+    import json
+    from PIL import Image
+    from app.cli import main
+    np.save(tmp_path / "s.npy", moving_blob())
+    scene = {"volume": {"path": str(tmp_path / "s.npy"), "axes": "tzyx"}, **SMALL,
+             "camera": {"width": 24, "height": 16}}
+    (tmp_path / "s.json").write_text(json.dumps(scene))
+    code = main(["animate", str(tmp_path / "s.json"), "--time-series", "--frames", "8",
+                 "--out", str(tmp_path / "f"), "--spp", "1", "--probe-grid", "4",
+                 "--probe-samples", "16"])
+    out = capsys.readouterr()
+    assert code in (0, None), out.err
+    assert "baking the probes for each of 4 time steps" in out.err
+    assert "probes baked 4x" in out.out
+    frames = sorted((tmp_path / "f").glob("*.png"))
+    assert len(frames) == 8
+    images = [np.asarray(Image.open(f).convert("L"), np.float64) for f in frames]
+    np.testing.assert_array_equal(images[0], images[1])      # step 0 held two frames
+    ball = [np.abs(im - np.median(im)) for im in images[::2]]     # the ball against the sky
+    cols = [float((b * np.arange(b.shape[1])).sum() / b.sum()) for b in ball]
+    assert cols == sorted(cols) and cols[-1] > cols[0] + 2    # the ball moves along +x
+    (tmp_path / "one.json").write_text(json.dumps({**scene, "volume": {"builtin": "sphere"}}))
+    code = main(["animate", str(tmp_path / "one.json"), "--time-series", "--out",
+                 str(tmp_path / "g")])
+    assert code != 0 and "--time-series" in capsys.readouterr().err
+
+
+def test_time_series_bench_quick(tmp_path):
+    """scripts/time_series_bench.py --quick (the GPU run's code at llvmpipe's size): playback
+    timed over every step kept, and the error after a step change, warm and cold, falling to 0
+    once the new step's bake ends (a warm bake ends at the cold bake's probes)."""
+    import importlib.util
+    import json
+    from conftest import ROOT
+    spec = importlib.util.spec_from_file_location("time_series_bench",
+                                                  ROOT / "scripts" / "time_series_bench.py")
+    bench = importlib.util.module_from_spec(spec)
+    import sys
+    sys.modules.setdefault("time_series_bench", bench)   # (its dataclasses look themselves up)
+    spec.loader.exec_module(bench)
+    assert bench.main([str(tmp_path / "out"), "--quick"]) == 0
+    rec = json.loads((tmp_path / "out" / "results.json").read_text())
+    play = rec["playback"]
+    assert play["frames"] == 12 and play["fps"] > 0 and play["steps_kept"] == 6
+    for variant in ("warm", "cold"):
+        errors = rec["after_step_change"][variant]
+        assert errors["1"]["mean"] > 1e-3            # the new step's bake has only begun
+        assert errors["24"]["max"] < 1e-6            # ended: the cold bake's probes exactly
+        assert np.isfinite(rec["while_playing"][variant]["mean"])
+    assert rec["bake_noise_rrmse"] > 0
+    assert "fps" in (tmp_path / "out" / "report.md").read_text()
+    assert not (tmp_path / "out" / "series.npy").exists()
