@@ -485,3 +485,22 @@ def test_colour_bar_and_transfer_function_options_refuse_channels(tmp_path, caps
                  str(tmp_path / "o.png"), "--spp", "1"])
     assert code != 0 and "--colorbar: a colour bar shows one transfer function; this volume "\
                          "has 3 channels" in capsys.readouterr().err
+
+
+def test_channels_known_answer_script_quick(tmp_path):
+    """scripts/channels_known_answer.py --quick: the GPU record's code at llvmpipe's size (the
+    known answer itself is checked above)."""
+    import importlib.util
+    import json
+    from conftest import ROOT
+    spec = importlib.util.spec_from_file_location("channels_known_answer",
+                                                  ROOT / "scripts" / "channels_known_answer.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert script.main([str(tmp_path), "--quick"]) == 0
+    rec = json.loads((tmp_path / "results.json").read_text())
+    for q in "0123":
+        assert np.all(np.abs(rec["known_answer"][q]["raymarch"]) < 0.03), q
+    assert [row["channels"] for row in rec["cost"]] == [1, 2, 3, 4]
+    means = [row["image_mean"] for row in rec["cost"]]       # the same medium split in channels
+    assert max(means) - min(means) < 0.1 * max(means)
