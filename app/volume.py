@@ -571,6 +571,34 @@ def volume_from_canonical(raw: np.ndarray, spacing: tuple[float, float, float], 
                   raws[0][0], raws[0][1], tuple(ranges), tuple(raws))
 
 
+def volume_from_array(array, axes: str = "zyx", spacing=(1.0, 1.0, 1.0),
+                      value_range: tuple[float, float] | None = None,
+                      channels: tuple | None = None, time: int = 0,
+                      name: str = "array") -> Volume:
+    """A Volume from a NumPy array in memory (the Python API's way in): `axes` names its axes as
+    volume.axes does ("zyx", "czyx", "tzyx", "tczyx", ...); `channels` and `time` as the scene's
+    (app/channels.py, SPEC.md); normalised as a file's would be. Errors are VolumeErrors naming
+    the problem."""
+    from .volume_axes import resolve_axes, to_canonical
+    data = np.asarray(array)
+    if not isinstance(axes, str):
+        raise VolumeError(f"{name}: axes must be a string such as \"czyx\", got {axes!r}")
+    raw = to_canonical(data, resolve_axes(None, tuple(data.shape), axes.lower(), name), name)
+    if min(raw.shape) < 1:
+        raise VolumeError(f"{name}: volume has zero size, shape {list(data.shape)}")
+    spacing = tuple(float(v) for v in spacing)
+    if len(spacing) != 3 or any(not (v > 0 and np.isfinite(v)) for v in spacing):
+        raise VolumeError(f"{name}: spacing must be three positive numbers, got {list(spacing)}")
+    steps = raw.shape[0]
+    if not 0 <= time < steps:
+        raise VolumeError(f"{name}: time step {time} asked for, but the array has "
+                          + (f"{steps} time steps" if steps > 1 else "no time axis"))
+    spec = VolumeSpec(path=name, builtin=None, value_range=value_range)
+    volume = volume_from_canonical(raw[time], spacing, name, spec, channels, name,
+                                   _series_domains(raw, spec) if steps > 1 else None)
+    return dataclasses.replace(volume, time=time, time_steps=steps) if steps > 1 else volume
+
+
 def _finite_min_max(raw: np.ndarray) -> tuple[float, float]:
     finite = raw[np.isfinite(raw)] if raw.dtype.kind == "f" else raw
     return (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)

@@ -504,3 +504,22 @@ def test_channels_known_answer_script_quick(tmp_path):
     assert [row["channels"] for row in rec["cost"]] == [1, 2, 3, 4]
     means = [row["image_mean"] for row in rec["cost"]]       # the same medium split in channels
     assert max(means) - min(means) < 0.1 * max(means)
+
+
+def test_volume_from_an_array_in_memory():
+    """The Python API's way in: a NumPy array with its axes named, channels and time steps as
+    from a file, refused where the axes do not fit."""
+    from app.volume import volume_from_array
+    data = _blobs(shape=(6, 7, 8))
+    v = volume_from_array(data, axes="czyx")
+    assert v.channel_count == 3 and v.dims == (8, 7, 6)
+    np.testing.assert_allclose(v.channel(1), data[1] / data[1].max(), atol=1e-6)
+    shown = (ChannelSpec(transfer_function=TransferFunctionSpec(), index=2),)
+    one = volume_from_array(data, axes="czyx", channels=shown, value_range=(0, 2))
+    assert one.channel_count == 1 and one.value_range == (0.0, 2.0)
+    series = volume_from_array(np.stack([data[0], data[1]]), axes="tzyx", time=1)
+    assert (series.time, series.time_steps) == (1, 2)
+    with pytest.raises(VolumeError, match="names 3 axes but the array has 4"):
+        volume_from_array(data, axes="zyx")
+    with pytest.raises(VolumeError, match="no time axis"):
+        volume_from_array(data[0], time=1)
