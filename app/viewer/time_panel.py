@@ -32,5 +32,5 @@ def time_section(v) -> None:
     if changed:
         state.play_rate = float(rate)
     res = v.session.renderer.resources
-    imgui.text_disabled(f"{res.steps_kept} steps kept for showing again (space plays, "
+    imgui.text_disabled(f"steps kept for showing again: {res.steps_kept} (space plays, "
                         "',' and '.' step)")
