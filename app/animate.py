@@ -6,8 +6,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .frontend import (OptionError, add_colorbar_options, add_scene_edit_options, apply_options,
-                       check_clip, grid_arg, positive_float, positive_int, scene_from_arg)
+from .frontend import (OptionError, add_colorbar_options, add_scene_edit_options,
+                       add_volume_options, apply_options, check_clip, grid_arg, positive_float,
+                       positive_int, scene_from_arg)
 
 DEFAULT_FRAMES = 120
 DEFAULT_SPP = 16
@@ -21,10 +22,12 @@ def bookmark_list(text: str) -> list[str]:
 
 def add_animate_parser(sub, func) -> argparse.ArgumentParser:
     from .movie_writer import DEFAULT_CRF
-    from .render.renderer import METHODS, RAYMARCH_STAGES
+    from .render.renderer import RAYMARCH_STAGES
+    from .scene_types import VIEWER_METHODS as METHODS
     a = sub.add_parser("animate", help="render a movie: a turntable, or a flight through the "
                                        "scene's bookmarks (MP4, GIF or numbered PNGs)")
-    a.add_argument("scene", nargs="?", help="scene JSON or a volume file (default: built-in scene)")
+    a.add_argument("scene", nargs="?", help="scene JSON, a volume file or a folder (TIFF, DICOM; "
+                                            "default: the built-in scene)")
     path = a.add_mutually_exclusive_group()
     path.add_argument("--turntable", type=float, metavar="DEGREES",
                       help="turn the camera about its up axis through the target by DEGREES over "
@@ -61,6 +64,7 @@ def add_animate_parser(sub, func) -> argparse.ArgumentParser:
     a.add_argument("--probe-samples", type=positive_int, help="walks per probe")
     a.add_argument("--raymarch-stage", choices=RAYMARCH_STAGES, default="compute")
     a.add_argument("--raymarch-step", type=positive_float, help="raymarch step in voxels")
+    add_volume_options(a)
     add_scene_edit_options(a)
     add_colorbar_options(a)
     from .gl.context import BACKENDS
@@ -108,6 +112,8 @@ def run_animate(args: argparse.Namespace) -> int:
         raise OptionError(str(exc)) from None
     except ValueError as exc:
         raise OptionError(f"--keyframes: {exc}") from None
+    for note in volume.notes:
+        print(f"note: {note}", file=sys.stderr)
     load_scene_environment(scene)
     if getattr(args, "colorbar", None) and volume.channel_count > 1:
         raise OptionError(f"--colorbar: a colour bar shows one transfer function; this volume has "

@@ -6,7 +6,8 @@ import sys
 from pathlib import Path
 
 from .frontend import (ArgumentParser, OptionError, add_colorbar_options, add_scene_edit_options,
-                       fraction, grid_arg, positive_float, positive_int, render_to_files)
+                       add_volume_options, fraction, grid_arg, positive_float, positive_int,
+                       render_to_files)
 from .scene import SceneError
 
 
@@ -17,6 +18,46 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 def cmd_render(args: argparse.Namespace) -> int:
     return render_to_files(args)
+
+
+def cmd_schema(args: argparse.Namespace) -> int:
+    """The scene file's JSON Schema (or its key table), generated from the scene's types."""
+    from .scene_schema import key_table, schema_text, update_docs
+    if args.update_docs:
+        from .paths import ASSETS_DIR
+        for written in update_docs(ASSETS_DIR.parent / "docs"):
+            print(f"wrote {written}")
+        return 0
+    text = key_table() if args.table else schema_text()
+    if args.out:
+        Path(args.out).write_text(text)
+        print(f"wrote {Path(args.out).resolve()}")
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def cmd_series(args: argparse.Namespace) -> int:
+    """Lists a DICOM folder tree's or DICOMDIR's series, and which one opens by default."""
+    from .dicom import list_series
+    from .scene_types import VolumeError
+    listing = list_series(args.path)
+    try:
+        default = listing.largest().number
+    except VolumeError:
+        default = None
+    print(f"{listing.where}: {len(listing.series)} DICOM series")
+    for s in listing.series:
+        mark = "*" if s.number == default else " "
+        print(f"{mark} {s.label()}")
+        print(f"      SeriesInstanceUID {s.uid}")
+    if listing.skipped:
+        n = len(listing.skipped)
+        print(f"({n} file{'s' if n != 1 else ''} that {'are' if n != 1 else 'is'} not DICOM "
+              "passed over)")
+    print("* opens by default (the largest that makes a volume); open another with --series N or "
+          "--series UID" if default is not None else "none of them makes one volume")
+    return 0
 
 
 def cmd_animate(args: argparse.Namespace) -> int:
@@ -161,10 +202,26 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-empty-space-skipping", dest="empty_space_skipping", action="store_false",
                    help="track with one global majorant instead of the macrocell grid (the same "
                         "image; for comparisons)")
+    add_volume_options(r)
     add_scene_edit_options(r)
     add_colorbar_options(r)
     add_gl_backend(r)
     r.set_defaults(func=cmd_render)
+
+    s = sub.add_parser("series", help="list the series of a DICOM folder tree or DICOMDIR "
+                                      "(description, modality, size, slices) and which opens")
+    s.add_argument("path", help="a folder (searched recursively) or a DICOMDIR file")
+    s.set_defaults(func=cmd_series)
+
+    j = sub.add_parser("schema", help="the scene file's JSON Schema (docs/scene.schema.json), "
+                                      "generated from the scene's types")
+    j.add_argument("--out", help="write it to this file instead of stdout")
+    j.add_argument("--table", action="store_true",
+                   help="the key table of docs/scene-format.md (markdown) instead")
+    j.add_argument("--update-docs", action="store_true",
+                   help="rewrite docs/scene.schema.json and docs/scene-format.md's key table in "
+                        "this checkout")
+    j.set_defaults(func=cmd_schema)
 
     from .animate import add_animate_parser
     add_animate_parser(sub, cmd_animate)

@@ -103,6 +103,50 @@ class ArgumentParser(argparse.ArgumentParser):
 
 # ---- the scene ---------------------------------------------------------------------------------
 
+def series_arg(text: str) -> int | str:
+    """--series: a number in the folder's listing (from 1) or a SeriesInstanceUID."""
+    text = text.strip()
+    if text.isdigit():
+        if int(text) < 1:
+            raise argparse.ArgumentTypeError(f"expected a series number from 1 or a "
+                                             f"SeriesInstanceUID, got {text!r}")
+        return int(text)
+    if not text:
+        raise argparse.ArgumentTypeError("expected a series number or a SeriesInstanceUID")
+    return text
+
+
+def window_arg(text: str) -> str | dict:
+    """--window: a preset name (soft_tissue, bone, lung, air) or LEVEL,WIDTH in data units."""
+    from .scene_types import WINDOW_PRESETS
+    if text.strip().lower() in WINDOW_PRESETS:
+        return text.strip().lower()
+    parts = text.split(",")
+    try:
+        level, width = (float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a preset ({', '.join(WINDOW_PRESETS)}) or "
+                                         f"LEVEL,WIDTH, got {text!r}") from None
+    return {"level": level, "width": width}
+
+
+def add_volume_options(parser: argparse.ArgumentParser) -> None:
+    """The options that say how a volume file is read (render and view)."""
+    from .scene_types import ORIENTATIONS
+    parser.add_argument("--series", type=series_arg, metavar="N|UID",
+                        help="a DICOM folder or DICOMDIR's series: its number in the listing "
+                             "(`radiance-probes series PATH`) or its SeriesInstanceUID (default: "
+                             "the largest that makes a volume)")
+    parser.add_argument("--data-window", dest="data_window", type=window_arg,
+                        metavar="PRESET|LEVEL,WIDTH",
+                        help="the values shown, as radiology gives them: soft_tissue, bone, lung, "
+                             "air, or level and width in data units (Hounsfield units for CT)")
+    parser.add_argument("--orientation", choices=ORIENTATIONS,
+                        help="data: the array's axes as stored (default); patient: turned so that "
+                             "+x is the patient's left, +y superior, +z anterior (NIfTI, DICOM, "
+                             "NRRD)")
+
+
 def scene_from_arg(arg: str | None) -> Scene:
     """The scene argument: a scene JSON file, a volume file (in the default scene), or none (the
     default scene)."""
@@ -190,7 +234,8 @@ _OPTION_FIELDS = {"crop.": "--crop", "clip_plane.": "--clip-plane",
                   "probes.sh_window": "--sh-window", "probes.precision": "--probe-precision",
                   "probes.layout": "--probe-layout", "probes.adaptive_strength": "--adaptive-strength",
                   "probes.adaptive_indicator": "--adaptive-indicator",
-                  "probes.interpolation": "--probe-interpolation"}
+                  "probes.interpolation": "--probe-interpolation", "volume.series": "--series",
+                  "volume.orientation": "--orientation", "volume.window": "--data-window"}
 
 
 def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
@@ -207,6 +252,10 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
         ("interpolation", getattr(args, "probe_interpolation", None))) if value is not None})
     camera = {key: value for key, value in (("width", getattr(args, "width", None)),
                                             ("height", getattr(args, "height", None))) if value}
+    volume = {key: value for key, value in (("series", getattr(args, "series", None)),
+                                            ("orientation", getattr(args, "orientation", None)),
+                                            ("window", getattr(args, "data_window", None)))
+              if value is not None}
     edits = _scene_edits(args)
     if getattr(args, "transfer_function", None):
         from .scene import load_transfer_function
@@ -221,11 +270,14 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
         scene = scene.replace(crop=replace(scene.crop, enabled=False))
     if getattr(args, "no_clip_plane", False) and scene.clip_plane is not None:
         scene = scene.replace(clip_plane=replace(scene.clip_plane, enabled=False))
-    if not probes and not camera and not edits:
+    if not probes and not camera and not volume and not edits:
         return scene
     data = scene_to_dict(scene)
     data["probes"].update(probes)
     data["camera"].update(camera)
+    if "window" in volume:
+        data["volume"].pop("value_range", None)   # the window given replaces the scene's range
+    data["volume"].update(volume)
     data.update(edits)
     try:
         return parse_scene(data, base_dir=scene.base_dir)
@@ -317,9 +369,9 @@ def render_defaults() -> dict:
                 exr=None, probe_grid=None, probe_samples=None, sh_window=None, probe_precision=None,
                 auto_probes=None, raymarch_stage="compute", raymarch_step=None, seed=0, width=None,
                 height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True,
-                gather_event=None, crop=None, crop_voxels=None, clip_plane=None, no_crop=False,
-                no_clip_plane=False, transfer_function=None, colorbar=None,
-                colorbar_title="value")
+                gather_event=None, series=None, orientation=None, data_window=None, crop=None,
+                crop_voxels=None, clip_plane=None, no_crop=False, no_clip_plane=False,
+                transfer_function=None, colorbar=None, colorbar_title="value")
 
 
 def render_to_files(args: argparse.Namespace) -> int:
@@ -348,6 +400,8 @@ def render_to_files(args: argparse.Namespace) -> int:
     scene = apply_options(scene_from_arg(args.scene), args)
     check_outputs(args)
     volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
+    for note in volume.notes:
+        print(f"note: {note}", file=sys.stderr)
     if getattr(args, "colorbar", None) and volume.channel_count > 1:
         raise OptionError(f"--colorbar: a colour bar shows one transfer function; this volume has "
                           f"{volume.channel_count} channels, each with its own")

@@ -14,18 +14,18 @@ from typing import Any, Mapping
 
 from .scene_types import (AXIS_LETTERS, CROP_UNITS, MAX_CHANNELS, ChannelSpec,
                           channel_transfer_function, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
-                          MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, PROBE_FITS, PROBE_INDICATORS,
-                          PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS, SH_ORDERS,
-                          SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS, VIEWER_PROBE_VIEWS,
-                          WINDOW_PRESETS, BookmarkSpec, CameraSpec, ClipPlaneSpec, CropSpec,
-                          EnvironmentMapSpec, LightSpec, ProbeSpec, Scene, SceneError,
-                          TransferFunctionSpec, ViewerSpec, VolumeSpec, scene_to_dict,
+                          MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
+                          PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
+                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
+                          VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
+                          ClipPlaneSpec, CropSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene,
+                          SceneError, TransferFunctionSpec, ViewerSpec, VolumeSpec, scene_to_dict,
                           transfer_to_dict, window_range)
 from .transfer import COLORMAPS
 from .volume import BUILTIN_VOLUMES, RAW_DTYPES
 
 __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_SAMPLES",
-           "MAX_TRANSFER_ROWS", "PROBE_FITS", "PROBE_INDICATORS", "PROBE_INTERPOLATIONS",
+           "MAX_TRANSFER_ROWS", "ORIENTATIONS", "PROBE_FITS", "PROBE_INDICATORS", "PROBE_INTERPOLATIONS",
            "PROBE_LAYOUTS", "PROBE_PRECISIONS",
            "SH_WINDOWS", "WINDOW_PRESETS",
            "BookmarkSpec", "CameraSpec", "ChannelSpec", "MAX_CHANNELS", "ClipPlaneSpec", "CropSpec", "EnvironmentMapSpec",
@@ -122,11 +122,28 @@ def _parse_volume(d: Any) -> VolumeSpec:
         kw["dtype"] = _choice(d["dtype"], "volume.dtype", tuple(RAW_DTYPES))
     if d.get("replace_nonfinite") is not None:
         kw["replace_nonfinite"] = _number(d["replace_nonfinite"], "volume.replace_nonfinite")
+    if d.get("series") is not None:
+        if not kw.get("path"):
+            raise SceneError("volume.series: only for a DICOM folder or DICOMDIR (volume.path)")
+        kw["series"] = _series(d["series"])
+    if "orientation" in d:
+        kw["orientation"] = _choice(d["orientation"], "volume.orientation", ORIENTATIONS)
     if d.get("axes") is not None:
         if not kw.get("path"):
             raise SceneError("volume.axes: only for files (a built-in volume is one channel, z, y, x)")
         kw["axes"] = _parse_axes(d["axes"])
     return VolumeSpec(**kw)
+
+
+def _series(value: Any) -> int | str:
+    """A DICOM series: its number in the listing (from 1) or its SeriesInstanceUID."""
+    if isinstance(value, bool) or not isinstance(value, (int, str)) or (
+            isinstance(value, int) and value < 1) or (isinstance(value, str) and not value.strip()):
+        raise SceneError(f"volume.series: expected a series number from 1 or a "
+                         f"SeriesInstanceUID, got {value!r}")
+    if isinstance(value, str) and value.strip().isdigit():
+        return int(value)
+    return value.strip() if isinstance(value, str) else value
 
 
 def _parse_window(w: Any, name: str = "volume.window") -> tuple[float, float]:
@@ -497,10 +514,27 @@ def _transfer_file(path: str, base_dir: str | Path | None, name: str) -> Transfe
         raise SceneError(f"{name}: {exc}") from None
 
 
+# Volume keys a scene may also give at its top level, as SPEC.md writes them ("orientation":
+# "patient"; "series" of a DICOM folder): the same as volume.orientation and volume.series.
+TOP_LEVEL_VOLUME_KEYS = ("orientation", "series")
+
+
 def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
     """Validate a JSON-like dictionary into a :class:`Scene`."""
-    d = _object(data, "", _fields(Scene) - {"base_dir", "environment_map"})
+    d = _object(data, "", (_fields(Scene) - {"base_dir", "environment_map"})
+                | set(TOP_LEVEL_VOLUME_KEYS) | {"$schema"})
+    if "$schema" in d and not isinstance(d["$schema"], str):   # for editors; nothing else reads it
+        raise SceneError(f"$schema: expected the schema's address, got {d['$schema']!r}")
     kw: dict[str, Any] = {}
+    lifted = {k: d[k] for k in TOP_LEVEL_VOLUME_KEYS if k in d}
+    if lifted:
+        volume = d.get("volume", {})
+        if isinstance(volume, Mapping):
+            both = sorted(set(lifted) & set(volume))
+            if both:
+                raise SceneError(f"{both[0]}: given both at the top level and as volume.{both[0]}; "
+                                 "give it once")
+            d = {**d, "volume": {**volume, **lifted}}
     if "volume" in d:
         kw["volume"] = _parse_volume(d["volume"])
     if "transfer_function" in d:

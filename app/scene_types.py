@@ -56,6 +56,8 @@ PROBE_INDICATORS = ("extinction", "sun")
 PROBE_INTERPOLATIONS = ("trilinear", "visibility")
 # The SH orders probes can hold (glsl/lib/probe_packing.glsl; "auto" picks among them).
 SH_ORDERS = (0, 1, 2, 3, 4)
+# How a volume's array axes meet the world (app/orientation.py).
+ORIENTATIONS = ("data", "patient")
 
 
 @dataclass(frozen=True)
@@ -73,6 +75,12 @@ class VolumeSpec:
     # (level, width) in data units (Hounsfield units for CT), or a WINDOW_PRESETS name in the JSON:
     # another way to give value_range (level -/+ width / 2), which it excludes.
     window: tuple[float, float] | None = None
+    # A DICOM folder tree or DICOMDIR's series: its number in the listing (from 1) or its
+    # SeriesInstanceUID; None: the largest series that makes one volume (app/dicom.py).
+    series: int | str | None = None
+    # "data": data[z, y, x] on world x, y, z as stored; "patient": axes permuted and flipped to
+    # world +x = left, +y = superior, +z = anterior where the file says (app/orientation.py).
+    orientation: str = "data"
     # Which array axis is which, e.g. "czyx" or "tzyx" (letters t, c, z, y, x, each once, z, y and
     # x always): needed for a .npy of more than 3 dimensions and for a file whose metadata leaves
     # axes unnamed; for a file whose metadata names its axes it must agree with them.
@@ -240,8 +248,9 @@ class BookmarkSpec:
                                    fov_y=self.fov_y)
 
 
-# The viewer's render methods and display modes (app/render/renderer.py METHODS and
-# app/viewer/state.py DISPLAY_MODES name the same; a test keeps them equal).
+# The viewer's render methods and display modes (app/render/renderer.py METHODS but `guided`,
+# which the viewer does not offer yet, and app/viewer/state.py DISPLAY_MODES; a test keeps them
+# so).
 VIEWER_METHODS = ("pt", "probes", "probes-only", "raymarch")
 VIEWER_DISPLAYS = ("image", "split", "error")
 VIEWER_PROBE_VIEWS = ("off", "over", "alone")
@@ -319,6 +328,8 @@ def scene_to_dict(scene: Scene) -> dict:
             sub = {k.name: conv(getattr(v, k.name)) for k in dataclasses.fields(v)}
             if f.name == "volume":
                 sub = {k: val for k, val in sub.items() if val is not None}
+                if v.orientation == "data":
+                    sub.pop("orientation")   # the default, left out as the other defaults are
                 if v.window is not None:
                     sub["window"] = {"level": v.window[0], "width": v.window[1]}
                 if v.path:

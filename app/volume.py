@@ -16,19 +16,21 @@ from typing import Callable
 
 import numpy as np
 
+from . import dicom
 from . import volume_formats as formats
+from .orientation import NRRD_SPACES, patient_axes, to_patient, unit_columns
 from .scene_types import Scene, VolumeError, VolumeSpec
 from .volume_axes import resolve_axes, to_canonical
 
-# What load_volume takes, by file name ending (a folder is a TIFF stack or a DICOM series).
+# What load_volume takes, by file name ending (a folder is a TIFF stack, DICOM images or a Zarr
+# store; a file named DICOMDIR indexes a DICOM set).
 VOLUME_SUFFIXES = ((".raw", ".nrrd", ".nhdr", ".npy") + formats.NIFTI_SUFFIXES
                    + formats.TIFF_SUFFIXES + formats.ZARR_SUFFIXES)
 
 
 def is_volume_path(p: Path) -> bool:
-    """A file load_volume reads by its name, or a folder (a TIFF stack or a DICOM series)."""
-    return p.is_dir() or formats.has_suffix(p, VOLUME_SUFFIXES)
-
+    """A file load_volume reads by its name, a DICOMDIR, or a folder (a TIFF stack or DICOM)."""
+    return p.is_dir() or formats.has_suffix(p, VOLUME_SUFFIXES) or dicom.is_dicomdir(p)
 
 
 RAW_DTYPES = {
@@ -49,6 +51,17 @@ class Volume:
     raw_dtype: str
     raw_min: float
     raw_max: float
+    # What a person should know about how the file was read (the other series of a DICOM folder,
+    # an oblique scan shown axis-aligned, files passed over); the CLI prints them, the viewer shows
+    # them.
+    notes: tuple[str, ...] = ()
+    # The array axes' directions in the patient's LPS frame (columns x, y, z) as shown, where the
+    # file says; None: it does not (app/orientation.py).
+    direction: np.ndarray | None = None
+    orientation: str = "data"            # how the axes were placed: "data" or "patient"
+    oblique_degrees: float = 0.0         # "patient": the residual rotation not applied
+    dicom_listing: dicom.DicomListing | None = None   # a DICOM folder's series
+    dicom_series: dicom.DicomSeries | None = None     # ... and the one shown
     # Several channels: the raw values each channel maps to 0 and 1, and each one's raw min and
     # max; empty for a one-channel volume.
     channel_ranges: tuple[tuple[float, float], ...] = ()
@@ -348,7 +361,9 @@ def _read_raw(p: Path, dims: tuple[int, int, int] | None, dtype: str | None) -> 
     return np.fromfile(p, dtype=np_dtype).reshape(dims[2], dims[1], dims[0])
 
 
-def _read_nrrd(p: Path) -> tuple[np.ndarray, tuple[float, float, float] | None]:
+def _read_nrrd(p: Path) -> tuple[np.ndarray, tuple[float, float, float] | None, np.ndarray | None]:
+    """The array (first, fastest axis = x), its spacing, and its axes' directions in LPS where the
+    header gives an anatomical `space` and `space directions`."""
     import warnings
 
     import nrrd
@@ -372,7 +387,16 @@ def _read_nrrd(p: Path) -> tuple[np.ndarray, tuple[float, float, float] | None]:
         raise VolumeError(f"{p}: cannot read the NRRD's spacing ({_one_line(exc)})") from None
     if spacing is not None and len(spacing) != 3:
         raise VolumeError(f"{p}: the NRRD gives {len(spacing)} spacings for 3 axes")
-    return data, spacing
+    direction = None
+    signs = NRRD_SPACES.get(str(header.get("space", "")).strip().lower())
+    if signs is not None and "space directions" in header:
+        try:
+            dirs = np.asarray(header["space directions"], dtype=np.float64)
+        except (TypeError, ValueError):
+            dirs = None
+        if dirs is not None and dirs.shape == (3, 3):   # rows: axes x, y, z
+            direction = unit_columns(np.diag(signs) @ dirs.T)
+    return data, spacing, direction
 
 
 def _read_npy(p: Path) -> np.ndarray:
@@ -416,46 +440,66 @@ def normalise(raw: np.ndarray, value_range: tuple[float, float] | None, where: s
     return np.clip(data, 0.0, 1.0).astype(np.float32), (float(lo), float(hi))
 
 
-def read_volume_array(spec: VolumeSpec, base_dir: str | None = None
-                      ) -> tuple[np.ndarray, tuple[float, float, float] | None, str]:
-    """The raw values of a volume file as (t, c, z, y, x) (app/volume_axes.py: axes from the
-    file's metadata or volume.axes, refused where neither says), the file's own spacing (None
-    where it has none or the scene gives one) and the file's name."""
+def read_volume_array(spec: VolumeSpec, base_dir: str | None = None) -> "VolumeFile":
+    """A volume file's raw values as (t, c, z, y, x) (app/volume_axes.py: axes from the file's
+    metadata or volume.axes, refused where neither says), with what else the file says
+    (VolumeFile)."""
     p = _resolve(spec.path, base_dir)
     need_spacing = spec.spacing is None
-    file_spacing = None
+    file_spacing = direction = None
+    notes: tuple[str, ...] = ()
+    listing = series = None
     axes: str | None = "zyx"
+    if spec.series is not None and not (p.is_dir() or dicom.is_dicomdir(p)):
+        raise VolumeError(f"{p}: volume.series {spec.series} names a DICOM series, but this is "
+                          "not a DICOM folder or DICOMDIR")
     if formats.is_zarr(p):
         raw, file_spacing, axes = formats.read_zarr(p, need_spacing)
-    elif p.is_dir():
-        if formats.tiff_files(p):
-            raw, axes = formats.read_tiff_folder(p)
-        else:
-            raw, file_spacing = formats.read_dicom_folder(p, need_spacing)
+    elif p.is_dir() and spec.series is None and formats.tiff_files(p):
+        raw, axes = formats.read_tiff_folder(p)
+    elif p.is_dir() or dicom.is_dicomdir(p):
+        got = dicom.read_dicom(p, need_spacing, spec.series)
+        raw, file_spacing, direction, notes = got.data, got.spacing, got.direction, got.notes
+        listing, series = got.listing, got.series
     elif not p.is_file():
         raise VolumeError(f"{p}: volume file not found")
     elif formats.has_suffix(p, formats.NIFTI_SUFFIXES):
-        raw, file_spacing, axes = formats.read_nifti(p, need_spacing)
+        raw, file_spacing, direction, axes = formats.read_nifti(p, need_spacing)
     elif formats.has_suffix(p, formats.TIFF_SUFFIXES):
         raw, axes = formats.read_tiff(p)
-    elif formats.has_suffix(p, formats.DICOM_SUFFIXES):
+    elif formats.has_suffix(p, dicom.DICOM_SUFFIXES):
         raise VolumeError(f"{p}: a single DICOM file; give the folder holding its series")
     else:
         suffix = p.suffix.lower()
         if suffix == ".raw":
             raw = _read_raw(p, spec.dims, spec.dtype)
         elif suffix in (".nrrd", ".nhdr"):
-            raw, file_spacing = _read_nrrd(p)
+            raw, file_spacing, direction = _read_nrrd(p)
         elif suffix == ".npy":
             raw, axes = _read_npy(p), None
         else:
             raise VolumeError(f"{p}: unknown volume format '{suffix}' (known: "
-                              f"{', '.join(VOLUME_SUFFIXES)}, or a folder of TIFF or DICOM "
-                              "slices)")
+                              f"{', '.join(VOLUME_SUFFIXES)}, a DICOMDIR, a Zarr store, or a "
+                              "folder of TIFF or DICOM slices)")
     raw = to_canonical(raw, resolve_axes(axes, tuple(raw.shape), spec.axes, str(p)), str(p))
     if min(raw.shape) < 1:
         raise VolumeError(f"{p}: volume has zero size, shape {raw.shape[:1:-1]} (x, y, z)")
-    return raw, (file_spacing if need_spacing else None), p.name
+    return VolumeFile(raw, file_spacing if need_spacing else None, p.name, direction, notes,
+                      listing, series)
+
+
+@dataclass(frozen=True, eq=False)
+class VolumeFile:
+    """What read_volume_array found: the raw values (t, c, z, y, x), the file's spacing (None
+    where it has none or the scene gives one), its name, the axes' directions in LPS where the
+    file says, notes for a person, and a DICOM set's listing and the series read."""
+    raw: np.ndarray
+    spacing: tuple[float, float, float] | None
+    name: str
+    direction: np.ndarray | None = None
+    notes: tuple[str, ...] = ()
+    listing: object = None
+    series: object = None
 
 
 def load_volume(spec: VolumeSpec, base_dir: str | None = None,
@@ -483,10 +527,11 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
         norm, vr = normalise(data, vr, f"built-in '{name}'")
         return Volume(norm, tuple(float(v) for v in spacing), f"builtin:{name}", vr, "float32",
                       float(data.min()), float(data.max()))
-    raw, file_spacing, name = _read_series(spec, base_dir)
+    found = _read_series(spec, base_dir)
+    raw, name, direction, notes = found.raw, found.name, found.direction, found.notes
     where = str(_resolve(spec.path, base_dir))
-    if file_spacing is not None:
-        spacing = file_spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
+    if found.spacing is not None:
+        spacing = found.spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
     if any(not (s > 0 and np.isfinite(s)) for s in spacing):
         raise VolumeError(f"{where}: spacing must be positive, got {spacing}")
     steps = raw.shape[0]
@@ -495,9 +540,30 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
                           + (f"{steps} time steps (0 to {steps - 1})" if steps > 1 else
                              "no time axis (one step)") + "; see the scene's time")
     fallback = _series_domains(raw, spec) if steps > 1 else None
-    volume = volume_from_canonical(raw[time], tuple(float(s) for s in spacing), name, spec,
+    step = raw[time]
+    oblique = 0.0
+    orientation = "data"
+    if spec.orientation == "patient":
+        if direction is None:
+            notes += (f"{name} says nothing of the patient's orientation: shown as stored "
+                      "(orientation \"data\")",)
+        else:   # every channel placed alike (the same permutation and flips)
+            placed = [to_patient(step[c], spacing, direction) for c in range(step.shape[0])]
+            step = np.stack([p.data for p in placed])
+            direction, orientation = placed[0].direction, "patient"
+            # a scene's spacing is given along the file's axes, like the header's
+            spacing = placed[0].spacing
+            oblique = placed[0].oblique_degrees
+            if oblique:
+                notes += (f"{name} was scanned obliquely: its axes lie {oblique:.1f} degrees "
+                          "from the patient's; shown on the nearest patient axes (permuted and "
+                          f"flipped, not resampled: {patient_axes(direction)})",)
+    volume = volume_from_canonical(step, tuple(float(s) for s in spacing), name, spec,
                                    channels, where, fallback)
-    return dataclasses.replace(volume, time=time, time_steps=steps) if steps > 1 else volume
+    return dataclasses.replace(
+        volume, notes=notes, direction=direction, orientation=orientation,
+        oblique_degrees=oblique, dicom_listing=found.listing, dicom_series=found.series,
+        **({"time": time, "time_steps": steps} if steps > 1 else {}))
 
 
 # The last time series read (app/volume.py _read_series): its key and (raw, spacing, name).
@@ -513,12 +579,12 @@ def _read_series(spec: VolumeSpec, base_dir: str | None):
     except OSError:
         stamp = None
     key = (str(p.resolve()) if stamp is not None else str(p), stamp, spec.axes, spec.dims,
-           spec.dtype, spec.spacing)
+           spec.dtype, spec.spacing, spec.series)
     if _SERIES_CACHE and _SERIES_CACHE[0][0] == key and stamp is not None:
         return _SERIES_CACHE[0][1]
     found = read_volume_array(spec, base_dir)
     _SERIES_CACHE.clear()
-    if found[0].shape[0] > 1:
+    if found.raw.shape[0] > 1:
         _SERIES_CACHE.append((key, found))
     return found
 

@@ -1,10 +1,10 @@
-"""Medical and microscopy volume files read with the libraries made for them: NIfTI (nibabel),
-TIFF stacks (tifffile) and DICOM series (pydicom), each mapped to ``data[z, y, x]`` as SPEC.md
-says, with no reorientation (orientation matrices stay metadata).
+"""Medical and microscopy volume files read with the libraries made for them: NIfTI (nibabel) and
+TIFF stacks (tifffile), each mapped to ``data[z, y, x]`` as docs/scene-format.md says (DICOM series:
+app/dicom.py). Orientation matrices are returned as metadata; app/volume.py applies them where
+the scene asks for ``"orientation": "patient"`` (app/orientation.py).
 
-Each reader returns ``(array [z, y, x], spacing along x, y, z or None)``; every problem, whatever
-the library raises, ends in one :class:`VolumeError` naming the file (or folder) and the problem.
-``app/volume.py`` normalises the array like any other format's.
+Every problem, whatever the library raises, ends in one :class:`VolumeError` naming the file (or
+folder) and the problem. ``app/volume.py`` normalises the array like any other format's.
 """
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .orientation import RAS_TO_LPS, unit_columns
 from .scene_types import VolumeError
 from .volume_axes import tiff_axes
 
@@ -21,11 +22,6 @@ ZARR_SUFFIXES = (".zarr",)
 # Files that make a folder a Zarr store (version 2: .zarray or .zgroup; version 3: zarr.json).
 ZARR_MARKERS = (".zarray", ".zgroup", "zarr.json")
 TIFF_SUFFIXES = (".tif", ".tiff")
-DICOM_SUFFIXES = (".dcm",)
-
-# Neighbouring DICOM slice gaps may differ by this fraction of the mean gap (rounding in the
-# headers' decimal strings); beyond it the series is unevenly spaced and would render distorted.
-SLICE_GAP_TOLERANCE = 1e-3
 
 
 def _one_line(exc: BaseException) -> str:
@@ -37,7 +33,7 @@ def has_suffix(p: Path, suffixes: tuple[str, ...]) -> bool:
     return any(name.endswith(s) for s in suffixes)
 
 
-def _spacing_or_none(values, where: str, need: bool) -> tuple[float, float, float] | None:
+def spacing_or_none(values, where: str, need: bool) -> tuple[float, float, float] | None:
     """The header's three voxel sizes, or None (with the scene giving its own); a header without
     usable sizes is an error only when the scene gives none."""
     try:
@@ -47,19 +43,22 @@ def _spacing_or_none(values, where: str, need: bool) -> tuple[float, float, floa
     if len(spacing) == 3 and all(np.isfinite(s) and s > 0 for s in spacing):
         return spacing
     if need:
-        raise VolumeError(f"{where}: missing spacing: the header's voxel sizes are "
-                          f"{list(spacing) or 'absent'}; give volume.spacing")
+        shown = "absent" if not spacing else "[" + ", ".join(f"{s:g}" for s in spacing) + "]"
+        raise VolumeError(f"{where}: missing spacing: the header's voxel sizes are {shown}; give "
+                          "volume.spacing")
     return None
 
 
 # ---- NIfTI ---------------------------------------------------------------------------------------
 
 def read_nifti(p: Path, need_spacing: bool
-               ) -> tuple[np.ndarray, tuple[float, float, float] | None, str]:
+               ) -> tuple[np.ndarray, tuple[float, float, float] | None, np.ndarray | None, str]:
     """The stored array ``[i, j, k]`` becomes ``data[k, j, i]`` (a 4D ``[i, j, k, t]``, a time
     series, ``data[t, k, j, i]``); spacing from the voxel sizes (pixdim); scl_slope/scl_inter
     applied (nibabel's array proxy applies them, keeping the stored integer type where they are
-    the identity). Returns the array, the spacing and its axes ("zyx" or "tzyx")."""
+    the identity). Also the axes' directions in LPS from the sform, else the qform (RAS in the
+    file), or None where neither is set (codes 0). Returns the array, the spacing, the directions
+    and the array's axes ("zyx" or "tzyx")."""
     import nibabel as nib
     try:
         img = nib.load(str(p))
@@ -76,16 +75,27 @@ def read_nifti(p: Path, need_spacing: bool
             raise VolumeError(f"{p}: expected a 3D volume or a 4D time series [i, j, k, t], the "
                               f"NIfTI has shape {list(img.shape)}")
         data = np.asanyarray(img.dataobj).reshape(shape)
+        direction = _nifti_direction(img)
     except VolumeError:
         raise
     except Exception as exc:  # nibabel raises many types for truncated or corrupt files
         raise VolumeError(f"{p}: cannot read NIfTI ({_one_line(exc)})") from None
     if data.dtype.names is not None:
         raise VolumeError(f"{p}: NIfTI with {data.dtype.names} channels; expected one scalar")
-    spacing = _spacing_or_none(zooms[:3], str(p), need_spacing)
+    spacing = spacing_or_none(zooms[:3], str(p), need_spacing)
     if data.ndim == 4:
-        return np.ascontiguousarray(data.transpose(3, 2, 1, 0)), spacing, "tzyx"
-    return np.ascontiguousarray(data.transpose(2, 1, 0)), spacing, "zyx"
+        return np.ascontiguousarray(data.transpose(3, 2, 1, 0)), spacing, direction, "tzyx"
+    return np.ascontiguousarray(data.transpose(2, 1, 0)), spacing, direction, "zyx"
+
+
+def _nifti_direction(img) -> np.ndarray | None:
+    """The directions of i, j, k (= x, y, z) in LPS, from the sform (else the qform) where its code
+    says it is set."""
+    for get in (img.header.get_sform, img.header.get_qform):
+        affine, code = get(coded=True)
+        if affine is not None and int(code) > 0:
+            return unit_columns(RAS_TO_LPS @ np.asarray(affine, np.float64)[:3, :3])
+    return None
 
 
 # ---- TIFF ----------------------------------------------------------------------------------------
@@ -248,7 +258,7 @@ def read_zarr(p: Path, need_spacing: bool
                 if transform.get("type") == "scale" and names:
                     scale = dict(zip(_zarr_axes(names) or "", transform["scale"]))
                     values = [scale.get(a) for a in "xyz"]
-                    spacing = _spacing_or_none(values, str(p), False)
+                    spacing = spacing_or_none(values, str(p), False)
         else:
             array = node
             names = getattr(array.metadata, "dimension_names", None) or \
@@ -259,154 +269,3 @@ def read_zarr(p: Path, need_spacing: bool
     except Exception as exc:   # zarr and its codecs raise many types for broken stores
         raise VolumeError(f"{p}: cannot read Zarr ({_one_line(exc)})") from None
     return data, spacing, _zarr_axes(names)   # (no spacing: the scene's, or 1, 1, 1)
-
-
-# ---- DICOM ---------------------------------------------------------------------------------------
-
-def _floats(ds, keyword: str, n: int, f: Path) -> np.ndarray | None:
-    value = ds.get(keyword)
-    if value is None:
-        return None
-    try:
-        out = np.array([float(v) for v in (value if n > 1 else [value])], np.float64)
-    except (TypeError, ValueError):
-        raise VolumeError(f"{f}: cannot read {keyword} ({value!r})") from None
-    if len(out) != n or not np.isfinite(out).all():
-        raise VolumeError(f"{f}: {keyword} should be {n} finite numbers, got {value!r}")
-    return out
-
-
-def _describe_series(uid: str, files: list) -> str:
-    ds = files[0][1]
-    desc = str(ds.get("SeriesDescription", "") or "").strip()
-    number = ds.get("SeriesNumber", "")
-    label = f"#{number} " if number not in ("", None) else ""
-    label += f"'{desc}' " if desc else ""
-    return f"{label}{uid} ({len(files)} files)"
-
-
-def read_dicom_folder(folder: Path, need_spacing: bool
-                      ) -> tuple[np.ndarray, tuple[float, float, float] | None]:
-    """One series' slices: ordered by ImagePositionPatient along the slice normal (never by file
-    name); pixel row = y, column = x; spacing from PixelSpacing and the slice positions;
-    RescaleSlope/RescaleIntercept applied (CT in Hounsfield units)."""
-    try:
-        return _read_dicom_folder(folder, need_spacing)
-    except VolumeError:
-        raise
-    except Exception as exc:  # pydicom converts values lazily: a mangled one raises on first use
-        raise VolumeError(f"{folder}: cannot read the DICOM series ({_one_line(exc)})") from None
-
-
-def _read_dicom_folder(folder: Path, need_spacing: bool
-                       ) -> tuple[np.ndarray, tuple[float, float, float] | None]:
-    import pydicom
-    from pydicom.errors import InvalidDicomError
-
-    files = sorted(f for f in folder.iterdir() if f.is_file() and not f.name.startswith(".")
-                   and f.name.upper() != "DICOMDIR")
-    if not files:
-        raise VolumeError(f"{folder}: the folder holds no files (expected one DICOM series)")
-    series: dict[str, list] = {}
-    for f in files:
-        try:
-            ds = pydicom.dcmread(str(f))
-        except InvalidDicomError:
-            raise VolumeError(f"{f}: not a DICOM file (a DICOM series folder holds only its "
-                              "slices)") from None
-        except Exception as exc:
-            raise VolumeError(f"{f}: cannot read DICOM ({_one_line(exc)})") from None
-        if "PixelData" not in ds:
-            meta = getattr(ds, "file_meta", None)
-            sop = ds.get("SOPClassUID") or (meta.get("MediaStorageSOPClassUID") if meta else None)
-            sop_name = str(getattr(sop, "name", "") or "")
-            if (len(ds) == 0 or "Image Storage" in sop_name
-                    or any(k in ds for k in ("Rows", "Columns", "ImagePositionPatient"))):
-                raise VolumeError(f"{f}: an image without pixel data (a truncated file?)")
-            continue  # a report or presentation state beside the images
-        uid = str(ds.get("SeriesInstanceUID", "") or "(no SeriesInstanceUID)")
-        series.setdefault(uid, []).append((f, ds))
-    if not series:
-        raise VolumeError(f"{folder}: holds no DICOM images ({len(files)} files, none with pixel "
-                          "data)")
-    if len(series) > 1:
-        found = "; ".join(_describe_series(u, fs) for u, fs in sorted(series.items()))
-        raise VolumeError(f"{folder}: mixes {len(series)} DICOM series ({found}); put one series "
-                          "per folder")
-    slices = next(iter(series.values()))
-
-    first_f, first = slices[0]
-    iop = _floats(first, "ImageOrientationPatient", 6, first_f)
-    if iop is None:
-        iop = np.array([1.0, 0, 0, 0, 1.0, 0]) if len(slices) == 1 else None
-    if iop is None:
-        raise VolumeError(f"{first_f}: no ImageOrientationPatient: cannot order the slices")
-    row_dir, col_dir = iop[:3], iop[3:]
-    normal = np.cross(row_dir, col_dir)
-    if not np.linalg.norm(normal) > 1e-6:
-        raise VolumeError(f"{first_f}: ImageOrientationPatient {list(iop)} has parallel axes")
-    normal /= np.linalg.norm(normal)
-
-    entries = []
-    for f, ds in slices:
-        if int(ds.get("NumberOfFrames", 1) or 1) != 1:
-            raise VolumeError(f"{f}: a multi-frame DICOM image; expected a series of single slices")
-        o = _floats(ds, "ImageOrientationPatient", 6, f)
-        if o is not None and not np.allclose(o, iop, atol=1e-4):
-            raise VolumeError(f"{f}: ImageOrientationPatient {list(o)} differs from "
-                              f"{first_f.name}'s {list(iop)}: slices of different orientations")
-        pos = _floats(ds, "ImagePositionPatient", 3, f)
-        if pos is None:
-            if len(slices) > 1:
-                raise VolumeError(f"{f}: no ImagePositionPatient: cannot order the slices")
-            pos = np.zeros(3)
-        try:
-            pixels = ds.pixel_array
-        except Exception as exc:
-            raise VolumeError(f"{f}: cannot decode the pixel data ({_one_line(exc)})") from None
-        if pixels.ndim != 2:
-            raise VolumeError(f"{f}: pixel data of shape {list(pixels.shape)}; expected one "
-                              "channel (rows x columns)")
-        slope = _floats(ds, "RescaleSlope", 1, f)
-        intercept = _floats(ds, "RescaleIntercept", 1, f)
-        entries.append((float(pos @ normal), f, pixels,
-                        1.0 if slope is None else float(slope[0]),
-                        0.0 if intercept is None else float(intercept[0]), ds))
-    entries.sort(key=lambda e: e[0])
-
-    shape0, name0 = entries[0][2].shape, entries[0][1].name
-    for _, f, px, *_ in entries:
-        if px.shape != shape0:
-            raise VolumeError(f"{folder}: slices of different sizes: {name0} is {shape0[1]} x "
-                              f"{shape0[0]} but {f.name} is {px.shape[1]} x {px.shape[0]} "
-                              "(columns x rows)")
-    positions = np.array([e[0] for e in entries])
-    gaps = np.diff(positions)
-    if len(gaps):
-        k = int(np.argmin(gaps))
-        if not gaps[k] > 1e-6:
-            raise VolumeError(f"{folder}: {entries[k][1].name} and {entries[k + 1][1].name} lie "
-                              f"at the same position along the slice normal ({positions[k]:g})")
-        if gaps.max() - gaps.min() > SLICE_GAP_TOLERANCE * gaps.mean():
-            raise VolumeError(f"{folder}: uneven slice spacing along the normal (gaps from "
-                              f"{gaps.min():g} to {gaps.max():g}): a slice missing?")
-
-    stack = np.stack([e[2] for e in entries])
-    slopes = np.array([e[3] for e in entries])
-    intercepts = np.array([e[4] for e in entries])
-    if not (slopes == 1.0).all() or not (intercepts == 0.0).all():
-        if not (slopes != 0).all():
-            raise VolumeError(f"{folder}: RescaleSlope 0 would make every voxel one value")
-        stack = (stack.astype(np.float64) * slopes[:, None, None]
-                 + intercepts[:, None, None]).astype(np.float32)
-
-    ps = _floats(first, "PixelSpacing", 2, first_f)
-    if len(entries) > 1:
-        dz = float(gaps.mean())
-    else:
-        thickness = (_floats(first, "SpacingBetweenSlices", 1, first_f)
-                     if "SpacingBetweenSlices" in first else
-                     _floats(first, "SliceThickness", 1, first_f))
-        dz = None if thickness is None else float(thickness[0])
-    values = None if ps is None or dz is None else (ps[1], ps[0], dz)  # x = column, y = row
-    return stack, _spacing_or_none(values, str(folder), need_spacing)

@@ -10,11 +10,14 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #include "lib/lights.glsl"
 #include "lib/phase.glsl"
 #include "lib/tracking.glsl"
-#if defined(PROBE_LIGHTING)
+#if defined(PROBE_LIGHTING) || defined(GUIDED_RESIDUAL)
 #define PROBE_SAMPLING
 #include "lib/sh.glsl"
 #include "lib/directions.glsl"
 #include "lib/probes.glsl"
+#endif
+#if defined(GUIDED_RESIDUAL)
+#include "lib/guided_source.glsl"
 #endif
 #include "lib/integrator.glsl"
 

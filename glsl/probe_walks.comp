@@ -28,6 +28,7 @@ layout(local_size_x = 64) in;
 #include "lib/directions.glsl"
 #include "lib/probes.glsl"
 #if defined(WALK_SUN_GRID)
+#define LIGHT_GRID_FACE_MARCH 0
 #include "lib/light_grid.glsl"
 #endif
 #include "lib/integrator.glsl"

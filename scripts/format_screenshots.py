@@ -1,10 +1,15 @@
-"""Viewer screenshots of the volume formats people bring (issue 13):
+"""Viewer screenshots of the volume formats people bring (issues 13 and 31):
   screenshots/viewer_dicom_ct.png  the chest CT of ../shared/datasets (8-bit NRRD) written as a DICOM
                                    series by pydicom, slices under shuffled names, RescaleSlope 8 and
                                    RescaleIntercept -1024 so that it arrives in Hounsfield-like units,
                                    opened as a folder with the soft-tissue window;
   screenshots/viewer_nifti_mri.png nibabel's own example anatomical MRI (anatomical.nii, 33x41x25 at
-                                   2 mm, shipped with nibabel), windowed to its brightest tissue.
+                                   2 mm, shipped with nibabel), windowed to its brightest tissue;
+  screenshots/viewer_dicom_study.png the same chest CT in a study folder as a scanner exports it
+                                   (the CT series, a one-slice scout and a three-plane localiser in
+                                   subfolders, a README.TXT), opened as the README says:
+                                   `view FOLDER --data-window soft_tissue --orientation patient`
+                                   (raymarched), the Data panel open on the series list.
 Run: .venv/bin/python scripts/format_screenshots.py   (llvmpipe: about a minute each)"""
 from __future__ import annotations
 
@@ -19,6 +24,50 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 CHEST = ROOT.parent / "shared" / "datasets" / "lidc2_chest_ct_256x256x133.nrrd"
+
+
+def write_slice(path: Path, pixels: np.ndarray, series: str, description: str, position, orientation,
+                spacing, number: int) -> None:
+    from pydicom.dataset import FileDataset, FileMetaDataset
+    from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
+    meta = FileMetaDataset()
+    meta.MediaStorageSOPClassUID = CTImageStorage
+    meta.MediaStorageSOPInstanceUID = generate_uid()
+    meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ds = FileDataset(str(path), {}, file_meta=meta, preamble=b"\0" * 128)
+    ds.SOPClassUID, ds.SOPInstanceUID = CTImageStorage, meta.MediaStorageSOPInstanceUID
+    ds.Modality, ds.SeriesInstanceUID, ds.StudyInstanceUID = "CT", series, "1.2.3"
+    ds.SeriesDescription, ds.SeriesNumber = description, number
+    ds.ImagePositionPatient = [float(v) for v in position]
+    ds.ImageOrientationPatient = list(orientation)
+    ds.PixelSpacing = [float(spacing[1]), float(spacing[0])]
+    ds.SliceThickness = 2.5
+    ds.RescaleSlope, ds.RescaleIntercept = 8.0, -1024.0
+    ds.Rows, ds.Columns = pixels.shape
+    ds.SamplesPerPixel, ds.PhotometricInterpretation = 1, "MONOCHROME2"
+    ds.BitsAllocated = ds.BitsStored = 16
+    ds.HighBit, ds.PixelRepresentation = 15, 0
+    ds.PixelData = np.ascontiguousarray(pixels, np.uint16).tobytes()
+    ds.save_as(str(path), enforce_file_format=True)
+
+
+def write_study(root: Path) -> None:
+    """The chest CT as series 2 of a study, with a scout (series 1, one coronal slice: the CT's
+    mean over y) and a three-plane localiser (series 3) in their own subfolders, and a text file."""
+    from pydicom.uid import generate_uid
+    import nrrd
+    write_ct_series(root / "SE000002")
+    data, header = nrrd.read(str(CHEST))            # stored x, y, z; LPS, axial
+    spacing = np.abs(np.diag(header["space directions"]))
+    scout = data.astype(np.float32).mean(axis=1)     # x, z: coronal, rows along -z
+    write_slice(root / "SE000001" / "IM00001", scout[:, ::-1].T, generate_uid(), "Scout", (0, 0, 0),
+                (1, 0, 0, 0, 0, -1), (spacing[0], spacing[2]), 1)
+    localiser = generate_uid()
+    for k, iop in enumerate(((1, 0, 0, 0, 1, 0), (0, 1, 0, 0, 0, -1), (1, 0, 0, 0, 0, -1))):
+        write_slice(root / "SE000003" / f"IM{k:05d}", data[:64, :64, 60].T, localiser,
+                    "3-plane localiser", (0, 0, 10 * k), iop, spacing, 3)
+    (root / "README.TXT").write_text("exported by a scanner\n")
 
 
 def write_ct_series(folder: Path) -> None:
@@ -40,7 +89,7 @@ def write_ct_series(folder: Path) -> None:
         ds = FileDataset(str(path), {}, file_meta=meta, preamble=b"\0" * 128)
         ds.SOPClassUID, ds.SOPInstanceUID = CTImageStorage, meta.MediaStorageSOPInstanceUID
         ds.Modality, ds.SeriesInstanceUID, ds.StudyInstanceUID = "CT", series, "1.2.3"
-        ds.SeriesDescription = "LIDC chest CT (8-bit dataset, rescaled)"
+        ds.SeriesDescription, ds.SeriesNumber = "LIDC chest CT (8-bit dataset, rescaled)", 2
         ds.ImagePositionPatient = [0.0, 0.0, float(k * spacing[2])]
         ds.ImageOrientationPatient = [1, 0, 0, 0, 1, 0]
         ds.PixelSpacing = [float(spacing[1]), float(spacing[0])]
@@ -74,8 +123,18 @@ def main() -> int:
                    "transfer_function": {"colormap": "coolwarm"}, "density_scale": 40.0,
                    "camera": {"width": 256, "height": 256}},
                   out / "viewer_dicom_ct.png", tmp, "ct")
+            write_study(tmp / "study")
+            script = tmp / "data_panel.json"
+            script.write_text(json.dumps([{"click": "Data"}, {"frames": 12},
+                                          {"screenshot": str(out / "viewer_dicom_study.png")},
+                                          {"close": True}]))
+            cmd = [str(ROOT / ".venv/bin/radiance-probes"), "view", str(tmp / "study"),
+                   "--data-window", "soft_tissue", "--orientation", "patient", "--method",
+                   "raymarch", "--script", str(script), "--window", "1280x800"]
+            print(" ".join(cmd), flush=True)
+            subprocess.run(cmd, check=True)
         else:
-            print(f"{CHEST} is absent: no DICOM screenshot", file=sys.stderr)
+            print(f"{CHEST} is absent: no DICOM screenshots", file=sys.stderr)
         mri = Path(nibabel.__file__).parent / "tests" / "data" / "anatomical.nii"
         # its brightest tissue (a window over the top 20% of its voxels): the rest is made clear
         shoot({"volume": {"path": str(mri), "window": {"level": 12000, "width": 4000}},

@@ -1,12 +1,68 @@
-"""Shared fixtures: one headless OpenGL 4.3 context (Mesa llvmpipe through EGL in CI)."""
+"""Shared fixtures: one headless OpenGL 4.3 context (Mesa llvmpipe through EGL in CI); and every
+scene a test parses successfully is checked against the scene file's JSON Schema when the session
+ends (docs/scene.schema.json: what the loader takes, an editor must not flag)."""
 from __future__ import annotations
 
+import copy
+import json
 from pathlib import Path
 
 import pytest
 
+import app.scene as _scene_module
+
 ROOT = Path(__file__).resolve().parents[1]
 DATASETS = ROOT.parent / "shared" / "datasets"
+
+# ---- every scene the tests parse, for the schema check at the session's end ----------------------
+# Installed before any test module imports app.scene's parse_scene by name, so every caller (the
+# loader, the CLI's options, the viewer's files, the bench) goes through it.
+PARSED_SCENES: dict[str, object] = {}
+_parse_scene = _scene_module.parse_scene
+
+
+def _recording_parse_scene(data, base_dir=None):
+    scene = _parse_scene(data, base_dir)
+    try:
+        text = json.dumps(data, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError):   # not JSON data (a test of Python-only input): no file has it
+        return scene
+    PARSED_SCENES.setdefault(text, copy.deepcopy(json.loads(text)))
+    return scene
+
+
+_scene_module.parse_scene = _recording_parse_scene
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Fails the run when a scene the loader accepted does not validate against the schema."""
+    if not PARSED_SCENES:
+        return
+    try:
+        import jsonschema
+    except ImportError:   # the test extras are not installed: tests/test_scene_schema.py says so
+        return
+    from app.scene_schema import scene_schema
+    validator = jsonschema.Draft202012Validator(scene_schema())
+    bad = []
+    for data in PARSED_SCENES.values():
+        error = jsonschema.exceptions.best_match(validator.iter_errors(data))
+        if error is not None:
+            bad.append(f"{json.dumps(data)[:300]}: {error.message} at "
+                       f"{'.'.join(str(p) for p in error.absolute_path) or 'the top'}")
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is not None:
+        reporter.write_line("")
+    if bad:
+        if reporter is not None:
+            reporter.write_line(f"{len(bad)} of {len(PARSED_SCENES)} scenes the loader accepted "
+                                "do not validate against the scene schema:", red=True)
+            for line in bad[:20]:
+                reporter.write_line(f"  {line}", red=True)
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+    elif reporter is not None:
+        reporter.write_line(f"scene schema: the {len(PARSED_SCENES)} scenes the tests parsed all "
+                            "validate")
 
 
 _SESSION_CONTEXT: list = []   # the session's context, once a test has asked for it

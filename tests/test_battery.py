@@ -78,7 +78,13 @@ def test_battery_scene_renders_clean_with_every_method(checked_ctx, name):
         for method in METHODS:
             result = r.render(method, spp=2, seed=1)
             image = result.image
-            assert np.all(np.isfinite(image)) and image.min() >= 0.0, method
+            assert np.all(np.isfinite(image)), method
+            if method == "guided":
+                # a control variate: a pixel's estimate may dip below 0 at a few samples (level
+                # 1 subtracts the probes' prediction); its mean over the image may not
+                assert image.mean() >= 0.0, method
+            else:
+                assert image.min() >= 0.0, method
             assert result.stats["truncated_paths"] == 0, method
             assert result.stats["nonfinite_samples"] == 0, method
             hits = checks.hits()

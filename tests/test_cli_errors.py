@@ -323,7 +323,7 @@ def test_bad_new_format_volumes_are_one_line(tmp_path, capsys, no_gpu, monkeypat
     (tmp_path / "notes" / "a.txt").write_text("no images here")
     (tmp_path / "bad.nii.gz").write_bytes(b"\x1f\x8b" + bytes(30))
     for path, needle in ((tmp_path / "empty", "holds no files"),
-                         (tmp_path / "notes", "not a DICOM file"),
+                         (tmp_path / "notes", "holds no DICOM files"),
                          (tmp_path / "bad.nii.gz", "cannot read NIfTI")):
         one_error_line(["render", path, "--out", tmp_path / "o.png"], capsys, str(path), needle)
     import app.viewer.xvfb

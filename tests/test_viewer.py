@@ -545,6 +545,33 @@ def test_ct_series_with_a_window_and_its_level_dragged(display, tmp_path):
     assert level < 400.0 and width == 1800.0
 
 
+def test_dicom_folder_lists_its_series_and_another_is_picked(display, tmp_path):
+    """A folder of two DICOM series opens the larger with a note; the Data panel lists both, and
+    clicking the other loads it (the volume's size follows, no error). The patient orientation
+    radio reloads it turned."""
+    from test_volume_formats import write_dicom_series
+    write_dicom_series(tmp_path / "study" / "a", np.arange(4 * 4 * 5, dtype=np.int16).reshape(4, 4, 5),
+                       uid="1.2.3.50", description="Axial")
+    write_dicom_series(tmp_path / "study" / "b", np.arange(2 * 6 * 6, dtype=np.int16).reshape(2, 6, 6),
+                       uid="1.2.3.51", description="Small", seed=5)
+    script = write_script(tmp_path / "s.json", [
+        {"click": "Data"}, {"frames": 2}, {"dump": "first.json"},
+        {"click": "series 2"}, {"frames": 2}, {"dump": "second.json"},
+        {"click": "orientation patient"}, {"frames": 2}, {"dump": "turned.json"}, {"close": True}])
+    proc = view(["study", "--script", str(script), "--method", "raymarch", "--window", "640x400"],
+                tmp_path, display)
+    assert "holds 2 DICOM series" in proc.stderr
+    first, second = dump(tmp_path / "first.json"), dump(tmp_path / "second.json")
+    turned = dump(tmp_path / "turned.json")
+    assert first["dicom_series"] == 1 and first["volume"]["dims"] == [5, 4, 4]
+    assert "series 1" in first["widgets"] and "series 2" in first["widgets"]
+    assert second["errors"] == [] and second["dicom_series"] == 2
+    assert second["volume"]["dims"] == [6, 6, 2]
+    assert second["scene"]["volume"]["series"] == "1.2.3.51"
+    # axial slices (x left, y posterior, z superior): patient order puts z on y, y on z
+    assert turned["errors"] == [] and turned["volume"]["dims"] == [6, 2, 6]
+
+
 def test_cli_screenshot_starts_its_own_display(display, tmp_path):
     """`view SCENE --screenshot --frames N --method M --probe-view` with no DISPLAY at all: the
     viewer runs in its own Xvfb and saves the window's image. (`display` only skips the test

@@ -2,7 +2,7 @@
 
 On the lent H100 the SM clock fell to 390-1665 MHz while a probe sweep left the GPU mostly idle
 (1980 MHz under load), and the records taken then were slow for no reason of their own
-(bench/h100-runs-2). The speed check (ceiling.py) sees the effect; this log names the cause. It
+(bench/archive/h100-runs-2). The speed check (ceiling.py) sees the effect; this log names the cause. It
 samples every CLOCK_LOG_MS in a process of its own, so the run itself never waits on it. Without
 nvidia-smi (llvmpipe, other vendors) nothing is logged and the report says nothing of clocks."""
 from __future__ import annotations

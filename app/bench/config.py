@@ -33,6 +33,10 @@ class BenchConfig:
     gather_events: tuple[int, ...] = (2, 3)
     gather_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 128), (128, 64), (128, 256))
     gather_frames: tuple[int, ...] = (16, 64, 256, 1024, 4096)
+    # `guided` (unbiased: level 0 from the probes plus a path-traced correction) at these probe
+    # settings, to these samples per pixel
+    guided_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 128))
+    guided_frames: tuple[int, ...] = (4, 16, 64, 256, 1024, 4096)
     raymarch_frames: tuple[int, ...] = (1, 2, 4, 8, 16)
     showcase: tuple[int, int] = (32, 256)   # grid, samples: images, step/stage/precision sweeps
     probe_layouts: tuple[str, ...] = ("uniform",)   # of BENCH_PROBE_LAYOUTS, per probe setting
@@ -90,7 +94,7 @@ class BenchConfig:
     movie_fps: float = 30.0
     movie_target: float = 0.05                       # per-frame relative RMSE asked for
     # --preset bias (bias.py): each default shortcut against its exact variant on the battery
-    bias_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 256))   # grid, walks
+    bias_settings: tuple[tuple[int, int], ...] = ((32, 256),)   # grid, walks (the held-out check)
     bias_seeds: int = 4                              # independent bakes per variant (paired)
     bias_frames: int = 16                            # raymarched frames per image
     bias_probe_spp: int = 64                         # `probes` samples per image
@@ -139,6 +143,7 @@ PRESETS = {
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),
                          gather_events=(2,), gather_settings=((8, 64),), gather_frames=(4, 16),
+                         guided_settings=((8, 64),), guided_frames=(4, 16),
                          showcase=(8, 64), raymarch_steps=(0.5, 1.0),
                          sweep_raymarch_steps=(0.5, 1.0), flip_frames=(16,),
                          image_frames=16),

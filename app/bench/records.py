@@ -37,7 +37,7 @@ def progressive(renderer, method: str, snapshots, seed: int, per_dispatch: int):
     time is the median over full-size dispatches after a warm-up (WARM_UP_MS). The whole run is
     dispatched first, each snapshot copied on the GPU, and the images are read back afterwards:
     reading and measuring an image between the timed dispatches left the GPU idle long enough to
-    lower its clock (bench/h100-runs-2's nvidia-smi logs)."""
+    lower its clock (bench/archive/h100-runs-2's nvidia-smi logs)."""
     # warm-up, not timed: at least WARM_UP_MS of GPU work, so that a GPU that lowered its clock
     # while the host measured the previous run's images is back at speed
     renderer.begin(method, seed=seed + 7919)

@@ -11,9 +11,10 @@ from pathlib import Path
 from .metrics import corrected_floor, corrected_rrmse
 from .records import caveat, speed_checks
 
-METHOD_ORDER = ("pt", "probes", "probes-only", "raymarch")
-COLOURS = {"pt": "#222222", "probes": "#1f77b4", "probes-only": "#2ca02c", "raymarch": "#d62728"}
-TARGETS = (0.20, 0.10, 0.05, 0.02, 0.01)
+METHOD_ORDER = ("pt", "probes", "probes-only", "raymarch", "guided")
+COLOURS = {"pt": "#222222", "probes": "#1f77b4", "probes-only": "#2ca02c", "raymarch": "#d62728",
+           "guided": "#9467bd"}
+TARGETS = (0.20, 0.10, 0.05, 0.02, 0.01, 0.005)
 
 
 def results_path(folder: str | Path) -> Path:
@@ -227,6 +228,30 @@ def plot(data: dict, scenes: list[str], path: Path) -> None:
     plt.close(fig)
 
 
+def dispatch_lines(data: dict, scenes: list[str]) -> list[str]:
+    """The longest single dispatch per scene and method (every record holds the longest since the
+    record before it: app/gl/dispatch_log.py), against DISPATCH_BOUND_MS."""
+    from ..render.dispatch_budget import DISPATCH_BOUND_MS
+    recs = [r for r in data["records"] if r.get("longest_dispatch_ms") is not None]
+    if not recs:
+        return []
+    meta = data["meta"]
+    lines = ["", "## The longest dispatch", "",
+             f"Every compute dispatch of the run was timed (GPU timestamps). The longest: "
+             f"**{meta.get('longest_dispatch_ms', max(r['longest_dispatch_ms'] for r in recs)):.1f} "
+             f"ms** ({meta.get('longest_dispatch')}), against a bound of {DISPATCH_BOUND_MS:g} ms; "
+             f"{meta.get('dispatches', 'n/a')} dispatches in all. Per scene and method (the "
+             "longest since the record before, so a method's row includes its bake):", "",
+             "| scene | method | longest dispatch | program |", "|---|---|---|---|"]
+    for s in scenes:
+        for m in dict.fromkeys(r["method"] for r in recs if r["scene"] == s):
+            worst = max((r for r in recs if r["scene"] == s and r["method"] == m),
+                        key=lambda r: r["longest_dispatch_ms"])
+            lines.append(f"| {s} | {m} | {worst['longest_dispatch_ms']:.2f} ms | "
+                         f"{worst.get('longest_dispatch')} |")
+    return lines
+
+
 def write_report(results_path: str | Path, out_dir: str | Path | None = None) -> Path:
     data = load(results_path)
     out = Path(out_dir or Path(results_path).parent)
@@ -288,7 +313,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
         recs = main_records(data, s)
         for t in TARGETS:
             if t < floor(data, s):
-                lines.append(f"| {s} | {t:.0%} | " + " | ".join("-" for _ in METHOD_ORDER)
+                lines.append(f"| {s} | {100 * t:g}% | " + " | ".join("-" for _ in METHOD_ORDER)
                              + f" | below the reference floor {floor(data, s):.4f} |")
                 continue
             cells, best = [], {}
@@ -308,7 +333,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
                 verdict = "no probe method reaches it"
             else:
                 verdict = "-"
-            lines.append(f"| {s} | {t:.0%} | " + " | ".join(cells) + f" | {verdict} |")
+            lines.append(f"| {s} | {100 * t:g}% | " + " | ".join(cells) + f" | {verdict} |")
     lines += ["", "## Equal-time error", "",
               "At the time the path tracer needs for each of its sample counts: the lowest error "
               "each method reaches within that time, bake included.", "",
@@ -323,6 +348,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
                 cells.append("-" if r is None else f"{err(r)} ({label(r)})")
             lines.append(f"| {s} | {_ms(p['total_ms'])} ({p['spp']}) | " + " | ".join(cells) + " |")
     lines += speed_checks(data, scenes)
+    lines += dispatch_lines(data, scenes)
     lines += _table1(data, scenes)
     lines += _sweeps(data, scenes)
     lines += _layouts(data, scenes)

@@ -32,7 +32,7 @@ PROBE_METHODS = ("probes", "probes-only")
 # Seconds between two writes of results.json while records come in. Writing it after every record
 # took 0.05 to 0.14 s once it held a few scenes (json.dumps of 1 to 2 MB), and the GPU sat idle
 # meanwhile: between the snapshots of one timed run its clock fell to 390-1665 MHz (nvidia-smi,
-# bench/h100-runs-2), so records of the later scenes were timed on a clocked-down GPU.
+# bench/archive/h100-runs-2), so records of the later scenes were timed on a clocked-down GPU.
 FLUSH_EVERY_S = 30.0
 
 
@@ -294,6 +294,12 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
                         record("probes", frames, image, timing, bake_ms + walk_light_ms,
                                light_ms=walk_light_ms, gather_event=event, **probe_info)
                 renderer.configure(gather_event=1)
+            if not variant and (grid, samples) in config.guided_settings:
+                # the light grid is read by both of guided's levels: charged to it as well
+                for frames, image, *timing in _progressive(renderer, "guided",
+                                                           config.guided_frames, 19, k):
+                    record("guided", frames, image, timing, bake_ms + light_ms,
+                           light_ms=light_ms, **probe_info)
             steps = (config.sweep_raymarch_steps if not showcase or variant else
                      sorted({*config.sweep_raymarch_steps, *config.raymarch_steps}))
             stages = ("compute", "fragment") if showcase and not variant else ("compute",)

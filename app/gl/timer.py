@@ -166,8 +166,8 @@ class SpanClock:
         self._spans.append((*self._open, float(units)))
         self._open = None
 
-    def poll(self) -> float | None:
-        """GPU ms per unit of the newest finished span (older finished ones are dropped)."""
+    def poll(self) -> tuple[float, float] | None:
+        """(GPU ms, units) of the newest finished span (older finished ones are dropped)."""
         newest = None
         while self._spans:
             start, end, units = self._spans[0]
@@ -180,7 +180,7 @@ class SpanClock:
             self._gl.glGetQueryObjectui64v(end, GL_QUERY_RESULT, ctypes.byref(b))
             self._gl.glDeleteQueries(2, (ctypes.c_uint * 2)(start, end))
             self._spans.pop(0)
-            newest = (b.value - a.value) / 1e6 / max(units, 1e-9)
+            newest = ((b.value - a.value) / 1e6, units)
         return newest
 
     def release(self) -> None:

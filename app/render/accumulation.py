@@ -47,3 +47,40 @@ class Accumulation:
     def release(self) -> None:
         self._framebuffer.release()
         self.texture.release()
+
+
+class SumAccumulation:
+    """Two running means read as their sum: `guided`'s level 0 (frames of an unbiased estimate of
+    what the probes predict) and level 1 (path-traced samples minus that prediction's
+    single-collision estimate), each averaged over its own count. Counts (alpha, `samples`) are
+    level 1's."""
+
+    def __init__(self, residual: Accumulation, level0: Accumulation):
+        self.residual, self.level0 = residual, level0
+
+    @property
+    def width(self) -> int:
+        return self.residual.width
+
+    @property
+    def height(self) -> int:
+        return self.residual.height
+
+    @property
+    def samples(self) -> int:
+        return self.residual.samples
+
+    def snapshot(self) -> "SumAccumulation":
+        return SumAccumulation(self.residual.snapshot(), self.level0.snapshot())
+
+    def read_rgba(self) -> np.ndarray:
+        rgba = self.residual.read_rgba()
+        rgba[..., :3] += self.level0.read_rgba()[..., :3]
+        return rgba
+
+    def read(self) -> np.ndarray:
+        return self.read_rgba()[..., :3].copy()
+
+    def release(self) -> None:
+        self.residual.release()
+        self.level0.release()

@@ -17,8 +17,9 @@ import weakref
 from ..gl.context import is_software
 
 DISPATCH_BOUND_MS = 50.0    # no dispatch longer than this on the H100, at any setting offered
-DISPATCH_TARGET_MS = 20.0   # what the cutting aims at: estimates come from earlier dispatches
-                            # of the same pass, and the next one's work may differ by 2x
+DISPATCH_TARGET_MS = 15.0   # what the cutting aims at: estimates come from earlier dispatches
+                            # of the same pass, and the next one's work may differ by 3x (20 ms
+                            # gave bake chunks of up to 115 ms on the battery's shells)
 # The speed check's GPU ms on the H100 (app/bench/ceiling.py speed_check_ms: 2^18 rays x 64
 # trilinear steps; bench/h100 records, median over the run: 0.171 ms).
 H100_SPEED_CHECK_MS = 0.171

@@ -26,7 +26,7 @@ import numpy as np
 from ..gl.context import UNBOUNDED_LOOP_BUDGET, loop_budget, loop_budget_unbounded
 from ..gl.profiler import GpuProfile
 from ..gl.shaders import compute_program, set_uniforms
-from ..gl.timer import GpuTimer
+from ..gl.timer import GpuTimer, SpanClock
 from .probe_layout import colour_textures, texture_ids
 from ..twins.probe_warp import WARP_ROWS, warp_table
 from .resources import SceneResources
@@ -88,7 +88,7 @@ def accum_bytes(sh_order: int) -> int:
 def band_factors(g: float, window: str, sh_order: int = 2) -> tuple[float, ...]:
     """Per-band multipliers g^l * window_l, l = 0 .. max(sh_order, 2) (NumPy twin of
     sh_band_factors in lib/sh.glsl, whose SH_ORDER is at least 2)."""
-    from ..sh import sh_band_factors
+    from ..twins.sh import sh_band_factors
     return tuple(float(v) for v in sh_band_factors(g, SH_WINDOW_IDS[window], max(sh_order, 2)))
 
 
@@ -212,11 +212,13 @@ class ProbeGrid:
                               if self.adaptive else None)
         self.budget_program = (compute_program(ctx, "probe_walk_budget.comp", self.defines())
                                if self.adaptive else None)
-        # Walk dispatches sized by time (_chunk): the target (None: fixed chunks) and the GPU ms
-        # per walk of the last timed chunk, kept across restarts of this grid.
+        # Walk dispatches sized by time (_chunk): the target (None: fixed chunks) and the walks and
+        # GPU ms of the last timed chunk, kept across restarts of this grid.
         self.dispatch_target_ms: float | None = None
-        self.walk_ms: float | None = None
+        self._chunk_walks: int = FIRST_CHUNK_WALKS
+        self._chunk_ms: float | None = None
         self._chunk_timer = GpuTimer(ctx)
+        self._chunk_clock = SpanClock()
         self.dispatches = 0
         self.passes_done = 0
         self.next_probe = 0        # the next probe to walk in the current pass
@@ -377,12 +379,17 @@ class ProbeGrid:
             set_uniforms(self.project_program, {"first_probe": first})
             groups = (n * directions + 63) // 64
             with section("walks"):
-                if timed:
+                if timed == "wait":
                     self._chunk_timer.start()
+                elif timed:
+                    self._chunk_clock.start()
                 self._run_walks(walk_program, groups)
-                if timed:
+                if timed == "wait":
                     self._chunk_timer.stop()
-                    self.walk_ms = self._chunk_timer.elapsed_ms / (n * directions)
+                    self._chunk_walks = n * directions
+                    self._chunk_ms = self._chunk_timer.elapsed_ms
+                elif timed:
+                    self._chunk_clock.stop(n * directions)
             with section("project"):
                 self.project_program.run(n)
                 self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT
@@ -420,18 +427,31 @@ class ProbeGrid:
     def _chunk(self, left: int, directions: int) -> tuple[int, bool]:
         """Probes the next walk dispatch takes (of `left` still to walk in this call) and whether
         to time it. Where walks end in one dispatch and a dispatch target is set
-        (dispatch_target_ms, by the Renderer), chunks hold the walks that the GPU ms per walk of
-        the last timed chunk says fit the target: timed (one wait for the GPU) whenever the rest
-        of the pass does not fit in one, or no chunk was timed yet (the first holds
-        FIRST_CHUNK_WALKS); a pass that fits is not waited for. Else the fixed chunk_probes."""
+        (dispatch_target_ms, by the Renderer), chunks follow the last timed chunk's GPU time
+        towards the target: the grid's first chunk (FIRST_CHUNK_WALKS) is waited for, later
+        ones are timed without waiting; the size changes only when a time comes in. Else the
+        fixed chunk_probes. Returns (probes, "wait" | "clock" | None)."""
         if self.resumable or self.dispatch_target_ms is None or math.isinf(self.dispatch_target_ms):
             return min(self.chunk_probes, left), False
-        if self.walk_ms is None:
+        measured = self._chunk_clock.poll() if self._chunk_ms is not None else None
+        if measured is not None:
+            self._chunk_ms, self._chunk_walks = measured[0], int(measured[1])
+        if self._chunk_ms is None:
             walks = FIRST_CHUNK_WALKS
         else:
-            walks = int(self.dispatch_target_ms / max(self.walk_ms, 1e-12))
+            # A dispatch's time is not proportional to its walks: a small one waits for its
+            # longest walk whatever its size (measured on the battery's shells, sizing each chunk
+            # by the last one's time per walk kept chunks small and bakes 2.7x slower). So the
+            # next chunk scales the last one by target / time, by at most 4x up and 2x down.
+            scale = self.dispatch_target_ms / max(self._chunk_ms, 1e-6)
+            walks = int(self._chunk_walks * min(max(scale, 0.5), 4.0))
         n = max(1, min(self.chunk_probes, left, walks // directions))
-        return n, self.walk_ms is None or n < left
+        # The first chunk of this grid's life is waited for (its size is a guess); later ones that
+        # do not hold the rest of the pass are timed without waiting (SpanClock), their times read
+        # when in: waiting for each made a small bake (fuel, 32^3 x 256) 15x slower on the H100.
+        if self._chunk_ms is None:
+            return n, "wait"
+        return n, ("clock" if n < left else None)
 
     def _bind_images(self, first_slot: int) -> None:
         """Slots first_slot .. first_slot + 7 to image units 0 .. 7 (lib/probe_publish.glsl)."""
@@ -549,7 +569,7 @@ class ProbeGrid:
                     self.warp_texture,
                     self.walk_program, self._walk_profile_program, self.project_program,
                     self.sun_program, self._progress_program, self._partial_sums,
-                    self._chunk_timer):
+                    self._chunk_timer, self._chunk_clock):
             if obj is not None:
                 obj.release()
 

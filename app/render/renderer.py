@@ -15,7 +15,7 @@ from ..gl.context import is_software
 from ..gl.timer import GpuTimer
 from ..scene import Scene
 from ..volume import Volume
-from .accumulation import Accumulation
+from .accumulation import Accumulation, SumAccumulation
 from .limits import check_image_size
 from .pathtracer import PathTracer
 from .light_transmittance import LightTransmittance, min_side_for_probes
@@ -30,7 +30,7 @@ from .resources import SceneResources
 from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noqa: F401 (re-exported)
                        check_gather_event)
 
-METHODS = ("pt", "probes", "probes-only", "raymarch")
+METHODS = ("pt", "probes", "probes-only", "raymarch", "guided")
 # Variants of glsl/pathtrace.comp: the probe renderers stop at the first scattering event.
 PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
 # The probes hold max_bounces - 1 events whatever the gather event, so a gather at event k lets a
@@ -39,6 +39,10 @@ PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
 # 2% brighter than the path tracer, gather 3 at max_bounces 4 0.8%; at 16 the difference is below
 # the probes' own error.
 GATHER_BOUNCES_NOTE = 8
+# Tracking steps one of `guided`'s level-0 rays may take (lib/guided_level0.glsl): far beyond any
+# ray through a volume of the sizes offered (a GPU has no loop limit; llvmpipe ends an
+# invocation's loops at 65535 iterations in all, so its tests keep rays short).
+GUIDED_LEVEL0_BUDGET = 1 << 22
 
 
 @dataclass(frozen=True)
@@ -103,6 +107,7 @@ class Renderer:
         self._settings = settings
         self._passes: dict[str, PathTracer] = {}
         self._acc: Accumulation | None = None
+        self._acc0: Accumulation | None = None   # `guided`'s level 0
         self.timer = GpuTimer(ctx)
         self.probe_grid: ProbeGrid | None = None
         self._baked_key: tuple | None = None
@@ -192,6 +197,8 @@ class Renderer:
         if method in PROBE_LIGHTING:
             defines = {"PROBE_LIGHTING": PROBE_LIGHTING[method],
                        **(probe_defines or self._probe_defines())}
+        elif method == "guided":   # level 1: a path-traced sample minus level 0's prediction
+            defines = {"GUIDED_RESIDUAL": 1, **(probe_defines or self._probe_defines())}
         if self.resources.defines():
             defines = {**(defines or {}), **self.resources.defines()}
         key = (method, tuple(sorted((defines or {}).items())))
@@ -381,12 +388,19 @@ class Renderer:
         bake's time includes it, and the raymarcher then finds it current)."""
         return self.bake_light() if self.probe_grid.sun == "grid" else 0.0
 
-    def raymarcher(self) -> Raymarcher:
+    def raymarcher(self, guided_level0: bool = False) -> Raymarcher:
+        """The raymarcher for the probes in hand, or (guided_level0) `guided`'s level 0, an
+        unbiased estimate of what they predict along camera rays (lib/guided_level0.glsl; compute
+        only)."""
         # The layout of the textures it will read, and the scene's lights.
         defines = {**self._read_defines(self.probe_grid.defines()), **self.resources.defines()}
-        key = (self.raymarch_stage, tuple(sorted(defines.items())))
+        stage = self.raymarch_stage
+        if guided_level0:
+            defines["GUIDED_LEVEL0"] = 1
+            stage = "compute"
+        key = (stage, tuple(sorted(defines.items())))
         if key not in self._raymarchers:
-            self._raymarchers[key] = Raymarcher(self.ctx, self.raymarch_stage, defines)
+            self._raymarchers[key] = Raymarcher(self.ctx, stage, defines)
         self._light.bind()
         return self._raymarchers[key]
 
@@ -492,10 +506,21 @@ class Renderer:
         self.resources.reset_stats()
         acc = self.accumulation(self.camera.width, self.camera.height)
         acc.reset()
+        if method == "guided":
+            level0 = self._level0_accumulation(self.camera.width, self.camera.height)
+            level0.reset()
+            return SumAccumulation(acc, level0)
         return acc
 
+    def _level0_accumulation(self, width: int, height: int) -> Accumulation:
+        if self._acc0 is None or (self._acc0.width, self._acc0.height) != (width, height):
+            if self._acc0 is not None:
+                self._acc0.release()
+            self._acc0 = Accumulation(self.ctx, width, height)
+        return self._acc0
+
     def needs_probes(self, method: str | None = None) -> bool:
-        return (method or self.method) in PROBE_LIGHTING or (method or self.method) == "raymarch"
+        return (method or self.method) in (*PROBE_LIGHTING, "raymarch", "guided")
 
     def bake_step(self, seed: int = 0, budget_ms: float | None = None) -> float:
         """One slice of a progressive bake if the probes are stale or unfinished (GPU ms; 0 when
@@ -560,8 +585,26 @@ class Renderer:
             extra["probe_gather_event"] = (self._settings.gather_event if method == "probes"
                                            else 1)
         # a sliced light-grid bake under way (bake_step) is read as it is, not finished here
-        light_ms = self.bake_light() if method == "raymarch" and not self.light_baking() else 0.0
+        light_ms = (self.bake_light() if method in ("raymarch", "guided")
+                    and not self.light_baking() else 0.0)
         self.last_light_ms = light_ms
+        level0_ms = 0.0
+        if method == "guided":
+            # level 0's frames, guided_level0_ratio of them per sample of level 1 (at least one
+            # whenever level 1 has more samples than level 0 has frames times the ratio)
+            acc0 = self._acc0
+            want = math.ceil((acc.samples + n) * self._settings.guided_level0_ratio)
+            frames = max(0, want - acc0.samples)
+            if frames:
+                self.timer.start()
+                self.raymarcher(guided_level0=True).run(
+                    self.resources, self.camera, acc0, frames, self.seed ^ 0x5bd1e995,
+                    self.raymarch_step_voxels * 2 * self.resources.march_step,
+                    {**extra, **self._light.uniforms(),
+                     "guided_level0_budget": GUIDED_LEVEL0_BUDGET})
+                self.timer.stop()
+                level0_ms = self.timer.elapsed_ms
+            extra = {**extra, **self._light.uniforms()}
         if method == "raymarch":
             self.timer.start()
             self.raymarcher().run(self.resources, self.camera, acc, n, self.seed,
@@ -569,8 +612,8 @@ class Renderer:
                                   {**extra, **self._light.uniforms()})
             self.timer.stop()
             return self.timer.elapsed_ms
-        defines = (self._read_defines(self.probe_grid.defines()) if method in PROBE_LIGHTING
-                   else None)
+        defines = (self._read_defines(self.probe_grid.defines())
+                   if method in (*PROBE_LIGHTING, "guided") else None)
         tracer = self.pass_for(method, defines)
         # Cut into dispatches of at most the device's target (dispatch_budget.py) by the GPU ms
         # per sample this pass took at this size last time: several samples a dispatch where they
@@ -593,10 +636,12 @@ class Renderer:
             self._sample_ms[key] = ms / k
             total += ms
             n -= k
-        return total
+        return total + level0_ms
 
     def image(self) -> np.ndarray:
         """The current accumulated linear RGB image (H, W, 3), row 0 at the top."""
+        if self.method == "guided":
+            return SumAccumulation(self._acc, self._acc0).read()
         return self._acc.read()
 
     @property
@@ -612,7 +657,7 @@ class Renderer:
         bake_ms = 0.0
         if self.needs_probes(method):
             bake_ms = self.bake(seed, progress=bake_progress)
-        if method == "raymarch":
+        if method in ("raymarch", "guided"):
             bake_ms += self.bake_light()
         render_ms = 0.0
         chunk = max(samples_per_pass, 1)
@@ -632,8 +677,9 @@ class Renderer:
             self._light.release()
         if self.probe_grid is not None:
             self.probe_grid.release()
-        if self._acc is not None:
-            self._acc.release()
+        for acc in (self._acc, self._acc0):
+            if acc is not None:
+                acc.release()
         self._region_pass.release()
         if self._sun_lobe_fitter is not None:
             self._sun_lobe_fitter.release()

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from pyrr import vector, vector3
 
 from ..scene_types import CameraSpec
 
@@ -29,18 +30,16 @@ class CameraFrame:
         ndc_x = 2.0 * px / self.width - 1.0
         ndc_y = 1.0 - 2.0 * py / self.height
         d = (self.forward[None, :] + ndc_x[..., None] * self.right + ndc_y[..., None] * self.up)
-        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)   # (pyrr normalises 1D and 2D only)
 
 
 def camera_frame(spec: CameraSpec, width: int | None = None, height: int | None = None) -> CameraFrame:
     w = width or spec.width
     h = height or spec.height
     eye = np.asarray(spec.eye, np.float64)
-    forward = np.asarray(spec.target, np.float64) - eye
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, np.asarray(spec.up, np.float64))
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
+    forward = vector.normalise(np.asarray(spec.target, np.float64) - eye)
+    right = vector.normalise(vector3.cross(forward, np.asarray(spec.up, np.float64)))
+    up = vector3.cross(right, forward)
     tan_half = math.tan(math.radians(spec.fov_y) / 2)
     return CameraFrame(eye.astype(np.float32), forward.astype(np.float32),
                        (right * tan_half * w / h).astype(np.float32),

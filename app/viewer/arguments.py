@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import argparse
 
-from ..frontend import (add_scene_edit_options, grid_arg, positive_float, positive_int,
-                        render_scale, window_size)
-from ..render.renderer import METHODS
+from ..frontend import (add_scene_edit_options, add_volume_options, grid_arg, positive_float,
+                        positive_int, render_scale, window_size)
+from ..scene_types import VIEWER_METHODS as METHODS
 
 
 def add_view_parser(sub, func) -> argparse.ArgumentParser:
@@ -41,6 +41,7 @@ def add_view_parser(sub, func) -> argparse.ArgumentParser:
     v.add_argument("--file-dialog", choices=("auto", "builtin"), default="auto",
                    help="auto: the system's file dialog where one is installed (zenity, kdialog), "
                         "else the viewer's own; builtin: always the viewer's own")
+    add_volume_options(v)
     add_scene_edit_options(v)
     v.set_defaults(func=func)
     return v

@@ -68,6 +68,8 @@ def run_view(args: argparse.Namespace) -> int:
         # A volume that does not load fails here, before a window, an X server or a GL context.
         volume = load_scene_volume(scene)
         load_scene_environment(scene)   # and an environment map (kept in its cache)
+        for note in volume.notes:
+            print(f"view: note: {note}", file=sys.stderr)
     else:
         volume = None   # the headless fallback loads it
     xvfb = None
@@ -149,7 +151,8 @@ def headless_fallback(args: argparse.Namespace, reason: str) -> int:
                    probe_grid=args.probe_grid, probe_samples=args.probe_samples,
                    sh_window=args.sh_window, probe_precision=args.probe_precision, seed=args.seed,
                    exposure=args.exposure or 1.0, gl_backend=args.gl_backend,
-                   **{k: getattr(args, k, None) for k in ("crop", "crop_voxels", "clip_plane",
+                   **{k: getattr(args, k, None) for k in ("series", "orientation", "data_window",
+                                                          "crop", "crop_voxels", "clip_plane",
                                                           "transfer_function")},
                    no_crop=getattr(args, "no_crop", False),
                    no_clip_plane=getattr(args, "no_clip_plane", False))

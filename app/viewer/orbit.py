@@ -1,11 +1,15 @@
 """Orbit, pan and zoom of the scene camera (a CameraSpec), and the matrices that draw geometry
-with the very camera the renderers trace rays from (app/twins/camera.py)."""
+with the very camera the renderers trace rays from (app/twins/camera.py). The vector and matrix
+maths is pyrr's (rotations about an axis, look-at and perspective matrices); pyrr writes matrices
+for row vectors (``v @ M``), so they are transposed here into the column-vector form GL and the
+rest of the code use."""
 from __future__ import annotations
 
 import math
 from dataclasses import replace
 
 import numpy as np
+from pyrr import matrix44, quaternion, vector, vector3
 
 from ..twins.camera import CameraFrame
 from ..scene import CameraSpec
@@ -16,21 +20,16 @@ MIN_DISTANCE, MAX_DISTANCE = 0.05, 100.0
 POLE_MARGIN_DEGREES = 1.0          # orbiting stops this far from looking straight along `up`
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
-
-
 def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues' rotation of v about the unit axis by angle (radians)."""
-    c, s = math.cos(angle), math.sin(angle)
-    return v * c + np.cross(axis, v) * s + axis * np.dot(axis, v) * (1.0 - c)
+    """v turned about the unit axis by angle (radians, right-handed)."""
+    return quaternion.apply_to_vector(quaternion.create_from_axis_rotation(axis, angle), v)
 
 
 def _basis(cam: CameraSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     eye, target = np.asarray(cam.eye, np.float64), np.asarray(cam.target, np.float64)
-    forward = _unit(target - eye)
-    right = _unit(np.cross(forward, np.asarray(cam.up, np.float64)))
-    up = np.cross(right, forward)
+    forward = vector.normalise(target - eye)
+    right = vector.normalise(vector3.cross(forward, np.asarray(cam.up, np.float64)))
+    up = vector3.cross(right, forward)
     return eye, target, forward, right, up
 
 
@@ -43,7 +42,7 @@ def orbit(cam: CameraSpec, dx_pixels: float, dy_pixels: float) -> CameraSpec:
     (the eye yaws left about `up`), down tilts its top towards the viewer (the eye rises); the
     distance to the target is kept and the view never flips over the pole."""
     eye, target, forward, right, _ = _basis(cam)
-    world_up = _unit(np.asarray(cam.up, np.float64))
+    world_up = vector.normalise(np.asarray(cam.up, np.float64))
     offset = eye - target
     yaw = -math.radians(dx_pixels * ORBIT_DEGREES_PER_PIXEL)     # the eye moves left
     tilt = math.radians(dy_pixels * ORBIT_DEGREES_PER_PIXEL)     # the eye moves up
@@ -79,23 +78,16 @@ def zoom(cam: CameraSpec, wheel_steps: float) -> CameraSpec:
 def view_projection(frame: CameraFrame, near: float = 0.01, far: float = 100.0) -> np.ndarray:
     """The 4x4 matrix (row-major NumPy; transpose for GL) mapping world points to clip space so
     that a point on the ray through image point (px, py) lands at that point of the viewport, row
-    0 at the top: the rasterised twin of camera_ray_direction."""
+    0 at the top: the rasterised twin of camera_ray_direction. The frame's `right` and `up` are
+    scaled by tan(fov_y / 2) (times the aspect), which gives the perspective's field of view."""
     eye = frame.eye.astype(np.float64)
     forward = frame.forward.astype(np.float64)
-    right, up = frame.right.astype(np.float64), frame.up.astype(np.float64)
-    # ndc_x = dot(p - eye, right) / (|right|^2 z), z = dot(p - eye, forward); likewise for y.
-    view = np.eye(4)
-    view[0, :3] = right / np.dot(right, right)
-    view[1, :3] = up / np.dot(up, up)
-    view[2, :3] = forward
-    view[:3, 3] = -view[:3, :3] @ eye
-    # Clip: x' = x, y' = y, w' = z, depth mapped from [near, far] to [-1, 1].
-    proj = np.zeros((4, 4))
-    proj[0, 0] = proj[1, 1] = 1.0
-    proj[2, 2] = (far + near) / (far - near)
-    proj[2, 3] = -2.0 * far * near / (far - near)
-    proj[3, 2] = 1.0
-    return proj @ view
+    tan_half = float(np.linalg.norm(frame.up))
+    aspect = float(np.linalg.norm(frame.right)) / tan_half
+    view = matrix44.create_look_at(eye, eye + forward, frame.up.astype(np.float64), dtype=np.float64)
+    proj = matrix44.create_perspective_projection(math.degrees(2.0 * math.atan(tan_half)), aspect,
+                                                  near, far, dtype=np.float64)
+    return matrix44.multiply(view, proj).T   # pyrr: v @ view @ proj; here M @ v
 
 
 def project(matrix: np.ndarray, points: np.ndarray, width: int, height: int) -> np.ndarray:

@@ -8,9 +8,10 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
-from ..render.renderer import MAX_GATHER_EVENT, METHODS, RAYMARCH_STAGES
-from ..scene import (PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS,
-                     PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS)
+from ..render.renderer import MAX_GATHER_EVENT, RAYMARCH_STAGES
+from ..scene_types import VIEWER_METHODS as METHODS
+from ..scene import (ORIENTATIONS, PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS,
+                     PROBE_LAYOUTS, PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS)
 from ..volume import BUILTIN_VOLUMES
 from .overlays import shortcut_table
 from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
@@ -176,6 +177,16 @@ def data_section(v) -> None:
         implot.plot_bars("histogram", xs, heights, 1.0 / len(xs))
         implot.end_plot()
     imgui.text_disabled("histogram in data units over the value range or window (log counts)")
+    if state.scene.volume.path is not None:
+        chosen = _radio_row(v, "Orientation", ORIENTATIONS, state.scene.volume.orientation,
+                            prefix="orientation ")
+        if chosen and chosen != state.scene.volume.orientation:
+            state.set_volume(orientation=chosen)
+        imgui.text_disabled("patient: +x left, +y superior, +z anterior, where the file says")
+    for note in vol.notes:
+        if vol.dicom_listing is None or "DICOM series" not in note:   # the list below says it
+            imgui.text_wrapped(note)
+    series_list(v, vol)
     if imgui.button("Open file..."):
         v.files.open_dialog()
     ui.note("Open file...")
@@ -197,6 +208,24 @@ def data_section(v) -> None:
         ui.note(f"dataset {path.name}")
         if clicked:
             v.open_path(str(path))
+
+
+def series_list(v, vol) -> None:
+    """A DICOM folder's series to pick from: the one shown selected, those that make no volume
+    greyed out with the reason."""
+    listing = vol.dicom_listing
+    if listing is None or len(listing.series) < 2:
+        return
+    imgui.text(f"{len(listing.series)} DICOM series in {listing.where.name}:")
+    for s in listing.series:
+        current = vol.dicom_series is not None and s.uid == vol.dicom_series.uid
+        flags = imgui.SelectableFlags_.disabled if s.problem else 0
+        clicked, _ = imgui.selectable(f"{s.label(reason=False)}##series{s.number}", current, flags)
+        v.widgets.note(f"series {s.number}")
+        if s.problem and imgui.is_item_hovered(imgui.HoveredFlags_.allow_when_disabled):
+            imgui.set_tooltip(s.problem)
+        if clicked and not current:
+            v.state.set_volume(series=s.uid)
 
 
 def light_section(v) -> None:

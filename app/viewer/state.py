@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from ..render.renderer import METHODS
+from ..scene_types import VIEWER_METHODS as METHODS
 from ..scene import BookmarkSpec, CameraSpec, ClipPlaneSpec, CropSpec, Scene, ViewerSpec
 from .history import SceneHistory
 
@@ -227,6 +227,10 @@ class ViewerState:
     def step_probe_grid(self, step: int) -> None:
         """Every axis to the next coarser (step < 0) or finer density of PROBE_AXIS_STEPS."""
         self.set_probe_grid(tuple(_next_step(v, step) for v in self.scene.probes.grid))
+
+    def set_volume(self, **changes) -> None:
+        """How the volume file is read: its DICOM `series`, its `orientation` (a reload)."""
+        self.scene = self.scene.replace(volume=replace(self.scene.volume, **changes))
 
     def set_probes(self, **changes) -> None:
         self.scene = self.scene.replace(probes=replace(self.scene.probes, **changes))

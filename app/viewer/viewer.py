@@ -208,6 +208,8 @@ class Viewer:
         self.state.show_channels(volume.channel_count)
         self._pending_volume = volume
         self.state.note(f"opened {path}")
+        for note in volume.notes:
+            self.state.note(note)
         return True
 
     # ---- the crop box's and clip plane's handles -------------------------------------------------
@@ -491,6 +493,9 @@ class Viewer:
                           if session.volume.time_steps > 1 else {}),
                        **({"channels": session.volume.channel_count}
                           if session.volume.channel_count > 1 else {})},
+            "dicom_series": (session.volume.dicom_series.number
+                             if session.volume.dicom_series is not None else None),
+            "volume_notes": list(session.volume.notes),
             "playing": s.playing,
             "opacity_points": [list(p) for p in self.opacity_points()[0]],
             "clip_region": (None if session.renderer.resources.clip is None else

@@ -26,7 +26,7 @@ uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
 uniform int max_path_steps;   // hang guard: tracking steps one path may take in all
 #if defined(WALK_SUN_GRID)
-uniform float walk_sun_correction;   // probability of a shadow ray correcting the grid's sun
+uniform float walk_sun_correction;   // least probability of a shadow ray correcting the grid's sun
 #endif
 #if defined(PROBE_LIGHTING)
 // The scattering event at which a probe renderer reads the probes and ends the path (>= 1). 1 is
@@ -133,25 +133,34 @@ const int STEP_SHADOW_CUT = 3;     // steps ran out in a shadow ray; its progres
 // The flight to the next scattering event and what happens there before the shadow ray: returns
 // STEP_DONE, STEP_FLIGHT_CUT, or STEP_CONTINUE with p at the event (p.shadow_pending set when the
 // sun needs a shadow ray from there).
+// The radiance a path that leaves the box along p.w adds. GUIDED_RESIDUAL (`guided`'s level 1): a
+// camera ray that leaves without scattering adds nothing, since level 0's estimate of the same
+// ray (lib/guided_level0.glsl) holds exactly what it would (the environment through the
+// ray's transmittance).
+vec3 path_escape(PathState p)
+{
+#if defined(GUIDED_RESIDUAL)
+    if (p.bounce == 0)
+        return vec3(0.0);
+#endif
+#if defined(ENVIRONMENT_MAP)
+    return p.throughput * path_escape_radiance(p);
+#else
+    return p.throughput * environment;
+#endif
+}
+
 int path_flight(inout PathState p, inout int steps_left)
 {
     float t0, t1;
     if (!box_intersect(p.x, p.w, t0, t1)) {
-#if defined(ENVIRONMENT_MAP)
-        p.radiance += p.throughput * path_escape_radiance(p);
-#else
-        p.radiance += p.throughput * environment;
-#endif
+        p.radiance += path_escape(p);
         return STEP_DONE;
     }
     float t;
     int event = delta_track(p.x, p.w, t0, t1, p.rng, steps_left, t);
     if (event == TRACK_ESCAPED) {
-#if defined(ENVIRONMENT_MAP)
-        p.radiance += p.throughput * path_escape_radiance(p);
-#else
-        p.radiance += p.throughput * environment;
-#endif
+        p.radiance += path_escape(p);
         return STEP_DONE;
     }
     if (event == TRACK_OUT_OF_STEPS) {
@@ -165,6 +174,14 @@ int path_flight(inout PathState p, inout int steps_left)
     p.throughput *= albedo_at(p.x);
     if (all(equal(p.throughput, vec3(0.0))))
         return STEP_DONE;
+#if defined(GUIDED_RESIDUAL)
+    // `guided`'s level 1: minus the single-collision estimate of level 0's F at this first event
+    // (the same random numbers: the same collision), so the sample is the path's estimate minus
+    // what the probes and the light grid predict for it (lib/guided_level0.glsl).
+    if (p.bounce == 1)
+        p.radiance -= p.throughput * guided_predicted_source(
+            p.x, p.w, phase_hg(dot(sun_direction, p.w), anisotropy));
+#endif
 #if defined(PROBE_LIGHTING)
     // Render from probes: at the gather event (the first unless probe_gather_event says
     // otherwise), light arriving by further bounces comes from the probes (convolved with the
@@ -202,22 +219,26 @@ int path_flight(inout PathState p, inout int steps_left)
 #endif
 #if defined(WALK_SUN_GRID)
     // The sun's transmittance from the baked light grid (lib/light_grid.glsl), corrected without
-    // bias: with probability q = walk_sun_correction a ratio-tracked shadow ray T_ray is traced and
-    // the event adds T_grid + (T_ray - T_grid) / q, otherwise T_grid; the mean is E[T_ray], the
-    // sun's exact transmittance, whatever the grid's error (which on a thin backlit shell or a
-    // pinhole's beam made probes 2.6-6% dark: bench/h100-bias). The correction's shadow ray
-    // starts with weight 1 / q in shadow_transmittance. q = 0: the grid alone (biased).
-    {
+    // bias: with probability q a ratio-tracked shadow ray T_ray is traced and the event adds
+    // T_grid + (T_ray - T_grid) / q, otherwise T_grid; the mean is E[T_ray], the sun's exact
+    // transmittance, whatever the grid's error (which on a thin backlit shell or a pinhole's beam
+    // made probes 2.3-7.5% dark: bench/h100-bias). The correction's shadow ray starts with weight
+    // 1 / q in shadow_transmittance, q = walk_sun_correction (any q > 0 keeps the mean exact).
+    // Measured on the H100 (bench/h100-bias-v1, bench/archive/h100-v11): a q that rose to 0.5
+    // where the grid's depth changes fast made the bench's bakes 3-15x slower; a fixed 0.05 costs
+    // a twentieth of the shadow rays. walk_sun_correction = 0: the grid alone (biased).
+    if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
         float sun_phase = phase_hg(dot(sun_direction, p.w), anisotropy);
-        float grid = light_grid_transmittance(p.x);
-        bool correct = walk_sun_correction > 0.0 && any(greaterThan(sun_irradiance, vec3(0.0)))
-                       && rng_next(p.rng) < walk_sun_correction;
-        float grid_weight = correct ? 1.0 - 1.0 / walk_sun_correction : 1.0;
+        float tau = light_grid_optical_depth(p.x);
+        float grid = exp(-tau);
+        float q = walk_sun_correction;
+        bool correct = q > 0.0 && rng_next(p.rng) < q;
+        float grid_weight = correct ? 1.0 - 1.0 / q : 1.0;
         p.radiance += p.throughput * sun_irradiance * (grid * grid_weight * sun_phase);
         if (!correct)
             return STEP_CONTINUE;
         p.shadow_t = -1.0;
-        p.shadow_transmittance = 1.0 / walk_sun_correction;
+        p.shadow_transmittance = 1.0 / q;
         p.shadow_pending = 1;
         return STEP_CONTINUE;
     }

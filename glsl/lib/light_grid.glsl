@@ -39,9 +39,15 @@ uniform float light_grid_march_step;   // the bake's quadrature step (world unit
 // too dark, bench/h100-bias). There the depth is marched to the box instead (the bake's midpoint
 // quadrature, at most 8 points: exact where sigma_t is constant); elsewhere it is the grid's.
 // (A point whose ray towards the sun does not cross the box, such as one on its sun-side face,
-// has depth 0.)
+// has depth 0.) LIGHT_GRID_FACE_MARCH 0 (the bake's walks, whose grid sun is corrected without bias
+// by shadow rays: lib/integrator.glsl) reads the grid alone: on llvmpipe's coarse grids the march
+// covered much of the volume and made a walk's event 2.5x dearer.
+#ifndef LIGHT_GRID_FACE_MARCH
+#define LIGHT_GRID_FACE_MARCH 1
+#endif
 float light_grid_optical_depth(vec3 x)
 {
+#if LIGHT_GRID_FACE_MARCH
     float t0, t1;
     if (!box_intersect(x, sun_direction, t0, t1))
         return 0.0;   // on the box's sun side, leaving it (or outside, not shadowed by it)
@@ -53,6 +59,7 @@ float light_grid_optical_depth(vec3 x)
             tau += sigma_t_at(x + (t0 + (float(i) + 0.5) * dt) * sun_direction) * dt;
         return tau;
     }
+#endif
     return texture(light_transmittance, light_grid_coordinates(x)).r;
 }
 

@@ -78,11 +78,19 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
     return radiance + transmittance * environment;
 }
 
-// One jittered frame's radiance through a pixel; the frame number keys the jitter.
+#if defined(GUIDED_LEVEL0)
+#include "lib/guided_level0.glsl"
+#endif
+
+// One jittered frame's radiance through a pixel; the frame number keys the jitter. GUIDED_LEVEL0:
+// `guided`'s unbiased level 0 instead of the raymarcher's quadrature (lib/guided_level0.glsl).
 vec3 raymarch_frame(ivec2 pixel, uint frame)
 {
     uint rng = rng_seed(uint(pixel.y * image_size.x + pixel.x), frame, seed);
     vec2 sub = vec2(rng_next(rng), rng_next(rng));
+#if defined(GUIDED_LEVEL0)
+    return guided_level0_radiance(camera_eye, camera_ray_direction(vec2(pixel) + sub), rng);
+#endif
     return raymarch_radiance(camera_eye, camera_ray_direction(vec2(pixel) + sub), rng_next(rng));
 }
 

@@ -40,15 +40,18 @@ const int TRACK_OUT_OF_STEPS = 2;
 
 // Russian roulette on a ratio-tracking estimate: below 0.1 it survives with probability
 // 10 x transmittance and is then raised to 0.1 (unbiased). True when the estimate was ended.
+#ifndef RATIO_ROULETTE_BELOW
+#define RATIO_ROULETTE_BELOW 0.1
+#endif
 bool ratio_roulette(inout float transmittance, inout uint rng)
 {
-    if (transmittance >= 0.1)
+    if (transmittance >= RATIO_ROULETTE_BELOW)
         return false;
-    if (rng_next(rng) >= transmittance * 10.0) {
+    if (rng_next(rng) >= transmittance / RATIO_ROULETTE_BELOW) {
         transmittance = 0.0;
         return true;
     }
-    transmittance = 0.1;
+    transmittance = RATIO_ROULETTE_BELOW;
     return false;
 }
 
