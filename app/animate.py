@@ -35,8 +35,13 @@ def add_animate_parser(sub, func) -> argparse.ArgumentParser:
     path.add_argument("--keyframes", nargs="?", const="", type=bookmark_list, metavar="A,B,...",
                       help="fly smoothly through these bookmarks of the scene (default: all, in "
                            "order)")
-    a.add_argument("--frames", type=lambda t: positive_int(t, MAX_FRAMES), default=DEFAULT_FRAMES,
-                   help=f"frames in the movie (default {DEFAULT_FRAMES})")
+    a.add_argument("--frames", type=lambda t: positive_int(t, MAX_FRAMES), default=None,
+                   help=f"frames in the movie (default {DEFAULT_FRAMES}; with --time-series, one "
+                        "a step)")
+    a.add_argument("--time-series", action="store_true",
+                   help="play the volume's time steps, first to last, over the movie (the camera "
+                        "still unless --turntable or --keyframes moves it); each step's probes "
+                        "are baked before its first frame")
     a.add_argument("--fps", type=positive_float, default=30.0, help="frames a second (default 30)")
     a.add_argument("--out", default="movie.mp4",
                    help="movie.mp4, movie.gif, a folder for numbered PNGs, or a pattern such as "
@@ -75,7 +80,7 @@ def run_animate(args: argparse.Namespace) -> int:
     from .environment_map import load_scene_environment
     from .frontend import DEFAULT_RAYMARCH_STEP
     from .gl.context import create_headless_context, describe, is_software
-    from .movie import frame_count_note, movie_cameras, render_movie
+    from .movie import frame_count_note, movie_cameras, render_movie, series_steps
     from .movie_writer import MovieError, MovieWriter, check_movie_output
     from .progress import ProgressBar
     from .render.limits import check_image_size
@@ -86,20 +91,33 @@ def run_animate(args: argparse.Namespace) -> int:
 
     scene = apply_options(scene_from_arg(args.scene), args)
     cam = scene.camera
+    volume = load_scene_volume(scene)
+    frames = args.frames
+    times = None
+    if args.time_series:
+        if volume.time_steps < 2:
+            raise OptionError(f"--time-series: {volume.name} has no time axis (one step)")
+        frames = frames or volume.time_steps
+        times = series_steps(volume.time_steps, frames)
+    frames = frames or DEFAULT_FRAMES
     try:
         check_movie_output(args.out, cam.width, cam.height)
-        cameras = movie_cameras(scene, args.frames,
+        still = args.time_series and args.turntable is None and args.keyframes is None
+        cameras = movie_cameras(scene, frames,
                                 None if args.keyframes is not None else (
+                                    0.0 if still else
                                     360.0 if args.turntable is None else args.turntable),
                                 args.keyframes)
     except MovieError as exc:
         raise OptionError(str(exc)) from None
     except ValueError as exc:
         raise OptionError(f"--keyframes: {exc}") from None
-    volume = load_scene_volume(scene)
     for note in volume.notes:
         print(f"note: {note}", file=sys.stderr)
     load_scene_environment(scene)
+    if getattr(args, "colorbar", None) and volume.channel_count > 1:
+        raise OptionError(f"--colorbar: a colour bar shows one transfer function; this volume has "
+                          f"{volume.channel_count} channels, each with its own")
     check_clip(scene, volume, args)
     if args.method == "raymarch" and args.raymarch_step is not None:
         try:
@@ -123,10 +141,12 @@ def run_animate(args: argparse.Namespace) -> int:
     writer = MovieWriter(args.out, cam.width, cam.height, fps=args.fps, crf=args.quality)
     try:
         if renderer.needs_probes(args.method):
-            print("animate: baking the probes once for the whole movie", file=sys.stderr)
+            print("animate: baking the probes " + (
+                f"for each of {len(set(times))} time steps" if times else
+                "once for the whole movie"), file=sys.stderr)
         result = render_movie(renderer, cameras, writer, args.method, args.spp, args.seed,
                               args.exposure, args.samples_per_pass, overlay,
-                              progress=lambda done, total: bar.update(done))
+                              progress=lambda done, total: bar.update(done), times=times)
     except MovieError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

@@ -138,7 +138,11 @@ def scene_colorbar_overlay(width: int, height: int, scene, volume, position: str
                            title: str = "value") -> ColorbarOverlay:
     """The colour bar of a scene's transfer function over its volume's value range (or window)."""
     from .transfer import transfer_table
-    table = transfer_table(scene.transfer_function)
+    if getattr(volume, "channel_count", 1) > 1:
+        raise ValueError(f"a colour bar shows one transfer function; this volume has "
+                         f"{volume.channel_count} channels, each with its own")
+    table = transfer_table(scene.transfer_function if not scene.channels
+                           else scene.channels[0].transfer_function)
     return colorbar_overlay(width, height, table[:, :3], volume.value_range, title, position)
 
 

@@ -259,6 +259,9 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
     edits = _scene_edits(args)
     if getattr(args, "transfer_function", None):
         from .scene import load_transfer_function
+        if scene.channels:
+            raise OptionError("--transfer-function: the scene has channels, each with its own "
+                              "transfer function (channels[i].transfer_function)")
         try:
             scene = scene.replace(transfer_function=load_transfer_function(args.transfer_function))
         except SceneError as exc:
@@ -399,6 +402,9 @@ def render_to_files(args: argparse.Namespace) -> int:
     volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
     for note in volume.notes:
         print(f"note: {note}", file=sys.stderr)
+    if getattr(args, "colorbar", None) and volume.channel_count > 1:
+        raise OptionError(f"--colorbar: a colour bar shows one transfer function; this volume has "
+                          f"{volume.channel_count} channels, each with its own")
     load_scene_environment(scene)          # so does an environment map (kept in its cache)
     check_clip(scene, volume, args)        # and a crop that does not fit the volume
     if args.method == "raymarch" and args.raymarch_step is not None:

@@ -68,7 +68,10 @@ class MovieFrames:
 
     def __init__(self, renderer, cameras: list[CameraSpec], method: str = "raymarch",
                  spp: int = 16, seed: int = 0, exposure: float = 1.0,
-                 samples_per_pass: int = 16, overlay=None):
+                 samples_per_pass: int = 16, overlay=None, times: list[int] | None = None):
+        """`times`: a time series' step of each frame (None: the scene's step throughout). A
+        frame on another step than the last bakes that step's probes (restarted from the last
+        step's: Renderer.bake; a finished bake is the same either way)."""
         from .render.accumulation import Accumulation
         from .render.frame_readback import FrameReadback
         self.renderer, self.cameras, self.method = renderer, list(cameras), method
@@ -79,6 +82,10 @@ class MovieFrames:
         self.readback = FrameReadback(renderer.ctx)
         self.next = 0
         self.bakes, self.bake_ms, self.render_ms = 0, 0.0, 0.0
+        if times is not None and len(times) != len(self.cameras):
+            raise ValueError(f"{len(times)} time steps for {len(self.cameras)} frames")
+        self.times = None if times is None else [int(t) for t in times]
+        self.scene_time = renderer.scene.time   # given back when the movie is done
 
     @property
     def done(self) -> bool:
@@ -89,8 +96,9 @@ class MovieFrames:
         r = self.renderer
         scene, lent = r.scene, r._acc
         r._acc = self.acc
+        step = scene.time if self.times is None else self.times[self.next]
         try:
-            r.set_scene(scene.replace(camera=self.cameras[self.next]))
+            r.set_scene(scene.replace(camera=self.cameras[self.next], time=step))
             if r.needs_probes(self.method) and not r.probes_current():
                 self.bake_ms += r.bake(self.seed)     # before the first frame only (tests count)
                 self.bakes += 1
@@ -103,25 +111,30 @@ class MovieFrames:
             pixels = self.readback.read(acc, self.exposure)
         finally:
             r._acc = lent
-            r.set_scene(scene)
+            # the step stays until the movie is done: going back between frames would re-bake
+            r.set_scene(scene.replace(time=step))
         if self.overlay is not None:
             pixels = self.overlay.apply(pixels)
         self.next += 1
         return pixels, linear
 
     def release(self) -> None:
+        if self.renderer.scene.time != self.scene_time:
+            self.renderer.set_scene(self.renderer.scene.replace(time=self.scene_time))
         self.acc.release()
         self.readback.release()
 
 
 def render_movie(renderer, cameras: list[CameraSpec], writer, method: str = "raymarch",
                  spp: int = 16, seed: int = 0, exposure: float = 1.0, samples_per_pass: int = 16,
-                 overlay=None, progress=None, keep: tuple[int, ...] = ()) -> MovieResult:
+                 overlay=None, progress=None, keep: tuple[int, ...] = (),
+                 times: list[int] | None = None) -> MovieResult:
     """Renders every camera into `writer` (None: frames are not written, only kept or timed);
     `overlay`: a colorbar.ColorbarOverlay laid over each frame; `progress(done, total)` after each
     frame; `keep`: frame indices whose linear images come back in MovieResult.kept."""
     start = time.perf_counter()
-    frames = MovieFrames(renderer, cameras, method, spp, seed, exposure, samples_per_pass, overlay)
+    frames = MovieFrames(renderer, cameras, method, spp, seed, exposure, samples_per_pass, overlay,
+                         times)
     kept = {}
     try:
         while not frames.done:
@@ -139,6 +152,14 @@ def render_movie(renderer, cameras: list[CameraSpec], writer, method: str = "ray
     return MovieResult(path=path, frames=len(cameras), width=frames.width, height=frames.height,
                        method=method, spp=spp, bakes=frames.bakes, bake_ms=frames.bake_ms,
                        render_ms=frames.render_ms, wall_s=time.perf_counter() - start, kept=kept)
+
+
+def series_steps(steps: int, frames: int) -> list[int]:
+    """The step each of `frames` frames shows of a series of `steps`: evenly through the series,
+    first to last (each step held frames / steps frames)."""
+    if steps < 2:
+        raise ValueError("the volume has no time axis (one step)")
+    return [min(steps - 1, i * steps // frames) for i in range(frames)]
 
 
 def sized(cameras: list[CameraSpec], width: int, height: int) -> list[CameraSpec]:

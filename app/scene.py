@@ -12,7 +12,8 @@ import math
 from pathlib import Path
 from typing import Any, Mapping
 
-from .scene_types import (CROP_UNITS, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
+from .scene_types import (AXIS_LETTERS, CROP_UNITS, MAX_CHANNELS, ChannelSpec,
+                          channel_transfer_function, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
                           MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
                           PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
                           SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
@@ -27,7 +28,7 @@ __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_S
            "MAX_TRANSFER_ROWS", "ORIENTATIONS", "PROBE_FITS", "PROBE_INDICATORS", "PROBE_INTERPOLATIONS",
            "PROBE_LAYOUTS", "PROBE_PRECISIONS",
            "SH_WINDOWS", "WINDOW_PRESETS",
-           "BookmarkSpec", "CameraSpec", "ClipPlaneSpec", "CropSpec", "EnvironmentMapSpec",
+           "BookmarkSpec", "CameraSpec", "ChannelSpec", "MAX_CHANNELS", "ClipPlaneSpec", "CropSpec", "EnvironmentMapSpec",
            "ViewerSpec", "load_transfer_function", "parse_transfer_function",
            "save_transfer_function", "transfer_to_dict",
            "LightSpec", "ProbeSpec", "Scene", "SceneError", "TransferFunctionSpec", "VolumeSpec",
@@ -108,10 +109,7 @@ def _parse_volume(d: Any) -> VolumeSpec:
     if "spacing" in d:
         kw["spacing"] = _vector(d["spacing"], "volume.spacing", 3, lo=0.0, lo_open=True)
     if d.get("value_range") is not None:
-        lo, hi = _vector(d["value_range"], "volume.value_range", 2)
-        if not hi > lo:
-            raise SceneError(f"volume.value_range: needs min < max, got {[lo, hi]}")
-        kw["value_range"] = (lo, hi)
+        kw["value_range"] = _parse_value_range(d["value_range"], "volume.value_range")
     if d.get("window") is not None:
         if "value_range" in kw:
             raise SceneError("volume.window: give either volume.window or volume.value_range, "
@@ -130,6 +128,10 @@ def _parse_volume(d: Any) -> VolumeSpec:
         kw["series"] = _series(d["series"])
     if "orientation" in d:
         kw["orientation"] = _choice(d["orientation"], "volume.orientation", ORIENTATIONS)
+    if d.get("axes") is not None:
+        if not kw.get("path"):
+            raise SceneError("volume.axes: only for files (a built-in volume is one channel, z, y, x)")
+        kw["axes"] = _parse_axes(d["axes"])
     return VolumeSpec(**kw)
 
 
@@ -144,21 +146,101 @@ def _series(value: Any) -> int | str:
     return value.strip() if isinstance(value, str) else value
 
 
-def _parse_window(w: Any) -> tuple[float, float]:
+def _parse_window(w: Any, name: str = "volume.window") -> tuple[float, float]:
     """A CT/MRI window: a preset name or {"level": L, "width": W} in data units."""
     if isinstance(w, str):
-        return WINDOW_PRESETS[_choice(w, "volume.window", tuple(WINDOW_PRESETS))]
-    w = _object(w, "volume.window", {"level", "width"})
+        return WINDOW_PRESETS[_choice(w, name, tuple(WINDOW_PRESETS))]
+    w = _object(w, name, {"level", "width"})
     if set(w) != {"level", "width"}:
-        raise SceneError("volume.window: needs both level and width (or a preset: "
+        raise SceneError(f"{name}: needs both level and width (or a preset: "
                          f"{', '.join(WINDOW_PRESETS)})")
-    level = _number(w["level"], "volume.window.level")
-    width = _number(w["width"], "volume.window.width", lo=0.0, lo_open=True)
+    level = _number(w["level"], f"{name}.level")
+    width = _number(w["width"], f"{name}.width", lo=0.0, lo_open=True)
     lo, hi = window_range(level, width)
     if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
-        raise SceneError(f"volume.window: level {level:g} and width {width:g} give no finite "
-                         "range")
+        raise SceneError(f"{name}: level {level:g} and width {width:g} give no finite range")
     return (level, width)
+
+
+def _parse_value_range(value: Any, name: str) -> tuple[float, float]:
+    lo, hi = _vector(value, name, 2)
+    if not hi > lo:
+        raise SceneError(f"{name}: needs min < max, got {[lo, hi]}")
+    return (lo, hi)
+
+
+def _parse_axes(value: Any) -> str:
+    """volume.axes: the array's axes by letter, e.g. "czyx" (t, c, z, y, x; each once)."""
+    if not isinstance(value, str) or not value:
+        raise SceneError(f"volume.axes: expected a string of axis letters such as \"czyx\", "
+                         f"got {value!r}")
+    axes = value.lower()
+    unknown = sorted(set(axes) - set(AXIS_LETTERS))
+    if unknown:
+        raise SceneError(f"volume.axes: unknown axis {unknown[0]!r} in {value!r} (letters: t time, "
+                         "c channel, z, y, x)")
+    twice = sorted(a for a in set(axes) if axes.count(a) > 1)
+    if twice:
+        raise SceneError(f"volume.axes: axis {twice[0]!r} appears twice in {value!r}")
+    missing = [a for a in "zyx" if a not in axes]
+    if missing:
+        raise SceneError(f"volume.axes: {value!r} lacks {', '.join(missing)} (a volume always has "
+                         "z, y and x)")
+    return axes
+
+
+def _parse_channels(d: Any, has_transfer_function: bool,
+                    base_dir: str | Path | None = None) -> tuple[ChannelSpec, ...]:
+    """[{"name": ..., "index": i, "enabled": true, "transfer_function": {...}, "value_range":
+    [lo, hi] | "window": {...}}, ...]: 1 to MAX_CHANNELS channels, at least one switched on."""
+    if not isinstance(d, (list, tuple)):
+        raise SceneError(f"channels: expected a list of channels, got {d!r}")
+    if not d:
+        raise SceneError("channels: no channels to show (the list is empty; leave the key out "
+                         "for a one-channel volume)")
+    if len(d) > MAX_CHANNELS:
+        raise SceneError(f"channels: {len(d)} channels, at most {MAX_CHANNELS} are shown at once "
+                         "(choose them with channels[i].index)")
+    if has_transfer_function:
+        raise SceneError("transfer_function: a scene with channels gives each channel its own "
+                         "(channels[i].transfer_function), not one for the scene")
+    out, seen = [], {}
+    for i, c in enumerate(d):
+        name = f"channels[{i}]"
+        c = _object(c, name, _fields(ChannelSpec))
+        kw: dict[str, Any] = {}
+        if c.get("name") is not None:
+            if not isinstance(c["name"], str):
+                raise SceneError(f"{name}.name: expected a text, got {c['name']!r}")
+            kw["name"] = c["name"]
+        if c.get("index") is not None:
+            kw["index"] = _integer(c["index"], f"{name}.index", 0, 1 << 16)
+        index = kw.get("index", i)
+        if index in seen:
+            raise SceneError(f"{name}.index: the file's channel {index} is already "
+                             f"channels[{seen[index]}]")
+        seen[index] = i
+        if "enabled" in c:
+            kw["enabled"] = _boolean(c["enabled"], f"{name}.enabled")
+        if c.get("value_range") is not None:
+            kw["value_range"] = _parse_value_range(c["value_range"], f"{name}.value_range")
+        if c.get("window") is not None:
+            if "value_range" in kw:
+                raise SceneError(f"{name}.window: give either {name}.window or "
+                                 f"{name}.value_range, not both")
+            kw["window"] = _parse_window(c["window"], f"{name}.window")
+        tf = c.get("transfer_function")
+        if tf is None:
+            kw["transfer_function"] = channel_transfer_function(i)
+        elif isinstance(tf, str):   # a transfer-function file, relative to the scene's folder
+            kw["transfer_function"] = _transfer_file(tf, base_dir, f"{name}.transfer_function")
+        else:
+            kw["transfer_function"] = _parse_transfer(tf, f"{name}.transfer_function")
+        out.append(ChannelSpec(**kw))
+    if not any(c.enabled for c in out):
+        raise SceneError("channels: no channels to show (every channel has enabled false; switch "
+                         "one on)")
+    return tuple(out)
 
 
 def _parse_transfer(d: Any, name: str = "transfer_function") -> TransferFunctionSpec:
@@ -422,6 +504,16 @@ def _parse_probes(d: Any) -> ProbeSpec:
     return ProbeSpec(**kw)
 
 
+def _transfer_file(path: str, base_dir: str | Path | None, name: str) -> TransferFunctionSpec:
+    p = Path(path).expanduser()
+    if not p.is_absolute() and base_dir is not None:
+        p = Path(base_dir) / p
+    try:
+        return load_transfer_function(p)
+    except SceneError as exc:
+        raise SceneError(f"{name}: {exc}") from None
+
+
 # Volume keys a scene may also give at its top level, as SPEC.md writes them ("orientation":
 # "patient"; "series" of a DICOM folder): the same as volume.orientation and volume.series.
 TOP_LEVEL_VOLUME_KEYS = ("orientation", "series")
@@ -448,13 +540,7 @@ def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
     if "transfer_function" in d:
         tf = d["transfer_function"]
         if isinstance(tf, str):   # a transfer-function file, relative to the scene's folder
-            p = Path(tf).expanduser()
-            if not p.is_absolute() and base_dir is not None:
-                p = Path(base_dir) / p
-            try:
-                kw["transfer_function"] = load_transfer_function(p)
-            except SceneError as exc:
-                raise SceneError(f"transfer_function: {exc}") from None
+            kw["transfer_function"] = _transfer_file(tf, base_dir, "transfer_function")
         else:
             kw["transfer_function"] = _parse_transfer(tf)
     if "density_scale" in d:
@@ -479,6 +565,10 @@ def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
         kw["bookmarks"] = _parse_bookmarks(d["bookmarks"])
     if d.get("viewer") is not None:
         kw["viewer"] = _parse_viewer(d["viewer"])
+    if d.get("time") is not None:
+        kw["time"] = _integer(d["time"], "time", 0, 1 << 24)
+    if d.get("channels") is not None:
+        kw["channels"] = _parse_channels(d["channels"], "transfer_function" in d, base_dir)
     if base_dir is not None:
         kw["base_dir"] = str(base_dir)
     return Scene(**kw)

@@ -19,12 +19,12 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
-from .scene_types import (CROP_UNITS, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
+from .scene_types import (AXIS_LETTERS, CHANNEL_COLOURS, CROP_UNITS, MAX_CHANNELS, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
                           MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
                           PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
                           SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
                           VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
-                          ClipPlaneSpec, CropSpec, LightSpec, ProbeSpec, Scene,
+                          ChannelSpec, ClipPlaneSpec, CropSpec, LightSpec, ProbeSpec, Scene,
                           TransferFunctionSpec, ViewerSpec, VolumeSpec)
 
 SCHEMA_ID = "https://radiance-probes.invalid/scene.schema.json"
@@ -35,11 +35,11 @@ NESTED = {"volume": VolumeSpec, "transfer_function": TransferFunctionSpec, "ligh
           "camera": CameraSpec, "probes": ProbeSpec, "crop": CropSpec,
           "clip_plane": ClipPlaneSpec, "viewer": ViewerSpec}
 # Scene fields that are lists of objects (each item's keys are named "bookmarks[].name", ...).
-LISTS = {"bookmarks": BookmarkSpec}
+LISTS = {"bookmarks": BookmarkSpec, "channels": ChannelSpec}
 # What a nested object's key takes besides the object: a transfer-function file's name in place of
 # the transfer function; null for the optional ones (as if absent).
 ALSO = {"transfer_function": ("string",), "crop": ("null",), "clip_plane": ("null",),
-        "viewer": ("null",), "bookmarks": ("null",)}
+        "viewer": ("null",), "bookmarks": ("null",), "channels": ("null",)}
 # Keys an object must hold (the loader names the one missing), and a voxel crop's integer corners.
 REQUIRED = {"crop": ["min", "max"], "clip_plane": ["normal"], "bookmarks[]": ["name", "eye"]}
 
@@ -98,8 +98,9 @@ def keys() -> dict[str, Key]:
         "volume": Key("The scalar field: a built-in procedural volume or a file.", {}),
         "volume.path": Key(
             "A volume file or folder, relative to the scene file's folder (or absolute): .raw, "
-            ".nrrd/.nhdr, .npy, .nii/.nii.gz, .tif/.tiff, a folder of TIFF slices, a folder of "
-            "DICOM files (searched recursively) or a DICOMDIR. Excludes volume.builtin.",
+            ".nrrd/.nhdr, .npy, .nii/.nii.gz, .tif/.tiff, a folder of TIFF slices or steps, a Zarr "
+            "or OME-Zarr store, a folder of DICOM files (searched recursively) or a DICOMDIR. "
+            "Excludes volume.builtin.",
             {"type": "string", "minLength": 1}, default="none (the built-in volume)",
             values="a path"),
         "volume.builtin": Key("A built-in procedural volume (used when there is no path).",
@@ -137,6 +138,12 @@ def keys() -> dict[str, Key]:
             {"oneOf": [number(1, integer=True), {"type": "string", "minLength": 1}]},
             default="the largest series that makes a volume",
             values="a number from 1 or a SeriesInstanceUID"),
+        "volume.axes": Key(
+            "Which array axis is which, one letter each: t (time), c (channel), z, y, x; z, y and "
+            "x always. Needed for a .npy of more than 3 dimensions and a file whose metadata "
+            "leaves axes unnamed; where the file names its axes (ImageJ, OME, Zarr) it must agree.",
+            {"type": "string", "pattern": f"^[{AXIS_LETTERS}]{{3,5}}$"},
+            default="the file's own (3D .npy: zyx)", values="e.g. \"czyx\", \"tzyx\""),
         "volume.orientation": Key(
             "data: the array's axes on world x, y, z as stored; patient: permuted and flipped so "
             "that +x is the patient's left, +y superior, +z anterior (NIfTI, DICOM, NRRD files "
@@ -265,6 +272,38 @@ def keys() -> dict[str, Key]:
         "bookmarks[].up": Key("Up on the image (not along the view).", vector(3)),
         "bookmarks[].fov_y": Key("Vertical field of view, degrees.",
                                  number(0.0, 179.0, lo_open=True)),
+        "channels": Key(
+            f"A volume's channels shown (SPEC.md, Channels): 1 to {MAX_CHANNELS}, at least one "
+            "switched on; they add their extinctions and mix their colours by extinction. Absent: "
+            "one channel, or a file's 2 to 4 channels each in the colour of its place. Excludes "
+            "the scene's transfer_function.", {"minItems": 1, "maxItems": MAX_CHANNELS},
+            default="none"),
+        "channels[].name": Key("A name for the viewer's panel.", {"type": "string"},
+                               default="none", values="text"),
+        "channels[].index": Key("The file's channel shown here (from 0), each once.",
+                                number(0, 1 << 16, integer=True), default="its place in the list"),
+        "channels[].enabled": Key("false: the channel adds nothing (kept for the viewer's "
+                                  "switch).", BOOLEAN),
+        "channels[].value_range": Key(
+            "The channel's data values mapped to density 0 and 1 (min < max). Excludes "
+            "channels[].window.", vector(2),
+            default="volume's, else the channel's own min and max (0..255 for 8-bit data)"),
+        "channels[].window": Key(
+            "As volume.window, for this channel. Excludes channels[].value_range.",
+            {"oneOf": [choice(WINDOW_PRESETS),
+                       {"type": "object", "additionalProperties": False,
+                        "required": ["level", "width"],
+                        "properties": {"level": {"type": "number"},
+                                       "width": number(0.0, lo_open=True)}}]},
+            default="volume's", values="a preset name or {\"level\": L, \"width\": W > 0}"),
+        "channels[].transfer_function": Key(
+            "The channel's transfer function, as the scene's transfer_function (an object or a "
+            "file name).", {"$ref": "#/properties/transfer_function"},
+            default="one colour by its place ("
+            + ", ".join("(" + ", ".join(f"{v:g}" for v in c) + ")" for c in CHANNEL_COLOURS)
+            + ") and the default opacity", values="as transfer_function"),
+        "time": Key("A time series' step shown (SPEC.md, Time series), from 0.",
+                    number(0, 1 << 24, integer=True)),
         "viewer": Key("How the viewer showed the scene when it was saved (Ctrl+S); it opens the "
                       "same way. Other commands ignore it. Absent or null: the viewer's "
                       "defaults.", {}),
@@ -409,8 +448,10 @@ def key_table() -> str:
                 rows.append(f"| `{path}` | | {kind} | {key.meaning} |")
                 walk(f"{path}.", sub["properties"])
                 continue
-            if "properties" in sub.get("items", {}) and not key.schema:
-                kind = " or ".join(["list of objects", *ALSO.get(path, ())])
+            if "properties" in sub.get("items", {}):
+                count = (f"list of {sub['minItems']} to {sub['maxItems']} objects"
+                         if "maxItems" in sub else "list of objects")
+                kind = " or ".join([count, *ALSO.get(path, ())])
                 rows.append(f"| `{path}` | [] | {kind} | {key.meaning} |")
                 walk(f"{path}[].", sub["items"]["properties"])
                 continue

@@ -81,6 +81,10 @@ class VolumeSpec:
     # "data": data[z, y, x] on world x, y, z as stored; "patient": axes permuted and flipped to
     # world +x = left, +y = superior, +z = anterior where the file says (app/orientation.py).
     orientation: str = "data"
+    # Which array axis is which, e.g. "czyx" or "tzyx" (letters t, c, z, y, x, each once, z, y and
+    # x always): needed for a .npy of more than 3 dimensions and for a file whose metadata leaves
+    # axes unnamed; for a file whose metadata names its axes it must agree with them.
+    axes: str | None = None
 
     @property
     def domain(self) -> tuple[float, float] | None:
@@ -100,6 +104,43 @@ class TransferFunctionSpec:
     # Colour control points (density, r, g, b), linearly interpolated and constant beyond the
     # first and last: they replace the colormap's colours (JSON "colors"; excludes "colormap").
     colors: tuple[tuple[float, float, float, float], ...] | None = None
+
+
+# The letters of volume.axes: time, channel and the three space axes.
+AXIS_LETTERS = "tczyx"
+# Channels (SPEC.md, Channels): at most this many are shown at once (one RGBA volume texture).
+MAX_CHANNELS = 4
+# The default colour of channel i where the scene gives it no transfer function: light tints, so
+# that every channel also scatters some of the other colours (a pure primary would absorb them).
+CHANNEL_COLOURS = ((0.25, 1.0, 0.25), (1.0, 0.25, 1.0), (0.25, 1.0, 1.0), (1.0, 1.0, 0.25))
+
+
+def channel_transfer_function(i: int) -> "TransferFunctionSpec":
+    """Channel i's default transfer function: its colour (CHANNEL_COLOURS) at every density, the
+    default opacity ramp."""
+    r, g, b = CHANNEL_COLOURS[i % len(CHANNEL_COLOURS)]
+    return TransferFunctionSpec(colors=((0.0, r, g, b),))
+
+
+@dataclass(frozen=True)
+class ChannelSpec:
+    """One channel of a multi-channel volume (SPEC.md, Channels): which channel of the file
+    (`index`; None: its place in the scene's list), shown or not, its own transfer function and
+    window (value_range or window, as volume's; None: volume's, else the channel's own range)."""
+    transfer_function: "TransferFunctionSpec"
+    name: str | None = None
+    index: int | None = None
+    enabled: bool = True
+    value_range: tuple[float, float] | None = None
+    window: tuple[float, float] | None = None
+
+    def domain(self, volume: "VolumeSpec") -> tuple[float, float] | None:
+        """The data values mapped to densities 0 and 1 in this channel."""
+        if self.window is not None:
+            return window_range(*self.window)
+        if self.value_range is not None:
+            return self.value_range
+        return volume.domain
 
 
 def _unit(v: tuple, name: str) -> tuple[float, float, float]:
@@ -244,6 +285,11 @@ class Scene:
     clip_plane: ClipPlaneSpec | None = None
     bookmarks: tuple[BookmarkSpec, ...] = ()
     viewer: ViewerSpec | None = None
+    # Several channels (SPEC.md, Channels): empty for a one-channel volume, or a file's channels
+    # each with the default colour of its place (app/channels.py effective_channels).
+    channels: tuple[ChannelSpec, ...] = ()
+    # Time series (SPEC.md, Time series): the step shown of a volume with a time axis.
+    time: int = 0
     # Folder that relative volume paths are also looked up in (the scene file's folder).
     base_dir: str | None = field(default=None, compare=False)
 
@@ -265,10 +311,14 @@ def scene_to_dict(scene: Scene) -> dict:
     for f in dataclasses.fields(scene):
         if f.name in ("base_dir", "environment_map"):
             continue
+        if f.name == "transfer_function" and scene.channels:
+            continue   # each channel has its own
         v = getattr(scene, f.name)
         if f.name in OPTIONAL_FIELDS:
             if v:   # written only where the scene has them, so older scenes stay as they were
-                out[f.name] = ([_plain(b) for b in v] if f.name == "bookmarks" else _plain(v))
+                out[f.name] = ([_plain(b) for b in v] if f.name == "bookmarks" else
+                               [channel_to_dict(c) for c in v] if f.name == "channels" else
+                               v if f.name == "time" else _plain(v))
             continue
         if f.name == "environment" and scene.environment_map is not None:
             m = scene.environment_map
@@ -294,7 +344,7 @@ def scene_to_dict(scene: Scene) -> dict:
 
 
 # Scene fields written only where the scene has them (None or empty: left out).
-OPTIONAL_FIELDS = ("crop", "clip_plane", "bookmarks", "viewer")
+OPTIONAL_FIELDS = ("crop", "clip_plane", "bookmarks", "viewer", "channels", "time")
 
 
 def _plain(spec) -> dict:
@@ -302,6 +352,22 @@ def _plain(spec) -> dict:
     def conv(x):
         return [conv(v) for v in x] if isinstance(x, tuple) else x
     return {k.name: conv(getattr(spec, k.name)) for k in dataclasses.fields(spec)}
+
+
+def channel_to_dict(channel: ChannelSpec) -> dict:
+    """A channel as the JSON of the scene's channels list (unset fields left out)."""
+    out: dict[str, Any] = {}
+    if channel.name is not None:
+        out["name"] = channel.name
+    if channel.index is not None:
+        out["index"] = channel.index
+    out["enabled"] = channel.enabled
+    if channel.value_range is not None:
+        out["value_range"] = list(channel.value_range)
+    if channel.window is not None:
+        out["window"] = {"level": channel.window[0], "width": channel.window[1]}
+    out["transfer_function"] = transfer_to_dict(channel.transfer_function)
+    return out
 
 
 def transfer_to_dict(tf: TransferFunctionSpec) -> dict:

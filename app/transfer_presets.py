@@ -94,15 +94,15 @@ def peak_opacity(peaks: list[tuple[float, float]], height: float = 1.0
     return tuple((float(x), float(y)) for x, y in out)
 
 
-def opacity_presets(volume=None) -> dict[str, tuple[tuple[float, float], ...]]:
+def opacity_presets(volume=None, channel: int = 0) -> dict[str, tuple[tuple[float, float], ...]]:
     """Preset name -> opacity control points: the ramps, and with a volume one tent per histogram
-    peak ("peak at <value>") and all its peaks together."""
+    peak ("peak at <value>") and all its peaks together (of several channels, channel's)."""
     presets = dict(RAMPS)
     if volume is None:
         return presets
-    counts = volume.histogram(HISTOGRAM_BINS)
+    counts = volume.histogram(HISTOGRAM_BINS, channel)
     peaks = histogram_peaks(counts)
-    lo, hi = volume.value_range
+    lo, hi = volume.channel_ranges[channel] if volume.channel_ranges else volume.value_range
     for centre, width in peaks:
         presets[f"peak at {lo + centre * (hi - lo):.4g}"] = peak_opacity([(centre, width)])
     if len(peaks) > 1:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -19,10 +20,12 @@ from . import dicom
 from . import volume_formats as formats
 from .orientation import NRRD_SPACES, patient_axes, to_patient, unit_columns
 from .scene_types import Scene, VolumeError, VolumeSpec
+from .volume_axes import resolve_axes, to_canonical
 
-# What load_volume takes, by file name ending (a folder is a TIFF stack or DICOM images; a file
-# named DICOMDIR indexes a DICOM set).
-VOLUME_SUFFIXES = (".raw", ".nrrd", ".nhdr", ".npy") + formats.NIFTI_SUFFIXES + formats.TIFF_SUFFIXES
+# What load_volume takes, by file name ending (a folder is a TIFF stack, DICOM images or a Zarr
+# store; a file named DICOMDIR indexes a DICOM set).
+VOLUME_SUFFIXES = ((".raw", ".nrrd", ".nhdr", ".npy") + formats.NIFTI_SUFFIXES
+                   + formats.TIFF_SUFFIXES + formats.ZARR_SUFFIXES)
 
 
 def is_volume_path(p: Path) -> bool:
@@ -39,10 +42,12 @@ _RAW_NAME = re.compile(r"_(\d+)x(\d+)x(\d+)_([a-z]+\d+)\.raw$", re.IGNORECASE)
 
 @dataclass(frozen=True, eq=False)
 class Volume:
-    data: np.ndarray                    # float32 [z, y, x], normalised density in [0, 1]
+    # float32 normalised density in [0, 1]: [z, y, x], or [z, y, x, c] for several channels
+    # (SPEC.md, Channels; each channel normalised by its own window, channel_ranges)
+    data: np.ndarray
     spacing: tuple[float, float, float]  # voxel size along x, y, z (any unit)
     name: str
-    value_range: tuple[float, float]     # raw values mapped to 0 and 1
+    value_range: tuple[float, float]     # raw values mapped to 0 and 1 (channel 0's)
     raw_dtype: str
     raw_min: float
     raw_max: float
@@ -57,12 +62,35 @@ class Volume:
     oblique_degrees: float = 0.0         # "patient": the residual rotation not applied
     dicom_listing: dicom.DicomListing | None = None   # a DICOM folder's series
     dicom_series: dicom.DicomSeries | None = None     # ... and the one shown
+    # Several channels: the raw values each channel maps to 0 and 1, and each one's raw min and
+    # max; empty for a one-channel volume.
+    channel_ranges: tuple[tuple[float, float], ...] = ()
+    channel_raw: tuple[tuple[float, float], ...] = ()
+    # A step of a time series: which, and of how many (1: no time axis).
+    time: int = 0
+    time_steps: int = 1
+    # What is computed from the data once and kept with it (the majorant grid's density ranges,
+    # keyed by their cells): a step shown again costs nothing.
+    derived: dict = field(default_factory=dict, repr=False)
 
     @property
     def dims(self) -> tuple[int, int, int]:
         """Voxel counts along x, y, z."""
-        z, y, x = self.data.shape
+        z, y, x = self.data.shape[:3]
         return (x, y, z)
+
+    @property
+    def channel_count(self) -> int:
+        """1 for a one-channel volume ([z, y, x]), else the last axis of data."""
+        return 1 if self.data.ndim == 3 else int(self.data.shape[3])
+
+    def channel(self, c: int) -> np.ndarray:
+        """Channel c's normalised density [z, y, x] (the data itself for one channel)."""
+        if self.data.ndim == 3:
+            if c != 0:
+                raise IndexError(f"channel {c} of a one-channel volume")
+            return self.data
+        return self.data[..., c]
 
     @property
     def half_extent(self) -> np.ndarray:
@@ -72,11 +100,13 @@ class Volume:
 
     @property
     def exact_uint8(self) -> bool:
-        """True when the data is 8-bit with the default range, so an R8 texture stores it exactly."""
-        return self.raw_dtype == "uint8" and self.value_range == (0.0, 255.0)
+        """True when the data is 8-bit with the default range (in every channel), so a 16-bit
+        normalised texture stores it exactly."""
+        return self.raw_dtype == "uint8" and all(
+            r == (0.0, 255.0) for r in (self.channel_ranges or (self.value_range,)))
 
-    def histogram(self, bins: int = 128) -> np.ndarray:
-        counts, _ = np.histogram(self.data, bins=bins, range=(0.0, 1.0))
+    def histogram(self, bins: int = 128, channel: int = 0) -> np.ndarray:
+        counts, _ = np.histogram(self.channel(channel), bins=bins, range=(0.0, 1.0))
         return counts
 
 
@@ -374,8 +404,9 @@ def _read_npy(p: Path) -> np.ndarray:
         data = np.load(p, allow_pickle=False)
     except Exception as exc:
         raise VolumeError(f"{p}: cannot read .npy ({_one_line(exc)})") from None
-    if data.ndim != 3:
-        raise VolumeError(f"{p}: expected a 3D array [z, y, x], got shape {data.shape}")
+    if data.ndim < 3:
+        raise VolumeError(f"{p}: expected a 3D array [z, y, x] (or 4D or 5D with channels and "
+                          f"time steps: see volume.axes), got shape {list(data.shape)}")
     return data
 
 
@@ -409,29 +440,23 @@ def normalise(raw: np.ndarray, value_range: tuple[float, float] | None, where: s
     return np.clip(data, 0.0, 1.0).astype(np.float32), (float(lo), float(hi))
 
 
-def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
-    """Load the volume a scene names: a built-in or a file; errors name the file and the problem."""
-    spacing = spec.spacing if spec.spacing is not None else (1.0, 1.0, 1.0)
-    if spec.path is None:
-        name = spec.builtin or "cloud"
-        if name not in BUILTIN_VOLUMES:
-            raise VolumeError(f"unknown built-in volume '{name}' (known: {', '.join(BUILTIN_VOLUMES)})")
-        data = BUILTIN_VOLUMES[name](tuple(spec.size))
-        vr = spec.domain or (0.0, 1.0)
-        norm, vr = normalise(data, vr, f"built-in '{name}'")
-        return Volume(norm, tuple(float(v) for v in spacing), f"builtin:{name}", vr, "float32",
-                      float(data.min()), float(data.max()))
-
+def read_volume_array(spec: VolumeSpec, base_dir: str | None = None) -> "VolumeFile":
+    """A volume file's raw values as (t, c, z, y, x) (app/volume_axes.py: axes from the file's
+    metadata or volume.axes, refused where neither says), with what else the file says
+    (VolumeFile)."""
     p = _resolve(spec.path, base_dir)
     need_spacing = spec.spacing is None
     file_spacing = direction = None
     notes: tuple[str, ...] = ()
     listing = series = None
+    axes: str | None = "zyx"
     if spec.series is not None and not (p.is_dir() or dicom.is_dicomdir(p)):
         raise VolumeError(f"{p}: volume.series {spec.series} names a DICOM series, but this is "
                           "not a DICOM folder or DICOMDIR")
-    if p.is_dir() and spec.series is None and formats.tiff_files(p):
-        raw = formats.read_tiff_folder(p)
+    if formats.is_zarr(p):
+        raw, file_spacing, axes = formats.read_zarr(p, need_spacing)
+    elif p.is_dir() and spec.series is None and formats.tiff_files(p):
+        raw, axes = formats.read_tiff_folder(p)
     elif p.is_dir() or dicom.is_dicomdir(p):
         got = dicom.read_dicom(p, need_spacing, spec.series)
         raw, file_spacing, direction, notes = got.data, got.spacing, got.direction, got.notes
@@ -439,9 +464,9 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
     elif not p.is_file():
         raise VolumeError(f"{p}: volume file not found")
     elif formats.has_suffix(p, formats.NIFTI_SUFFIXES):
-        raw, file_spacing, direction = formats.read_nifti(p, need_spacing)
+        raw, file_spacing, direction, axes = formats.read_nifti(p, need_spacing)
     elif formats.has_suffix(p, formats.TIFF_SUFFIXES):
-        raw = formats.read_tiff(p)
+        raw, axes = formats.read_tiff(p)
     elif formats.has_suffix(p, dicom.DICOM_SUFFIXES):
         raise VolumeError(f"{p}: a single DICOM file; give the folder holding its series")
     else:
@@ -451,41 +476,200 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None) -> Volume:
         elif suffix in (".nrrd", ".nhdr"):
             raw, file_spacing, direction = _read_nrrd(p)
         elif suffix == ".npy":
-            raw = _read_npy(p)
+            raw, axes = _read_npy(p), None
         else:
             raise VolumeError(f"{p}: unknown volume format '{suffix}' (known: "
-                              f"{', '.join(VOLUME_SUFFIXES)}, a DICOMDIR, or a folder of TIFF or "
-                              "DICOM slices)")
-    if file_spacing is not None and need_spacing:
-        spacing = file_spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
+                              f"{', '.join(VOLUME_SUFFIXES)}, a DICOMDIR, a Zarr store, or a "
+                              "folder of TIFF or DICOM slices)")
+    raw = to_canonical(raw, resolve_axes(axes, tuple(raw.shape), spec.axes, str(p)), str(p))
     if min(raw.shape) < 1:
-        raise VolumeError(f"{p}: volume has zero size, shape {raw.shape[::-1]} (x, y, z)")
+        raise VolumeError(f"{p}: volume has zero size, shape {raw.shape[:1:-1]} (x, y, z)")
+    return VolumeFile(raw, file_spacing if need_spacing else None, p.name, direction, notes,
+                      listing, series)
+
+
+@dataclass(frozen=True, eq=False)
+class VolumeFile:
+    """What read_volume_array found: the raw values (t, c, z, y, x), the file's spacing (None
+    where it has none or the scene gives one), its name, the axes' directions in LPS where the
+    file says, notes for a person, and a DICOM set's listing and the series read."""
+    raw: np.ndarray
+    spacing: tuple[float, float, float] | None
+    name: str
+    direction: np.ndarray | None = None
+    notes: tuple[str, ...] = ()
+    listing: object = None
+    series: object = None
+
+
+def load_volume(spec: VolumeSpec, base_dir: str | None = None,
+                channels: tuple | None = None, time: int = 0) -> Volume:
+    """Load the volume a scene names: a built-in or a file; errors name the file and the problem.
+    `channels`: the channels to show (app/channels.py effective_channels; None: a file of one
+    channel, or its channels with their defaults). `time`: the step of a time series (SPEC.md,
+    Time series: every step normalised alike, by the whole series' range where the scene gives
+    none)."""
+    spacing = spec.spacing if spec.spacing is not None else (1.0, 1.0, 1.0)
+    if spec.path is None:
+        name = spec.builtin or "cloud"
+        if name not in BUILTIN_VOLUMES:
+            raise VolumeError(f"unknown built-in volume '{name}' (known: {', '.join(BUILTIN_VOLUMES)})")
+        if time != 0:
+            raise VolumeError(f"built-in '{name}': time step {time} asked for, but the volume has "
+                              "no time axis (one step); see the scene's time")
+        data = BUILTIN_VOLUMES[name](tuple(spec.size))
+        domain = spec.domain
+        if channels is not None:
+            from .channels import check_channel_count
+            check_channel_count(channels, 1, f"built-in '{name}'")
+            domain = channels[0].domain(spec)
+        vr = domain or (0.0, 1.0)
+        norm, vr = normalise(data, vr, f"built-in '{name}'")
+        return Volume(norm, tuple(float(v) for v in spacing), f"builtin:{name}", vr, "float32",
+                      float(data.min()), float(data.max()))
+    found = _read_series(spec, base_dir)
+    raw, name, direction, notes = found.raw, found.name, found.direction, found.notes
+    where = str(_resolve(spec.path, base_dir))
+    if found.spacing is not None:
+        spacing = found.spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
     if any(not (s > 0 and np.isfinite(s)) for s in spacing):
-        raise VolumeError(f"{p}: spacing must be positive, got {spacing}")
+        raise VolumeError(f"{where}: spacing must be positive, got {spacing}")
+    steps = raw.shape[0]
+    if not 0 <= time < steps:
+        raise VolumeError(f"{where}: time step {time} asked for, but the volume has "
+                          + (f"{steps} time steps (0 to {steps - 1})" if steps > 1 else
+                             "no time axis (one step)") + "; see the scene's time")
+    fallback = _series_domains(raw, spec) if steps > 1 else None
+    step = raw[time]
     oblique = 0.0
     orientation = "data"
     if spec.orientation == "patient":
         if direction is None:
-            notes += (f"{p.name} says nothing of the patient's orientation: shown as stored "
+            notes += (f"{name} says nothing of the patient's orientation: shown as stored "
                       "(orientation \"data\")",)
-        else:
-            placed = to_patient(raw, spacing, direction)
-            raw, direction, orientation = placed.data, placed.direction, "patient"
+        else:   # every channel placed alike (the same permutation and flips)
+            placed = [to_patient(step[c], spacing, direction) for c in range(step.shape[0])]
+            step = np.stack([p.data for p in placed])
+            direction, orientation = placed[0].direction, "patient"
             # a scene's spacing is given along the file's axes, like the header's
-            spacing = placed.spacing
-            oblique = placed.oblique_degrees
+            spacing = placed[0].spacing
+            oblique = placed[0].oblique_degrees
             if oblique:
-                notes += (f"{p.name} was scanned obliquely: its axes lie {oblique:.1f} degrees "
+                notes += (f"{name} was scanned obliquely: its axes lie {oblique:.1f} degrees "
                           "from the patient's; shown on the nearest patient axes (permuted and "
                           f"flipped, not resampled: {patient_axes(direction)})",)
-    norm, vr = normalise(raw, spec.domain, str(p), spec.replace_nonfinite)
+    volume = volume_from_canonical(step, tuple(float(s) for s in spacing), name, spec,
+                                   channels, where, fallback)
+    return dataclasses.replace(
+        volume, notes=notes, direction=direction, orientation=orientation,
+        oblique_degrees=oblique, dicom_listing=found.listing, dicom_series=found.series,
+        **({"time": time, "time_steps": steps} if steps > 1 else {}))
+
+
+# The last time series read (app/volume.py _read_series): its key and (raw, spacing, name).
+_SERIES_CACHE: list = []
+
+
+def _read_series(spec: VolumeSpec, base_dir: str | None):
+    """read_volume_array, kept in memory for a time series (one at a time), so that showing
+    another step normalises that step and never reads the file again."""
+    p = _resolve(spec.path, base_dir)
+    try:
+        stamp = p.stat().st_mtime_ns
+    except OSError:
+        stamp = None
+    key = (str(p.resolve()) if stamp is not None else str(p), stamp, spec.axes, spec.dims,
+           spec.dtype, spec.spacing, spec.series)
+    if _SERIES_CACHE and _SERIES_CACHE[0][0] == key and stamp is not None:
+        return _SERIES_CACHE[0][1]
+    found = read_volume_array(spec, base_dir)
+    _SERIES_CACHE.clear()
+    if found.raw.shape[0] > 1:
+        _SERIES_CACHE.append((key, found))
+    return found
+
+
+def _series_domains(raw: np.ndarray, spec: VolumeSpec) -> tuple:
+    """Per channel, the values a time series' steps map to 0 and 1 where neither the scene nor
+    the type says (normalise's own default): the least and largest over every step, so that one
+    value is one density at every step (None where the type decides: 8-bit data)."""
+    out = []
+    for c in range(raw.shape[1]):
+        data = raw[:, c]
+        if data.dtype in (np.uint8, np.int8):
+            out.append(None)
+            continue
+        lo, hi = _finite_min_max(data)
+        out.append((lo, hi) if hi > lo else None)
+    return tuple(out)
+
+
+def volume_from_canonical(raw: np.ndarray, spacing: tuple[float, float, float], name: str,
+                          spec: VolumeSpec, channels: tuple | None, where: str,
+                          fallback: tuple | None = None) -> Volume:
+    """A Volume from raw values (c, z, y, x): one channel normalised by the volume's domain, or
+    the channels to show each by its own (ChannelSpec.domain); `fallback`, per file channel, the
+    domain where neither says (None: normalise's default, the data's own range)."""
+    from .channels import check_channel_count, default_channels
+    count = raw.shape[0]
+    if channels is None:
+        channels = default_channels(count, where) if count > 1 else None
+    if channels is None:
+        data = raw[0]
+        domain = spec.domain or (fallback[0] if fallback else None)
+        norm, vr = normalise(data, domain, where, spec.replace_nonfinite)
+        lo, hi = _finite_min_max(data)
+        return Volume(norm, spacing, name, vr, data.dtype.name, lo, hi)
+    check_channel_count(channels, count, where)
+    norms, ranges, raws = [], [], []
+    for i, ch in enumerate(channels):
+        index = i if ch.index is None else ch.index
+        data = raw[index]
+        label = f"{where} (channel {index}{f' {ch.name}' if ch.name else ''})"
+        domain = ch.domain(spec) or (fallback[index] if fallback else None)
+        norm, vr = normalise(data, domain, label, spec.replace_nonfinite)
+        norms.append(norm)
+        ranges.append(vr)
+        raws.append(_finite_min_max(data))
+    if len(norms) == 1:
+        return Volume(norms[0], spacing, name, ranges[0], raw.dtype.name, *raws[0])
+    return Volume(np.stack(norms, axis=-1), spacing, name, ranges[0], raw.dtype.name,
+                  raws[0][0], raws[0][1], tuple(ranges), tuple(raws))
+
+
+def volume_from_array(array, axes: str = "zyx", spacing=(1.0, 1.0, 1.0),
+                      value_range: tuple[float, float] | None = None,
+                      channels: tuple | None = None, time: int = 0,
+                      name: str = "array") -> Volume:
+    """A Volume from a NumPy array in memory (the Python API's way in): `axes` names its axes as
+    volume.axes does ("zyx", "czyx", "tzyx", "tczyx", ...); `channels` and `time` as the scene's
+    (app/channels.py, SPEC.md); normalised as a file's would be. Errors are VolumeErrors naming
+    the problem."""
+    from .volume_axes import resolve_axes, to_canonical
+    data = np.asarray(array)
+    if not isinstance(axes, str):
+        raise VolumeError(f"{name}: axes must be a string such as \"czyx\", got {axes!r}")
+    raw = to_canonical(data, resolve_axes(None, tuple(data.shape), axes.lower(), name), name)
+    if min(raw.shape) < 1:
+        raise VolumeError(f"{name}: volume has zero size, shape {list(data.shape)}")
+    spacing = tuple(float(v) for v in spacing)
+    if len(spacing) != 3 or any(not (v > 0 and np.isfinite(v)) for v in spacing):
+        raise VolumeError(f"{name}: spacing must be three positive numbers, got {list(spacing)}")
+    steps = raw.shape[0]
+    if not 0 <= time < steps:
+        raise VolumeError(f"{name}: time step {time} asked for, but the array has "
+                          + (f"{steps} time steps" if steps > 1 else "no time axis"))
+    spec = VolumeSpec(path=name, builtin=None, value_range=value_range)
+    volume = volume_from_canonical(raw[time], spacing, name, spec, channels, name,
+                                   _series_domains(raw, spec) if steps > 1 else None)
+    return dataclasses.replace(volume, time=time, time_steps=steps) if steps > 1 else volume
+
+
+def _finite_min_max(raw: np.ndarray) -> tuple[float, float]:
     finite = raw[np.isfinite(raw)] if raw.dtype.kind == "f" else raw
-    return Volume(norm, tuple(float(s) for s in spacing), p.name, vr, raw.dtype.name,
-                  float(finite.min()) if finite.size else 0.0,
-                  float(finite.max()) if finite.size else 0.0,
-                  notes=notes, direction=direction, orientation=orientation,
-                  oblique_degrees=oblique, dicom_listing=listing, dicom_series=series)
+    return (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)
 
 
 def load_scene_volume(scene: Scene) -> Volume:
-    return load_volume(scene.volume, scene.base_dir)
+    from .channels import scene_channels
+    return load_volume(scene.volume, scene.base_dir, scene_channels(scene), scene.time)

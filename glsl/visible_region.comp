@@ -10,10 +10,21 @@
 // wholly on its far side is not visible. Without either, voxel_first is 0 and voxel_count dims.
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 4) in;
 
+// Several channels (MEDIUM_CHANNELS > 1): a cell is visible where any channel switched on is.
+#if !defined(MEDIUM_CHANNELS)
+#define MEDIUM_CHANNELS 1
+#endif
 uniform sampler3D volume_density;        // as lib/medium.glsl: normalised density, texelFetch here
-uniform sampler2D transfer_function;     // N x 1 RGBA32F
+uniform sampler2D transfer_function;     // N x C RGBA32F (a row a channel)
 uniform int transfer_size;               // N
-uniform isampler2D positive_node_counts; // (N + 1) x 1: nodes before k with opacity > 0
+uniform isampler2D positive_node_counts; // (N + 1) x C: nodes before k with opacity > 0
+#if MEDIUM_CHANNELS > 1
+uniform ivec4 channel_transfer_size;     // each channel's N
+uniform vec4 channel_on;                 // 1 shown, 0 switched off
+#define TABLE_SIZE(ch) channel_transfer_size[ch]
+#else
+#define TABLE_SIZE(ch) transfer_size
+#endif
 uniform ivec3 dims;                      // voxels per axis
 uniform ivec3 voxel_first;               // the kept voxels: first and count per axis
 uniform ivec3 voxel_count;
@@ -28,34 +39,36 @@ layout(std430, binding = 0) buffer VisibleCells {
 shared uint group_first[3];
 shared uint group_last[3];
 
-bool positive_node(int k)
+bool positive_node(int ch, int k)
 {
-    return texelFetch(transfer_function, ivec2(k, 0), 0).a > 0.0;
+    return texelFetch(transfer_function, ivec2(k, ch), 0).a > 0.0;
 }
 
 // t = density * (N - 1) strictly inside a segment whose end nodes are not both transparent.
-bool inside_positive_segment(float t)
+bool inside_positive_segment(int ch, float t)
 {
     float node = floor(t);
     if (t == node)
         return false;
     int k = int(node);
-    return positive_node(k) || positive_node(min(k + 1, transfer_size - 1));
+    return positive_node(ch, k) || positive_node(ch, min(k + 1, TABLE_SIZE(ch) - 1));
 }
 
-bool opacity_positive_between(float lo, float hi)
+// Channel ch's opacity > 0 somewhere in densities [lo, hi].
+bool opacity_positive_between(int ch, float lo, float hi)
 {
-    float last_node = float(transfer_size - 1);
+    int n = TABLE_SIZE(ch);
+    float last_node = float(n - 1);
     float t_lo = clamp(lo, 0.0, 1.0) * last_node;
     float t_hi = clamp(hi, 0.0, 1.0) * last_node;
     int first = int(ceil(t_lo)), last = int(floor(t_hi));
     if (first <= last) {
-        int before_first = texelFetch(positive_node_counts, ivec2(min(first, transfer_size), 0), 0).r;
-        int through_last = texelFetch(positive_node_counts, ivec2(min(last + 1, transfer_size), 0), 0).r;
+        int before_first = texelFetch(positive_node_counts, ivec2(min(first, n), ch), 0).r;
+        int through_last = texelFetch(positive_node_counts, ivec2(min(last + 1, n), ch), 0).r;
         if (through_last > before_first)
             return true;
     }
-    return inside_positive_segment(t_lo) || inside_positive_segment(t_hi);
+    return inside_positive_segment(ch, t_lo) || inside_positive_segment(ch, t_hi);
 }
 
 // Whether the clip plane leaves nothing of the cell (between voxel centres voxel_first + cell - 1
@@ -86,15 +99,23 @@ void main()
         ivec3 last_voxel = voxel_first + voxel_count - 1;
         ivec3 v0 = clamp(voxel_first + cell - 1, voxel_first, last_voxel);
         ivec3 v1 = min(voxel_first + cell, last_voxel);
-        float lo = 1.0, hi = 0.0;
+        vec4 lo = vec4(1.0), hi = vec4(0.0);
         for (int k = 0; k < 8; ++k) {
             ivec3 v = ivec3((k & 1) != 0 ? v1.x : v0.x, (k & 2) != 0 ? v1.y : v0.y,
                             (k & 4) != 0 ? v1.z : v0.z);
-            float d = texelFetch(volume_density, v, 0).r;
+            vec4 d = texelFetch(volume_density, v, 0);
             lo = min(lo, d);
             hi = max(hi, d);
         }
-        if (opacity_positive_between(lo, hi)) {
+        bool visible = false;
+        for (int ch = 0; ch < MEDIUM_CHANNELS; ++ch) {
+#if MEDIUM_CHANNELS > 1
+            if (channel_on[ch] == 0.0)
+                continue;
+#endif
+            visible = visible || opacity_positive_between(ch, lo[ch], hi[ch]);
+        }
+        if (visible) {
             for (int a = 0; a < 3; ++a) {
                 atomicMin(group_first[a], uint(cell[a]));
                 atomicMax(group_last[a], uint(cell[a]));

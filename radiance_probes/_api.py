@@ -29,7 +29,7 @@ from ._image import Image
 # Keywords that stand for a nested scene key: render(data, colormap="viridis", width=256).
 SHORTCUTS = {
     **{k: "volume" for k in ("spacing", "value_range", "window", "series", "orientation",
-                             "builtin", "size", "dims", "dtype", "replace_nonfinite")},
+                             "builtin", "size", "dims", "dtype", "replace_nonfinite", "axes")},
     **{k: "transfer_function" for k in ("colormap", "colors", "opacity", "rgba", "resolution")},
     **{k: "camera" for k in ("width", "height", "fov_y", "eye", "target", "up")},
 }
@@ -88,7 +88,8 @@ def _window_value(window: Any) -> Any:
 
 
 def as_array(data: Any) -> np.ndarray:
-    """A 3D NumPy array [z, y, x] of numbers, or a plain error saying what is wrong."""
+    """A NumPy array of numbers, 3D [z, y, x] (or 4D, 5D with channels or time steps, named by
+    axes=), or a plain error saying what is wrong."""
     array = np.asarray(data)
     if array.dtype == bool:
         array = array.astype(np.uint8)
@@ -99,8 +100,9 @@ def as_array(data: Any) -> np.ndarray:
         raise VolumeError(f"array of {array.dtype} values: expected numbers")
     if array.dtype == np.float16:
         array = array.astype(np.float32)
-    if array.ndim != 3:
-        raise VolumeError(f"expected a 3D array [z, y, x], got shape {tuple(array.shape)}")
+    if array.ndim not in (3, 4, 5):
+        raise VolumeError(f"expected a 3D array [z, y, x], got shape {tuple(array.shape)} (4D "
+                          "and 5D arrays hold channels or time steps, named by axes=)")
     if min(array.shape) < 1:
         raise VolumeError(f"the array is empty (shape {tuple(array.shape)})")
     return array
@@ -170,15 +172,30 @@ def build_scene(data: Any = None, scene: Any = None, options: dict | None = None
         options["window"] = _window_value(window)
     merged = _merge(base, options)
     given = array is not None or isinstance(data, Volume)
-    if given:   # the scene's volume keys say how to read the array (spacing, range, window)
+    axes = None
+    if given:   # the scene's volume keys say how to read the array (spacing, range, window, axes)
         merged["volume"] = {k: v for k, v in merged.get("volume", {}).items()
                             if k not in ("path", "builtin", "size")}
+        axes = merged["volume"].pop("axes", None)
     parsed = parse_scene(merged, base_dir=base_dir)
     if given:
         parsed = parsed.replace(volume=dataclasses.replace(parsed.volume, builtin=None))
-        volume = data if isinstance(data, Volume) else volume_from_array(array, parsed.volume)
+        if isinstance(data, Volume):
+            volume = data
+        elif axes is None and array.ndim == 3 and not parsed.channels and not parsed.time:
+            volume = volume_from_array(array, parsed.volume)
+        else:   # channels or time steps (app/volume.py volume_from_array reads them as a file)
+            from app.volume import volume_from_array as from_axes
+            if axes is None and array.ndim != 3:
+                raise VolumeError(f"a {array.ndim}D array (shape {tuple(array.shape)}): say which "
+                                  "axis is which with axes=, e.g. \"czyx\" or \"tzyx\"")
+            spec = parsed.volume
+            volume = from_axes(array, axes or "zyx", spec.spacing or (1.0, 1.0, 1.0), spec.domain,
+                               parsed.channels or None, parsed.time)
     else:
         volume = load_scene_volume(parsed)
+    if volume.channel_count > 1 or volume.time_steps > 1:
+        window = None   # each channel, and a series as a whole, by its own range (or the scene's)
     if window == "auto" and parsed.volume.domain is None and (array is not None or from_file):
         volume = auto_window(volume)
         parsed = parsed.replace(volume=dataclasses.replace(parsed.volume,

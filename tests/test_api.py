@@ -249,3 +249,26 @@ def test_crop_clip_and_colour_points_are_scene_options():
         assert r.scene.transfer_function.colormap == "viridis"
         with pytest.raises(SceneError, match="keeps no voxel"):
             r.update(crop={"min": [0.6, 0.6, 0.6], "max": [0.7, 0.7, 0.7], "units": "world"})
+
+
+def test_arrays_of_channels_and_time_steps_name_their_axes():
+    """A 4D array says which axis is which (axes=, as volume.axes): channels each in their own
+    colour (or the scene's channels), a time series' step; without axes it is refused plainly."""
+    a, b = blob(np.float32), blob(np.float32)[:, :, ::-1]
+    both = np.stack([a, b])
+    image = rp.render(both, axes="czyx", **SMALL, spp=1)
+    assert image.shape == (20, 24, 3) and image.linear.max() > 0
+    only_b = rp.render(both, axes="czyx", channels=[{"index": 1}], window=None, **SMALL, spp=1)
+    green = [[0.0, 0.25, 1.0, 0.25]]            # channel 0's default colour
+    alone = rp.render(np.ascontiguousarray(b), window=None, **SMALL, spp=1, colors=green,
+                      value_range=[float(b.min()), float(b.max())])
+    np.testing.assert_allclose(only_b.linear, alone.linear, rtol=1e-5, atol=1e-6)
+    step = rp.render(both, axes="tzyx", time=1, window=None, **SMALL, spp=1, colors=green,
+                     value_range=[float(b.min()), float(b.max())])
+    # (a time series' probes cover the whole box: the same as fit "box" for one volume)
+    boxed = rp.render(np.ascontiguousarray(b), window=None, **{**SMALL, "probes": {
+        **SMALL["probes"], "fit": "box"}}, spp=1, colors=green,
+        value_range=[float(b.min()), float(b.max())])
+    np.testing.assert_allclose(step.linear, boxed.linear, rtol=1e-5, atol=1e-6)
+    with pytest.raises(VolumeError, match="say which axis is which with axes="):
+        rp.render(both, **SMALL)

@@ -695,3 +695,64 @@ def test_probe_view_shows_where_an_adaptive_layout_put_the_probes(display, tmp_p
             assert _is_background(image[int(fy), int(fx)][None], background)[0]
             checked += 1
     assert checked >= 8
+
+
+def test_channel_panels_switch_a_channel_and_drag_its_window(display, tmp_path):
+    """A volume of three channels: one panel a channel; switching channel 1 off and dragging
+    channel 0's window level edit only those channels (no error), and the picture changes."""
+    z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in (12, 12, 12)), indexing="ij")
+    blobs = [np.clip(1.0 - 2.5 * np.sqrt((x - cx) ** 2 + y ** 2 + z ** 2), 0, 1)
+             for cx in (-0.45, 0.0, 0.45)]
+    np.save(tmp_path / "three.npy", (1000 * np.stack(blobs)).astype(np.uint16))
+    scene = {"volume": {"path": "three.npy", "axes": "czyx"},
+             "channels": [{"name": "left", "window": {"level": 500, "width": 1000}},
+                          {"name": "middle"}, {"name": "right"}],
+             "density_scale": 40, "camera": {"width": 48, "height": 48}}
+    (tmp_path / "three.json").write_text(json.dumps(scene))
+    script = write_script(tmp_path / "s.json", [
+        {"frames": 3}, {"dump": "before.json"}, {"screenshot": "before.png"},
+        {"click": "channel 1 shown"}, {"frames": 3}, {"dump": "off.json"},
+        {"screenshot": "off.png"},
+        {"drag": "channel 0 Level", "by": [60, 0]}, {"frames": 2}, {"dump": "level.json"},
+        {"close": True}])
+    view(["three.json", "--script", str(script), "--method", "raymarch", "--window", "900x800"],
+         tmp_path, display)
+    before, off, level = (dump(tmp_path / f"{n}.json") for n in ("before", "off", "level"))
+    assert before["errors"] == [] and off["errors"] == [] and level["errors"] == []
+    assert [c["enabled"] for c in before["scene"]["channels"]] == [True, True, True]
+    assert [c["enabled"] for c in off["scene"]["channels"]] == [True, False, True]
+    assert off["scene"]["channels"][0] == before["scene"]["channels"][0]
+    moved = level["scene"]["channels"][0]["window"]
+    assert moved["level"] > 500.0 and moved["width"] == 1000.0
+    assert level["scene"]["channels"][1:] == off["scene"]["channels"][1:]
+    assert np.abs(png(tmp_path / "off.png") - png(tmp_path / "before.png")).mean() > 0.5
+
+
+def test_time_series_plays_steps_and_pauses(display, tmp_path):
+    """A 4-step series: the Time panel's play button plays it (the step shown changes, each a
+    warm restart of the bake, no undo step), '.' steps on and pauses, the slider sets a step."""
+    from test_time_series import moving_blob
+    np.save(tmp_path / "series.npy", moving_blob(steps=4))
+    scene = {"volume": {"path": "series.npy", "axes": "tzyx"}, "density_scale": 40,
+             "camera": {"width": 48, "height": 48}, "probes": {"grid": 4, "samples": 16}}
+    (tmp_path / "series.json").write_text(json.dumps(scene))
+    script = write_script(tmp_path / "s.json", [
+        {"frames": 2}, {"dump": "start.json"}, {"screenshot": "start.png"},
+        {"click": "Play"}, {"frames": 4}, {"dump": "playing.json"},
+        {"key": "."}, {"frames": 2}, {"dump": "stepped.json"},
+        {"drag": "Time step", "by": [-400, 0]}, {"frames": 1}, {"dump": "slider.json"},
+        {"close": True}])
+    # (a quarter of the pixels: on llvmpipe every step played restarts the image)
+    view(["series.json", "--script", str(script), "--method", "raymarch", "--window", "900x640",
+          "--render-scale", "0.25"], tmp_path, display)
+    start, playing, stepped, slider = (dump(tmp_path / f"{n}.json")
+                                       for n in ("start", "playing", "stepped", "slider"))
+    assert all(d["errors"] == [] for d in (start, playing, stepped, slider))
+    assert start["volume"]["time_steps"] == 4 and start["volume"]["time"] == 0
+    assert playing["playing"] and playing["bakes_started"] > start["bakes_started"]
+    assert playing["undo_steps"] == 0                      # playing is not an edit
+    assert not stepped["playing"]
+    assert stepped["volume"]["time"] == (playing["volume"]["time"] + 1) % 4
+    assert stepped["scene"].get("time", 0) == stepped["volume"]["time"]
+    assert slider["scene"].get("time", 0) == 0 and slider["volume"]["time"] == 0
+    assert "Time step" in start["widgets"]

@@ -34,13 +34,15 @@ def check_volume_fits(name: str, dims: tuple[int, int, int], bytes_per_voxel: in
 
 
 def volume_texture(ctx: moderngl.Context, volume: Volume) -> moderngl.Texture3D:
-    """A one-channel 3D texture, linear, clamped to edge: R16 for exact 8-bit data (k * 257 / 65535
+    """A 3D texture of one component a channel (R, RG, RGB or RGBA), linear, clamped to edge:
+    16-bit normalised for exact 8-bit data (k * 257 / 65535
     is exactly k / 255, and llvmpipe filters 8-bit textures with 8-bit intermediate rounding), else
     R32F, so 16-bit and float data keep their precision (float32 holds every 16-bit step exactly).
     Refused before any allocation when it exceeds GL_MAX_3D_TEXTURE_SIZE or the memory left."""
     from .context import is_software as software_renderer
     from .memory import gpu_available_bytes, host_available_bytes
-    texel = 2 if volume.exact_uint8 else 4
+    channels = volume.channel_count
+    texel = (2 if volume.exact_uint8 else 4) * channels
     if software_renderer(ctx):
         # the texture lives in host memory, beside the upload's payload and its bytes copy
         available, where = host_available_bytes(), "host memory available (MemAvailable)"
@@ -57,7 +59,7 @@ def volume_texture(ctx: moderngl.Context, volume: Volume) -> moderngl.Texture3D:
         dtype = "f4"
     ctx.error  # clear any earlier error flag
     try:
-        tex = ctx.texture3d(volume.dims, 1, payload.tobytes(), dtype=dtype, alignment=1)
+        tex = ctx.texture3d(volume.dims, channels, payload.tobytes(), dtype=dtype, alignment=1)
     except moderngl.Error as exc:
         raise VolumeError(f"{volume.name}: cannot create a {volume.dims} 3D texture ({exc})") from None
     _check_gl(ctx, f"{volume.name} ({payload.nbytes / 2**20:.0f} MiB 3D texture)")
@@ -80,11 +82,19 @@ def transfer_buffer_bindable(ctx: moderngl.Context) -> bool:
 class TransferTable:
     """The RGBA table on the GPU twice, with the same float32 values: an N x 1 RGBA32F texture
     (read with texelFetch and interpolated exactly) and a storage buffer, which compute passes
-    read on a GPU (lib/medium.glsl TRANSFER_FROM_BUFFER; app/gl/shaders.py transfer_from_buffer)."""
+    read on a GPU (lib/medium.glsl TRANSFER_FROM_BUFFER; app/gl/shaders.py transfer_from_buffer).
+    Several channels (an app.channels.ChannelTables): one row of the texture a channel, each
+    padded to the longest table, and the buffer the rows one after another."""
 
-    def __init__(self, ctx: moderngl.Context, table: np.ndarray):
-        data = np.ascontiguousarray(table, np.float32)
-        self.texture = ctx.texture((len(data), 1), 4, data.tobytes(), dtype="f4")
+    def __init__(self, ctx: moderngl.Context, table):
+        if hasattr(table, "padded"):
+            padded = table.padded()
+            data = np.ascontiguousarray(padded.reshape(-1, 4), np.float32)
+            size = (padded.shape[1], padded.shape[0])
+        else:
+            data = np.ascontiguousarray(table, np.float32)
+            size = (len(data), 1)
+        self.texture = ctx.texture(size, 4, data.tobytes(), dtype="f4")
         self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.texture.repeat_x = self.texture.repeat_y = False
         self.buffer = ctx.buffer(data.tobytes())

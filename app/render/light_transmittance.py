@@ -103,8 +103,10 @@ def covered_box(resources: SceneResources) -> tuple[tuple[int, int, int], np.nda
 
 class LightTransmittance:
     def __init__(self, ctx: moderngl.Context, max_side: int = MAX_SIDE, precision: str = PRECISION,
-                 segment_target: int = SEGMENT_TARGET_INVOCATIONS):
+                 segment_target: int = SEGMENT_TARGET_INVOCATIONS, medium: dict | None = None):
+        """`medium`: the scene's medium defines (SceneResources.medium_defines: its channels)."""
         self.ctx = ctx
+        self.medium = dict(medium or {})
         self.max_side = int(max_side)
         self.precision = precision
         self.segment_target = int(segment_target)   # column_segments; 0: whole columns
@@ -112,7 +114,7 @@ class LightTransmittance:
         self.segments = 1        # per column in the last bake_layers
         self.march_step = 1.0    # the bake's quadrature step (world units), set by begin()
         self.program = compute_program(ctx, "light_transmittance.comp",
-                                       {"LIGHT_GRID_FORMAT": PRECISIONS[precision]})
+                                       {"LIGHT_GRID_FORMAT": PRECISIONS[precision], **self.medium})
         self._segment_program = None   # the LIGHT_GRID_SEGMENTS build, compiled when first used
         self.texture: moderngl.Texture3D | None = None   # what readers use
         self.layout: LightGridLayout | None = None       # of the texture's contents
@@ -194,7 +196,8 @@ class LightTransmittance:
         if segments > 1 and self._segment_program is None:
             self._segment_program = compute_program(
                 self.ctx, "light_transmittance.comp",
-                {"LIGHT_GRID_FORMAT": PRECISIONS[self.precision], "LIGHT_GRID_SEGMENTS": 1})
+                {"LIGHT_GRID_FORMAT": PRECISIONS[self.precision], "LIGHT_GRID_SEGMENTS": 1,
+                 **self.medium})
         program = self.program if segments == 1 else self._segment_program
         resources.bind()
         set_uniforms(program, resources.uniforms())

@@ -14,22 +14,28 @@ import numpy as np
 from ..clip_region import ClipRegion, region_uniforms
 from ..gl.shaders import ComputeProgram, compute_program, set_uniforms
 from ..gl.textures import TransferTable
-from ..twins.majorant_grid import MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_bound
+from ..channels import channel_uniforms
+from ..twins.majorant_grid import (MAJORANT_SAFETY, channel_density_ranges, density_range_grid,
+                                   macrocell_counts, majorant_bound)
 from ..volume import Volume
 
 # Texture units: 0 volume, 1 transfer function (and its storage buffer, binding 8), 2..8 probes, 9 light transmittance (raymarcher).
 MAJORANT_UNIT = 10   # the majorant grid, read by the tracking passes
 RANGE_UNIT = 11      # the density ranges, read only while the grid is built
 
-_programs: "weakref.WeakKeyDictionary[moderngl.Context, ComputeProgram]" = \
+RANGE_MAX_UNIT = 15  # several channels: their largest densities, read only while the grid is built
+
+_programs: "weakref.WeakKeyDictionary[moderngl.Context, dict[int, ComputeProgram]]" = \
     weakref.WeakKeyDictionary()
 
 
-def _program(ctx: moderngl.Context) -> ComputeProgram:
-    """One compiled build pass per context (every SceneResources shares it)."""
-    program = _programs.get(ctx)
+def _program(ctx: moderngl.Context, channels: int = 1) -> ComputeProgram:
+    """One compiled build pass per context and channel count (every SceneResources shares it)."""
+    programs = _programs.setdefault(ctx, {})
+    program = programs.get(channels)
     if program is None:
-        program = _programs[ctx] = compute_program(ctx, "majorant_grid.comp")
+        defines = {"MEDIUM_CHANNELS": channels} if channels > 1 else None
+        program = programs[channels] = compute_program(ctx, "majorant_grid.comp", defines)
     return program
 
 
@@ -38,6 +44,8 @@ class MajorantGrid:
         self.ctx = ctx
         self.cells: tuple[int, int, int] | None = None
         self.range_tex: moderngl.Texture3D | None = None
+        self.range_max_tex: moderngl.Texture3D | None = None   # several channels only
+        self.channels = 1
         self.texture: moderngl.Texture3D | None = None
         self.d_min: np.ndarray | None = None
         self.d_max: np.ndarray | None = None
@@ -45,31 +53,54 @@ class MajorantGrid:
         self.builds = 0       # how many times the grid was built on the GPU (tests count them)
 
     def set_volume(self, volume: Volume) -> None:
-        """The density range per macrocell of a new volume (NumPy, once per volume)."""
+        """The density range per macrocell of a new volume (NumPy, once per volume); of several
+        channels, each channel's ([C, cz, cy, cx]; on the GPU one texture of the least and one
+        of the largest, a component a channel)."""
         cells = macrocell_counts(volume.dims)
-        self.d_min, self.d_max = density_range_grid(volume.data, cells)
-        payload = np.ascontiguousarray(np.stack([self.d_min, self.d_max], axis=-1), np.float32)
-        if self.cells != cells:
-            for tex in (self.range_tex, self.texture):
+        channels = volume.channel_count
+        ranges = volume.derived.get(("density ranges", cells))   # a step of a series seen before
+        if ranges is None:
+            ranges = volume.derived[("density ranges", cells)] = (
+                channel_density_ranges(volume, cells) if channels > 1
+                else density_range_grid(volume.data, cells))
+        self.d_min, self.d_max = ranges
+        if channels > 1:
+            payloads = [np.ascontiguousarray(np.moveaxis(r, 0, -1), np.float32)
+                        for r in (self.d_min, self.d_max)]
+        else:
+            payloads = [np.ascontiguousarray(np.stack([self.d_min, self.d_max], axis=-1),
+                                             np.float32)]
+        if self.cells != cells or self.channels != channels:
+            for tex in (self.range_tex, self.range_max_tex, self.texture):
                 if tex is not None:
                     tex.release()
-            self.range_tex = self.ctx.texture3d(cells, 2, dtype="f4")
+            self.range_tex = self.ctx.texture3d(cells, 2 if channels == 1 else channels, dtype="f4")
+            self.range_max_tex = (self.ctx.texture3d(cells, channels, dtype="f4")
+                                  if channels > 1 else None)
             self.texture = self.ctx.texture3d(cells, 1, dtype="f4")
-            for tex in (self.range_tex, self.texture):
-                tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-                tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-            self.cells = cells
-        self.range_tex.write(payload.tobytes())
+            for tex in (self.range_tex, self.range_max_tex, self.texture):
+                if tex is not None:
+                    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+                    tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+            self.cells, self.channels = cells, channels
+        self.range_tex.write(payloads[0].tobytes())
+        if channels > 1:
+            self.range_max_tex.write(payloads[1].tobytes())
 
-    def build(self, transfer: TransferTable, table: np.ndarray, density_scale: float,
+    def build(self, transfer: TransferTable, table, density_scale: float,
               transfer_unit: int, clip: ClipRegion | None = None, half_extent=None) -> None:
         """Majorant per macrocell under the current transfer function and density_scale (GPU);
         with a crop or clip plane (`clip`, in the box of `half_extent`) cells cut away get 0."""
-        program = _program(self.ctx)
+        program = _program(self.ctx, self.channels)
         transfer.use(transfer_unit)
         self.range_tex.use(RANGE_UNIT)
+        if self.channels > 1:
+            self.range_max_tex.use(RANGE_MAX_UNIT)
+            set_uniforms(program, {"density_range_max": RANGE_MAX_UNIT,
+                                   **channel_uniforms(table)})
+        else:
+            set_uniforms(program, {"transfer_size": int(len(table))})
         set_uniforms(program, {"density_range": RANGE_UNIT, "transfer_function": transfer_unit,
-                               "transfer_size": int(len(table)),
                                "density_scale": float(density_scale), "cells": self.cells,
                                "majorant_safety": float(MAJORANT_SAFETY),
                                **region_uniforms(clip)})
@@ -89,13 +120,14 @@ class MajorantGrid:
 
     @property
     def gpu_bytes(self) -> int:
-        return 0 if self.cells is None else 12 * int(np.prod(self.cells))
+        texel = 12 if self.channels == 1 else 4 + 8 * self.channels
+        return 0 if self.cells is None else texel * int(np.prod(self.cells))
 
     def bind(self) -> None:
         self.texture.use(MAJORANT_UNIT)
 
     def release(self) -> None:
-        for tex in (self.range_tex, self.texture):
+        for tex in (self.range_tex, self.range_max_tex, self.texture):
             if tex is not None:
                 tex.release()
-        self.range_tex = self.texture = None
+        self.range_tex = self.range_max_tex = self.texture = None

@@ -100,9 +100,12 @@ def unpack_coefficients(channels: np.ndarray, order: int) -> tuple[np.ndarray, n
 def scene_is_grey(table: np.ndarray, irradiance, environment) -> bool:
     """True when every transfer-function colour and both lights have r = g = b exactly, so that
     every path's radiance has equal channels."""
-    rgb = np.asarray(table)[:, :3]
     grey = lambda v: np.all(np.asarray(v)[..., 0:1] == np.asarray(v)[..., :3])  # noqa: E731
-    return bool(grey(rgb) and grey(irradiance) and grey(environment))
+    if hasattr(table, "tables"):   # several channels: a mix of grey colours is grey
+        colours = all(grey(np.asarray(t)[:, :3]) for t, on in zip(table.tables, table.on) if on)
+    else:
+        colours = grey(np.asarray(table)[:, :3])
+    return bool(colours and grey(irradiance) and grey(environment))
 
 
 def resolve_channels(channels: str | int, table: np.ndarray, irradiance, environment) -> int:

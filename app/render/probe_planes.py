@@ -51,10 +51,17 @@ def block_mean(field: np.ndarray, factors: tuple[int, int, int]) -> np.ndarray:
 def extinction_field(data: np.ndarray, table: np.ndarray, density_scale: float) -> np.ndarray:
     """sigma_t after the transfer function at the voxels (z, y, x), block-averaged to at most
     MAX_FIELD_SIDE per axis; slab by slab, so a large volume is never copied whole."""
-    factors = block_factors(data.shape)
+    factors = block_factors(data.shape[:3])
     step = factors[0] * max(1, 64 // factors[0])
-    slabs = [block_mean(density_scale * lookup(table[:, 3:4], data[z:z + step])[..., 0], factors)
-             for z in range(0, data.shape[0], step)]
+
+    def sigma_t(slab: np.ndarray) -> np.ndarray:
+        if not hasattr(table, "tables"):
+            return density_scale * lookup(table[:, 3:4], slab)[..., 0]
+        # several channels (data [z, y, x, c]): their sigma_t add up
+        return density_scale * sum(lookup(t[:, 3:4], slab[..., c])[..., 0]
+                                   for c, (t, on) in enumerate(zip(table.tables, table.on)) if on)
+
+    slabs = [block_mean(sigma_t(data[z:z + step]), factors) for z in range(0, data.shape[0], step)]
     return np.concatenate(slabs)
 
 

@@ -107,7 +107,7 @@ class ProbeGrid:
                  box: tuple | None = None, grey: bool = False, resumable: bool | None = None,
                  sun: str = "ray", adaptive: float = 0.0, environment_map: bool = False,
                  planes: tuple | None = None, sun_lobe: float = 0.0,
-                 sun_correction: float = 0.0):
+                 sun_correction: float = 0.0, medium: dict | None = None):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
         bake time); `sh_order` 0 to 4 decides which textures exist (lib/probe_packing.glsl).
         `resumable`: walks that suspend and resume across dispatches (default: where the driver limits loops;
@@ -123,8 +123,10 @@ class ProbeGrid:
         planes per axis, world fractions of the box (app/render/probe_planes.py); None: evenly
         spaced, and the shaders are built without the warp (PROBE_WARP 0). `sun_lobe` > 0: each
         probe also holds a lobe about the sun's direction of that Henyey-Greenstein g beside its
-        bands (lib/sun_lobe.glsl; SH order 3 only); 0: none."""
+        bands (lib/sun_lobe.glsl; SH order 3 only); 0: none. `medium`: the scene's medium
+        defines (SceneResources.medium_defines: its channels), which every pass is built with."""
         self.environment_map = bool(environment_map)
+        self.medium = dict(medium or {})
         if not (math.isfinite(sun_lobe) and 0.0 <= sun_lobe < 1.0):
             raise ValueError(f"sun lobe g {sun_lobe!r}: expected a number in [0, 1)")
         if sun_lobe > 0.0 and int(sh_order) != 3:
@@ -511,7 +513,7 @@ class ProbeGrid:
         """Compile-time settings every shader reading these probes needs (lib/probes.glsl)."""
         return {"PROBE_SH_ORDER": self.sh_order, "PROBE_GREY": int(self.grey),
                 **({"PROBE_SUN_LOBE": 1} if self.sun_lobe > 0 else {}),
-                **self._warp_defines()}
+                **self._warp_defines(), **self.medium}
 
     def _warp_defines(self) -> dict:
         """PROBE_WARP 1 for an adaptive layout; nothing for the uniform one (today's shaders)."""

@@ -243,7 +243,7 @@ class Renderer:
         the volume, glsl/visible_region.comp, redone when the volume or the transfer function
         changes)."""
         s = self.scene
-        key = (self.resources.volume_version, s.transfer_function, s.density_scale > 0,
+        key = (self.resources.volume_version, s.transfer_function, s.channels, s.density_scale > 0,
                self.resources.clip)
         if self._region_key != key:
             self._region = self._region_pass.region(self.resources)
@@ -258,7 +258,9 @@ class Renderer:
         spec = s.probes
         grid, box = tuple(spec.grid), None
         clip = self.resources.clip
-        if spec.fit == "visible" and region:
+        # A time series' probes cover the whole box: its visible region moves from step to step,
+        # and one grid for every step lets each step's bake start warm from the last one's.
+        if spec.fit == "visible" and region and self.resources.volume.time_steps == 1:
             low, high = self.visible_region()
             grid = fitted_grid(spec.grid, low, high)
             box = (tuple(map(float, low)), tuple(map(float, high)))
@@ -272,7 +274,7 @@ class Renderer:
                   if region and spec.layout == "adaptive" else None)
         return ProbePlan(grid=grid, box=box,
                          sh_order=resolve_sh_order(spec.sh_order, s.anisotropy, spec.samples),
-                         grey=resolve_channels(spec.channels, self.resources.table,
+                         grey=resolve_channels(spec.channels, self.resources.medium_table,
                                                s.light.irradiance, environment) == 1,
                          planes=planes)
 
@@ -282,7 +284,8 @@ class Renderer:
         s = self.scene
         spec = s.probes
         sun = spec.adaptive_indicator == "sun"
-        key = (self.resources.volume_version, s.transfer_function, s.density_scale, grid, box,
+        key = (self.resources.volume_version, s.transfer_function, s.channels, s.density_scale,
+               grid, box,
                spec.adaptive_strength, spec.adaptive_indicator,
                (s.light.direction, self._settings.light_max_side, self._settings.light_min_side,
                 self._settings.light_follows_probes) if sun else None)
@@ -292,7 +295,7 @@ class Renderer:
                 self.bake_light()
                 field = sun_field(self._light_box_optical_depth())
             else:
-                field = extinction_field(self.resources.volume.data, self.resources.table,
+                field = extinction_field(self.resources.volume.data, self.resources.medium_table,
                                          s.density_scale)
             self._planes = adaptive_planes(field, self.resources.volume.half_extent, box, grid,
                                            spec.adaptive_strength)
@@ -330,11 +333,12 @@ class Renderer:
             lobe = fit.h
             self.last_sun_lobe_fit = fit
             self._fit_ms += fit.gpu_ms
+        medium = self.resources.medium_defines()
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
                          g.adaptive, g.environment_map, g.planes, g.sun_lobe) != (
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
                 st.walk_sun, st.walk_adaptive, env_map, plan.planes, lobe) or (
-                g.sun_correction != st.walk_sun_correction):
+                g.sun_correction != st.walk_sun_correction) or g.medium != medium:
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
@@ -342,7 +346,7 @@ class Renderer:
                                         sun=st.walk_sun, adaptive=st.walk_adaptive,
                                         sun_correction=st.walk_sun_correction,
                                         environment_map=env_map, planes=plan.planes,
-                                        sun_lobe=lobe)
+                                        sun_lobe=lobe, medium=medium)
         self.probe_grid.dispatch_target_ms = dispatch_target_ms(self)
         self.probe_grid.restart(seed, warm=warm)
         self._baked_key = self.bake_key()
@@ -406,7 +410,7 @@ class Renderer:
         s, st = self.scene, self._settings
         min_side = (min_side_for_probes(s.probes.grid, st.light_min_side)
                     if st.light_follows_probes else st.light_min_side)
-        key = (self.resources.volume_version, s.transfer_function, s.density_scale,
+        key = (self.resources.volume_version, s.transfer_function, s.channels, s.density_scale,
                s.light.direction, st.light_max_side, min_side, st.light_precision,
                self.resources.clip)
         return key, min_side
@@ -428,11 +432,13 @@ class Renderer:
         sliced bake restarts it."""
         key, min_side = self._light_target()
         st = self._settings
+        medium = self.resources.medium_defines()
         if (self._light is None or self._light.max_side != st.light_max_side
-                or self._light.precision != st.light_precision):
+                or self._light.precision != st.light_precision or self._light.medium != medium):
             if self._light is not None:
                 self._light.release()
-            self._light = LightTransmittance(self.ctx, st.light_max_side, st.light_precision)
+            self._light = LightTransmittance(self.ctx, st.light_max_side, st.light_precision,
+                                             medium=medium)
             self._light_pending = None
         self._light.segment_target = st.light_segment_target
         if key == self._light_key:

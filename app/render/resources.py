@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import math
 import struct
+from collections import OrderedDict
 
 import moderngl
 import numpy as np
 
+from ..channels import ChannelTables, channel_uniforms, effective_channels, volume_inputs
 from ..clip_region import ClipRegion, clip_region, region_uniforms
 from ..environment_map import EnvironmentMap, load_scene_environment
 from ..gl.textures import TransferTable, volume_texture
@@ -27,6 +29,8 @@ STATS_BINDING = 7
 # dropped and counted as truncated. Far beyond what max_bounces = 64 needs even at sigma_t = 1e4;
 # it only stops a pathological scene from hanging the GPU.
 DEFAULT_MAX_PATH_STEPS = 1 << 24
+# A time series' steps kept for showing again (host data and GPU texture together).
+STEP_CACHE_BYTES = 1 << 30
 
 
 def environment_textures(ctx: moderngl.Context, image: np.ndarray, distribution: Distribution):
@@ -52,7 +56,8 @@ class SceneResources:
         self.volume: Volume | None = None
         self.volume_tex = None
         self.transfer_gpu = None
-        self.table: np.ndarray | None = None
+        self.table: np.ndarray | None = None   # one channel's (of several: channel 0's)
+        self.tables: ChannelTables | None = None   # several channels: all of them
         self.environment: EnvironmentMap | None = None   # the scene's map, None: constant
         self.environment_tex = None
         self.environment_cdf_tex = None
@@ -72,6 +77,10 @@ class SceneResources:
         # The crop box and clip plane resolved against the volume (app/clip_region.py); None: the
         # whole volume is kept.
         self.clip: ClipRegion | None = None
+        # A time series' steps shown, kept (volume and texture) up to this many bytes in all:
+        # stepping back and forth, or playing the series again, uploads nothing.
+        self.step_cache_bytes = STEP_CACHE_BYTES
+        self._steps: OrderedDict = OrderedDict()
         self.update(scene, volume)
 
     def update(self, scene: Scene, volume: Volume | None = None) -> set[str]:
@@ -82,25 +91,46 @@ class SceneResources:
         old_map = None if old is None else (old.environment_map, old.base_dir)
         new_map = (scene.environment_map, scene.base_dir)
         environment = load_scene_environment(scene) if new_map != old_map else self.environment
+        inputs = volume_inputs(scene)
+        kept_texture = None
         if volume is not None and volume is not self.volume:
             changed.add("volume")
-        elif old is None or scene.volume != old.volume or scene.base_dir != old.base_dir:
-            volume = load_scene_volume(scene)
+        elif old is None or inputs != volume_inputs(old):
+            kept = self._steps.get(inputs)   # a time series' step shown before
+            if kept is not None:
+                volume, kept_texture = kept
+                self._steps.move_to_end(inputs)
+            else:
+                volume = load_scene_volume(scene)
             changed.add("volume")
-        # A crop that does not fit the volume fails before anything on the GPU changes.
+        # A crop that does not fit the volume, or channels it lacks, fail before anything on the
+        # GPU changes.
         new_volume = volume if "volume" in changed else self.volume
         clip = clip_region(scene, new_volume.dims, new_volume.half_extent)
+        channels = effective_channels(scene, new_volume.channel_count)
         if "volume" in changed:
-            tex = volume_texture(self.ctx, volume)
-            if self.volume_tex is not None:
+            if any(key[:-1] != inputs[:-1] for key in self._steps):   # another series, or none
+                self._drop_steps()
+            tex = kept_texture if kept_texture is not None else volume_texture(self.ctx, volume)
+            if self.volume_tex is not None and not self._step_kept(self.volume_tex):
                 self.volume_tex.release()
             self.volume, self.volume_tex = volume, tex
             self.volume_version += 1
-        if old is None or scene.transfer_function != old.transfer_function:
-            self.table = transfer_table(scene.transfer_function)
+            if volume.time_steps > 1 and kept_texture is None:
+                self._keep_step(inputs, volume, tex)
+            self._trim_steps()
+        if (old is None or "volume" in changed or scene.transfer_function != old.transfer_function
+                or scene.channels != old.channels):
+            if channels is None or len(channels) == 1:   # one channel: the classic medium
+                self.tables = None
+                self.table = transfer_table(scene.transfer_function if channels is None
+                                            else channels[0].transfer_function)
+            else:
+                self.tables = ChannelTables.of(channels)
+                self.table = self.tables.tables[0]
             if self.transfer_gpu is not None:
                 self.transfer_gpu.release()
-            self.transfer_gpu = TransferTable(self.ctx, self.table)
+            self.transfer_gpu = TransferTable(self.ctx, self.medium_table)
             changed.add("transfer")
         if old is None or (scene.density_scale, scene.albedo, scene.anisotropy, scene.max_bounces) != (
                 old.density_scale, old.albedo, old.anisotropy, old.max_bounces):
@@ -117,12 +147,45 @@ class SceneResources:
         self.scene = scene
         if "volume" in changed:
             self.majorant_grid.set_volume(self.volume)
-        key = (self.volume_version, scene.transfer_function, scene.density_scale, clip)
+        key = (self.volume_version, scene.transfer_function, scene.channels, scene.density_scale,
+               clip)
         if key != self._majorant_key:
-            self.majorant_grid.build(self.transfer_gpu, self.table, scene.density_scale, TRANSFER_UNIT,
-                                     clip=clip, half_extent=self.volume.half_extent)
+            self.majorant_grid.build(self.transfer_gpu, self.medium_table, scene.density_scale,
+                                     TRANSFER_UNIT, clip=clip,
+                                     half_extent=self.volume.half_extent)
             self._majorant_key = key
         return changed
+
+    def _step_kept(self, texture) -> bool:
+        return any(t is texture for _, t in self._steps.values())
+
+    def _keep_step(self, key: tuple, volume: Volume, texture) -> None:
+        """Keeps a time series' step (its volume and texture) for when it is shown again, the
+        least recently shown dropped while the kept ones hold more than step_cache_bytes."""
+        self._steps[key] = (volume, texture)
+        self._steps.move_to_end(key)
+        self._trim_steps()
+
+    def _trim_steps(self) -> None:
+        """Drops the least recently shown steps while the kept ones hold more than
+        step_cache_bytes (never the one shown)."""
+        def size(entry) -> int:
+            v, t = entry
+            return int(v.data.nbytes) + int(t.width * t.height * t.depth * t.components
+                                            * (2 if v.exact_uint8 else 4))
+
+        while len(self._steps) > 1 and sum(map(size, self._steps.values())) > self.step_cache_bytes:
+            key, (v, t) = next(iter(self._steps.items()))
+            if t is self.volume_tex:        # the one shown: keep it, drop the next oldest
+                self._steps.move_to_end(key)
+                continue
+            del self._steps[key]
+            t.release()
+
+    @property
+    def steps_kept(self) -> int:
+        """How many steps of a time series are kept (host and GPU) for showing again."""
+        return len(self._steps)
 
     def _set_environment(self, env: EnvironmentMap | None) -> None:
         """Uploads the map (radiance with its (u, v) density in alpha, and the CDFs) if it is new."""
@@ -138,15 +201,34 @@ class SceneResources:
             self.ctx, env.image, env.distribution)
 
     def defines(self) -> dict:
-        """Compile-time variants the scene's lights need in every pass that includes lib/lights.glsl."""
+        """Compile-time variants of the scene: its medium's channels (MEDIUM_CHANNELS, in every
+        pass that includes lib/medium.glsl; medium_defines) and what its lights need in every
+        pass that includes lib/lights.glsl."""
+        defines = self.medium_defines()
         if self.environment is None:
-            return {}
-        return {"ENVIRONMENT_MAP": 1} if self.environment_sampling else {
-            "ENVIRONMENT_MAP": 1, "ENVIRONMENT_MAP_SAMPLING": 0}
+            return defines
+        return {**defines, "ENVIRONMENT_MAP": 1} if self.environment_sampling else {
+            **defines, "ENVIRONMENT_MAP": 1, "ENVIRONMENT_MAP_SAMPLING": 0}
+
+    def medium_defines(self) -> dict:
+        """What every pass that includes lib/medium.glsl is compiled with for this scene: nothing
+        for one channel (the one-channel code, unchanged), else MEDIUM_CHANNELS."""
+        return {} if self.tables is None else {"MEDIUM_CHANNELS": self.tables.count}
+
+    @property
+    def medium_table(self):
+        """The one-channel table, or the channels' tables (app.channels.ChannelTables): what the
+        twins in app/twins take as the medium's `table`."""
+        return self.table if self.tables is None else self.tables
+
+    @property
+    def transfer_size(self) -> int:
+        """Rows of the (first channel's) transfer table: lib/medium.glsl transfer_size."""
+        return int(len(self.table))
 
     @property
     def majorant(self) -> float:
-        return majorant(self.table, self.scene.density_scale)
+        return majorant(self.medium_table, self.scene.density_scale)
 
     @property
     def march_step(self) -> float:
@@ -157,7 +239,8 @@ class SceneResources:
     def bake_key(self) -> tuple:
         """What the probes depend on: everything but the camera (camera moves never re-bake)."""
         s = self.scene
-        return (self.volume_version, s.transfer_function, s.density_scale, s.albedo, s.anisotropy,
+        return (self.volume_version, s.transfer_function, s.channels, s.density_scale, s.albedo,
+                s.anisotropy,
                 s.light, s.environment, s.environment_map, s.max_bounces, s.probes.grid, s.probes.samples,
                 s.probes.precision, self.clip)
 
@@ -166,7 +249,8 @@ class SceneResources:
         return {
             "volume_density": VOLUME_UNIT,
             "transfer_function": TRANSFER_UNIT,
-            "transfer_size": int(len(self.table)),
+            "transfer_size": self.transfer_size,
+            **({} if self.tables is None else channel_uniforms(self.tables)),
             "density_scale": float(s.density_scale),
             "albedo": float(s.albedo),
             "box_half_extent": tuple(float(v) for v in self.volume.half_extent),
@@ -210,7 +294,15 @@ class SceneResources:
         truncated, nonfinite, _, _ = struct.unpack("4I", self.stats.read())
         return {"truncated_paths": truncated, "nonfinite_samples": nonfinite}
 
+    def _drop_steps(self) -> None:
+        """Forgets the kept steps (their textures released, but the one shown now)."""
+        for _, t in self._steps.values():
+            if t is not self.volume_tex:
+                t.release()
+        self._steps.clear()
+
     def release(self) -> None:
+        self._drop_steps()
         for obj in (self.volume_tex, self.transfer_gpu, self.stats, self.environment_tex,
                     self.environment_cdf_tex):
             if obj is not None:

@@ -64,15 +64,16 @@ class SunLobeFitter:
         self._program_key = None
         self.timer = GpuTimer(ctx)
 
-    def _pilot_for(self, grid, box, grey, environment_map, h):
+    def _pilot_for(self, grid, box, grey, environment_map, h, medium=None):
         side = PILOT_GRID["software" if is_software(self.ctx) else "gpu"]
         pilot_grid = tuple(min(int(n), side) for n in grid)
-        key = (pilot_grid, box, bool(grey), bool(environment_map))
+        key = (pilot_grid, box, bool(grey), bool(environment_map), tuple(sorted((medium or {}).items())))
         if self._pilot_key != key:
             if self._pilot is not None:
                 self._pilot.release()
             self._pilot = ProbeGrid(self.ctx, pilot_grid, 2 * PILOT_WALKS, "rgba32f", 3, box, grey,
-                                    sun="ray", environment_map=environment_map, sun_lobe=h)
+                                    sun="ray", environment_map=environment_map, sun_lobe=h,
+                                    medium=medium)
             self._pilot_key = key
         self._pilot.sun_lobe = h   # a uniform of its shaders (built with PROBE_SUN_LOBE 1)
         return self._pilot
@@ -84,7 +85,8 @@ class SunLobeFitter:
         hs = candidate_hs(scene.anisotropy)
         if not hs:
             raise ValueError(f"no sun-lobe candidate for anisotropy {scene.anisotropy}")
-        pilot = self._pilot_for(grid, box, grey, environment_map, hs[0])
+        pilot = self._pilot_for(grid, box, grey, environment_map, hs[0],
+                                resources.medium_defines())
         key = (tuple(sorted(pilot.defines().items())), len(hs))
         if self._program_key != key:
             if self._program is not None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from ..channels import channel_uniforms
 from ..clip_region import region_uniforms
 from ..gl.shaders import ComputeProgram, compute_program, set_uniforms
 from ..twins.visible_region import positive_node_counts, region_from_cells
@@ -21,6 +22,7 @@ class VisibleRegionPass:
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
         self.program: ComputeProgram | None = None
+        self.channels = 1   # the channel count the program was built for
 
     def region(self, resources: SceneResources) -> tuple[np.ndarray, np.ndarray]:
         """World (low, high) corners of where sigma_t can be > 0 (the whole box, or the kept box
@@ -32,12 +34,24 @@ class VisibleRegionPass:
                  (np.asarray(clip.box_min, np.float64), np.asarray(clip.box_max, np.float64)))
         if resources.scene.density_scale <= 0 or (clip is not None and clip.empty):
             return whole
-        if self.program is None:
-            self.program = compute_program(ctx, "visible_region.comp")
+        tables = resources.tables
+        channels = 1 if tables is None else tables.count
+        if self.program is None or self.channels != channels:
+            if self.program is not None:
+                self.program.release()
+            self.program = compute_program(ctx, "visible_region.comp",
+                                           {"MEDIUM_CHANNELS": channels} if channels > 1 else None)
+            self.channels = channels
         program = self.program
         dims = tuple(int(v) for v in resources.volume.dims)
-        counts = positive_node_counts(resources.table[:, 3])
-        counts_tex = ctx.texture((len(counts), 1), 1, counts.tobytes(), dtype="i4")
+        if tables is None:
+            counts = positive_node_counts(resources.table[:, 3])[None]
+        else:
+            counts = np.stack([positive_node_counts(t[:, 3]) for t in tables.padded()])
+            set_uniforms(program, channel_uniforms(tables))
+        counts = np.ascontiguousarray(counts, np.int32)
+        counts_tex = ctx.texture((counts.shape[1], counts.shape[0]), 1, counts.tobytes(),
+                                 dtype="i4")
         counts_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         cells = ctx.buffer(np.array([NONE_VISIBLE] * 3 + [0] * 3, np.uint32).tobytes())
         try:
@@ -46,7 +60,7 @@ class VisibleRegionPass:
             first = (0, 0, 0) if clip is None else clip.voxel_first
             count = dims if clip is None else clip.voxel_count
             set_uniforms(program, {"volume_density": VOLUME_UNIT, "transfer_function": TRANSFER_UNIT,
-                                   "transfer_size": int(len(resources.table)),
+                                   "transfer_size": int(resources.transfer_size),
                                    "positive_node_counts": COUNTS_UNIT, "dims": dims,
                                    "voxel_first": tuple(first), "voxel_count": tuple(count),
                                    "box_half_extent": tuple(float(v) for v in half),

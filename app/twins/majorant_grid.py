@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..channels import ChannelTables
 from ..transfer import lookup
 
 CELL_VOXELS = 8          # voxels per macrocell along an axis (before clamping the count)
@@ -63,6 +64,12 @@ def _reduce_axis(a: np.ndarray, axis: int, lo: np.ndarray, hi: np.ndarray, op) -
     moved = np.moveaxis(a, axis, 0)
     out = np.stack([op(moved[l:h + 1], axis=0) for l, h in zip(lo, hi)], axis=0)
     return np.moveaxis(out, 0, axis)
+
+
+def channel_density_ranges(volume, cells: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """density_range_grid of each channel of a volume of several channels: [C, cz, cy, cx]."""
+    ranges = [density_range_grid(volume.channel(c), cells) for c in range(volume.channel_count)]
+    return np.stack([r[0] for r in ranges]), np.stack([r[1] for r in ranges])
 
 
 def density_range_grid(data: np.ndarray, cells: tuple[int, int, int] | None = None
@@ -174,12 +181,28 @@ def kept_density_ranges(d_min: np.ndarray, d_max: np.ndarray, clip, half_extent,
     return out_lo, out_hi, cut
 
 
-def majorant_grid(d_min: np.ndarray, d_max: np.ndarray, table: np.ndarray,
+def majorant_grid(d_min: np.ndarray, d_max: np.ndarray, table,
                   density_scale: float, clip=None, half_extent=None,
                   rounding: float = 0.0) -> np.ndarray:
     """The majorant per macrocell, float32 [cz, cy, cx] (the twin of glsl/majorant_grid.comp);
     with a crop or clip plane (`clip`, in the box of `half_extent`), 0 in cells cut away
-    (`rounding`: kept_density_ranges')."""
+    (`rounding`: kept_density_ranges').
+    Several channels (`table` an app.channels.ChannelTables, d_min and d_max [C, cz, cy, cx]):
+    density_scale times the sum over the channels switched on of each one's largest opacity over
+    its own range, which bounds their summed sigma_t."""
+    if isinstance(table, ChannelTables):
+        alpha = 0.0
+        cut = None
+        for c, (t, on) in enumerate(zip(table.tables, table.on)):
+            lo, hi = d_min[c], d_max[c]
+            if clip is not None:
+                lo, hi, cut = kept_density_ranges(lo, hi, clip, half_extent, rounding)
+            if on:
+                alpha = alpha + max_alpha(t, lo, hi)
+        m = float(density_scale) * np.broadcast_to(alpha, d_min.shape[1:]) * MAJORANT_SAFETY
+        if cut is not None:
+            m = np.where(cut, 0.0, m)
+        return m.astype(np.float32)
     cut = None
     if clip is not None:
         d_min, d_max, cut = kept_density_ranges(d_min, d_max, clip, half_extent, rounding)
@@ -197,4 +220,9 @@ def majorant_bound(d_min: np.ndarray, d_max: np.ndarray, table: np.ndarray,
     lo, hi = np.asarray(d_min), np.asarray(d_max)
     if lo.size == 0:
         return 0.0
+    if isinstance(table, ChannelTables):   # [C, ...]: each channel's own range
+        c = lo.shape[0]
+        lo_c = lo.reshape(c, -1).min(axis=1).reshape(c, 1)
+        hi_c = hi.reshape(c, -1).max(axis=1).reshape(c, 1)
+        return float(majorant_grid(lo_c, hi_c, table, density_scale)[0])
     return float(majorant_grid(np.array([lo.min()]), np.array([hi.max()]), table, density_scale)[0])

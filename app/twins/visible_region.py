@@ -43,11 +43,20 @@ def opacity_positive_between(lo: np.ndarray, hi: np.ndarray, table_alpha: np.nda
     return inside_positive_segment(t_lo) | inside_positive_segment(t_hi) | nodes
 
 
-def visible_cells(data: np.ndarray, table_alpha: np.ndarray, clip=None,
+def visible_cells(data: np.ndarray, table_alpha, clip=None,
                   half_extent=None) -> np.ndarray:
     """bool [z, y, x], (n + 1) per axis: can sigma_t be > 0 in the cell (density scale > 0)?
     With a crop or clip plane (`clip`, an app.clip_region.ClipRegion in the box of `half_extent`):
-    over the kept voxels alone, (count + 1) per axis, and False where the plane cuts a cell away."""
+    over the kept voxels alone, (count + 1) per axis, and False where the plane cuts a cell away.
+    Several channels (data [z, y, x, c], `table_alpha` an app.channels.ChannelTables): where
+    any channel switched on is visible."""
+    if hasattr(table_alpha, "tables"):
+        out = None
+        for c, (table, on) in enumerate(zip(table_alpha.tables, table_alpha.on)):
+            if on:
+                v = visible_cells(np.asarray(data)[..., c], table[:, 3], clip, half_extent)
+                out = v if out is None else out | v
+        return out
     data = np.asarray(data, np.float32)
     if clip is not None:
         (fx, fy, fz), (nx, ny, nz) = clip.voxel_first, clip.voxel_count
@@ -108,7 +117,7 @@ def region_from_cells(first: np.ndarray, last: np.ndarray, dims, half_extent,
     return low, high
 
 
-def visible_region(data: np.ndarray, half_extent, table_alpha: np.ndarray,
+def visible_region(data: np.ndarray, half_extent, table_alpha,
                    density_scale: float, clip=None) -> tuple[np.ndarray, np.ndarray]:
     """World-space (low, high) corners of the smallest box outside which sigma_t is 0 everywhere.
     The whole volume box (the kept box with a crop or clip plane) when nothing is visible (then
@@ -121,7 +130,7 @@ def visible_region(data: np.ndarray, half_extent, table_alpha: np.ndarray,
     visible = visible_cells(data, table_alpha, clip, half_extent)
     if not visible.any():
         return whole
-    dims = np.asarray(data).shape[::-1]
+    dims = np.asarray(data).shape[:3][::-1]
     first, last = np.empty(3, np.int64), np.empty(3, np.int64)
     for axis, reduce_axes in ((0, (0, 1)), (1, (0, 2)), (2, (1, 2))):  # x, y, z
         used = np.flatnonzero(visible.any(axis=reduce_axes))

@@ -1,8 +1,9 @@
 """Undo and redo of scene edits (ctrl+z, ctrl+y): every change of the scene other than the camera
 (transfer function, light, crop, probes, bookmarks, ...) is one step once it settles. A drag (a
 slider, a curve point, a crop handle) is one step, not one per frame: while a mouse button is
-held, changes pile up into the step that the release completes. Camera moves are navigation, not
-edits: they are not steps, and undo keeps the camera where it is."""
+held, changes pile up into the step that the release completes. Camera moves and a time series'
+step shown (playing it) are navigation, not edits: they are not steps, and undo keeps the camera
+and the time step where they are."""
 from __future__ import annotations
 
 from ..scene import CameraSpec, Scene
@@ -13,7 +14,7 @@ _ANY_CAMERA = CameraSpec()
 
 def _content(scene: Scene) -> Scene:
     """The scene as an edit sees it: everything but the camera."""
-    return scene.replace(camera=_ANY_CAMERA)
+    return scene.replace(camera=_ANY_CAMERA, time=0)
 
 
 class SceneHistory:
@@ -43,7 +44,7 @@ class SceneHistory:
             return None
         step = source.pop()
         target.append(self.committed)
-        restored = step.replace(camera=scene.camera)
+        restored = step.replace(camera=scene.camera, time=scene.time)
         self.committed = restored
         return restored
 

@@ -53,6 +53,9 @@ SHORTCUTS = (
              lambda v: v.state.toggle_clipping(v.session.volume.dims)),
     Shortcut("h", "crop and clip handles on/off", lambda v: setattr(v.state, "show_handles",
                                                                     not v.state.show_handles)),
+    Shortcut("space", "time series: play / pause", lambda v: v.toggle_playing()),
+    Shortcut(".", "time series: next step", lambda v: v.step_time(+1)),
+    Shortcut(",", "time series: previous step", lambda v: v.step_time(-1)),
     Shortcut("ctrl+z", "undo the last scene edit", lambda v: v.state.undo()),
     Shortcut("ctrl+y", "redo", lambda v: v.state.redo()),
     Shortcut("ctrl+shift+z", "redo", lambda v: v.state.redo()),
@@ -78,6 +81,7 @@ _NAMED_KEYS = {
     "tab": glfw.KEY_TAB, "escape": glfw.KEY_ESCAPE, "space": glfw.KEY_SPACE,
     "enter": glfw.KEY_ENTER, "[": glfw.KEY_LEFT_BRACKET, "]": glfw.KEY_RIGHT_BRACKET,
     "=": glfw.KEY_EQUAL, "-": glfw.KEY_MINUS, "+": glfw.KEY_KP_ADD,
+    ",": glfw.KEY_COMMA, ".": glfw.KEY_PERIOD,
     **{f"f{i}": getattr(glfw, f"KEY_F{i}") for i in range(1, 13)},
     **{c: getattr(glfw, f"KEY_{c.upper()}") for c in "abcdefghijklmnopqrstuvwxyz0123456789"},
 }

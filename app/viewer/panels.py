@@ -17,6 +17,7 @@ from .overlays import shortcut_table
 from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
 from .crop_panel import crop_section
 from .movie_panel import movie_section
+from .time_panel import time_section
 from .tf_editor import data_ticks, heat_legend, transfer_panel
 
 SIDEBAR_WIDTH = 370           # logical pixels, before the UI scale
@@ -32,6 +33,8 @@ def sidebar(v) -> None:
     imgui.begin("Radiance probes", None, flags)
     imgui.push_item_width(-150 * s)
     for title, draw in SECTIONS:
+        if title == "Time" and v.time_steps <= 1:   # only for a volume with a time axis
+            continue
         imgui.set_next_item_open(title not in CLOSED_AT_START, imgui.Cond_.once)
         if imgui.collapsing_header(title):
             v.widgets.note(title)
@@ -456,7 +459,8 @@ def help_section(v) -> None:
     shortcut_table()
 
 
-SECTIONS = (("Render", render_section), ("Data", data_section), ("Transfer function", transfer_panel),
+SECTIONS = (("Render", render_section), ("Data", data_section), ("Time", time_section),
+            ("Transfer function", transfer_panel),
             ("Crop and clip", crop_section), ("Light", light_section), ("Probes", probes_section),
             ("Bookmarks and movie", movie_section), ("Stats", stats_section),
             ("Camera and files", camera_section), ("Help (F1)", help_section))

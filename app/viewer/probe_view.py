@@ -46,13 +46,19 @@ def visible_cells(grid: tuple[int, int, int], box, volume, alpha: np.ndarray,
     out = np.zeros((nz, ny, nx), bool)
     if density_scale <= 0:
         return out
-    positive = np.asarray(alpha) > 0
-    if not positive.any():
+    # several channels (`alpha` an app.channels.ChannelTables): visible where any shown one is
+    pairs = ([(volume.channel(c), t[:, 3]) for c, (t, on) in
+              enumerate(zip(alpha.tables, alpha.on)) if on] if hasattr(alpha, "tables")
+             else [(volume.data, alpha)])
+    voxels = None
+    for data, channel_alpha in pairs:
+        positive = np.asarray(channel_alpha) > 0
+        n = len(positive)
+        i0 = np.clip((data * np.float32(n - 1)).astype(np.int32), 0, n - 1)
+        seen = positive[i0] | positive[np.minimum(i0 + 1, n - 1)]
+        voxels = seen if voxels is None else voxels | seen
+    if voxels is None or not voxels.any():
         return out
-    n = len(positive)
-    scaled = volume.data * np.float32(n - 1)
-    i0 = np.clip(scaled.astype(np.int32), 0, n - 1)
-    voxels = positive[i0] | positive[np.minimum(i0 + 1, n - 1)]
     he = np.asarray(volume.half_extent, np.float64)
     low, high = (-he, he) if box is None else (np.asarray(box[0], np.float64),
                                                 np.asarray(box[1], np.float64))
@@ -173,9 +179,10 @@ class ProbeSpheres:
         """The probes drawn (cached until the grid, the volume or the transfer function changes)."""
         scene = resources.scene
         key = (grid.grid, grid.box, grid.planes, resources.volume_version,
-               scene.transfer_function, scene.density_scale > 0)
+               scene.transfer_function, scene.channels, scene.density_scale > 0)
         if key != self._key:
-            visible = visible_cells(grid.grid, grid.box, resources.volume, resources.table[:, 3],
+            alpha = resources.table[:, 3] if resources.tables is None else resources.tables
+            visible = visible_cells(grid.grid, grid.box, resources.volume, alpha,
                                     scene.density_scale, grid.planes)
             self.selection = select_probes(grid.grid, visible)
             centres = probe_centres(grid.grid, resources.volume.half_extent, grid.box,

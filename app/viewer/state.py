@@ -36,6 +36,12 @@ class ViewerState:
     errors: list[str] = field(default_factory=list)
     messages: list[str] = field(default_factory=list)
     history: SceneHistory | None = None    # undo and redo (ctrl+z, ctrl+y)
+    # Several channels: the one whose transfer function and window the editor changes now (its
+    # panel sets it while it draws); None: the scene's own transfer function.
+    channel: int | None = None
+    # A time series: playing (a step every 1 / play_rate seconds, looping) or paused.
+    playing: bool = False
+    play_rate: float = 10.0                # steps a second
 
     def __post_init__(self):
         if self.history is None:
@@ -229,12 +235,62 @@ class ViewerState:
     def set_probes(self, **changes) -> None:
         self.scene = self.scene.replace(probes=replace(self.scene.probes, **changes))
 
+    @property
+    def transfer_function(self):
+        """The transfer function the editor shows: the edited channel's, or the scene's."""
+        if self.scene.channels:
+            return self.scene.channels[self.edited_channel].transfer_function
+        return self.scene.transfer_function
+
+    @property
+    def edited_channel(self) -> int:
+        """The channel the editor changes (0 where none was chosen, or it no longer exists)."""
+        n = len(self.scene.channels)
+        return self.channel if self.channel is not None and 0 <= self.channel < n else 0
+
+    def set_edited_transfer(self, tf) -> None:
+        """Replaces the transfer function the editor shows (the edited channel's, or the scene's)."""
+        if self.scene.channels:
+            self.set_channel(self.edited_channel, transfer_function=tf)
+        else:
+            self.scene = self.scene.replace(transfer_function=tf)
+
+    def set_time(self, step: int, steps: int) -> None:
+        """Shows step `step` of a series of `steps` (wrapping around at either end)."""
+        if steps > 1:
+            self.scene = self.scene.replace(time=int(step) % int(steps))
+
+    def step_time(self, delta: int, steps: int) -> None:
+        self.set_time(self.scene.time + delta, steps)
+
+    def set_channel(self, index: int, **changes) -> None:
+        """Edits channel `index` (enabled, transfer_function, window, value_range, name); the last
+        channel shown is not switched off (nothing would be left to show: a note says so)."""
+        channels = list(self.scene.channels)
+        if not 0 <= index < len(channels):
+            raise IndexError(f"channel {index}: the scene has {len(channels)} channels")
+        new = replace(channels[index], **changes)
+        channels[index] = new
+        if not any(c.enabled for c in channels):
+            self.note("the last channel shown stays on: with every channel off there is nothing "
+                      "to show")
+            return
+        self.scene = self.scene.replace(channels=tuple(channels))
+
+    def show_channels(self, count: int) -> None:
+        """A volume of several channels opened without a channels list: its channels written into
+        the scene with their defaults (each in its own colour), so the panels can edit them."""
+        if count > 1 and not self.scene.channels:
+            from ..channels import default_channels
+            self.scene = self.scene.replace(channels=default_channels(count, "volume"))
+            self.history.reset(self.scene)
+
     def set_transfer(self, **changes) -> None:
-        """Edits the transfer function. An explicit RGBA table keeps its colours when its opacity
-        curve is edited (its alpha column is rewritten), and keeps its opacity curve when a
-        colormap replaces its colours."""
+        """Edits the transfer function (the edited channel's, or the scene's). An explicit RGBA
+        table keeps its colours when its opacity curve is edited (its alpha column is rewritten),
+        and keeps its opacity curve when a colormap replaces its colours."""
         from ..transfer import opacity_points, rgba_with_opacity
-        tf = self.scene.transfer_function
+        tf = self.transfer_function
         if tf.rgba is not None:
             if "colormap" in changes or "colors" in changes:
                 changes.setdefault("opacity", opacity_points(tf)[0])
@@ -243,13 +299,12 @@ class ViewerState:
                 changes["rgba"] = rgba_with_opacity(tf, changes.pop("opacity"))
         if "colormap" in changes:      # a colormap replaces colour points
             changes.setdefault("colors", None)
-        self.scene = self.scene.replace(transfer_function=replace(tf, **changes))
+        self.set_edited_transfer(replace(tf, **changes))
 
     def cycle_colormap(self, step: int = 1) -> None:
         from ..transfer import COLORMAPS, ALIASES
         names = [c for c in COLORMAPS if c not in ALIASES]
-        current = ALIASES.get(self.scene.transfer_function.colormap,
-                              self.scene.transfer_function.colormap)
+        current = ALIASES.get(self.transfer_function.colormap, self.transfer_function.colormap)
         index = names.index(current) if current in names else -1
         self.set_transfer(colormap=names[(index + step) % len(names)])
 

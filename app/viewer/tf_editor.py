@@ -22,9 +22,10 @@ POINT_COLOUR = (1.0, 0.85, 0.2, 1.0)
 HISTOGRAM_BINS = 128
 
 
-def histogram_curve(volume, bins: int = HISTOGRAM_BINS) -> tuple[np.ndarray, np.ndarray]:
+def histogram_curve(volume, bins: int = HISTOGRAM_BINS,
+                    channel: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Bin centres and log-scaled counts in [0, 1] of the normalised density (for a backdrop)."""
-    counts = volume.histogram(bins).astype(np.float64)
+    counts = volume.histogram(bins, channel).astype(np.float64)
     logc = np.log1p(counts)
     height = logc / logc.max() if logc.max() > 0 else logc
     return (np.arange(bins) + 0.5) / bins, height
@@ -41,9 +42,21 @@ def window_choice(window: tuple[float, float] | None) -> str:
 
 def window_editor(v) -> None:
     """A CT/MRI window over the data (in its units: HU for CT): a preset, or level and width; the
-    volume is renormalised with it (scene JSON volume.window)."""
+    volume is renormalised with it (scene JSON volume.window; of several channels, the edited
+    channel's own, channels[i].window)."""
     state, ui = v.state, v.widgets
-    vol = state.scene.volume
+    channels = state.scene.channels
+    if channels:
+        edited = v.edited_channel()
+        vol = channels[edited]
+
+        def set_window(**changes):
+            state.set_channel(edited, **changes)
+    else:
+        vol = state.scene.volume
+
+        def set_window(**changes):
+            state.edit(volume=replace(vol, **changes))
     current = window_choice(vol.window)
     changed, index = imgui.combo("Window", WINDOW_CHOICES.index(current), list(WINDOW_CHOICES))
     ui.note("Window")
@@ -52,11 +65,11 @@ def window_editor(v) -> None:
         if choice == "value range":
             window = None
         elif choice == "custom":
-            lo, hi = v.session.volume.value_range
+            lo, hi = v.edited_value_range()
             window = (0.5 * (lo + hi), hi - lo)
         else:
             window = WINDOW_PRESETS[choice]
-        state.edit(volume=replace(vol, window=window, value_range=None))
+        set_window(window=window, value_range=None)
     if vol.window is not None:
         level, width = (float(w) for w in vol.window)
         speed = max(width, 1e-6) / 200.0          # a 200-pixel drag moves by one width
@@ -68,7 +81,7 @@ def window_editor(v) -> None:
             new_level = float(new_level) if math.isfinite(new_level) else level
             new_width = float(new_width) if math.isfinite(new_width) and new_width > 0 else width
             if (new_level, new_width) != (level, width):
-                state.edit(volume=replace(vol, window=(new_level, new_width)))
+                set_window(window=(new_level, new_width))
 
 
 def colour_bar(rgb: np.ndarray, width: float, height: float) -> None:
@@ -83,8 +96,22 @@ def colour_bar(rgb: np.ndarray, width: float, height: float) -> None:
 
 
 def transfer_panel(v) -> None:
+    """The transfer function's editor and the medium's sliders; of several channels, one panel
+    a channel (app/viewer/channel_panel.py) with its switch, window and transfer function."""
+    from .channel_panel import channel_panels
+    if v.state.scene.channels:
+        channel_panels(v, transfer_editor)
+    else:
+        transfer_editor(v)
+    medium_sliders(v)
+    _transfer_file(v)
+
+
+def transfer_editor(v) -> None:
+    """The colours, window and opacity of the transfer function the editor shows
+    (ViewerState.transfer_function: the edited channel's, or the scene's)."""
     state, ui = v.state, v.widgets
-    tf = state.scene.transfer_function
+    tf = state.transfer_function
     width = imgui.get_content_region_avail().x
     if tf.rgba is not None:
         imgui.text_wrapped(f"The scene gives an explicit RGBA table ({len(tf.rgba)} rows): editing the "
@@ -97,7 +124,7 @@ def transfer_panel(v) -> None:
     ui.note("Colormap")
     if changed and names[index] != "colour points":
         state.set_transfer(colormap=names[index])
-    table = v.session.renderer.resources.table
+    table = v.edited_table()
     if tf.colors is None:
         colour_bar(table[:, :3], width, 14 * v.ui_scale)
         if imgui.button("Edit colours as points"):
@@ -108,6 +135,11 @@ def transfer_panel(v) -> None:
     window_editor(v)
     _opacity_presets(v)
     _opacity_editor(v, width)
+
+
+def medium_sliders(v) -> None:
+    """density_scale, albedo and anisotropy (one each, whatever the channels)."""
+    state, ui = v.state, v.widgets
     changed, value = imgui.slider_float("Density scale", state.scene.density_scale, 0.1, 10000.0, "%.1f",
                                         imgui.SliderFlags_.logarithmic)
     ui.note("Density scale")
@@ -121,7 +153,6 @@ def transfer_panel(v) -> None:
     ui.note("Anisotropy g")
     if changed:
         state.edit(anisotropy=float(value))
-    _transfer_file(v)
 
 
 def _transfer_file(v) -> None:
@@ -133,7 +164,7 @@ def _transfer_file(v) -> None:
         v.transfer_file = text
     if imgui.button("Save TF"):
         try:
-            path = save_transfer_function(v.transfer_file, state.scene.transfer_function)
+            path = save_transfer_function(v.transfer_file, state.transfer_function)
             state.note(f"saved the transfer function to {path}")
         except OSError as exc:
             state.error(f"could not save the transfer function to {v.transfer_file}: {exc}")
@@ -141,7 +172,7 @@ def _transfer_file(v) -> None:
     imgui.same_line()
     if imgui.button("Load TF"):
         try:
-            state.edit(transfer_function=load_transfer_function(v.transfer_file))
+            state.set_edited_transfer(load_transfer_function(v.transfer_file))
             state.note(f"loaded the transfer function {v.transfer_file}")
         except SceneError as exc:
             state.error(str(exc))
@@ -152,11 +183,13 @@ def _opacity_presets(v) -> None:
     """Ramps, and tents over the histogram's peaks (transfer_presets.py), as the opacity curve."""
     state, ui = v.state, v.widgets
     volume = v.session.volume
-    cached = getattr(v, "_opacity_presets", (None, None))
-    if cached[0] is not volume:
-        cached = (volume, opacity_presets(volume))
-        v._opacity_presets = cached
-    presets = cached[1]
+    channel = v.edited_channel()
+    cached = getattr(v, "_opacity_presets", {})
+    if cached.get("volume") is not volume:
+        cached = v._opacity_presets = {"volume": volume}
+    if channel not in cached:
+        cached[channel] = opacity_presets(volume, channel)
+    presets = cached[channel]
     names = ["choose..."] + list(presets)
     changed, index = imgui.combo("Opacity preset", 0, names)
     ui.note("Opacity preset")
@@ -171,9 +204,9 @@ def _colour_points_editor(v, width: float) -> None:
     """The colour points on the bar they make: drag a marker along it, click one to pick its
     colour, right-click one to remove it, double-click the bar to add one there."""
     state, ui = v.state, v.widgets
-    tf = state.scene.transfer_function
+    tf = state.transfer_function
     points = [list(p) for p in tf.colors]
-    table = v.session.renderer.resources.table
+    table = v.edited_table()
     s = v.ui_scale
     bar_h = 16 * s
     origin = imgui.get_cursor_screen_pos()
@@ -229,9 +262,9 @@ def _colour_points_editor(v, width: float) -> None:
 
 def _opacity_editor(v, width: float) -> None:
     state, ui = v.state, v.widgets
-    tf = state.scene.transfer_function
+    tf = state.transfer_function
     points, simplified_by = v.opacity_points()
-    table_alpha = v.session.renderer.resources.table[:, 3]   # what the renderers use
+    table_alpha = v.edited_table()[:, 3]   # what the renderers use
     xs, heights = v.histogram()
     flags = (implot.Flags_.no_menus | implot.Flags_.no_box_select | implot.Flags_.no_legend
              | implot.Flags_.no_mouse_text | implot.Flags_.no_title)
@@ -240,7 +273,7 @@ def _opacity_editor(v, width: float) -> None:
     axis_flags = implot.AxisFlags_.no_menus | implot.AxisFlags_.no_label
     implot.setup_axes("density", "opacity", axis_flags, axis_flags)
     implot.setup_axes_limits(0.0, 1.0, 0.0, 1.05, implot.Cond_.always)
-    ticks, labels = data_ticks(v.session.volume.value_range)   # the x axis in data units
+    ticks, labels = data_ticks(v.edited_value_range())   # the x axis in data units
     implot.setup_axis_ticks(implot.ImAxis_.x1, ticks, labels)
     implot.plot_shaded("histogram", xs, heights, 0.0,
                        spec=implot.Spec(fill_color=(0.45, 0.55, 0.7, 1.0), fill_alpha=0.45))

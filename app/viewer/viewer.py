@@ -5,6 +5,7 @@ panel; the viewer keeps running with what last worked."""
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -42,6 +43,7 @@ class Viewer:
         self.state = state
         self.device = device
         self.session = RenderSession(ctx, state.scene, volume)
+        state.show_channels(self.session.volume.channel_count)
         self.widgets = WidgetRects()
         self.error_meter = ErrorMeter()
         self.files = FileDialogs(self.open_path, dialog=file_dialog)
@@ -65,7 +67,8 @@ class Viewer:
         self.last_screenshot: tuple | None = None   # (path asked for, where it went, error line)
         self.close_requested = False
         self.frame_index = 0
-        self._histogram = (None, None)
+        self._histogram = (None, None, None)
+        self._last_step_at = 0.0                 # when playback last showed another step
         self._opacity_points = (None, None)
         self._drag_start = None                  # what a handle's drag moves from
         self._drag_distance = 0.0                # world units dragged so far
@@ -98,16 +101,59 @@ class Viewer:
     def opacity_points(self):
         """The scene's opacity curve as the editor's control points (transfer.opacity_points),
         cached while the transfer function stays the same."""
-        tf = self.state.scene.transfer_function
+        tf = self.state.transfer_function
         if self._opacity_points[0] != tf:
             self._opacity_points = (tf, opacity_points(tf))
         return self._opacity_points[1]
 
     def histogram(self):
+        """The edited channel's histogram (of one channel, the volume's), cached."""
         volume = self.session.volume
-        if self._histogram[0] is not volume:
-            self._histogram = (volume, histogram_curve(volume))
+        channel = self.edited_channel()
+        if self._histogram[0] is not volume or self._histogram[2] != channel:
+            self._histogram = (volume, histogram_curve(volume, channel=channel), channel)
         return self._histogram[1]
+
+    # ---- a time series ---------------------------------------------------------------------------
+    @property
+    def time_steps(self) -> int:
+        """Steps of the volume's time axis (1: none)."""
+        return self.session.volume.time_steps
+
+    def toggle_playing(self) -> None:
+        if self.time_steps > 1:
+            self.state.playing = not self.state.playing
+            self._last_step_at = time.perf_counter()
+
+    def step_time(self, delta: int) -> None:
+        self.state.playing = False
+        self.state.step_time(delta, self.time_steps)
+
+    def advance_playback(self) -> None:
+        """While playing, the next step once 1 / play_rate seconds have passed since the last
+        (one step a frame at most: a slow frame slows the playback, it skips no step)."""
+        state = self.state
+        if not state.playing or self.time_steps <= 1:
+            return
+        now = time.perf_counter()
+        if now - self._last_step_at >= 1.0 / max(state.play_rate, 1e-3):
+            self._last_step_at = now
+            state.step_time(+1, self.time_steps)
+
+    def edited_channel(self) -> int:
+        """Which channel of the volume the editor shows (0 for a one-channel volume)."""
+        c = self.state.edited_channel
+        return c if c < self.session.volume.channel_count else 0
+
+    def edited_table(self):
+        """The table the renderers use for the edited channel (of one channel, the scene's)."""
+        res = self.session.renderer.resources
+        return res.table if res.tables is None else res.tables.tables[self.edited_channel()]
+
+    def edited_value_range(self) -> tuple[float, float]:
+        """The data values the edited channel's densities 0 and 1 are."""
+        vol = self.session.volume
+        return vol.channel_ranges[self.edited_channel()] if vol.channel_ranges else vol.value_range
 
     # ---- actions (panels, shortcuts, scripts) --------------------------------------------------
     def run_action(self, shortcut) -> None:
@@ -159,6 +205,7 @@ class Viewer:
             self.state.error(f"could not open {path}: {exc}")
             return False
         self.state.load_scene(scene, scene_path)
+        self.state.show_channels(volume.channel_count)
         self._pending_volume = volume
         self.state.note(f"opened {path}")
         for note in volume.notes:
@@ -285,6 +332,7 @@ class Viewer:
     def render_frame(self) -> FrameTimes:
         """Advances the renderers and draws the picture into the window's framebuffer."""
         state = self.state
+        self.advance_playback()
         state.history.observe(state.scene, busy=self._mouse_held())
         self._sync()
         self._record_step()
@@ -440,10 +488,15 @@ class Viewer:
                                    and s.probe_view != "off" else None),
             "camera_eye": list(s.scene.camera.eye),
             "half_extent": [float(x) for x in session.volume.half_extent],
-            "volume": {"name": session.volume.name, "dims": list(session.volume.dims)},
+            "volume": {"name": session.volume.name, "dims": list(session.volume.dims),
+                       **({"time": session.volume.time, "time_steps": session.volume.time_steps}
+                          if session.volume.time_steps > 1 else {}),
+                       **({"channels": session.volume.channel_count}
+                          if session.volume.channel_count > 1 else {})},
             "dicom_series": (session.volume.dicom_series.number
                              if session.volume.dicom_series is not None else None),
             "volume_notes": list(session.volume.notes),
+            "playing": s.playing,
             "opacity_points": [list(p) for p in self.opacity_points()[0]],
             "clip_region": (None if session.renderer.resources.clip is None else
                             {"box_min": list(session.renderer.resources.clip.box_min),

@@ -9,6 +9,7 @@ class WidgetRects:
     def __init__(self):
         self.rects: dict[str, tuple[float, float, float, float]] = {}
         self._next: dict[str, tuple[float, float, float, float]] = {}
+        self.prefix = ""   # put before every name noted (one channel's panel: "channel 1 ")
 
     def begin_frame(self) -> None:
         self._next = {}
@@ -19,10 +20,10 @@ class WidgetRects:
     def note(self, name: str) -> None:
         """Records the rectangle of the widget just submitted."""
         lo, hi = imgui.get_item_rect_min(), imgui.get_item_rect_max()
-        self._next[name] = (lo.x, lo.y, hi.x, hi.y)
+        self._next[self.prefix + name] = (lo.x, lo.y, hi.x, hi.y)
 
     def note_point(self, name: str, x: float, y: float, radius: float = 4.0) -> None:
-        self._next[name] = (x - radius, y - radius, x + radius, y + radius)
+        self._next[self.prefix + name] = (x - radius, y - radius, x + radius, y + radius)
 
     def centre(self, name: str) -> tuple[float, float]:
         if name not in self.rects:
