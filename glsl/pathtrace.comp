@@ -18,6 +18,13 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #endif
 #if defined(GUIDED_RESIDUAL)
 #include "lib/guided_source.glsl"
+#if !defined(GUIDED_DIRECTION_CONTROL) || PROBE_SH_ORDER < 1
+#undef GUIDED_DIRECTION_CONTROL   // order 0 probes hold no direction: the control would be 0
+#define GUIDED_DIRECTION_CONTROL 0
+#endif
+#if GUIDED_DIRECTION_CONTROL
+#include "lib/guided_direction_control.glsl"
+#endif
 #endif
 #include "lib/integrator.glsl"
 

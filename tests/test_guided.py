@@ -34,10 +34,14 @@ def _z(a, b):
     return diff / se
 
 
-@pytest.mark.parametrize("probes", ["baked", "zero", "times ten", "another sun"])
+@pytest.mark.parametrize("probes", ["baked", "zero", "times ten", "another sun",
+                                    "baked, first event only"])
 def test_guided_mean_is_the_path_tracers_whatever_the_probes(ctx, probes):
+    """With the direction control at every event (the default) and, last, without it."""
     scene = parse_scene(SCENE)
     r = Renderer(ctx, scene)
+    if probes == "baked, first event only":
+        r.settings = replace(r.settings, guided_direction_control=False)
     try:
         pt = _means(r, "pt", range(100, 124))
         if probes == "another sun":

@@ -543,6 +543,8 @@ class ProbeGrid:
             u["probe_warp"] = PROBE_WARP_UNIT
         u.update(self.box_uniforms(resources))
         u["probe_band_factors"] = band_factors(anisotropy, window, self.sh_order)
+        # the window alone (g = 1): `guided`'s direction control (lib/guided_direction_control.glsl)
+        u["probe_window_factors"] = band_factors(1.0, window, self.sh_order)
         u["probe_radiance_scale"] = self.radiance_scale
         u["sun_lobe_g"] = self.sun_lobe
         u["sun_lobe_phase_g"] = float(anisotropy)

@@ -198,7 +198,9 @@ class Renderer:
             defines = {"PROBE_LIGHTING": PROBE_LIGHTING[method],
                        **(probe_defines or self._probe_defines())}
         elif method == "guided":   # level 1: a path-traced sample minus level 0's prediction
-            defines = {"GUIDED_RESIDUAL": 1, **(probe_defines or self._probe_defines())}
+            defines = {"GUIDED_RESIDUAL": 1,
+                       "GUIDED_DIRECTION_CONTROL": int(self._settings.guided_direction_control),
+                       **(probe_defines or self._probe_defines())}
         if self.resources.defines():
             defines = {**(defines or {}), **self.resources.defines()}
         key = (method, tuple(sorted((defines or {}).items())))

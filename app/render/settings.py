@@ -87,6 +87,10 @@ class RenderSettings:
     # Level 0's residual-tracked march is far less noisy than level 1 (llvmpipe, the foot at 32^2:
     # 7.8e-4 against 7.0e-3 relative variance a sample), so it needs fewer samples.
     guided_level0_ratio: float = 0.25
+    # `guided`: at every scattering event, the probes' radiance in the direction drawn minus its
+    # mean over the phase function as a control variate (mean 0 at any probes;
+    # lib/guided_direction_control.glsl). False: level 1 subtracts at the first event only.
+    guided_direction_control: bool = True
 
     def __post_init__(self):
         if self.walk_sun not in WALK_SUN_MODES:
@@ -120,7 +124,8 @@ class RenderSettings:
         if isinstance(step, bool) or not isinstance(step, (int, float)) or not (
                 math.isfinite(step) and step > 0):
             raise ValueError(f"raymarch step: expected a finite number of voxels > 0, got {step!r}")
-        for name in ("sun_lobe", "sun_lobe_fit", "bake_warm", "empty_space_skipping"):
+        for name in ("sun_lobe", "sun_lobe_fit", "bake_warm", "empty_space_skipping",
+                     "guided_direction_control"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")
 

@@ -296,6 +296,15 @@ int path_step(inout PathState p, inout int steps_left)
 #endif
     vec3 w_in = p.w;
     p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
+#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTION_CONTROL
+    // `guided`'s control variate on the direction (lib/guided_direction_control.glsl): the probes'
+    // radiance expected over the phase function minus their radiance in the direction drawn. Its
+    // mean is 0 at any probes, so the estimate stays unbiased; where the probes follow the light,
+    // it takes out the noise of which direction was drawn. Not at the last event the path may
+    // scatter at (what follows it is an escape alone, which the probes' radiance does not track).
+    if (p.bounce < max_bounces)
+        p.radiance += p.throughput * guided_direction_control(p.x, w_in, p.w);
+#endif
 #if defined(ENVIRONMENT_MAP) && defined(PROBE_LIGHTING)
     // The probe renderers take no map samples at the events before the gather: an escape counts
     // in full (phase_pdf 0), as it would with ENVIRONMENT_MAP_SAMPLING 0.
