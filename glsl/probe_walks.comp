@@ -13,7 +13,9 @@
 // a = 3 and the projection leaves it as it is.
 //
 // WALK_SUN_GRID (defined or not): the sun at each scattering event from the baked light grid
-// (lib/light_grid.glsl) instead of a ratio-tracked shadow ray.
+// (lib/light_grid.glsl) instead of a ratio-tracked shadow ray, corrected without bias by one
+// shadow ray a walk at most, traced after the walks (glsl/probe_sun_correction.comp). The buffer
+// walk_radiance then holds three entries a walk: the radiance first, then two for that ray.
 layout(local_size_x = 64) in;
 
 #ifndef RESUMABLE_WALKS
@@ -96,7 +98,21 @@ void run_walk(uint local)
         return;
     }
 #endif
-    walk_radiance[local] = path_estimate_valid(p, result) ? vec4(p.radiance, 1.0) : vec4(0.0, 0.0, 0.0, 2.0);
+    bool valid = path_estimate_valid(p, result);
+    walk_radiance[local] = valid ? vec4(p.radiance, 1.0) : vec4(0.0, 0.0, 0.0, 2.0);
+#if defined(WALK_SUN_GRID)
+    // The sun's correction the walk chose (lib/integrator.glsl path_flight), for
+    // probe_sun_correction.comp: its point and grid transmittance, then its weight (0: none),
+    // in the buffer's second region (two entries a walk after the chunk's radiance).
+    if (valid) {
+        uint base = uint(walk_radiance.length()) / 3u;
+        float rate = min(1.0, intBitsToFloat(p.pad));
+        bool traced = p.correction_w_sum > 0.0 && rng_next(p.rng) < rate;
+        walk_radiance[base + 2u * local] = vec4(p.correction_x, p.correction_grid);
+        walk_radiance[base + 2u * local + 1u] =
+            vec4(traced ? p.correction_weight * (p.correction_w_sum / rate) : vec3(0.0), 0.0);
+    }
+#endif
 }
 
 void main()

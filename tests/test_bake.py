@@ -537,8 +537,9 @@ def test_accumulation_clears_on_the_gpu_and_leaves_the_framebuffer_alone(ctx):
 def test_the_walks_grid_sun_corrected_by_shadow_rays_is_unbiased(ctx):
     """Known answer for the walks' sun: on a thin dense shell lit from behind, with a light grid as
     coarse as the volume (llvmpipe's), the grid's sun alone makes the probes a third dark; with the
-    default correction (a shadow ray at a quarter of the events, weighted to correct the grid's
-    transmittance: lib/integrator.glsl) the mean over 12 seeds is within 3 standard errors of the
+    default correction (one event a walk chosen by weighted reservoir sampling, its shadow ray traced
+    after the walks and weighted to correct the grid's transmittance: lib/integrator.glsl,
+    glsl/probe_sun_correction.comp) the mean over 12 seeds is within 3 standard errors of the
     same with a ratio-tracked shadow ray at every event (the exact sun)."""
     from app.bench.scenes import battery_scene
     from dataclasses import replace

@@ -48,6 +48,7 @@ SUN_MARCH_SKIPS_EMPTY_CELLS = os.environ.get("RADIANCE_PROBES_SUN_MARCH_SKIPS", 
 FIRST_CHUNK_WALKS = 1 << 14
 PATH_STATE_BYTES = 80       # PathState of glsl/lib/integrator.glsl, std430
 PATH_STATE_BYTES_ENVIRONMENT_MAP = 112   # the same with ENVIRONMENT_MAP
+PATH_STATE_BYTES_SUN_CORRECTION = 32     # and the walks' sun correction (WALK_SUN_GRID)
 WALK_SUN_MODES = ("ray", "grid")
 WALK_PROFILE_SLOTS = 1024   # rows of 8 counters in glsl/lib/walk_profile.glsl
 WALK_PROFILE_FIELDS = ("walks", "events", "flight_steps", "shadow_steps", "cell_steps",
@@ -179,8 +180,11 @@ class ProbeGrid:
         self.chunk_probes = max(1, min(self.count, per_chunk // self.directions))
         walks = self.chunk_probes * self.directions
         state_bytes = PATH_STATE_BYTES_ENVIRONMENT_MAP if self.environment_map else PATH_STATE_BYTES
+        if sun == "grid":   # the sun correction's reservoir (lib/integrator.glsl)
+            state_bytes += PATH_STATE_BYTES_SUN_CORRECTION
         self.walk_states = ctx.buffer(reserve=walks * state_bytes) if self.resumable else None
-        self.walk_radiance = ctx.buffer(reserve=walks * 16)
+        # sun "grid": two more entries a walk, its sun correction (glsl/probe_sun_correction.comp)
+        self.walk_radiance = ctx.buffer(reserve=walks * 16 * (3 if sun == "grid" else 1))
         self.accum_floats = accum_bytes(self.sh_order) // 4
         self.accums = ctx.buffer(reserve=self.count * accum_bytes(self.sh_order))
         self.progress = ctx.buffer(reserve=4)
@@ -196,6 +200,10 @@ class ProbeGrid:
         if self.environment_map:
             self._walk_defines["ENVIRONMENT_MAP"] = 1
         self.walk_program = compute_program(ctx, "probe_walks.comp", self._walk_defines)
+        # sun "grid": each walk's correction of the grid's sun, traced after the walks
+        self.correction_program = (compute_program(ctx, "probe_sun_correction.comp",
+                                                   self.medium or None)
+                                   if sun == "grid" else None)
         self._walk_profile_program = None   # the WALK_PROFILE build, compiled when first asked for
         self.project_program = compute_program(ctx, "probe_project.comp", defines)
         # slots past the first PROBE_IMAGE_LIMIT: published by their own dispatches
@@ -350,6 +358,8 @@ class ProbeGrid:
             light.bind()
             uniforms.update(light.uniforms())
         set_uniforms(walk_program, uniforms)
+        if self.correction_program is not None:
+            set_uniforms(self.correction_program, uniforms)
         set_uniforms(self.project_program, uniforms)
         for _, program in self.publish_programs:
             set_uniforms(program, uniforms)
@@ -381,6 +391,12 @@ class ProbeGrid:
                 if timed:
                     self._chunk_timer.start()
                 self._run_walks(walk_program, groups)
+                if self.correction_program is not None and self.sun_correction > 0.0:
+                    set_uniforms(self.correction_program, {"first_probe": first,
+                                                           "walk_count": n * directions})
+                    self.correction_program.run(groups)
+                    self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+                    self.dispatches += 1
                 if timed:
                     self._chunk_timer.stop()
                     self._chunk_walks = n * directions
@@ -557,6 +573,7 @@ class ProbeGrid:
                     self.noise, self.noise_program, self.budget_program, self.prior,
                     self.warp_texture,
                     self.walk_program, self._walk_profile_program, self.project_program,
+                    self.correction_program,
                     self.sun_program, self._progress_program, self._partial_sums,
                     self._chunk_timer):
             if obj is not None:

@@ -48,9 +48,11 @@ class RenderSettings:
     # The sun at the bake's walk events: "grid" (the baked light grid, lib/light_grid.glsl) or
     # "ray" (a ratio-tracked shadow ray, unbiased).
     walk_sun: str = "grid"
-    # ... corrected without bias (walk_sun "grid"): at this fraction of the walks' events at
-    # least (more where the grid's optical depth changes fast, up to half) a ratio-tracked shadow
-    # ray corrects the grid's transmittance (lib/integrator.glsl); 0: the grid alone, whose
+    # ... corrected without bias (walk_sun "grid"): each event's rate of correction is this at
+    # least (more where the grid's optical depth changes fast, up to half); a walk keeps one of
+    # its events, weighted by rate and sun, and with probability the sum of its rates (at most 1)
+    # a ratio-tracked shadow ray from there corrects the grid's transmittance after the walks
+    # (lib/integrator.glsl, glsl/probe_sun_correction.comp); 0: the grid alone, whose
     # interpolation made probes up to 7.5% dark on the stress battery.
     walk_sun_correction: float = 0.05
     # Walks per probe from the noise of its neighbours (lib/probe_noise.glsl, unbiased; 0: every
@@ -106,7 +108,7 @@ class RenderSettings:
             raise ValueError(f"guided level-0 ratio {r!r}: expected a number in (0, 64]")
         q = self.walk_sun_correction
         if isinstance(q, bool) or not isinstance(q, (int, float)) or not 0.0 <= q <= 1.0:
-            raise ValueError(f"walk sun correction {q!r}: expected a probability in [0, 1]")
+            raise ValueError(f"walk sun correction {q!r}: expected a rate in [0, 1]")
         check_gather_event(self.gather_event)
         _check_positive_int("light grid max side", self.light_max_side)
         if self.light_min_side is not None:

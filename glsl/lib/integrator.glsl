@@ -26,7 +26,7 @@ uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
 uniform int max_path_steps;   // hang guard: tracking steps one path may take in all
 #if defined(WALK_SUN_GRID)
-uniform float walk_sun_correction;   // least probability of a shadow ray correcting the grid's sun
+uniform float walk_sun_correction;   // least rate at which a shadow ray corrects the grid's sun
 #endif
 #if defined(PROBE_LIGHTING)
 // The scattering event at which a probe renderer reads the probes and ends the path (>= 1). 1 is
@@ -83,6 +83,15 @@ struct PathState {
     float shadow_transmittance;  // and its ratio-tracking estimate so far
     int shadow_pending; // 1 while the shadow ray of the event at x is unfinished
     int pad;
+#if defined(WALK_SUN_GRID)
+    // The walk's one candidate for the sun's correction (see path_flight): where, its weight
+    // W c / w (the estimate's factor on T_ray - T_grid), the grid's transmittance there; the
+    // reservoir's weight sum W, and the sum of the events' correction rates (in pad's bits).
+    vec3 correction_x;
+    float correction_w_sum;
+    vec3 correction_weight;
+    float correction_grid;
+#endif
 #if defined(ENVIRONMENT_MAP)
     vec3 env_w;         // the map sample's direction at x
     float phase_pdf;    // pdf of the phase sampling that chose w (0: w was not phase-sampled)
@@ -105,6 +114,12 @@ void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
     p.shadow_transmittance = 1.0;
     p.shadow_pending = 0;
     p.pad = 0;
+#if defined(WALK_SUN_GRID)
+    p.correction_x = origin;
+    p.correction_w_sum = 0.0;
+    p.correction_weight = vec3(0.0);
+    p.correction_grid = 0.0;
+#endif
 #if defined(ENVIRONMENT_MAP)
     p.env_w = vec3(0.0);
     p.phase_pdf = 0.0;
@@ -219,34 +234,40 @@ int path_flight(inout PathState p, inout int steps_left)
 #endif
 #if defined(WALK_SUN_GRID)
     // The sun's transmittance from the baked light grid (lib/light_grid.glsl), corrected without
-    // bias: with probability q a ratio-tracked shadow ray T_ray is traced and the event adds
-    // T_grid + (T_ray - T_grid) / q, otherwise T_grid; the mean is E[T_ray], the sun's exact
-    // transmittance, whatever the grid's error (which on a thin backlit shell or a pinhole's beam
-    // made probes 2.3-7.5% dark: bench/h100-bias). The correction's shadow ray starts with weight
-    // 1 / q in shadow_transmittance. Any q > 0 that does not depend on the walk's random numbers
-    // keeps the mean exact; q follows where the grid's interpolation errs, where its optical depth
-    // changes fast: walk_sun_correction where it is flat, up to 0.5 where it changes by a unit or
-    // more over the texel towards the sun (one more fetch). walk_sun_correction = 0: the grid
-    // alone (biased).
+    // bias by a shadow ray traced after the walk (glsl/probe_sun_correction.comp). The grid's
+    // interpolation errs (on a thin backlit shell or a pinhole's beam it made probes 2.3-7.5%
+    // dark: bench/h100-bias); the correction of event k is c_k (T_ray,k - T_grid,k), c_k the
+    // event's sun weight. The walk keeps one event of all its events (weighted reservoir sampling,
+    // weights w_k = lum(c_k) q_k) and, with probability Q = min(1, sum q_k), the pass after it adds
+    // W c_k / w_k (T_ray,k - T_grid,k) / Q, W = sum w_k: its mean over the choice and the coin is
+    // sum_k c_k E[T_ray,k - T_grid,k], the exact sun's, whatever the grid's error. q_k is the
+    // rate at which the event would deserve a ray of its own: walk_sun_correction where the grid is
+    // flat, up to 0.5 where its optical depth changes by a unit or more over the texel towards the
+    // sun (where its interpolation errs). The ray is not traced in the walk: a shadow ray's code
+    // in the walk shader made every walk 2-2.5x slower on an H100 whether or not it ran
+    // (bench/h100-bake-split). walk_sun_correction = 0: the grid alone (biased).
     if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
         float sun_phase = phase_hg(dot(sun_direction, p.w), anisotropy);
         float tau = light_grid_optical_depth(p.x);
         float grid = exp(-tau);
-        float q = 0.0;
+        vec3 c = p.throughput * sun_irradiance * sun_phase;
+        p.radiance += c * grid;
         if (walk_sun_correction > 0.0) {
             float change = tau - light_grid_optical_depth(p.x + light_grid_texel * sun_direction);
-            q = clamp(walk_sun_correction * (1.0 + 8.0 * change), walk_sun_correction, 0.5);
+            float q = clamp(walk_sun_correction * (1.0 + 8.0 * change), walk_sun_correction, 0.5);
+            float w = max(c.r, max(c.g, c.b)) * q;
+            if (w > 0.0) {
+                p.correction_w_sum += w;
+                if (rng_next(p.rng) * p.correction_w_sum < w) {
+                    p.correction_x = p.x;
+                    p.correction_weight = c / w;
+                    p.correction_grid = grid;
+                }
+                p.pad = floatBitsToInt(intBitsToFloat(p.pad) + q);
+            }
         }
-        bool correct = q > 0.0 && rng_next(p.rng) < q;
-        float grid_weight = correct ? 1.0 - 1.0 / q : 1.0;
-        p.radiance += p.throughput * sun_irradiance * (grid * grid_weight * sun_phase);
-        if (!correct)
-            return STEP_CONTINUE;
-        p.shadow_t = -1.0;
-        p.shadow_transmittance = 1.0 / q;
-        p.shadow_pending = 1;
-        return STEP_CONTINUE;
     }
+    return STEP_CONTINUE;
 #endif
     if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
         p.shadow_t = -1.0;
@@ -269,6 +290,7 @@ int path_step(inout PathState p, inout int steps_left)
         if (flight != STEP_CONTINUE)
             return flight;
     }
+#if !defined(WALK_SUN_GRID)   // grid-sun walks trace no shadow ray (their correction comes after)
     if (p.shadow_pending != 0) {
         if (!transmittance_to_boundary_continue(p.x, sun_direction, p.shadow_t,
                                                 p.shadow_transmittance, p.rng, steps_left))
@@ -281,6 +303,7 @@ int path_step(inout PathState p, inout int steps_left)
         p.shadow_transmittance = 1.0;
 #endif
     }
+#endif
 #if defined(ENVIRONMENT_MAP)
     if (p.env_pending != 0) {
         if (!transmittance_to_boundary_continue(p.x, p.env_w, p.shadow_t,
