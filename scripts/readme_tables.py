@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 from app.bench import report as R  # noqa: E402
 
 RECORDS = "bench/h100"
-PREVIOUS = "bench/archive/h100-v11"
+PREVIOUS = "bench/archive/h100-v12"
 INTERACT_RECORDS = "bench/h100-interact"
 # The files holding generated blocks, and the blocks each holds.
 GENERATED = {"README.md": ("headline",), "docs/benchmarks.md": ("speed", "interact")}
