@@ -52,6 +52,7 @@ REFINE_RAYMARCH_FRAMES = 16
 REFINE_CHECK_FRAMES = 16
 REFINE_MIN_HALF_SAMPLES = 4
 REFINE_HALF_SEED = 0x68E31DA4
+REFINE_HISTORY = 64     # frames after a restart whose shown image a refine view remembers (tests)
 
 
 @dataclass
@@ -88,6 +89,8 @@ class RefineView:
         self.frames_since_check = 0
         self.checked_stage = 0          # bit_length of guided's samples at the last check
         self.switched_at: int | None = None   # guided's samples when it replaced the raymarcher
+        self.frames = 0                 # frames stepped since the last restart
+        self.shown_frames: list[str] = []   # what each of the first REFINE_HISTORY of them showed
 
     @property
     def acc(self) -> Accumulation | None:
@@ -220,6 +223,7 @@ class RenderSession:
         view.shown = "raymarch"
         view.estimate, view.switched_at = None, None
         view.frames_since_check, view.checked_stage = 0, 0
+        view.frames, view.shown_frames = 0, []
 
     def _drop(self, name: str) -> None:
         view = self.views.pop(name)
@@ -315,7 +319,13 @@ class RenderSession:
         either replaced or at its last frame."""
         return (self.renderer.probes_current() and view.guided_samples >= max_samples
                 and (view.shown == "guided"
-                     or view.ray.samples >= min(REFINE_RAYMARCH_FRAMES, max_samples)))
+                     or (view.ray.samples >= min(REFINE_RAYMARCH_FRAMES, max_samples)
+                         and not self._check_pending(view))))
+
+    def _check_pending(self, view: RefineView) -> bool:
+        """Guided samples since the last check while the raymarcher is shown."""
+        return (view.shown == "raymarch" and view.guided_samples > 0
+                and view.frames_since_check > 0 and self.renderer.probes_current())
 
     def _step_refine(self, view: RefineView, budget_ms: float, max_samples: int) -> tuple[float, int]:
         """One frame of refine within `budget_ms`: raymarched frames while the raymarcher is shown
@@ -323,8 +333,10 @@ class RenderSession:
         budget each while both run; at least one sample each), split between the halves (the
         emptier first), then the halves combined on the GPU and, at a check, their error read
         (16 bytes) and the view switched to guided if its estimate is below the raymarcher's.
-        Returns GPU ms and samples per pixel dispatched."""
+        The frame of a restart (any edit) always shows the raymarcher: guided may take over from
+        the next frame on. Returns GPU ms and samples per pixel dispatched."""
         r = self.renderer
+        view.frames += 1
         ray_cap = min(REFINE_RAYMARCH_FRAMES, max_samples)
         ray_todo = view.shown == "raymarch" and view.ray.samples < ray_cap
         guided_todo = r.probes_current() and view.guided_samples < max_samples
@@ -335,33 +347,45 @@ class RenderSession:
             ms = self._lend(view.ray, None, "raymarch", view.camera, self.seed, 0, n)
             self._note_dispatch(view, "raymarch", n, ms)
             ms_total, n_total = ms_total + ms, n_total + n
-        if not guided_todo:
-            return ms_total, n_total
         halves = view.halves
-        n = min(self.samples_per_frame(view, share, "guided"), max_samples - halves.samples)
-        first = halves.next_half()
-        ms = 0.0
-        for index, k in ((first, (n + 1) // 2), (1 - first, n // 2)):
-            if k:
-                half = halves.halves[index]
-                seed = self.seed ^ (REFINE_HALF_SEED if index else 0)
-                ms += self._lend(half.residual, half.level0, "guided", view.camera, seed, index, k)
-        self._note_dispatch(view, "guided", n, ms)
-        view.frames_since_check += 1
-        stage = halves.samples.bit_length()
-        check = (stage != view.checked_stage or view.frames_since_check >= REFINE_CHECK_FRAMES
-                 or halves.samples >= max_samples)
+        n, ms = 0, 0.0
+        if guided_todo:
+            n = min(self.samples_per_frame(view, share, "guided"), max_samples - halves.samples)
+            first = halves.next_half()
+            for index, k in ((first, (n + 1) // 2), (1 - first, n // 2)):
+                if k:
+                    half = halves.halves[index]
+                    seed = self.seed ^ (REFINE_HALF_SEED if index else 0)
+                    ms += self._lend(half.residual, half.level0, "guided", view.camera, seed,
+                                     index, k)
+            self._note_dispatch(view, "guided", n, ms)
+            view.frames_since_check += 1
+            stage = halves.samples.bit_length()
+            check = (stage != view.checked_stage or view.frames_since_check >= REFINE_CHECK_FRAMES
+                     or halves.samples >= max_samples)
+        elif self._check_pending(view):   # guided has stopped: its last samples not yet judged
+            stage, check = halves.samples.bit_length(), True
+        else:
+            self._note_shown(view)
+            return ms_total, n_total
+        check = check and view.frames > 1   # an edit's own frame shows the raymarcher
         with_ray = view.shown == "raymarch"
         halves.combine(view.ray if with_ray else None, reduce=check)
         if check:
             view.estimate = halves.read_estimate(with_ray)
             view.frames_since_check, view.checked_stage = 0, stage
             est = view.estimate
-            if (with_ray and min(halves.counts) >= REFINE_MIN_HALF_SAMPLES
+            if (with_ray and view.frames > 1 and min(halves.counts) >= REFINE_MIN_HALF_SAMPLES
                     and est.guided < est.raymarch):   # (False while either is NaN)
                 view.shown = "guided"
                 view.switched_at = halves.samples
+        self._note_shown(view)
         return ms_total + ms, n_total + n
+
+    @staticmethod
+    def _note_shown(view: RefineView) -> None:
+        if len(view.shown_frames) < REFINE_HISTORY:
+            view.shown_frames.append(view.shown)
 
     @staticmethod
     def _note_dispatch(view, shown: str, n: int, ms: float) -> None:
@@ -458,7 +482,8 @@ class RenderSession:
                 "half_samples": [] if view.halves is None else list(view.halves.counts),
                 "estimated_rrmse": None if est is None else
                 {"guided": est.guided, "raymarch": est.raymarch, "samples": est.samples},
-                "switched_at": view.switched_at,
+                "switched_at": view.switched_at, "frames": view.frames,
+                "shown_frames": list(view.shown_frames),
                 "reads": 0 if view.halves is None else view.halves.reads}
 
     def _bake_percent(self) -> int:
