@@ -23,7 +23,7 @@ def bookmark_list(text: str) -> list[str]:
 def add_animate_parser(sub, func) -> argparse.ArgumentParser:
     from .movie_writer import DEFAULT_CRF
     from .render.renderer import RAYMARCH_STAGES
-    from .scene_types import VIEWER_METHODS as METHODS
+    from .scene_types import MOVIE_METHODS as METHODS
     a = sub.add_parser("animate", help="render a movie: a turntable, or a flight through the "
                                        "scene's bookmarks (MP4, GIF or numbered PNGs)")
     a.add_argument("scene", nargs="?", help="scene JSON, a volume file or a folder (TIFF, DICOM; "

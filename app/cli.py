@@ -95,6 +95,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
             changes["sh_orders"] = args.sh_orders
         if args.auto_targets:
             changes["cost_auto_targets"] = args.auto_targets
+        if args.methods:
+            if config.mode != "interact":
+                raise SystemExit(f"error: --methods is for the interact presets (--preset "
+                                 f"{args.preset} is {config.mode})")
+            changes["interact_methods"] = args.methods
         if args.adaptive_strength is not None:
             if not 0.0 <= args.adaptive_strength <= 1.0:
                 raise SystemExit(f"error: --adaptive-strength {args.adaptive_strength}: expected "
@@ -114,6 +119,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
     print(f"results: {results.resolve()}")
     print(f"report: {write_report(results, out).resolve()}")
     return 0
+
+
+def interact_methods_arg(text: str) -> tuple:
+    """`bench --methods`: a comma-separated list of the viewer's methods."""
+    from .scene_types import VIEWER_METHODS
+    return _comma_list(text, str, lambda m: m in VIEWER_METHODS,
+                       f"one of {', '.join(VIEWER_METHODS)}")
 
 
 def _comma_list(text: str, convert, valid, expected: str) -> tuple:
@@ -258,6 +270,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--auto-targets", type=auto_targets_arg, metavar="T[,T...]",
                    help="the errors `auto` is asked for and checked at full resolution in the "
                         "cost and auto presets (default 0.05,0.10)")
+    b.add_argument("--methods", type=interact_methods_arg, metavar="M[,M...]",
+                   help="the methods the interact presets replay the viewer's session with: "
+                        "pt, probes, probes-only, raymarch, refine (the viewer's raymarcher, then "
+                        "guided); default probes,raymarch (interact-refine: refine)")
     b.add_argument("--report-only", action="store_true",
                    help="rewrite report.md and plots from an existing results.json")
     b.set_defaults(func=cmd_bench)

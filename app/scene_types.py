@@ -248,10 +248,12 @@ class BookmarkSpec:
                                    fov_y=self.fov_y)
 
 
-# The viewer's render methods and display modes (app/render/renderer.py METHODS but `guided`,
-# which the viewer does not offer yet, and app/viewer/state.py DISPLAY_MODES; a test keeps them
-# so).
-VIEWER_METHODS = ("pt", "probes", "probes-only", "raymarch")
+# The methods a movie renders (app/animate.py, the viewer's movie panel): app/render/renderer.py
+# METHODS but `guided`. The viewer's methods and display modes: those, and `refine` (the raymarcher
+# at once after an edit, then `guided` replacing it; app/viewer/session.py), and
+# app/viewer/state.py DISPLAY_MODES (a test keeps them so).
+MOVIE_METHODS = ("pt", "probes", "probes-only", "raymarch")
+VIEWER_METHODS = (*MOVIE_METHODS, "refine")
 VIEWER_DISPLAYS = ("image", "split", "error")
 VIEWER_PROBE_VIEWS = ("off", "over", "alone")
 

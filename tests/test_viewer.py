@@ -756,3 +756,39 @@ def test_time_series_plays_steps_and_pauses(display, tmp_path):
     assert stepped["scene"].get("time", 0) == stepped["volume"]["time"]
     assert slider["scene"].get("time", 0) == 0 and slider["volume"]["time"] == 0
     assert "Time step" in start["widgets"]
+
+
+def test_refine_shows_the_raymarcher_at_once_after_an_edit_then_guided(display, tmp_path):
+    """Key 5 (refine) in the real window: after the switch and after an orbit, the first frame
+    shows the raymarcher's image and later frames guided's (its caption with the error estimated
+    from the halves); the estimate's read-backs are fewer than the frames."""
+    scene = {"volume": {"builtin": "cloud", "size": [12, 12, 12]}, "density_scale": 30.0,
+             "albedo": 0.9, "camera": {"width": 48, "height": 48},
+             "probes": {"grid": [2, 2, 2], "samples": 64, "fit": "box"}}
+    (tmp_path / "cloud.json").write_text(json.dumps(scene))
+    script = write_script(tmp_path / "s.json", [
+        {"key": "5"}, {"until": "done"}, {"dump": "first.json"},
+        {"screenshot": "first.png"},
+        {"drag": {"view": [0.5, 0.5]}, "by": [40, 0]}, {"until": "done"}, {"dump": "orbit.json"},
+        {"screenshot": "orbit.png"}, {"close": True}])
+    view(["cloud.json", "--script", str(script), "--spp", "128", "--window", "640x400",
+          "--render-scale", "0.125"],
+         tmp_path, display)
+    first, orbit = dump(tmp_path / "first.json"), dump(tmp_path / "orbit.json")
+    for d in (first, orbit):
+        assert d["method"] == "refine" and not d["errors"]
+        st = d["refine"]
+        assert st["shown"] == "guided" and st["guided_samples"] == 128
+        assert st["shown_frames"][0] == "raymarch"                 # at once after the edit
+        assert "guided" in st["shown_frames"]                      # later frames: guided
+        k = st["shown_frames"].index("guided")
+        assert set(st["shown_frames"][:k]) == {"raymarch"} and set(st["shown_frames"][k:]) == {"guided"}
+        est = st["estimated_rrmse"]
+        assert 0 < est["guided"] < 0.5 and st["reads"] < st["frames"]
+        assert "guided 128 spp, est. error" in d["labels"]["refine"]
+        assert d["samples"] == {"refine": 128}
+    assert orbit["restarts"] > first["restarts"] and orbit["bakes_started"] == first["bakes_started"]
+    assert orbit["scene"]["camera"]["eye"] != first["scene"]["camera"]["eye"]
+    a = view_pixels(png(tmp_path / "first.png"), first)
+    b = view_pixels(png(tmp_path / "orbit.png"), orbit)
+    assert np.abs(a.astype(float) - b).mean() > 0.2                # the orbit's other image

@@ -75,8 +75,11 @@ class BenchConfig:
     interact_probes: tuple[tuple[int, int], ...] = ((64, 256), (128, 64))
     interact_bake_budget_ms: float = BAKE_BUDGET_MS["gpu"]     # GPU time a frame gives the bake
     interact_frame_budget_ms: float = FRAME_BUDGET_MS["gpu"]   # ... and a frame in all (session.py)
-    interact_target_spp: tuple = (("probes", 64), ("raymarch", 16), ("pt", 256))
-    # the methods the session is replayed with (load, orbit, edits), each against the same references
+    # refine: guided's samples once it has replaced the raymarcher
+    interact_target_spp: tuple = (("probes", 64), ("raymarch", 16), ("pt", 256), ("refine", 256))
+    # the methods the session is replayed with (load, orbit, edits), each against the same
+    # references: the viewer's (app/scene_types.py VIEWER_METHODS), `refine` included
+    # (`bench --methods`)
     interact_methods: tuple[str, ...] = ("probes", "raymarch")
     interact_max_frames: int = 300                   # frames an event may take to converge
     interact_orbit_frames: int = 60
@@ -120,9 +123,16 @@ PRESETS = {
     "interact-quick": BenchConfig(mode="interact", scenes=("anisotropic", "thick"),
                                   interact_sizes=((64, 48),), interact_probes=((8, 128),),
                                   interact_bake_budget_ms=40.0, interact_frame_budget_ms=45.0,
-                                  interact_target_spp=(("probes", 16), ("raymarch", 4)),
+                                  interact_target_spp=(("probes", 16), ("raymarch", 4),
+                                                       ("refine", 64)),
+                                  interact_methods=("probes", "raymarch", "refine"),
                                   interact_max_frames=60, interact_orbit_frames=12,
                                   interact_ref_spp=512, ref_samples_per_pass=16, interact_tail_k=4),
+    # the viewer's refine on the GPU at 1080p, the viewer's GPU probe default (128^3 x 64): is it
+    # within 2% of the reference within 1 s of every edit? (about 2 minutes a scene on an H100)
+    "interact-refine": BenchConfig(mode="interact", scenes=("bonsai", "foot"),
+                                   ref_samples_per_pass=64, interact_sizes=((1920, 1080),),
+                                   interact_probes=((128, 64),), interact_methods=("refine",)),
     # the movie of the issue: 120 frames of bonsai at 1080p on the lent GPU (about 4 minutes,
     # most of it the three references and the path tracer's runs)
     "movie": BenchConfig(mode="movie", scenes=("bonsai",), width=1920, height=1080,

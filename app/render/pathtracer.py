@@ -21,9 +21,14 @@ def groups(width: int, height: int) -> tuple[int, int]:
 
 
 class PathTracer:
-    def __init__(self, ctx: moderngl.Context, defines: dict | None = None):
+    def __init__(self, ctx: moderngl.Context, defines: dict | None = None,
+                 share: "PathTracer | None" = None):
+        """`share`: another pass of the same defines whose program this one uses (with path
+        states of its own: a pixel's state belongs to one accumulation)."""
         self.ctx = ctx
-        self.program = compute_program(ctx, "pathtrace.comp", defines)
+        self._owns_program = share is None
+        self.program = compute_program(ctx, "pathtrace.comp", defines) if share is None \
+            else share.program
         self.state_bytes = (PIXEL_STATE_BYTES_ENVIRONMENT_MAP if (defines or {}).get("ENVIRONMENT_MAP")
                             else PIXEL_STATE_BYTES)
         self.loop_budget, self.loop_reserve = loop_budget(ctx)
@@ -100,7 +105,8 @@ class PathTracer:
         acc.samples = target_samples
 
     def release(self) -> None:
-        self.program.release()
+        if self._owns_program:
+            self.program.release()
         self.progress.release()
         if self.states is not None:
             self.states.release()

@@ -105,7 +105,11 @@ class Renderer:
         self.resources = SceneResources(ctx, scene, volume,
                                         use_majorant_grid=settings.empty_space_skipping)
         self._settings = settings
-        self._passes: dict[str, PathTracer] = {}
+        self._passes: dict[tuple, PathTracer] = {}
+        # Which path states a pass uses (pass_for): a PathTracer keeps one per pixel between
+        # dispatches, so two accumulations of one method advanced in turn (the viewer's `refine`
+        # halves) each need their own; 0 for everything else.
+        self.pass_slot = 0
         self._acc: Accumulation | None = None
         self._acc0: Accumulation | None = None   # `guided`'s level 0
         self.timer = GpuTimer(ctx)
@@ -206,6 +210,11 @@ class Renderer:
         key = (method, tuple(sorted((defines or {}).items())))
         if key not in self._passes:
             self._passes[key] = PathTracer(self.ctx, defines)
+        if self.pass_slot:   # another accumulation's path states, the same program
+            first = self._passes[key]
+            key = (*key, self.pass_slot)
+            if key not in self._passes:
+                self._passes[key] = PathTracer(self.ctx, defines, share=first)
         return self._passes[key]
 
     def _probe_defines(self) -> dict:

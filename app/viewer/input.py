@@ -32,6 +32,8 @@ SHORTCUTS = (
     Shortcut("2", "method: probes", _method("probes")),
     Shortcut("3", "method: probes-only", _method("probes-only")),
     Shortcut("4", "method: raymarch", _method("raymarch")),
+    Shortcut("5", "method: refine (raymarch at once, then guided to the exact image)",
+             _method("refine")),
     Shortcut("s", "split view on/off (method | split method)", lambda v: v.state.toggle_display("split")),
     Shortcut("e", "error view on/off (heat map against pt)", lambda v: v.state.toggle_display("error")),
     Shortcut("g", "probe grid: off, over the volume, alone", lambda v: v.state.cycle("probe_view", PROBE_VIEWS)),

@@ -11,9 +11,16 @@ switch to their own when the probes are current.
 
 A frame's GPU time is budgeted as a whole (FRAME_BUDGET_MS): the bake slice first, then as many
 samples per shown method as the rest of the frame holds by their measured cost, at least one.
+
+`refine` (RefineView) is two renderers in one view: after any edit the raymarcher's image shows
+at once; once the probes are current, `guided` samples accumulate beside it in two independent
+halves (app/render/refine.py), and the view switches to their mean when its error, estimated from
+the halves, falls below the raymarcher's, estimated against that same unbiased mean. `guided`
+waits for the bake: its two levels must read the same probes for the whole accumulation.
 """
 from __future__ import annotations
 
+import math
 import statistics
 from collections import deque
 from dataclasses import dataclass
@@ -25,6 +32,7 @@ from ..gl.context import is_software
 from ..render.accumulation import Accumulation
 from ..render.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from ..render.probes import BakeProgress
+from ..render.refine import HalfBuffers, RefineEstimate
 from ..render.renderer import PROBE_LIGHTING, Renderer
 from ..scene import Scene
 from ..volume import Volume
@@ -34,6 +42,17 @@ MAX_SAMPLES_PER_FRAME = 64
 RECENT_DISPATCHES = 5    # dispatches whose GPU ms per sample set the next frame's samples
 # What a probe-lit method shows while its probes bake: the raymarcher over the probes as they are.
 PREVIEW_WHILE_BAKING = "raymarch"
+REFINE = "refine"
+# `refine`: the raymarcher's frames it accumulates at most (its image is then as good as its bias
+# lets it be; the rest of each frame goes to `guided`); a reduction of the halves' error (a 16-byte
+# read-back) whenever guided's samples double and at least every REFINE_CHECK_FRAMES frames with
+# guided samples (about 4 a second at 60 Hz), never every frame; the guided samples each half
+# needs before its estimate may switch the view; the seed offset of the second half.
+REFINE_RAYMARCH_FRAMES = 16
+REFINE_CHECK_FRAMES = 16
+REFINE_MIN_HALF_SAMPLES = 4
+REFINE_HALF_SEED = 0x68E31DA4
+REFINE_HISTORY = 64     # frames after a restart whose shown image a refine view remembers (tests)
 
 
 @dataclass
@@ -53,6 +72,48 @@ class MethodView:
     @property
     def samples(self) -> int:
         return 0 if self.acc is None else self.acc.samples
+
+
+class RefineView:
+    """The `refine` view: the raymarcher's accumulation (`ray`), `guided`'s two halves and their
+    mean (`halves`), and which of the two the display shows (`shown`: "raymarch" or "guided")."""
+
+    def __init__(self, method: str = REFINE):
+        self.method = method
+        self.ray: Accumulation | None = None
+        self.halves: HalfBuffers | None = None
+        self.camera = None
+        self.shown = "raymarch"
+        self.dispatch_ms: dict = {}
+        self.estimate: RefineEstimate | None = None   # the last check's
+        self.frames_since_check = 0
+        self.checked_stage = 0          # bit_length of guided's samples at the last check
+        self.switched_at: int | None = None   # guided's samples when it replaced the raymarcher
+        self.frames = 0                 # frames stepped since the last restart
+        self.shown_frames: list[str] = []   # what each of the first REFINE_HISTORY of them showed
+
+    @property
+    def acc(self) -> Accumulation | None:
+        """What the display shows: the raymarcher's accumulation or the halves' mean."""
+        if self.ray is None:
+            return None
+        return self.halves.combined if self.shown == "guided" else self.ray
+
+    @property
+    def samples(self) -> int:
+        acc = self.acc
+        return 0 if acc is None else acc.samples
+
+    @property
+    def guided_samples(self) -> int:
+        return 0 if self.halves is None else self.halves.samples
+
+    def release(self) -> None:
+        if self.ray is not None:
+            self.ray.release()
+        if self.halves is not None:
+            self.halves.release()
+        self.ray = self.halves = None
 
 
 @dataclass
@@ -116,7 +177,7 @@ class RenderSession:
             self._drop(name)
         for name in methods:
             if name not in self.views:
-                self.views[name] = MethodView(name)
+                self.views[name] = RefineView(name) if name == REFINE else MethodView(name)
                 self._begin(self.views[name])
 
     def resize(self, width: int, height: int) -> None:
@@ -134,6 +195,8 @@ class RenderSession:
     def _begin(self, view: MethodView) -> None:
         if self.size == (0, 0):
             return
+        if isinstance(view, RefineView):
+            return self._begin_refine(view)
         r = self.renderer
         view.shown = self.shown_method(view.method)
         r._acc = view.acc  # the Renderer keeps one accumulation; each view lends it its own
@@ -142,14 +205,40 @@ class RenderSession:
         view.camera = r.camera
         r._acc = None
 
+    def _begin_refine(self, view: RefineView) -> None:
+        """Both of refine's renderers afresh: the raymarcher's image is what shows."""
+        r = self.renderer
+        r._acc = view.ray
+        view.ray = r.begin("raymarch", *self.size, seed=self.seed)
+        r._acc = None
+        view.camera = r.camera
+        w, h = r.camera.width, r.camera.height
+        if view.halves is None or (view.halves.width, view.halves.height) != (w, h):
+            if view.halves is not None:
+                view.halves.release()
+            view.halves = HalfBuffers(self.ctx, w, h)
+        view.halves.reset()
+        for acc in (view.ray, view.halves.combined):
+            acc.texture.filter = (self.filter, self.filter)
+        view.shown = "raymarch"
+        view.estimate, view.switched_at = None, None
+        view.frames_since_check, view.checked_stage = 0, 0
+        view.frames, view.shown_frames = 0, []
+
     def _drop(self, name: str) -> None:
         view = self.views.pop(name)
-        if view.acc is not None:
+        if isinstance(view, RefineView):
+            view.release()
+        elif view.acc is not None:
             view.acc.release()
 
     # ---- one frame -----------------------------------------------------------------------------
     def probes_ready(self) -> bool:
         return self.renderer.probe_grid is not None and self.renderer.probes_current()
+
+    def needs_probes(self, method: str) -> bool:
+        """Whether a view of `method` reads the probes (refine: its raymarcher and `guided` do)."""
+        return method == REFINE or self.renderer.needs_probes(method)
 
     def shown_method(self, method: str) -> str:
         """What a view of `method` renders now: the raymarcher while a probe-lit method's probes
@@ -178,15 +267,23 @@ class RenderSession:
             self.bake_passes_run += 1
             if r.probe_grid.passes_done not in (0, passes):   # a pass ended: its progress
                 self.bake_report = r.probe_grid.progress_report()
-            self.restart([m for m in self.views if r.needs_probes(m)])
+            self.restart([m for m in self.views if self.needs_probes(m)])
         # a view whose preview is over (the bake ended, or was never needed) starts its own method
-        stale = [v.method for v in self.views.values() if v.shown != self.shown_method(v.method)]
+        stale = [v.method for v in self.views.values() if not isinstance(v, RefineView)
+                 and v.shown != self.shown_method(v.method)]
         if stale:
             self.restart(stale)
-        todo = [v for v in self.views.values() if v.acc is not None and v.acc.samples < max_samples
-                and not (r.needs_probes(v.shown) and r.probe_grid is None)]  # nothing to read yet
+        todo = [v for v in self.views.values() if v.acc is not None
+                and not (r.needs_probes(v.shown) and r.probe_grid is None)   # nothing to read yet
+                and (not self._refine_done(v, max_samples) if isinstance(v, RefineView)
+                     else v.acc.samples < max_samples)]
         share = max(self.frame_budget_ms - times.bake_ms, 0.0) / max(len(todo), 1)
         for view in todo:
+            if isinstance(view, RefineView):
+                ms, n = self._step_refine(view, share, max_samples)
+                times.render_ms += ms
+                times.samples += n
+                continue
             n = min(self.samples_per_frame(view, share), max_samples - view.acc.samples)
             ms = self._add_samples(view, n)
             recent = view.dispatch_ms.setdefault(view.shown, [])
@@ -198,7 +295,7 @@ class RenderSession:
         return times
 
     @staticmethod
-    def samples_per_frame(view: MethodView, budget_ms: float) -> int:
+    def samples_per_frame(view: MethodView, budget_ms: float, shown: str | None = None) -> int:
         """Samples per pixel for the view's next dispatch: as many as fit in `budget_ms` at the GPU
         ms per sample of its recent dispatches (the median of ms / samples over the last
         RECENT_DISPATCHES), at least one; one before any is timed. The median keeps a dispatch
@@ -209,13 +306,103 @@ class RenderSession:
         while its path states were cleared from the host; a compile in a trial dispatch read as
         such a tail, and the llvmpipe replay then ran frames of 16 samples at 70 to 120 ms against
         a 45 ms budget.)"""
-        recent = view.dispatch_ms.get(view.shown)
+        recent = view.dispatch_ms.get(shown or view.shown)
         if not recent:
             return 1
         per = statistics.median(ms / n for n, ms in recent)
         if per <= 0.0:
             return MAX_SAMPLES_PER_FRAME
         return int(max(1, min(MAX_SAMPLES_PER_FRAME, budget_ms // per)))
+
+    def _refine_done(self, view: RefineView, max_samples: int) -> bool:
+        """Nothing left for refine: probes current, guided at max_samples, and the raymarcher
+        either replaced or at its last frame."""
+        return (self.renderer.probes_current() and view.guided_samples >= max_samples
+                and (view.shown == "guided"
+                     or (view.ray.samples >= min(REFINE_RAYMARCH_FRAMES, max_samples)
+                         and not self._check_pending(view))))
+
+    def _check_pending(self, view: RefineView) -> bool:
+        """Guided samples since the last check while the raymarcher is shown."""
+        return (view.shown == "raymarch" and view.guided_samples > 0
+                and view.frames_since_check > 0 and self.renderer.probes_current())
+
+    def _step_refine(self, view: RefineView, budget_ms: float, max_samples: int) -> tuple[float, int]:
+        """One frame of refine within `budget_ms`: raymarched frames while the raymarcher is shown
+        and short of REFINE_RAYMARCH_FRAMES; `guided` samples once the probes are current (half the
+        budget each while both run; at least one sample each), split between the halves (the
+        emptier first), then the halves combined on the GPU and, at a check, their error read
+        (16 bytes) and the view switched to guided if its estimate is below the raymarcher's.
+        The frame of a restart (any edit) always shows the raymarcher: guided may take over from
+        the next frame on. Returns GPU ms and samples per pixel dispatched."""
+        r = self.renderer
+        view.frames += 1
+        ray_cap = min(REFINE_RAYMARCH_FRAMES, max_samples)
+        ray_todo = view.shown == "raymarch" and view.ray.samples < ray_cap
+        guided_todo = r.probes_current() and view.guided_samples < max_samples
+        share = budget_ms / 2 if ray_todo and guided_todo else budget_ms
+        ms_total, n_total = 0.0, 0
+        if ray_todo:
+            n = min(self.samples_per_frame(view, share, "raymarch"), ray_cap - view.ray.samples)
+            ms = self._lend(view.ray, None, "raymarch", view.camera, self.seed, 0, n)
+            self._note_dispatch(view, "raymarch", n, ms)
+            ms_total, n_total = ms_total + ms, n_total + n
+        halves = view.halves
+        n, ms = 0, 0.0
+        if guided_todo:
+            n = min(self.samples_per_frame(view, share, "guided"), max_samples - halves.samples)
+            first = halves.next_half()
+            for index, k in ((first, (n + 1) // 2), (1 - first, n // 2)):
+                if k:
+                    half = halves.halves[index]
+                    seed = self.seed ^ (REFINE_HALF_SEED if index else 0)
+                    ms += self._lend(half.residual, half.level0, "guided", view.camera, seed,
+                                     index, k)
+            self._note_dispatch(view, "guided", n, ms)
+            view.frames_since_check += 1
+            stage = halves.samples.bit_length()
+            check = (stage != view.checked_stage or view.frames_since_check >= REFINE_CHECK_FRAMES
+                     or halves.samples >= max_samples)
+        elif self._check_pending(view):   # guided has stopped: its last samples not yet judged
+            stage, check = halves.samples.bit_length(), True
+        else:
+            self._note_shown(view)
+            return ms_total, n_total
+        check = check and view.frames > 1   # an edit's own frame shows the raymarcher
+        with_ray = view.shown == "raymarch"
+        halves.combine(view.ray if with_ray else None, reduce=check)
+        if check:
+            view.estimate = halves.read_estimate(with_ray)
+            view.frames_since_check, view.checked_stage = 0, stage
+            est = view.estimate
+            if (with_ray and view.frames > 1 and min(halves.counts) >= REFINE_MIN_HALF_SAMPLES
+                    and est.guided < est.raymarch):   # (False while either is NaN)
+                view.shown = "guided"
+                view.switched_at = halves.samples
+        self._note_shown(view)
+        return ms_total + ms, n_total + n
+
+    @staticmethod
+    def _note_shown(view: RefineView) -> None:
+        if len(view.shown_frames) < REFINE_HISTORY:
+            view.shown_frames.append(view.shown)
+
+    @staticmethod
+    def _note_dispatch(view, shown: str, n: int, ms: float) -> None:
+        recent = view.dispatch_ms.setdefault(shown, [])
+        recent.append((n, ms))
+        del recent[:-RECENT_DISPATCHES]
+
+    def _lend(self, acc, acc0, method: str, camera, seed: int, slot: int, n: int) -> float:
+        """n samples of `method` into accumulations the Renderer borrows for the call (acc0:
+        guided's level 0; slot: the path states of refine's half)."""
+        r = self.renderer
+        kept = r._acc0
+        r._acc, r._acc0, r.method, r.camera, r.seed, r.pass_slot = acc, acc0, method, camera, seed, slot
+        try:
+            return r.add_samples(n)
+        finally:
+            r._acc, r._acc0, r.pass_slot = None, kept, 0
 
     def _add_samples(self, view: MethodView, n: int) -> float:
         r = self.renderer
@@ -232,11 +419,24 @@ class RenderSession:
         """True when another step would do nothing (the viewer may then wait for events)."""
         if want_probes and not self.renderer.probes_current():
             return False
-        if any(v.shown != self.shown_method(v.method) for v in self.views.values()):
+        if any(v.shown != self.shown_method(v.method) for v in self.views.values()
+               if not isinstance(v, RefineView)):
             return False
-        return all(v.acc is None or v.acc.samples >= max_samples
-                   or (self.renderer.needs_probes(v.method) and self.renderer.probe_grid is None)
+        return all(v.acc is None
+                   or (self._refine_done(v, max_samples) if isinstance(v, RefineView)
+                       else v.acc.samples >= max_samples)
+                   or (self.needs_probes(v.method) and self.renderer.probe_grid is None)
                    for v in self.views.values())
+
+    def view_done(self, method: str, target_spp: int) -> bool:
+        """A view shows its own method's image with at least `target_spp` samples (refine:
+        `guided`'s mean has replaced the raymarcher's image and holds that many)."""
+        view = self.views.get(method)
+        if view is None:
+            return False
+        if isinstance(view, RefineView):
+            return view.shown == "guided" and view.guided_samples >= target_spp
+        return view.shown == method and view.samples >= target_spp
 
     # ---- reading -------------------------------------------------------------------------------
     def texture(self, method: str):
@@ -250,9 +450,41 @@ class RenderSession:
     def label(self, method: str) -> str:
         """A view's caption: its method and samples, and the preview it shows while baking."""
         view = self.views.get(method)
+        if isinstance(view, RefineView):
+            return self._refine_label(view)
         shown = method if view is None else view.shown
         extra = "" if shown == method else f" (bake {self._bake_percent()}%: {shown} meanwhile)"
         return f"{method}  {self.samples(method)} spp{extra}"
+
+    def _refine_label(self, view: RefineView) -> str:
+        """refine's caption: what it shows, and the errors estimated from guided's halves."""
+        est = view.estimate
+
+        def pct(x) -> str:
+            return "?" if x is None or not math.isfinite(x) else f"{100 * x:.1f}%"
+        guided = pct(None if est is None else est.guided)
+        if view.shown == "guided":
+            return f"{view.method}  guided {view.guided_samples} spp, est. error {guided}"
+        text = f"{view.method}  raymarch {0 if view.ray is None else view.ray.samples} spp"
+        if not self.renderer.probes_current():
+            return f"{text} (bake {self._bake_percent()}%, then guided)"
+        return (f"{text}, est. error {pct(None if est is None else est.raymarch)}; guided "
+                f"{view.guided_samples} spp, est. {guided}")
+
+    def refine_state(self, method: str = REFINE) -> dict | None:
+        """What a refine view holds (for the viewer's snapshot and the benchmark)."""
+        view = self.views.get(method)
+        if not isinstance(view, RefineView):
+            return None
+        est = view.estimate
+        return {"shown": view.shown, "raymarch_samples": 0 if view.ray is None else view.ray.samples,
+                "guided_samples": view.guided_samples,
+                "half_samples": [] if view.halves is None else list(view.halves.counts),
+                "estimated_rrmse": None if est is None else
+                {"guided": est.guided, "raymarch": est.raymarch, "samples": est.samples},
+                "switched_at": view.switched_at, "frames": view.frames,
+                "shown_frames": list(view.shown_frames),
+                "reads": 0 if view.halves is None else view.halves.reads}
 
     def _bake_percent(self) -> int:
         g = self.renderer.probe_grid
@@ -269,8 +501,11 @@ class RenderSession:
     def set_filter(self, linear: bool) -> None:
         self.filter = moderngl.LINEAR if linear else moderngl.NEAREST
         for view in self.views.values():
-            if view.acc is not None:
-                view.acc.texture.filter = (self.filter, self.filter)
+            accs = ([view.ray, view.halves and view.halves.combined]
+                    if isinstance(view, RefineView) else [view.acc])
+            for acc in accs:
+                if acc is not None:
+                    acc.texture.filter = (self.filter, self.filter)
 
     def release(self) -> None:
         for name in list(self.views):

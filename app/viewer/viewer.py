@@ -465,6 +465,8 @@ class Viewer:
             "show_ui": s.show_ui, "show_help": s.show_help, "scene_path": s.scene_path,
             "scene": scene_to_dict(s.scene),
             "samples": {m: session.samples(m) for m in session.views},
+            "labels": {m: session.label(m) for m in session.views},
+            "refine": session.refine_state(),
             "restarts": session.restarts,
             "render_size": list(session.size), "framebuffer_size": list(self.framebuffer_size),
             "window_size": list(self.window_size), "view_rect_window": list(self.view_rect_window()),

@@ -1,0 +1,170 @@
+"""The viewer's `refine` mode (app/viewer/session.py): `guided` accumulated as two independent
+halves, their combined mean shown, and its error estimated from the two halves alone.
+
+The estimator (NumPy: `half_buffer_error`; GPU: glsl/refine_halves.comp, which gives the same
+three sums for `error_from_sums`):
+
+Let a and b be the two halves' per-pixel means over n_a and n_b independent samples of an
+unbiased estimator with per-pixel mean t and variance s^2 (each channel a value; `guided` is
+unbiased, so noise is its whole error). The image shown is m = (n_a a + n_b b) / (n_a + n_b), so
+Var(m) = s^2 / (n_a + n_b). The halves are independent with the same mean, so
+
+    E[(a - b)^2] = Var(a) + Var(b) = s^2 (1/n_a + 1/n_b) = s^2 (n_a + n_b) / (n_a n_b)
+
+and Var(m) = w E[(a - b)^2] with w = n_a n_b / (n_a + n_b)^2 (1/4 when n_a = n_b). Averaged over
+pixels, N^2 = w mean((a - b)^2) estimates mean(Var(m)) = E[mean((m - t)^2)], the square of the
+numerator of the relative RMSE (app/bench/metrics.rrmse). Its denominator is mean(t^2); since
+E[m^2] = t^2 + Var(m), T^2 = mean(m^2) - N^2 estimates it without the upward bias mean(m^2) has
+at few samples. The estimate is sqrt(N^2 / T^2): with n_a = n_b and the noise small, the brief's
+sqrt(mean((a - b)^2)) / (2 sqrt(mean(((a + b) / 2)^2))).
+
+The raymarcher's image r (biased, and independent of the halves) is judged against the same
+unbiased m: E[mean((r - m)^2)] = mean((r - t)^2) + mean(Var(m)), so its relative error is
+sqrt((mean((r - m)^2) - N^2) / T^2). `refine` shows the halves' mean once its estimated error is
+below that (app/viewer/session.py).
+
+The sums are reduced on the GPU (a workgroup's in shared memory, then one workgroup over the
+partials) and 16 bytes read back, only at the checks the session schedules (REFINE_CHECK_FRAMES):
+the combine itself runs every frame with no read-back.
+"""
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from ..gl.shaders import compute_program, set_uniforms
+from .accumulation import Accumulation, SumAccumulation
+
+GROUP_SIDE = 16
+
+
+@dataclass(frozen=True)
+class RefineEstimate:
+    """Estimated relative RMSEs against the exact image: the halves' mean (`guided`) and the
+    raymarcher's (NaN where not measured), and the guided samples they were measured at."""
+    guided: float
+    raymarch: float
+    samples: int
+
+
+def weight(n_a: int, n_b: int) -> float:
+    """w = n_a n_b / (n_a + n_b)^2: Var(m) = w E[(a - b)^2] (0 while a half is empty)."""
+    n = n_a + n_b
+    return n_a * n_b / (n * n) if n_a > 0 and n_b > 0 else 0.0
+
+
+def half_buffer_sums(a: np.ndarray, b: np.ndarray, n_a: int, n_b: int,
+                     raymarched: np.ndarray | None = None) -> tuple[float, float, float, int]:
+    """The shader's sums (float64): sum (a - b)^2, sum m^2, sum (r - m)^2 (0 without r), and the
+    count of values (pixels times channels)."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    m = (n_a * a + n_b * b) / max(n_a + n_b, 1)
+    ray = 0.0 if raymarched is None else float(np.sum((np.asarray(raymarched, np.float64) - m) ** 2))
+    return float(np.sum((a - b) ** 2)), float(np.sum(m * m)), ray, a.size
+
+
+def error_from_sums(sums, n_a: int, n_b: int, samples: int = 0,
+                    with_raymarch: bool = True) -> RefineEstimate:
+    """The estimates of the module's docstring from the three sums and the count of values."""
+    diff, mean_sq, ray, count = sums
+    w = weight(n_a, n_b)
+    if w <= 0.0 or count <= 0:
+        return RefineEstimate(float("nan"), float("nan"), samples)
+    noise2 = w * diff / count
+    signal2 = mean_sq / count - noise2
+    if not signal2 > 0.0:
+        return RefineEstimate(float("nan"), float("nan"), samples)
+    guided = math.sqrt(noise2 / signal2)
+    raymarch = (math.sqrt(max(ray / count - noise2, 0.0) / signal2) if with_raymarch
+                else float("nan"))
+    return RefineEstimate(guided, raymarch, samples)
+
+
+def half_buffer_error(a: np.ndarray, b: np.ndarray, n_a: int = 1, n_b: int = 1,
+                      raymarched: np.ndarray | None = None) -> RefineEstimate:
+    """The estimated relative RMSE of the halves' mean (and of `raymarched`, when given)."""
+    return error_from_sums(half_buffer_sums(a, b, n_a, n_b, raymarched), n_a, n_b,
+                           n_a + n_b, raymarched is not None)
+
+
+class HalfBuffers:
+    """Two independent `guided` accumulations (each a SumAccumulation: level 1 and level 0) and
+    the image shown, their count-weighted mean (an Accumulation: rgb the mean, alpha the count),
+    combined on the GPU."""
+
+    def __init__(self, ctx: moderngl.Context, width: int, height: int):
+        self.ctx = ctx
+        self.width, self.height = width, height
+        self.halves = [SumAccumulation(Accumulation(ctx, width, height),
+                                       Accumulation(ctx, width, height)) for _ in range(2)]
+        self.combined = Accumulation(ctx, width, height)
+        self.groups = ((width + GROUP_SIDE - 1) // GROUP_SIDE, (height + GROUP_SIDE - 1) // GROUP_SIDE)
+        self.partials = ctx.buffer(reserve=16 * self.groups[0] * self.groups[1])
+        self.sums = ctx.buffer(reserve=16)
+        self._combine = compute_program(ctx, "refine_halves.comp", {"STAGE": 1})
+        self._reduce = compute_program(ctx, "refine_halves.comp", {"STAGE": 2})
+        self.reads = 0            # read-backs so far (a test counts them)
+
+    @property
+    def counts(self) -> tuple[int, int]:
+        return self.halves[0].samples, self.halves[1].samples
+
+    @property
+    def samples(self) -> int:
+        return sum(self.counts)
+
+    def reset(self) -> None:
+        for half in self.halves:
+            half.residual.reset()
+            half.level0.reset()
+        self.combined.reset()
+
+    def next_half(self) -> int:
+        """The half the next batch of samples goes to: the one with fewer (A on a tie)."""
+        a, b = self.counts
+        return 0 if a <= b else 1
+
+    def combine(self, raymarched: Accumulation | None = None, reduce: bool = False) -> None:
+        """Writes the halves' mean into `combined` (no host transfer); with `reduce`, also the
+        estimator's sums into a 16-byte buffer that `read_estimate` reads."""
+        n_a, n_b = self.counts
+        total = n_a + n_b
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+        units = [self.halves[0].residual, self.halves[0].level0, self.halves[1].residual,
+                 self.halves[1].level0, raymarched or self.halves[0].residual]
+        for unit, acc in enumerate(units):
+            acc.texture.bind_to_image(unit, read=True, write=False)
+        self.combined.texture.bind_to_image(5, read=False, write=True)
+        self.partials.bind_to_storage_buffer(0)
+        self.sums.bind_to_storage_buffer(1)
+        set_uniforms(self._combine, {"weight_a": n_a / total if total else 0.5,
+                                     "total_samples": float(total), "reduce": int(reduce),
+                                     "have_raymarch": int(raymarched is not None)})
+        self._combine.run(*self.groups)
+        self.combined.samples = total
+        if reduce:
+            self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+            set_uniforms(self._reduce, {"partial_count": self.groups[0] * self.groups[1]})
+            self._reduce.run(1, 1)
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+
+    def read_sums(self) -> tuple[float, float, float, int]:
+        """The last reduction's sums (a 16-byte read-back) and the count of values."""
+        self.reads += 1
+        x, y, z, _ = struct.unpack("4f", self.sums.read())
+        return x, y, z, 3 * self.width * self.height
+
+    def read_estimate(self, with_raymarch: bool) -> RefineEstimate:
+        n_a, n_b = self.counts
+        return error_from_sums(self.read_sums(), n_a, n_b, n_a + n_b, with_raymarch)
+
+    def release(self) -> None:
+        for half in self.halves:
+            half.release()
+        self.combined.release()
+        for obj in (self.partials, self.sums, self._combine, self._reduce):
+            obj.release()
