@@ -72,6 +72,11 @@ class Volume:
     # What is computed from the data once and kept with it (the majorant grid's density ranges,
     # keyed by their cells): a step shown again costs nothing.
     derived: dict = field(default_factory=dict, repr=False)
+    # A volume read brick by brick (app/bricks.py): its BrickStore (data is then a LazyData), and
+    # the sources of its coarser levels finest first (an OME-Zarr store's multiscales); None and
+    # () for a volume in memory.
+    bricks: object = field(default=None, repr=False)
+    levels: tuple = field(default=(), repr=False)
 
     @property
     def dims(self) -> tuple[int, int, int]:
@@ -106,7 +111,10 @@ class Volume:
             r == (0.0, 255.0) for r in (self.channel_ranges or (self.value_range,)))
 
     def histogram(self, bins: int = 128, channel: int = 0) -> np.ndarray:
-        counts, _ = np.histogram(self.channel(channel), bins=bins, range=(0.0, 1.0))
+        data = self.channel(channel)
+        if hasattr(data, "sample"):   # read brick by brick: a strided sample of it
+            data = data.sample()
+        counts, _ = np.histogram(data, bins=bins, range=(0.0, 1.0))
         return counts
 
 
@@ -503,12 +511,14 @@ class VolumeFile:
 
 
 def load_volume(spec: VolumeSpec, base_dir: str | None = None,
-                channels: tuple | None = None, time: int = 0) -> Volume:
+                channels: tuple | None = None, time: int = 0,
+                brick: int | None = None) -> Volume:
     """Load the volume a scene names: a built-in or a file; errors name the file and the problem.
     `channels`: the channels to show (app/channels.py effective_channels; None: a file of one
     channel, or its channels with their defaults). `time`: the step of a time series (SPEC.md,
     Time series: every step normalised alike, by the whole series' range where the scene gives
-    none)."""
+    none). A Zarr store larger than app/bricks.py LAZY_BYTES or LAZY_SIDE, or any with `brick`
+    given, is read brick by brick (bricks of `brick` voxels, default 64) instead of whole."""
     spacing = spec.spacing if spec.spacing is not None else (1.0, 1.0, 1.0)
     if spec.path is None:
         name = spec.builtin or "cloud"
@@ -527,6 +537,11 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
         norm, vr = normalise(data, vr, f"built-in '{name}'")
         return Volume(norm, tuple(float(v) for v in spacing), f"builtin:{name}", vr, "float32",
                       float(data.min()), float(data.max()))
+    p = _resolve(spec.path, base_dir)
+    if formats.is_zarr(p) and (brick is not None or _large_zarr(p)):
+        from .bricks import lazy_zarr_volume
+        from .twins.brick_pool import DEFAULT_BRICK_SIZE
+        return lazy_zarr_volume(p, spec, time, channels, brick or DEFAULT_BRICK_SIZE)
     found = _read_series(spec, base_dir)
     raw, name, direction, notes = found.raw, found.name, found.direction, found.notes
     where = str(_resolve(spec.path, base_dir))
@@ -564,6 +579,14 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
         volume, notes=notes, direction=direction, orientation=orientation,
         oblique_degrees=oblique, dicom_listing=found.listing, dicom_series=found.series,
         **({"time": time, "time_steps": steps} if steps > 1 else {}))
+
+
+def _large_zarr(p: Path) -> bool:
+    """A Zarr store too large to read whole (app/bricks.py LAZY_BYTES, LAZY_SIDE)."""
+    from .bricks import LAZY_BYTES, LAZY_SIDE
+    array = formats.open_zarr(p)[0]
+    spatial = sorted(array.shape)[-3:]
+    return 4 * int(np.prod(array.shape, dtype=np.int64)) > LAZY_BYTES or max(spatial) > LAZY_SIDE
 
 
 # The last time series read (app/volume.py _read_series): its key and (raw, spacing, name).
@@ -670,6 +693,6 @@ def _finite_min_max(raw: np.ndarray) -> tuple[float, float]:
     return (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)
 
 
-def load_scene_volume(scene: Scene) -> Volume:
+def load_scene_volume(scene: Scene, brick: int | None = None) -> Volume:
     from .channels import scene_channels
-    return load_volume(scene.volume, scene.base_dir, scene_channels(scene), scene.time)
+    return load_volume(scene.volume, scene.base_dir, scene_channels(scene), scene.time, brick)
