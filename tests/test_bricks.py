@@ -162,3 +162,28 @@ def test_volume_longer_than_the_texture_limit_is_bricked(ctx):
         assert np.isfinite(image).all() and image.max() > 0
     finally:
         r.release()
+
+
+def test_brick_bench_quick(tmp_path):
+    """scripts/brick_bench.py --quick (the GPU run's code at llvmpipe's size): a capped OME-Zarr
+    volume shown at a coarser level with its note and timings, its error against level 0, and a
+    volume longer than the texture limit rendered bricked."""
+    import importlib.util
+    import json
+    import sys
+    from conftest import ROOT
+    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "scripts" / "brick_bench.py")
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("brick_bench", bench)
+    spec.loader.exec_module(bench)
+    assert bench.main([str(tmp_path / "out"), "--quick"]) == 0
+    rec = json.loads((tmp_path / "out" / "results.json").read_text())
+    capped = rec["capped"]
+    assert capped["bricked"] and capped["level_dims"][0] < 48
+    assert any("coarser" in n for n in capped["notes"])
+    assert capped["pool_bytes"] <= capped["cap_bytes"]
+    assert capped["first_image_s"] > 0 and capped["fps"] > 0
+    assert 0 < rec["rrmse_vs_uncapped"]["rrmse"] < 1.0
+    assert rec["long"]["bricked"] and rec["long"]["finite"] and rec["long"]["mean_radiance"] > 0
+    assert rec["long"]["dims"][0] > rec["long"]["max_3d_texture_size"]
+    assert "fps" in (tmp_path / "out" / "report.md").read_text()
