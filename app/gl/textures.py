@@ -15,7 +15,7 @@ def _check_gl(ctx: moderngl.Context, what: str) -> None:
         raise VolumeError(f"{what}: OpenGL error {err}")
 
 
-BRICKING_HINT = "bricking (README, Volume files) would split it into textures that fit"
+BRICKING_HINT = "a volume that does not fit is read in bricks instead (docs/bricking.md)"
 
 
 def check_volume_fits(name: str, dims: tuple[int, int, int], bytes_per_voxel: int,
