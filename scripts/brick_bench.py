@@ -149,19 +149,51 @@ def _region(volume, lo: float, hi: float) -> np.ndarray:
     return src.density(src.read(a[0], b[0], a[1], b[1], a[2], b[2]))
 
 
-def run(out: Path, s: Settings, quick: bool) -> dict:
+PARTS = ("capped", "uncapped", "long")
+
+
+def _written(path: Path, dims, reuse: bool, chunk: int, levels: int) -> float | None:
+    """Seconds to write the store, or None where --reuse found it written (same shape)."""
+    if reuse and path.exists():
+        import zarr
+        try:
+            shape = zarr.open_group(str(path), mode="r")["0"].shape
+        except Exception:   # not a complete store: written again
+            shape = None
+        if shape == tuple(dims[::-1]):
+            return None
+    return write_ome_zarr(path, dims, chunk, levels)
+
+
+def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     ctx = create_headless_context()
     max_side = int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"])
-    records: dict = {"device": describe(ctx), "settings": asdict(s), "quick": quick}
+    old = out / "results.json"
+    records: dict = json.loads(old.read_text()) if reuse and old.exists() else {}
+    records.update({"device": describe(ctx), "settings": asdict(s), "quick": quick})
     from app.gl.brick_pool import slot_bytes
     cap = s.cap or 12 * slot_bytes(s.brick, 1, False)
     levels = max(1, int(np.log2(max(s.size // 64, 1))) + 1) if not quick else 3
     path = out / "volume.zarr"
-    records["write_s"] = write_ome_zarr(path, (s.size,) * 3, s.chunk, levels)
-    records["levels_written"] = levels
+    if "capped" in parts or "uncapped" in parts:
+        written = _written(path, (s.size,) * 3, reuse, s.chunk, levels)
+        if written is not None:
+            records["write_s"] = written
+        records["levels_written"] = levels
     scene = _scene(path, s)
     settings = RenderSettings(volume_memory_bytes=cap, brick_size=s.brick)
+    if "capped" in parts or "uncapped" in parts:
+        _capped(ctx, records, scene, settings, cap, s, parts)
+    if "long" in parts:
+        _long(ctx, records, out, s, quick, max_side, reuse)
+    (out / "results.json").write_text(json.dumps(records, indent=2))
+    _report(out, records, s)
+    ctx.release()
+    return records
+
+
+def _capped(ctx, records, scene, settings, cap, s, parts):
 
     # time to the first image under the cap
     start = time.perf_counter()
@@ -174,6 +206,7 @@ def run(out: Path, s: Settings, quick: bool) -> dict:
         "level_dims": list(shown.dims), "notes": list(shown.notes),
         "pool_bytes": int(r.resources.volume_tex.nbytes) if r.resources.bricked else None,
         "bricked": r.resources.bricked, **_frames(r, s)}
+    r.invalidate()                               # the first image baked them: again, timed
     t = time.perf_counter()
     bake_ms = r.bake(seed=1)
     light_ms = r.bake_light()
@@ -182,7 +215,10 @@ def run(out: Path, s: Settings, quick: bool) -> dict:
                              bake_and_light_wall_s=time.perf_counter() - t)
     capped_image = r.render("raymarch", spp=4, seed=7).image
     capped_volume = shown
+    records["first_image_mean"] = float(first.mean())
     r.release()
+    if "uncapped" not in parts:
+        return
 
     # the uncapped render (level 0, bricked), or level 0 against the capped level over a crop
     try:
@@ -206,10 +242,14 @@ def run(out: Path, s: Settings, quick: bool) -> dict:
             "what": "central half of each axis, level 0 against the capped level",
             "why": str(exc), "rrmse": rrmse(images[1], images[0])}
 
-    # the long volume
+
+
+def _long(ctx, records, out, s, quick, max_side, reuse):
     long = s.long if not quick else (max_side + 40, s.long[1], s.long[2])
     lpath = out / "long.zarr"
-    records["long_write_s"] = write_ome_zarr(lpath, long, s.chunk, 1)
+    written = _written(lpath, long, reuse, s.chunk, 1)
+    if written is not None:
+        records["long_write_s"] = written
     start = time.perf_counter()
     rl = Renderer(ctx, _scene(lpath, s), settings=RenderSettings(brick_size=s.brick))
     image = rl.render("raymarch", spp=1, seed=0).image
@@ -221,21 +261,24 @@ def run(out: Path, s: Settings, quick: bool) -> dict:
                        "finite": bool(np.isfinite(image).all()),
                        "mean_radiance": float(image.mean()), **_frames(rl, s)}
     rl.release()
-    records["first_image_mean"] = float(first.mean())
-    (out / "results.json").write_text(json.dumps(records, indent=2))
-    c, lg = records["capped"], records["long"]
-    (out / "report.md").write_text(
-        f"# Bricked volumes ({records['device']})\n\n"
-        f"- {s.size}^3 uint16 under a {cap / 2**30:.2f} GiB cap: level {c['level_dims']}, "
-        f"first image {c['first_image_s']:.1f} s, raymarched {s.width}x{s.height} "
-        f"{c['fps']:.1f} fps, bake {c['bake_ms']:.0f} ms + light grid {c['light_ms']:.0f} ms; "
-        f"rRMSE {records['rrmse_vs_uncapped']['rrmse']:.4f} "
-        f"({records['rrmse_vs_uncapped']['what']})\n"
-        f"- notes: {'; '.join(c['notes']) or 'none'}\n"
-        f"- long volume {lg['dims']}: bricked {lg['bricked']}, first image "
-        f"{lg['first_image_s']:.1f} s, {lg['fps']:.1f} fps\n")
-    ctx.release()
-    return records
+
+
+def _report(out: Path, records: dict, s: Settings) -> None:
+    lines = [f"# Bricked volumes ({records['device']})", ""]
+    c, lg, err = records.get("capped"), records.get("long"), records.get("rrmse_vs_uncapped")
+    if c:
+        lines.append(
+            f"- {s.size}^3 uint16 under a {c['cap_bytes'] / 2**30:.2f} GiB cap: level "
+            f"{c['level_dims']}, first image {c['first_image_s']:.1f} s, raymarched "
+            f"{s.width}x{s.height} {c['fps']:.1f} fps, bake {c['bake_ms']:.0f} ms + light grid "
+            f"{c['light_ms']:.0f} ms ({c['bake_and_light_wall_s']:.1f} s wall)")
+        lines.append(f"- notes: {'; '.join(c['notes']) or 'none'}")
+    if err:
+        lines.append(f"- rRMSE against level 0: {err['rrmse']:.4f} ({err['what']})")
+    if lg:
+        lines.append(f"- long volume {lg['dims']}: bricked {lg['bricked']}, first image "
+                     f"{lg['first_image_s']:.1f} s, {lg['fps']:.1f} fps")
+    (out / "report.md").write_text("\n".join(lines) + "\n")
 
 
 def main(argv=None) -> int:
@@ -249,13 +292,20 @@ def main(argv=None) -> int:
     p.add_argument("--frames", type=int)
     p.add_argument("--probes", type=int)
     p.add_argument("--long", type=lambda t: tuple(int(v) for v in t.split(",")))
+    p.add_argument("--parts", type=lambda t: tuple(t.split(",")), default=PARTS,
+                   help="which measurements: capped,uncapped,long (default all)")
+    p.add_argument("--reuse", action="store_true",
+                   help="keep stores already written (same shape) and add to results.json")
     args = p.parse_args(argv)
+    unknown = set(args.parts) - set(PARTS)
+    if unknown:
+        p.error(f"--parts: unknown {', '.join(sorted(unknown))} (known: {', '.join(PARTS)})")
     s = QUICK if args.quick else Settings()
     changes = {k: v for k, v in vars(args).items()
-               if k not in ("out", "quick") and v is not None}
+               if k not in ("out", "quick", "parts", "reuse") and v is not None}
     from dataclasses import replace
     s = replace(s, **changes)
-    run(Path(args.out), s, args.quick)
+    run(Path(args.out), s, args.quick, args.parts, args.reuse)
     return 0
 
 
