@@ -657,7 +657,8 @@ def volume_from_canonical(raw: np.ndarray, spacing: tuple[float, float, float], 
     if len(norms) == 1:
         return Volume(norms[0], spacing, name, ranges[0], raw.dtype.name, *raws[0])
     return Volume(np.stack(norms, axis=-1), spacing, name, ranges[0], raw.dtype.name,
-                  raws[0][0], raws[0][1], tuple(ranges), tuple(raws))
+                  raws[0][0], raws[0][1], channel_ranges=tuple(ranges),
+                  channel_raw=tuple(raws))
 
 
 def volume_from_array(array, axes: str = "zyx", spacing=(1.0, 1.0, 1.0),
