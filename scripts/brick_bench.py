@@ -4,6 +4,7 @@ GL_MAX_3D_TEXTURE_SIZE) rendered.
 
     python scripts/brick_bench.py OUT_DIR [--quick] [--size 2048] [--cap 4G]
         [--width 1920 --height 1080] [--frames 30] [--probes 32] [--long 20000,512,512]
+        [--parts write,capped,uncapped,long] [--reuse] [--stores DIR]
 
 1. Writes OUT_DIR/volume.zarr: an OME-Zarr image (levels 0.. each 2x box-filtered, chunks of
    64^3), uint16, a ball of smooth noise in vacuum, slab by slab (never whole in memory); and
@@ -149,7 +150,7 @@ def _region(volume, lo: float, hi: float) -> np.ndarray:
     return src.density(src.read(a[0], b[0], a[1], b[1], a[2], b[2]))
 
 
-PARTS = ("capped", "uncapped", "long")
+PARTS = ("write", "capped", "uncapped", "long")
 
 
 def _written(path: Path, dims, reuse: bool, chunk: int, levels: int) -> float | None:
@@ -165,8 +166,17 @@ def _written(path: Path, dims, reuse: bool, chunk: int, levels: int) -> float | 
     return write_ome_zarr(path, dims, chunk, levels)
 
 
-def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False) -> dict:
+def _need(path: Path) -> Path:
+    if not path.exists():
+        raise SystemExit(f"{path}: not written yet; run with --parts write first (or with it)")
+    return path
+
+
+def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
+        stores: Path | None = None) -> dict:
     out.mkdir(parents=True, exist_ok=True)
+    stores = stores or out
+    stores.mkdir(parents=True, exist_ok=True)
     ctx = create_headless_context()
     max_side = int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"])
     old = out / "results.json"
@@ -175,18 +185,23 @@ def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False) -
     from app.gl.brick_pool import slot_bytes
     cap = s.cap or 12 * slot_bytes(s.brick, 1, False)
     levels = max(1, int(np.log2(max(s.size // 64, 1))) + 1) if not quick else 3
-    path = out / "volume.zarr"
-    if "capped" in parts or "uncapped" in parts:
+    path = stores / "volume.zarr"
+    long = s.long if not quick else (max_side + 40, s.long[1], s.long[2])
+    if "write" in parts:
         written = _written(path, (s.size,) * 3, reuse, s.chunk, levels)
         if written is not None:
             records["write_s"] = written
         records["levels_written"] = levels
+        written = _written(stores / "long.zarr", long, reuse, s.chunk, 1)
+        if written is not None:
+            records["long_write_s"] = written
     scene = _scene(path, s)
     settings = RenderSettings(volume_memory_bytes=cap, brick_size=s.brick)
     if "capped" in parts or "uncapped" in parts:
+        _need(path)
         _capped(ctx, records, scene, settings, cap, s, parts)
     if "long" in parts:
-        _long(ctx, records, out, s, quick, max_side, reuse)
+        _long(ctx, records, _need(stores / "long.zarr"), s, long)
     (out / "results.json").write_text(json.dumps(records, indent=2))
     _report(out, records, s)
     ctx.release()
@@ -244,12 +259,8 @@ def _capped(ctx, records, scene, settings, cap, s, parts):
 
 
 
-def _long(ctx, records, out, s, quick, max_side, reuse):
-    long = s.long if not quick else (max_side + 40, s.long[1], s.long[2])
-    lpath = out / "long.zarr"
-    written = _written(lpath, long, reuse, s.chunk, 1)
-    if written is not None:
-        records["long_write_s"] = written
+def _long(ctx, records, lpath, s, long):
+    max_side = int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"])
     start = time.perf_counter()
     rl = Renderer(ctx, _scene(lpath, s), settings=RenderSettings(brick_size=s.brick))
     image = rl.render("raymarch", spp=1, seed=0).image
@@ -296,16 +307,18 @@ def main(argv=None) -> int:
                    help="which measurements: capped,uncapped,long (default all)")
     p.add_argument("--reuse", action="store_true",
                    help="keep stores already written (same shape) and add to results.json")
+    p.add_argument("--stores", type=Path,
+                   help="where the Zarr stores are written (default OUT_DIR)")
     args = p.parse_args(argv)
     unknown = set(args.parts) - set(PARTS)
     if unknown:
         p.error(f"--parts: unknown {', '.join(sorted(unknown))} (known: {', '.join(PARTS)})")
     s = QUICK if args.quick else Settings()
     changes = {k: v for k, v in vars(args).items()
-               if k not in ("out", "quick", "parts", "reuse") and v is not None}
+               if k not in ("out", "quick", "parts", "reuse", "stores") and v is not None}
     from dataclasses import replace
     s = replace(s, **changes)
-    run(Path(args.out), s, args.quick, args.parts, args.reuse)
+    run(Path(args.out), s, args.quick, args.parts, args.reuse, args.stores)
     return 0
 
 
