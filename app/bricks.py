@@ -14,8 +14,98 @@ from __future__ import annotations
 import numpy as np
 
 from .scene_types import VolumeError
-from .twins.brick_pool import (APRON, CONSTANT, FREE_SLOT, brick_counts, constant_bricks,
-                               constant_values, slot_grid, slot_side)
+
+APRON = 1
+CONSTANT = 0x80000000
+DEFAULT_BRICK_SIZE = 64
+FREE_SLOT = 0xFFFFFFFF   # brick_of_slot of a slot that holds no brick (the checking build)
+CONSTANTS_WIDTH = 1024   # the constants' texture is this wide (k at (k % width, k // width))
+
+
+def brick_counts(dims, brick: int) -> tuple[int, int, int]:
+    """Bricks per axis (x, y, z) of a volume of dims (x, y, z) voxels."""
+    return tuple(int(-(-int(n) // brick)) for n in dims)
+
+
+def slot_side(brick: int) -> int:
+    return brick + 2 * APRON
+
+
+def slot_grid(slots: int, brick: int, max_side: int) -> tuple[int, int, int]:
+    """Slots per axis (x, y, z) of an atlas holding at least `slots` slots (one at least), each
+    axis within max_side texels, as near a cube as allows; ValueError where it cannot."""
+    side = slot_side(brick)
+    per_axis = max_side // side
+    if per_axis < 1:
+        raise ValueError(f"a brick of {brick} voxels ({side} texels with its apron) exceeds the "
+                         f"3D texture side of {max_side}")
+    n = max(int(slots), 1)
+    sx = min(per_axis, int(np.ceil(n ** (1.0 / 3.0) - 1e-9)))
+    sy = min(per_axis, int(np.ceil(np.sqrt(n / sx) - 1e-9)))
+    sz = -(-n // (sx * sy))
+    if sz > per_axis:
+        raise ValueError(f"{n} bricks of {brick}^3 voxels need more slots than one 3D texture of "
+                         f"{max_side}^3 texels holds ({per_axis ** 3})")
+    return sx, sy, sz
+
+
+def slot_origin(slot: int, grid) -> np.ndarray:
+    """First texel (x, y, z) of a slot, counted as lib/brick_pool.glsl brick_slot_origin does
+    (units of slots; times slot_side for texels)."""
+    sx, sy, _ = grid
+    return np.array([slot % sx, (slot // sx) % sy, slot // (sx * sy)], np.int64)
+
+
+def constant_bricks(brick_min: np.ndarray, brick_max: np.ndarray) -> np.ndarray:
+    """[bz, by, bx] True where a brick and its apron certainly hold one value: the brick and
+    every neighbour its apron reaches (26, clamped at the faces) each hold one value, the same.
+    brick_min/max: each brick's own voxels' least and largest value, [bz, by, bx(, c)]."""
+    lo = np.asarray(brick_min, np.float64)
+    hi = np.asarray(brick_max, np.float64)
+    if lo.ndim == 3:
+        lo, hi = lo[..., None], hi[..., None]
+    one = np.all(lo == hi, axis=-1)
+    same = one.copy()
+    pad_lo = np.pad(lo, ((1, 1), (1, 1), (1, 1), (0, 0)), mode="edge")
+    pad_one = np.pad(one, 1, mode="edge")
+    bz, by, bx = one.shape
+    for dz in range(3):
+        for dy in range(3):
+            for dx in range(3):
+                same &= pad_one[dz:dz + bz, dy:dy + by, dx:dx + bx]
+                same &= np.all(pad_lo[dz:dz + bz, dy:dy + by, dx:dx + bx] == lo, axis=-1)
+    return same
+
+
+def constant_values(brick_min: np.ndarray, constant: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The constants' table (K, 4) (row 0 vacuum, then each distinct value once) and each
+    constant brick's row ([bz, by, bx], -1 elsewhere)."""
+    lo = np.asarray(brick_min, np.float32)
+    if lo.ndim == 3:
+        lo = lo[..., None]
+    rows = [np.zeros(4, np.float32)]
+    index: dict[bytes, int] = {rows[0].tobytes(): 0}
+    which = np.full(constant.shape, -1, np.int64)
+    for z, y, x in zip(*np.nonzero(constant)):
+        value = np.zeros(4, np.float32)
+        value[:lo.shape[-1]] = lo[z, y, x]
+        key = value.tobytes()
+        if key not in index:
+            index[key] = len(rows)
+            rows.append(value)
+        which[z, y, x] = index[key]
+    return np.stack(rows), which
+
+
+def texel_bytes(channels: int, exact_uint8: bool) -> int:
+    """Bytes of one atlas texel: R16 (a component a channel) for exact 8-bit data, else R32F,
+    as the one-texture volume (app/gl/textures.py volume_texture)."""
+    return (2 if exact_uint8 else 4) * channels
+
+
+def slot_bytes(brick: int, channels: int, exact_uint8: bool) -> int:
+    return slot_side(brick) ** 3 * texel_bytes(channels, exact_uint8)
+
 
 
 class ArraySource:
@@ -37,13 +127,14 @@ class ZarrSource:
     `value_range` (app/volume.py normalise: the same mapping as a whole volume's)."""
 
     def __init__(self, array, axes: str, time: int, channel: int, value_range, where: str,
-                 replace_nonfinite=None):
+                 replace_nonfinite=None, normalise=None):
         self.array = array
         self.axes = axes
         self.time, self.channel = time, channel
         self.value_range = value_range
         self.where = where
         self.replace_nonfinite = replace_nonfinite
+        self.normalise = normalise   # app/volume.py normalise (given: this module is below it)
         size = dict(zip(axes, array.shape))
         self.shape = (size["z"], size["y"], size["x"])
 
@@ -69,8 +160,7 @@ class ZarrSource:
 
     def density(self, raw: np.ndarray) -> np.ndarray:
         """Raw values as densities (app/volume.py normalise with the volume's value range)."""
-        from .volume import normalise
-        return normalise(raw, self.value_range, self.where)[0]
+        return self.normalise(raw, self.value_range, self.where)[0]
 
 
 class BrickStore:
@@ -89,7 +179,7 @@ class BrickStore:
         self.reads = np.zeros((bz, by, bx), np.int64)
         self._ranges = None
 
-    def _pencil(self, bz: int, by: int, x0: int, x1: int, apron: int) -> np.ndarray:
+    def pencil(self, bz: int, by: int, x0: int, x1: int, apron: int) -> np.ndarray:
         """The raw voxels of bricks x0 .. x1 - 1 of row (by, bz), with `apron` voxels around,
         clamped to the volume (the edge voxel repeated)."""
         nx, ny, nz = self.dims
@@ -122,7 +212,7 @@ class BrickStore:
             B = self.brick
             for z in range(bz):
                 for y in range(by):
-                    row = self._pencil(z, y, 0, bx, 0)
+                    row = self.pencil(z, y, 0, bx, 0)
                     if lo is None:
                         lo, hi = np.empty(shape, row.dtype), np.empty(shape, row.dtype)
                     for x in range(bx):
@@ -151,35 +241,6 @@ class BrickStore:
             table[z, y, x] = slot
         return table, constants, grid, resident
 
-    def upload(self, ctx, exact_uint8: bool, max_side: int):
-        """A BrickPool holding every brick that is not constant (read once more, with aprons,
-        a run of neighbours at a time; constant bricks are not read)."""
-        from .gl.brick_pool import BrickPool
-        table, constants, grid, resident = self.layout(max_side)
-        pool = BrickPool(ctx, self.dims, self.brick, self.channels, grid, table, constants,
-                         exact_uint8, self.name)
-        try:
-            B, side = self.brick, slot_side(self.brick)
-            bx, by, _ = self.counts
-            rows: dict[tuple[int, int], list[int]] = {}
-            for z, y, x in resident:
-                rows.setdefault((int(z), int(y)), []).append(int(x))
-            for (z, y), xs in rows.items():
-                runs = np.split(np.asarray(xs), np.nonzero(np.diff(xs) != 1)[0] + 1)
-                for run in runs:
-                    x0, x1 = int(run[0]), int(run[-1]) + 1
-                    pencil = self._pencil(z, y, x0, x1, APRON)
-                    for x in range(x0, x1):
-                        o = (x - x0) * B
-                        block = self.source.density(pencil[:, :, o:o + side])
-                        pool.write_slot(int(table[z, y, x]), x + bx * (y + by * z), block)
-        except BaseException:
-            pool.release()
-            raise
-        assert np.count_nonzero(pool.brick_of_slot != FREE_SLOT) == len(resident)
-        return pool
-
-
 def box_filtered(data: np.ndarray) -> np.ndarray:
     """The next level of a pyramid: 2 x 2 x 2 voxels averaged ([z, y, x(, c)]; an odd axis has
     its last voxel repeated first)."""
@@ -204,7 +265,6 @@ def source_box_filtered(source, brick: int) -> np.ndarray:
 
 def refuse_cap_below_brick(cap: int, brick: int, channels: int, exact_uint8: bool,
                            name: str) -> None:
-    from .gl.brick_pool import slot_bytes
     need = slot_bytes(brick, channels, exact_uint8)
     if cap < need:
         raise VolumeError(f"{name}: volume_memory_bytes {cap} is below one brick: a brick of "
@@ -249,62 +309,3 @@ class LazyData:
         parts = [src.density(src.read(z, z + 1, 0, self.shape[1], 0, self.shape[2]))[:, ::k, ::k]
                  for z in range(0, nz, k)]
         return np.concatenate(parts, axis=0)
-
-
-# A Zarr volume larger than this (as float32) or longer than LAZY_SIDE along an axis is read
-# brick by brick (app/volume.py load_volume) instead of whole.
-LAZY_BYTES = 1 << 30
-LAZY_SIDE = 2048
-
-
-def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
-    """A Volume of a Zarr store read brick by brick (Volume.data a LazyData, Volume.bricks its
-    BrickStore, Volume.levels the store's coarser levels): one channel (several are refused), the
-    time step `time`; normalised as the whole loader does (the value range, else the type's for
-    8-bit data, else the data's least and largest, from the range pass)."""
-    import dataclasses
-    from .volume import Volume, _resolve
-    from .volume_axes import resolve_axes
-    from .volume_formats import open_zarr
-    where = str(p)
-    array, file_spacing, axes, levels = open_zarr(p, spec.spacing is None)
-    axes = resolve_axes(axes, tuple(array.shape), spec.axes, where)
-    size = dict(zip(axes, array.shape))
-    if size.get("c", 1) > 1 or channels is not None and len(channels) > 1:
-        raise VolumeError(f"{where}: a Zarr store of {size.get('c', 1)} channels too large to "
-                          "read whole; bricking reads one channel: give volume.axes without c, or "
-                          "a store of one channel")
-    if any(a not in "tczyx" for a in axes) or not all(a in axes for a in "zyx"):
-        raise VolumeError(f"{where}: axes {axes!r}; a bricked Zarr store needs z, y and x")
-    steps = size.get("t", 1)
-    if not 0 <= time < steps:
-        raise VolumeError(f"{where}: time step {time} asked for, but the volume has "
-                          + (f"{steps} time steps (0 to {steps - 1})" if steps > 1 else
-                             "no time axis (one step)") + "; see the scene's time")
-    spacing = spec.spacing or file_spacing or (1.0, 1.0, 1.0)
-    domain = spec.domain if channels is None else channels[0].domain(spec)
-    source = ZarrSource(array, axes, time, 0, domain, where, spec.replace_nonfinite)
-    store = BrickStore(source, brick, p.name)
-    raw_lo, raw_hi = store.raw_ranges()
-    lo, hi = float(raw_lo.min()), float(raw_hi.max())
-    if domain is None:
-        if array.dtype == np.uint8:
-            domain = (0.0, 255.0)
-        elif array.dtype == np.int8:
-            domain = (-128.0, 127.0)
-        elif not hi > lo:
-            raise VolumeError(f"{where}: every voxel is {lo}; give volume.value_range to say "
-                              "what density that is")
-        else:
-            domain = (lo, hi)
-    source.value_range = tuple(float(v) for v in domain)
-    coarser = [ZarrSource(a, axes, time, 0, source.value_range, where, spec.replace_nonfinite)
-               for a in levels[1:]]
-    notes = ()
-    if spec.orientation == "patient":
-        notes += (f"{p.name} says nothing of the patient's orientation: shown as stored "
-                  "(orientation \"data\")",)
-    volume = Volume(LazyData(store), tuple(float(v) for v in spacing), p.name,
-                    source.value_range, array.dtype.name, lo, hi, notes=notes,
-                    bricks=store, levels=tuple(coarser))
-    return dataclasses.replace(volume, time=time, time_steps=steps) if steps > 1 else volume

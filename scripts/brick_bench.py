@@ -182,7 +182,7 @@ def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
     old = out / "results.json"
     records: dict = json.loads(old.read_text()) if reuse and old.exists() else {}
     records.update({"device": describe(ctx), "settings": asdict(s), "quick": quick})
-    from app.gl.brick_pool import slot_bytes
+    from app.bricks import slot_bytes
     cap = s.cap or 12 * slot_bytes(s.brick, 1, False)
     levels = max(1, int(np.log2(max(s.size // 64, 1))) + 1) if not quick else 3
     path = stores / "volume.zarr"

@@ -114,7 +114,7 @@ def _sphere_scene():
 
 
 def test_cap_shows_a_coarser_level_and_says_so(ctx):
-    from app.gl.brick_pool import slot_bytes
+    from app.bricks import slot_bytes
     one = slot_bytes(BRICK, 1, False)
     r = Renderer(ctx, _sphere_scene(), settings=RenderSettings(brick_size=BRICK,
                                                                volume_memory_bytes=12 * one))

@@ -6,25 +6,16 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from ..twins.brick_pool import (CONSTANTS_WIDTH, FREE_SLOT, Packed, brick_counts, slot_origin,
-                                slot_side)
-from ..volume import VolumeError
+from ..bricks import (APRON, CONSTANTS_WIDTH, FREE_SLOT, brick_counts, slot_bytes,  # noqa: F401
+                      slot_origin, slot_side, texel_bytes)
+from ..scene_types import VolumeError
+from ..twins.brick_pool import Packed
 
 # Texture units (0: the volume, here the atlas; 1 to 15: the passes' own, app/render/*.py).
 ATLAS_UNIT = 0
 TABLE_UNIT = 16
 CONSTANTS_UNIT = 17
 BRICK_SLOTS_BINDING = 10    # lib/brick_pool.glsl, the checking build only
-
-
-def texel_bytes(channels: int, exact_uint8: bool) -> int:
-    """Bytes of one atlas texel: R16 (a component a channel) for exact 8-bit data, else R32F,
-    as the one-texture volume (app/gl/textures.py volume_texture)."""
-    return (2 if exact_uint8 else 4) * channels
-
-
-def slot_bytes(brick: int, channels: int, exact_uint8: bool) -> int:
-    return slot_side(brick) ** 3 * texel_bytes(channels, exact_uint8)
 
 
 def atlas_payload(block: np.ndarray, exact_uint8: bool) -> bytes:
@@ -138,3 +129,31 @@ class BrickPool:
             if obj is not None:
                 obj.release()
         self.slots_buffer = None
+
+
+def upload_store(ctx: moderngl.Context, store, exact_uint8: bool, max_side: int) -> "BrickPool":
+    """A BrickPool holding every brick of an app.bricks.BrickStore that is not constant (read
+    once more, with aprons, a run of neighbours at a time; constant bricks are not read)."""
+    table, constants, grid, resident = store.layout(max_side)
+    pool = BrickPool(ctx, store.dims, store.brick, store.channels, grid, table, constants,
+                     exact_uint8, store.name)
+    try:
+        B, side = store.brick, slot_side(store.brick)
+        bx, by, _ = store.counts
+        rows: dict[tuple[int, int], list[int]] = {}
+        for z, y, x in resident:
+            rows.setdefault((int(z), int(y)), []).append(int(x))
+        for (z, y), xs in rows.items():
+            runs = np.split(np.asarray(xs), np.nonzero(np.diff(xs) != 1)[0] + 1)
+            for run in runs:
+                x0, x1 = int(run[0]), int(run[-1]) + 1
+                pencil = store.pencil(z, y, x0, x1, APRON)
+                for x in range(x0, x1):
+                    o = (x - x0) * B
+                    block = store.source.density(pencil[:, :, o:o + side])
+                    pool.write_slot(int(table[z, y, x]), x + bx * (y + by * z), block)
+    except BaseException:
+        pool.release()
+        raise
+    assert np.count_nonzero(pool.brick_of_slot != FREE_SLOT) == len(resident)
+    return pool

@@ -10,11 +10,11 @@ import dataclasses
 import moderngl
 import numpy as np
 
-from ..bricks import (ArraySource, BrickStore, LazyData, box_filtered, refuse_cap_below_brick,
-                      source_box_filtered)
-from ..gl.brick_pool import slot_bytes, texel_bytes
+from ..bricks import (DEFAULT_BRICK_SIZE, ArraySource, BrickStore, LazyData, box_filtered,
+                      brick_counts, refuse_cap_below_brick, slot_bytes, slot_grid,
+                      source_box_filtered, texel_bytes)
+from ..gl.brick_pool import upload_store
 from ..gl.textures import device_available, volume_texture
-from ..twins.brick_pool import DEFAULT_BRICK_SIZE, brick_counts, slot_grid
 from ..volume import Volume, VolumeError
 
 
@@ -97,7 +97,7 @@ def place_volume(ctx: moderngl.Context, volume: Volume, memory_bytes: int | None
             raise VolumeError(f"{volume.name}: even one brick of {brick}^3 voxels exceeds the "
                               f"{_gib(cap)} of {cap_name}")
         current, level = coarser(current, brick), level + 1
-    pool = store.upload(ctx, current.exact_uint8, max_side)
+    pool = upload_store(ctx, store, current.exact_uint8, max_side)
     notes = current.notes
     if level > 0:
         held = (cap // slot_bytes(brick, channels, exact)) if cap is not None else None

@@ -3,7 +3,8 @@ non-constant brick in a slot of an atlas with a one-voxel apron ((B + 2)^3 texel
 table (a uint32 a brick: its slot, or CONSTANT | k for a brick whose voxels and apron all hold
 constant k) and the table of constants (k = 0 is vacuum).
 
-`pack` builds the three from a whole array (what app/gl/brick_pool.py uploads brick by brick from
+The layout (brick counts, slots, which bricks are constant) is app/bricks.py's, shared with the
+store. `pack` builds the three from a whole array (what app/gl/brick_pool.py uploads brick by brick from
 an app.bricks.BrickStore); `bricked_sample` and `bricked_voxel` read them as the shader does, and
 equal app/twins/medium.py trilinear of the whole array (the seams included) within float rounding.
 """
@@ -13,48 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..bricks import (APRON, CONSTANT, CONSTANTS_WIDTH, DEFAULT_BRICK_SIZE,  # noqa: F401
+                      FREE_SLOT, brick_counts, constant_bricks, constant_values, slot_grid,
+                      slot_origin, slot_side)
 from .medium import trilinear
-
-APRON = 1
-CONSTANT = 0x80000000
-DEFAULT_BRICK_SIZE = 64
-FREE_SLOT = 0xFFFFFFFF   # brick_of_slot of a slot that holds no brick (the checking build)
-CONSTANTS_WIDTH = 1024   # the constants' texture is this wide (k at (k % width, k // width))
-
-
-def brick_counts(dims, brick: int) -> tuple[int, int, int]:
-    """Bricks per axis (x, y, z) of a volume of dims (x, y, z) voxels."""
-    return tuple(int(-(-int(n) // brick)) for n in dims)
-
-
-def slot_side(brick: int) -> int:
-    return brick + 2 * APRON
-
-
-def slot_grid(slots: int, brick: int, max_side: int) -> tuple[int, int, int]:
-    """Slots per axis (x, y, z) of an atlas holding at least `slots` slots (one at least), each
-    axis within max_side texels, as near a cube as allows; ValueError where it cannot."""
-    side = slot_side(brick)
-    per_axis = max_side // side
-    if per_axis < 1:
-        raise ValueError(f"a brick of {brick} voxels ({side} texels with its apron) exceeds the "
-                         f"3D texture side of {max_side}")
-    n = max(int(slots), 1)
-    sx = min(per_axis, int(np.ceil(n ** (1.0 / 3.0) - 1e-9)))
-    sy = min(per_axis, int(np.ceil(np.sqrt(n / sx) - 1e-9)))
-    sz = -(-n // (sx * sy))
-    if sz > per_axis:
-        raise ValueError(f"{n} bricks of {brick}^3 voxels need more slots than one 3D texture of "
-                         f"{max_side}^3 texels holds ({per_axis ** 3})")
-    return sx, sy, sz
-
-
-def slot_origin(slot: int, grid) -> np.ndarray:
-    """First texel (x, y, z) of a slot, counted as lib/brick_pool.glsl brick_slot_origin does
-    (units of slots; times slot_side for texels)."""
-    sx, sy, _ = grid
-    return np.array([slot % sx, (slot // sx) % sy, slot // (sx * sy)], np.int64)
-
 
 def brick_block(data: np.ndarray, b, brick: int) -> np.ndarray:
     """Brick b's (x, y, z) voxels with the apron: data [z, y, x(, c)] at indices b B - 1 ..
@@ -62,27 +25,6 @@ def brick_block(data: np.ndarray, b, brick: int) -> np.ndarray:
     idx = [np.clip(np.arange(int(b[a]) * brick - APRON, int(b[a]) * brick + brick + APRON),
                    0, data.shape[2 - a] - 1) for a in range(3)]
     return data[np.ix_(idx[2], idx[1], idx[0])]
-
-
-def constant_bricks(brick_min: np.ndarray, brick_max: np.ndarray) -> np.ndarray:
-    """[bz, by, bx] True where a brick and its apron certainly hold one value: the brick and
-    every neighbour its apron reaches (26, clamped at the faces) each hold one value, the same.
-    brick_min/max: each brick's own voxels' least and largest value, [bz, by, bx(, c)]."""
-    lo = np.asarray(brick_min, np.float64)
-    hi = np.asarray(brick_max, np.float64)
-    if lo.ndim == 3:
-        lo, hi = lo[..., None], hi[..., None]
-    one = np.all(lo == hi, axis=-1)
-    same = one.copy()
-    pad_lo = np.pad(lo, ((1, 1), (1, 1), (1, 1), (0, 0)), mode="edge")
-    pad_one = np.pad(one, 1, mode="edge")
-    bz, by, bx = one.shape
-    for dz in range(3):
-        for dy in range(3):
-            for dx in range(3):
-                same &= pad_one[dz:dz + bz, dy:dy + by, dx:dx + bx]
-                same &= np.all(pad_lo[dz:dz + bz, dy:dy + by, dx:dx + bx] == lo, axis=-1)
-    return same
 
 
 @dataclass
@@ -107,26 +49,6 @@ def brick_ranges(data: np.ndarray, brick: int) -> tuple[np.ndarray, np.ndarray]:
     full = np.pad(data, pad, mode="edge")
     shaped = full.reshape((bz, brick, by, brick, bx, brick) + data.shape[3:])
     return shaped.min(axis=(1, 3, 5)), shaped.max(axis=(1, 3, 5))
-
-
-def constant_values(brick_min: np.ndarray, constant: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The constants' table (K, 4) (row 0 vacuum, then each distinct value once) and each
-    constant brick's row ([bz, by, bx], -1 elsewhere)."""
-    lo = np.asarray(brick_min, np.float32)
-    if lo.ndim == 3:
-        lo = lo[..., None]
-    rows = [np.zeros(4, np.float32)]
-    index: dict[bytes, int] = {rows[0].tobytes(): 0}
-    which = np.full(constant.shape, -1, np.int64)
-    for z, y, x in zip(*np.nonzero(constant)):
-        value = np.zeros(4, np.float32)
-        value[:lo.shape[-1]] = lo[z, y, x]
-        key = value.tobytes()
-        if key not in index:
-            index[key] = len(rows)
-            rows.append(value)
-        which[z, y, x] = index[key]
-    return np.stack(rows), which
 
 
 def pack(data: np.ndarray, brick: int, max_side: int = 2048) -> Packed:
