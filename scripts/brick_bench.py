@@ -4,7 +4,7 @@ GL_MAX_3D_TEXTURE_SIZE) rendered.
 
     python scripts/brick_bench.py OUT_DIR [--quick] [--size 2048] [--cap 4G]
         [--width 1920 --height 1080] [--frames 30] [--probes 32] [--long 20000,512,512]
-        [--parts write,capped,uncapped,long] [--reuse] [--stores DIR]
+        [--parts write,write-long,capped,uncapped,long] [--reuse] [--stores DIR]
 
 1. Writes OUT_DIR/volume.zarr: an OME-Zarr image (levels 0.. each 2x box-filtered, chunks of
    64^3), uint16, a ball of smooth noise in vacuum, slab by slab (never whole in memory); and
@@ -150,7 +150,7 @@ def _region(volume, lo: float, hi: float) -> np.ndarray:
     return src.density(src.read(a[0], b[0], a[1], b[1], a[2], b[2]))
 
 
-PARTS = ("write", "capped", "uncapped", "long")
+PARTS = ("write", "write-long", "capped", "uncapped", "long")
 
 
 def _written(path: Path, dims, reuse: bool, chunk: int, levels: int) -> float | None:
@@ -168,7 +168,8 @@ def _written(path: Path, dims, reuse: bool, chunk: int, levels: int) -> float | 
 
 def _need(path: Path) -> Path:
     if not path.exists():
-        raise SystemExit(f"{path}: not written yet; run with --parts write first (or with it)")
+        raise SystemExit(f"{path}: not written yet; run with --parts write (the cube) or "
+                         "write-long first (or with it)")
     return path
 
 
@@ -192,6 +193,7 @@ def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
         if written is not None:
             records["write_s"] = written
         records["levels_written"] = levels
+    if "write-long" in parts:
         written = _written(stores / "long.zarr", long, reuse, s.chunk, 1)
         if written is not None:
             records["long_write_s"] = written
@@ -304,7 +306,7 @@ def main(argv=None) -> int:
     p.add_argument("--probes", type=int)
     p.add_argument("--long", type=lambda t: tuple(int(v) for v in t.split(",")))
     p.add_argument("--parts", type=lambda t: tuple(t.split(",")), default=PARTS,
-                   help="which measurements: capped,uncapped,long (default all)")
+                   help="which parts: write,write-long,capped,uncapped,long (default all)")
     p.add_argument("--reuse", action="store_true",
                    help="keep stores already written (same shape) and add to results.json")
     p.add_argument("--stores", type=Path,
