@@ -11,6 +11,22 @@ from .frontend import (ArgumentParser, OptionError, add_colorbar_options, add_sc
 from .scene import SceneError
 
 
+
+def memory_size(text: str) -> int:
+    """Bytes from "4G", "512M", "65536" (K, M, G, T: powers of 1024)."""
+    units = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+    t = text.strip().upper().removesuffix("B").removesuffix("I")
+    scale = units.get(t[-1:], 1)
+    number = t[:-1] if t[-1:] in units else t
+    try:
+        value = int(float(number) * scale)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a size in bytes such as 4G or 512M, got "
+                                         f"{text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a size > 0, got {text!r}")
+    return value
+
 def cmd_view(args: argparse.Namespace) -> int:
     from .viewer.launch import run_view  # imports glfw and imgui only when a window may open
     return run_view(args)
@@ -214,6 +230,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-empty-space-skipping", dest="empty_space_skipping", action="store_false",
                    help="track with one global majorant instead of the macrocell grid (the same "
                         "image; for comparisons)")
+    r.add_argument("--volume-memory", type=memory_size, metavar="BYTES",
+                   help="the volume's GPU memory at most (e.g. 4G, 512M): where one 3D texture "
+                        "exceeds it, the finest level whose bricks fit is rendered, with a note")
     add_volume_options(r)
     add_scene_edit_options(r)
     add_colorbar_options(r)

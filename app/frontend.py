@@ -371,7 +371,8 @@ def render_defaults() -> dict:
                 height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True,
                 gather_event=None, series=None, orientation=None, data_window=None, crop=None,
                 crop_voxels=None, clip_plane=None, no_crop=False, no_clip_plane=False,
-                transfer_function=None, colorbar=None, colorbar_title="value")
+                transfer_function=None, colorbar=None, colorbar_title="value",
+                volume_memory=None)
 
 
 def render_to_files(args: argparse.Namespace) -> int:
@@ -419,7 +420,11 @@ def render_to_files(args: argparse.Namespace) -> int:
         raymarch_stage=args.raymarch_stage,
         raymarch_step=args.raymarch_step or DEFAULT_RAYMARCH_STEP,
         empty_space_skipping=args.empty_space_skipping,
-        gather_event=gather_event if gather_event is not None else 1))
+        gather_event=gather_event if gather_event is not None else 1,
+        volume_memory_bytes=getattr(args, "volume_memory", None)))
+    for note in renderer.resources.volume.notes:   # where bricking showed a coarser level
+        if note not in volume.notes:
+            print(f"note: {note}", file=sys.stderr)
     if args.auto_probes is not None:
         from .render.auto_probes import choose_probes
         choice = choose_probes(renderer, args.auto_probes, args.method,

@@ -72,6 +72,11 @@ class Volume:
     # What is computed from the data once and kept with it (the majorant grid's density ranges,
     # keyed by their cells): a step shown again costs nothing.
     derived: dict = field(default_factory=dict, repr=False)
+    # A volume read brick by brick (app/bricks.py): its BrickStore (data is then a LazyData), and
+    # the sources of its coarser levels finest first (an OME-Zarr store's multiscales); None and
+    # () for a volume in memory.
+    bricks: object = field(default=None, repr=False)
+    levels: tuple = field(default=(), repr=False)
 
     @property
     def dims(self) -> tuple[int, int, int]:
@@ -106,7 +111,10 @@ class Volume:
             r == (0.0, 255.0) for r in (self.channel_ranges or (self.value_range,)))
 
     def histogram(self, bins: int = 128, channel: int = 0) -> np.ndarray:
-        counts, _ = np.histogram(self.channel(channel), bins=bins, range=(0.0, 1.0))
+        data = self.channel(channel)
+        if hasattr(data, "sample"):   # read brick by brick: a strided sample of it
+            data = data.sample()
+        counts, _ = np.histogram(data, bins=bins, range=(0.0, 1.0))
         return counts
 
 
@@ -503,12 +511,14 @@ class VolumeFile:
 
 
 def load_volume(spec: VolumeSpec, base_dir: str | None = None,
-                channels: tuple | None = None, time: int = 0) -> Volume:
+                channels: tuple | None = None, time: int = 0,
+                brick: int | None = None) -> Volume:
     """Load the volume a scene names: a built-in or a file; errors name the file and the problem.
     `channels`: the channels to show (app/channels.py effective_channels; None: a file of one
     channel, or its channels with their defaults). `time`: the step of a time series (SPEC.md,
     Time series: every step normalised alike, by the whole series' range where the scene gives
-    none)."""
+    none). A Zarr store larger than app/bricks.py LAZY_BYTES or LAZY_SIDE, or any with `brick`
+    given, is read brick by brick (bricks of `brick` voxels, default 64) instead of whole."""
     spacing = spec.spacing if spec.spacing is not None else (1.0, 1.0, 1.0)
     if spec.path is None:
         name = spec.builtin or "cloud"
@@ -527,6 +537,10 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
         norm, vr = normalise(data, vr, f"built-in '{name}'")
         return Volume(norm, tuple(float(v) for v in spacing), f"builtin:{name}", vr, "float32",
                       float(data.min()), float(data.max()))
+    p = _resolve(spec.path, base_dir)
+    if formats.is_zarr(p) and (brick is not None or _large_zarr(p)):
+        from .bricks import DEFAULT_BRICK_SIZE
+        return lazy_zarr_volume(p, spec, time, channels, brick or DEFAULT_BRICK_SIZE)
     found = _read_series(spec, base_dir)
     raw, name, direction, notes = found.raw, found.name, found.direction, found.notes
     where = str(_resolve(spec.path, base_dir))
@@ -564,6 +578,71 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
         volume, notes=notes, direction=direction, orientation=orientation,
         oblique_degrees=oblique, dicom_listing=found.listing, dicom_series=found.series,
         **({"time": time, "time_steps": steps} if steps > 1 else {}))
+
+
+# A Zarr volume larger than this (as float32) or longer than LAZY_SIDE along an axis is read
+# brick by brick (app/volume.py load_volume) instead of whole.
+LAZY_BYTES = 1 << 30
+LAZY_SIDE = 2048
+
+
+def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
+    """A Volume of a Zarr store read brick by brick (Volume.data a LazyData, Volume.bricks its
+    BrickStore, Volume.levels the store's coarser levels): one channel (several are refused), the
+    time step `time`; normalised as the whole loader does (the value range, else the type's for
+    8-bit data, else the data's least and largest, from the range pass)."""
+    from .bricks import BrickStore, LazyData, ZarrSource
+    from .volume_formats import open_zarr
+    where = str(p)
+    array, file_spacing, axes, levels = open_zarr(p, spec.spacing is None)
+    axes = resolve_axes(axes, tuple(array.shape), spec.axes, where)
+    size = dict(zip(axes, array.shape))
+    if size.get("c", 1) > 1 or channels is not None and len(channels) > 1:
+        raise VolumeError(f"{where}: a Zarr store of {size.get('c', 1)} channels too large to "
+                          "read whole; bricking reads one channel: give volume.axes without c, or "
+                          "a store of one channel")
+    if any(a not in "tczyx" for a in axes) or not all(a in axes for a in "zyx"):
+        raise VolumeError(f"{where}: axes {axes!r}; a bricked Zarr store needs z, y and x")
+    steps = size.get("t", 1)
+    if not 0 <= time < steps:
+        raise VolumeError(f"{where}: time step {time} asked for, but the volume has "
+                          + (f"{steps} time steps (0 to {steps - 1})" if steps > 1 else
+                             "no time axis (one step)") + "; see the scene's time")
+    spacing = spec.spacing or file_spacing or (1.0, 1.0, 1.0)
+    domain = spec.domain if channels is None else channels[0].domain(spec)
+    source = ZarrSource(array, axes, time, 0, domain, where, spec.replace_nonfinite, normalise)
+    store = BrickStore(source, brick, p.name)
+    raw_lo, raw_hi = store.raw_ranges()
+    lo, hi = float(raw_lo.min()), float(raw_hi.max())
+    if domain is None:
+        if array.dtype == np.uint8:
+            domain = (0.0, 255.0)
+        elif array.dtype == np.int8:
+            domain = (-128.0, 127.0)
+        elif not hi > lo:
+            raise VolumeError(f"{where}: every voxel is {lo}; give volume.value_range to say "
+                              "what density that is")
+        else:
+            domain = (lo, hi)
+    source.value_range = tuple(float(v) for v in domain)
+    coarser = [ZarrSource(a, axes, time, 0, source.value_range, where, spec.replace_nonfinite,
+                          normalise)
+               for a in levels[1:]]
+    notes = ()
+    if spec.orientation == "patient":
+        notes += (f"{p.name} says nothing of the patient's orientation: shown as stored "
+                  "(orientation \"data\")",)
+    volume = Volume(LazyData(store), tuple(float(v) for v in spacing), p.name,
+                    source.value_range, array.dtype.name, lo, hi, notes=notes,
+                    bricks=store, levels=tuple(coarser))
+    return dataclasses.replace(volume, time=time, time_steps=steps) if steps > 1 else volume
+
+
+def _large_zarr(p: Path) -> bool:
+    """A Zarr store too large to read whole (app/bricks.py LAZY_BYTES, LAZY_SIDE)."""
+    array = formats.open_zarr(p)[0]
+    spatial = sorted(array.shape)[-3:]
+    return 4 * int(np.prod(array.shape, dtype=np.int64)) > LAZY_BYTES or max(spatial) > LAZY_SIDE
 
 
 # The last time series read (app/volume.py _read_series): its key and (raw, spacing, name).
@@ -670,6 +749,6 @@ def _finite_min_max(raw: np.ndarray) -> tuple[float, float]:
     return (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)
 
 
-def load_scene_volume(scene: Scene) -> Volume:
+def load_scene_volume(scene: Scene, brick: int | None = None) -> Volume:
     from .channels import scene_channels
-    return load_volume(scene.volume, scene.base_dir, scene_channels(scene), scene.time)
+    return load_volume(scene.volume, scene.base_dir, scene_channels(scene), scene.time, brick)

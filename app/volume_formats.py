@@ -225,12 +225,10 @@ def _zarr_axes(names) -> str | None:
     return "".join(ZARR_AXIS_NAMES.get(str(n).lower(), "?") for n in names)
 
 
-def read_zarr(p: Path, need_spacing: bool
-              ) -> tuple[np.ndarray, tuple[float, float, float] | None, str | None]:
-    """A Zarr array, or an OME-Zarr image (a group whose multiscales metadata, version 0.4 or
-    0.5, names its axes and the scale of its finest level, which is read). Returns the array, the
-    spacing (OME's scale along x, y, z; None where the store has none) and the axes as the store
-    names them (None where it names none: volume.axes must)."""
+def open_zarr(p: Path, need_spacing: bool = True):
+    """A Zarr array, or an OME-Zarr image, opened without reading it: (array, spacing, axes,
+    levels), levels the multiscales' arrays finest first (the array alone for a plain array);
+    see read_zarr."""
     try:
         import zarr
     except ImportError:
@@ -254,6 +252,7 @@ def read_zarr(p: Path, need_spacing: bool
                 types = [a.get("type") if isinstance(a, dict) else None for a in axes_meta]
                 names = [ZARR_AXIS_TYPES.get(t, n) for n, t in zip(names, types)]
             array = node[level["path"]]
+            levels = [node[d["path"]] for d in image["datasets"]]
             for transform in level.get("coordinateTransformations", []):
                 if transform.get("type") == "scale" and names:
                     scale = dict(zip(_zarr_axes(names) or "", transform["scale"]))
@@ -261,11 +260,25 @@ def read_zarr(p: Path, need_spacing: bool
                     spacing = spacing_or_none(values, str(p), False)
         else:
             array = node
+            levels = [array]
             names = getattr(array.metadata, "dimension_names", None) or \
                 array.attrs.asdict().get("_ARRAY_DIMENSIONS")
-        data = np.asarray(array[...])
     except VolumeError:
         raise
     except Exception as exc:   # zarr and its codecs raise many types for broken stores
         raise VolumeError(f"{p}: cannot read Zarr ({_one_line(exc)})") from None
-    return data, spacing, _zarr_axes(names)   # (no spacing: the scene's, or 1, 1, 1)
+    return array, spacing, _zarr_axes(names), levels
+
+
+def read_zarr(p: Path, need_spacing: bool
+              ) -> tuple[np.ndarray, tuple[float, float, float] | None, str | None]:
+    """A Zarr array, or an OME-Zarr image (a group whose multiscales metadata, version 0.4 or
+    0.5, names its axes and the scale of its finest level, which is read). Returns the array, the
+    spacing (OME's scale along x, y, z; None where the store has none) and the axes as the store
+    names them (None where it names none: volume.axes must)."""
+    array, spacing, axes, _ = open_zarr(p, need_spacing)
+    try:
+        data = np.asarray(array[...])
+    except Exception as exc:   # zarr and its codecs raise many types for broken stores
+        raise VolumeError(f"{p}: cannot read Zarr ({_one_line(exc)})") from None
+    return data, spacing, axes   # (no spacing: the scene's, or 1, 1, 1)

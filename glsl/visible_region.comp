@@ -30,6 +30,12 @@ uniform ivec3 voxel_first;               // the kept voxels: first and count per
 uniform ivec3 voxel_count;
 uniform vec3 box_half_extent;            // the volume box, for the cells' world corners
 #include "lib/clip_region.glsl"
+#include "lib/brick_pool.glsl"
+#if VOLUME_BRICKED
+#define VOXEL_AT(v) bricked_voxel(v)
+#else
+#define VOXEL_AT(v) texelFetch(volume_density, v, 0)
+#endif
 
 layout(std430, binding = 0) buffer VisibleCells {
     uint first_cell[3];                  // x, y, z; start at 0xffffffff
@@ -103,7 +109,7 @@ void main()
         for (int k = 0; k < 8; ++k) {
             ivec3 v = ivec3((k & 1) != 0 ? v1.x : v0.x, (k & 2) != 0 ? v1.y : v0.y,
                             (k & 4) != 0 ? v1.z : v0.z);
-            vec4 d = texelFetch(volume_density, v, 0);
+            vec4 d = VOXEL_AT(v);
             lo = min(lo, d);
             hi = max(hi, d);
         }

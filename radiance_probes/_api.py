@@ -253,8 +253,9 @@ class Renderer:
     # ---- the scene ------------------------------------------------------------------------------
     @property
     def notes(self) -> tuple[str, ...]:
-        """How the data was read: DICOM series, orientation, the window chosen."""
-        return self.volume.notes
+        """How the data was read: DICOM series, orientation, the window chosen; and for a bricked
+        volume under a memory cap, the level shown."""
+        return self._renderer.resources.volume.notes
 
     @property
     def device(self) -> str:

@@ -416,7 +416,8 @@ def test_empty_cells_are_crossed_without_random_numbers(ctx):
         assert out[..., 0].max() < 1e-3 and out[..., 1].max() == 0.0
     finally:
         res.release()
-    res = _resources(ctx, dataclasses.replace(volume, data=np.zeros_like(volume.data)), WHITE, 1e4)
+    res = _resources(ctx, dataclasses.replace(volume, data=np.zeros_like(volume.data), derived={}),
+                     WHITE, 1e4)
     try:
         out = _track(ctx, res, rays, 8, 1 << 20, True)
         assert (out[..., 0] == 1.0).all() and (out[..., 1] == 1.0).all()

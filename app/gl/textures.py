@@ -15,7 +15,7 @@ def _check_gl(ctx: moderngl.Context, what: str) -> None:
         raise VolumeError(f"{what}: OpenGL error {err}")
 
 
-BRICKING_HINT = "bricking (README, Volume files) would split it into textures that fit"
+BRICKING_HINT = "a volume that does not fit is read in bricks instead (docs/bricking.md)"
 
 
 def check_volume_fits(name: str, dims: tuple[int, int, int], bytes_per_voxel: int,
@@ -33,22 +33,27 @@ def check_volume_fits(name: str, dims: tuple[int, int, int], bytes_per_voxel: in
                           f"{available / 2**30:.2f} GiB of {where}; {BRICKING_HINT}")
 
 
+def device_available(ctx: moderngl.Context) -> tuple[int | None, str]:
+    """The bytes a volume may take on this device (None where it cannot tell), and what they are."""
+    from .context import is_software as software_renderer
+    from .memory import gpu_available_bytes, host_available_bytes
+    if software_renderer(ctx):
+        # the texture lives in host memory, beside the upload's payload and its bytes copy
+        available = host_available_bytes()
+        return (None if available is None else available // 3,
+                "host memory available (MemAvailable)")
+    return gpu_available_bytes(ctx), "GPU memory available (GL_NVX_gpu_memory_info)"
+
+
 def volume_texture(ctx: moderngl.Context, volume: Volume) -> moderngl.Texture3D:
     """A 3D texture of one component a channel (R, RG, RGB or RGBA), linear, clamped to edge:
     16-bit normalised for exact 8-bit data (k * 257 / 65535
     is exactly k / 255, and llvmpipe filters 8-bit textures with 8-bit intermediate rounding), else
     R32F, so 16-bit and float data keep their precision (float32 holds every 16-bit step exactly).
     Refused before any allocation when it exceeds GL_MAX_3D_TEXTURE_SIZE or the memory left."""
-    from .context import is_software as software_renderer
-    from .memory import gpu_available_bytes, host_available_bytes
     channels = volume.channel_count
     texel = (2 if volume.exact_uint8 else 4) * channels
-    if software_renderer(ctx):
-        # the texture lives in host memory, beside the upload's payload and its bytes copy
-        available, where = host_available_bytes(), "host memory available (MemAvailable)"
-        available = None if available is None else available // 3
-    else:
-        available, where = gpu_available_bytes(ctx), "GPU memory available (GL_NVX_gpu_memory_info)"
+    available, where = device_available(ctx)
     check_volume_fits(volume.name, volume.dims, texel, int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"]),
                       available, where)
     if volume.exact_uint8:

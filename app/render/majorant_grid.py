@@ -15,7 +15,8 @@ from ..clip_region import ClipRegion, region_uniforms
 from ..gl.shaders import ComputeProgram, compute_program, set_uniforms
 from ..gl.textures import TransferTable
 from ..channels import channel_uniforms
-from ..twins.majorant_grid import (MAJORANT_SAFETY, channel_density_ranges, density_range_grid,
+from ..twins.majorant_grid import (MAJORANT_SAFETY, brick_density_range_grid,
+                                   channel_density_ranges, density_range_grid,
                                    macrocell_counts, majorant_bound)
 from ..volume import Volume
 
@@ -60,9 +61,13 @@ class MajorantGrid:
         channels = volume.channel_count
         ranges = volume.derived.get(("density ranges", cells))   # a step of a series seen before
         if ranges is None:
-            ranges = volume.derived[("density ranges", cells)] = (
-                channel_density_ranges(volume, cells) if channels > 1
-                else density_range_grid(volume.data, cells))
+            if not isinstance(volume.data, np.ndarray):   # read brick by brick: its ranges
+                store = volume.bricks
+                ranges = brick_density_range_grid(*store.ranges(), store.dims, store.brick, cells)
+            else:
+                ranges = (channel_density_ranges(volume, cells) if channels > 1
+                          else density_range_grid(volume.data, cells))
+            volume.derived[("density ranges", cells)] = ranges
         self.d_min, self.d_max = ranges
         if channels > 1:
             payloads = [np.ascontiguousarray(np.moveaxis(r, 0, -1), np.float32)

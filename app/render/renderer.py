@@ -103,7 +103,9 @@ class Renderer:
         self._software = is_software(ctx)
         settings = (settings or RenderSettings()).resolved(self._software)  # checked first
         self.resources = SceneResources(ctx, scene, volume,
-                                        use_majorant_grid=settings.empty_space_skipping)
+                                        use_majorant_grid=settings.empty_space_skipping,
+                                        volume_memory_bytes=settings.volume_memory_bytes,
+                                        brick_size=settings.brick_size)
         self._settings = settings
         self._passes: dict[tuple, PathTracer] = {}
         # Which path states a pass uses (pass_for): a PathTracer keeps one per pixel between
@@ -153,6 +155,7 @@ class Renderer:
             raise TypeError(f"settings: expected a RenderSettings, got {type(settings).__name__}")
         self._settings = settings.resolved(self._software)
         self.resources.use_majorant_grid = self._settings.empty_space_skipping
+        self.resources.set_bricking(self._settings.volume_memory_bytes, self._settings.brick_size)
 
     def configure(self, **changes) -> RenderSettings:
         """Replaces the named settings (RenderSettings' fields; checked); returns the new ones."""

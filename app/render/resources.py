@@ -12,13 +12,15 @@ import numpy as np
 from ..channels import ChannelTables, channel_uniforms, effective_channels, volume_inputs
 from ..clip_region import ClipRegion, clip_region, region_uniforms
 from ..environment_map import EnvironmentMap, load_scene_environment
-from ..gl.textures import TransferTable, volume_texture
+from ..gl.brick_pool import BrickPool
+from ..gl.textures import TransferTable
 from ..twins.environment_map import Distribution
 from ..twins.medium import majorant
 from ..scene import Scene
 from ..transfer import transfer_table
 from ..volume import Volume, load_scene_volume
 from .majorant_grid import MAJORANT_UNIT, MajorantGrid
+from .volume_placement import place_volume
 
 VOLUME_UNIT = 0
 TRANSFER_UNIT = 1
@@ -50,7 +52,8 @@ def environment_textures(ctx: moderngl.Context, image: np.ndarray, distribution:
 
 class SceneResources:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
-                 use_majorant_grid: bool = True):
+                 use_majorant_grid: bool = True, volume_memory_bytes: int | None = None,
+                 brick_size: int | None = None):
         self.ctx = ctx
         self.scene: Scene | None = None
         self.volume: Volume | None = None
@@ -81,6 +84,13 @@ class SceneResources:
         # stepping back and forth, or playing the series again, uploads nothing.
         self.step_cache_bytes = STEP_CACHE_BYTES
         self._steps: OrderedDict = OrderedDict()
+        # Bricking (app/render/volume_placement.py): the cap on the volume's GPU memory (None:
+        # what the device has left) and a forced brick size (None: bricks of 64 voxels where one
+        # texture does not fit). The volume given or loaded is kept (`given`) to place again
+        # when they change.
+        self.volume_memory_bytes = volume_memory_bytes
+        self.brick_size = brick_size
+        self.given_volume: Volume | None = None
         self.update(scene, volume)
 
     def update(self, scene: Scene, volume: Volume | None = None) -> set[str]:
@@ -93,7 +103,7 @@ class SceneResources:
         environment = load_scene_environment(scene) if new_map != old_map else self.environment
         inputs = volume_inputs(scene)
         kept_texture = None
-        if volume is not None and volume is not self.volume:
+        if volume is not None and volume is not self.volume and volume is not self.given_volume:
             changed.add("volume")
         elif old is None or inputs != volume_inputs(old):
             kept = self._steps.get(inputs)   # a time series' step shown before
@@ -101,22 +111,35 @@ class SceneResources:
                 volume, kept_texture = kept
                 self._steps.move_to_end(inputs)
             else:
-                volume = load_scene_volume(scene)
+                volume = load_scene_volume(scene, self.brick_size)
             changed.add("volume")
         # A crop that does not fit the volume, or channels it lacks, fail before anything on the
         # GPU changes.
+        if "volume" in changed and kept_texture is None:   # where it goes: a texture or bricks
+            given = volume
+            volume, kept_texture = place_volume(self.ctx, volume, self.volume_memory_bytes,
+                                                self.brick_size)
+            self.given_volume = given
+            fresh_texture = kept_texture
+        else:
+            fresh_texture = None
         new_volume = volume if "volume" in changed else self.volume
-        clip = clip_region(scene, new_volume.dims, new_volume.half_extent)
-        channels = effective_channels(scene, new_volume.channel_count)
+        try:
+            clip = clip_region(scene, new_volume.dims, new_volume.half_extent)
+            channels = effective_channels(scene, new_volume.channel_count)
+        except BaseException:
+            if fresh_texture is not None:
+                fresh_texture.release()
+            raise
         if "volume" in changed:
             if any(key[:-1] != inputs[:-1] for key in self._steps):   # another series, or none
                 self._drop_steps()
-            tex = kept_texture if kept_texture is not None else volume_texture(self.ctx, volume)
+            tex = kept_texture
             if self.volume_tex is not None and not self._step_kept(self.volume_tex):
                 self.volume_tex.release()
             self.volume, self.volume_tex = volume, tex
             self.volume_version += 1
-            if volume.time_steps > 1 and kept_texture is None:
+            if volume.time_steps > 1 and fresh_texture is not None:
                 self._keep_step(inputs, volume, tex)
             self._trim_steps()
         if (old is None or "volume" in changed or scene.transfer_function != old.transfer_function
@@ -171,8 +194,9 @@ class SceneResources:
         step_cache_bytes (never the one shown)."""
         def size(entry) -> int:
             v, t = entry
-            return int(v.data.nbytes) + int(t.width * t.height * t.depth * t.components
-                                            * (2 if v.exact_uint8 else 4))
+            gpu = t.nbytes if hasattr(t, "nbytes") else int(
+                t.width * t.height * t.depth * t.components * (2 if v.exact_uint8 else 4))
+            return int(v.data.nbytes) + gpu
 
         while len(self._steps) > 1 and sum(map(size, self._steps.values())) > self.step_cache_bytes:
             key, (v, t) = next(iter(self._steps.items()))
@@ -213,7 +237,31 @@ class SceneResources:
     def medium_defines(self) -> dict:
         """What every pass that includes lib/medium.glsl is compiled with for this scene: nothing
         for one channel (the one-channel code, unchanged), else MEDIUM_CHANNELS."""
-        return {} if self.tables is None else {"MEDIUM_CHANNELS": self.tables.count}
+        defines = {} if self.tables is None else {"MEDIUM_CHANNELS": self.tables.count}
+        return {**defines, "VOLUME_BRICKED": 1} if self.bricked else defines
+
+    @property
+    def bricked(self) -> bool:
+        """Whether the volume is read through a brick pool (lib/brick_pool.glsl)."""
+        return isinstance(self.volume_tex, BrickPool)
+
+    def set_bricking(self, volume_memory_bytes: int | None, brick_size: int | None) -> None:
+        """A new cap or brick size: the volume placed again (and everything built from it)."""
+        if (volume_memory_bytes, brick_size) == (self.volume_memory_bytes, self.brick_size):
+            return
+        self.volume_memory_bytes, self.brick_size = volume_memory_bytes, brick_size
+        given = self.given_volume
+        if given is not None and not isinstance(given.data, np.ndarray) and brick_size is None:
+            given = None   # read brick by brick for the old size: read again
+        self._drop_steps()
+        scene, self.scene = self.scene, None
+        keep = self.volume_tex
+        self.volume_tex = None
+        if keep is not None:
+            keep.release()
+        self.volume, self.given_volume = None, None
+        self._majorant_key = None
+        self.update(scene, given)
 
     @property
     def medium_table(self):
@@ -266,6 +314,7 @@ class SceneResources:
             "max_path_steps": int(self.max_path_steps),
             **self.environment_uniforms(),
             **region_uniforms(self.clip),
+            **(self.volume_tex.uniforms() if self.bricked else {}),
         }
 
     def environment_uniforms(self) -> dict:
@@ -279,7 +328,10 @@ class SceneResources:
                 "environment_rotation": (math.cos(a), math.sin(a))}
 
     def bind(self) -> None:
-        self.volume_tex.use(VOLUME_UNIT)
+        if self.bricked:
+            self.volume_tex.use()
+        else:
+            self.volume_tex.use(VOLUME_UNIT)
         self.transfer_gpu.use(TRANSFER_UNIT)
         self.majorant_grid.bind()
         if self.environment_tex is not None:

@@ -93,6 +93,12 @@ class RenderSettings:
     # mean over the phase function as a control variate (mean 0 at any probes;
     # lib/guided_direction_control.glsl). False: level 1 subtracts at the first event only.
     guided_direction_control: bool = True
+    # Bricked volumes (app/render/volume_placement.py): the volume's GPU memory at most, in bytes
+    # (None: what the device has left); where one 3D texture exceeds it, the finest level whose
+    # bricks fit is shown, with a note. `brick_size`: bricks of that many voxels per axis always
+    # (None: bricks of 64 only where one texture does not fit; tests force small ones).
+    volume_memory_bytes: int | None = None
+    brick_size: int | None = None
 
     def __post_init__(self):
         if self.walk_sun not in WALK_SUN_MODES:
@@ -110,6 +116,12 @@ class RenderSettings:
         if isinstance(q, bool) or not isinstance(q, (int, float)) or not 0.0 <= q <= 1.0:
             raise ValueError(f"walk sun correction {q!r}: expected a rate in [0, 1]")
         check_gather_event(self.gather_event)
+        if self.volume_memory_bytes is not None:
+            _check_positive_int("volume memory bytes", self.volume_memory_bytes)
+        if self.brick_size is not None:
+            _check_positive_int("brick size", self.brick_size)
+            if self.brick_size < 2:
+                raise ValueError(f"brick size: expected at least 2 voxels, got {self.brick_size}")
         _check_positive_int("light grid max side", self.light_max_side)
         if self.light_min_side is not None:
             _check_positive_int("light grid min side", self.light_min_side)

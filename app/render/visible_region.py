@@ -22,7 +22,7 @@ class VisibleRegionPass:
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
         self.program: ComputeProgram | None = None
-        self.channels = 1   # the channel count the program was built for
+        self.defines = None   # the medium's defines the program was built with
 
     def region(self, resources: SceneResources) -> tuple[np.ndarray, np.ndarray]:
         """World (low, high) corners of where sigma_t can be > 0 (the whole box, or the kept box
@@ -36,12 +36,12 @@ class VisibleRegionPass:
             return whole
         tables = resources.tables
         channels = 1 if tables is None else tables.count
-        if self.program is None or self.channels != channels:
+        defines = resources.medium_defines()
+        if self.program is None or self.defines != defines:
             if self.program is not None:
                 self.program.release()
-            self.program = compute_program(ctx, "visible_region.comp",
-                                           {"MEDIUM_CHANNELS": channels} if channels > 1 else None)
-            self.channels = channels
+            self.program = compute_program(ctx, "visible_region.comp", defines)
+            self.defines = defines
         program = self.program
         dims = tuple(int(v) for v in resources.volume.dims)
         if tables is None:
@@ -64,7 +64,9 @@ class VisibleRegionPass:
                                    "positive_node_counts": COUNTS_UNIT, "dims": dims,
                                    "voxel_first": tuple(first), "voxel_count": tuple(count),
                                    "box_half_extent": tuple(float(v) for v in half),
-                                   **region_uniforms(clip)})
+                                   **region_uniforms(clip),
+                                   **(resources.volume_tex.uniforms() if resources.bricked
+                                      else {})})
             cells.bind_to_storage_buffer(0)
             program.run((count[0] + 8) // 8, (count[1] + 8) // 8, (count[2] + 4) // 4)
             ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)

@@ -86,6 +86,29 @@ def density_range_grid(data: np.ndarray, cells: tuple[int, int, int] | None = No
         lo, hi = voxel_ranges(n, c)
         lo_grid = _reduce_axis(lo_grid, axis, lo, hi, np.min)
         hi_grid = _reduce_axis(hi_grid, axis, lo, hi, np.max)
+    return _widened(lo_grid, hi_grid)
+
+
+def brick_density_range_grid(brick_min: np.ndarray, brick_max: np.ndarray, dims, brick: int,
+                             cells: tuple[int, int, int] | None = None
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """density_range_grid of a volume read brick by brick (app/bricks.py), from each brick's
+    own least and largest density ([bz, by, bx]) alone: a macrocell's range is the union of the
+    bricks that hold the voxels its points read (voxel_ranges), so it contains the one of the
+    whole array, widened alike."""
+    if cells is None:
+        cells = macrocell_counts(dims)
+    lo_grid = np.asarray(brick_min, np.float32)
+    hi_grid = np.asarray(brick_max, np.float32)
+    for axis, (n, c) in zip((2, 1, 0), zip(dims, cells)):
+        lo, hi = voxel_ranges(int(n), c)
+        lo_grid = _reduce_axis(lo_grid, axis, lo // brick, hi // brick, np.min)
+        hi_grid = _reduce_axis(hi_grid, axis, lo // brick, hi // brick, np.max)
+    return _widened(lo_grid, hi_grid)
+
+
+def _widened(lo_grid: np.ndarray, hi_grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ranges widened by DENSITY_WIDEN, rounded outwards to float32."""
     lo_grid = lo_grid.astype(np.float64)
     hi_grid = hi_grid.astype(np.float64)
     lo_grid = np.where(lo_grid > 0, lo_grid * (1.0 - DENSITY_WIDEN), lo_grid * (1.0 + DENSITY_WIDEN))

@@ -22,6 +22,7 @@
 #define CHECK_SITE_MARCH_LOOP 11         // raymarch and shadow-march loops past their caps
 #define CHECK_SITE_TRACKING_LOOP 12      // tracking loops past the path's step budget
 #define CHECK_SITE_WALK_BUDGET 13        // a probe's walk budget out of [1, passes]
+#define CHECK_SITE_PAGE_MISS 14          // lib/brick_pool.glsl: a brick's slot holds another brick
 #define CHECK_SITE_COUNT 16
 
 #if defined(SHADER_CHECKS)

@@ -10,6 +10,7 @@
 // medium's, unchanged.
 #include "lib/checks.glsl"
 #include "lib/clip_region.glsl"
+#include "lib/brick_pool.glsl"
 #if !defined(MEDIUM_CHANNELS)
 #define MEDIUM_CHANNELS 1
 #endif
@@ -43,9 +44,15 @@ layout(std430, binding = 8) readonly buffer TransferTable { vec4 transfer_entrie
 #define CHANNEL_TRANSFER_ENTRY(c, i) texelFetch(transfer_function, ivec2(i, c), 0)
 #endif
 
+// A bricked volume (VOLUME_BRICKED, lib/brick_pool.glsl) reads the same values through its page
+// table; without it the code is the one-texture medium's, unchanged.
 float density_at(vec3 p)
 {
+#if VOLUME_BRICKED
+    return bricked_sample(kept_sample_point(p) / (2.0 * box_half_extent) + 0.5).r;
+#else
     return texture(volume_density, kept_sample_point(p) / (2.0 * box_half_extent) + 0.5).r;
+#endif
 }
 
 // Linear interpolation between table entries, written a + (b - a) f so that equal entries give
@@ -64,7 +71,11 @@ vec4 transfer_at(float d)
 // Each channel's normalised density at p (components past MEDIUM_CHANNELS unused).
 vec4 densities_at(vec3 p)
 {
+#if VOLUME_BRICKED
+    return bricked_sample(kept_sample_point(p) / (2.0 * box_half_extent) + 0.5);
+#else
     return texture(volume_density, kept_sample_point(p) / (2.0 * box_half_extent) + 0.5);
+#endif
 }
 
 // Channel c's transfer function at density d (transfer_at of its own table).

@@ -1,0 +1,311 @@
+"""Bricked volumes on the host: a BrickStore reads a volume's bricks (from an array in memory or a
+Zarr array, never the whole array at once), keeps each brick's least and largest density (read
+once), and writes the bricks that are not constant into a brick pool (app/gl/brick_pool.py); and
+the levels a memory cap chooses between (a 2x box-filtered pyramid, or an OME-Zarr store's own).
+
+Reading: rows of bricks along x ("pencils") at a time, so a Zarr store's chunks are decoded once a
+pass. The range pass reads every brick once; the upload pass reads only the bricks that are not
+constant, with their aprons (the one voxel of each neighbour they need); a constant brick (the
+brick and its apron one value) is never read again nor uploaded. `reads` counts, per brick, how
+many times its voxels were read.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .scene_types import VolumeError
+
+APRON = 1
+CONSTANT = 0x80000000
+DEFAULT_BRICK_SIZE = 64
+FREE_SLOT = 0xFFFFFFFF   # brick_of_slot of a slot that holds no brick (the checking build)
+CONSTANTS_WIDTH = 1024   # the constants' texture is this wide (k at (k % width, k // width))
+
+
+def brick_counts(dims, brick: int) -> tuple[int, int, int]:
+    """Bricks per axis (x, y, z) of a volume of dims (x, y, z) voxels."""
+    return tuple(int(-(-int(n) // brick)) for n in dims)
+
+
+def slot_side(brick: int) -> int:
+    return brick + 2 * APRON
+
+
+def slot_grid(slots: int, brick: int, max_side: int) -> tuple[int, int, int]:
+    """Slots per axis (x, y, z) of an atlas holding at least `slots` slots (one at least), each
+    axis within max_side texels, as near a cube as allows; ValueError where it cannot."""
+    side = slot_side(brick)
+    per_axis = max_side // side
+    if per_axis < 1:
+        raise ValueError(f"a brick of {brick} voxels ({side} texels with its apron) exceeds the "
+                         f"3D texture side of {max_side}")
+    n = max(int(slots), 1)
+    sx = min(per_axis, int(np.ceil(n ** (1.0 / 3.0) - 1e-9)))
+    sy = min(per_axis, int(np.ceil(np.sqrt(n / sx) - 1e-9)))
+    sz = -(-n // (sx * sy))
+    if sz > per_axis:
+        raise ValueError(f"{n} bricks of {brick}^3 voxels need more slots than one 3D texture of "
+                         f"{max_side}^3 texels holds ({per_axis ** 3})")
+    return sx, sy, sz
+
+
+def slot_origin(slot: int, grid) -> np.ndarray:
+    """First texel (x, y, z) of a slot, counted as lib/brick_pool.glsl brick_slot_origin does
+    (units of slots; times slot_side for texels)."""
+    sx, sy, _ = grid
+    return np.array([slot % sx, (slot // sx) % sy, slot // (sx * sy)], np.int64)
+
+
+def constant_bricks(brick_min: np.ndarray, brick_max: np.ndarray) -> np.ndarray:
+    """[bz, by, bx] True where a brick and its apron certainly hold one value: the brick and
+    every neighbour its apron reaches (26, clamped at the faces) each hold one value, the same.
+    brick_min/max: each brick's own voxels' least and largest value, [bz, by, bx(, c)]."""
+    lo = np.asarray(brick_min, np.float64)
+    hi = np.asarray(brick_max, np.float64)
+    if lo.ndim == 3:
+        lo, hi = lo[..., None], hi[..., None]
+    one = np.all(lo == hi, axis=-1)
+    same = one.copy()
+    pad_lo = np.pad(lo, ((1, 1), (1, 1), (1, 1), (0, 0)), mode="edge")
+    pad_one = np.pad(one, 1, mode="edge")
+    bz, by, bx = one.shape
+    for dz in range(3):
+        for dy in range(3):
+            for dx in range(3):
+                same &= pad_one[dz:dz + bz, dy:dy + by, dx:dx + bx]
+                same &= np.all(pad_lo[dz:dz + bz, dy:dy + by, dx:dx + bx] == lo, axis=-1)
+    return same
+
+
+def constant_values(brick_min: np.ndarray, constant: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The constants' table (K, 4) (row 0 vacuum, then each distinct value once) and each
+    constant brick's row ([bz, by, bx], -1 elsewhere)."""
+    lo = np.asarray(brick_min, np.float32)
+    if lo.ndim == 3:
+        lo = lo[..., None]
+    rows = [np.zeros(4, np.float32)]
+    index: dict[bytes, int] = {rows[0].tobytes(): 0}
+    which = np.full(constant.shape, -1, np.int64)
+    for z, y, x in zip(*np.nonzero(constant)):
+        value = np.zeros(4, np.float32)
+        value[:lo.shape[-1]] = lo[z, y, x]
+        key = value.tobytes()
+        if key not in index:
+            index[key] = len(rows)
+            rows.append(value)
+        which[z, y, x] = index[key]
+    return np.stack(rows), which
+
+
+def texel_bytes(channels: int, exact_uint8: bool) -> int:
+    """Bytes of one atlas texel: R16 (a component a channel) for exact 8-bit data, else R32F,
+    as the one-texture volume (app/gl/textures.py volume_texture)."""
+    return (2 if exact_uint8 else 4) * channels
+
+
+def slot_bytes(brick: int, channels: int, exact_uint8: bool) -> int:
+    return slot_side(brick) ** 3 * texel_bytes(channels, exact_uint8)
+
+
+
+class ArraySource:
+    """A [z, y, x(, c)] array in memory (float32 densities in [0, 1])."""
+
+    def __init__(self, data: np.ndarray):
+        self.data = data
+        self.shape = data.shape
+
+    def density(self, block: np.ndarray) -> np.ndarray:
+        return block
+
+    def read(self, z0, z1, y0, y1, x0, x1) -> np.ndarray:
+        return np.asarray(self.data[z0:z1, y0:y1, x0:x1], np.float32)
+
+
+class ZarrSource:
+    """One time step of one channel of a Zarr array, read region by region and normalised by
+    `value_range` (app/volume.py normalise: the same mapping as a whole volume's)."""
+
+    def __init__(self, array, axes: str, time: int, channel: int, value_range, where: str,
+                 replace_nonfinite=None, normalise=None):
+        self.array = array
+        self.axes = axes
+        self.time, self.channel = time, channel
+        self.value_range = value_range
+        self.where = where
+        self.replace_nonfinite = replace_nonfinite
+        self.normalise = normalise   # app/volume.py normalise (given: this module is below it)
+        size = dict(zip(axes, array.shape))
+        self.shape = (size["z"], size["y"], size["x"])
+
+    def raw(self, z0, z1, y0, y1, x0, x1) -> np.ndarray:
+        pick = {"t": self.time, "c": self.channel, "z": slice(z0, z1), "y": slice(y0, y1),
+                "x": slice(x0, x1)}
+        index = tuple(pick.get(a, 0) for a in self.axes)
+        block = np.asarray(self.array[index])
+        kept = [a for a in self.axes if a in "zyx"]
+        return np.transpose(block, [kept.index(a) for a in "zyx"])
+
+    def read(self, z0, z1, y0, y1, x0, x1) -> np.ndarray:
+        """Raw values, finite (non-finite ones replaced as the scene says, else refused)."""
+        raw = self.raw(z0, z1, y0, y1, x0, x1)
+        if raw.dtype.kind == "f":
+            bad = ~np.isfinite(raw)
+            if bad.any():
+                if self.replace_nonfinite is None:
+                    raise VolumeError(f"{self.where}: voxels in z {z0} to {z1 - 1} are NaN or "
+                                      "Inf; give volume.replace_nonfinite to replace them")
+                raw = np.where(bad, raw.dtype.type(self.replace_nonfinite), raw)
+        return raw
+
+    def density(self, raw: np.ndarray) -> np.ndarray:
+        """Raw values as densities (app/volume.py normalise with the volume's value range)."""
+        return self.normalise(raw, self.value_range, self.where)[0]
+
+
+class BrickStore:
+    """A volume's bricks of `brick` voxels per axis, from a source with read(z0, z1, y0, y1, x0,
+    x1) -> [z, y, x(, c)] densities."""
+
+    def __init__(self, source, brick: int, name: str = "volume"):
+        self.source = source
+        self.brick = int(brick)
+        self.name = name
+        nz, ny, nx = source.shape[:3]
+        self.dims = (int(nx), int(ny), int(nz))
+        self.channels = 1 if len(source.shape) == 3 else int(source.shape[3])
+        self.counts = brick_counts(self.dims, self.brick)
+        bx, by, bz = self.counts
+        self.reads = np.zeros((bz, by, bx), np.int64)
+        self._ranges = None
+
+    def pencil(self, bz: int, by: int, x0: int, x1: int, apron: int) -> np.ndarray:
+        """The raw voxels of bricks x0 .. x1 - 1 of row (by, bz), with `apron` voxels around,
+        clamped to the volume (the edge voxel repeated)."""
+        nx, ny, nz = self.dims
+        B = self.brick
+        lo = [bz * B - apron, by * B - apron, x0 * B - apron]
+        hi = [bz * B + B + apron, by * B + B + apron, x1 * B + apron]
+        n = (nz, ny, nx)
+        cl = [min(max(l, 0), m - 1) for l, m in zip(lo, n)]
+        ch = [max(min(h, m), c + 1) for h, m, c in zip(hi, n, cl)]
+        block = self.source.read(cl[0], ch[0], cl[1], ch[1], cl[2], ch[2])
+        pad = [(c - l, h - d) for l, c, h, d in zip(lo, cl, hi, ch)] + [(0, 0)] * (block.ndim - 3)
+        if any(p != (0, 0) for p in pad):
+            block = np.pad(block, pad, mode="edge")
+        self.reads[bz, by, x0:x1] += 1
+        return block
+
+    def ranges(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each brick's least and largest density [bz, by, bx(, c)]: the raw ones as densities
+        (the mapping is monotonic, so the least raw value's density is the least density)."""
+        lo, hi = self.raw_ranges()
+        return self.source.density(lo), self.source.density(hi)
+
+    def raw_ranges(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each brick's least and largest raw value [bz, by, bx(, c)] (one read of every brick,
+        the first time)."""
+        if self._ranges is None:
+            bx, by, bz = self.counts
+            shape = (bz, by, bx) + ((self.channels,) if self.channels > 1 else ())
+            lo = hi = None
+            B = self.brick
+            for z in range(bz):
+                for y in range(by):
+                    row = self.pencil(z, y, 0, bx, 0)
+                    if lo is None:
+                        lo, hi = np.empty(shape, row.dtype), np.empty(shape, row.dtype)
+                    for x in range(bx):
+                        part = row[:, :, x * B:(x + 1) * B]
+                        lo[z, y, x] = part.min(axis=(0, 1, 2))
+                        hi[z, y, x] = part.max(axis=(0, 1, 2))
+            self._ranges = (lo, hi)
+        return self._ranges
+
+    def constant(self) -> np.ndarray:
+        """[bz, by, bx] True where the brick and its apron hold one value (never uploaded)."""
+        return constant_bricks(*self.ranges())
+
+    def resident_count(self) -> int:
+        return int(np.count_nonzero(~self.constant()))
+
+    def layout(self, max_side: int):
+        """(page table, constants, slot grid, resident bricks (z, y, x) in slot order)."""
+        lo, _ = self.ranges()
+        constant = self.constant()
+        constants, which = constant_values(lo, constant)
+        resident = np.argwhere(~constant)
+        grid = slot_grid(len(resident), self.brick, max_side)
+        table = np.where(constant, CONSTANT | np.maximum(which, 0), 0).astype(np.uint32)
+        for slot, (z, y, x) in enumerate(resident):
+            table[z, y, x] = slot
+        return table, constants, grid, resident
+
+def box_filtered(data: np.ndarray) -> np.ndarray:
+    """The next level of a pyramid: 2 x 2 x 2 voxels averaged ([z, y, x(, c)]; an odd axis has
+    its last voxel repeated first)."""
+    pad = [(0, n % 2) for n in data.shape[:3]] + [(0, 0)] * (data.ndim - 3)
+    d = np.pad(np.asarray(data, np.float32), pad, mode="edge")
+    nz, ny, nx = d.shape[:3]
+    d = d.reshape((nz // 2, 2, ny // 2, 2, nx // 2, 2) + d.shape[3:])
+    return d.mean(axis=(1, 3, 5), dtype=np.float64).astype(np.float32)
+
+
+def source_box_filtered(source, brick: int) -> np.ndarray:
+    """box_filtered of a source too large to read whole, read slab by slab along z (an even
+    number of slices each): the next level, in memory."""
+    nz = source.shape[0]
+    step = 2 * max(1, brick // 2)
+    parts = []
+    for z0 in range(0, nz, step):
+        raw = source.read(z0, min(z0 + step, nz), 0, source.shape[1], 0, source.shape[2])
+        parts.append(box_filtered(source.density(raw)))
+    return np.concatenate(parts, axis=0)
+
+
+def refuse_cap_below_brick(cap: int, brick: int, channels: int, exact_uint8: bool,
+                           name: str) -> None:
+    need = slot_bytes(brick, channels, exact_uint8)
+    if cap < need:
+        raise VolumeError(f"{name}: volume_memory_bytes {cap} is below one brick: a brick of "
+                          f"{brick}^3 voxels with its apron takes {need} bytes "
+                          f"({need / 2**20:.2f} MiB); give a larger cap or a smaller brick")
+
+
+# A bricked volume's densities are materialised whole (np.asarray) only up to this many bytes.
+HOST_WHOLE_BYTES = 1 << 30
+
+
+class LazyData:
+    """The densities [z, y, x] of a volume read brick by brick (Volume.data of a store too large
+    to read whole): its shape, and the whole array only where it is small enough."""
+    ndim = 3
+    dtype = np.dtype(np.float32)
+
+    def __init__(self, store: BrickStore):
+        self.store = store
+        self.shape = store.source.shape[:3]
+        self.size = int(np.prod(self.shape, dtype=np.int64))
+        self.nbytes = 4 * self.size
+
+    def read(self) -> np.ndarray:
+        nz, ny, nx = self.shape
+        return self.store.source.density(self.store.source.read(0, nz, 0, ny, 0, nx))
+
+    def __array__(self, dtype=None, copy=None):
+        if self.nbytes > HOST_WHOLE_BYTES:
+            raise VolumeError(f"{self.store.name}: the {self.shape[2]} x {self.shape[1]} x "
+                              f"{self.shape[0]} volume is read brick by brick "
+                              f"({self.nbytes / 2**30:.1f} GiB as float32); this use needs it "
+                              "whole in host memory")
+        data = self.read()
+        return data if dtype is None else data.astype(dtype)
+
+    def sample(self, max_voxels: int = 1 << 24) -> np.ndarray:
+        """Every k-th voxel along each axis (at most about max_voxels): for histograms."""
+        k = max(1, int(np.ceil((self.size / max_voxels) ** (1.0 / 3.0))))
+        src = self.store.source
+        nz = self.shape[0]
+        parts = [src.density(src.read(z, z + 1, 0, self.shape[1], 0, self.shape[2]))[:, ::k, ::k]
+                 for z in range(0, nz, k)]
+        return np.concatenate(parts, axis=0)

@@ -1,0 +1,159 @@
+"""A bricked volume on the GPU (glsl/lib/brick_pool.glsl; NumPy twin app/twins/brick_pool.py):
+the atlas of slots, the page table and the constants, written brick by brick (the host never
+needs the whole volume), and in the checking build the slot -> brick map it checks against."""
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from ..bricks import (APRON, CONSTANTS_WIDTH, FREE_SLOT, brick_counts, slot_bytes,  # noqa: F401
+                      slot_origin, slot_side, texel_bytes)
+from ..scene_types import VolumeError
+from ..twins.brick_pool import Packed
+
+# Texture units (0: the volume, here the atlas; 1 to 15: the passes' own, app/render/*.py).
+ATLAS_UNIT = 0
+TABLE_UNIT = 16
+CONSTANTS_UNIT = 17
+BRICK_SLOTS_BINDING = 10    # lib/brick_pool.glsl, the checking build only
+
+
+def atlas_payload(block: np.ndarray, exact_uint8: bool) -> bytes:
+    """A block of normalised densities as the atlas stores them (volume_texture's encoding)."""
+    if exact_uint8:
+        return (np.round(block * 255.0).astype(np.uint16) * 257).astype(np.uint16).tobytes()
+    return np.ascontiguousarray(block, np.float32).tobytes()
+
+
+class BrickPool:
+    """The atlas (grid slots of (B + 2)^3 texels), the page table and the constants."""
+
+    def __init__(self, ctx: moderngl.Context, dims, brick: int, channels: int, grid,
+                 table: np.ndarray, constants: np.ndarray, exact_uint8: bool, name: str = "volume"):
+        self.ctx = ctx
+        self.dims = tuple(int(v) for v in dims)
+        self.brick = int(brick)
+        self.channels = int(channels)
+        self.grid = tuple(int(v) for v in grid)
+        self.exact_uint8 = bool(exact_uint8)
+        side = slot_side(self.brick)
+        size = tuple(g * side for g in self.grid)
+        ctx.error
+        try:
+            self.atlas = ctx.texture3d(size, self.channels, dtype="nu2" if exact_uint8 else "f4",
+                                       alignment=1)
+        except moderngl.Error as exc:
+            raise VolumeError(f"{name}: cannot create the {size} brick atlas ({exc})") from None
+        err = ctx.error
+        if err != "GL_NO_ERROR":
+            self.atlas.release()
+            raise VolumeError(f"{name}: the {size} brick atlas "
+                              f"({self.atlas_bytes / 2**20:.0f} MiB): OpenGL error {err}")
+        self.atlas.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.atlas.repeat_x = self.atlas.repeat_y = self.atlas.repeat_z = False
+        table = np.ascontiguousarray(table, np.uint32)
+        counts = brick_counts(self.dims, self.brick)
+        if table.shape != counts[::-1]:
+            raise ValueError(f"page table of shape {table.shape} for {counts[::-1]} bricks")
+        self.table = ctx.texture3d(counts, 1, table.tobytes(), dtype="u4")
+        self.table.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        constants = np.asarray(constants, np.float32).reshape(-1, 4)
+        self.constant_count = len(constants)
+        rows = -(-len(constants) // CONSTANTS_WIDTH)
+        width = min(len(constants), CONSTANTS_WIDTH)
+        padded = np.zeros((rows * width, 4), np.float32)
+        padded[:len(constants)] = constants
+        self.constants = ctx.texture((width, rows), 4, padded.tobytes(), dtype="f4")
+        self.constants.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.brick_of_slot = np.full(int(np.prod(self.grid)), FREE_SLOT, np.uint32)
+        self.slots_buffer = None
+        self.uploads = 0      # bricks written (tests count them)
+
+    @classmethod
+    def from_packed(cls, ctx: moderngl.Context, packed: Packed, exact_uint8: bool = False):
+        """The pool of app/twins/brick_pool.py pack (tests; the renderer writes bricks from a
+        store)."""
+        channels = 1 if packed.atlas.ndim == 3 else packed.atlas.shape[3]
+        pool = cls(ctx, packed.dims, packed.brick, channels, packed.grid, packed.table,
+                   packed.constants, exact_uint8)
+        side = slot_side(packed.brick)
+        for slot, brick in enumerate(packed.brick_of_slot):
+            if brick != FREE_SLOT:
+                o = slot_origin(slot, packed.grid) * side
+                pool.write_slot(slot, int(brick), packed.atlas[o[2]:o[2] + side,
+                                                               o[1]:o[1] + side, o[0]:o[0] + side])
+        return pool
+
+    @property
+    def atlas_bytes(self) -> int:
+        return int(np.prod(self.grid)) * slot_bytes(self.brick, self.channels, self.exact_uint8)
+
+    @property
+    def nbytes(self) -> int:
+        """GPU bytes: the atlas, the page table and the constants."""
+        return self.atlas_bytes + 4 * int(np.prod(brick_counts(self.dims, self.brick))) + \
+            16 * self.constant_count
+
+    def write_slot(self, slot: int, brick: int, block: np.ndarray) -> None:
+        """Writes brick `brick` (linear index) with its apron ((B + 2)^3 [z, y, x(, c)]) to slot."""
+        side = slot_side(self.brick)
+        if block.shape[:3] != (side, side, side):
+            raise ValueError(f"brick block of shape {block.shape}, expected {side}^3")
+        o = slot_origin(slot, self.grid) * side
+        self.atlas.write(atlas_payload(block, self.exact_uint8),
+                         viewport=(int(o[0]), int(o[1]), int(o[2]), side, side, side), alignment=1)
+        self.brick_of_slot[slot] = brick
+        self.uploads += 1
+        if self.slots_buffer is not None:
+            self.slots_buffer.write(self.brick_of_slot.tobytes())
+
+    def uniforms(self) -> dict:
+        return {"brick_atlas": ATLAS_UNIT, "brick_table": TABLE_UNIT,
+                "brick_constants": CONSTANTS_UNIT, "brick_volume_dims": self.dims,
+                "brick_counts": brick_counts(self.dims, self.brick), "brick_size": self.brick,
+                "brick_slots": self.grid, "brick_constant_count": self.constant_count}
+
+    def use(self) -> None:
+        """Binds the atlas, the table and the constants (and in the checking build the slot map)."""
+        self.atlas.use(ATLAS_UNIT)
+        self.table.use(TABLE_UNIT)
+        self.constants.use(CONSTANTS_UNIT)
+        from .checks import checks_for
+        if checks_for(self.ctx) is not None:
+            if self.slots_buffer is None:
+                self.slots_buffer = self.ctx.buffer(self.brick_of_slot.tobytes())
+            self.slots_buffer.bind_to_storage_buffer(BRICK_SLOTS_BINDING)
+
+    def release(self) -> None:
+        for obj in (self.atlas, self.table, self.constants, self.slots_buffer):
+            if obj is not None:
+                obj.release()
+        self.slots_buffer = None
+
+
+def upload_store(ctx: moderngl.Context, store, exact_uint8: bool, max_side: int) -> "BrickPool":
+    """A BrickPool holding every brick of an app.bricks.BrickStore that is not constant (read
+    once more, with aprons, a run of neighbours at a time; constant bricks are not read)."""
+    table, constants, grid, resident = store.layout(max_side)
+    pool = BrickPool(ctx, store.dims, store.brick, store.channels, grid, table, constants,
+                     exact_uint8, store.name)
+    try:
+        B, side = store.brick, slot_side(store.brick)
+        bx, by, _ = store.counts
+        rows: dict[tuple[int, int], list[int]] = {}
+        for z, y, x in resident:
+            rows.setdefault((int(z), int(y)), []).append(int(x))
+        for (z, y), xs in rows.items():
+            runs = np.split(np.asarray(xs), np.nonzero(np.diff(xs) != 1)[0] + 1)
+            for run in runs:
+                x0, x1 = int(run[0]), int(run[-1]) + 1
+                pencil = store.pencil(z, y, x0, x1, APRON)
+                for x in range(x0, x1):
+                    o = (x - x0) * B
+                    block = store.source.density(pencil[:, :, o:o + side])
+                    pool.write_slot(int(table[z, y, x]), x + bx * (y + by * z), block)
+    except BaseException:
+        pool.release()
+        raise
+    assert np.count_nonzero(pool.brick_of_slot != FREE_SLOT) == len(resident)
+    return pool

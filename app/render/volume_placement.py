@@ -1,0 +1,110 @@
+"""Where a volume goes on the GPU: one 3D texture (app/gl/textures.py volume_texture) where it
+fits, else a brick pool (app/gl/brick_pool.py) of the finest level whose bricks that are not
+constant fit the memory cap (RenderSettings.volume_memory_bytes, else the memory the device has
+left) and one atlas texture: the level shown whole, so every method renders one medium. A volume
+longer than GL_MAX_3D_TEXTURE_SIZE along an axis is bricked, not refused."""
+from __future__ import annotations
+
+import dataclasses
+
+import moderngl
+import numpy as np
+
+from ..bricks import (DEFAULT_BRICK_SIZE, ArraySource, BrickStore, LazyData, box_filtered,
+                      brick_counts, refuse_cap_below_brick, slot_bytes, slot_grid,
+                      source_box_filtered, texel_bytes)
+from ..gl.brick_pool import upload_store
+from ..gl.textures import device_available, volume_texture
+from ..volume import Volume, VolumeError
+
+
+def _gib(n: int) -> str:
+    if n >= 2**30:
+        return f"{n / 2**30:.2f} GiB"
+    return f"{n / 2**20:.1f} MiB" if n >= 2**20 else f"{n / 2**10:.1f} KiB"
+
+
+def _store(volume: Volume, brick: int) -> BrickStore:
+    if volume.bricks is not None and volume.bricks.brick == brick:
+        return volume.bricks
+    source = (ArraySource(volume.data) if isinstance(volume.data, np.ndarray)
+              else volume.bricks.source)
+    return BrickStore(source, brick, volume.name)
+
+
+def coarser(volume: Volume, brick: int) -> Volume:
+    """The next level: the store's own (OME-Zarr multiscales), else 2 x 2 x 2 voxels averaged
+    (in host memory); the same world box (spacing scaled by the dims' ratio)."""
+    if volume.levels:
+        source = volume.levels[0]
+        store = BrickStore(source, brick, volume.name)
+        data, levels, dtype = LazyData(store), volume.levels[1:], volume.raw_dtype
+    else:
+        store = None
+        data = (box_filtered(volume.data) if isinstance(volume.data, np.ndarray)
+                else source_box_filtered(volume.bricks.source, brick))
+        levels, dtype = (), "float32"   # averages are no longer 8-bit values
+    nz, ny, nx = data.shape[:3]
+    spacing = tuple(float(s) * n / m for s, n, m in zip(volume.spacing, volume.dims,
+                                                          (nx, ny, nz)))
+    return dataclasses.replace(volume, data=data, spacing=spacing, raw_dtype=dtype,
+                               derived={}, bricks=store, levels=levels)
+
+
+def level_bytes(store: BrickStore, channels: int, exact_uint8: bool, max_side: int) -> int | None:
+    """GPU bytes of a store's pool (atlas, page table, constants); None where its atlas exceeds
+    one 3D texture."""
+    resident = store.resident_count()
+    try:
+        grid = slot_grid(resident, store.brick, max_side)
+    except ValueError:
+        return None
+    constants = int(np.count_nonzero(store.constant())) + 1
+    return (int(np.prod(grid)) * slot_bytes(store.brick, channels, exact_uint8)
+            + 4 * int(np.prod(brick_counts(store.dims, store.brick))) + 16 * constants)
+
+
+def place_volume(ctx: moderngl.Context, volume: Volume, memory_bytes: int | None = None,
+                 brick_size: int | None = None):
+    """(the volume shown, its texture or BrickPool). `memory_bytes`: the cap on the volume's GPU
+    memory (None: the device's memory left); `brick_size`: bricks of that many voxels, forced
+    (None: bricked only where one texture does not fit, in bricks of 64)."""
+    max_side = int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"])
+    channels = volume.channel_count
+    exact = volume.exact_uint8
+    whole = int(np.prod(volume.dims, dtype=np.int64)) * texel_bytes(channels, exact)
+    available, where = device_available(ctx)
+    in_memory = isinstance(volume.data, np.ndarray)
+    if (in_memory and brick_size is None and max(volume.dims) <= max_side
+            and (memory_bytes is None or whole <= memory_bytes)
+            and (available is None or whole <= available)):
+        return volume, volume_texture(ctx, volume)
+    brick = int(brick_size or DEFAULT_BRICK_SIZE)
+    cap, cap_name = memory_bytes, "volume_memory_bytes"
+    if cap is None and available is not None:
+        cap, cap_name = available, where
+    if cap is not None:
+        refuse_cap_below_brick(cap, brick, channels, exact, volume.name)
+    current, level, first = volume, 0, None
+    while True:
+        store = _store(current, brick)
+        need = level_bytes(store, channels, current.exact_uint8, max_side)
+        if first is None:
+            first = store.resident_count()
+        if need is not None and (cap is None or need <= cap):
+            break
+        if max(current.dims) <= brick:
+            raise VolumeError(f"{volume.name}: even one brick of {brick}^3 voxels exceeds the "
+                              f"{_gib(cap)} of {cap_name}")
+        current, level = coarser(current, brick), level + 1
+    pool = upload_store(ctx, store, current.exact_uint8, max_side)
+    notes = current.notes
+    if level > 0:
+        held = (cap // slot_bytes(brick, channels, exact)) if cap is not None else None
+        why = (f"the {_gib(cap)} cap ({cap_name}) holds {min(100.0, 100.0 * held / max(first, 1)):.0f}% "
+               f"of level 0's {first} bricks" if cap is not None and (held or 0) < first else
+               f"level 0's {first} bricks exceed one atlas texture of {max_side}^3 texels")
+        nx, ny, nz = current.dims
+        notes += (f"level {level}, {2 ** level}x coarser ({nx} x {ny} x {nz}): {why}",)
+    shown = dataclasses.replace(current, bricks=store, notes=notes)
+    return shown, pool

@@ -1,0 +1,328 @@
+"""Issue 33's bricking targets: a 2048^3 uint16 procedural volume written as OME-Zarr on the device
+and opened under a 4 GiB cap; and a 20000 x 512 x 512 volume (longer than any
+GL_MAX_3D_TEXTURE_SIZE) rendered.
+
+    python scripts/brick_bench.py OUT_DIR [--quick] [--size 2048] [--cap 4G]
+        [--width 1920 --height 1080] [--frames 30] [--probes 32] [--long 20000,512,512]
+        [--parts write,write-long,capped,uncapped,long] [--reuse] [--stores DIR]
+
+1. Writes OUT_DIR/volume.zarr: an OME-Zarr image (levels 0.. each 2x box-filtered, chunks of
+   64^3), uint16, a ball of smooth noise in vacuum, slab by slab (never whole in memory); and
+   OUT_DIR/long.zarr (one level). Time to write each is recorded.
+2. Opens the volume under the cap (RenderSettings.volume_memory_bytes) and records: the level
+   shown and its note, the pool's bytes, the time to the first raymarched image (open, range
+   pass, upload, light grid, one frame), the raymarcher's 1080p frame rate (FRAMES frames, each
+   waited for), and the probe bake plus light grid time.
+3. rRMSE of that image against the uncapped render (level 0, bricked: no cap). Where level 0 does
+   not fit the device, both are rendered over a crop: the central eighth of the box (a quarter of
+   each side... half of each side) read as in-memory volumes (level 0's voxels, and the capped
+   level's over the same box), the same camera framing it.
+4. The long volume: bricked (not refused), time to its first raymarched image, and its frame.
+
+Writes OUT_DIR/results.json (one record a measurement, with the device and the settings) and
+OUT_DIR/report.md. --quick: a 48^3 volume, a cap of 12 slots of 8^3 bricks, a 64 x 48 image, a
+long volume of GL_MAX_3D_TEXTURE_SIZE + 40 voxels (llvmpipe; tests/test_bricks.py runs it).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from app.bench.metrics import rrmse  # noqa: E402
+from app.cli import memory_size  # noqa: E402
+from app.gl.context import create_headless_context, describe  # noqa: E402
+from app.render.renderer import Renderer  # noqa: E402
+from app.render.settings import RenderSettings  # noqa: E402
+from app.scene import parse_scene  # noqa: E402
+from app.volume import VolumeError, load_scene_volume, volume_from_array  # noqa: E402
+
+
+@dataclass(frozen=True)
+class Settings:
+    size: int = 2048
+    cap: int = 4 << 30
+    brick: int | None = None          # None: the default (64)
+    chunk: int = 64
+    width: int = 1920
+    height: int = 1080
+    frames: int = 30
+    probes: int = 32
+    probe_samples: int = 64
+    long: tuple[int, int, int] = (20000, 512, 512)   # x, y, z
+
+
+QUICK = Settings(size=48, cap=0, brick=8, chunk=8, width=64, height=48, frames=3, probes=4,
+                 probe_samples=16, long=(0, 16, 16))
+
+
+def density(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The procedural volume at coordinates in [-1, 1] (broadcast): a ball of radius 0.7 with a
+    soft edge, modulated by separable waves (cheap at 2048^3), zero outside; in [0, 1]."""
+    r2 = x * x + y * y + z * z
+    ball = np.clip((0.49 - r2) * 8.0, 0.0, 1.0)
+    waves = (0.6 + 0.2 * np.sin(11.0 * x + 1.0) * np.sin(13.0 * y + 2.0)
+             + 0.2 * np.sin(17.0 * z + 0.5) * np.cos(7.0 * x))
+    return (ball * waves).astype(np.float32)
+
+
+def _coords(n: int, lo: int, hi: int) -> np.ndarray:
+    return ((np.arange(lo, hi, dtype=np.float32) + 0.5) / n * 2.0 - 1.0)
+
+
+def write_ome_zarr(path: Path, dims, chunk: int, levels: int, value=density) -> float:
+    """An OME-Zarr image of `levels` levels (uint16, axes z, y, x), written slab by slab; seconds."""
+    import zarr
+    from app.bricks import box_filtered
+    start = time.perf_counter()
+    if path.exists():
+        shutil.rmtree(path)
+    nx, ny, nz = dims
+    root = zarr.open_group(str(path), mode="w", zarr_format=3)
+    arrays, shapes = [], []
+    for level in range(levels):
+        f = 2 ** level
+        shape = (-(-nz // f), -(-ny // f), -(-nx // f))
+        shapes.append(shape)
+        arrays.append(root.create_array(str(level), shape=shape, dtype="uint16",
+                                        chunks=tuple(min(chunk, s) for s in shape),
+                                        fill_value=0))
+    root.attrs["ome"] = {"version": "0.5", "multiscales": [{
+        "axes": [{"name": a, "type": "space"} for a in "zyx"],
+        "datasets": [{"path": str(level), "coordinateTransformations": [
+            {"type": "scale", "scale": [float(2 ** level)] * 3}]} for level in range(levels)]}]}
+    slab = 4 * max(chunk, 2 ** (levels - 1))   # whole chunks of level 0, even for every level
+    x = _coords(nx, 0, nx)[None, None, :]
+    y = _coords(ny, 0, ny)[None, :, None]
+    for z0 in range(0, nz, slab):
+        z1 = min(z0 + slab, nz)
+        d = value(x, y, _coords(nz, z0, z1)[:, None, None])
+        for level, array in enumerate(arrays):
+            f = 2 ** level
+            array[z0 // f:z0 // f + d.shape[0]] = np.round(d * 65535.0).astype(np.uint16)
+            d = box_filtered(d)
+    return time.perf_counter() - start
+
+
+def _scene(path: Path, s: Settings, crop=None):
+    data = {"volume": {"path": str(path), "value_range": [0, 65535]},
+            "transfer_function": {"colormap": "viridis",
+                                  "opacity": [[0.0, 0.0], [0.3, 0.0], [1.0, 1.0]]},
+            "density_scale": 60.0,
+            "camera": {"eye": [0.0, 0.4, 2.2], "target": [0, 0, 0], "up": [0, 1, 0],
+                       "fov_y": 35.0, "width": s.width, "height": s.height},
+            "probes": {"grid": [s.probes] * 3, "samples": s.probe_samples}}
+    return parse_scene(data)
+
+
+def _frames(r: Renderer, s: Settings) -> dict:
+    ctx = r.ctx
+    r.render("raymarch", spp=1, seed=0)          # compiled, light grid baked
+    ctx.finish()
+    times = []
+    for i in range(s.frames):
+        t = time.perf_counter()
+        r.render("raymarch", spp=1, seed=i + 1)
+        ctx.finish()
+        times.append(time.perf_counter() - t)
+    return {"frames": s.frames, "fps": 1.0 / float(np.median(times)),
+            "frame_ms_median": 1e3 * float(np.median(times)),
+            "frame_ms_max": 1e3 * float(np.max(times))}
+
+
+def _region(volume, lo: float, hi: float) -> np.ndarray:
+    """The densities of a volume (in memory or read brick by brick) over [lo, hi) of each axis
+    (fractions of the box)."""
+    nx, ny, nz = volume.dims
+    a = [int(round(lo * n)) for n in (nz, ny, nx)]
+    b = [int(round(hi * n)) for n in (nz, ny, nx)]
+    if isinstance(volume.data, np.ndarray):
+        return np.array(volume.data[a[0]:b[0], a[1]:b[1], a[2]:b[2]])
+    src = volume.data.store.source
+    return src.density(src.read(a[0], b[0], a[1], b[1], a[2], b[2]))
+
+
+PARTS = ("write", "write-long", "capped", "uncapped", "long")
+
+
+def _written(path: Path, dims, reuse: bool, chunk: int, levels: int) -> float | None:
+    """Seconds to write the store, or None where --reuse found it written (same shape)."""
+    if reuse and path.exists():
+        import zarr
+        try:
+            shape = zarr.open_group(str(path), mode="r")["0"].shape
+        except Exception:   # not a complete store: written again
+            shape = None
+        if shape == tuple(dims[::-1]):
+            return None
+    return write_ome_zarr(path, dims, chunk, levels)
+
+
+def _need(path: Path) -> Path:
+    if not path.exists():
+        raise SystemExit(f"{path}: not written yet; run with --parts write (the cube) or "
+                         "write-long first (or with it)")
+    return path
+
+
+def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
+        stores: Path | None = None) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    stores = stores or out
+    stores.mkdir(parents=True, exist_ok=True)
+    ctx = create_headless_context()
+    max_side = int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"])
+    old = out / "results.json"
+    records: dict = json.loads(old.read_text()) if reuse and old.exists() else {}
+    records.update({"device": describe(ctx), "settings": asdict(s), "quick": quick})
+    from app.bricks import slot_bytes
+    cap = s.cap or 12 * slot_bytes(s.brick, 1, False)
+    levels = max(1, int(np.log2(max(s.size // 64, 1))) + 1) if not quick else 3
+    path = stores / "volume.zarr"
+    long = s.long if not quick else (max_side + 40, s.long[1], s.long[2])
+    if "write" in parts:
+        written = _written(path, (s.size,) * 3, reuse, s.chunk, levels)
+        if written is not None:
+            records["write_s"] = written
+        records["levels_written"] = levels
+    if "write-long" in parts:
+        written = _written(stores / "long.zarr", long, reuse, s.chunk, 1)
+        if written is not None:
+            records["long_write_s"] = written
+    scene = _scene(path, s)
+    settings = RenderSettings(volume_memory_bytes=cap, brick_size=s.brick)
+    if "capped" in parts or "uncapped" in parts:
+        _need(path)
+        _capped(ctx, records, scene, settings, cap, s, parts)
+    if "long" in parts:
+        _long(ctx, records, _need(stores / "long.zarr"), s, long)
+    (out / "results.json").write_text(json.dumps(records, indent=2))
+    _report(out, records, s)
+    ctx.release()
+    return records
+
+
+def _capped(ctx, records, scene, settings, cap, s, parts):
+
+    # time to the first image under the cap
+    start = time.perf_counter()
+    r = Renderer(ctx, scene, settings=settings)
+    first = r.render("raymarch", spp=1, seed=0).image
+    ctx.finish()
+    shown = r.resources.volume
+    records["capped"] = {
+        "cap_bytes": cap, "first_image_s": time.perf_counter() - start,
+        "level_dims": list(shown.dims), "notes": list(shown.notes),
+        "pool_bytes": int(r.resources.volume_tex.nbytes) if r.resources.bricked else None,
+        "bricked": r.resources.bricked, **_frames(r, s)}
+    r.invalidate()                               # the first image baked them: again, timed
+    t = time.perf_counter()
+    bake_ms = r.bake(seed=1)
+    light_ms = r.bake_light()
+    ctx.finish()
+    records["capped"].update(bake_ms=bake_ms, light_ms=light_ms,
+                             bake_and_light_wall_s=time.perf_counter() - t)
+    capped_image = r.render("raymarch", spp=4, seed=7).image
+    capped_volume = shown
+    records["first_image_mean"] = float(first.mean())
+    r.release()
+    if "uncapped" not in parts:
+        return
+
+    # the uncapped render (level 0, bricked), or level 0 against the capped level over a crop
+    try:
+        r0 = Renderer(ctx, scene, settings=RenderSettings(brick_size=s.brick or 64))
+        if r0.resources.volume.dims != (s.size,) * 3:
+            raise VolumeError(f"level 0 does not fit: {r0.resources.volume.notes}")
+        full = r0.render("raymarch", spp=4, seed=7).image
+        r0.release()
+        records["rrmse_vs_uncapped"] = {"what": "whole image, level 0 uncapped",
+                                        "rrmse": rrmse(capped_image, full)}
+    except VolumeError as exc:
+        base = load_scene_volume(scene, s.brick or 64)
+        images = []
+        for vol in (base, capped_volume):
+            region = volume_from_array(_region(vol, 0.25, 0.75), value_range=(0.0, 1.0),
+                                       name="crop")
+            rc = Renderer(ctx, scene, region, RenderSettings(brick_size=s.brick))
+            images.append(rc.render("raymarch", spp=4, seed=7).image)
+            rc.release()
+        records["rrmse_vs_uncapped"] = {
+            "what": "central half of each axis, level 0 against the capped level",
+            "why": str(exc), "rrmse": rrmse(images[1], images[0])}
+
+
+
+def _long(ctx, records, lpath, s, long):
+    max_side = int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"])
+    start = time.perf_counter()
+    rl = Renderer(ctx, _scene(lpath, s), settings=RenderSettings(brick_size=s.brick))
+    image = rl.render("raymarch", spp=1, seed=0).image
+    ctx.finish()
+    records["long"] = {"dims": list(long), "max_3d_texture_size": max_side,
+                       "bricked": rl.resources.bricked,
+                       "level_dims": list(rl.resources.volume.dims),
+                       "first_image_s": time.perf_counter() - start,
+                       "finite": bool(np.isfinite(image).all()),
+                       "mean_radiance": float(image.mean()), **_frames(rl, s)}
+    rl.release()
+
+
+def _report(out: Path, records: dict, s: Settings) -> None:
+    lines = [f"# Bricked volumes ({records['device']})", ""]
+    c, lg, err = records.get("capped"), records.get("long"), records.get("rrmse_vs_uncapped")
+    if c:
+        lines.append(
+            f"- {s.size}^3 uint16 under a {c['cap_bytes'] / 2**30:.2f} GiB cap: level "
+            f"{c['level_dims']}, first image {c['first_image_s']:.1f} s, raymarched "
+            f"{s.width}x{s.height} {c['fps']:.1f} fps, bake {c['bake_ms']:.0f} ms + light grid "
+            f"{c['light_ms']:.0f} ms ({c['bake_and_light_wall_s']:.1f} s wall)")
+        lines.append(f"- notes: {'; '.join(c['notes']) or 'none'}")
+    if err:
+        lines.append(f"- rRMSE against level 0: {err['rrmse']:.4f} ({err['what']})")
+    if lg:
+        lines.append(f"- long volume {lg['dims']}: bricked {lg['bricked']}, first image "
+                     f"{lg['first_image_s']:.1f} s, {lg['fps']:.1f} fps")
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("out")
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--size", type=int)
+    p.add_argument("--cap", type=memory_size)
+    p.add_argument("--width", type=int)
+    p.add_argument("--height", type=int)
+    p.add_argument("--frames", type=int)
+    p.add_argument("--probes", type=int)
+    p.add_argument("--long", type=lambda t: tuple(int(v) for v in t.split(",")))
+    p.add_argument("--parts", type=lambda t: tuple(t.split(",")), default=PARTS,
+                   help="which parts: write,write-long,capped,uncapped,long (default all)")
+    p.add_argument("--reuse", action="store_true",
+                   help="keep stores already written (same shape) and add to results.json")
+    p.add_argument("--stores", type=Path,
+                   help="where the Zarr stores are written (default OUT_DIR)")
+    args = p.parse_args(argv)
+    unknown = set(args.parts) - set(PARTS)
+    if unknown:
+        p.error(f"--parts: unknown {', '.join(sorted(unknown))} (known: {', '.join(PARTS)})")
+    s = QUICK if args.quick else Settings()
+    changes = {k: v for k, v in vars(args).items()
+               if k not in ("out", "quick", "parts", "reuse", "stores") and v is not None}
+    from dataclasses import replace
+    s = replace(s, **changes)
+    run(Path(args.out), s, args.quick, args.parts, args.reuse, args.stores)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,189 @@
+"""Bricked volumes from a store (app/bricks.py): a Zarr array read brick by brick, constant bricks
+read once and never uploaded (counted), the majorant grid from the bricks' ranges; the memory cap
+(a coarser level, with a note; a cap below one brick refused); a volume longer than
+GL_MAX_3D_TEXTURE_SIZE bricked, not refused."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.bricks import ArraySource, BrickStore, LazyData, box_filtered
+from app.render.renderer import Renderer
+from app.render.settings import RenderSettings
+from app.render.volume_placement import place_volume
+from app.scene import parse_scene
+from app.scene_types import VolumeSpec
+from app.twins.brick_pool import CONSTANT, pack
+from app.twins.majorant_grid import brick_density_range_grid, density_range_grid
+from app.volume import VolumeError, load_volume, volume_from_array
+
+BRICK = 8
+CAMERA = {"eye": [0.0, 0.3, 2.2], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y": 35.0,
+          "width": 16, "height": 12}
+
+
+def _blob(shape=(24, 24, 64)) -> np.ndarray:
+    """uint16 [z, y, x]: zero but for a smooth blob in one corner region (most bricks empty)."""
+    z, y, x = np.meshgrid(*(np.arange(n) for n in shape), indexing="ij")
+    r2 = (x - 54.0) ** 2 + (y - 10.0) ** 2 + (z - 8.0) ** 2
+    d = np.where(r2 < 49.0, 40000.0 * np.exp(-r2 / 30.0), 0.0)
+    return np.round(d).astype(np.uint16)
+
+
+def _zarr(tmp_path, data, chunks=(8, 8, 8)):
+    import zarr
+    path = tmp_path / "blob.zarr"
+    zarr.create_array(str(path), shape=data.shape, dtype=data.dtype, chunks=chunks)[...] = data
+    return path
+
+
+def test_zarr_store_reads_constant_bricks_once_and_uploads_only_the_others(ctx, tmp_path):
+    data = _blob()
+    path = _zarr(tmp_path, data)
+    volume = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK)
+    assert isinstance(volume.data, LazyData) and volume.dims == (64, 24, 24)
+    store = volume.bricks
+    assert np.all(store.reads == 1)                      # the range pass: every brick once
+    assert (volume.raw_min, volume.raw_max) == (0.0, float(data.max()))
+    shown, pool = place_volume(ctx, volume, brick_size=BRICK)
+    try:
+        constant = store.constant()
+        assert constant.sum() >= constant.size // 2       # mostly empty
+        assert np.all(store.reads[constant] == 1)         # never read again
+        assert np.all(store.reads[~constant] == 2)        # read once more, to upload
+        assert pool.uploads == int((~constant).sum())
+        # what was uploaded is the whole loader's volume, bricked
+        whole = load_volume(VolumeSpec(path=str(path), builtin=None))
+        assert isinstance(whole.data, np.ndarray)
+        want = pack(whole.data, BRICK)
+        table = np.frombuffer(pool.table.read(), np.uint32).reshape(want.table.shape)
+        np.testing.assert_array_equal(table, want.table)
+        atlas = np.frombuffer(pool.atlas.read(), np.float32).reshape(want.atlas.shape)
+        np.testing.assert_array_equal(atlas, want.atlas)
+    finally:
+        pool.release()
+
+
+def test_zarr_store_renders_as_the_whole_volume(ctx, tmp_path):
+    data = _blob()
+    path = _zarr(tmp_path, data)
+    scene = parse_scene({"volume": {"path": str(path)}, "camera": CAMERA, "density_scale": 40.0,
+                         "probes": {"grid": [3, 3, 3], "samples": 32}})
+    images = []
+    # one global majorant: the grid from the bricks' ranges is looser than the voxels' (the same
+    # medium, other null collisions), which would change the random choices
+    for brick in (None, BRICK):
+        r = Renderer(ctx, scene, settings=RenderSettings(brick_size=brick,
+                                                         empty_space_skipping=False))
+        try:
+            assert r.resources.bricked == (brick is not None)
+            assert isinstance(r.resources.volume.data, np.ndarray) == (brick is None)
+            images.append(r.render("raymarch", spp=1, seed=2).image)
+        finally:
+            r.release()
+    assert images[0].max() > 0
+    err = np.sqrt(np.mean((images[1] - images[0]) ** 2) / np.mean(images[0] ** 2))
+    assert err < 1e-5, err
+
+
+def test_majorant_ranges_from_bricks_contain_the_whole_arrays():
+    r = np.random.default_rng(1)
+    data = r.uniform(0, 1, (21, 29, 37)).astype(np.float32)
+    data[:, :16, :24] = 0.0
+    store = BrickStore(ArraySource(data), BRICK)
+    lo_b, hi_b = brick_density_range_grid(*store.ranges(), store.dims, BRICK)
+    lo, hi = density_range_grid(data)
+    assert lo_b.shape == lo.shape
+    assert np.all(lo_b <= lo) and np.all(hi_b >= hi)
+    assert np.any(hi_b == 0.0)            # empty bricks keep empty cells skipped
+    assert np.all(store.reads == 1)
+
+
+def test_box_filtered_level_averages_pairs():
+    d = np.arange(3 * 4 * 5, dtype=np.float32).reshape(3, 4, 5)
+    c = box_filtered(d)
+    assert c.shape == (2, 2, 3)
+    assert c[0, 0, 0] == pytest.approx(d[:2, :2, :2].mean())
+    assert c[1, 1, 2] == pytest.approx(d[2, 2:4, 4].mean())   # odd axes: the edge repeated
+
+
+def _sphere_scene():
+    return parse_scene({"volume": {"builtin": "sphere", "size": [32, 32, 32]},
+                        "camera": CAMERA, "density_scale": 20.0,
+                        "probes": {"grid": [3, 3, 3], "samples": 32}})
+
+
+def test_cap_shows_a_coarser_level_and_says_so(ctx):
+    from app.bricks import slot_bytes
+    one = slot_bytes(BRICK, 1, False)
+    r = Renderer(ctx, _sphere_scene(), settings=RenderSettings(brick_size=BRICK,
+                                                               volume_memory_bytes=12 * one))
+    try:
+        v = r.resources.volume
+        assert v.dims == (16, 16, 16)              # level 0's bricks do not fit 12 slots
+        assert any(n.startswith("level 1, 2x coarser") and "cap" in n for n in v.notes)
+        assert np.allclose(v.half_extent, 0.5)     # the same world box
+        assert r.resources.volume_tex.nbytes <= 12 * one
+        image = r.render("raymarch", spp=1).image
+        assert np.isfinite(image).all() and image.max() > 0
+        r.configure(volume_memory_bytes=None)       # no cap: level 0 again
+        assert r.resources.volume.dims == (32, 32, 32)
+        assert not any(n.startswith("level") for n in r.resources.volume.notes)
+    finally:
+        r.release()
+
+
+def test_cap_below_one_brick_is_refused(ctx):
+    with pytest.raises(VolumeError, match="below one brick"):
+        Renderer(ctx, _sphere_scene(), settings=RenderSettings(volume_memory_bytes=1000))
+
+
+def test_cap_that_holds_the_whole_texture_keeps_it(ctx):
+    r = Renderer(ctx, _sphere_scene(), settings=RenderSettings(volume_memory_bytes=1 << 30))
+    try:
+        assert not r.resources.bricked and "VOLUME_BRICKED" not in r.resources.medium_defines()
+    finally:
+        r.release()
+
+
+def test_volume_longer_than_the_texture_limit_is_bricked(ctx):
+    long = int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"]) + 40
+    x = np.arange(long)
+    data = np.broadcast_to((np.sin(x / 50.0) > 0.5).astype(np.float32), (4, 4, long)).copy()
+    volume = volume_from_array(data, value_range=(0.0, 1.0), name="long")
+    scene = parse_scene({"camera": {**CAMERA, "eye": [0.0, 0.0, 1.5]}, "density_scale": 200.0,
+                         "probes": {"grid": [3, 3, 3], "samples": 32}})
+    r = Renderer(ctx, scene, volume)
+    try:
+        assert r.resources.bricked and r.resources.volume.dims == (long, 4, 4)
+        table = np.frombuffer(r.resources.volume_tex.table.read(), np.uint32)
+        assert np.any(table & CONSTANT)
+        image = r.render("raymarch", spp=1).image
+        assert np.isfinite(image).all() and image.max() > 0
+    finally:
+        r.release()
+
+
+def test_brick_bench_quick(tmp_path):
+    """scripts/brick_bench.py --quick (the GPU run's code at llvmpipe's size): a capped OME-Zarr
+    volume shown at a coarser level with its note and timings, its error against level 0, and a
+    volume longer than the texture limit rendered bricked."""
+    import importlib.util
+    import json
+    import sys
+    from conftest import ROOT
+    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "scripts" / "brick_bench.py")
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("brick_bench", bench)
+    spec.loader.exec_module(bench)
+    assert bench.main([str(tmp_path / "out"), "--quick"]) == 0
+    rec = json.loads((tmp_path / "out" / "results.json").read_text())
+    capped = rec["capped"]
+    assert capped["bricked"] and capped["level_dims"][0] < 48
+    assert any("coarser" in n for n in capped["notes"])
+    assert capped["pool_bytes"] <= capped["cap_bytes"]
+    assert capped["first_image_s"] > 0 and capped["fps"] > 0
+    assert 0 < rec["rrmse_vs_uncapped"]["rrmse"] < 1.0
+    assert rec["long"]["bricked"] and rec["long"]["finite"] and rec["long"]["mean_radiance"] > 0
+    assert rec["long"]["dims"][0] > rec["long"]["max_3d_texture_size"]
+    assert "fps" in (tmp_path / "out" / "report.md").read_text()
