@@ -106,7 +106,7 @@ void run_walk(uint local)
     // in the buffer's second region (two entries a walk after the chunk's radiance).
     if (valid) {
         uint base = uint(walk_radiance.length()) / 3u;
-        float rate = min(1.0, intBitsToFloat(p.pad));
+        float rate = min(1.0, p.correction_rate_sum);
         bool traced = p.correction_w_sum > 0.0 && rng_next(p.rng) < rate;
         walk_radiance[base + 2u * local] = vec4(p.correction_x, p.correction_grid);
         walk_radiance[base + 2u * local + 1u] =

@@ -139,7 +139,7 @@ class ProbeGrid:
         if sun not in WALK_SUN_MODES:
             raise ValueError(f"walk sun mode {sun!r}: expected one of {', '.join(WALK_SUN_MODES)}")
         self.sun = sun
-        # sun "grid": the probability of a shadow ray correcting the grid's sun (lib/integrator.glsl)
+        # sun "grid": the least rate at which a shadow ray corrects the grid's sun (lib/integrator.glsl)
         self.sun_correction = float(sun_correction)
         self.ctx = ctx
         self.grid = tuple(int(v) for v in grid)

@@ -82,15 +82,17 @@ struct PathState {
     float shadow_t;     // a shadow ray in progress at x: distance tracked so far (< 0: not begun)
     float shadow_transmittance;  // and its ratio-tracking estimate so far
     int shadow_pending; // 1 while the shadow ray of the event at x is unfinished
-    int pad;
 #if defined(WALK_SUN_GRID)
-    // The walk's one candidate for the sun's correction (see path_flight): where, its weight
-    // W c / w (the estimate's factor on T_ray - T_grid), the grid's transmittance there; the
-    // reservoir's weight sum W, and the sum of the events' correction rates (in pad's bits).
+    float correction_rate_sum;   // the walk's events' correction rates summed (see path_flight)
+    // The walk's one candidate for the sun's correction: where, its weight W c / w (the
+    // estimate's factor on T_ray - T_grid), the grid's transmittance there; the reservoir's
+    // weight sum W.
     vec3 correction_x;
     float correction_w_sum;
     vec3 correction_weight;
     float correction_grid;
+#else
+    int pad;
 #endif
 #if defined(ENVIRONMENT_MAP)
     vec3 env_w;         // the map sample's direction at x
@@ -113,12 +115,14 @@ void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
     p.shadow_t = -1.0;
     p.shadow_transmittance = 1.0;
     p.shadow_pending = 0;
-    p.pad = 0;
 #if defined(WALK_SUN_GRID)
+    p.correction_rate_sum = 0.0;
     p.correction_x = origin;
     p.correction_w_sum = 0.0;
     p.correction_weight = vec3(0.0);
     p.correction_grid = 0.0;
+#else
+    p.pad = 0;
 #endif
 #if defined(ENVIRONMENT_MAP)
     p.env_w = vec3(0.0);
@@ -145,9 +149,6 @@ const int STEP_DONE = 1;
 const int STEP_FLIGHT_CUT = 2;     // steps ran out mid-flight; p.x moved to where tracking stopped
 const int STEP_SHADOW_CUT = 3;     // steps ran out in a shadow ray; its progress is kept in p
 
-// The flight to the next scattering event and what happens there before the shadow ray: returns
-// STEP_DONE, STEP_FLIGHT_CUT, or STEP_CONTINUE with p at the event (p.shadow_pending set when the
-// sun needs a shadow ray from there).
 // The radiance a path that leaves the box along p.w adds. GUIDED_RESIDUAL (`guided`'s level 1): a
 // camera ray that leaves without scattering adds nothing, since level 0's estimate of the same
 // ray (lib/guided_level0.glsl) holds exactly what it would (the environment through the
@@ -165,6 +166,9 @@ vec3 path_escape(PathState p)
 #endif
 }
 
+// The flight to the next scattering event and what happens there before the shadow ray: returns
+// STEP_DONE, STEP_FLIGHT_CUT, or STEP_CONTINUE with p at the event (p.shadow_pending set when the
+// sun needs a shadow ray from there).
 int path_flight(inout PathState p, inout int steps_left)
 {
     float t0, t1;
@@ -263,7 +267,7 @@ int path_flight(inout PathState p, inout int steps_left)
                     p.correction_weight = c / w;
                     p.correction_grid = grid;
                 }
-                p.pad = floatBitsToInt(intBitsToFloat(p.pad) + q);
+                p.correction_rate_sum += q;
             }
         }
     }
