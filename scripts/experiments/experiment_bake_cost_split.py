@@ -41,19 +41,6 @@ VARIANTS = {
     "uncut, neither": {"_target": float("inf"), "walk_sun_correction": 0.0, "walk_adaptive": 0.0},
 }
 REPEATS = 3
-_EXTRA_DEFINES: dict = {}
-
-
-def _walk_defines_hook():
-    """The walk shader built with _EXTRA_DEFINES (the experiment's variants of it)."""
-    import app.render.probes as probes_module
-    compile_program = probes_module.compute_program
-
-    def patched(ctx, main, defines=None, **kw):
-        if main == "probe_walks.comp":
-            defines = {**(defines or {}), **_EXTRA_DEFINES}
-        return compile_program(ctx, main, defines, **kw)
-    probes_module.compute_program = patched
 
 
 def main(argv=None) -> int:
@@ -66,7 +53,6 @@ def main(argv=None) -> int:
     size = 32 if args.quick else 512
     from app.gl.context import create_headless_context, describe
     ctx = create_headless_context()
-    _walk_defines_hook()
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
     for name in scenes:
@@ -82,8 +68,6 @@ def main(argv=None) -> int:
                     change = dict(change)
                     import app.render.renderer as renderer_module
                     target = change.pop("_target", DISPATCH_TARGET_MS)
-                    _EXTRA_DEFINES.clear()
-                    _EXTRA_DEFINES.update(change.pop("_defines", {}))
                     renderer_module.dispatch_target_ms = (
                         lambda _r, t=target: t if not is_software(_r.ctx) else float("inf"))
                     r.settings = replace(type(r.settings)(), **change)
@@ -96,7 +80,6 @@ def main(argv=None) -> int:
                         times.append(ms)
                         sections.append(profile.totals_ms() if profile.available else {})
                         dispatches = r.probe_grid.dispatches
-                        longest = getattr(r.probe_grid, "_chunk_ms", None)
                         profile.release()
                     best = statistics.median(times)
                     i = times.index(sorted(times)[len(times) // 2])
