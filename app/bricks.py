@@ -3,13 +3,19 @@ Zarr array, never the whole array at once), keeps each brick's least and largest
 once), and writes the bricks that are not constant into a brick pool (app/gl/brick_pool.py); and
 the levels a memory cap chooses between (a 2x box-filtered pyramid, or an OME-Zarr store's own).
 
-Reading: rows of bricks along x ("pencils") at a time, so a Zarr store's chunks are decoded once a
-pass. The range pass reads every brick once; the upload pass reads only the bricks that are not
-constant, with their aprons (the one voxel of each neighbour they need); a constant brick (the
-brick and its apron one value) is never read again nor uploaded. `reads` counts, per brick, how
-many times its voxels were read.
+Reading: the range pass reads a layer of bricks (B voxels along z, the whole y and x) at a time,
+several layers at once on threads (Zarr's decoders and NumPy's reductions run outside the GIL), so
+each of a store's chunks is decoded once a pass. The upload pass reads only the bricks that are not
+constant, each once, as runs along x without aprons (chunk-aligned: a pencil with its apron would
+decode the 3 x 3 rows of chunks around it, 9 times the data); each brick's apron is assembled from
+its neighbours' voxels: those read, or a constant brick's value (a constant brick, the brick and
+its apron one value, is never read again nor uploaded). `reads` counts, per brick, how many times
+its voxels were read.
 """
 from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -204,23 +210,122 @@ class BrickStore:
 
     def raw_ranges(self) -> tuple[np.ndarray, np.ndarray]:
         """Each brick's least and largest raw value [bz, by, bx(, c)] (one read of every brick,
-        the first time)."""
+        the first time: a layer of bricks a read, layers on threads)."""
         if self._ranges is None:
             bx, by, bz = self.counts
-            shape = (bz, by, bx) + ((self.channels,) if self.channels > 1 else ())
-            lo = hi = None
-            B = self.brick
-            for z in range(bz):
-                for y in range(by):
-                    row = self.pencil(z, y, 0, bx, 0)
-                    if lo is None:
-                        lo, hi = np.empty(shape, row.dtype), np.empty(shape, row.dtype)
-                    for x in range(bx):
-                        part = row[:, :, x * B:(x + 1) * B]
-                        lo[z, y, x] = part.min(axis=(0, 1, 2))
-                        hi[z, y, x] = part.max(axis=(0, 1, 2))
+            with ThreadPoolExecutor(reader_threads()) as pool:
+                layers = list(pool.map(self._layer_ranges, range(bz)))
+            lo = np.stack([layer[0] for layer in layers])
+            hi = np.stack([layer[1] for layer in layers])
             self._ranges = (lo, hi)
         return self._ranges
+
+    def _layer_ranges(self, z: int) -> tuple[np.ndarray, np.ndarray]:
+        """[by, bx(, c)] least and largest raw values of layer z's bricks."""
+        bx, by, _ = self.counts
+        B = self.brick
+        nx, ny, _ = self.dims
+        layer = self.source.read(z * B, min(z * B + B, self.dims[2]), 0, ny, 0, nx)
+        self.reads[z] += 1
+        # partial bricks at the far faces: the edge voxel repeated changes no least or largest
+        pad = [(0, 0), (0, by * B - ny), (0, bx * B - nx)] + [(0, 0)] * (layer.ndim - 3)
+        if any(p != (0, 0) for p in pad):
+            layer = np.pad(layer, pad, mode="edge")
+        d = layer.shape[0]
+        blocks = layer.reshape((d, by, B, bx, B) + layer.shape[3:])
+        return blocks.min(axis=(0, 2, 4)), blocks.max(axis=(0, 2, 4))
+
+    def resident_layers(self, resident: np.ndarray):
+        """For each layer z holding bricks that are not constant, in order: (z, the raw voxels of
+        each such brick with its apron {(y, x): [B + 2, B + 2, B + 2(, c)]}). Every brick that is
+        not constant is read once (runs along x, no apron, a layer ahead on threads); an apron
+        voxel is its neighbour's: read, or a constant brick's value (its least raw value), or at
+        the volume's faces the edge voxel repeated (as clamped texture coordinates read it)."""
+        bx, by, bz = self.counts
+        B = self.brick
+        lo, _ = self.raw_ranges()
+        is_resident = np.zeros((bz, by, bx), bool)
+        if len(resident):
+            is_resident[tuple(np.asarray(resident).T)] = True
+        layers_wanted = sorted({int(z) for z in np.asarray(resident)[:, 0]}) if len(resident) else []
+        need = sorted({n for z in layers_wanted for n in (z - 1, z, z + 1) if 0 <= n < bz})
+        cores: dict[int, dict] = {}
+        with ThreadPoolExecutor(reader_threads()) as pool:
+            futures, submitted = {}, set()
+            ahead = 2                                   # layers read ahead of the one assembled
+            for z in layers_wanted:
+                for n in need:
+                    if n <= z + ahead and n not in submitted:
+                        submitted.add(n)
+                        futures[n] = pool.submit(self._read_cores, n, is_resident[n])
+                for n in (z - 1, z, z + 1):
+                    if n in futures:
+                        cores[n] = futures.pop(n).result()
+                slab = self._apron_slab(z, cores, lo, is_resident)
+                for y, x in np.argwhere(is_resident[z]):
+                    y, x = int(y), int(x)
+                    yield z, (y, x), slab[:, y * B:y * B + B + 2, x * B:x * B + B + 2]
+                for n in list(cores):
+                    if n < z:
+                        del cores[n]
+
+    def _read_cores(self, z: int, resident_row: np.ndarray) -> dict:
+        """{(y, x): raw voxels [B, B, B(, c)]} of layer z's resident bricks (edge-padded to B at
+        the far faces), read as runs along x."""
+        B = self.brick
+        nx, ny, nz = self.dims
+        out = {}
+        for y in range(resident_row.shape[0]):
+            xs = np.nonzero(resident_row[y])[0]
+            if not len(xs):
+                continue
+            for run in np.split(xs, np.nonzero(np.diff(xs) != 1)[0] + 1):
+                x0, x1 = int(run[0]), int(run[-1]) + 1
+                block = self.source.read(z * B, min(z * B + B, nz), y * B, min(y * B + B, ny),
+                                         x0 * B, min(x1 * B, nx))
+                self.reads[z, y, x0:x1] += 1
+                pad = ([(0, B - block.shape[0]), (0, B - block.shape[1]),
+                        (0, (x1 - x0) * B - block.shape[2])] + [(0, 0)] * (block.ndim - 3))
+                if any(p != (0, 0) for p in pad):
+                    block = np.pad(block, pad, mode="edge")
+                for x in range(x0, x1):
+                    out[(y, x)] = block[:, :, (x - x0) * B:(x - x0 + 1) * B]
+        return out
+
+    def _apron_slab(self, z: int, cores: dict, lo: np.ndarray, is_resident: np.ndarray):
+        """Layer z's voxels with a one-voxel apron on every side, [B + 2, by B + 2, bx B + 2(, c)]
+        (the volume padded to whole bricks by its edge voxels, as the bricks' cores are)."""
+        bx, by, bz = self.counts
+        B = self.brick
+        planes = {z: slice(0, B)}
+        if z > 0:
+            planes[z - 1] = slice(B - 1, B)
+        if z + 1 < bz:
+            planes[z + 1] = slice(0, 1)
+        first = next(iter(cores[z].values())) if cores.get(z) else None
+        dtype = first.dtype if first is not None else lo.dtype
+        extra = lo.shape[3:]
+        slab = np.empty((B + 2, by * B + 2, bx * B + 2) + extra, dtype)
+        inner = slab[:, 1:-1, 1:-1]
+        for n, rows in planes.items():
+            dz = slice(1, B + 1) if n == z else (slice(0, 1) if n < z else slice(B + 1, B + 2))
+            part = inner[dz]
+            # every brick's value first (a constant brick's core is its one value), then the
+            # cores read over it
+            values = lo[n]                                      # [by, bx(, c)]
+            part[...] = np.repeat(np.repeat(values, B, axis=0), B, axis=1)[None]
+            for (y, x), core in (cores.get(n) or {}).items():
+                part[:, y * B:(y + 1) * B, x * B:(x + 1) * B] = core[rows]
+        # the faces: the edge voxel repeated (below the first layer, above the last, and y, x)
+        if z == 0:
+            slab[0, 1:-1, 1:-1] = slab[1, 1:-1, 1:-1]
+        if z + 1 == bz:
+            slab[B + 1, 1:-1, 1:-1] = slab[B, 1:-1, 1:-1]
+        slab[:, 0] = slab[:, 1]
+        slab[:, -1] = slab[:, -2]
+        slab[:, :, 0] = slab[:, :, 1]
+        slab[:, :, -1] = slab[:, :, -2]
+        return slab
 
     def constant(self) -> np.ndarray:
         """[bz, by, bx] True where the brick and its apron hold one value (never uploaded)."""
@@ -240,6 +345,11 @@ class BrickStore:
         for slot, (z, y, x) in enumerate(resident):
             table[z, y, x] = slot
         return table, constants, grid, resident
+
+def reader_threads() -> int:
+    """Threads reading a store's layers at once (each holds a layer of bricks in memory)."""
+    return max(1, min(8, os.cpu_count() or 1))
+
 
 def box_filtered(data: np.ndarray) -> np.ndarray:
     """The next level of a pyramid: 2 x 2 x 2 voxels averaged ([z, y, x(, c)]; an odd axis has

@@ -99,6 +99,35 @@ def test_majorant_ranges_from_bricks_contain_the_whole_arrays():
     assert np.all(store.reads == 1)
 
 
+@pytest.mark.parametrize("shape, channels", [((19, 13, 30), 1), ((16, 8, 24), 1),
+                                               ((11, 17, 9), 2)])
+def test_resident_bricks_with_aprons_equal_clamped_reads(shape, channels):
+    """The upload's bricks (each read once, its apron from its neighbours' voxels or a constant
+    brick's value) equal a read of the brick with its apron clamped to the volume (the edge voxel
+    repeated), with partial bricks at the far faces, constant regions of a nonzero value, and
+    several channels; and each resident brick is read once more, no constant brick."""
+    rng = np.random.default_rng(5)
+    data = np.full(shape + ((channels,) if channels > 1 else ()), 0.25, np.float32)
+    data[: shape[0] // 2, : shape[1] // 2] = 0.0
+    z0, y0, x0 = (n // 3 for n in shape)
+    data[z0:z0 + 5, y0:y0 + 4, x0:x0 + 6] = rng.random((5, 4, 6) + data.shape[3:])
+    data[-1, -1, -1] = 0.9                    # a lone voxel in a far, partial brick
+    store = BrickStore(ArraySource(data), 4)
+    _, _, _, resident = store.layout(4096)
+    assert 0 < len(resident) < np.prod(store.counts)
+    before = store.reads.copy()
+    seen = 0
+    for z, (y, x), block in store.resident_layers(resident):
+        np.testing.assert_array_equal(block, store.pencil(z, y, x, x + 1, 1))
+        seen += 1
+    assert seen == len(resident)
+    # pencil() above counted once more each; resident_layers once each, constant ones never
+    added = store.reads - before
+    is_resident = np.zeros(added.shape, bool)
+    is_resident[tuple(resident.T)] = True
+    assert np.all(added[is_resident] == 2) and np.all(added[~is_resident] == 0)
+
+
 def test_box_filtered_level_averages_pairs():
     d = np.arange(3 * 4 * 5, dtype=np.float32).reshape(3, 4, 5)
     c = box_filtered(d)
@@ -187,3 +216,29 @@ def test_brick_bench_quick(tmp_path):
     assert rec["long"]["bricked"] and rec["long"]["finite"] and rec["long"]["mean_radiance"] > 0
     assert rec["long"]["dims"][0] > rec["long"]["max_3d_texture_size"]
     assert "fps" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_histogram_of_a_lazy_store_reads_a_small_coarser_level_whole(tmp_path):
+    """A store read brick by brick takes its histogram from its own coarser level (read whole,
+    never a strided sample of level 0 that decodes a row of chunks a plane)."""
+    import importlib.util
+    import sys
+    from conftest import ROOT
+    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "scripts" / "brick_bench.py")
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("brick_bench", bench)
+    spec.loader.exec_module(bench)
+    path = tmp_path / "v.zarr"
+    bench.write_ome_zarr(path, (32, 32, 32), 8, 3)
+    volume = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK)
+    assert isinstance(volume.data, LazyData) and volume.levels
+    level1 = volume.levels[0]
+    assert level1.shape[:3] == (16, 16, 16)
+    reads = []
+    original = volume.data.sample
+    volume.data.sample = lambda *a, **k: reads.append(1) or original(*a, **k)
+    counts = volume.histogram(bins=16)
+    assert not reads
+    data = level1.density(level1.read(0, 16, 0, 16, 0, 16))
+    np.testing.assert_array_equal(counts, np.histogram(data, bins=16, range=(0.0, 1.0))[0])
+    assert counts.sum() == 16 ** 3

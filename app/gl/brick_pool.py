@@ -132,26 +132,17 @@ class BrickPool:
 
 
 def upload_store(ctx: moderngl.Context, store, exact_uint8: bool, max_side: int) -> "BrickPool":
-    """A BrickPool holding every brick of an app.bricks.BrickStore that is not constant (read
-    once more, with aprons, a run of neighbours at a time; constant bricks are not read)."""
+    """A BrickPool holding every brick of an app.bricks.BrickStore that is not constant (each read
+    once more, its apron from its neighbours: BrickStore.resident_layers; constant bricks are not
+    read)."""
     table, constants, grid, resident = store.layout(max_side)
     pool = BrickPool(ctx, store.dims, store.brick, store.channels, grid, table, constants,
                      exact_uint8, store.name)
     try:
-        B, side = store.brick, slot_side(store.brick)
         bx, by, _ = store.counts
-        rows: dict[tuple[int, int], list[int]] = {}
-        for z, y, x in resident:
-            rows.setdefault((int(z), int(y)), []).append(int(x))
-        for (z, y), xs in rows.items():
-            runs = np.split(np.asarray(xs), np.nonzero(np.diff(xs) != 1)[0] + 1)
-            for run in runs:
-                x0, x1 = int(run[0]), int(run[-1]) + 1
-                pencil = store.pencil(z, y, x0, x1, APRON)
-                for x in range(x0, x1):
-                    o = (x - x0) * B
-                    block = store.source.density(pencil[:, :, o:o + side])
-                    pool.write_slot(int(table[z, y, x]), x + bx * (y + by * z), block)
+        for z, (y, x), block in store.resident_layers(resident):
+            pool.write_slot(int(table[z, y, x]), x + bx * (y + by * z),
+                            store.source.density(block))
     except BaseException:
         pool.release()
         raise
