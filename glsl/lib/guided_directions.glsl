@@ -35,6 +35,11 @@ const int GUIDED_CELLS_PHI = 8;
 const int GUIDED_CELLS = GUIDED_CELLS_COS * GUIDED_CELLS_PHI;
 const float GUIDED_CELL_FLOOR = 0.05;
 const vec3 GUIDED_LUMINANCE = vec3(0.2126, 0.7152, 0.0722);   // Rec. 709
+// Loop iterations one table may take at most, with the probe fetch before it and the draw after
+// (its cells times the SH loop, the fetch's and the reductions' loops, the search), charged to
+// the path's step budget as the map's samples are (lib/integrator.glsl): Mesa's llvmpipe ends an
+// invocation's loops past its limit, and uncharged loops of 700 iterations an event overran it.
+const int GUIDED_DIRECTION_TABLE_STEPS = GUIDED_CELLS * (SH_COUNT + 2) + 4 * SH_COUNT + 64;
 
 uniform float guided_direction_probability;   // P: the share of directions drawn from the table
 

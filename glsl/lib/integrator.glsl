@@ -63,6 +63,17 @@ float mis_power(float a, float b)
 }
 #endif
 
+// Steps a path step keeps back from its tracking for the work after it that loops: guided
+// directions' tables (lib/guided_directions.glsl), one at the event's map sample and one for its
+// next direction; charged as they run.
+#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS && defined(ENVIRONMENT_MAP)
+const int PATH_STEP_KEPT_BACK = 2 * GUIDED_DIRECTION_TABLE_STEPS;
+#elif defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS
+const int PATH_STEP_KEPT_BACK = GUIDED_DIRECTION_TABLE_STEPS;
+#else
+const int PATH_STEP_KEPT_BACK = 0;
+#endif
+
 #ifndef RR_START_BOUNCE
 #define RR_START_BOUNCE 3
 #endif
@@ -242,6 +253,7 @@ int path_flight(inout PathState p, inout int steps_left)
                     float probe_sun;
                     probe_fetch(p.x, coeffs, probe_sun);
                     direction_pdf *= guided_direction_density_at(coeffs, p.w, anisotropy, env_w);
+                    steps_left -= GUIDED_DIRECTION_TABLE_STEPS;
                 }
 #endif
                 p.env_w = env_w;
@@ -360,6 +372,7 @@ int path_step(inout PathState p, inout int steps_left)
         vec2 u = guided_direction_primary(cdf, xi_choice, xi1, xi2);
         phase_over_pdf = 1.0 / guided_direction_density(cdf, u);
         p.w = sample_hg(w_in, anisotropy, u.x, u.y);
+        steps_left -= GUIDED_DIRECTION_TABLE_STEPS;
     } else {
         p.w = sample_hg(w_in, anisotropy, rng_next(p.rng), rng_next(p.rng));
     }
@@ -408,7 +421,9 @@ int path_continue(inout PathState p, inout int loop_budget, int reserve)
         bool dispatch_bound = loop_budget < path_left;
         int steps_left = min(path_left, loop_budget);
         int before = steps_left;
+        steps_left -= PATH_STEP_KEPT_BACK;   // tracking stops short of it; what runs after, charged
         int result = path_step(p, steps_left);
+        steps_left += PATH_STEP_KEPT_BACK;
         p.steps_used += before - steps_left;
         loop_budget -= before - steps_left;
         if (result == STEP_DONE)
