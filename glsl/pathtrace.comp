@@ -25,6 +25,13 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #if GUIDED_DIRECTION_CONTROL
 #include "lib/guided_direction_control.glsl"
 #endif
+#if !defined(GUIDED_DIRECTIONS) || PROBE_SH_ORDER < 1
+#undef GUIDED_DIRECTIONS   // the same: order 0 holds no direction to guide by (the renderer bakes
+#define GUIDED_DIRECTIONS 0   // order 2 where `auto` would give 0: probe_layout.resolve_sh_order)
+#endif
+#if GUIDED_DIRECTIONS
+#include "lib/guided_directions.glsl"
+#endif
 #endif
 #include "lib/integrator.glsl"
 

@@ -13,7 +13,12 @@ SPP samples per pixel with independent seeds:
   RenderSettings.guided_direction_control False), with the direction control at every event
   (the default, lib/guided_direction_control.glsl), and that with one frame of level 0 a sample
   of level 1 instead of 0.25 (guided_level0_ratio); for `guided` each level's share of its
-  variance.
+  variance. These rows draw directions from the phase function alone (guided_directions 0), as
+  they did before guided directions, so that they stay comparable with earlier records;
+- `guided, guided directions`: the `guided` row with guided directions at their default
+  (RenderSettings.guided_directions 0.5: half the directions drawn from the phase function times
+  the probes' radiance, lib/guided_directions.glsl): against `guided`, what guiding removes and
+  what its table costs a sample.
 
 For two independent images a, b of SPP samples, E[(a - b)^2] / 2 is one image's variance, so a
 sample's relative variance is  v = SPP * sum((a - b)^2) / 2 / sum(((a + b) / 2)^2)  (the image's
@@ -41,14 +46,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.bench.records import progressive  # noqa: E402
 from app.bench.scenes import ALL_SCENES, bench_scene  # noqa: E402
+from app.render.probe_layout import resolve_sh_order  # noqa: E402
 from app.render.renderer import Renderer  # noqa: E402
 from app.render.settings import RenderSettings  # noqa: E402
 
 TARGETS = (0.05, 0.02, 0.01, 0.005)
 # `guided` first, right after the bake (a scene change for the pt rows would make the probes and
 # the light grid stale, and their re-bake would be counted in the next render)
-ESTIMATORS = ("guided, first event", "guided", "guided, level-0 ratio 1", "pt", "pt, 1 bounce",
-              "pt, 2 bounces")
+ESTIMATORS = ("guided, first event", "guided", "guided, level-0 ratio 1",
+              "guided, guided directions", "pt", "pt, 1 bounce", "pt, 2 bounces")
+# guided directions' probability in the row that has them (the setting's default)
+GUIDED_DIRECTIONS = RenderSettings().guided_directions
 
 
 def relative_variance(a: np.ndarray, b: np.ndarray, spp: int) -> float:
@@ -81,9 +89,16 @@ def measure_scene(ctx, name: str, width: int, height: int, grid: int, walks: int
     if scene is None:
         log(f"{name}: dataset absent, skipped")
         return None
-    scene = scene.replace(probes=replace(scene.probes, grid=(grid, grid, grid), samples=walks))
+    # One probe bake for every row: the order guided directions bake (where g = 0 "auto" gives 2
+    # rather than 0 while they are on), fixed, so that turning them off in the other rows does
+    # not re-bake (at g = 0 those rows then also have the direction control, which order 0
+    # compiles out).
+    order = resolve_sh_order(scene.probes.sh_order, scene.anisotropy, walks, directions=True)
+    scene = scene.replace(probes=replace(scene.probes, grid=(grid, grid, grid), samples=walks,
+                                         sh_order=order))
     out = {"scene": name, "width": width, "height": height, "probe_grid": grid,
-           "probe_samples": walks, "spp": spp, "max_bounces": scene.max_bounces, "estimators": {}}
+           "probe_samples": walks, "sh_order": order, "spp": spp,
+           "max_bounces": scene.max_bounces, "estimators": {}}
     renderer = Renderer(ctx, scene)
     try:
         bake_ms = renderer.bake(seed=1)
@@ -103,7 +118,8 @@ def measure_scene(ctx, name: str, width: int, height: int, grid: int, walks: int
                     raise RuntimeError("the probes went stale before a guided row")
             renderer.settings = replace(
                 renderer.settings, guided_direction_control=est != "guided, first event",
-                guided_level0_ratio=1.0 if est.endswith("ratio 1") else 0.25)
+                guided_level0_ratio=1.0 if est.endswith("ratio 1") else 0.25,
+                guided_directions=GUIDED_DIRECTIONS if est.endswith("guided directions") else 0.0)
             a, b, ms, levels = _estimate(renderer, method, spp, per_dispatch, seed=1000)
             v = relative_variance(a, b, spp)
             level_share = None

@@ -22,16 +22,18 @@ CONTROL_KERNEL = """
 #include "lib/sh.glsl"
 #include "lib/probes.glsl"
 #include "lib/guided_direction_control.glsl"
-layout(std430, binding = 0) readonly buffer In { float v[]; };   // x, w_in, w per item
+layout(std430, binding = 0) readonly buffer In { float v[]; };   // x, w_in, w, weight per item
 layout(std430, binding = 1) writeonly buffer Out { float o[]; };
 void main()
 {
     uint i = gl_GlobalInvocationID.x;
     if (i >= count) return;
-    uint b = 9u * i;
-    vec3 c = guided_direction_control(vec3(v[b], v[b + 1u], v[b + 2u]),
-                                      vec3(v[b + 3u], v[b + 4u], v[b + 5u]),
-                                      vec3(v[b + 6u], v[b + 7u], v[b + 8u]));
+    uint b = 10u * i;
+    vec3 coeffs[SH_COUNT];
+    float sun;
+    probe_fetch(vec3(v[b], v[b + 1u], v[b + 2u]), coeffs, sun);
+    vec3 c = guided_direction_control(coeffs, vec3(v[b + 3u], v[b + 4u], v[b + 5u]),
+                                      vec3(v[b + 6u], v[b + 7u], v[b + 8u]), v[b + 9u]);
     o[3u * i] = c.r; o[3u * i + 1u] = c.g; o[3u * i + 2u] = c.b;
 }
 """
@@ -54,6 +56,7 @@ def test_direction_control_glsl_matches_its_twin(ctx, order, window):
     x = rng.uniform(-0.9, 0.9, (n, 3))
     w_in = _unit(rng.normal(size=(n, 3)))
     w = _unit(rng.normal(size=(n, 3)))
+    weight = np.where(np.arange(n) % 2 == 0, 1.0, rng.uniform(0.5, 2.0, n))   # HG's, guided's
     g = 0.6
     uniforms = {"probe_textures": tuple(probe_unit(t) for t in ids), "probe_grid": grid,
                 "probe_box_min": (-1.0, -1.0, -1.0), "probe_box_size": (2.0, 2.0, 2.0),
@@ -64,7 +67,8 @@ def test_direction_control_glsl_matches_its_twin(ctx, order, window):
     sh_count = (order + 1) ** 2
     try:
         got = run_kernel(ctx, CONTROL_KERNEL,
-                         [np.concatenate([x, w_in, w], 1).astype(np.float32).ravel()], (n, 3),
+                         [np.concatenate([x, w_in, w, weight[:, None]], 1).astype(np.float32)
+                          .ravel()], (n, 3),
                          count=n, defines=defines, uniforms=uniforms)
         fetched = run_kernel(ctx, PROBE_FETCH_KERNEL, [x.astype(np.float32).ravel()],
                              (n, 3 * sh_count + 1), count=n, defines=defines, uniforms=uniforms)
@@ -73,7 +77,7 @@ def test_direction_control_glsl_matches_its_twin(ctx, order, window):
             tex.release()
     coeffs = fetched[:, :-1].reshape(n, sh_count, 3)
     expected = np.stack([direction_control(coeffs[i], w_in[i], w[i], g, SH_WINDOW_IDS[window],
-                                           order) for i in range(n)])
+                                           order, weight[i]) for i in range(n)])
     assert np.abs(expected).max() > 0.1       # the control is not trivially zero here
     np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-5 * np.abs(expected).max())
 
@@ -94,10 +98,36 @@ def test_direction_control_has_mean_zero_over_the_phase_function(order, window, 
         np.testing.assert_allclose(mean, 0.0, atol=1e-6 * np.abs(control).max() + 1e-9)
 
 
+@pytest.mark.parametrize("g", [0.0, 0.6, -0.4])
+@pytest.mark.parametrize("probability", [0.5, 1.0])
+def test_direction_control_has_mean_zero_over_guided_directions(g, probability):
+    """The same with directions drawn from guided directions' mixture (lib/guided_directions.glsl):
+    E_pdf[E_phase[h] - h phase / pdf] = 0 by quadrature over the sphere, for coefficients unlike
+    the table's (the table is built from other probes: the mean is 0 for any pdf), and the plain
+    form E_phase[h] - h, without the weight, is not (the weight is needed)."""
+    from app.twins.guided_directions import direction_pdf
+    order = 2
+    rng = np.random.default_rng(int(10 * g) + 7)
+    coeffs = rng.normal(size=(9, 3))
+    table_coeffs = rng.normal(size=(9, 3))
+    table_coeffs[0] += 3.0
+    w, weights = sphere_quadrature(256)
+    for w_in in _unit(rng.normal(size=(3, 3))):
+        pdf = direction_pdf(table_coeffs, w_in, g, SH_WINDOW_HANN, order, probability, w)
+        weight = phase_hg(w @ w_in, g) / pdf
+        control = direction_control(coeffs, w_in, w, g, SH_WINDOW_HANN, order, weight)
+        mean = (pdf * weights) @ control
+        scale = np.abs(control).max()
+        np.testing.assert_allclose(mean, 0.0, atol=3e-3 * scale)
+        unweighted = (pdf * weights) @ direction_control(coeffs, w_in, w, g, SH_WINDOW_HANN, order)
+        assert np.abs(unweighted).max() > 10 * np.abs(mean).max()
+
+
 def test_the_variance_script_runs_and_the_control_acts(tmp_path):
     """scripts/guided_variance.py --quick (the anisotropic cloud, g = 0.8, whose probes hold
-    directions): every estimator's variance is finite and positive, the direction control changes
-    `guided`'s estimate (it acts), and the report names every estimator."""
+    directions): every estimator's variance is finite and positive, the direction control and
+    guided directions change `guided`'s estimate (they act), and the report names every
+    estimator."""
     import json
     import subprocess
     import sys
@@ -109,11 +139,13 @@ def test_the_variance_script_runs_and_the_control_acts(tmp_path):
     (scene,) = data["results"]
     est = scene["estimators"]
     assert set(est) == {"pt", "pt, 1 bounce", "pt, 2 bounces", "guided, first event", "guided",
-                        "guided, level-0 ratio 1"}
+                        "guided, level-0 ratio 1", "guided, guided directions"}
     for name, rec in est.items():
         assert rec["finite"] and 0.0 < rec["relative_variance"] < np.inf, name
         assert rec["ms_per_sample"] > 0.0, name
     assert est["guided"]["relative_variance"] != est["guided, first event"]["relative_variance"]
+    guided_directions = est["guided, guided directions"]   # guided directions act too
+    assert guided_directions["relative_variance"] != est["guided"]["relative_variance"]
     assert 0.0 < est["pt, 1 bounce"]["share_of_pt_variance"] < 2.0
     report = (tmp_path / "report.md").read_text()
     assert all(f"| {name} |" in report for name in est)

@@ -114,13 +114,21 @@ def resolve_channels(channels: str | int, table: np.ndarray, irradiance, environ
     return int(channels)
 
 
-def resolve_sh_order(order: str | int, anisotropy: float, walks: int | None = None) -> int:
+# "auto"'s order where the probes must hold directions (guided directions,
+# RenderSettings.guided_directions) and g = 0 would give 0.
+AUTO_DIRECTIONAL_ORDER = 2
+
+
+def resolve_sh_order(order: str | int, anisotropy: float, walks: int | None = None,
+                     directions: bool = False) -> int:
     """The SH order probes are baked with: `order` itself, or for "auto" the scene's choice for
-    probes of `walks` walks each (None: as many as the higher bands want)."""
+    probes of `walks` walks each (None: as many as the higher bands want). `directions`: the
+    probes must hold directions (`guided` drawing its directions from them): "auto" then never
+    gives order 0, which holds none (AUTO_DIRECTIONAL_ORDER instead where g = 0)."""
     if order == "auto":
         g = abs(float(anisotropy))
         if g == 0.0:
-            return 0
+            return AUTO_DIRECTIONAL_ORDER if directions else 0
         if walks is not None and walks < AUTO_WALKS_PER_HIGH_BAND:
             return 2
         kept = max(l for l in SH_ORDERS if l <= AUTO_MAX_ORDER and g ** l >= AUTO_BAND_WEIGHT)

@@ -207,6 +207,7 @@ class Renderer:
         elif method == "guided":   # level 1: a path-traced sample minus level 0's prediction
             defines = {"GUIDED_RESIDUAL": 1,
                        "GUIDED_DIRECTION_CONTROL": int(self._settings.guided_direction_control),
+                       "GUIDED_DIRECTIONS": int(self._settings.guided_directions > 0.0),
                        **(probe_defines or self._probe_defines())}
         if self.resources.defines():
             defines = {**(defines or {}), **self.resources.defines()}
@@ -240,7 +241,8 @@ class Renderer:
     # ---- probes -------------------------------------------------------------------------------
     def bake_key(self) -> tuple:
         spec, st = self.scene.probes, self._settings
-        return (*self.resources.bake_key(), spec.sh_order, spec.fit, spec.channels,
+        return (*self.resources.bake_key(), spec.sh_order, self._sh_order(), spec.fit,
+                spec.channels,
                 spec.layout, spec.adaptive_strength, spec.adaptive_indicator,
                 self.resources.use_majorant_grid, st.walk_sun, st.walk_adaptive, st.sun_lobe,
                 st.walk_sun_correction if st.walk_sun == "grid" else None,
@@ -287,10 +289,17 @@ class Renderer:
         planes = (self.adaptive_planes(grid, box)
                   if region and spec.layout == "adaptive" else None)
         return ProbePlan(grid=grid, box=box,
-                         sh_order=resolve_sh_order(spec.sh_order, s.anisotropy, spec.samples),
+                         sh_order=self._sh_order(),
                          grey=resolve_channels(spec.channels, self.resources.medium_table,
                                                s.light.irradiance, environment) == 1,
                          planes=planes)
+
+    def _sh_order(self) -> int:
+        """The SH order the current scene's probes are baked with (probe_layout.resolve_sh_order;
+        guided directions need directions: "auto" gives no order 0 while they are on)."""
+        spec = self.scene.probes
+        return resolve_sh_order(spec.sh_order, self.scene.anisotropy, spec.samples,
+                                directions=self._settings.guided_directions > 0.0)
 
     def adaptive_planes(self, grid: tuple[int, int, int], box) -> tuple | None:
         """The adaptive layout's probe planes for this grid and box (cached; None: it came out
@@ -618,7 +627,8 @@ class Renderer:
                      "guided_level0_budget": GUIDED_LEVEL0_BUDGET})
                 self.timer.stop()
                 level0_ms = self.timer.elapsed_ms
-            extra = {**extra, **self._light.uniforms()}
+            extra = {**extra, **self._light.uniforms(),
+                     "guided_direction_probability": float(self._settings.guided_directions)}
         if method == "raymarch":
             self.timer.start()
             self.raymarcher().run(self.resources, self.camera, acc, n, self.seed,

@@ -93,6 +93,17 @@ class RenderSettings:
     # mean over the phase function as a control variate (mean 0 at any probes;
     # lib/guided_direction_control.glsl). False: level 1 subtracts at the first event only.
     guided_direction_control: bool = True
+    # `guided`: the probability with which a level-1 path draws its next direction from the phase
+    # function times the probes' radiance (tabulated per event; one-sample MIS with the phase
+    # function, exact pdf: unbiased at any probes; lib/guided_directions.glsl); 0: the phase
+    # function alone. 0.5: an even mixture, not tuned to a scene (wrong probes then cost at most
+    # a factor 2 on a direction's weight). Costs per event one probe fetch (shared with the
+    # direction control) and 64 SH evaluations; with an environment map the map's samples weigh
+    # themselves against the mixture too (one more table per event). Needs directions in the
+    # probes: where `auto` would bake SH order 0 (g = 0), > 0 bakes order 2 for every method
+    # (9 coefficients a probe instead of 1: colour probes take 7 textures instead of 2, the bake
+    # projects 9 coefficients per walk).
+    guided_directions: float = 0.5
     # Bricked volumes (app/render/volume_placement.py): the volume's GPU memory at most, in bytes
     # (None: what the device has left); where one 3D texture exceeds it, the finest level whose
     # bricks fit is shown, with a note. `brick_size`: bricks of that many voxels per axis always
@@ -112,6 +123,9 @@ class RenderSettings:
         if isinstance(r, bool) or not isinstance(r, (int, float)) or not (
                 math.isfinite(r) and 0.0 < r <= 64.0):
             raise ValueError(f"guided level-0 ratio {r!r}: expected a number in (0, 64]")
+        d = self.guided_directions
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not 0.0 <= d <= 1.0:
+            raise ValueError(f"guided directions {d!r}: expected a probability in [0, 1]")
         q = self.walk_sun_correction
         if isinstance(q, bool) or not isinstance(q, (int, float)) or not 0.0 <= q <= 1.0:
             raise ValueError(f"walk sun correction {q!r}: expected a rate in [0, 1]")

@@ -40,3 +40,21 @@ def sample_hg(direction: np.ndarray, g: float, u1, u2) -> np.ndarray:
     b1, b2 = orthonormal_basis(direction)
     v = sin_t * (np.cos(phi) * b1 + np.sin(phi) * b2) + cos_t * np.asarray(direction, np.float64)
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def hg_primary_sample(direction: np.ndarray, g: float, w: np.ndarray) -> np.ndarray:
+    """The inverse of sample_hg: (..., 2) points (u1, u2) of the unit square that sample_hg maps
+    to the unit vectors w (..., 3) about `direction` (u1: HG's CDF at cos theta, u2: the azimuth
+    over 2 pi, in [0, 1))."""
+    direction = np.asarray(direction, np.float64)
+    w = np.asarray(w, np.float64)
+    cos_t = np.clip(np.sum(w * direction, axis=-1), -1.0, 1.0)
+    if abs(g) < 1e-3:
+        u1 = 0.5 * (1.0 - cos_t)
+    else:
+        s = np.sqrt(np.maximum((1.0 - g) ** 2 + 2.0 * g * (1.0 - cos_t), 1e-24))
+        u1 = ((1.0 - g * g) / s - (1.0 - g)) / (2.0 * g)
+    b1, b2 = orthonormal_basis(np.broadcast_to(direction, w.shape))
+    u2 = np.arctan2(np.sum(w * b2, axis=-1), np.sum(w * b1, axis=-1)) / (2.0 * np.pi)
+    u2 = np.where(u2 < 0.0, u2 + 1.0, u2)
+    return np.stack([np.clip(u1, 0.0, 1.0), np.clip(u2, 0.0, 1.0)], axis=-1)

@@ -22,6 +22,12 @@
 // the phase function's. Without it the code below is the constant environment's, unchanged.
 // ENVIRONMENT_MAP_SAMPLING 0 turns the map's samples off (phase sampling alone, escapes weighted
 // 1): the same estimate with more noise, kept for measuring what importance sampling gains.
+//
+// GUIDED_RESIDUAL with GUIDED_DIRECTIONS 1 (`guided`'s level 1): the next direction at an event
+// before the last is drawn from the mixture of HG and HG times the probes' radiance
+// (lib/guided_directions.glsl) and the throughput takes its weight phase / pdf. With a map, "the
+// phase function's pdf" of the MIS above is then that mixture's pdf, on both sides: p.phase_pdf
+// of the direction drawn (escapes) and the mixture evaluated at the map sample's direction.
 uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
 uniform int max_path_steps;   // hang guard: tracking steps one path may take in all
@@ -55,6 +61,17 @@ float mis_power(float a, float b)
     float a2 = a * a, b2 = b * b;
     return a2 + b2 > 0.0 ? a2 / (a2 + b2) : 0.0;
 }
+#endif
+
+// Steps a path step keeps back from its tracking for the work after it that loops: guided
+// directions' tables (lib/guided_directions.glsl), one at the event's map sample and one for its
+// next direction; charged as they run.
+#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS && defined(ENVIRONMENT_MAP)
+const int PATH_STEP_KEPT_BACK = 2 * GUIDED_DIRECTION_TABLE_STEPS;
+#elif defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS
+const int PATH_STEP_KEPT_BACK = GUIDED_DIRECTION_TABLE_STEPS;
+#else
+const int PATH_STEP_KEPT_BACK = 0;
 #endif
 
 #ifndef RR_START_BOUNCE
@@ -96,7 +113,8 @@ struct PathState {
 #endif
 #if defined(ENVIRONMENT_MAP)
     vec3 env_w;         // the map sample's direction at x
-    float phase_pdf;    // pdf of the phase sampling that chose w (0: w was not phase-sampled)
+    float phase_pdf;    // pdf of the phase sampling that chose w (0: w was not phase-sampled;
+                        // GUIDED_DIRECTIONS: of the mixture that chose it)
     vec3 env_weight;    // its radiance x phase x MIS weight / pdf, to be times its transmittance
     int env_pending;    // 1 while the map sample's shadow ray at x is unfinished
 #endif
@@ -227,8 +245,19 @@ int path_flight(inout PathState p, inout int steps_left)
             float phase = phase_hg(dot(env_w, p.w), anisotropy);
             vec3 le = environment_radiance(env_w);
             if (any(greaterThan(le, vec3(0.0)))) {
+                // the pdf with which path_step would draw env_w at this event
+                float direction_pdf = phase;
+#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS
+                if (p.bounce < max_bounces) {   // (path_step's condition for guiding)
+                    vec3 coeffs[SH_COUNT];
+                    float probe_sun;
+                    probe_fetch(p.x, coeffs, probe_sun);
+                    direction_pdf *= guided_direction_density_at(coeffs, p.w, anisotropy, env_w);
+                    steps_left -= GUIDED_DIRECTION_TABLE_STEPS;
+                }
+#endif
                 p.env_w = env_w;
-                p.env_weight = le * (phase * mis_power(env_pdf, phase) / env_pdf);
+                p.env_weight = le * (phase * mis_power(env_pdf, direction_pdf) / env_pdf);
                 p.env_pending = 1;
                 p.shadow_t = -1.0;
                 p.shadow_transmittance = 1.0;
@@ -322,22 +351,50 @@ int path_step(inout PathState p, inout int steps_left)
         return STEP_DONE;
 #endif
     vec3 w_in = p.w;
-    p.w = sample_hg(p.w, anisotropy, rng_next(p.rng), rng_next(p.rng));
+    float phase_over_pdf = 1.0;   // the direction's weight: 1 where drawn from the phase function
+#if defined(GUIDED_RESIDUAL) && (GUIDED_DIRECTIONS || GUIDED_DIRECTION_CONTROL)
+    // Both read the probes at the event; neither at the last event the path may scatter at (what
+    // follows it is an escape alone, which the probes' radiance does not track).
+    bool guide = p.bounce < max_bounces;
+    vec3 event_coeffs[SH_COUNT];
+    if (guide) {
+        float probe_sun;
+        probe_fetch(p.x, event_coeffs, probe_sun);
+    }
+#endif
+#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS
+    // `guided`'s directions (lib/guided_directions.glsl): the mixture of HG and HG times the
+    // probes' radiance, weighted by phase / pdf = 1 / q(u); exact for any probes (unbiased).
+    if (guide) {
+        float cdf[GUIDED_CELLS];
+        guided_direction_table(event_coeffs, w_in, anisotropy, cdf);
+        float xi_choice = rng_next(p.rng), xi1 = rng_next(p.rng), xi2 = rng_next(p.rng);
+        vec2 u = guided_direction_primary(cdf, xi_choice, xi1, xi2);
+        phase_over_pdf = 1.0 / guided_direction_density(cdf, u);
+        p.w = sample_hg(w_in, anisotropy, u.x, u.y);
+        steps_left -= GUIDED_DIRECTION_TABLE_STEPS;
+    } else {
+        p.w = sample_hg(w_in, anisotropy, rng_next(p.rng), rng_next(p.rng));
+    }
+#else
+    p.w = sample_hg(w_in, anisotropy, rng_next(p.rng), rng_next(p.rng));
+#endif
 #if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTION_CONTROL
     // `guided`'s control variate on the direction (lib/guided_direction_control.glsl): the probes'
-    // radiance expected over the phase function minus their radiance in the direction drawn. Its
-    // mean is 0 at any probes, so the estimate stays unbiased; where the probes follow the light,
-    // it takes out the noise of which direction was drawn. Not at the last event the path may
-    // scatter at (what follows it is an escape alone, which the probes' radiance does not track).
-    if (p.bounce < max_bounces)
-        p.radiance += p.throughput * guided_direction_control(p.x, w_in, p.w);
+    // radiance expected over the phase function minus their radiance in the direction drawn,
+    // times its weight. Its mean is 0 at any probes, so the estimate stays unbiased; where the
+    // probes follow the light, it takes out the noise of which direction was drawn.
+    if (guide)
+        p.radiance += p.throughput * guided_direction_control(event_coeffs, w_in, p.w,
+                                                              phase_over_pdf);
 #endif
+    p.throughput *= phase_over_pdf;
 #if defined(ENVIRONMENT_MAP) && defined(PROBE_LIGHTING)
     // The probe renderers take no map samples at the events before the gather: an escape counts
     // in full (phase_pdf 0), as it would with ENVIRONMENT_MAP_SAMPLING 0.
     p.phase_pdf = 0.0;
 #elif defined(ENVIRONMENT_MAP)
-    p.phase_pdf = phase_hg(dot(w_in, p.w), anisotropy);
+    p.phase_pdf = phase_hg(dot(w_in, p.w), anisotropy) / phase_over_pdf;
 #endif
     if (p.bounce >= RR_START_BOUNCE) {
         float q = max(p.throughput.r, max(p.throughput.g, p.throughput.b));
@@ -364,7 +421,9 @@ int path_continue(inout PathState p, inout int loop_budget, int reserve)
         bool dispatch_bound = loop_budget < path_left;
         int steps_left = min(path_left, loop_budget);
         int before = steps_left;
+        steps_left -= PATH_STEP_KEPT_BACK;   // tracking stops short of it; what runs after, charged
         int result = path_step(p, steps_left);
+        steps_left += PATH_STEP_KEPT_BACK;
         p.steps_used += before - steps_left;
         loop_budget -= before - steps_left;
         if (result == STEP_DONE)

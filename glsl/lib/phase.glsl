@@ -1,7 +1,7 @@
 // Henyey-Greenstein phase function. cos_theta is the cosine between the direction light travels
 // before and after scattering (both as propagation directions): g > 0 scatters forward.
 // The function is reciprocal, so a path traced from the camera uses the same expression.
-// NumPy twin: app/phase.py.
+// NumPy twin: app/twins/phase.py.
 const float PI = 3.14159265358979323846;
 const float INV_4PI = 0.07957747154594767;
 
@@ -40,4 +40,28 @@ vec3 sample_hg(vec3 direction, float g, float u1, float u2)
     vec3 b1, b2;
     orthonormal_basis(direction, b1, b2);
     return normalize(sin_theta * (cos(phi) * b1 + sin(phi) * b2) + cos_theta * direction);
+}
+
+// The inverse of sample_hg: the point (u1, u2) of the unit square that sample_hg(direction, g,
+// u1, u2) maps to the unit vector w (u1 HG's CDF at cos theta = w . direction, u2 the azimuth
+// about the same basis over 2 pi, in [0, 1)). With s^2 = 1 + g^2 - 2 g cos theta (written as
+// phase_hg writes it), sample_hg_cos_theta's s = (1 - g^2) / (1 - g + 2 g u1) gives
+// u1 = ((1 - g^2) / s - (1 - g)) / (2 g).
+vec2 hg_primary_sample(vec3 direction, float g, vec3 w)
+{
+    float cos_theta = clamp(dot(w, direction), -1.0, 1.0);
+    float u1;
+    if (abs(g) < 1e-3) {
+        u1 = 0.5 * (1.0 - cos_theta);
+    } else {
+        float s = sqrt(max((1.0 - g) * (1.0 - g) + 2.0 * g * (1.0 - cos_theta), 1e-24));
+        u1 = ((1.0 - g * g) / s - (1.0 - g)) / (2.0 * g);
+    }
+    vec3 b1, b2;
+    orthonormal_basis(direction, b1, b2);
+    float x = dot(w, b1), y = dot(w, b2);
+    // (along the axis itself the azimuth is any: 0, as atan(0, 0) is left undefined)
+    float u2 = x == 0.0 && y == 0.0 ? 0.0 : atan(y, x) / (2.0 * PI);
+    u2 = u2 < 0.0 ? u2 + 1.0 : u2;
+    return vec2(clamp(u1, 0.0, 1.0), clamp(u2, 0.0, 1.0));
 }

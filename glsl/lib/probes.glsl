@@ -72,6 +72,10 @@ vec3 probe_fetched_lobe;          // the sun lobe's amplitude that probe_fetch r
 uniform sampler3D probe_textures[PROBE_TEXTURE_COUNT];
 // per SH band: g^l (the phase convolution) times the SH window
 uniform float probe_band_factors[SH_BANDS];
+// per SH band: the window alone (g = 1): the probes' radiance itself, h(w), which `guided`'s
+// direction control and guided directions read (lib/guided_direction_control.glsl,
+// lib/guided_directions.glsl)
+uniform float probe_window_factors[SH_BANDS];
 
 // Texture `slot` of the probes at texture coordinate uvw: hardware trilinear, or where
 // PROBE_VISIBILITY found an occluded probe, the visibility-weighted blend of the 8 around it.
