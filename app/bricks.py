@@ -14,8 +14,9 @@ its voxels were read.
 """
 from __future__ import annotations
 
+import multiprocessing
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
 import numpy as np
 
@@ -130,7 +131,9 @@ class ArraySource:
 
 class ZarrSource:
     """One time step of one channel of a Zarr array, read region by region and normalised by
-    `value_range` (app/volume.py normalise: the same mapping as a whole volume's)."""
+    `value_range` (app/volume.py normalise: the same mapping as a whole volume's). It pickles
+    (the array by its store's path), so a process can read it."""
+    process_safe = True
 
     def __init__(self, array, axes: str, time: int, channel: int, value_range, where: str,
                  replace_nonfinite=None, normalise=None):
@@ -213,8 +216,17 @@ class BrickStore:
         the first time: a layer of bricks a read, layers on threads)."""
         if self._ranges is None:
             bx, by, bz = self.counts
-            with ThreadPoolExecutor(reader_threads()) as pool:
-                layers = list(pool.map(self._layer_ranges, range(bz)))
+            if self._in_processes():
+                # a Zarr store's reads decode on one event loop, under the GIL (0.5 GB/s at best
+                # on the H100's host whatever the threads): separate processes read the layers
+                with ProcessPoolExecutor(reader_processes(), mp_context=_spawn()) as pool:
+                    layers = list(pool.map(_layer_ranges_of, [self.source] * bz, range(bz),
+                                           [self.brick] * bz, [self.counts] * bz,
+                                           [self.dims] * bz))
+            else:
+                with ThreadPoolExecutor(reader_threads()) as pool:
+                    layers = list(pool.map(self._layer_ranges, range(bz)))
+            self.reads += 1
             lo = np.stack([layer[0] for layer in layers])
             hi = np.stack([layer[1] for layer in layers])
             self._ranges = (lo, hi)
@@ -222,18 +234,14 @@ class BrickStore:
 
     def _layer_ranges(self, z: int) -> tuple[np.ndarray, np.ndarray]:
         """[by, bx(, c)] least and largest raw values of layer z's bricks."""
-        bx, by, _ = self.counts
-        B = self.brick
-        nx, ny, _ = self.dims
-        layer = self.source.read(z * B, min(z * B + B, self.dims[2]), 0, ny, 0, nx)
-        self.reads[z] += 1
-        # partial bricks at the far faces: the edge voxel repeated changes no least or largest
-        pad = [(0, 0), (0, by * B - ny), (0, bx * B - nx)] + [(0, 0)] * (layer.ndim - 3)
-        if any(p != (0, 0) for p in pad):
-            layer = np.pad(layer, pad, mode="edge")
-        d = layer.shape[0]
-        blocks = layer.reshape((d, by, B, bx, B) + layer.shape[3:])
-        return blocks.min(axis=(0, 2, 4)), blocks.max(axis=(0, 2, 4))
+        return _layer_ranges_of(self.source, z, self.brick, self.counts, self.dims)
+
+    def _in_processes(self) -> bool:
+        """Whether the range pass reads in processes: a source that can be sent to one (a Zarr
+        array, not an array in memory) and large enough to repay starting them (about 1 s)."""
+        nz, ny, nx = self.source.shape[:3]
+        return (getattr(self.source, "process_safe", False) and reader_processes() > 1
+                and nz * ny * nx * self.channels >= PROCESS_READ_VOXELS)
 
     def resident_layers(self, resident: np.ndarray):
         """For each layer z holding bricks that are not constant, in order: (z, the raw voxels of
@@ -250,17 +258,23 @@ class BrickStore:
         layers_wanted = sorted({int(z) for z in np.asarray(resident)[:, 0]}) if len(resident) else []
         need = sorted({n for z in layers_wanted for n in (z - 1, z, z + 1) if 0 <= n < bz})
         cores: dict[int, dict] = {}
-        with ThreadPoolExecutor(reader_threads()) as pool:
+        processes = self._in_processes()
+        pool = (ProcessPoolExecutor(reader_processes(), mp_context=_spawn()) if processes
+                else ThreadPoolExecutor(reader_threads()))
+        with pool:
             futures, submitted = {}, set()
-            ahead = 2                                   # layers read ahead of the one assembled
+            ahead = reader_processes() if processes else 2   # layers read ahead of the one assembled
             for z in layers_wanted:
                 for n in need:
                     if n <= z + ahead and n not in submitted:
                         submitted.add(n)
-                        futures[n] = pool.submit(self._read_cores, n, is_resident[n])
+                        futures[n] = pool.submit(_read_cores_of, self.source, n, is_resident[n],
+                                                 self.brick, self.dims)
                 for n in (z - 1, z, z + 1):
                     if n in futures:
                         cores[n] = futures.pop(n).result()
+                        for y, x in cores[n]:
+                            self.reads[n, y, x] += 1
                 slab = self._apron_slab(z, cores, lo, is_resident)
                 for y, x in np.argwhere(is_resident[z]):
                     y, x = int(y), int(x)
@@ -268,29 +282,6 @@ class BrickStore:
                 for n in list(cores):
                     if n < z:
                         del cores[n]
-
-    def _read_cores(self, z: int, resident_row: np.ndarray) -> dict:
-        """{(y, x): raw voxels [B, B, B(, c)]} of layer z's resident bricks (edge-padded to B at
-        the far faces), read as runs along x."""
-        B = self.brick
-        nx, ny, nz = self.dims
-        out = {}
-        for y in range(resident_row.shape[0]):
-            xs = np.nonzero(resident_row[y])[0]
-            if not len(xs):
-                continue
-            for run in np.split(xs, np.nonzero(np.diff(xs) != 1)[0] + 1):
-                x0, x1 = int(run[0]), int(run[-1]) + 1
-                block = self.source.read(z * B, min(z * B + B, nz), y * B, min(y * B + B, ny),
-                                         x0 * B, min(x1 * B, nx))
-                self.reads[z, y, x0:x1] += 1
-                pad = ([(0, B - block.shape[0]), (0, B - block.shape[1]),
-                        (0, (x1 - x0) * B - block.shape[2])] + [(0, 0)] * (block.ndim - 3))
-                if any(p != (0, 0) for p in pad):
-                    block = np.pad(block, pad, mode="edge")
-                for x in range(x0, x1):
-                    out[(y, x)] = block[:, :, (x - x0) * B:(x - x0 + 1) * B]
-        return out
 
     def _apron_slab(self, z: int, cores: dict, lo: np.ndarray, is_resident: np.ndarray):
         """Layer z's voxels with a one-voxel apron on every side, [B + 2, by B + 2, bx B + 2(, c)]
@@ -345,6 +336,64 @@ class BrickStore:
         for slot, (z, y, x) in enumerate(resident):
             table[z, y, x] = slot
         return table, constants, grid, resident
+
+def _layer_ranges_of(source, z: int, brick: int, counts, dims) -> tuple[np.ndarray, np.ndarray]:
+    """[by, bx(, c)] least and largest raw values of layer z's bricks (a function of its
+    arguments alone, so a process can run it)."""
+    bx, by, _ = counts
+    B = brick
+    nx, ny, nz = dims
+    layer = source.read(z * B, min(z * B + B, nz), 0, ny, 0, nx)
+    # partial bricks at the far faces: the edge voxel repeated changes no least or largest
+    pad = [(0, 0), (0, by * B - ny), (0, bx * B - nx)] + [(0, 0)] * (layer.ndim - 3)
+    if any(p != (0, 0) for p in pad):
+        layer = np.pad(layer, pad, mode="edge")
+    d = layer.shape[0]
+    blocks = layer.reshape((d, by, B, bx, B) + layer.shape[3:])
+    return blocks.min(axis=(0, 2, 4)), blocks.max(axis=(0, 2, 4))
+
+
+def _read_cores_of(source, z: int, resident_row: np.ndarray, brick: int, dims) -> dict:
+    """{(y, x): raw voxels [B, B, B(, c)]} of layer z's resident bricks (edge-padded to B at the
+    far faces), read as runs along x (a function of its arguments alone, so a process can run
+    it)."""
+    B = brick
+    nx, ny, nz = dims
+    out = {}
+    for y in range(resident_row.shape[0]):
+        xs = np.nonzero(resident_row[y])[0]
+        if not len(xs):
+            continue
+        for run in np.split(xs, np.nonzero(np.diff(xs) != 1)[0] + 1):
+            x0, x1 = int(run[0]), int(run[-1]) + 1
+            block = source.read(z * B, min(z * B + B, nz), y * B, min(y * B + B, ny),
+                                x0 * B, min(x1 * B, nx))
+            pad = ([(0, B - block.shape[0]), (0, B - block.shape[1]),
+                    (0, (x1 - x0) * B - block.shape[2])] + [(0, 0)] * (block.ndim - 3))
+            if any(p != (0, 0) for p in pad):
+                block = np.pad(block, pad, mode="edge")
+            for x in range(x0, x1):
+                out[(y, x)] = block[:, :, (x - x0) * B:(x - x0 + 1) * B]
+    return out
+
+
+# A store of at least this many voxels is read in processes (reader_processes): its range pass
+# and its upload.
+PROCESS_READ_VOXELS = 1 << 28
+
+
+def reader_processes() -> int:
+    """Processes reading a Zarr store's layers at once in the range pass."""
+    return max(1, min(16, os.cpu_count() or 1))
+
+
+def _spawn():
+    # forked where the platform can (Zarr resets its event loop in a forked child): a spawned
+    # process would import the caller's main module again, which a script without a
+    # `if __name__ == "__main__"` guard would run again
+    methods = multiprocessing.get_all_start_methods()
+    return multiprocessing.get_context("fork" if "fork" in methods else "spawn")
+
 
 def reader_threads() -> int:
     """Threads reading a store's layers at once (each holds a layer of bricks in memory)."""

@@ -15,8 +15,8 @@ SPP samples per pixel with independent seeds:
   of level 1 instead of 0.25 (guided_level0_ratio); for `guided` each level's share of its
   variance. These rows draw directions from the phase function alone (guided_directions 0), as
   they did before guided directions, so that they stay comparable with earlier records;
-- `guided, guided directions`: the `guided` row with guided directions at their default
-  (RenderSettings.guided_directions 0.5: half the directions drawn from the phase function times
+- `guided, guided directions`: the `guided` row with guided directions on
+  (RenderSettings.guided_directions 0.5, off by default: half the directions drawn from the phase function times
   the probes' radiance, lib/guided_directions.glsl): against `guided`, what guiding removes and
   what its table costs a sample.
 
@@ -55,8 +55,9 @@ TARGETS = (0.05, 0.02, 0.01, 0.005)
 # the light grid stale, and their re-bake would be counted in the next render)
 ESTIMATORS = ("guided, first event", "guided", "guided, level-0 ratio 1",
               "guided, guided directions", "pt", "pt, 1 bounce", "pt, 2 bounces")
-# guided directions' probability in the row that has them (the setting's default)
-GUIDED_DIRECTIONS = RenderSettings().guided_directions
+# guided directions' probability in the row that has them (the setting is off by default:
+# bench/h100-guided-directions measured this probability)
+GUIDED_DIRECTIONS = 0.5
 
 
 def relative_variance(a: np.ndarray, b: np.ndarray, spp: int) -> float:

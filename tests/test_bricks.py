@@ -242,3 +242,30 @@ def test_histogram_of_a_lazy_store_reads_a_small_coarser_level_whole(tmp_path):
     data = level1.density(level1.read(0, 16, 0, 16, 0, 16))
     np.testing.assert_array_equal(counts, np.histogram(data, bins=16, range=(0.0, 1.0))[0])
     assert counts.sum() == 16 ** 3
+
+
+def test_reads_in_processes_equal_threads(tmp_path, monkeypatch):
+    """A large Zarr store is read in processes (Zarr decodes under the GIL): the same ranges and
+    the same bricks with aprons as the threads' reads, each brick counted as often."""
+    import app.bricks as bricks
+    data = _blob()
+    path = _zarr(tmp_path, data)
+    threads = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
+    monkeypatch.setattr(bricks, "PROCESS_READ_VOXELS", 1)
+    monkeypatch.setattr(bricks, "reader_processes", lambda: 2)
+    procs = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
+    assert procs._in_processes()       # (the first store, read before the patch, used threads)
+    for a, b in zip(threads.raw_ranges(), procs.raw_ranges()):
+        np.testing.assert_array_equal(a, b)
+    assert np.all(procs.reads == 1)
+    # the upload's reads too: each resident brick with its apron as a clamped read gives it,
+    # read once more; constant bricks not at all
+    _, _, _, resident = procs.layout(4096)
+    seen = 0
+    for z, (y, x), block in procs.resident_layers(resident):
+        np.testing.assert_array_equal(block, threads.pencil(z, y, x, x + 1, 1))
+        seen += 1
+    assert seen == len(resident) > 0
+    is_resident = np.zeros(procs.reads.shape, bool)
+    is_resident[tuple(resident.T)] = True
+    assert np.all(procs.reads[is_resident] == 2) and np.all(procs.reads[~is_resident] == 1)

@@ -95,15 +95,15 @@ class RenderSettings:
     guided_direction_control: bool = True
     # `guided`: the probability with which a level-1 path draws its next direction from the phase
     # function times the probes' radiance (tabulated per event; one-sample MIS with the phase
-    # function, exact pdf: unbiased at any probes; lib/guided_directions.glsl); 0: the phase
-    # function alone. 0.5: an even mixture, not tuned to a scene (wrong probes then cost at most
-    # a factor 2 on a direction's weight). Costs per event one probe fetch (shared with the
-    # direction control) and 64 SH evaluations; with an environment map the map's samples weigh
-    # themselves against the mixture too (one more table per event). Needs directions in the
-    # probes: where `auto` would bake SH order 0 (g = 0), > 0 bakes order 2 for every method
-    # (9 coefficients a probe instead of 1: colour probes take 7 textures instead of 2, the bake
-    # projects 9 coefficients per walk).
-    guided_directions: float = 0.5
+    # function, exact pdf: unbiased at any probes; lib/guided_directions.glsl); 0 (the default):
+    # the phase function alone. Off by default: on the H100 it took no variance away on any bench
+    # scene and cost 10-680% more time a sample (bench/h100-guided-directions). Costs per event
+    # one probe fetch (shared with the direction control) and 64 SH evaluations; with an
+    # environment map the map's samples weigh themselves against the mixture too (one more table
+    # per event). Needs directions in the probes: where `auto` would bake SH order 0 (g = 0),
+    # > 0 bakes order 2 for every method (9 coefficients a probe instead of 1). 1 draws from the
+    # product alone: weights up to 20 an event where the probes are wrong (heavy-tailed).
+    guided_directions: float = 0.0
     # Bricked volumes (app/render/volume_placement.py): the volume's GPU memory at most, in bytes
     # (None: what the device has left); where one 3D texture exceeds it, the finest level whose
     # bricks fit is shown, with a note. `brick_size`: bricks of that many voxels per axis always
