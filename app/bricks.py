@@ -243,12 +243,14 @@ class BrickStore:
         return (getattr(self.source, "process_safe", False) and reader_processes() > 1
                 and nz * ny * nx * self.channels >= PROCESS_READ_VOXELS)
 
-    def resident_layers(self, resident: np.ndarray):
+    def resident_layers(self, resident: np.ndarray, densities: bool = False):
         """For each layer z holding bricks that are not constant, in order: (z, the raw voxels of
-        each such brick with its apron {(y, x): [B + 2, B + 2, B + 2(, c)]}). Every brick that is
-        not constant is read once (runs along x, no apron, a layer ahead on threads); an apron
-        voxel is its neighbour's: read, or a constant brick's value (its least raw value), or at
-        the volume's faces the edge voxel repeated (as clamped texture coordinates read it)."""
+        each such brick with its apron {(y, x): [B + 2, B + 2, B + 2(, c)]}); `densities`: as
+        densities (the source's mapping, applied to the whole layer on a thread while the caller
+        takes the layer before). Every brick that is not constant is read once (runs along x, no
+        apron, layers ahead in processes or on threads); an apron voxel is its neighbour's: read,
+        or a constant brick's value (its least raw value), or at the volume's faces the edge voxel
+        repeated (as clamped texture coordinates read it)."""
         bx, by, bz = self.counts
         B = self.brick
         lo, _ = self.raw_ranges()
@@ -261,9 +263,15 @@ class BrickStore:
         processes = self._in_processes()
         pool = (ProcessPoolExecutor(reader_processes(), mp_context=_spawn()) if processes
                 else ThreadPoolExecutor(reader_threads()))
-        with pool:
+
+        def slab_of(z: int, near: dict) -> np.ndarray:
+            slab = self._apron_slab(z, near, lo, is_resident)
+            return self.source.density(slab) if densities else slab
+
+        with pool, ThreadPoolExecutor(SLAB_THREADS) as slabs:
             futures, submitted = {}, set()
             ahead = reader_processes() if processes else 2   # layers read ahead of the one assembled
+            pending = []                                       # (z, its slab's future), in order
             for z in layers_wanted:
                 for n in need:
                     if n <= z + ahead and n not in submitted:
@@ -275,13 +283,17 @@ class BrickStore:
                         cores[n] = futures.pop(n).result()
                         for y, x in cores[n]:
                             self.reads[n, y, x] += 1
-                slab = self._apron_slab(z, cores, lo, is_resident)
-                for y, x in np.argwhere(is_resident[z]):
-                    y, x = int(y), int(x)
-                    yield z, (y, x), slab[:, y * B:y * B + B + 2, x * B:x * B + B + 2]
+                near = {n: cores[n] for n in (z - 1, z, z + 1) if n in cores}
+                pending.append((z, slabs.submit(slab_of, z, near)))
                 for n in list(cores):
                     if n < z:
                         del cores[n]
+                while len(pending) > SLAB_THREADS or (pending and z == layers_wanted[-1]):
+                    done_z, future = pending.pop(0)
+                    slab = future.result()
+                    for y, x in np.argwhere(is_resident[done_z]):
+                        y, x = int(y), int(x)
+                        yield done_z, (y, x), slab[:, y * B:y * B + B + 2, x * B:x * B + B + 2]
 
     def _apron_slab(self, z: int, cores: dict, lo: np.ndarray, is_resident: np.ndarray):
         """Layer z's voxels with a one-voxel apron on every side, [B + 2, by B + 2, bx B + 2(, c)]
@@ -375,6 +387,10 @@ def _read_cores_of(source, z: int, resident_row: np.ndarray, brick: int, dims) -
             for x in range(x0, x1):
                 out[(y, x)] = block[:, :, (x - x0) * B:(x - x0 + 1) * B]
     return out
+
+
+# Layers assembled (and mapped to densities) at once while the caller takes an earlier one.
+SLAB_THREADS = 3
 
 
 # A store of at least this many voxels is read in processes (reader_processes): its range pass

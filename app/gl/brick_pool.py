@@ -140,9 +140,8 @@ def upload_store(ctx: moderngl.Context, store, exact_uint8: bool, max_side: int)
                      exact_uint8, store.name)
     try:
         bx, by, _ = store.counts
-        for z, (y, x), block in store.resident_layers(resident):
-            pool.write_slot(int(table[z, y, x]), x + bx * (y + by * z),
-                            store.source.density(block))
+        for z, (y, x), block in store.resident_layers(resident, densities=True):
+            pool.write_slot(int(table[z, y, x]), x + bx * (y + by * z), block)
     except BaseException:
         pool.release()
         raise
