@@ -41,7 +41,7 @@ def _z(a, b):
     ("baked, first event only", 1.0)])
 def test_guided_mean_is_the_path_tracers_whatever_the_probes(ctx, probes, directions):
     """With the direction control at every event (the default) and, "first event only", without
-    it; with guided directions (RenderSettings.guided_directions: the default 0.5, and 1, every
+    it; with guided directions (RenderSettings.guided_directions 0.5 (off by default), and 1, every
     direction drawn from the probes' table) and without them (0). The probes that guide the
     directions are the same wrong ones as those that predict."""
     scene = parse_scene(SCENE)
@@ -183,7 +183,7 @@ def test_guided_directions_at_g_0_bake_order_2_and_keep_the_mean(ctx):
     the probes are baked at order 2 and guide (the directions' table is not flat), and `guided`
     keeps the path tracer's mean."""
     scene = parse_scene({**SCENE, "anisotropy": 0.0})
-    r = Renderer(ctx, scene)
+    r = Renderer(ctx, scene, settings=RenderSettings(guided_directions=0.5))   # off by default
     try:
         pt = _means(r, "pt", range(100, 124))
         guided = _means(r, "guided", range(200, 224))
