@@ -190,7 +190,9 @@ class BrickStore:
 
     def pencil(self, bz: int, by: int, x0: int, x1: int, apron: int) -> np.ndarray:
         """The raw voxels of bricks x0 .. x1 - 1 of row (by, bz), with `apron` voxels around,
-        clamped to the volume (the edge voxel repeated)."""
+        clamped to the volume (the edge voxel repeated): the plain read that resident_layers'
+        assembled bricks equal (tests/test_bricks.py compares them); the upload does not use it,
+        since a read with aprons decodes the rows of chunks around it too."""
         nx, ny, nz = self.dims
         B = self.brick
         lo = [bz * B - apron, by * B - apron, x0 * B - apron]
@@ -257,7 +259,7 @@ class BrickStore:
         is_resident = np.zeros((bz, by, bx), bool)
         if len(resident):
             is_resident[tuple(np.asarray(resident).T)] = True
-        layers_wanted = sorted({int(z) for z in np.asarray(resident)[:, 0]}) if len(resident) else []
+        layers_wanted = [int(z) for z in np.nonzero(is_resident.any(axis=(1, 2)))[0]]
         need = sorted({n for z in layers_wanted for n in (z - 1, z, z + 1) if 0 <= n < bz})
         cores: dict[int, dict] = {}
         processes = self._in_processes()
@@ -270,7 +272,8 @@ class BrickStore:
 
         with pool, ThreadPoolExecutor(SLAB_THREADS) as slabs:
             futures, submitted = {}, set()
-            ahead = reader_processes() if processes else 2   # layers read ahead of the one assembled
+            # layers read ahead of the one assembled
+            ahead = reader_processes() if processes else 2
             pending = []                                       # (z, its slab's future), in order
             for z in layers_wanted:
                 for n in need:
@@ -296,8 +299,9 @@ class BrickStore:
                         yield done_z, (y, x), slab[:, y * B:y * B + B + 2, x * B:x * B + B + 2]
 
     def _apron_slab(self, z: int, cores: dict, lo: np.ndarray, is_resident: np.ndarray):
-        """Layer z's voxels with a one-voxel apron on every side, [B + 2, by B + 2, bx B + 2(, c)]
-        (the volume padded to whole bricks by its edge voxels, as the bricks' cores are)."""
+        """Layer z's voxels with a one-voxel apron (APRON) on every side,
+        [B + 2, by B + 2, bx B + 2(, c)] (the volume padded to whole bricks by its edge voxels, as
+        the bricks' cores are)."""
         bx, by, bz = self.counts
         B = self.brick
         planes = {z: slice(0, B)}
@@ -349,6 +353,19 @@ class BrickStore:
             table[z, y, x] = slot
         return table, constants, grid, resident
 
+def _edge_padded(block: np.ndarray, shape) -> np.ndarray:
+    """A [z, y, x(, c)] block read at a volume's far faces, grown to `shape` (z, y, x) by
+    repeating its last voxels (as clamped texture coordinates read beyond the faces)."""
+    pad = [(0, n - m) for n, m in zip(shape, block.shape[:3])] + [(0, 0)] * (block.ndim - 3)
+    return np.pad(block, pad, mode="edge") if any(p != (0, 0) for p in pad) else block
+
+
+def source_whole(source) -> np.ndarray:
+    """A source's whole volume as densities (one read: for a source known to be small)."""
+    nz, ny, nx = source.shape[:3]
+    return source.density(source.read(0, nz, 0, ny, 0, nx))
+
+
 def _layer_ranges_of(source, z: int, brick: int, counts, dims) -> tuple[np.ndarray, np.ndarray]:
     """[by, bx(, c)] least and largest raw values of layer z's bricks (a function of its
     arguments alone, so a process can run it)."""
@@ -357,10 +374,8 @@ def _layer_ranges_of(source, z: int, brick: int, counts, dims) -> tuple[np.ndarr
     nx, ny, nz = dims
     layer = source.read(z * B, min(z * B + B, nz), 0, ny, 0, nx)
     # partial bricks at the far faces: the edge voxel repeated changes no least or largest
-    pad = [(0, 0), (0, by * B - ny), (0, bx * B - nx)] + [(0, 0)] * (layer.ndim - 3)
-    if any(p != (0, 0) for p in pad):
-        layer = np.pad(layer, pad, mode="edge")
     d = layer.shape[0]
+    layer = _edge_padded(layer, (d, by * B, bx * B))
     blocks = layer.reshape((d, by, B, bx, B) + layer.shape[3:])
     return blocks.min(axis=(0, 2, 4)), blocks.max(axis=(0, 2, 4))
 
@@ -378,12 +393,9 @@ def _read_cores_of(source, z: int, resident_row: np.ndarray, brick: int, dims) -
             continue
         for run in np.split(xs, np.nonzero(np.diff(xs) != 1)[0] + 1):
             x0, x1 = int(run[0]), int(run[-1]) + 1
-            block = source.read(z * B, min(z * B + B, nz), y * B, min(y * B + B, ny),
-                                x0 * B, min(x1 * B, nx))
-            pad = ([(0, B - block.shape[0]), (0, B - block.shape[1]),
-                    (0, (x1 - x0) * B - block.shape[2])] + [(0, 0)] * (block.ndim - 3))
-            if any(p != (0, 0) for p in pad):
-                block = np.pad(block, pad, mode="edge")
+            block = _edge_padded(source.read(z * B, min(z * B + B, nz), y * B,
+                                             min(y * B + B, ny), x0 * B, min(x1 * B, nx)),
+                                 (B, B, (x1 - x0) * B))
             for x in range(x0, x1):
                 out[(y, x)] = block[:, :, (x - x0) * B:(x - x0 + 1) * B]
     return out
@@ -464,8 +476,7 @@ class LazyData:
         self.nbytes = 4 * self.size
 
     def read(self) -> np.ndarray:
-        nz, ny, nx = self.shape
-        return self.store.source.density(self.store.source.read(0, nz, 0, ny, 0, nx))
+        return source_whole(self.store.source)
 
     def __array__(self, dtype=None, copy=None):
         if self.nbytes > HOST_WHOLE_BYTES:

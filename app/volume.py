@@ -119,8 +119,8 @@ class Volume:
                 # strided sample of level 0 would decode a row of chunks for every plane it
                 # takes; at 2048^3, 8 times the volume). Its voxels are averages of level 0's:
                 # the histogram's peaks are a little narrower than level 0's own.
-                src = small[0]
-                data = src.density(src.read(0, src.shape[0], 0, src.shape[1], 0, src.shape[2]))
+                from .bricks import source_whole
+                data = source_whole(small[0])
             else:                     # a strided sample of it
                 data = data.sample()
         counts, _ = np.histogram(data, bins=bins, range=(0.0, 1.0))
