@@ -28,6 +28,21 @@ def _means(r, method, seeds, spp=4):
                      for s in seeds], np.float64)
 
 
+def _guided_means_as_baked(r, seeds, spp=4):
+    """`guided`'s image means with the probes as they are now (begin and add_samples: never
+    re-baked, so probes changed by hand stay as they were made), every image finite."""
+    baked_key = r._baked_key
+    means = []
+    for s in seeds:
+        r.begin("guided", seed=s)
+        r.add_samples(spp)
+        assert r._baked_key == baked_key   # the probes were not re-baked
+        image = r.image()
+        assert np.all(np.isfinite(image))
+        means.append(image.mean(axis=(0, 1)))
+    return np.array(means, np.float64)
+
+
 def _z(a, b):
     diff = a.mean(0) - b.mean(0)
     se = np.sqrt(a.var(0, ddof=1) / len(a) + b.var(0, ddof=1) / len(b))
@@ -65,16 +80,7 @@ def test_guided_mean_is_the_path_tracers_whatever_the_probes(ctx, probes, direct
             for tex in grid.textures:
                 data = np.frombuffer(tex.read(), np.float32)
                 tex.write((data * (0.0 if probes == "zero" else 10.0)).astype(np.float32).tobytes())
-        baked_key = r._baked_key
-        guided = []
-        for s in range(200, 224):
-            r.begin("guided", seed=s)
-            r.add_samples(4)
-            assert r._baked_key == baked_key   # the probes were not re-baked
-            image = r.image()
-            assert np.all(np.isfinite(image))
-            guided.append(image.mean(axis=(0, 1)))
-        guided = np.array(guided, np.float64)
+        guided = _guided_means_as_baked(r, range(200, 224))
     finally:
         r.release()
     z = _z(guided, pt)
@@ -162,14 +168,7 @@ def test_guided_directions_under_an_environment_map(ctx, tmp_path):
                     if f // 4 == number:
                         data[:, f % 4] = coeffs[k] / scale
             tex.write(data.tobytes())
-        guided = []
-        for s in range(200, 248):
-            r.begin("guided", seed=s)
-            r.add_samples(4)
-            image = r.image()
-            assert np.all(np.isfinite(image))
-            guided.append(image.mean(axis=(0, 1)))
-        guided = np.array(guided, np.float64)
+        guided = _guided_means_as_baked(r, range(200, 248))
     finally:
         r.release()
     z = _z(guided, pt)
