@@ -64,21 +64,36 @@ def level_bytes(store: BrickStore, channels: int, exact_uint8: bool, max_side: i
             + 4 * int(np.prod(brick_counts(store.dims, store.brick))) + 16 * constants)
 
 
-def place_volume(ctx: moderngl.Context, volume: Volume, memory_bytes: int | None = None,
-                 brick_size: int | None = None):
-    """(the volume shown, its texture or BrickPool). `memory_bytes`: the cap on the volume's GPU
-    memory (None: the device's memory left); `brick_size`: bricks of that many voxels, forced
-    (None: bricked only where one texture does not fit, in bricks of 64)."""
-    max_side = int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"])
+@dataclasses.dataclass
+class Placement:
+    """Where a volume goes, decided on the host (no GL calls: app/render/progressive_open.py
+    decides on a thread): `shown` the volume shown (a coarser level under a cap, with its note),
+    `store` its BrickStore where it is bricked (None: one texture)."""
+    shown: Volume
+    store: BrickStore | None
+
+
+def device_limits(ctx: moderngl.Context) -> tuple[int, int | None, str]:
+    """(GL_MAX_3D_TEXTURE_SIZE, the bytes the device has left or None, what they are): what
+    plan_placement needs from the context."""
+    available, where = device_available(ctx)
+    return int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"]), available, where
+
+
+def plan_placement(volume: Volume, limits, memory_bytes: int | None = None,
+                   brick_size: int | None = None) -> Placement:
+    """Where `volume` goes under `limits` (device_limits): one texture where it fits, else the
+    finest level whose bricks that are not constant fit the cap (reads the range passes it
+    needs; no GL calls)."""
+    max_side, available, where = limits
     channels = volume.channel_count
     exact = volume.exact_uint8
     whole = int(np.prod(volume.dims, dtype=np.int64)) * texel_bytes(channels, exact)
-    available, where = device_available(ctx)
     in_memory = isinstance(volume.data, np.ndarray)
     if (in_memory and brick_size is None and max(volume.dims) <= max_side
             and (memory_bytes is None or whole <= memory_bytes)
             and (available is None or whole <= available)):
-        return volume, volume_texture(ctx, volume)
+        return Placement(volume, None)
     brick = int(brick_size or DEFAULT_BRICK_SIZE)
     cap, cap_name = memory_bytes, "volume_memory_bytes"
     if cap is None and available is not None:
@@ -97,7 +112,6 @@ def place_volume(ctx: moderngl.Context, volume: Volume, memory_bytes: int | None
             raise VolumeError(f"{volume.name}: even one brick of {brick}^3 voxels exceeds the "
                               f"{_gib(cap)} of {cap_name}")
         current, level = coarser(current, brick), level + 1
-    pool = upload_store(ctx, store, current.exact_uint8, max_side)
     notes = current.notes
     if level > 0:
         held = (cap // slot_bytes(brick, channels, exact)) if cap is not None else None
@@ -106,5 +120,17 @@ def place_volume(ctx: moderngl.Context, volume: Volume, memory_bytes: int | None
                f"level 0's {first} bricks exceed one atlas texture of {max_side}^3 texels")
         nx, ny, nz = current.dims
         notes += (f"level {level}, {2 ** level}x coarser ({nx} x {ny} x {nz}): {why}",)
-    shown = dataclasses.replace(current, bricks=store, notes=notes)
-    return shown, pool
+    return Placement(dataclasses.replace(current, bricks=store, notes=notes), store)
+
+
+def place_volume(ctx: moderngl.Context, volume: Volume, memory_bytes: int | None = None,
+                 brick_size: int | None = None):
+    """(the volume shown, its texture or BrickPool). `memory_bytes`: the cap on the volume's GPU
+    memory (None: the device's memory left); `brick_size`: bricks of that many voxels, forced
+    (None: bricked only where one texture does not fit, in bricks of 64)."""
+    limits = device_limits(ctx)
+    placement = plan_placement(volume, limits, memory_bytes, brick_size)
+    if placement.store is None:
+        return placement.shown, volume_texture(ctx, placement.shown)
+    return placement.shown, upload_store(ctx, placement.store, placement.shown.exact_uint8,
+                                         limits[0])
