@@ -761,3 +761,76 @@ def _finite_min_max(raw: np.ndarray) -> tuple[float, float]:
 def load_scene_volume(scene: Scene, brick: int | None = None) -> Volume:
     from .channels import scene_channels
     return load_volume(scene.volume, scene.base_dir, scene_channels(scene), scene.time, brick)
+
+
+# A preview of a Zarr store read brick by brick (app/render/progressive_open.py): its finest level
+# of at most this many voxels, read whole (256^3 of a 2048^3 store: a fraction of a second).
+PREVIEW_VOXELS = 1 << 25
+
+
+def reads_lazily(scene: Scene, brick: int | None = None) -> bool:
+    """Whether the scene's volume is a Zarr store that load_volume reads brick by brick."""
+    spec = scene.volume
+    if spec.path is None:
+        return False
+    p = _resolve(spec.path, scene.base_dir)
+    return formats.is_zarr(p) and (brick is not None or _large_zarr(p))
+
+
+def zarr_preview(scene: Scene, max_voxels: int = PREVIEW_VOXELS,
+                 memory_bytes: int | None = None) -> Volume | None:
+    """A quick stand-in for a Zarr store read brick by brick, in the same world box: the finest
+    of its own coarser levels (OME-Zarr multiscales) of at most `max_voxels` voxels (and within
+    `memory_bytes` as float32, the volume's GPU memory cap), read whole,
+    normalised by the scene's value range, else the type's for 8-bit data, else the level's own
+    least and largest (which its note calls provisional: the store's are known only after its
+    range pass); where the store has no such level, an empty box. None for a store of several
+    channels, or a time step it lacks (the full open says what is wrong)."""
+    from .bricks import ZarrSource
+    from .channels import scene_channels
+    from .volume_formats import open_zarr
+    spec = scene.volume
+    p = _resolve(spec.path, scene.base_dir)
+    where = str(p)
+    array, file_spacing, axes, levels = open_zarr(p, spec.spacing is None)
+    axes = resolve_axes(axes, tuple(array.shape), spec.axes, where)
+    size = dict(zip(axes, array.shape))
+    channels = scene_channels(scene)
+    if size.get("c", 1) > 1 or (channels is not None and len(channels) > 1):
+        return None
+    if not 0 <= scene.time < size.get("t", 1):
+        return None
+    spacing = spec.spacing or file_spacing or (1.0, 1.0, 1.0)
+    dims0 = [size[a] for a in "xyz"]
+    if memory_bytes is not None:
+        max_voxels = min(max_voxels, memory_bytes // 4)
+
+    def in_box(data, note, value_range=(0.0, 1.0), lo=0.0, hi=0.0) -> Volume:
+        dims = data.shape[:3][::-1]
+        scaled = tuple(float(s) * n0 / n for s, n0, n in zip(spacing, dims0, dims))
+        return Volume(data, scaled, p.name, value_range, array.dtype.name, lo, hi, notes=(note,))
+
+    small = [a for a in levels[1:]
+             if int(np.prod([dict(zip(axes, a.shape))[k] for k in "zyx"])) <= max_voxels]
+    domain = spec.domain if channels is None else channels[0].domain(spec)
+    raw = None
+    if small:
+        level = small[0]
+        shape = [dict(zip(axes, level.shape))[k] for k in "zyx"]
+        source = ZarrSource(level, axes, scene.time, 0, domain, where, spec.replace_nonfinite,
+                            normalise)
+        raw = source.read(0, shape[0], 0, shape[1], 0, shape[2])
+        if domain is None and raw.dtype not in (np.uint8, np.int8) and not raw.max() > raw.min():
+            raw = None
+    if raw is None:
+        return in_box(np.zeros((2, 2, 2), np.float32),
+                      f"{p.name} is loading; it has no level small enough to preview")
+    provisional = ""
+    if domain is None and raw.dtype not in (np.uint8, np.int8):
+        provisional = (" (densities provisional: this level's own least and largest values, until "
+                       "the store's range pass)")
+    data, value_range = normalise(raw, domain, where)
+    nz = raw.shape[0]
+    note = (f"preview: a {size['z'] / nz:.0f}x coarser level ({raw.shape[2]} x {raw.shape[1]} x "
+            f"{nz}) while {p.name} loads{provisional}")
+    return in_box(data, note, value_range, float(raw.min()), float(raw.max()))

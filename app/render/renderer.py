@@ -194,8 +194,9 @@ class Renderer:
     def scene(self) -> Scene:
         return self.resources.scene
 
-    def set_scene(self, scene: Scene, volume: Volume | None = None) -> set[str]:
-        return self.resources.update(scene, volume)
+    def set_scene(self, scene: Scene, volume: Volume | None = None, placed=None) -> set[str]:
+        """`placed`: `volume` already placed (Resources.update)."""
+        return self.resources.update(scene, volume, placed)
 
     def pass_for(self, method: str, probe_defines: dict | None = None) -> PathTracer:
         """The compiled pass of a method (compiled once per probe layout, on first use); the

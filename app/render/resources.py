@@ -93,8 +93,10 @@ class SceneResources:
         self.given_volume: Volume | None = None
         self.update(scene, volume)
 
-    def update(self, scene: Scene, volume: Volume | None = None) -> set[str]:
-        """Adopt a new scene; returns which parts changed ('volume', 'transfer', 'medium', ...)."""
+    def update(self, scene: Scene, volume: Volume | None = None, placed=None) -> set[str]:
+        """Adopt a new scene; returns which parts changed ('volume', 'transfer', 'medium', ...).
+        `placed`: (the volume shown, its texture or BrickPool) of `volume`, already placed
+        (app/render/progressive_open.py); else place_volume places it here."""
         changed: set[str] = set()
         old = self.scene
         # The map first: a bad file fails before anything on the GPU changes.
@@ -115,10 +117,13 @@ class SceneResources:
             changed.add("volume")
         # A crop that does not fit the volume, or channels it lacks, fail before anything on the
         # GPU changes.
+        if placed is not None and "volume" not in changed:
+            raise ValueError("Resources.update: `placed` belongs with a new volume")
         if "volume" in changed and kept_texture is None:   # where it goes: a texture or bricks
             given = volume
-            volume, kept_texture = place_volume(self.ctx, volume, self.volume_memory_bytes,
-                                                self.brick_size)
+            volume, kept_texture = (placed if placed is not None else
+                                    place_volume(self.ctx, volume, self.volume_memory_bytes,
+                                                 self.brick_size))
             self.given_volume = given
             fresh_texture = kept_texture
         else:

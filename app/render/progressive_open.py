@@ -1,0 +1,175 @@
+"""Opening a volume read brick by brick without stopping the viewer: the host's work (the range
+passes, the choice of level, reading and mapping the bricks: seconds for a 2048^3 store) runs on a
+thread while the context's thread keeps drawing, and writes the bricks that are ready a few
+milliseconds a frame (the GL context belongs to one thread). Meanwhile the viewer shows a preview
+(app/volume.py zarr_preview: a small level of the store read whole), with a note that says so.
+
+    opening = ProgressiveOpen(ctx, scene, memory_bytes, brick_size)
+    each frame: done = opening.poll(budget_s)   # None until the pool is whole, then
+                (given, shown, pool) = done      # what Resources.update(placed=...) adopts
+
+The result is the one place_volume gives (plan_placement's level, upload_store's bricks): only
+when the work is done changes."""
+from __future__ import annotations
+
+import queue
+import threading
+import time
+
+import moderngl
+
+from ..gl.brick_pool import FREE_SLOT, empty_pool, resident_blocks
+from ..gl.textures import volume_texture
+from ..scene import Scene
+from ..volume import Volume, load_scene_volume
+from .volume_placement import device_limits, plan_placement
+
+# Bricks read ahead of the writes, at most (each (B + 2)^3 float32 texels: 1.1 MiB at B = 64).
+QUEUE_BRICKS = 512
+_DONE = object()
+
+
+class ProgressiveOpen:
+    def __init__(self, ctx: moderngl.Context, scene: Scene, memory_bytes: int | None = None,
+                 brick_size: int | None = None):
+        self.ctx = ctx
+        self.scene = scene
+        self.started = time.perf_counter()
+        self._limits = device_limits(ctx)          # GL queries: on the context's thread
+        self._memory_bytes = memory_bytes
+        self._brick_size = brick_size
+        self._blocks: queue.Queue = queue.Queue(QUEUE_BRICKS)
+        self._planned = threading.Event()
+        self._cancelled = threading.Event()
+        self.given: Volume | None = None           # the volume as loaded
+        self.placement = None                      # plan_placement's, once the thread has it
+        self._layout = None
+        self.pool = None
+        self.written = 0
+        self.error: BaseException | None = None
+        self.stage = "reading the store's value ranges"
+        self.done = False
+        self._thread = threading.Thread(target=self._work, name="progressive-open", daemon=True)
+        self._thread.start()
+
+    # ---- the host's work (a thread) ---------------------------------------------------------
+    def _work(self) -> None:
+        try:
+            self.given = load_scene_volume(self.scene, self._brick_size)
+            self.stage = "choosing the level that fits"
+            placement = plan_placement(self.given, self._limits, self._memory_bytes,
+                                       self._brick_size)
+            if placement.store is not None:
+                self._layout = placement.store.layout(self._limits[0])
+            self.placement = placement
+            self._planned.set()
+            if placement.store is not None:
+                self.stage = "reading bricks"
+                for item in resident_blocks(placement.store, self._layout):
+                    while not self._cancelled.is_set():
+                        try:
+                            self._blocks.put(item, timeout=0.1)
+                            break
+                        except queue.Full:
+                            pass
+                    if self._cancelled.is_set():
+                        return
+        except BaseException as exc:   # reported by poll() on the context's thread
+            self.error = exc
+        finally:
+            self._planned.set()
+            self._put_done()
+
+    def _put_done(self) -> None:
+        while not self._cancelled.is_set():
+            try:
+                self._blocks.put(_DONE, timeout=0.1)
+                return
+            except queue.Full:
+                pass
+
+    # ---- the context's thread ---------------------------------------------------------------
+    @property
+    def bricks_total(self) -> int:
+        return 0 if self._layout is None else len(self._layout[3])
+
+    def progress(self) -> str:
+        """A line for the viewer: what is being done, and how far."""
+        elapsed = time.perf_counter() - self.started
+        if self.pool is not None and self.bricks_total:
+            return (f"loading {self.scene_name}: {self.written} of {self.bricks_total} bricks "
+                    f"({100.0 * self.written / self.bricks_total:.0f}%), {elapsed:.1f} s")
+        return f"loading {self.scene_name}: {self.stage}, {elapsed:.1f} s"
+
+    @property
+    def scene_name(self) -> str:
+        return self.scene.volume.path or "the volume"
+
+    def poll(self, budget_s: float = 0.008):
+        """Writes the bricks that are ready for up to `budget_s` seconds; returns (the volume as
+        loaded, the volume shown, its texture or BrickPool) once all is written, else None.
+        Raises what the thread raised (a VolumeError names the file and the problem)."""
+        if self.done:
+            raise RuntimeError("ProgressiveOpen.poll after it finished")
+        deadline = time.perf_counter() + budget_s
+        if not self._planned.is_set():
+            return None
+        if self.error is not None:
+            self._finish_failed()
+        placement = self.placement
+        if placement.store is None:            # one texture: uploaded whole, here
+            self._thread.join()
+            if self.error is not None:
+                self._finish_failed()
+            self.done = True
+            return self.given, placement.shown, volume_texture(self.ctx, placement.shown)
+        if self.pool is None:
+            self.pool = empty_pool(self.ctx, placement.store, placement.shown.exact_uint8,
+                                   self._layout)
+            self.stage = "writing bricks"
+        while True:
+            try:
+                item = self._blocks.get(timeout=max(0.0, deadline - time.perf_counter()))
+            except queue.Empty:
+                return None
+            if item is _DONE:
+                self._thread.join()
+                if self.error is not None:
+                    self._finish_failed()
+                written = int((self.pool.brick_of_slot != FREE_SLOT).sum())
+                if written != self.bricks_total:
+                    raise RuntimeError(f"progressive open wrote {written} of "
+                                       f"{self.bricks_total} bricks")
+                self.done = True
+                pool, self.pool = self.pool, None
+                return self.given, placement.shown, pool
+            slot, brick, block = item
+            self.pool.write_slot(slot, brick, block)
+            self.written += 1
+            if time.perf_counter() >= deadline:
+                return None
+
+    def _finish_failed(self):
+        self.cancel()
+        error, self.error = self.error, None
+        raise error
+
+    def cancel(self) -> None:
+        """Stops the thread's work (it ends after the brick it is reading) and frees the pool."""
+        self._cancelled.set()
+        self.done = True
+        while True:
+            try:
+                self._blocks.get_nowait()
+            except queue.Empty:
+                break
+        if self.pool is not None:
+            self.pool.release()
+            self.pool = None
+
+    def wait(self, budget_s: float = 0.05):
+        """poll() until done (scripts and tests): the result poll() gives."""
+        while True:
+            result = self.poll(budget_s)
+            if result is not None:
+                return result
