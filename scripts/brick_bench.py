@@ -184,7 +184,7 @@ def _region(volume, lo: float, hi: float) -> np.ndarray:
     return src.density(src.read(a[0], b[0], a[1], b[1], a[2], b[2]))
 
 
-PARTS = ("write", "write-long", "capped", "uncapped", "long")
+PARTS = ("write", "write-long", "capped", "progressive", "uncapped", "long")
 
 
 def _written(path: Path, dims, reuse: bool, chunk: int, levels: int) -> float | None:
@@ -233,6 +233,8 @@ def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
             records["long_write_s"] = written
     scene = _scene(path, s)
     settings = RenderSettings(volume_memory_bytes=cap, brick_size=s.brick)
+    if "progressive" in parts:
+        _progressive(ctx, records, _scene(_need(path), s), settings, cap)
     if "capped" in parts or "uncapped" in parts:
         _need(path)
         _capped(ctx, records, scene, settings, cap, s, parts)
@@ -297,6 +299,55 @@ def _capped(ctx, records, scene, settings, cap, s, parts):
 
 
 
+def _progressive(ctx, records, scene, settings, cap):
+    """The viewer's open (app/viewer/launch.py, Viewer._poll_opening): the store's preview
+    (zarr_preview) read and drawn, while ProgressiveOpen loads the store on a thread; each frame
+    writes bricks for up to OPEN_WRITE_BUDGET_S and draws the preview's raymarched frame (the
+    viewer's frame: begin, one sample, waited for, nothing read back); then the store's own first
+    frame. Times from opening."""
+    from app.render.progressive_open import ProgressiveOpen
+    from app.viewer.viewer import OPEN_WRITE_BUDGET_S
+    from app.volume import zarr_preview
+
+    def frame(r, seed, bake=False):
+        if bake:        # a new volume: its probes and light grid first (the viewer's first frames)
+            r.bake(seed=1)
+            r.bake_light()
+        r.begin("raymarch", seed=seed)
+        r.add_samples(1)
+        ctx.finish()
+
+    start = time.perf_counter()
+    preview = zarr_preview(scene, memory_bytes=cap)
+    preview_read = time.perf_counter() - start
+    r = Renderer(ctx, scene, preview, settings=settings)
+    opening = ProgressiveOpen(ctx, scene, cap, settings.brick_size)
+    frame(r, 0, bake=True)
+    preview_image = time.perf_counter() - start
+    walls = []
+    while True:
+        t = time.perf_counter()
+        done = opening.poll(OPEN_WRITE_BUDGET_S)
+        if done is not None:
+            break
+        frame(r, len(walls) + 1)
+        walls.append(time.perf_counter() - t)
+    loaded = time.perf_counter() - start
+    given, shown, pool = done
+    r.set_scene(scene, given, (shown, pool))
+    frame(r, 0, bake=True)
+    records["progressive"] = {
+        "cap_bytes": cap, "preview_dims": list(preview.dims), "preview_notes": list(preview.notes),
+        "preview_read_s": preview_read, "preview_image_s": preview_image,
+        "loaded_s": loaded, "first_image_s": time.perf_counter() - start,
+        "level_dims": list(shown.dims), "notes": list(shown.notes),
+        "frames_while_loading": len(walls),
+        "frame_ms_while_loading_median": 1e3 * float(np.median(walls)) if walls else None,
+        "frame_ms_while_loading_max": 1e3 * float(np.max(walls)) if walls else None,
+        "write_budget_s": OPEN_WRITE_BUDGET_S}
+    r.release()
+
+
 def _long(ctx, records, lpath, s, long):
     max_side = int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"])
     start = time.perf_counter()
@@ -322,6 +373,14 @@ def _report(out: Path, records: dict, s: Settings) -> None:
             f"{s.width}x{s.height} {c['fps']:.1f} fps, bake {c['bake_ms']:.0f} ms + light grid "
             f"{c['light_ms']:.0f} ms ({c['bake_and_light_wall_s']:.1f} s wall)")
         lines.append(f"- notes: {'; '.join(c['notes']) or 'none'}")
+    pg = records.get("progressive")
+    if pg:
+        lines.append(
+            f"- opened as the viewer opens it: preview {pg['preview_dims']} drawn after "
+            f"{pg['preview_image_s']:.1f} s; level {pg['level_dims']} drawn after "
+            f"{pg['first_image_s']:.1f} s; {pg['frames_while_loading']} frames meanwhile "
+            f"(median {pg['frame_ms_while_loading_median'] or 0:.0f} ms, longest "
+            f"{pg['frame_ms_while_loading_max'] or 0:.0f} ms)")
     if err:
         lines.append(f"- rRMSE against level 0: {err['rrmse']:.4f} ({err['what']})")
     if lg:
@@ -342,7 +401,7 @@ def main(argv=None) -> int:
     p.add_argument("--probes", type=int)
     p.add_argument("--long", type=lambda t: tuple(int(v) for v in t.split(",")))
     p.add_argument("--parts", type=lambda t: tuple(t.split(",")), default=PARTS,
-                   help="which parts: write,write-long,capped,uncapped,long (default all)")
+                   help="which parts: write,write-long,capped,progressive,uncapped,long (default all)")
     p.add_argument("--reuse", action="store_true",
                    help="keep stores already written (same shape) and add to results.json")
     p.add_argument("--stores", type=Path,

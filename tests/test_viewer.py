@@ -792,3 +792,32 @@ def test_refine_shows_the_raymarcher_at_once_after_an_edit_then_guided(display, 
     a = view_pixels(png(tmp_path / "first.png"), first)
     b = view_pixels(png(tmp_path / "orbit.png"), orbit)
     assert np.abs(a.astype(float) - b).mean() > 0.2                # the orbit's other image
+
+
+def test_large_zarr_store_opens_on_a_thread_behind_its_preview(display, tmp_path):
+    """A Zarr store read brick by brick (forced here: the harness lowers the size that makes a
+    store "large") opens with a small level of it shown, the Volume panel saying how far the
+    loading is; the store itself replaces it once its bricks are written."""
+    import importlib.util
+    from conftest import ROOT
+    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "scripts" / "brick_bench.py")
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("brick_bench", bench)
+    spec.loader.exec_module(bench)
+    bench.write_ome_zarr(tmp_path / "big.zarr", (40, 32, 24), 8, 3)
+    scene = {"volume": {"path": "big.zarr"}, "density_scale": 30,
+             "camera": {"width": 48, "height": 48}, "probes": {"grid": 4, "samples": 16}}
+    (tmp_path / "big.json").write_text(json.dumps(scene))
+    script = write_script(tmp_path / "s.json", [
+        {"dump": "start.json"}, {"until": "loaded", "max_frames": 2000}, {"frames": 2},
+        {"dump": "loaded.json"}, {"close": True}])
+    view(["big.json", "--script", str(script), "--method", "raymarch", "--window", "900x640",
+          "--render-scale", "0.25"], tmp_path, display, harness=["--lazy-bytes", "1"])
+    start, loaded = dump(tmp_path / "start.json"), dump(tmp_path / "loaded.json")
+    assert start["errors"] == [] and loaded["errors"] == []
+    assert start["volume"]["dims"] == [20, 16, 12] and "preview" in start["volume_notes"][0]
+    assert start["opening"] is not None and "loading big.zarr" in start["opening"]
+    assert loaded["opening"] is None and loaded["volume"]["dims"] == [40, 32, 24]
+    assert not any("preview" in n for n in loaded["volume_notes"])
+    assert any(m.startswith("loaded big.zarr in") for m in loaded["messages"])
+    np.testing.assert_allclose(loaded["half_extent"], start["half_extent"])

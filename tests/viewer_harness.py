@@ -108,6 +108,9 @@ if __name__ == "__main__":
     if "--glsl" in hooks:
         import app.gl.shaders as shaders
         shaders.GLSL_DIR = Path(hooks[hooks.index("--glsl") + 1])
+    if "--lazy-bytes" in hooks:   # Zarr stores larger than this are read brick by brick
+        import app.volume
+        app.volume.LAZY_BYTES = int(hooks[hooks.index("--lazy-bytes") + 1])
     if "--release-check" in hooks:
         sys.exit(_release_check(view_argv))
     from app.cli import main

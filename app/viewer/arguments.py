@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..frontend import (add_scene_edit_options, add_volume_options, grid_arg, positive_float,
-                        positive_int, render_scale, window_size)
+from ..frontend import (add_scene_edit_options, add_volume_options, grid_arg, memory_size,
+                        positive_float, positive_int, render_scale, window_size)
 from ..scene_types import VIEWER_METHODS as METHODS
 
 
@@ -38,6 +38,9 @@ def add_view_parser(sub, func) -> argparse.ArgumentParser:
     v.add_argument("--sh-window", choices=("none", "hann", "lanczos"))
     v.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"))
     v.add_argument("--seed", type=int, default=0)
+    v.add_argument("--volume-memory", type=memory_size, metavar="BYTES",
+                   help="the volume's GPU memory at most (e.g. 4G, 512M): where one 3D texture "
+                        "exceeds it, the finest level whose bricks fit is shown, with a note")
     v.add_argument("--file-dialog", choices=("auto", "builtin"), default="auto",
                    help="auto: the system's file dialog where one is installed (zenity, kdialog), "
                         "else the viewer's own; builtin: always the viewer's own")

@@ -51,8 +51,9 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
 
 def run_view(args: argparse.Namespace) -> int:
     from ..environment_map import load_scene_environment
-    from ..volume import load_scene_volume
+    from ..volume import load_scene_volume, reads_lazily, zarr_preview
     scene = scene_from_args(args)
+    progressive = False
     if args.screenshot:
         check_output(args.screenshot, "--screenshot")   # before a long scripted run, not after
     steps = None
@@ -65,8 +66,14 @@ def run_view(args: argparse.Namespace) -> int:
             return 3
     scripted = bool(args.screenshot or args.script or args.frames)
     if has_display() or scripted:
-        # A volume that does not load fails here, before a window, an X server or a GL context.
-        volume = load_scene_volume(scene)
+        # A volume that does not load fails here, before a window, an X server or a GL context;
+        # a Zarr store read brick by brick loads on a thread once the window is open, a preview
+        # of it shown meanwhile (app/render/progressive_open.py).
+        volume = (zarr_preview(scene, memory_bytes=getattr(args, "volume_memory", None))
+                  if reads_lazily(scene) else None)
+        progressive = volume is not None
+        if volume is None:
+            volume = load_scene_volume(scene)
         load_scene_environment(scene)   # and an environment map (kept in its cache)
         for note in volume.notes:
             print(f"view: note: {note}", file=sys.stderr)
@@ -83,20 +90,25 @@ def run_view(args: argparse.Namespace) -> int:
         except XvfbError as exc:
             return headless_fallback(args, f"DISPLAY is not set and Xvfb could not be started ({exc})")
     try:
-        return _run_window(args, scene, volume, steps, scripted)
+        return _run_window(args, scene, volume, steps, scripted, progressive)
     finally:
         if xvfb is not None:
             xvfb.stop()
 
 
-def _run_window(args: argparse.Namespace, scene: Scene, volume, steps, scripted: bool) -> int:
+def _run_window(args: argparse.Namespace, scene: Scene, volume, steps, scripted: bool,
+                progressive: bool = False) -> int:
     from .script import ScriptError, ScriptRunner
     from .window import ViewerWindow, WindowError
     state = initial_state(scene, args)
     width, height = args.window
     try:
+        settings = None
+        if getattr(args, "volume_memory", None):
+            from ..render.settings import RenderSettings
+            settings = RenderSettings(volume_memory_bytes=args.volume_memory)
         window = ViewerWindow(state, width, height, vsync=not scripted,
-                              file_dialog=args.file_dialog, volume=volume)
+                              file_dialog=args.file_dialog, volume=volume, settings=settings)
     except WindowError as exc:
         return headless_fallback(args, str(exc))
     software = any(n in window.viewer.device.lower() for n in ("llvmpipe", "softpipe", "lavapipe"))
@@ -110,6 +122,10 @@ def _run_window(args: argparse.Namespace, scene: Scene, volume, steps, scripted:
     if said:
         print(f"view: {said}", file=sys.stderr)
     rc = 0
+    if progressive:
+        window.viewer.open_in_background(state.scene)
+        if scripted and steps is None:   # --frames / --screenshot show the volume, not its preview
+            window.viewer.finish_opening()
     try:
         if steps is not None:
             ScriptRunner(window, Path.cwd()).run(steps)
@@ -153,7 +169,8 @@ def headless_fallback(args: argparse.Namespace, reason: str) -> int:
                    exposure=args.exposure or 1.0, gl_backend=args.gl_backend,
                    **{k: getattr(args, k, None) for k in ("series", "orientation", "data_window",
                                                           "crop", "crop_voxels", "clip_plane",
-                                                          "transfer_function")},
+                                                          "transfer_function",
+                                                          "volume_memory")},
                    no_crop=getattr(args, "no_crop", False),
                    no_clip_plane=getattr(args, "no_clip_plane", False))
     return render_to_files(argparse.Namespace(**options))

@@ -183,6 +183,8 @@ def data_section(v) -> None:
         if chosen and chosen != state.scene.volume.orientation:
             state.set_volume(orientation=chosen)
         imgui.text_disabled("patient: +x left, +y superior, +z anterior, where the file says")
+    if v.opening is not None:
+        imgui.text_wrapped(v.opening.progress())
     for note in vol.notes:
         if vol.dicom_listing is None or "DICOM series" not in note:   # the list below says it
             imgui.text_wrapped(note)

@@ -5,8 +5,9 @@ script use them; a person can too (``view SCENE --script steps.json``).
 Steps (one key each; positions are window coordinates, a widget's name, or {"view": [fx, fy]},
 fractions of the picture's rectangle):
   {"frames": N}                      render N frames
-  {"until": "baked" | "done", "max_frames": M}   frames until the probes are baked / nothing is
-                                     left to render (the scripted --spp cap reached)
+  {"until": "baked" | "done" | "loaded", "max_frames": M}   frames until the probes are baked /
+                                     nothing is left to render (the scripted --spp cap reached) /
+                                     a volume loading on a thread is shown
   {"key": "s"} / {"key": "ctrl+s"}   press and release a key (see input.SHORTCUTS)
   {"click": TARGET, "button": "left"}
   {"double_click": TARGET}
@@ -118,7 +119,8 @@ class ScriptRunner:
     def until(self, condition: str, max_frames: int) -> None:
         v = self.viewer
         checks = {"baked": lambda: v.session.probes_ready(),
-                  "done": lambda: v.session.finished(v.state.max_samples, v.state.wants_probes())}
+                  "done": lambda: v.session.finished(v.state.max_samples, v.state.wants_probes()),
+                  "loaded": lambda: v.opening is None}
         if condition not in checks:
             raise ValueError(f"unknown condition {condition!r} (known: {', '.join(checks)})")
         for _ in range(max_frames):

@@ -131,10 +131,12 @@ class FrameTimes:
 
 class RenderSession:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
-                 seed: int = 0, renderer: Renderer | None = None):
-        """`renderer`: one to drive instead of a new one (the interact benchmark's replay)."""
+                 seed: int = 0, renderer: Renderer | None = None, settings=None):
+        """`renderer`: one to drive instead of a new one (the interact benchmark's replay);
+        `settings`: the new one's RenderSettings (None: the defaults)."""
         self.ctx = ctx
-        self.renderer = renderer if renderer is not None else Renderer(ctx, scene, volume)
+        self.renderer = (renderer if renderer is not None else
+                         Renderer(ctx, scene, volume, settings=settings))
         self.seed = seed
         self.views: dict[str, MethodView] = {}
         self.size = (0, 0)
@@ -163,11 +165,12 @@ class RenderSession:
         return self.renderer.probe_grid
 
     # ---- configuration -------------------------------------------------------------------------
-    def set_scene(self, scene: Scene, volume: Volume | None = None) -> set[str]:
-        """Adopts an edited scene; restarts the accumulations when anything visible changed."""
+    def set_scene(self, scene: Scene, volume: Volume | None = None, placed=None) -> set[str]:
+        """Adopts an edited scene; restarts the accumulations when anything visible changed.
+        `placed`: `volume` already placed (app/render/progressive_open.py)."""
         if scene is self.renderer.scene and volume is None:
             return set()
-        changed = self.renderer.set_scene(scene, volume)
+        changed = self.renderer.set_scene(scene, volume, placed)
         if changed:
             self.restart()
         return changed

@@ -17,7 +17,9 @@ from ..gl.shaders import ShaderError
 from ..gl.timer import GpuTimer
 from ..scene import SceneError, scene_to_dict
 from ..environment_map import load_scene_environment
-from ..volume import VolumeError, load_scene_volume
+from ..channels import volume_inputs
+from ..render.progressive_open import ProgressiveOpen
+from ..volume import VolumeError, load_scene_volume, reads_lazily, zarr_preview
 from . import layout, orbit, overlays, panels
 from .display import BACKGROUND, DisplayPass, ErrorMeter
 from .files import FileDialogs, builtin_scene, datasets, scene_for_path
@@ -34,15 +36,16 @@ from .widgets import WidgetRects
 RECOVERABLE = (SceneError, VolumeError, ShaderError, moderngl.Error, OSError, ValueError, RuntimeError)
 SAVED_SCENE_NAME = "viewer_scene.json"
 SNAPSHOT_MAX_PROBES = 512      # a snapshot carries the probes' coefficients for grids this small
+OPEN_WRITE_BUDGET_S = 0.012    # a frame's time for writing the bricks of a volume opening
 
 
 class Viewer:
     def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = "",
-                 file_dialog: str = "auto", volume=None):
+                 file_dialog: str = "auto", volume=None, settings=None):
         self.ctx = ctx
         self.state = state
         self.device = device
-        self.session = RenderSession(ctx, state.scene, volume)
+        self.session = RenderSession(ctx, state.scene, volume, settings=settings)
         state.show_channels(self.session.volume.channel_count)
         self.widgets = WidgetRects()
         self.error_meter = ErrorMeter()
@@ -53,6 +56,8 @@ class Viewer:
         self._broken: set[str] = set()           # passes whose shaders failed (errors shown)
         self._halted_scene = None                # the scene whose rendering raised, until it changes
         self._pending_volume = None
+        self._pending_placed = None              # (shown, texture or pool) of _pending_volume
+        self.opening: ProgressiveOpen | None = None   # a volume loading on a thread
         self.input = None                        # the window's InputRouter
         self.ui_scale = 1.0
         self.window_size = (1, 1)
@@ -196,21 +201,72 @@ class Viewer:
         return target
 
     def open_path(self, path: str) -> bool:
-        """Opens a scene (.json) or a volume file; on failure the error panel says why."""
+        """Opens a scene (.json) or a volume file; on failure the error panel says why. A Zarr
+        store read brick by brick loads on a thread (open_in_background), its preview shown."""
+        preview = None
         try:
             scene, scene_path = scene_for_path(path, self.state.scene)
-            volume = load_scene_volume(scene)
             load_scene_environment(scene)
+            preview = (zarr_preview(scene, memory_bytes=self.volume_memory_bytes)
+                       if reads_lazily(scene) else None)
+            volume = preview if preview is not None else load_scene_volume(scene)
         except RECOVERABLE as exc:
             self.state.error(f"could not open {path}: {exc}")
             return False
         self.state.load_scene(scene, scene_path)
         self.state.show_channels(volume.channel_count)
         self._pending_volume = volume
+        self._pending_placed = None
         self.state.note(f"opened {path}")
         for note in volume.notes:
             self.state.note(note)
+        if preview is not None:
+            self.open_in_background(scene)
         return True
+
+    @property
+    def volume_memory_bytes(self) -> int | None:
+        return self.session.renderer.resources.volume_memory_bytes
+
+    def open_in_background(self, scene) -> None:
+        """Loads the scene's volume on a thread (app/render/progressive_open.py) while what is
+        shown now (a preview) stays; it replaces it once all its bricks are written."""
+        if self.opening is not None:
+            self.opening.cancel()
+        res = self.session.renderer.resources
+        self.opening = ProgressiveOpen(self.ctx, scene, res.volume_memory_bytes, res.brick_size)
+
+    def _poll_opening(self) -> None:
+        opening = self.opening
+        if opening is None:
+            return
+        if volume_inputs(self.state.scene) != volume_inputs(opening.scene):
+            opening.cancel()
+            self.opening = None
+            self.state.note(f"stopped loading {opening.scene_name}: the scene's volume changed")
+            return
+        try:
+            done = opening.poll(OPEN_WRITE_BUDGET_S)
+        except RECOVERABLE as exc:
+            self.opening = None
+            self.state.error(f"could not open {opening.scene_name}: {exc}")
+            return
+        if done is None:
+            return
+        given, shown, texture = done
+        self.opening = None
+        self._pending_volume, self._pending_placed = given, (shown, texture)
+        self.state.note(f"loaded {opening.scene_name} in "
+                        f"{time.perf_counter() - opening.started:.1f} s")
+        for note in shown.notes:
+            self.state.note(note)
+
+    def finish_opening(self) -> None:
+        """Waits for a volume loading on a thread and shows it (scripted runs, screenshots)."""
+        while self.opening is not None:
+            self._poll_opening()
+            if self.opening is not None:
+                time.sleep(0.005)
 
     # ---- the crop box's and clip plane's handles -------------------------------------------------
     def world_to_window(self, points) -> np.ndarray:
@@ -320,9 +376,12 @@ class Viewer:
         """Hands the edited scene to the renderers; a scene that fails is reverted and reported."""
         state = self.state
         volume, self._pending_volume = self._pending_volume, None
+        placed, self._pending_placed = self._pending_placed, None
         try:
-            self.session.set_scene(state.scene, volume)
+            self.session.set_scene(state.scene, volume, placed)
         except RECOVERABLE as exc:
+            if placed is not None:
+                placed[1].release()
             state.error(f"could not apply the scene: {exc}")
             state.scene = self.session.scene
         self.session.set_filter(linear=state.render_scale < 1.0)
@@ -334,6 +393,7 @@ class Viewer:
         state = self.state
         self.advance_playback()
         state.history.observe(state.scene, busy=self._mouse_held())
+        self._poll_opening()
         self._sync()
         self._record_step()
         times = FrameTimes()
@@ -498,6 +558,7 @@ class Viewer:
             "dicom_series": (session.volume.dicom_series.number
                              if session.volume.dicom_series is not None else None),
             "volume_notes": list(session.volume.notes),
+            "opening": None if self.opening is None else self.opening.progress(),
             "playing": s.playing,
             "opacity_points": [list(p) for p in self.opacity_points()[0]],
             "clip_region": (None if session.renderer.resources.clip is None else
@@ -512,6 +573,9 @@ class Viewer:
         }
 
     def release(self) -> None:
+        if self.opening is not None:
+            self.opening.cancel()
+            self.opening = None
         for p in self._passes.values():
             p.release()
         self._passes.clear()

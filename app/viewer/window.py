@@ -48,8 +48,9 @@ def _font_path() -> Path | None:
 class ViewerWindow:
     def __init__(self, state: ViewerState, width: int = 1280, height: int = 800,
                  title: str = "Radiance probes", vsync: bool = True, file_dialog: str = "auto",
-                 volume=None):
-        """`volume`: the scene's volume, already loaded (else the viewer loads it)."""
+                 volume=None, settings=None):
+        """`volume`: the scene's volume, already loaded (else the viewer loads it); `settings`:
+        the renderer's RenderSettings (None: the defaults)."""
         self._glfw_errors: list[str] = []
         glfw.ERROR_REPORTING = "ignore"
         glfw.set_error_callback(lambda code, text: self._glfw_errors.append(
@@ -76,7 +77,8 @@ class ViewerWindow:
             raise WindowError(f"the window's OpenGL context is not 4.3 core: {exc}") from None
         self._init_imgui()
         try:
-            self.viewer = Viewer(self.ctx, state, describe(self.ctx), file_dialog, volume)
+            self.viewer = Viewer(self.ctx, state, describe(self.ctx), file_dialog, volume,
+                                 settings)
         except BaseException:  # a scene whose volume does not load: close the window, then report
             self._shutdown()
             raise
