@@ -24,6 +24,9 @@ from .scene_types import VolumeError
 
 APRON = 1
 CONSTANT = 0x80000000
+REDIRECT = 0x40000000    # level 0's page table: | the coarser level that holds the brick's points
+UNMAPPED = 0x3FFFFFFF    # a coarser level's brick no point reads (a slot past any atlas)
+LEVEL_SHIFT = 28         # brick_of_slot: level << LEVEL_SHIFT | the brick's index in its level
 DEFAULT_BRICK_SIZE = 64
 FREE_SLOT = 0xFFFFFFFF   # brick_of_slot of a slot that holds no brick (the checking build)
 CONSTANTS_WIDTH = 1024   # the constants' texture is this wide (k at (k % width, k // width))
@@ -54,6 +57,29 @@ def slot_grid(slots: int, brick: int, max_side: int) -> tuple[int, int, int]:
         raise ValueError(f"{n} bricks of {brick}^3 voxels need more slots than one 3D texture of "
                          f"{max_side}^3 texels holds ({per_axis ** 3})")
     return sx, sy, sz
+
+
+def bricks_reached(dims0, dims, brick: int, lo0, hi0) -> tuple[np.ndarray, np.ndarray]:
+    """The bricks (x, y, z; first and last, inclusive) of a level of `dims` voxels that points of
+    level-0 bricks lo0 .. hi0 (inclusive, per axis) land in, where lib/brick_pool.glsl maps a
+    point to uvw times a level's dims: a hair wider either side, for the float rounding."""
+    d0 = np.asarray(dims0, np.float64)
+    d = np.asarray(dims, np.float64)
+    counts = np.asarray(brick_counts(dims, brick))
+    lo = np.floor((np.asarray(lo0) * brick * d / d0 - 1e-3) / brick).astype(np.int64)
+    hi = np.floor((np.minimum((np.asarray(hi0) + 1) * brick, d0) * d / d0 + 1e-3) / brick)
+    return np.clip(lo, 0, counts - 1), np.clip(hi.astype(np.int64), 0, counts - 1)
+
+
+def level_needs(level_of_brick: np.ndarray, level: int, dims0, dims, brick: int) -> np.ndarray:
+    """[bz, by, bx] of a coarser level: True where a point of a level-0 brick that level holds
+    (level_of_brick [bz0, by0, bx0] == level) lands."""
+    counts = brick_counts(dims, brick)
+    need = np.zeros(counts[::-1], bool)
+    for z, y, x in np.argwhere(level_of_brick == level):
+        lo, hi = bricks_reached(dims0, dims, brick, (x, y, z), (x, y, z))
+        need[lo[2]:hi[2] + 1, lo[1]:hi[1] + 1, lo[0]:hi[0] + 1] = True
+    return need
 
 
 def slot_origin(slot: int, grid) -> np.ndarray:

@@ -31,11 +31,6 @@ uniform ivec3 voxel_count;
 uniform vec3 box_half_extent;            // the volume box, for the cells' world corners
 #include "lib/clip_region.glsl"
 #include "lib/brick_pool.glsl"
-#if VOLUME_BRICKED
-#define VOXEL_AT(v) bricked_voxel(v)
-#else
-#define VOXEL_AT(v) texelFetch(volume_density, v, 0)
-#endif
 
 layout(std430, binding = 0) buffer VisibleCells {
     uint first_cell[3];                  // x, y, z; start at 0xffffffff
@@ -109,9 +104,16 @@ void main()
         for (int k = 0; k < 8; ++k) {
             ivec3 v = ivec3((k & 1) != 0 ? v1.x : v0.x, (k & 2) != 0 ? v1.y : v0.y,
                             (k & 4) != 0 ? v1.z : v0.z);
-            vec4 d = VOXEL_AT(v);
+#if VOLUME_BRICKED
+            vec4 d_lo, d_hi;
+            bricked_voxel_range(v, d_lo, d_hi);
+            lo = min(lo, d_lo);
+            hi = max(hi, d_hi);
+#else
+            vec4 d = texelFetch(volume_density, v, 0);
             lo = min(lo, d);
             hi = max(hi, d);
+#endif
         }
         bool visible = false;
         for (int ch = 0; ch < MEDIUM_CHANNELS; ++ch) {

@@ -190,3 +190,121 @@ def test_glsl_bricked_sample_matches_twin_and_whole_texture(ctx, channels):
     ref = data[v[:, 2], v[:, 1], v[:, 0]].reshape(len(v), -1)
     assert np.array_equal(voxels[:, :channels], ref)
     assert pool.uploads == int(np.sum((packed.table & CONSTANT) == 0))
+
+
+# ---- mixed levels ----------------------------------------------------------------------------
+
+def _pyramid(channels: int = 1):
+    from app.bricks import box_filtered
+    levels = [_data(channels)]
+    for _ in range(2):
+        levels.append(box_filtered(levels[-1]))
+    return levels
+
+
+def _level_map(seed: int = 2) -> np.ndarray:
+    """A level per level-0 brick: 0, 1 or 2, at random, so that every kind of neighbour meets."""
+    counts = tuple(-(-n // BRICK) for n in DIMS)
+    return np.random.default_rng(seed).integers(0, 3, counts[::-1])
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_twin_mixed_levels_read_each_bricks_level(channels):
+    from app.twins.brick_pool import REDIRECT, mixed_reference, pack_levels
+    levels = _pyramid(channels)
+    which = _level_map()
+    packed = pack_levels(levels, which, BRICK)
+    assert packed.levels == 3 and ((packed.table[:which.shape[0]] & REDIRECT) != 0).any()
+    uvw = _seam_points(20000)
+    got = bricked_sample(packed, uvw)
+    want = mixed_reference(levels, which, BRICK, uvw)
+    assert np.abs(got - want).max() < 1e-5
+    # all level 0, or all level 1: the pool is that level's whole texture
+    for lv in (0, 1):
+        flat = np.full_like(which, lv)
+        p = pack_levels(levels, flat, BRICK)
+        coord = np.clip(uvw * np.asarray(levels[lv].shape[:3][::-1]), 0,
+                        np.asarray(levels[lv].shape[:3][::-1])) - 0.5
+        data = levels[lv] if channels == 1 else levels[lv][..., 0]
+        assert np.abs(bricked_sample(p, uvw)[:, 0] - trilinear(data, coord)).max() < 1e-5
+
+
+def test_twin_mixed_voxel_ranges_hold_the_medium_over_each_cell():
+    """visible_region.comp's cells between voxel centres: the medium at points inside a cell lies
+    within the union of its 8 corners' bricked_voxel_range (in a coarser level's brick, the
+    range of the voxels its filter blends)."""
+    from app.twins.brick_pool import bricked_voxel_range, pack_levels
+    levels = _pyramid()
+    which = _level_map(5)
+    packed = pack_levels(levels, which, BRICK)
+    r = np.random.default_rng(7)
+    dims = np.asarray(DIMS)
+    cells = r.integers(0, dims - 1, (4000, 3))
+    lo = np.full((len(cells), 1), np.inf)
+    hi = np.full((len(cells), 1), -np.inf)
+    for off in np.ndindex(2, 2, 2):
+        a, b = bricked_voxel_range(packed, cells + np.asarray(off))
+        lo, hi = np.minimum(lo, a), np.maximum(hi, b)
+    inside = (cells[:, None, :] + 0.5 + r.uniform(0, 1, (len(cells), 16, 3))) / dims
+    vals = bricked_sample(packed, inside.reshape(-1, 3)).reshape(len(cells), 16)
+    assert np.all(vals >= lo - 1e-6) and np.all(vals <= hi + 1e-6)
+    # level 0's voxels inside their brick are their own range; on its faces, with neighbours
+    from app.twins.brick_pool import CONSTANT as C
+    z, y, x = next(b for b in np.argwhere(which == 0)
+                   if not packed.table[b[0], b[1], b[2]] & C)
+    inner = np.array([x, y, z]) * BRICK + 2
+    a, b = bricked_voxel_range(packed, inner[None])
+    assert a[0, 0] == b[0, 0] == levels[0][inner[2], inner[1], inner[0]]
+
+
+RANGE_KERNEL = """
+#include "lib/brick_pool.glsl"
+layout(std430, binding = 0) readonly buffer In { int v[]; };
+layout(std430, binding = 1) writeonly buffer Out { vec4 o[]; };
+void main()
+{
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= count) return;
+    vec4 lo, hi;
+    bricked_voxel_range(ivec3(v[3u * i], v[3u * i + 1u], v[3u * i + 2u]), lo, hi);
+    o[2u * i] = lo;
+    o[2u * i + 1u] = hi;
+}
+"""
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_glsl_mixed_levels_match_the_twin(ctx, channels):
+    from app.twins.brick_pool import bricked_voxel_range, mixed_reference, pack_levels
+    levels = _pyramid(channels)
+    which = _level_map(11)
+    packed = pack_levels(levels, which, BRICK)
+    pool = BrickPool.from_packed(ctx, packed)
+    try:
+        pool.use()
+        assert pool.defines() == {"VOLUME_BRICKED": 1, "BRICK_LEVELS": 3}
+        uvw = _seam_points(6000)
+        out = run_kernel(ctx, SAMPLE_KERNEL.replace("uniform sampler3D whole;", "")
+                         .replace("texture(whole, p)", "vec4(0.0)"),
+                         [uvw.astype(np.float32).ravel()], (len(uvw), 2, 4),
+                         uniforms=pool.uniforms(), count=len(uvw), defines=pool.defines())
+        v = np.stack(np.meshgrid(*(np.arange(n) for n in DIMS), indexing="ij"),
+                     -1).reshape(-1, 3).astype(np.int32)
+        ranges = run_kernel(ctx, RANGE_KERNEL, [v.ravel()], (len(v), 2, 4),
+                            uniforms=pool.uniforms(), count=len(v), defines=pool.defines())
+    finally:
+        pool.release()
+    # a point on a face between bricks of two levels is in either, by the float rounding of its
+    # coordinate (the medium steps there): compared off the faces (1e-4 voxels off stays in)
+    t = uvw * np.asarray(DIMS, np.float64)
+    off_face = np.all(np.abs(t - np.round(t / BRICK) * BRICK) > 2e-5, axis=1)
+    assert off_face.mean() > 0.5
+    got = out[off_face, 0, :channels]
+    twin = bricked_sample(packed, uvw[off_face])
+    want = mixed_reference(levels, which, BRICK, uvw[off_face])
+    # fixed-point filter weights: up to 3/256 of the densities' spread (1 at most)
+    assert np.all(np.abs(got - twin) <= 3 / 256 + 2e-6)
+    assert np.abs(twin - want).max() < 1e-5
+    lo, hi = bricked_voxel_range(packed, v.astype(np.int64))
+    np.testing.assert_array_equal(ranges[:, 0, :channels], lo.astype(np.float32))
+    np.testing.assert_array_equal(ranges[:, 1, :channels], hi.astype(np.float32))

@@ -29,9 +29,14 @@ class BrickPool:
     """The atlas (grid slots of (B + 2)^3 texels), the page table and the constants."""
 
     def __init__(self, ctx: moderngl.Context, dims, brick: int, channels: int, grid,
-                 table: np.ndarray, constants: np.ndarray, exact_uint8: bool, name: str = "volume"):
+                 table: np.ndarray, constants: np.ndarray, exact_uint8: bool, name: str = "volume",
+                 level_dims=(), level_table_z=()):
+        """`level_dims`, `level_table_z`: mixed levels (lib/brick_pool.glsl BRICK_LEVELS), each
+        level's dims (level 0 first) and the first z of its table in `table`; () for one level."""
         self.ctx = ctx
         self.dims = tuple(int(v) for v in dims)
+        self.level_dims = tuple(tuple(int(v) for v in d) for d in level_dims)
+        self.level_table_z = tuple(int(z) for z in level_table_z)
         self.brick = int(brick)
         self.channels = int(channels)
         self.grid = tuple(int(v) for v in grid)
@@ -53,9 +58,12 @@ class BrickPool:
         self.atlas.repeat_x = self.atlas.repeat_y = self.atlas.repeat_z = False
         table = np.ascontiguousarray(table, np.uint32)
         counts = brick_counts(self.dims, self.brick)
-        if table.shape != counts[::-1]:
-            raise ValueError(f"page table of shape {table.shape} for {counts[::-1]} bricks")
-        self.table = ctx.texture3d(counts, 1, table.tobytes(), dtype="u4")
+        want = counts[::-1]
+        if self.levels > 1:
+            want = (sum(brick_counts(d, self.brick)[2] for d in self.level_dims),) + want[1:]
+        if table.shape != want:
+            raise ValueError(f"page table of shape {table.shape} for {want} bricks")
+        self.table = ctx.texture3d(want[::-1], 1, table.tobytes(), dtype="u4")
         self.table.filter = (moderngl.NEAREST, moderngl.NEAREST)
         constants = np.asarray(constants, np.float32).reshape(-1, 4)
         self.constant_count = len(constants)
@@ -75,7 +83,8 @@ class BrickPool:
         store)."""
         channels = 1 if packed.atlas.ndim == 3 else packed.atlas.shape[3]
         pool = cls(ctx, packed.dims, packed.brick, channels, packed.grid, packed.table,
-                   packed.constants, exact_uint8)
+                   packed.constants, exact_uint8, level_dims=packed.level_dims,
+                   level_table_z=packed.level_table_z)
         side = slot_side(packed.brick)
         for slot, brick in enumerate(packed.brick_of_slot):
             if brick != FREE_SLOT:
@@ -85,14 +94,17 @@ class BrickPool:
         return pool
 
     @property
+    def levels(self) -> int:
+        return max(1, len(self.level_dims))
+
+    @property
     def atlas_bytes(self) -> int:
         return int(np.prod(self.grid)) * slot_bytes(self.brick, self.channels, self.exact_uint8)
 
     @property
     def nbytes(self) -> int:
         """GPU bytes: the atlas, the page table and the constants."""
-        return self.atlas_bytes + 4 * int(np.prod(brick_counts(self.dims, self.brick))) + \
-            16 * self.constant_count
+        return self.atlas_bytes + 4 * int(np.prod(self.table.size)) + 16 * self.constant_count
 
     def write_slot(self, slot: int, brick: int, block: np.ndarray) -> None:
         """Writes brick `brick` (linear index) with its apron ((B + 2)^3 [z, y, x(, c)]) to slot."""
@@ -107,11 +119,20 @@ class BrickPool:
         if self.slots_buffer is not None:
             self.slots_buffer.write(self.brick_of_slot.tobytes())
 
+    def defines(self) -> dict:
+        """What the passes that read it are compiled with (lib/brick_pool.glsl)."""
+        return {"VOLUME_BRICKED": 1, **({"BRICK_LEVELS": self.levels} if self.levels > 1 else {})}
+
     def uniforms(self) -> dict:
+        mixed = {}
+        if self.levels > 1:
+            mixed = {"brick_level_dims": [tuple(d) for d in self.level_dims],
+                     "brick_level_counts": [brick_counts(d, self.brick) for d in self.level_dims],
+                     "brick_level_table_z": list(self.level_table_z)}
         return {"brick_atlas": ATLAS_UNIT, "brick_table": TABLE_UNIT,
                 "brick_constants": CONSTANTS_UNIT, "brick_volume_dims": self.dims,
                 "brick_counts": brick_counts(self.dims, self.brick), "brick_size": self.brick,
-                "brick_slots": self.grid, "brick_constant_count": self.constant_count}
+                "brick_slots": self.grid, "brick_constant_count": self.constant_count, **mixed}
 
     def use(self) -> None:
         """Binds the atlas, the table and the constants (and in the checking build the slot map)."""

@@ -243,7 +243,7 @@ class SceneResources:
         """What every pass that includes lib/medium.glsl is compiled with for this scene: nothing
         for one channel (the one-channel code, unchanged), else MEDIUM_CHANNELS."""
         defines = {} if self.tables is None else {"MEDIUM_CHANNELS": self.tables.count}
-        return {**defines, "VOLUME_BRICKED": 1} if self.bricked else defines
+        return {**defines, **self.volume_tex.defines()} if self.bricked else defines
 
     @property
     def bricked(self) -> bool:

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..bricks import (APRON, CONSTANT, CONSTANTS_WIDTH, DEFAULT_BRICK_SIZE,  # noqa: F401
-                      FREE_SLOT, brick_counts, constant_bricks, constant_values, slot_grid,
-                      slot_origin, slot_side)
+                      FREE_SLOT, LEVEL_SHIFT, REDIRECT, UNMAPPED, brick_counts, constant_bricks,
+                      constant_values, level_needs, slot_grid, slot_origin, slot_side)
 from .medium import trilinear
 
 def brick_block(data: np.ndarray, b, brick: int) -> np.ndarray:
@@ -38,6 +38,25 @@ class Packed:
     brick: int
     dims: tuple[int, int, int]       # the volume's voxels (x, y, z)
     brick_of_slot: np.ndarray        # the linear brick index a slot holds (FREE_SLOT: none)
+    # Mixed levels: each level's dims (x, y, z; level 0 first) and the first z of its table
+    # in `table` (level 0's at 0); () for one level.
+    level_dims: tuple = ()
+    level_table_z: tuple = ()
+
+    @property
+    def levels(self) -> int:
+        return max(1, len(self.level_dims))
+
+    def dims_of(self, level: int) -> tuple[int, int, int]:
+        return self.dims if level == 0 else tuple(self.level_dims[level])
+
+    def counts_of(self, level: int) -> tuple[int, int, int]:
+        return brick_counts(self.dims_of(level), self.brick)
+
+    def entry(self, b: np.ndarray, level) -> np.ndarray:
+        """The page table's entries of bricks b (..., 3) (x, y, z) of `level` (an int or an array)."""
+        z0 = (np.asarray(self.level_table_z, np.int64)[level] if self.level_table_z else 0)
+        return self.table[b[..., 2] + z0, b[..., 1], b[..., 0]].astype(np.int64)
 
 
 def brick_ranges(data: np.ndarray, brick: int) -> tuple[np.ndarray, np.ndarray]:
@@ -75,14 +94,82 @@ def pack(data: np.ndarray, brick: int, max_side: int = 2048) -> Packed:
     return Packed(atlas, table, constants, grid, brick, dims, brick_of_slot)
 
 
+def pack_levels(levels: list[np.ndarray], level_of_brick: np.ndarray, brick: int,
+                max_side: int = 2048) -> Packed:
+    """The mixed-level form: `levels` a pyramid's arrays [z, y, x(, c)] (level 0 the finest) in
+    one world box, `level_of_brick` [bz0, by0, bx0] the level whose voxels each level-0 brick's
+    points read. Level 0's bricks that read level 0, and every brick of a coarser level such a
+    point lands in (app/bricks.py level_needs), are resident or constant; slots level by level."""
+    levels = [np.asarray(a, np.float32) for a in levels]
+    dims = [tuple(a.shape[:3][::-1]) for a in levels]
+    counts = [brick_counts(d, brick) for d in dims]
+    bx0, by0, _ = counts[0]
+    table_z = np.cumsum([0] + [c[2] for c in counts[:-1]]).tolist()
+    table = np.full((sum(c[2] for c in counts), by0, bx0), UNMAPPED, np.uint32)
+    const_rows = [np.zeros(4, np.float32)]
+    index = {const_rows[0].tobytes(): 0}
+    blocks, owners = [], []
+    for level, (data, c) in enumerate(zip(levels, counts)):
+        need = (level_of_brick == 0) if level == 0 else level_needs(level_of_brick, level, dims[0],
+                                                                      dims[level], brick)
+        lo, hi = brick_ranges(data, brick)
+        constant = constant_bricks(lo, hi)
+        lo = lo if lo.ndim == 4 else lo[..., None]
+        part = table[table_z[level]:table_z[level] + c[2], :c[1], :c[0]]
+        for z, y, x in np.argwhere(need):
+            if constant[z, y, x]:
+                value = np.zeros(4, np.float32)
+                value[:lo.shape[-1]] = lo[z, y, x]
+                key = value.tobytes()
+                if key not in index:
+                    index[key] = len(const_rows)
+                    const_rows.append(value)
+                part[z, y, x] = CONSTANT | index[key]
+            else:
+                part[z, y, x] = len(blocks)
+                blocks.append(brick_block(data, (x, y, z), brick))
+                owners.append((level << LEVEL_SHIFT) | int(x + c[0] * (y + c[1] * z)))
+        if level == 0:
+            table[0:c[2]][level_of_brick > 0] = REDIRECT | level_of_brick[level_of_brick > 0]
+    grid = slot_grid(len(blocks), brick, max_side)
+    side = slot_side(brick)
+    atlas = np.zeros((grid[2] * side, grid[1] * side, grid[0] * side) + levels[0].shape[3:],
+                     np.float32)
+    brick_of_slot = np.full(grid[0] * grid[1] * grid[2], FREE_SLOT, np.uint32)
+    for slot, (block, owner) in enumerate(zip(blocks, owners)):
+        o = slot_origin(slot, grid) * side
+        atlas[o[2]:o[2] + side, o[1]:o[1] + side, o[0]:o[0] + side] = block
+        brick_of_slot[slot] = owner
+    return Packed(atlas, table, np.stack(const_rows), grid, brick, dims[0], brick_of_slot,
+                  tuple(dims), tuple(int(z) for z in table_z))
+
+
+def _redirect(packed: Packed, uvw: np.ndarray):
+    """(level, t, b, entry) of each point: level 0's brick, or the level its entry sends it to."""
+    dims = np.asarray(packed.dims, np.float64)
+    t = np.clip(uvw * dims, 0.0, dims)
+    b = np.clip(np.floor(t / packed.brick).astype(np.int64), 0,
+                np.asarray(packed.counts_of(0)) - 1)
+    entry = packed.entry(b, 0)
+    level = np.zeros(entry.shape, np.int64)
+    if packed.levels > 1:
+        moved = (entry & (CONSTANT | REDIRECT)) == REDIRECT
+        level[moved] = np.clip(entry[moved] & ~REDIRECT, 1, packed.levels - 1)
+        for lv in range(1, packed.levels):
+            at = level == lv
+            if at.any():
+                d = np.asarray(packed.dims_of(lv), np.float64)
+                t[at] = np.clip(uvw[at] * d, 0.0, d)
+                b[at] = np.clip(np.floor(t[at] / packed.brick).astype(np.int64), 0,
+                                np.asarray(packed.counts_of(lv)) - 1)
+                entry[at] = packed.entry(b[at], lv)
+    return level, t, b, entry
+
+
 def bricked_sample(packed: Packed, uvw: np.ndarray) -> np.ndarray:
     """lib/brick_pool.glsl bricked_sample at texture coordinates uvw (..., 3): (..., C)."""
     uvw = np.asarray(uvw, np.float64)
-    dims = np.asarray(packed.dims, np.float64)
-    t = np.clip(uvw * dims, 0.0, dims)
-    b = np.clip(np.floor(t / packed.brick).astype(np.int64), 0, np.asarray(
-        brick_counts(packed.dims, packed.brick)) - 1)
-    entry = packed.table[b[..., 2], b[..., 1], b[..., 0]].astype(np.int64)
+    _, t, b, entry = _redirect(packed, uvw)
     constant = (entry & CONSTANT) != 0
     channels = 1 if packed.atlas.ndim == 3 else packed.atlas.shape[3]
     out = np.empty(uvw.shape[:-1] + (channels,), np.float64)
@@ -113,3 +200,81 @@ def bricked_voxel(packed: Packed, v: np.ndarray) -> np.ndarray:
     got = got.reshape(v.shape[:-1] + (channels,)).astype(np.float64)
     got[constant] = packed.constants[entry[constant] & ~CONSTANT][:, :channels]
     return got
+
+
+def bricked_voxel_range(packed: Packed, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """lib/brick_pool.glsl bricked_voxel_range at voxels v (..., 3): (least, largest), (..., C);
+    (one level: the voxel's value twice)."""
+    v = np.asarray(v, np.int64)
+    channels = 1 if packed.atlas.ndim == 3 else packed.atlas.shape[3]
+    b = np.clip(v // packed.brick, 0, np.asarray(packed.counts_of(0)) - 1)
+    entry = packed.entry(b, 0)
+    lo = np.empty(v.shape[:-1] + (channels,), np.float64)
+    hi = np.empty_like(lo)
+    moved = (entry & (CONSTANT | REDIRECT)) == REDIRECT
+    here = ~moved
+    if here.any():
+        lo[here] = hi[here] = bricked_voxel(packed, v[here])
+    # a level-0 voxel on its brick's faces: with its neighbours from the apron, since a cell
+    # across the face is level 0's filtering of them on this side, whatever level the
+    # neighbouring brick reads
+    local = v - b * packed.brick
+    face = here & ((entry & CONSTANT) == 0) & np.any((local == 0) | (local == packed.brick - 1), -1)
+    if packed.levels > 1 and face.any():
+        slot = entry[face]
+        origin = np.stack([slot % packed.grid[0], (slot // packed.grid[0]) % packed.grid[1],
+                           slot // (packed.grid[0] * packed.grid[1])], -1) * \
+            slot_side(packed.brick) + APRON + local[face]
+        f_lo, f_hi = lo[face], hi[face]
+        for off in np.ndindex(3, 3, 3):
+            i = origin + np.asarray(off) - 1
+            val = packed.atlas[i[:, 2], i[:, 1], i[:, 0]].reshape(len(i), channels)
+            f_lo, f_hi = np.minimum(f_lo, val), np.maximum(f_hi, val)
+        lo[face], hi[face] = f_lo, f_hi
+    for lv in range(1, packed.levels):
+        at = moved & (np.clip(entry & ~REDIRECT, 1, packed.levels - 1) == lv)
+        if not at.any():
+            continue
+        d = np.asarray(packed.dims_of(lv), np.float64)
+        t = (v[at] + 0.5) * d / np.asarray(packed.dims, np.float64)
+        lb = np.clip(np.floor(t / packed.brick).astype(np.int64), 0,
+                     np.asarray(packed.counts_of(lv)) - 1)
+        e = packed.entry(lb, lv)
+        const = (e & CONSTANT) != 0
+        vals = np.empty((8,) + lo[at].shape, np.float64)
+        slot = np.where(const, 0, e)
+        origin = np.stack([slot % packed.grid[0], (slot // packed.grid[0]) % packed.grid[1],
+                           slot // (packed.grid[0] * packed.grid[1])], -1) * \
+            slot_side(packed.brick) + APRON - lb * packed.brick
+        first = np.floor(t - 0.5).astype(np.int64)
+        for k, off in enumerate(np.ndindex(2, 2, 2)):
+            w = np.clip(first + np.asarray(off[::-1]), lb * packed.brick - 1,
+                        lb * packed.brick + packed.brick)
+            i = origin + w
+            vals[k] = packed.atlas[i[:, 2], i[:, 1], i[:, 0]].reshape(len(i), channels)
+        vals[:, const] = packed.constants[e[const] & ~CONSTANT][:, :channels]
+        lo[at], hi[at] = vals.min(0), vals.max(0)
+    return lo, hi
+
+
+def mixed_reference(levels: list[np.ndarray], level_of_brick: np.ndarray, brick: int,
+                    uvw: np.ndarray) -> np.ndarray:
+    """What a mixed pool means: at each point, the trilinear filtering (app/twins/medium.py) of
+    the whole array of the level its level-0 brick reads, at uvw times that level's dims."""
+    uvw = np.asarray(uvw, np.float64)
+    dims0 = np.asarray(levels[0].shape[:3][::-1], np.float64)
+    t0 = np.clip(uvw * dims0, 0.0, dims0)
+    counts0 = np.asarray(brick_counts(dims0.astype(int), brick))
+    b0 = np.clip(np.floor(t0 / brick).astype(np.int64), 0, counts0 - 1)
+    which = level_of_brick[b0[:, 2], b0[:, 1], b0[:, 0]]
+    channels = 1 if levels[0].ndim == 3 else levels[0].shape[3]
+    out = np.empty((len(uvw), channels), np.float64)
+    for lv, data in enumerate(levels):
+        at = which == lv
+        if not at.any():
+            continue
+        d = np.asarray(data.shape[:3][::-1], np.float64)
+        coord = np.clip(uvw[at] * d, 0.0, d) - 0.5
+        for c in range(channels):
+            out[at, c] = trilinear(data if data.ndim == 3 else data[..., c], coord)
+    return out
