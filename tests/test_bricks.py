@@ -88,13 +88,21 @@ def test_zarr_store_renders_as_the_whole_volume(ctx, tmp_path):
     assert err < 1e-5, err
 
 
-def test_majorant_ranges_from_bricks_contain_the_whole_arrays():
+@pytest.mark.parametrize("channels", [1, 3])
+def test_majorant_ranges_from_bricks_contain_the_whole_arrays(channels):
+    """Each macrocell's range from the bricks' contains the voxels' (of several channels, each
+    channel's: [C, cz, cy, cx], as channel_density_ranges)."""
     r = np.random.default_rng(1)
-    data = r.uniform(0, 1, (21, 29, 37)).astype(np.float32)
+    data = r.uniform(0, 1, (21, 29, 37) + ((channels,) if channels > 1 else ())
+                     ).astype(np.float32)
     data[:, :16, :24] = 0.0
     store = BrickStore(ArraySource(data), BRICK)
     lo_b, hi_b = brick_density_range_grid(*store.ranges(), store.dims, BRICK)
-    lo, hi = density_range_grid(data)
+    if channels > 1:
+        grids = [density_range_grid(data[..., c]) for c in range(channels)]
+        lo, hi = np.stack([g[0] for g in grids]), np.stack([g[1] for g in grids])
+    else:
+        lo, hi = density_range_grid(data)
     assert lo_b.shape == lo.shape
     assert np.all(lo_b <= lo) and np.all(hi_b >= hi)
     assert np.any(hi_b == 0.0)            # empty bricks keep empty cells skipped
