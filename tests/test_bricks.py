@@ -254,17 +254,20 @@ def test_histogram_of_a_lazy_store_reads_a_small_coarser_level_whole(tmp_path):
     assert counts.sum() == 16 ** 3
 
 
-def test_reads_in_processes_equal_threads(tmp_path, monkeypatch):
+@pytest.mark.parametrize("channels", [1, 3])
+def test_reads_in_processes_equal_threads(tmp_path, monkeypatch, channels):
     """A large Zarr store is read in processes (Zarr decodes under the GIL): the same ranges and
-    the same bricks with aprons as the threads' reads, each brick counted as often."""
+    the same bricks with aprons as the threads' reads, each brick counted as often (one channel,
+    and several read as [z, y, x, c])."""
     import app.bricks as bricks
-    data = _blob()
-    path = _zarr(tmp_path, data)
+    path = (_zarr(tmp_path, _blob()) if channels == 1
+            else _zarr_channels(tmp_path, _channel_blobs(channels)))
     threads = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
     monkeypatch.setattr(bricks, "PROCESS_READ_VOXELS", 1)
     monkeypatch.setattr(bricks, "reader_processes", lambda: 2)
     procs = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
     assert procs._in_processes()       # (the first store, read before the patch, used threads)
+    assert procs.channels == channels
     for a, b in zip(threads.raw_ranges(), procs.raw_ranges()):
         np.testing.assert_array_equal(a, b)
     assert np.all(procs.reads == 1)
