@@ -153,7 +153,7 @@ class ZarrSource:
                       + (() if self.channels is None else (len(self.channels),)))
 
     def raw(self, z0, z1, y0, y1, x0, x1) -> np.ndarray:
-        many = self.channels is not None
+        many, ordered = self.channels is not None, True
         pick = {"t": self.time, "c": self.channel, "z": slice(z0, z1), "y": slice(y0, y1),
                 "x": slice(x0, x1)}
         if many:
@@ -163,8 +163,7 @@ class ZarrSource:
             ordered = self.channels == tuple(range(first, first + n))
             pick["c"] = slice(first, first + n) if ordered else list(self.channels)
         index = tuple(pick.get(a, 0) for a in self.axes)
-        block = np.asarray(self.array[index] if not many or ordered
-                           else self.array.oindex[index])
+        block = np.asarray(self.array[index] if ordered else self.array.oindex[index])
         kept = [a for a in self.axes if a in ("zyxc" if many else "zyx")]
         return np.transpose(block, [kept.index(a) for a in ("zyxc" if many else "zyx")])
 
