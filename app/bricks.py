@@ -156,13 +156,15 @@ class ArraySource:
 
 
 class ZarrSource:
-    """One time step of one channel of a Zarr array, read region by region and normalised by
-    `value_range` (app/volume.py normalise: the same mapping as a whole volume's). It pickles
-    (the array by its store's path), so a process can read it."""
+    """One time step of a Zarr array, read region by region: one channel (`channel`; [z, y, x]),
+    or several (`channels`, the file's channel indices in the order shown; [z, y, x, c]),
+    normalised by `value_range` (of several channels each by its own of `value_ranges`;
+    app/volume.py normalise: the same mapping as a whole volume's). It pickles (the array by its
+    store's path), so a process can read it."""
     process_safe = True
 
     def __init__(self, array, axes: str, time: int, channel: int, value_range, where: str,
-                 replace_nonfinite=None, normalise=None):
+                 replace_nonfinite=None, normalise=None, channels=None, value_ranges=None):
         self.array = array
         self.axes = axes
         self.time, self.channel = time, channel
@@ -170,16 +172,26 @@ class ZarrSource:
         self.where = where
         self.replace_nonfinite = replace_nonfinite
         self.normalise = normalise   # app/volume.py normalise (given: this module is below it)
+        self.channels = None if channels is None else tuple(int(c) for c in channels)
+        self.value_ranges = value_ranges
         size = dict(zip(axes, array.shape))
-        self.shape = (size["z"], size["y"], size["x"])
+        self.shape = ((size["z"], size["y"], size["x"])
+                      + (() if self.channels is None else (len(self.channels),)))
 
     def raw(self, z0, z1, y0, y1, x0, x1) -> np.ndarray:
+        many, ordered = self.channels is not None, True
         pick = {"t": self.time, "c": self.channel, "z": slice(z0, z1), "y": slice(y0, y1),
                 "x": slice(x0, x1)}
+        if many:
+            first, n = self.channels[0], len(self.channels)
+            # channels in order, one after another: a plain slice; else orthogonal indexing
+            # (only their chunks decoded)
+            ordered = self.channels == tuple(range(first, first + n))
+            pick["c"] = slice(first, first + n) if ordered else list(self.channels)
         index = tuple(pick.get(a, 0) for a in self.axes)
-        block = np.asarray(self.array[index])
-        kept = [a for a in self.axes if a in "zyx"]
-        return np.transpose(block, [kept.index(a) for a in "zyx"])
+        block = np.asarray(self.array[index] if ordered else self.array.oindex[index])
+        kept = [a for a in self.axes if a in ("zyxc" if many else "zyx")]
+        return np.transpose(block, [kept.index(a) for a in ("zyxc" if many else "zyx")])
 
     def read(self, z0, z1, y0, y1, x0, x1) -> np.ndarray:
         """Raw values, finite (non-finite ones replaced as the scene says, else refused)."""
@@ -194,8 +206,14 @@ class ZarrSource:
         return raw
 
     def density(self, raw: np.ndarray) -> np.ndarray:
-        """Raw values as densities (app/volume.py normalise with the volume's value range)."""
-        return self.normalise(raw, self.value_range, self.where)[0]
+        """Raw values as densities (app/volume.py normalise with the volume's value range; of
+        several channels, the last axis, each channel with its own)."""
+        if self.channels is None:
+            return self.normalise(raw, self.value_range, self.where)[0]
+        out = np.empty(raw.shape, np.float32)
+        for c, value_range in enumerate(self.value_ranges):
+            out[..., c] = self.normalise(raw[..., c], value_range, self.where)[0]
+        return out
 
 
 class BrickStore:
@@ -490,19 +508,28 @@ HOST_WHOLE_BYTES = 1 << 30
 
 
 class LazyData:
-    """The densities [z, y, x] of a volume read brick by brick (Volume.data of a store too large
-    to read whole): its shape, and the whole array only where it is small enough."""
-    ndim = 3
+    """The densities [z, y, x(, c)] of a volume read brick by brick (Volume.data of a store too
+    large to read whole): its shape, and the whole array only where it is small enough;
+    channel(c) is one channel's [z, y, x]."""
     dtype = np.dtype(np.float32)
 
-    def __init__(self, store: BrickStore):
+    def __init__(self, store: BrickStore, channel: int | None = None):
         self.store = store
-        self.shape = store.source.shape[:3]
+        self.channel_index = channel
+        shape = tuple(store.source.shape)
+        self.shape = shape[:3] if channel is not None else shape
+        self.ndim = len(self.shape)
         self.size = int(np.prod(self.shape, dtype=np.int64))
         self.nbytes = 4 * self.size
 
+    def channel(self, c: int) -> "LazyData":
+        return LazyData(self.store, c)
+
+    def _picked(self, data: np.ndarray) -> np.ndarray:
+        return data if self.channel_index is None else data[..., self.channel_index]
+
     def read(self) -> np.ndarray:
-        return source_whole(self.store.source)
+        return self._picked(source_whole(self.store.source))
 
     def __array__(self, dtype=None, copy=None):
         if self.nbytes > HOST_WHOLE_BYTES:
@@ -517,7 +544,7 @@ class LazyData:
         """Every k-th voxel along each axis (at most about max_voxels): for histograms."""
         k = max(1, int(np.ceil((self.size / max_voxels) ** (1.0 / 3.0))))
         src = self.store.source
-        nz = self.shape[0]
-        parts = [src.density(src.read(z, z + 1, 0, self.shape[1], 0, self.shape[2]))[:, ::k, ::k]
+        nz, ny, nx = self.shape[:3]
+        parts = [self._picked(src.density(src.read(z, z + 1, 0, ny, 0, nx)))[:, ::k, ::k]
                  for z in range(0, nz, k)]
         return np.concatenate(parts, axis=0)

@@ -95,6 +95,8 @@ class Volume:
             if c != 0:
                 raise IndexError(f"channel {c} of a one-channel volume")
             return self.data
+        if hasattr(self.data, "channel"):   # read brick by brick (app/bricks.py LazyData)
+            return self.data.channel(c)
         return self.data[..., c]
 
     @property
@@ -121,6 +123,8 @@ class Volume:
                 # the histogram's peaks are a little narrower than level 0's own.
                 from .bricks import source_whole
                 data = source_whole(small[0])
+                if data.ndim == 4:
+                    data = data[..., channel]
             else:                     # a strided sample of it
                 data = data.sample()
         counts, _ = np.histogram(data, bins=bins, range=(0.0, 1.0))
@@ -597,53 +601,70 @@ LAZY_SIDE = 2048
 
 def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
     """A Volume of a Zarr store read brick by brick (Volume.data a LazyData, Volume.bricks its
-    BrickStore, Volume.levels the store's coarser levels): one channel (several are refused), the
-    time step `time`; normalised as the whole loader does (the value range, else the type's for
-    8-bit data, else the data's least and largest, from the range pass)."""
+    BrickStore, Volume.levels the store's coarser levels, which read the same channels with the
+    same value ranges): the time step `time`, the channels shown (as the whole loader chooses
+    them: volume_from_canonical; several read as [z, y, x, c]); each channel normalised as the
+    whole loader does (its value range, else the type's for 8-bit data, else its least and
+    largest value, from the range pass)."""
     from .bricks import BrickStore, LazyData, ZarrSource
+    from .channels import check_channel_count, default_channels
+    from .scene_types import MAX_CHANNELS
     from .volume_formats import open_zarr
     where = str(p)
     array, file_spacing, axes, levels = open_zarr(p, spec.spacing is None)
     axes = resolve_axes(axes, tuple(array.shape), spec.axes, where)
-    size = dict(zip(axes, array.shape))
-    if size.get("c", 1) > 1 or channels is not None and len(channels) > 1:
-        raise VolumeError(f"{where}: a Zarr store of {size.get('c', 1)} channels too large to "
-                          "read whole; bricking reads one channel: give volume.axes without c, or "
-                          "a store of one channel")
     if any(a not in "tczyx" for a in axes) or not all(a in axes for a in "zyx"):
         raise VolumeError(f"{where}: axes {axes!r}; a bricked Zarr store needs z, y and x")
+    size = dict(zip(axes, array.shape))
     steps = size.get("t", 1)
     if not 0 <= time < steps:
         raise VolumeError(f"{where}: time step {time} asked for, but the volume has "
                           + (f"{steps} time steps (0 to {steps - 1})" if steps > 1 else
                              "no time axis (one step)") + "; see the scene's time")
+    count = size.get("c", 1)
+    if channels is None and count > 1:
+        channels = default_channels(count, where)       # more than MAX_CHANNELS refused
+    if channels is not None:
+        if len(channels) > MAX_CHANNELS:
+            raise VolumeError(f"{where}: {len(channels)} channels, at most {MAX_CHANNELS} are "
+                              "shown at once (choose them with channels[i].index)")
+        check_channel_count(channels, count, where)     # a channel the store lacks refused
+        shown = [i if ch.index is None else ch.index for i, ch in enumerate(channels)]
+        labels = [f"{where} (channel {index}{f' {ch.name}' if ch.name else ''})"
+                  for index, ch in zip(shown, channels)]
+        domains = [ch.domain(spec) for ch in channels]
+    else:
+        shown, labels, domains = [0], [where], [spec.domain]
+    many = len(shown) > 1
     spacing = spec.spacing or file_spacing or (1.0, 1.0, 1.0)
-    domain = spec.domain if channels is None else channels[0].domain(spec)
-    source = ZarrSource(array, axes, time, 0, domain, where, spec.replace_nonfinite, normalise)
+
+    def source_of(a, ranges):
+        return ZarrSource(a, axes, time, shown[0], ranges[0], where, spec.replace_nonfinite,
+                          normalise, channels=shown if many else None, value_ranges=ranges)
+
+    source = source_of(array, [None] * len(shown))
     store = BrickStore(source, brick, p.name)
     raw_lo, raw_hi = store.raw_ranges()
-    lo, hi = float(raw_lo.min()), float(raw_hi.max())
-    if domain is None:
-        if array.dtype == np.uint8:
-            domain = (0.0, 255.0)
-        elif array.dtype == np.int8:
-            domain = (-128.0, 127.0)
-        elif not hi > lo:
-            raise VolumeError(f"{where}: every voxel is {lo}; give volume.value_range to say "
-                              "what density that is")
-        else:
-            domain = (lo, hi)
-    source.value_range = tuple(float(v) for v in domain)
-    coarser = [ZarrSource(a, axes, time, 0, source.value_range, where, spec.replace_nonfinite,
-                          normalise)
-               for a in levels[1:]]
+    if not many:
+        raw_lo, raw_hi = raw_lo[..., None], raw_hi[..., None]
+    ranges, raws = [], []
+    for c, (domain, label) in enumerate(zip(domains, labels)):
+        # the channel's least and largest raw values, normalised as the whole loader normalises
+        # the channel: its domain, else the type's (8-bit), else these (refused where equal)
+        extremes = np.array([raw_lo[..., c].min(), raw_hi[..., c].max()], raw_lo.dtype)
+        ranges.append(normalise(extremes, domain, label)[1])
+        raws.append((float(extremes[0]), float(extremes[1])))
+    source.value_range, source.value_ranges = ranges[0], ranges
+    coarser = [source_of(a, ranges) for a in levels[1:]]
     notes = ()
     if spec.orientation == "patient":
         notes += (f"{p.name} says nothing of the patient's orientation: shown as stored "
                   "(orientation \"data\")",)
-    volume = Volume(LazyData(store), tuple(float(v) for v in spacing), p.name,
-                    source.value_range, array.dtype.name, lo, hi, notes=notes,
-                    bricks=store, levels=tuple(coarser))
+    volume = Volume(LazyData(store), tuple(float(v) for v in spacing), p.name, ranges[0],
+                    array.dtype.name, *raws[0], notes=notes, bricks=store,
+                    levels=tuple(coarser),
+                    **({"channel_ranges": tuple(ranges), "channel_raw": tuple(raws)}
+                       if many else {}))
     return dataclasses.replace(volume, time=time, time_steps=steps) if steps > 1 else volume
 
 

@@ -4,18 +4,20 @@ read once and never uploaded (counted), the majorant grid from the bricks' range
 GL_MAX_3D_TEXTURE_SIZE bricked, not refused."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
-from app.bricks import ArraySource, BrickStore, LazyData, box_filtered
+from app.bricks import ArraySource, BrickStore, LazyData, box_filtered, constant_bricks
 from app.render.renderer import Renderer
 from app.render.settings import RenderSettings
 from app.render.volume_placement import place_volume
 from app.scene import parse_scene
 from app.scene_types import VolumeSpec
-from app.twins.brick_pool import CONSTANT, pack
+from app.twins.brick_pool import CONSTANT, brick_ranges, pack
 from app.twins.majorant_grid import brick_density_range_grid, density_range_grid
-from app.volume import VolumeError, load_volume, volume_from_array
+from app.volume import VolumeError, load_scene_volume, load_volume, volume_from_array
 
 BRICK = 8
 CAMERA = {"eye": [0.0, 0.3, 2.2], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y": 35.0,
@@ -86,13 +88,21 @@ def test_zarr_store_renders_as_the_whole_volume(ctx, tmp_path):
     assert err < 1e-5, err
 
 
-def test_majorant_ranges_from_bricks_contain_the_whole_arrays():
+@pytest.mark.parametrize("channels", [1, 3])
+def test_majorant_ranges_from_bricks_contain_the_whole_arrays(channels):
+    """Each macrocell's range from the bricks' contains the voxels' (of several channels, each
+    channel's: [C, cz, cy, cx], as channel_density_ranges)."""
     r = np.random.default_rng(1)
-    data = r.uniform(0, 1, (21, 29, 37)).astype(np.float32)
+    data = r.uniform(0, 1, (21, 29, 37) + ((channels,) if channels > 1 else ())
+                     ).astype(np.float32)
     data[:, :16, :24] = 0.0
     store = BrickStore(ArraySource(data), BRICK)
     lo_b, hi_b = brick_density_range_grid(*store.ranges(), store.dims, BRICK)
-    lo, hi = density_range_grid(data)
+    if channels > 1:
+        grids = [density_range_grid(data[..., c]) for c in range(channels)]
+        lo, hi = np.stack([g[0] for g in grids]), np.stack([g[1] for g in grids])
+    else:
+        lo, hi = density_range_grid(data)
     assert lo_b.shape == lo.shape
     assert np.all(lo_b <= lo) and np.all(hi_b >= hi)
     assert np.any(hi_b == 0.0)            # empty bricks keep empty cells skipped
@@ -244,17 +254,20 @@ def test_histogram_of_a_lazy_store_reads_a_small_coarser_level_whole(tmp_path):
     assert counts.sum() == 16 ** 3
 
 
-def test_reads_in_processes_equal_threads(tmp_path, monkeypatch):
+@pytest.mark.parametrize("channels", [1, 3])
+def test_reads_in_processes_equal_threads(tmp_path, monkeypatch, channels):
     """A large Zarr store is read in processes (Zarr decodes under the GIL): the same ranges and
-    the same bricks with aprons as the threads' reads, each brick counted as often."""
+    the same bricks with aprons as the threads' reads, each brick counted as often (one channel,
+    and several read as [z, y, x, c])."""
     import app.bricks as bricks
-    data = _blob()
-    path = _zarr(tmp_path, data)
+    path = (_zarr(tmp_path, _blob()) if channels == 1
+            else _zarr_channels(tmp_path, _channel_blobs(channels)))
     threads = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
     monkeypatch.setattr(bricks, "PROCESS_READ_VOXELS", 1)
     monkeypatch.setattr(bricks, "reader_processes", lambda: 2)
     procs = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
     assert procs._in_processes()       # (the first store, read before the patch, used threads)
+    assert procs.channels == channels
     for a, b in zip(threads.raw_ranges(), procs.raw_ranges()):
         np.testing.assert_array_equal(a, b)
     assert np.all(procs.reads == 1)
@@ -269,3 +282,211 @@ def test_reads_in_processes_equal_threads(tmp_path, monkeypatch):
     is_resident = np.zeros(procs.reads.shape, bool)
     is_resident[tuple(resident.T)] = True
     assert np.all(procs.reads[is_resident] == 2) and np.all(procs.reads[~is_resident] == 1)
+
+
+# ---- several channels: a bricked Zarr store reads the scene's channels ---------------------------
+
+def _channel_blobs(count: int, shape=(24, 16, 40), dtype=np.uint16) -> np.ndarray:
+    """[c, z, y, x]: channel c a smooth blob of its own place and height (0 elsewhere); channel 1
+    also one nonzero value over a corner of 2 x 2 x 2 bricks of 8 (constant bricks of several
+    values), where channel 0 has a ramp in the corner brick: constant in channel 1 alone, so not
+    constant (constant only where every channel is)."""
+    z, y, x = np.meshgrid(*(np.arange(n) for n in shape), indexing="ij")
+    out = []
+    for c in range(count):
+        cz, cy, cx = 6.0 + 4 * c, 5.0 + 3 * (c % 2), 8.0 + 9 * c
+        r2 = (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2
+        out.append(np.where(r2 < 30.0, (100.0 + 70 * c) * np.exp(-r2 / 20.0), 0.0))
+    data = np.stack(out)
+    if count > 1:
+        data[1, 8:, :, 24:] = 77.0
+    data[0, 16:, 8:, 32:] = np.linspace(1.0, 90.0, 8)   # channel 1 constant there, 0 not
+    if np.dtype(dtype).kind == "f":
+        return data.astype(dtype)
+    return np.round(data).astype(dtype)
+
+
+def _zarr_channels(tmp_path, data, axes="czyx", name="channels.zarr"):
+    """A Zarr 3 store of data [c, z, y, x] with its axes named, chunks of 8 voxels and one
+    channel."""
+    import zarr
+    stored = np.ascontiguousarray(np.moveaxis(data, 0, axes.index("c")))
+    chunks = tuple(1 if a == "c" else 8 for a in axes)
+    path = tmp_path / name
+    zarr.create_array(str(path), shape=stored.shape, dtype=stored.dtype, chunks=chunks,
+                      dimension_names=list(axes))[...] = stored
+    return path
+
+
+def _same_volume(lazy, whole):
+    """A volume read brick by brick is the whole loader's: its densities, channels and ranges."""
+    assert isinstance(lazy.data, LazyData) and isinstance(whole.data, np.ndarray)
+    assert lazy.data.shape == whole.data.shape and lazy.channel_count == whole.channel_count
+    for key in ("value_range", "raw_min", "raw_max", "raw_dtype", "channel_ranges",
+                "channel_raw", "exact_uint8", "spacing"):
+        assert getattr(lazy, key) == getattr(whole, key), key
+    np.testing.assert_array_equal(np.asarray(lazy.data), whole.data)
+    for c in range(whole.channel_count):
+        np.testing.assert_array_equal(np.asarray(lazy.channel(c)), whole.channel(c))
+        if not lazy.levels:   # (else from its coarser level: a test below)
+            np.testing.assert_array_equal(lazy.histogram(32, c), whole.histogram(32, c))
+
+
+def _uploaded_is_packed(ctx, volume, densities, **place):
+    """place_volume's pool holds the twin's pack of `densities` (the bricks, their aprons and
+    the page table); returns the volume shown."""
+    from app.gl.brick_pool import atlas_payload
+    shown, pool = place_volume(ctx, volume, brick_size=BRICK, **place)
+    try:
+        want = pack(densities, BRICK)
+        table = np.frombuffer(pool.table.read(), np.uint32).reshape(want.table.shape)
+        np.testing.assert_array_equal(table, want.table)
+        assert pool.channels == (1 if densities.ndim == 3 else densities.shape[3])
+        assert pool.atlas.read() == atlas_payload(want.atlas, shown.exact_uint8)
+        assert pool.uploads == int(np.count_nonzero(~(want.table & CONSTANT).astype(bool)))
+    finally:
+        pool.release()
+    return shown
+
+
+@pytest.mark.parametrize("count, axes, dtype", [(2, "czyx", np.uint16), (3, "zcyx", np.float32),
+                                                (3, "czyx", np.uint8)])
+def test_bricked_zarr_store_of_channels_is_the_whole_loaders_volume(ctx, tmp_path, count, axes,
+                                                                     dtype):
+    """2 and 3 channels (the channel axis first or between z and y; ranges from the range pass
+    for 16-bit and float data, the type's for 8-bit data): read brick by brick as [z, y, x, c],
+    the same densities, ranges and histograms as the whole loader's; every brick read once by the
+    range pass; a brick constant only where every channel is; the upload the twin's pack of the
+    whole volume (R16 for 8-bit data)."""
+    data = _channel_blobs(count, dtype=dtype)
+    path = _zarr_channels(tmp_path, data, axes)
+    spec = VolumeSpec(path=str(path), builtin=None)
+    lazy = load_volume(spec, brick=BRICK)
+    whole = load_volume(spec)
+    _same_volume(lazy, whole)
+    assert lazy.channel_count == count and lazy.bricks.channels == count
+    assert lazy.exact_uint8 == (dtype == np.uint8)
+    assert np.all(lazy.bricks.reads == 1)
+    constant = lazy.bricks.constant()
+    lo, hi = lazy.bricks.ranges()
+    assert np.any(constant_bricks(lo[..., 1], hi[..., 1]) & ~constant)   # one channel alone
+    np.testing.assert_array_equal(constant, constant_bricks(*brick_ranges(whole.data, BRICK)))
+    _uploaded_is_packed(ctx, lazy, whole.data)
+    assert np.all(lazy.bricks.reads[constant] == 1) and np.all(lazy.bricks.reads[~constant] == 2)
+
+
+@pytest.mark.parametrize("channels", [
+    # out of order (orthogonal reads), their own ranges and windows, one switched off
+    [{"index": 3, "value_range": [10, 300]}, {"index": 1, "enabled": False,
+                                              "window": {"level": 100, "width": 120}},
+     {"index": 0}],
+    [{"index": 1}, {"index": 2}],          # in order from channel 1 (a slice)
+    [{"index": 2, "value_range": [0, 500]}],   # one channel of several: [z, y, x]
+    [{"index": 0}],
+])
+def test_bricked_zarr_store_shows_the_scenes_channels(tmp_path, channels):
+    data = _channel_blobs(4)
+    path = _zarr_channels(tmp_path, data)
+    scene = parse_scene({"volume": {"path": str(path)}, "channels": channels})
+    lazy = load_scene_volume(scene, brick=BRICK)
+    whole = load_scene_volume(scene)
+    _same_volume(lazy, whole)
+    assert lazy.channel_count == len(channels)
+    if len(channels) == 1:      # the file's channel, not channel 0
+        np.testing.assert_array_equal(lazy.bricks.source.read(0, 24, 0, 16, 0, 40),
+                                      data[channels[0]["index"]])
+
+
+def _ome_channels(path, data, axes, scale=(2.0, 1.0, 0.5)):
+    """An OME-Zarr 0.4 image of data ([t,] c, z, y, x) with two levels: level 1 the 2 x 2 x 2
+    mean of level 0, rounded (its own values, not a subsample)."""
+    import zarr
+    g = zarr.open_group(str(path), mode="w", zarr_format=2)
+    kinds = {"t": "time", "c": "channel"}
+    lead = [1.0] * (len(axes) - 3)
+    g.attrs["multiscales"] = [{
+        "version": "0.4", "axes": [{"name": a, "type": kinds.get(a, "space")} for a in axes],
+        "datasets": [{"path": str(level), "coordinateTransformations": [
+            {"type": "scale", "scale": lead + [s * 2 ** level for s in scale]}]}
+            for level in (0, 1)]}]
+    g.create_array("0", shape=data.shape, dtype=data.dtype, chunks=(1,) * (len(axes) - 3)
+                   + (8, 8, 8))[...] = data
+    n = data.shape[:-3] + tuple(s // 2 for s in data.shape[-3:])
+    coarse = data.astype(np.float64).reshape(n[:-3] + (n[-3], 2, n[-2], 2, n[-1], 2))
+    coarse = np.round(coarse.mean(axis=(-5, -3, -1))).astype(data.dtype)
+    g.create_array("1", shape=coarse.shape, dtype=data.dtype, chunks=(1,) * (len(axes) - 3)
+                   + (8, 8, 8))[...] = coarse
+    return coarse
+
+
+@pytest.mark.parametrize("axes", ["czyx", "tczyx"])
+def test_bricked_ome_zarr_levels_read_the_same_channels_with_the_same_ranges(ctx, tmp_path, axes):
+    """An OME-Zarr image of 2 channels and 2 levels: level 0 read brick by brick is the whole
+    loader's volume (a time step of a series where the scene gives the channels' ranges); its
+    coarser level reads the same channels, normalised by level 0's ranges (each channel's
+    histogram from it); a cap that shows level 1 uploads those densities, with its channels."""
+    from app.render.volume_placement import level_bytes
+    data = _channel_blobs(3)[[0, 2]].astype(np.uint16)
+    scene = {}
+    if axes == "tczyx":
+        data = np.stack([np.flip(data, axis=-1), data])    # time step 1 is `data`
+        scene = {"time": 1, "channels": [{"index": 0, "value_range": [5, 250]},
+                                         {"index": 1, "window": {"level": 200, "width": 300}}]}
+    path = tmp_path / "image.zarr"
+    coarse = _ome_channels(path, data, axes)
+    parsed = parse_scene({"volume": {"path": str(path)}, **scene})
+    lazy = load_scene_volume(parsed, brick=BRICK)
+    whole = load_scene_volume(parsed)
+    _same_volume(lazy, whole)
+    assert lazy.spacing == (0.5, 1.0, 2.0) and lazy.channel_count == 2
+    assert (lazy.time, lazy.time_steps) == ((1, 2) if axes == "tczyx" else (0, 1))
+    (level1,) = lazy.levels
+    assert level1.shape == (12, 8, 20, 2)
+    step = coarse[1] if axes == "tczyx" else coarse
+    want = np.stack([np.clip((step[c].astype(np.float64) - lo) / (hi - lo), 0, 1)
+                     for c, (lo, hi) in enumerate(lazy.channel_ranges)], axis=-1)
+    got = level1.density(level1.read(0, 12, 0, 8, 0, 20))
+    np.testing.assert_allclose(got, want.astype(np.float32), rtol=0, atol=1e-7)
+    for c in range(2):    # each channel's histogram from that level, read whole
+        np.testing.assert_array_equal(lazy.histogram(16, c), np.histogram(
+            got[..., c], bins=16, range=(0.0, 1.0))[0])
+    level0 = level_bytes(lazy.bricks, 2, False, 2048)
+    cap = level_bytes(BrickStore(level1, BRICK), 2, False, 2048)
+    assert cap < level0
+    shown = _uploaded_is_packed(ctx, lazy, got, memory_bytes=cap)
+    assert shown.dims == (20, 8, 12) and shown.channel_count == 2
+    assert shown.channel_ranges == lazy.channel_ranges
+    assert any(n.startswith("level 1, 2x coarser") for n in shown.notes)
+
+
+def _refused(load) -> str:
+    with pytest.raises(VolumeError) as info:
+        load()
+    return str(info.value)
+
+
+def test_bricked_zarr_store_refuses_channels_as_the_whole_loader_does(tmp_path):
+    """More than 4 channels without a choice, a channel the store lacks, more than 4 chosen, and
+    a channel of one value with no range: refused, each message the whole loader's."""
+    from app.scene_types import ChannelSpec
+    data = _channel_blobs(6)
+    data[4] = 7
+    path = _zarr_channels(tmp_path, data)
+    spec = VolumeSpec(path=str(path), builtin=None)
+    for channels, message in [
+            (None, r"the volume has 6 channels; at most 4 are shown at once: choose them with "
+                   r"the scene's channels list"),
+            ([{"index": 0}, {"index": 6}], r"channels\[1\] shows the file's channel 6, but the "
+                                           r"volume has 6 channels \(0 to 5\)"),
+            ([{"index": 1}, {"index": 4}], r"\(channel 4\): every voxel is 7\.0; give "
+                                           r"volume\.value_range")]:
+        scene = parse_scene({"volume": {"path": str(path)},
+                             **({"channels": channels} if channels else {})})
+        lazy = _refused(lambda: load_scene_volume(scene, brick=BRICK))
+        assert lazy == _refused(lambda: load_scene_volume(scene))
+        assert lazy.startswith(str(path)), lazy
+        assert re.search(message, lazy), lazy
+    five = tuple(ChannelSpec(transfer_function=None, index=i) for i in range(5))
+    message = _refused(lambda: load_volume(spec, channels=five, brick=BRICK))
+    assert message == f"{path}: 5 channels, at most 4 are shown at once (choose them with " \
+                      "channels[i].index)"

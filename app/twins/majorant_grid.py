@@ -95,9 +95,14 @@ def brick_density_range_grid(brick_min: np.ndarray, brick_max: np.ndarray, dims,
     """density_range_grid of a volume read brick by brick (app/bricks.py), from each brick's
     own least and largest density ([bz, by, bx]) alone: a macrocell's range is the union of the
     bricks that hold the voxels its points read (voxel_ranges), so it contains the one of the
-    whole array, widened alike."""
+    whole array, widened alike. Of several channels ([bz, by, bx, c]) each channel's, [C, cz,
+    cy, cx] as channel_density_ranges."""
     if cells is None:
         cells = macrocell_counts(dims)
+    if np.ndim(brick_min) == 4:
+        ranges = [brick_density_range_grid(brick_min[..., c], brick_max[..., c], dims, brick,
+                                           cells) for c in range(np.shape(brick_min)[3])]
+        return np.stack([r[0] for r in ranges]), np.stack([r[1] for r in ranges])
     lo_grid = np.asarray(brick_min, np.float32)
     hi_grid = np.asarray(brick_max, np.float32)
     for axis, (n, c) in zip((2, 1, 0), zip(dims, cells)):
