@@ -18,6 +18,8 @@ import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .scene_types import VolumeError
@@ -299,10 +301,15 @@ class BrickStore:
         repeated (as clamped texture coordinates read it)."""
         bx, by, bz = self.counts
         B = self.brick
-        lo, _ = self.raw_ranges()
+        lo, hi = self.raw_ranges()
         is_resident = np.zeros((bz, by, bx), bool)
         if len(resident):
             is_resident[tuple(np.asarray(resident).T)] = True
+        # the cores read: the resident bricks', and their neighbours' that hold more than one
+        # value (with mixed levels a neighbour may vary and yet not be resident at this level;
+        # with one level every brick not resident is constant, and none is added)
+        uniform = np.all((lo == hi).reshape(lo.shape[:3] + (-1,)), axis=-1)
+        read = is_resident | (_dilated(is_resident) & ~uniform)
         layers_wanted = [int(z) for z in np.nonzero(is_resident.any(axis=(1, 2)))[0]]
         need = sorted({n for z in layers_wanted for n in (z - 1, z, z + 1) if 0 <= n < bz})
         cores: dict[int, dict] = {}
@@ -323,7 +330,7 @@ class BrickStore:
                 for n in need:
                     if n <= z + ahead and n not in submitted:
                         submitted.add(n)
-                        futures[n] = pool.submit(_read_cores_of, self.source, n, is_resident[n],
+                        futures[n] = pool.submit(_read_cores_of, self.source, n, read[n],
                                                  self.brick, self.dims)
                 for n in (z - 1, z, z + 1):
                     if n in futures:
@@ -385,6 +392,12 @@ class BrickStore:
     def resident_count(self) -> int:
         return int(np.count_nonzero(~self.constant()))
 
+    def pool_plan(self, max_side: int) -> "PoolPlan":
+        """The pool of this store's bricks that are not constant (one level)."""
+        table, constants, grid, resident = self.layout(max_side)
+        return PoolPlan(self.dims, self.brick, self.channels, table, constants, grid,
+                        [(self, resident, 0)], self.name)
+
     def layout(self, max_side: int):
         """(page table, constants, slot grid, resident bricks (z, y, x) in slot order)."""
         lo, _ = self.ranges()
@@ -396,6 +409,49 @@ class BrickStore:
         for slot, (z, y, x) in enumerate(resident):
             table[z, y, x] = slot
         return table, constants, grid, resident
+
+@dataclass
+class PoolPlan:
+    """What a brick pool holds (app/gl/brick_pool.py), decided on the host: its page table
+    ([z, y, x]: level 0's, then with mixed levels each coarser level's stacked along z), the
+    constants, the slot grid, and per level the store and its resident bricks (z, y, x) whose
+    slots the table holds. `blocks()` reads them (BrickStore.resident_layers)."""
+    dims: tuple
+    brick: int
+    channels: int
+    table: np.ndarray
+    constants: np.ndarray
+    grid: tuple
+    parts: list                      # (BrickStore, resident (n, 3) z, y, x, level)
+    name: str = "volume"
+    level_dims: tuple = ()           # mixed levels: each level's dims, level 0 first
+    level_table_z: tuple = ()        # ... and the first z of its table
+    level_of_brick: np.ndarray | None = None   # ... and the level each level-0 brick reads
+
+    @property
+    def resident(self) -> int:
+        return sum(len(r) for _, r, _ in self.parts)
+
+    def blocks(self):
+        """(slot, level << LEVEL_SHIFT | the brick's index in its level, block with apron as
+        densities) of every resident brick: host work only (a thread may do it)."""
+        for store, resident, level in self.parts:
+            z0 = self.level_table_z[level] if self.level_table_z else 0
+            bx, by, _ = store.counts
+            for z, (y, x), block in store.resident_layers(resident, densities=True):
+                yield (int(self.table[z0 + z, y, x]), (level << LEVEL_SHIFT) | (x + bx * (y + by * z)),
+                       block)
+
+
+def _dilated(mask: np.ndarray) -> np.ndarray:
+    """[bz, by, bx]: True where the brick or one of its 26 neighbours is True."""
+    out = mask.copy()
+    padded = np.pad(mask, 1)
+    nz, ny, nx = mask.shape
+    for dz, dy, dx in np.ndindex(3, 3, 3):
+        out |= padded[dz:dz + nz, dy:dy + ny, dx:dx + nx]
+    return out
+
 
 def _edge_padded(block: np.ndarray, shape) -> np.ndarray:
     """A [z, y, x(, c)] block read at a volume's far faces, grown to `shape` (z, y, x) by

@@ -152,35 +152,28 @@ class BrickPool:
         self.slots_buffer = None
 
 
-def empty_pool(ctx: moderngl.Context, store, exact_uint8: bool, layout) -> "BrickPool":
-    """The pool of an app.bricks.BrickStore with its page table and constants and no brick
-    written yet; `layout`: store.layout(max_side)."""
-    table, constants, grid, _ = layout
-    return BrickPool(ctx, store.dims, store.brick, store.channels, grid, table, constants,
-                     exact_uint8, store.name)
+def empty_pool(ctx: moderngl.Context, plan, exact_uint8: bool) -> "BrickPool":
+    """The pool of an app.bricks.PoolPlan with its page table and constants and no brick written
+    yet."""
+    return BrickPool(ctx, plan.dims, plan.brick, plan.channels, plan.grid, plan.table,
+                     plan.constants, exact_uint8, plan.name, level_dims=plan.level_dims,
+                     level_table_z=plan.level_table_z)
 
 
-def resident_blocks(store, layout):
-    """(slot, linear brick index, block with apron as densities) of every brick that is not
-    constant (BrickStore.resident_layers: each read once, its apron from its neighbours); host
-    work only, so it may run on a thread while the context's thread writes the blocks."""
-    table, _, _, resident = layout
-    bx, by, _ = store.counts
-    for z, (y, x), block in store.resident_layers(resident, densities=True):
-        yield int(table[z, y, x]), x + bx * (y + by * z), block
-
-
-def upload_store(ctx: moderngl.Context, store, exact_uint8: bool, max_side: int) -> "BrickPool":
-    """A BrickPool holding every brick of an app.bricks.BrickStore that is not constant (each read
-    once more, its apron from its neighbours: BrickStore.resident_layers; constant bricks are not
-    read)."""
-    layout = store.layout(max_side)
-    pool = empty_pool(ctx, store, exact_uint8, layout)
+def upload_plan(ctx: moderngl.Context, plan, exact_uint8: bool) -> "BrickPool":
+    """A BrickPool holding the resident bricks of an app.bricks.PoolPlan (each read once, its
+    apron from its neighbours: BrickStore.resident_layers; constant bricks are not read)."""
+    pool = empty_pool(ctx, plan, exact_uint8)
     try:
-        for slot, brick, block in resident_blocks(store, layout):
+        for slot, brick, block in plan.blocks():
             pool.write_slot(slot, brick, block)
     except BaseException:
         pool.release()
         raise
-    assert np.count_nonzero(pool.brick_of_slot != FREE_SLOT) == len(layout[3])
+    assert np.count_nonzero(pool.brick_of_slot != FREE_SLOT) == plan.resident
     return pool
+
+
+def upload_store(ctx: moderngl.Context, store, exact_uint8: bool, max_side: int) -> "BrickPool":
+    """A BrickPool holding every brick of an app.bricks.BrickStore that is not constant."""
+    return upload_plan(ctx, store.pool_plan(max_side), exact_uint8)

@@ -18,7 +18,7 @@ import time
 
 import moderngl
 
-from ..gl.brick_pool import FREE_SLOT, empty_pool, resident_blocks
+from ..gl.brick_pool import FREE_SLOT, empty_pool
 from ..gl.textures import volume_texture
 from ..scene import Scene
 from ..volume import Volume, load_scene_volume
@@ -31,19 +31,20 @@ _DONE = object()
 
 class ProgressiveOpen:
     def __init__(self, ctx: moderngl.Context, scene: Scene, memory_bytes: int | None = None,
-                 brick_size: int | None = None):
+                 brick_size: int | None = None, camera=None):
+        """`camera`: levels mixed by what it sees under the cap (plan_placement)."""
         self.ctx = ctx
         self.scene = scene
         self.started = time.perf_counter()
         self._limits = device_limits(ctx)          # GL queries: on the context's thread
         self._memory_bytes = memory_bytes
         self._brick_size = brick_size
+        self._camera = camera
         self._blocks: queue.Queue = queue.Queue(QUEUE_BRICKS)
         self._planned = threading.Event()
         self._cancelled = threading.Event()
         self.given: Volume | None = None           # the volume as loaded
         self.placement = None                      # plan_placement's, once the thread has it
-        self._layout = None
         self.pool = None
         self.written = 0
         self.error: BaseException | None = None
@@ -58,14 +59,12 @@ class ProgressiveOpen:
             self.given = load_scene_volume(self.scene, self._brick_size)
             self.stage = "choosing the level that fits"
             placement = plan_placement(self.given, self._limits, self._memory_bytes,
-                                       self._brick_size)
-            if placement.store is not None:
-                self._layout = placement.store.layout(self._limits[0])
+                                       self._brick_size, self._camera)
             self.placement = placement
             self._planned.set()
-            if placement.store is not None:
+            if placement.plan is not None:
                 self.stage = "reading bricks"
-                for item in resident_blocks(placement.store, self._layout):
+                for item in placement.plan.blocks():
                     while not self._cancelled.is_set():
                         try:
                             self._blocks.put(item, timeout=0.1)
@@ -91,7 +90,8 @@ class ProgressiveOpen:
     # ---- the context's thread ---------------------------------------------------------------
     @property
     def bricks_total(self) -> int:
-        return 0 if self._layout is None else len(self._layout[3])
+        plan = None if self.placement is None else self.placement.plan
+        return 0 if plan is None else plan.resident
 
     def progress(self) -> str:
         """A line for the viewer: what is being done, and how far."""
@@ -117,15 +117,14 @@ class ProgressiveOpen:
         if self.error is not None:
             self._finish_failed()
         placement = self.placement
-        if placement.store is None:            # one texture: uploaded whole, here
+        if placement.plan is None:             # one texture: uploaded whole, here
             self._thread.join()
             if self.error is not None:
                 self._finish_failed()
             self.done = True
             return self.given, placement.shown, volume_texture(self.ctx, placement.shown)
         if self.pool is None:
-            self.pool = empty_pool(self.ctx, placement.store, placement.shown.exact_uint8,
-                                   self._layout)
+            self.pool = empty_pool(self.ctx, placement.plan, placement.shown.exact_uint8)
             self.stage = "writing bricks"
         while True:
             try:

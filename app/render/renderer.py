@@ -105,7 +105,8 @@ class Renderer:
         self.resources = SceneResources(ctx, scene, volume,
                                         use_majorant_grid=settings.empty_space_skipping,
                                         volume_memory_bytes=settings.volume_memory_bytes,
-                                        brick_size=settings.brick_size)
+                                        brick_size=settings.brick_size,
+                                        mixed_levels=settings.mixed_levels)
         self._settings = settings
         self._passes: dict[tuple, PathTracer] = {}
         # Which path states a pass uses (pass_for): a PathTracer keeps one per pixel between

@@ -53,7 +53,7 @@ def environment_textures(ctx: moderngl.Context, image: np.ndarray, distribution:
 class SceneResources:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
                  use_majorant_grid: bool = True, volume_memory_bytes: int | None = None,
-                 brick_size: int | None = None):
+                 brick_size: int | None = None, mixed_levels: bool = True):
         self.ctx = ctx
         self.scene: Scene | None = None
         self.volume: Volume | None = None
@@ -90,6 +90,7 @@ class SceneResources:
         # when they change.
         self.volume_memory_bytes = volume_memory_bytes
         self.brick_size = brick_size
+        self.mixed_levels = bool(mixed_levels)   # levels mixed by the camera under the cap
         self.given_volume: Volume | None = None
         self.update(scene, volume)
 
@@ -123,7 +124,7 @@ class SceneResources:
             given = volume
             volume, kept_texture = (placed if placed is not None else
                                     place_volume(self.ctx, volume, self.volume_memory_bytes,
-                                                 self.brick_size))
+                                                 self.brick_size, self.placement_camera(scene)))
             self.given_volume = given
             fresh_texture = kept_texture
         else:
@@ -249,6 +250,10 @@ class SceneResources:
     def bricked(self) -> bool:
         """Whether the volume is read through a brick pool (lib/brick_pool.glsl)."""
         return isinstance(self.volume_tex, BrickPool)
+
+    def placement_camera(self, scene: Scene):
+        """The camera levels are mixed for under a cap (place_volume), None: one whole level."""
+        return scene.camera if self.mixed_levels else None
 
     def set_bricking(self, volume_memory_bytes: int | None, brick_size: int | None) -> None:
         """A new cap or brick size: the volume placed again (and everything built from it)."""

@@ -110,6 +110,9 @@ class RenderSettings:
     # (None: bricks of 64 only where one texture does not fit; tests force small ones).
     volume_memory_bytes: int | None = None
     brick_size: int | None = None
+    # Under the cap, the memory the shown level leaves holds the next finer level's bricks where
+    # the scene's camera sees them largest (app/render/level_mix.py); False: one whole level.
+    mixed_levels: bool = True
 
     def __post_init__(self):
         if self.walk_sun not in WALK_SUN_MODES:

@@ -10,10 +10,12 @@ import dataclasses
 import moderngl
 import numpy as np
 
-from ..bricks import (DEFAULT_BRICK_SIZE, ArraySource, BrickStore, LazyData, box_filtered,
+from ..twins.majorant_grid import macrocell_counts
+from .level_mix import mixed_density_ranges, mixed_plan
+from ..bricks import (DEFAULT_BRICK_SIZE, ArraySource, BrickStore, LazyData, PoolPlan, box_filtered,
                       brick_counts, refuse_cap_below_brick, slot_bytes, slot_grid,
                       source_box_filtered, texel_bytes)
-from ..gl.brick_pool import upload_store
+from ..gl.brick_pool import upload_plan
 from ..gl.textures import device_available, volume_texture
 from ..volume import Volume, VolumeError
 
@@ -67,10 +69,10 @@ def level_bytes(store: BrickStore, channels: int, exact_uint8: bool, max_side: i
 @dataclasses.dataclass
 class Placement:
     """Where a volume goes, decided on the host (no GL calls: app/render/progressive_open.py
-    decides on a thread): `shown` the volume shown (a coarser level under a cap, with its note),
-    `store` its BrickStore where it is bricked (None: one texture)."""
+    decides on a thread): `shown` the volume shown (a coarser level under a cap, or a mix of two
+    levels, with its note), `plan` its pool where it is bricked (None: one texture)."""
     shown: Volume
-    store: BrickStore | None
+    plan: PoolPlan | None
 
 
 def device_limits(ctx: moderngl.Context) -> tuple[int, int | None, str]:
@@ -81,10 +83,11 @@ def device_limits(ctx: moderngl.Context) -> tuple[int, int | None, str]:
 
 
 def plan_placement(volume: Volume, limits, memory_bytes: int | None = None,
-                   brick_size: int | None = None) -> Placement:
+                   brick_size: int | None = None, camera=None) -> Placement:
     """Where `volume` goes under `limits` (device_limits): one texture where it fits, else the
-    finest level whose bricks that are not constant fit the cap (reads the range passes it
-    needs; no GL calls)."""
+    finest level whose bricks that are not constant fit the cap, and with a `camera` the memory
+    it leaves filled with the next finer level's bricks the camera sees largest
+    (app/render/level_mix.py). Reads the range passes it needs; no GL calls."""
     max_side, available, where = limits
     channels = volume.channel_count
     exact = volume.exact_uint8
@@ -100,37 +103,56 @@ def plan_placement(volume: Volume, limits, memory_bytes: int | None = None,
         cap, cap_name = available, where
     if cap is not None:
         refuse_cap_below_brick(cap, brick, channels, exact, volume.name)
-    current, level, first = volume, 0, None
+    current, level, first, first_need = volume, 0, None, None
+    finer = None                       # (the level one finer, its store)
     while True:
         store = _store(current, brick)
         need = level_bytes(store, channels, current.exact_uint8, max_side)
         if first is None:
-            first = store.resident_count()
+            first, first_need = store.resident_count(), need
         if need is not None and (cap is None or need <= cap):
             break
         if max(current.dims) <= brick:
             raise VolumeError(f"{volume.name}: even one brick of {brick}^3 voxels exceeds the "
                               f"{_gib(cap)} of {cap_name}")
+        finer = (current, store)
         current, level = coarser(current, brick), level + 1
     notes = current.notes
+    # mixed only under a cap given (filling the device's whole free memory would leave none for
+    # the probes and images)
+    if level > 0 and memory_bytes is not None and camera is not None:
+        fine_volume, fine_store = finer
+        plan, why = mixed_plan(fine_store, store, cap, camera, current.half_extent, max_side,
+                               exact, volume.name)
+        if plan is not None:
+            f, c = fine_volume.dims, current.dims
+            cells = macrocell_counts(f)
+            ranges = mixed_density_ranges(fine_store, store, plan.level_of_brick, cells)
+            note = (f"levels {level - 1} and {level} mixed ({f[0]} x {f[1]} x {f[2]} where the "
+                    f"camera sees its voxels largest, {c[0]} x {c[1]} x {c[2]} elsewhere) under the "
+                    f"{_gib(cap)} cap ({cap_name}): {why}")
+            shown = dataclasses.replace(fine_volume, bricks=fine_store,
+                                        notes=fine_volume.notes + (note,), derived={})
+            shown.derived[("density ranges", cells)] = ranges
+            return Placement(shown, plan)
     if level > 0:
-        held = (cap // slot_bytes(brick, channels, exact)) if cap is not None else None
-        why = (f"the {_gib(cap)} cap ({cap_name}) holds {min(100.0, 100.0 * held / max(first, 1)):.0f}% "
-               f"of level 0's {first} bricks" if cap is not None and (held or 0) < first else
-               f"level 0's {first} bricks exceed one atlas texture of {max_side}^3 texels")
+        why = (f"level 0's {first} bricks exceed one atlas texture of {max_side}^3 texels"
+               if first_need is None else
+               f"level 0's {first} bricks take {_gib(first_need)}, over the {_gib(cap)} cap "
+               f"({cap_name})")
         nx, ny, nz = current.dims
         notes += (f"level {level}, {2 ** level}x coarser ({nx} x {ny} x {nz}): {why}",)
-    return Placement(dataclasses.replace(current, bricks=store, notes=notes), store)
+    return Placement(dataclasses.replace(current, bricks=store, notes=notes),
+                     store.pool_plan(max_side))
 
 
 def place_volume(ctx: moderngl.Context, volume: Volume, memory_bytes: int | None = None,
-                 brick_size: int | None = None):
+                 brick_size: int | None = None, camera=None):
     """(the volume shown, its texture or BrickPool). `memory_bytes`: the cap on the volume's GPU
     memory (None: the device's memory left); `brick_size`: bricks of that many voxels, forced
-    (None: bricked only where one texture does not fit, in bricks of 64)."""
-    limits = device_limits(ctx)
-    placement = plan_placement(volume, limits, memory_bytes, brick_size)
-    if placement.store is None:
+    (None: bricked only where one texture does not fit, in bricks of 64); `camera`: under a cap,
+    levels mixed by what it sees (plan_placement; None: one whole level)."""
+    placement = plan_placement(volume, device_limits(ctx), memory_bytes, brick_size, camera)
+    if placement.plan is None:
         return placement.shown, volume_texture(ctx, placement.shown)
-    return placement.shown, upload_store(ctx, placement.store, placement.shown.exact_uint8,
-                                         limits[0])
+    return placement.shown, upload_plan(ctx, placement.plan, placement.shown.exact_uint8)

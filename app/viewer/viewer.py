@@ -234,7 +234,8 @@ class Viewer:
         if self.opening is not None:
             self.opening.cancel()
         res = self.session.renderer.resources
-        self.opening = ProgressiveOpen(self.ctx, scene, res.volume_memory_bytes, res.brick_size)
+        self.opening = ProgressiveOpen(self.ctx, scene, res.volume_memory_bytes, res.brick_size,
+                                       res.placement_camera(scene))
 
     def _poll_opening(self) -> None:
         opening = self.opening
