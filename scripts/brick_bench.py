@@ -246,9 +246,9 @@ def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
     return records
 
 
-def _capped(ctx, records, scene, settings, cap, s, parts):
-
-    # time to the first image under the cap
+def _open_capped(ctx, records, key, scene, settings, cap, s):
+    """Opens the store under the cap with `settings`: the time to the first image, the frame
+    rate, bake and light grid; records[key]; returns the shown volume and a 4-spp image."""
     start = time.perf_counter()
     r = Renderer(ctx, scene, settings=settings)
     ctx.finish()
@@ -256,22 +256,35 @@ def _capped(ctx, records, scene, settings, cap, s, parts):
     first = r.render("raymarch", spp=1, seed=0).image
     ctx.finish()
     shown = r.resources.volume
-    records["capped"] = {
+    pool = r.resources.volume_tex if r.resources.bricked else None
+    records[key] = {
         "cap_bytes": cap, "first_image_s": time.perf_counter() - start, "open_s": opened,
+        "mixed_levels": settings.mixed_levels,
         "level_dims": list(shown.dims), "notes": list(shown.notes),
-        "pool_bytes": int(r.resources.volume_tex.nbytes) if r.resources.bricked else None,
-        "bricked": r.resources.bricked, **_frames(r, s)}
+        "pool_bytes": int(pool.nbytes) if pool is not None else None,
+        "pool_levels": pool.levels if pool is not None else None,
+        "resident_bricks": int((pool.brick_of_slot != 0xFFFFFFFF).sum()) if pool is not None
+        else None, "bricked": r.resources.bricked, **_frames(r, s)}
     r.invalidate()                               # the first image baked them: again, timed
     t = time.perf_counter()
     bake_ms = r.bake(seed=1)
     light_ms = r.bake_light()
     ctx.finish()
-    records["capped"].update(bake_ms=bake_ms, light_ms=light_ms,
-                             bake_and_light_wall_s=time.perf_counter() - t)
-    capped_image = r.render("raymarch", spp=4, seed=7).image
-    capped_volume = shown
-    records["first_image_mean"] = float(first.mean())
+    records[key].update(bake_ms=bake_ms, light_ms=light_ms,
+                        bake_and_light_wall_s=time.perf_counter() - t,
+                        first_image_mean=float(first.mean()))
+    image = r.render("raymarch", spp=4, seed=7).image
     r.release()
+    return shown, image
+
+
+def _capped(ctx, records, scene, settings, cap, s, parts):
+    # the default (levels mixed by the camera under the cap), then one whole level
+    from dataclasses import replace
+    capped_volume, capped_image = _open_capped(ctx, records, "capped", scene, settings, cap, s)
+    _, whole_image = _open_capped(ctx, records, "capped_whole_level", scene,
+                                  replace(settings, mixed_levels=False), cap, s)
+    records["first_image_mean"] = records["capped"]["first_image_mean"]
     if "uncapped" not in parts:
         return
 
@@ -281,9 +294,12 @@ def _capped(ctx, records, scene, settings, cap, s, parts):
         if r0.resources.volume.dims != (s.size,) * 3:
             raise VolumeError(f"level 0 does not fit: {r0.resources.volume.notes}")
         full = r0.render("raymarch", spp=4, seed=7).image
+        full_again = r0.render("raymarch", spp=4, seed=8).image
         r0.release()
         records["rrmse_vs_uncapped"] = {"what": "whole image, level 0 uncapped",
-                                        "rrmse": rrmse(capped_image, full)}
+                                        "rrmse": rrmse(capped_image, full),
+                                        "rrmse_whole_level": rrmse(whole_image, full),
+                                        "rrmse_uncapped_other_seed": rrmse(full_again, full)}
     except VolumeError as exc:
         base = load_scene_volume(scene, s.brick or 64)
         images = []
@@ -296,7 +312,6 @@ def _capped(ctx, records, scene, settings, cap, s, parts):
         records["rrmse_vs_uncapped"] = {
             "what": "central half of each axis, level 0 against the capped level",
             "why": str(exc), "rrmse": rrmse(images[1], images[0])}
-
 
 
 def _progressive(ctx, records, scene, settings, cap):
@@ -321,7 +336,8 @@ def _progressive(ctx, records, scene, settings, cap):
     preview = zarr_preview(scene, memory_bytes=cap)
     preview_read = time.perf_counter() - start
     r = Renderer(ctx, scene, preview, settings=settings)
-    opening = ProgressiveOpen(ctx, scene, cap, settings.brick_size)
+    opening = ProgressiveOpen(ctx, scene, cap, settings.brick_size,
+                              scene.camera if settings.mixed_levels else None)
     frame(r, 0, bake=True)
     preview_image = time.perf_counter() - start
     walls = []
@@ -381,8 +397,15 @@ def _report(out: Path, records: dict, s: Settings) -> None:
             f"{pg['first_image_s']:.1f} s; {pg['frames_while_loading']} frames meanwhile "
             f"(median {pg['frame_ms_while_loading_median'] or 0:.0f} ms, longest "
             f"{pg['frame_ms_while_loading_max'] or 0:.0f} ms)")
+    w = records.get("capped_whole_level")
+    if w:
+        lines.append(f"- one whole level instead (mixed_levels off): level {w['level_dims']}, "
+                     f"first image {w['first_image_s']:.1f} s, {w['fps']:.1f} fps")
     if err:
-        lines.append(f"- rRMSE against level 0: {err['rrmse']:.4f} ({err['what']})")
+        lines.append(f"- rRMSE against level 0: {err['rrmse']:.4f} ({err['what']})"
+                     + (f"; one whole level {err['rrmse_whole_level']:.4f}; level 0 against "
+                        f"itself at another seed {err['rrmse_uncapped_other_seed']:.4f}"
+                        if "rrmse_whole_level" in err else ""))
     if lg:
         lines.append(f"- long volume {lg['dims']}: bricked {lg['bricked']}, first image "
                      f"{lg['first_image_s']:.1f} s, {lg['fps']:.1f} fps")
