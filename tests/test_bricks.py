@@ -269,3 +269,127 @@ def test_reads_in_processes_equal_threads(tmp_path, monkeypatch):
     is_resident = np.zeros(procs.reads.shape, bool)
     is_resident[tuple(resident.T)] = True
     assert np.all(procs.reads[is_resident] == 2) and np.all(procs.reads[~is_resident] == 1)
+
+
+class _Blocks:
+    """app.bricks.shared_memory with the names of the blocks the caller's process creates
+    recorded (the readers, forked, attach to them)."""
+
+    def __init__(self):
+        from multiprocessing import shared_memory
+        self.module = shared_memory
+        self.names = []
+        self.pid = __import__("os").getpid()
+
+    def SharedMemory(self, *args, **kw):
+        block = self.module.SharedMemory(*args, **kw)
+        if kw.get("create") and __import__("os").getpid() == self.pid:
+            self.names.append(block.name)
+        return block
+
+    def left(self):
+        from pathlib import Path
+        return [n for n in self.names if (Path("/dev/shm") / n.lstrip("/")).exists()]
+
+
+def _processes(monkeypatch):
+    import app.bricks as bricks
+    monkeypatch.setattr(bricks, "PROCESS_READ_VOXELS", 1)
+    monkeypatch.setattr(bricks, "reader_processes", lambda: 2)
+    blocks = _Blocks()
+    monkeypatch.setattr(bricks, "shared_memory", blocks)
+    return blocks
+
+
+@pytest.mark.skipif(not __import__("os").path.isdir("/dev/shm"), reason="no /dev/shm to look in")
+@pytest.mark.parametrize("dtype, value_range", [("uint16", None), ("uint8", None),
+                                                ("float32", (-0.3, 1.7))])
+def test_upload_from_processes_maps_there_and_moves_bricks_through_shared_memory(
+        ctx, tmp_path, monkeypatch, dtype, value_range):
+    """A store read in processes: each reader maps its bricks to densities (uint16 and uint8 in
+    float32 arithmetic, app/volume.py float32_exact; float32 data with a fractional range in
+    float64, as normalise does) and hands them over in shared memory blocks, every one unlinked
+    afterwards; the atlas equals the whole loader's volume bit for bit (tolerance 0: the float32
+    mapping is exact there), and the reads are counted as the threads' are. uint8 with its
+    type's range is the R16 atlas (exact_uint8)."""
+    from app.gl.brick_pool import atlas_payload
+    data = _blob()
+    if dtype == "uint8":
+        data = (data // 200).astype(np.uint8)
+    elif dtype == "float32":
+        data = data.astype(np.float32) / 20000.0
+    path = _zarr(tmp_path, data)
+    spec = VolumeSpec(path=str(path), builtin=None, value_range=value_range)
+    whole = load_volume(spec)
+    blocks = _processes(monkeypatch)
+    volume = load_volume(spec, brick=BRICK)
+    store = volume.bricks
+    assert store._in_processes()
+    shown, pool = place_volume(ctx, volume, brick_size=BRICK)
+    try:
+        assert blocks.names and not blocks.left()
+        assert pool.exact_uint8 == (dtype == "uint8")
+        constant = store.constant()
+        assert np.all(store.reads[constant] == 1) and np.all(store.reads[~constant] == 2)
+        n = int((~constant).sum())
+        assert pool.uploads == n
+        want = pack(whole.data, BRICK)
+        table = np.frombuffer(pool.table.read(), np.uint32).reshape(want.table.shape)
+        np.testing.assert_array_equal(table, want.table)
+        texel = np.uint16 if pool.exact_uint8 else np.float32
+        atlas = np.frombuffer(pool.atlas.read(), texel).reshape(want.atlas.shape)
+        encoded = np.frombuffer(atlas_payload(want.atlas, pool.exact_uint8), texel)
+        np.testing.assert_array_equal(atlas, encoded.reshape(want.atlas.shape))
+        assert store.seconds["upload_read"] > 0 and store.seconds["range_pass"] > 0
+    finally:
+        pool.release()
+
+
+class _FailingSource:
+    """A Zarr source whose read of one layer fails (in the reading process)."""
+    process_safe = True
+
+    def __init__(self, source, z0):
+        self.source, self.z0 = source, z0
+        self.shape = source.shape
+
+    def read(self, z0, *rest):
+        if z0 == self.z0:
+            raise VolumeError(f"layer at {z0} unreadable")
+        return self.source.read(z0, *rest)
+
+    def density(self, raw):
+        return self.source.density(raw)
+
+
+@pytest.mark.skipif(not __import__("os").path.isdir("/dev/shm"), reason="no /dev/shm to look in")
+def test_shared_memory_is_unlinked_when_a_read_fails_or_the_upload_stops(tmp_path, monkeypatch):
+    """Every shared memory block is unlinked when a reader fails, when the caller stops early
+    (KeyboardInterrupt in the loop) and when it closes the generator."""
+    data = _blob((40, 24, 64))
+    path = _zarr(tmp_path, data)
+    blocks = _processes(monkeypatch)
+    store = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
+    _, _, _, resident = store.layout(4096)
+    layers = sorted(set(resident[:, 0].tolist()))
+    assert len(layers) >= 3
+
+    def dest(z, y, x):
+        return np.empty((BRICK + 2,) * 3, np.float32)
+
+    failing = BrickStore(_FailingSource(store.source, layers[-1] * BRICK), BRICK)
+    failing._ranges = store.raw_ranges()
+    with pytest.raises(VolumeError, match="unreadable"):
+        for _ in failing.write_resident(resident, dest, densities=True):
+            pass
+    assert blocks.names and not blocks.left()
+    blocks.names.clear()
+    with pytest.raises(KeyboardInterrupt):
+        for _ in store.write_resident(resident, dest, densities=True):
+            raise KeyboardInterrupt
+    assert blocks.names and not blocks.left()
+    blocks.names.clear()
+    layers = store.write_resident(resident, dest, densities=True)
+    next(layers)
+    layers.close()
+    assert blocks.names and not blocks.left()
