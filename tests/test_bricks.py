@@ -52,6 +52,7 @@ def test_zarr_store_reads_constant_bricks_once_and_uploads_only_the_others(ctx, 
         assert np.all(store.reads[constant] == 1)         # never read again
         assert np.all(store.reads[~constant] == 2)        # read once more, to upload
         assert pool.uploads == int((~constant).sum())
+        assert pool.writes == -(-pool.uploads // pool.grid[0])   # a row of slots a write
         # what was uploaded is the whole loader's volume, bricked
         whole = load_volume(VolumeSpec(path=str(path), builtin=None))
         assert isinstance(whole.data, np.ndarray)
@@ -310,8 +311,8 @@ def test_upload_from_processes_maps_there_and_moves_bricks_through_shared_memory
     float32 arithmetic, app/volume.py float32_exact; float32 data with a fractional range in
     float64, as normalise does) and hands them over in shared memory blocks, every one unlinked
     afterwards; the atlas equals the whole loader's volume bit for bit (tolerance 0: the float32
-    mapping is exact there), and the reads are counted as the threads' are. uint8 with its
-    type's range is the R16 atlas (exact_uint8)."""
+    mapping is exact there), the reads are counted as the threads' are, and the atlas is written
+    a row of slots at a time. uint8 with its type's range is the R16 atlas (exact_uint8)."""
     from app.gl.brick_pool import atlas_payload
     data = _blob()
     if dtype == "uint8":
@@ -332,7 +333,7 @@ def test_upload_from_processes_maps_there_and_moves_bricks_through_shared_memory
         constant = store.constant()
         assert np.all(store.reads[constant] == 1) and np.all(store.reads[~constant] == 2)
         n = int((~constant).sum())
-        assert pool.uploads == n
+        assert pool.uploads == n and pool.writes == -(-n // pool.grid[0]) < n   # a row a write
         want = pack(whole.data, BRICK)
         table = np.frombuffer(pool.table.read(), np.uint32).reshape(want.table.shape)
         np.testing.assert_array_equal(table, want.table)
@@ -341,6 +342,7 @@ def test_upload_from_processes_maps_there_and_moves_bricks_through_shared_memory
         encoded = np.frombuffer(atlas_payload(want.atlas, pool.exact_uint8), texel)
         np.testing.assert_array_equal(atlas, encoded.reshape(want.atlas.shape))
         assert store.seconds["upload_read"] > 0 and store.seconds["range_pass"] > 0
+        assert pool.write_seconds > 0 and pool.upload_seconds >= pool.write_seconds
     finally:
         pool.release()
 
@@ -393,3 +395,31 @@ def test_shared_memory_is_unlinked_when_a_read_fails_or_the_upload_stops(tmp_pat
     next(layers)
     layers.close()
     assert blocks.names and not blocks.left()
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_upload_writes_rows_of_slots_equal_to_the_twins_pack(ctx, channels):
+    """upload_store from an array in memory (threads), one and several channels: the atlas
+    written a row of slots at a time (the last row partial) equals the twin's pack brick by
+    brick; a block past the end of its row is refused."""
+    from app.gl.brick_pool import upload_store
+    rng = np.random.default_rng(7)
+    data = np.zeros((20, 19, 33, channels), np.float32)
+    data[2:17, 3:15, 4:30] = rng.random((15, 12, 26, channels))
+    data = data[..., 0] if channels == 1 else data
+    store = BrickStore(ArraySource(data), 4)
+    pool = upload_store(ctx, store, False, 4096)
+    try:
+        want = pack(data, 4, 4096)
+        n = int(np.count_nonzero(want.brick_of_slot != 0xFFFFFFFF))
+        assert pool.uploads == n and n % pool.grid[0] != 0     # a partial last row
+        assert pool.writes == -(-n // pool.grid[0])
+        np.testing.assert_array_equal(pool.brick_of_slot, want.brick_of_slot)
+        atlas = np.frombuffer(pool.atlas.read(), np.float32).reshape(want.atlas.shape)
+        np.testing.assert_array_equal(atlas, want.atlas)
+        side = 6
+        with pytest.raises(ValueError, match="rows of"):
+            pool.write_slots(pool.grid[0] - 1, [0, 1],
+                             np.zeros((side, side, 2 * side) + data.shape[3:], np.float32))
+    finally:
+        pool.release()
