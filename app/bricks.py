@@ -385,8 +385,11 @@ def _layer_ranges_of(source, z: int, brick: int, counts, dims) -> tuple[np.ndarr
     # partial bricks at the far faces: the edge voxel repeated changes no least or largest
     d = layer.shape[0]
     layer = _edge_padded(layer, (d, by * B, bx * B))
-    blocks = layer.reshape((d, by, B, bx, B) + layer.shape[3:])
-    return blocks.min(axis=(0, 2, 4)), blocks.max(axis=(0, 2, 4))
+    # along z first (whole planes, elementwise: a third of the time of reducing the three block
+    # axes at once), then within each brick's B x B square
+    shape = (by, B, bx, B) + layer.shape[3:]
+    return (layer.min(axis=0).reshape(shape).min(axis=(1, 3)),
+            layer.max(axis=0).reshape(shape).max(axis=(1, 3)))
 
 
 def _read_cores_of(source, z: int, resident_row: np.ndarray, brick: int, dims,

@@ -13,7 +13,7 @@ from app.render.settings import RenderSettings
 from app.render.volume_placement import place_volume
 from app.scene import parse_scene
 from app.scene_types import VolumeSpec
-from app.twins.brick_pool import CONSTANT, pack
+from app.twins.brick_pool import CONSTANT, brick_ranges, pack
 from app.twins.majorant_grid import brick_density_range_grid, density_range_grid
 from app.volume import VolumeError, load_volume, volume_from_array
 
@@ -92,6 +92,8 @@ def test_majorant_ranges_from_bricks_contain_the_whole_arrays():
     data = r.uniform(0, 1, (21, 29, 37)).astype(np.float32)
     data[:, :16, :24] = 0.0
     store = BrickStore(ArraySource(data), BRICK)
+    for got, want in zip(store.ranges(), brick_ranges(data, BRICK)):   # partial bricks too
+        np.testing.assert_array_equal(got, want)
     lo_b, hi_b = brick_density_range_grid(*store.ranges(), store.dims, BRICK)
     lo, hi = density_range_grid(data)
     assert lo_b.shape == lo.shape
