@@ -215,6 +215,9 @@ def test_brick_bench_quick(tmp_path):
     assert any("coarser" in n for n in capped["notes"])
     assert capped["pool_bytes"] <= capped["cap_bytes"]
     assert capped["first_image_s"] > 0 and capped["fps"] > 0
+    b = capped["open_breakdown"]            # where the open's time went
+    assert b["level0_range_pass_s"] > 0 and b["shown_range_pass_s"] > 0 and b["upload_s"] > 0
+    assert 0 < b["texture_writes"] <= b["bricks_written"] and b["texture_write_s"] > 0
     assert 0 < rec["rrmse_vs_uncapped"]["rrmse"] < 1.0
     assert rec["long"]["bricked"] and rec["long"]["finite"] and rec["long"]["mean_radiance"] > 0
     assert rec["long"]["dims"][0] > rec["long"]["max_3d_texture_size"]
