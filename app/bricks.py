@@ -471,10 +471,14 @@ class _CoreReader:
         self.submitted: set[int] = set()
         self.unlinked: set[int] = set()
         if self.processes:
-            # the readers are forked once the pool has work: a block's tracker is theirs too
+            # the resource tracker started before the readers are forked, so that the blocks
+            # they attach to are tracked by the parent's (which unlinks what is left at exit)
             from multiprocessing import resource_tracker
             resource_tracker.ensure_running()
             self.pool = ProcessPoolExecutor(reader_processes(), mp_context=_spawn())
+            # forked now, before any block exists: a reader forked later would inherit the
+            # blocks mapped here then, and keep their memory until the pool ends
+            self.pool.submit(os.getpid).result()
         else:
             self.pool = ThreadPoolExecutor(reader_threads())
 
@@ -487,10 +491,14 @@ class _CoreReader:
         nbytes = count * B ** 3 * int(np.prod(self.extra, dtype=np.int64)) * self.dtype.itemsize
         into = None
         if self.processes and count and self.shared + nbytes <= self.budget:
-            block = shared_memory.SharedMemory(create=True, size=nbytes)
-            self.blocks[n], self.block_bytes[n] = block, nbytes
-            self.shared += nbytes
-            into = (block.name, self.dtype.str, self.extra)
+            try:
+                block = shared_memory.SharedMemory(create=True, size=nbytes)
+            except OSError:      # no shared memory to be had (too many open, ...): pickled
+                block = None
+            if block is not None:
+                self.blocks[n], self.block_bytes[n] = block, nbytes
+                self.shared += nbytes
+                into = (block.name, self.dtype.str, self.extra)
         self.submitted.add(n)
         self.futures[n] = self.pool.submit(_read_cores_of, self.store.source, n,
                                            self.is_resident[n], B, self.store.dims,

@@ -428,3 +428,32 @@ def test_upload_writes_rows_of_slots_equal_to_the_twins_pack(ctx, channels):
                              np.zeros((side, side, 2 * side) + data.shape[3:], np.float32))
     finally:
         pool.release()
+
+
+@pytest.mark.parametrize("budget", [0, 12 * BRICK ** 3 * 4])
+def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
+        tmp_path, monkeypatch, budget):
+    """Layers whose blocks would take the shared memory past its budget (half of /dev/shm's
+    free space: none here, or room for one layer's bricks) come back from the processes
+    pickled, as before: the same bricks with aprons as the threads' reads, each read once
+    more."""
+    import app.bricks as bricks
+    data = _blob()
+    path = _zarr(tmp_path, data)
+    threads = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
+    blocks = _processes(monkeypatch)
+    monkeypatch.setattr(bricks, "_shared_budget", lambda: budget)
+    procs = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
+    _, _, _, resident = procs.layout(4096)
+    seen = 0
+    for z, (y, x), block in procs.resident_layers(resident, densities=True):
+        want = threads.source.density(threads.pencil(z, y, x, x + 1, 1))
+        np.testing.assert_array_equal(block, want)
+        seen += 1
+    assert seen == len(resident)
+    layers = len(set(resident[:, 0].tolist()))
+    assert (len(blocks.names) == 0) if budget == 0 else (0 < len(blocks.names) < layers)
+    assert not blocks.left()
+    is_resident = np.zeros(procs.reads.shape, bool)
+    is_resident[tuple(resident.T)] = True
+    assert np.all(procs.reads[is_resident] == 2) and np.all(procs.reads[~is_resident] == 1)
