@@ -1,6 +1,7 @@
 """A bricked volume on the GPU (glsl/lib/brick_pool.glsl; NumPy twin app/twins/brick_pool.py):
-the atlas of slots, the page table and the constants, written brick by brick (the host never
-needs the whole volume), and in the checking build the slot -> brick map it checks against."""
+the atlas of slots, the page table and the constants, written a row of slots at a time (the host
+never needs the whole volume), and in the checking build the slot -> brick map it checks
+against."""
 from __future__ import annotations
 
 import threading
