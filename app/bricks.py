@@ -476,9 +476,13 @@ class _CoreReader:
             from multiprocessing import resource_tracker
             resource_tracker.ensure_running()
             self.pool = ProcessPoolExecutor(reader_processes(), mp_context=_spawn())
-            # forked now, before any block exists: a reader forked later would inherit the
-            # blocks mapped here then, and keep their memory until the pool ends
-            self.pool.submit(os.getpid).result()
+            try:
+                # forked now, before any block exists: a reader forked later would inherit the
+                # blocks mapped here then, and keep their memory until the pool ends
+                self.pool.submit(os.getpid).result()
+            except BaseException:
+                self.pool.shutdown(wait=True, cancel_futures=True)
+                raise
         else:
             self.pool = ThreadPoolExecutor(reader_threads())
 
