@@ -194,6 +194,8 @@ class BrickStore:
         # wall seconds; the upload's reading and mapping (summed over the readers) and the
         # waits of the caller's thread for the readers and the assembling threads
         self.seconds: dict[str, float] = {}
+        # layers of bricks the upload's reading processes handed over: in shared memory, pickled
+        self.handed = {"shared": 0, "pickled": 0}
 
     def pencil(self, bz: int, by: int, x0: int, x1: int, apron: int) -> np.ndarray:
         """The raw voxels of bricks x0 .. x1 - 1 of row (by, bz), with `apron` voxels around,
@@ -527,6 +529,9 @@ class _CoreReader:
                                     buffer=block.buf)
                 cores = {key: shared[i] for i, key in enumerate(keys)}
                 del shared
+                store.handed["shared"] += 1
+            elif self.processes and cores:
+                store.handed["pickled"] += 1
             self.got[n] = cores
             for y, x in cores:
                 store.reads[n, y, x] += 1

@@ -319,7 +319,10 @@ def _open_breakdown(r: Renderer) -> dict:
            "wait_for_readers_s": store.get("upload_read_wait"),
            "wait_for_assembly_s": store.get("upload_assembly_wait"),
            "readers_read_s_summed": store.get("upload_read"),
-           "readers_map_s_summed": store.get("upload_map")}
+           "readers_map_s_summed": store.get("upload_map"),
+           # layers from the reading processes: in shared memory, or pickled (a /dev/shm too
+           # small for them; none from threads)
+           "layers_handed": dict(getattr(getattr(shown, "bricks", None), "handed", {}))}
     return out
 
 
@@ -359,7 +362,8 @@ def _report(out: Path, records: dict, s: Settings) -> None:
             f"{b.get('bricks_written')} bricks; waiting for the readers "
             f"{sec('wait_for_readers_s')}, for the assembly {sec('wait_for_assembly_s')}; the "
             f"readers' reading {sec('readers_read_s_summed')} and mapping "
-            f"{sec('readers_map_s_summed')}, summed over them)")
+            f"{sec('readers_map_s_summed')}, summed over them; layers from the reading "
+            f"processes {b.get('layers_handed')})")
     if err:
         lines.append(f"- rRMSE against level 0: {err['rrmse']:.4f} ({err['what']})")
     if lg:

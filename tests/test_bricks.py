@@ -334,6 +334,7 @@ def test_upload_from_processes_maps_there_and_moves_bricks_through_shared_memory
     shown, pool = place_volume(ctx, volume, brick_size=BRICK)
     try:
         assert blocks.names and not blocks.left()
+        assert store.handed == {"shared": len(blocks.names), "pickled": 0}
         assert pool.exact_uint8 == (dtype == "uint8")
         constant = store.constant()
         assert np.all(store.reads[constant] == 1) and np.all(store.reads[~constant] == 2)
@@ -453,6 +454,7 @@ def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
     assert seen == len(resident)
     layers = len(set(resident[:, 0].tolist()))
     assert (len(blocks.names) == 0) if budget == 0 else (0 < len(blocks.names) < layers)
+    assert procs.handed == {"shared": len(blocks.names), "pickled": layers - len(blocks.names)}
     assert not blocks.left()
     is_resident = np.zeros(procs.reads.shape, bool)
     is_resident[tuple(resident.T)] = True
