@@ -22,9 +22,14 @@ CONSTANTS_UNIT = 17
 BRICK_SLOTS_BINDING = 10    # lib/brick_pool.glsl, the checking build only
 
 
-def atlas_payload(block: np.ndarray, exact_uint8: bool) -> np.ndarray:
-    """A block of normalised densities as the atlas stores them (volume_texture's encoding), a
-    C-contiguous array (Texture3D.write reads its buffer: no copy to bytes)."""
+def atlas_payload(block: np.ndarray, exact_uint8: bool) -> bytes:
+    """A block of normalised densities as the atlas stores them (volume_texture's encoding)."""
+    return atlas_texels(block, exact_uint8).tobytes()
+
+
+def atlas_texels(block: np.ndarray, exact_uint8: bool) -> np.ndarray:
+    """atlas_payload as a C-contiguous array (what the writes hand to Texture3D.write, which
+    reads its buffer: no copy to bytes; float32 densities pass as they are)."""
     if exact_uint8:
         return (np.round(block * 255.0).astype(np.uint16) * 257).astype(np.uint16)
     return np.ascontiguousarray(block, np.float32)
@@ -118,7 +123,7 @@ class BrickPool:
                              f"(rows of {self.grid[0]} slots of {side}^3 texels)")
         o = o * side
         start = time.perf_counter()
-        self.atlas.write(atlas_payload(block, self.exact_uint8),
+        self.atlas.write(atlas_texels(block, self.exact_uint8),
                          viewport=(int(o[0]), int(o[1]), int(o[2]), k * side, side, side),
                          alignment=1)
         self.write_seconds += time.perf_counter() - start
