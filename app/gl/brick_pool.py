@@ -1,7 +1,11 @@
 """A bricked volume on the GPU (glsl/lib/brick_pool.glsl; NumPy twin app/twins/brick_pool.py):
-the atlas of slots, the page table and the constants, written brick by brick (the host never
-needs the whole volume), and in the checking build the slot -> brick map it checks against."""
+the atlas of slots, the page table and the constants, written a row of slots at a time (the host
+never needs the whole volume), and in the checking build the slot -> brick map it checks
+against."""
 from __future__ import annotations
+
+import threading
+import time
 
 import moderngl
 import numpy as np
@@ -20,9 +24,15 @@ BRICK_SLOTS_BINDING = 10    # lib/brick_pool.glsl, the checking build only
 
 def atlas_payload(block: np.ndarray, exact_uint8: bool) -> bytes:
     """A block of normalised densities as the atlas stores them (volume_texture's encoding)."""
+    return atlas_texels(block, exact_uint8).tobytes()
+
+
+def atlas_texels(block: np.ndarray, exact_uint8: bool) -> np.ndarray:
+    """atlas_payload as a C-contiguous array (what the writes hand to Texture3D.write, which
+    reads its buffer: no copy to bytes; float32 densities pass as they are)."""
     if exact_uint8:
-        return (np.round(block * 255.0).astype(np.uint16) * 257).astype(np.uint16).tobytes()
-    return np.ascontiguousarray(block, np.float32).tobytes()
+        return (np.round(block * 255.0).astype(np.uint16) * 257).astype(np.uint16)
+    return np.ascontiguousarray(block, np.float32)
 
 
 class BrickPool:
@@ -68,6 +78,9 @@ class BrickPool:
         self.brick_of_slot = np.full(int(np.prod(self.grid)), FREE_SLOT, np.uint32)
         self.slots_buffer = None
         self.uploads = 0      # bricks written (tests count them)
+        self.writes = 0       # Texture3D.write calls of the atlas (a row of slots each, at most)
+        self.write_seconds = 0.0  # in them
+        self.upload_seconds = None   # upload_store's, all of it
 
     @classmethod
     def from_packed(cls, ctx: moderngl.Context, packed: Packed, exact_uint8: bool = False):
@@ -96,14 +109,27 @@ class BrickPool:
 
     def write_slot(self, slot: int, brick: int, block: np.ndarray) -> None:
         """Writes brick `brick` (linear index) with its apron ((B + 2)^3 [z, y, x(, c)]) to slot."""
+        self.write_slots(slot, [brick], block)
+
+    def write_slots(self, first: int, bricks, block: np.ndarray) -> None:
+        """Writes bricks (linear indices) with their aprons to the slots first, first + 1, ... of
+        one row of slots (along x): block [B + 2, B + 2, k (B + 2)(, c)], the k bricks side by
+        side along x; one Texture3D.write."""
         side = slot_side(self.brick)
-        if block.shape[:3] != (side, side, side):
-            raise ValueError(f"brick block of shape {block.shape}, expected {side}^3")
-        o = slot_origin(slot, self.grid) * side
-        self.atlas.write(atlas_payload(block, self.exact_uint8),
-                         viewport=(int(o[0]), int(o[1]), int(o[2]), side, side, side), alignment=1)
-        self.brick_of_slot[slot] = brick
-        self.uploads += 1
+        k = len(bricks)
+        o = slot_origin(first, self.grid)
+        if block.shape[:3] != (side, side, k * side) or k < 1 or o[0] + k > self.grid[0]:
+            raise ValueError(f"block of shape {block.shape} for {k} bricks from slot {first} "
+                             f"(rows of {self.grid[0]} slots of {side}^3 texels)")
+        o = o * side
+        start = time.perf_counter()
+        self.atlas.write(atlas_texels(block, self.exact_uint8),
+                         viewport=(int(o[0]), int(o[1]), int(o[2]), k * side, side, side),
+                         alignment=1)
+        self.write_seconds += time.perf_counter() - start
+        self.writes += 1
+        self.brick_of_slot[first:first + k] = bricks
+        self.uploads += k
         if self.slots_buffer is not None:
             self.slots_buffer.write(self.brick_of_slot.tobytes())
 
@@ -133,17 +159,73 @@ class BrickPool:
 
 def upload_store(ctx: moderngl.Context, store, exact_uint8: bool, max_side: int) -> "BrickPool":
     """A BrickPool holding every brick of an app.bricks.BrickStore that is not constant (each read
-    once more, its apron from its neighbours: BrickStore.resident_layers; constant bricks are not
-    read)."""
+    once more, its apron from its neighbours: BrickStore.write_resident; constant bricks are not
+    read), written a row of slots at a time (_SlotRows)."""
+    start = time.perf_counter()
     table, constants, grid, resident = store.layout(max_side)
     pool = BrickPool(ctx, store.dims, store.brick, store.channels, grid, table, constants,
                      exact_uint8, store.name)
     try:
-        bx, by, _ = store.counts
-        for z, (y, x), block in store.resident_layers(resident, densities=True):
-            pool.write_slot(int(table[z, y, x]), x + bx * (y + by * z), block)
+        rows = _SlotRows(pool, store, table, resident)
+        layers = store.write_resident(resident, rows.dest, densities=True)
+        try:
+            for z, _ in layers:
+                rows.write_through(z)
+        finally:
+            layers.close()      # its readers stopped and their shared memory unlinked now
+        assert not rows.staged
+        pool.upload_seconds = time.perf_counter() - start
     except BaseException:
         pool.release()
         raise
     assert np.count_nonzero(pool.brick_of_slot != FREE_SLOT) == len(resident)
     return pool
+
+
+class _SlotRows:
+    """The atlas's rows of slots, gathered on the host: the resident bricks take consecutive
+    slots in layer order (BrickStore.layout), a row of the slot grid (grid x slots along x) at a
+    time, so a row's bricks are assembled side by side into one array ([B + 2, B + 2,
+    grid x (B + 2)(, c)], the assembling threads writing each brick in its place) and the row is
+    written with one Texture3D.write once the layer of its last brick is done: grid x times fewer
+    writes than a brick a write, each of rows grid x times longer, and no copy of a brick on its
+    way (the assembly writes the texels the texture reads)."""
+
+    def __init__(self, pool: BrickPool, store, table: np.ndarray, resident: np.ndarray):
+        self.pool = pool
+        self.table = table
+        self.side = slot_side(pool.brick)
+        self.per_row = pool.grid[0]
+        self.extra = (pool.channels,) if pool.channels > 1 else ()
+        bx, by, _ = store.counts
+        resident = np.asarray(resident, np.int64).reshape(-1, 3)
+        self.count = len(resident)
+        self.linear = resident[:, 2] + bx * (resident[:, 1] + by * resident[:, 0])
+        rows = -(-self.count // self.per_row)
+        last = np.minimum((np.arange(rows) + 1) * self.per_row, self.count) - 1
+        self.last_layer = resident[last, 0] if rows else np.zeros(0, np.int64)
+        self.next_row = 0
+        self.staged: dict[int, np.ndarray] = {}
+        self.lock = threading.Lock()
+
+    def dest(self, z: int, y: int, x: int) -> np.ndarray:
+        """Where brick (z, y, x) goes: its place in its row's array (made on first use)."""
+        row, i = divmod(int(self.table[z, y, x]), self.per_row)
+        with self.lock:
+            staged = self.staged.get(row)
+            if staged is None:
+                k = min(self.per_row, self.count - row * self.per_row)
+                staged = np.empty((self.side, self.side, k * self.side) + self.extra, np.float32)
+                self.staged[row] = staged
+        return staged[:, :, i * self.side:(i + 1) * self.side]
+
+    def write_through(self, z: int) -> None:
+        """Writes, in order, every row whose bricks all lie in layers up to z (all written)."""
+        while self.next_row < len(self.last_layer) and self.last_layer[self.next_row] <= z:
+            row = self.next_row
+            first = row * self.per_row
+            with self.lock:
+                staged = self.staged.pop(row)
+            k = staged.shape[2] // self.side
+            self.pool.write_slots(first, self.linear[first:first + k], staged)
+            self.next_row += 1
