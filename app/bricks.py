@@ -9,16 +9,18 @@ each of a store's chunks is decoded once a pass. The upload pass reads only the 
 constant, each once, as runs along x without aprons (chunk-aligned: a pencil with its apron would
 decode the 3 x 3 rows of chunks around it, 9 times the data); each brick's apron is assembled from
 its neighbours' voxels: those read, or a constant brick's value (a constant brick, the brick and
-its apron one value, is never read again nor uploaded). `reads` counts, per brick, how many times
-its voxels were read.
+its apron one value, is never read again nor uploaded). The upload's readers map the bricks to
+densities themselves, and readers in processes hand them over in shared memory (_CoreReader), not
+pickled. `reads` counts, per brick, how many times its voxels were read.
 """
 from __future__ import annotations
 
 import multiprocessing
 import os
+import time
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
-
 from dataclasses import dataclass
+from multiprocessing import shared_memory
 
 import numpy as np
 
@@ -233,6 +235,12 @@ class BrickStore:
         bx, by, bz = self.counts
         self.reads = np.zeros((bz, by, bx), np.int64)
         self._ranges = None
+        # where the reads' time went (scripts/brick_bench.py records it): the range pass's
+        # wall seconds; the upload's reading and mapping (summed over the readers) and the
+        # waits of the caller's thread for the readers and the assembling threads
+        self.seconds: dict[str, float] = {}
+        # layers of bricks the upload's reading processes handed over: in shared memory, pickled
+        self.handed = {"shared": 0, "pickled": 0}
 
     def pencil(self, bz: int, by: int, x0: int, x1: int, apron: int) -> np.ndarray:
         """The raw voxels of bricks x0 .. x1 - 1 of row (by, bz), with `apron` voxels around,
@@ -263,6 +271,7 @@ class BrickStore:
         """Each brick's least and largest raw value [bz, by, bx(, c)] (one read of every brick,
         the first time: a layer of bricks a read, layers on threads)."""
         if self._ranges is None:
+            start = time.perf_counter()
             bx, by, bz = self.counts
             if self._in_processes():
                 # a Zarr store's reads decode on one event loop, under the GIL (0.5 GB/s at best
@@ -278,6 +287,7 @@ class BrickStore:
             lo = np.stack([layer[0] for layer in layers])
             hi = np.stack([layer[1] for layer in layers])
             self._ranges = (lo, hi)
+            self._add_seconds("range_pass", start)
         return self._ranges
 
     def _layer_ranges(self, z: int) -> tuple[np.ndarray, np.ndarray]:
@@ -292,98 +302,99 @@ class BrickStore:
                 and nz * ny * nx * self.channels >= PROCESS_READ_VOXELS)
 
     def resident_layers(self, resident: np.ndarray, densities: bool = False):
-        """For each layer z holding bricks that are not constant, in order: (z, the raw voxels of
-        each such brick with its apron {(y, x): [B + 2, B + 2, B + 2(, c)]}); `densities`: as
-        densities (the source's mapping, applied to the whole layer on a thread while the caller
-        takes the layer before). Every brick that is not constant is read once (runs along x, no
-        apron, layers ahead in processes or on threads); an apron voxel is its neighbour's: read,
-        or a constant brick's value (its least raw value), or at the volume's faces the edge voxel
+        """For each layer z holding bricks that are not constant, in order: (z, (y, x), the
+        voxels of each such brick with its apron [B + 2, B + 2, B + 2(, c)]); `densities`: as
+        densities (the source's mapping, applied where the bricks are read). write_resident's
+        bricks, each in an array of its own (the upload writes them into its rows of slots)."""
+        side = slot_side(self.brick)
+        values = (self.ranges() if densities else self.raw_ranges())[0]
+        blocks: dict = {}
+
+        def dest(z: int, y: int, x: int) -> np.ndarray:
+            blocks[(z, y, x)] = block = np.empty((side,) * 3 + values.shape[3:], values.dtype)
+            return block
+
+        for z, bricks in self.write_resident(resident, dest, densities):
+            for y, x in bricks:
+                yield z, (y, x), blocks.pop((z, y, x))
+
+    def write_resident(self, resident: np.ndarray, dest, densities: bool = False):
+        """Writes each brick of `resident` ((z, y, x) rows) with its apron into dest(z, y, x) (an
+        array [B + 2, B + 2, B + 2(, c)] it returns; called on the assembling threads) and yields
+        (z, the layer's bricks [(y, x)] in np.argwhere order) for each layer z holding some, in
+        order, once its bricks and every earlier layer's are written. `densities`: mapped by the
+        source (app/volume.py normalise) where they are read. Every brick that is not constant is
+        read once (runs along x, no apron, layers ahead in processes or on threads; from
+        processes through shared memory, _CoreReader); an apron voxel is its neighbour's: read,
+        or a constant brick's value (its least value), or at the volume's faces the edge voxel
         repeated (as clamped texture coordinates read it)."""
         bx, by, bz = self.counts
-        B = self.brick
-        lo, hi = self.raw_ranges()
+        values = (self.ranges() if densities else self.raw_ranges())[0]
         is_resident = np.zeros((bz, by, bx), bool)
         if len(resident):
             is_resident[tuple(np.asarray(resident).T)] = True
+        layers_wanted = [int(z) for z in np.nonzero(is_resident.any(axis=(1, 2)))[0]]
+        need = sorted({n for z in layers_wanted for n in (z - 1, z, z + 1) if 0 <= n < bz})
         # the cores read: the resident bricks', and their neighbours' that hold more than one
         # value (with mixed levels a neighbour may vary and yet not be resident at this level;
         # with one level every brick not resident is constant, and none is added)
+        lo, hi = self.raw_ranges()
         uniform = np.all((lo == hi).reshape(lo.shape[:3] + (-1,)), axis=-1)
         read = is_resident | (_dilated(is_resident) & ~uniform)
-        layers_wanted = [int(z) for z in np.nonzero(is_resident.any(axis=(1, 2)))[0]]
-        need = sorted({n for z in layers_wanted for n in (z - 1, z, z + 1) if 0 <= n < bz})
-        cores: dict[int, dict] = {}
-        processes = self._in_processes()
-        pool = (ProcessPoolExecutor(reader_processes(), mp_context=_spawn()) if processes
-                else ThreadPoolExecutor(reader_threads()))
+        reader = _CoreReader(self, read, densities, values)
+        try:
+            with ThreadPoolExecutor(SLAB_THREADS) as assemble:
+                pending = []                        # (z, its bricks, its assembly's future)
+                for z in layers_wanted:
+                    for n in need:       # the layers it reads, then layers read ahead
+                        if n <= z + reader.ahead:
+                            reader.submit(n)
+                    near = {n: reader.cores(n) for n in (z - 1, z, z + 1) if 0 <= n < bz}
+                    bricks = [(int(y), int(x)) for y, x in np.argwhere(is_resident[z])]
+                    pending.append((z, bricks, assemble.submit(
+                        self._assemble, z, bricks, near, values, dest)))
+                    del near
+                    while len(pending) > SLAB_THREADS or (pending and z == layers_wanted[-1]):
+                        done_z, bricks, future = pending.pop(0)
+                        start = time.perf_counter()
+                        future.result()
+                        self._add_seconds("upload_assembly_wait", start)
+                        reader.release_below(done_z)   # no later layer reads them
+                        yield done_z, bricks
+        finally:
+            reader.close()
 
-        def slab_of(z: int, near: dict) -> np.ndarray:
-            slab = self._apron_slab(z, near, lo, is_resident)
-            return self.source.density(slab) if densities else slab
+    def _assemble(self, z: int, bricks, near: dict, values: np.ndarray, dest) -> None:
+        for y, x in bricks:
+            self._with_apron(z, y, x, near, values, dest(z, y, x))
 
-        with pool, ThreadPoolExecutor(SLAB_THREADS) as slabs:
-            futures, submitted = {}, set()
-            # layers read ahead of the one assembled
-            ahead = reader_processes() if processes else 2
-            pending = []                                       # (z, its slab's future), in order
-            for z in layers_wanted:
-                for n in need:
-                    if n <= z + ahead and n not in submitted:
-                        submitted.add(n)
-                        futures[n] = pool.submit(_read_cores_of, self.source, n, read[n],
-                                                 self.brick, self.dims)
-                for n in (z - 1, z, z + 1):
-                    if n in futures:
-                        cores[n] = futures.pop(n).result()
-                        for y, x in cores[n]:
-                            self.reads[n, y, x] += 1
-                near = {n: cores[n] for n in (z - 1, z, z + 1) if n in cores}
-                pending.append((z, slabs.submit(slab_of, z, near)))
-                for n in list(cores):
-                    if n < z:
-                        del cores[n]
-                while len(pending) > SLAB_THREADS or (pending and z == layers_wanted[-1]):
-                    done_z, future = pending.pop(0)
-                    slab = future.result()
-                    for y, x in np.argwhere(is_resident[done_z]):
-                        y, x = int(y), int(x)
-                        yield done_z, (y, x), slab[:, y * B:y * B + B + 2, x * B:x * B + B + 2]
-
-    def _apron_slab(self, z: int, cores: dict, lo: np.ndarray, is_resident: np.ndarray):
-        """Layer z's voxels with a one-voxel apron (APRON) on every side,
-        [B + 2, by B + 2, bx B + 2(, c)] (the volume padded to whole bricks by its edge voxels, as
-        the bricks' cores are)."""
-        bx, by, bz = self.counts
+    def _with_apron(self, z: int, y: int, x: int, near: dict, values: np.ndarray,
+                    out: np.ndarray) -> None:
+        """Brick (z, y, x) with its apron into out [B + 2, B + 2, B + 2(, c)], from the cores of
+        layers z - 1 .. z + 1 (near {n: {(y, x): core}}) and the other bricks' one value
+        (values [bz, by, bx(, c)]): per axis, the neighbour below's last voxel (at the volume's
+        first face the brick's own first one), the brick's, the neighbour above's first (at the
+        last face the brick's own last)."""
         B = self.brick
-        planes = {z: slice(0, B)}
-        if z > 0:
-            planes[z - 1] = slice(B - 1, B)
-        if z + 1 < bz:
-            planes[z + 1] = slice(0, 1)
-        first = next(iter(cores[z].values())) if cores.get(z) else None
-        dtype = first.dtype if first is not None else lo.dtype
-        extra = lo.shape[3:]
-        slab = np.empty((B + 2, by * B + 2, bx * B + 2) + extra, dtype)
-        inner = slab[:, 1:-1, 1:-1]
-        for n, rows in planes.items():
-            dz = slice(1, B + 1) if n == z else (slice(0, 1) if n < z else slice(B + 1, B + 2))
-            part = inner[dz]
-            # every brick's value first (a constant brick's core is its one value), then the
-            # cores read over it
-            values = lo[n]                                      # [by, bx(, c)]
-            part[...] = np.repeat(np.repeat(values, B, axis=0), B, axis=1)[None]
-            for (y, x), core in (cores.get(n) or {}).items():
-                part[:, y * B:(y + 1) * B, x * B:(x + 1) * B] = core[rows]
-        # the faces: the edge voxel repeated (below the first layer, above the last, and y, x)
-        if z == 0:
-            slab[0, 1:-1, 1:-1] = slab[1, 1:-1, 1:-1]
-        if z + 1 == bz:
-            slab[B + 1, 1:-1, 1:-1] = slab[B, 1:-1, 1:-1]
-        slab[:, 0] = slab[:, 1]
-        slab[:, -1] = slab[:, -2]
-        slab[:, :, 0] = slab[:, :, 1]
-        slab[:, :, -1] = slab[:, :, -2]
-        return slab
+        bx, by, bz = self.counts
+
+        def parts(b: int, count: int):
+            below = (slice(0, 1), -1, slice(B - 1, B)) if b > 0 else (slice(0, 1), 0, slice(0, 1))
+            above = ((slice(B + 1, B + 2), 1, slice(0, 1)) if b + 1 < count
+                     else (slice(B + 1, B + 2), 0, slice(B - 1, B)))
+            return below, (slice(1, B + 1), 0, slice(0, B)), above
+
+        across = [(oy, ox, y + dy, x + dx, (sy, sx)) for oy, dy, sy in parts(y, by)
+                  for ox, dx, sx in parts(x, bx)]
+        for oz, dz, sz in parts(z, bz):
+            n = z + dz
+            cores = near.get(n) or {}
+            for oy, ox, ny, nx, (sy, sx) in across:
+                core = cores.get((ny, nx))
+                out[oz, oy, ox] = values[n, ny, nx] if core is None else core[sz, sy, sx]
+
+    def _add_seconds(self, what: str, start: float) -> None:
+        self.seconds[what] = self.seconds.get(what, 0.0) + time.perf_counter() - start
 
     def constant(self) -> np.ndarray:
         """[bz, by, bx] True where the brick and its apron hold one value (never uploaded)."""
@@ -415,7 +426,7 @@ class PoolPlan:
     """What a brick pool holds (app/gl/brick_pool.py), decided on the host: its page table
     ([z, y, x]: level 0's, then with mixed levels each coarser level's stacked along z), the
     constants, the slot grid, and per level the store and its resident bricks (z, y, x) whose
-    slots the table holds. `blocks()` reads them (BrickStore.resident_layers)."""
+    slots, consecutive in layer order, the table holds. `rows()` reads and assembles them."""
     dims: tuple
     brick: int
     channels: int
@@ -432,15 +443,84 @@ class PoolPlan:
     def resident(self) -> int:
         return sum(len(r) for _, r, _ in self.parts)
 
-    def blocks(self):
-        """(slot, level << LEVEL_SHIFT | the brick's index in its level, block with apron as
-        densities) of every resident brick: host work only (a thread may do it)."""
+    def level_table(self, level: int, store) -> np.ndarray:
+        """A level's page table, a view of `table`."""
+        z0 = self.level_table_z[level] if self.level_table_z else 0
+        bx, by, bz = store.counts
+        return self.table[z0:z0 + bz, :by, :bx]
+
+    def rows(self):
+        """(first slot, the bricks' ids (level << LEVEL_SHIFT | index in the level), block
+        [B + 2, B + 2, k (B + 2)(, c)] of k bricks side by side) for each run of consecutive slots
+        within a row of the slot grid, as soon as its bricks are read and assembled: host work
+        only (a thread may do it; BrickStore.write_resident), written with one Texture3D.write
+        each (BrickPool.write_slots)."""
         for store, resident, level in self.parts:
-            z0 = self.level_table_z[level] if self.level_table_z else 0
-            bx, by, _ = store.counts
-            for z, (y, x), block in store.resident_layers(resident, densities=True):
-                yield (int(self.table[z0 + z, y, x]), (level << LEVEL_SHIFT) | (x + bx * (y + by * z)),
-                       block)
+            if len(resident):
+                rows = _SlotRows(self, store, self.level_table(level, store), resident, level)
+                layers = store.write_resident(resident, rows.dest, densities=True)
+                try:
+                    for z, _ in layers:
+                        yield from rows.ready(z)
+                finally:
+                    layers.close()   # its readers stopped and their shared memory unlinked now
+                assert not rows.staged
+
+
+class _SlotRows:
+    """A level's resident bricks, gathered on the host into runs of consecutive slots within a
+    row of the slot grid (they take consecutive slots in layer order): the assembling threads
+    write each brick in its place in its run's array, and a run is handed on once the layer of
+    its last brick is done: a Texture3D.write a run instead of a brick, and no copy of a brick on
+    its way."""
+
+    def __init__(self, plan: PoolPlan, store, table: np.ndarray, resident: np.ndarray,
+                 level: int):
+        import threading
+        self.table = table
+        self.side = slot_side(plan.brick)
+        self.per_row = plan.grid[0]
+        self.extra = (plan.channels,) if plan.channels > 1 else ()
+        bx, by, _ = store.counts
+        resident = np.asarray(resident, np.int64).reshape(-1, 3)
+        slots = table[resident[:, 0], resident[:, 1], resident[:, 2]].astype(np.int64)
+        if np.any(np.diff(slots) != 1):
+            raise ValueError("a level's resident bricks must take consecutive slots")
+        self.first_slot = int(slots[0])
+        self.ids = (level << LEVEL_SHIFT) | (resident[:, 2] + bx * (resident[:, 1]
+                                                                    + by * resident[:, 0]))
+        rows = slots // self.per_row
+        self.runs = []                 # (first slot, count, last layer), in order
+        for row in np.unique(rows):
+            at = np.nonzero(rows == row)[0]
+            self.runs.append((int(slots[at[0]]), len(at), int(resident[at[-1], 0])))
+        self.next_run = 0
+        self.staged: dict[int, np.ndarray] = {}
+        self.lock = threading.Lock()
+
+    def dest(self, z: int, y: int, x: int) -> np.ndarray:
+        """Where brick (z, y, x) goes: its place in its run's array (made on first use)."""
+        slot = int(self.table[z, y, x])
+        row = slot // self.per_row
+        first = max(row * self.per_row, self.first_slot)
+        with self.lock:
+            staged = self.staged.get(row)
+            if staged is None:
+                k = next(n for f, n, _ in self.runs if f == first)
+                staged = np.empty((self.side, self.side, k * self.side) + self.extra, np.float32)
+                self.staged[row] = staged
+        i = slot - first
+        return staged[:, :, i * self.side:(i + 1) * self.side]
+
+    def ready(self, z: int):
+        """The runs whose bricks all lie in layers up to z (all written), in order."""
+        while self.next_run < len(self.runs) and self.runs[self.next_run][2] <= z:
+            first, k, _ = self.runs[self.next_run]
+            with self.lock:
+                staged = self.staged.pop(first // self.per_row)
+            i = first - self.first_slot
+            yield first, self.ids[i:i + k], staged
+            self.next_run += 1
 
 
 def _dilated(mask: np.ndarray) -> np.ndarray:
@@ -476,32 +556,211 @@ def _layer_ranges_of(source, z: int, brick: int, counts, dims) -> tuple[np.ndarr
     # partial bricks at the far faces: the edge voxel repeated changes no least or largest
     d = layer.shape[0]
     layer = _edge_padded(layer, (d, by * B, bx * B))
-    blocks = layer.reshape((d, by, B, bx, B) + layer.shape[3:])
-    return blocks.min(axis=(0, 2, 4)), blocks.max(axis=(0, 2, 4))
+    # along z first (whole planes, elementwise: a third of the time of reducing the three block
+    # axes at once), then within each brick's B x B square
+    shape = (by, B, bx, B) + layer.shape[3:]
+    return (layer.min(axis=0).reshape(shape).min(axis=(1, 3)),
+            layer.max(axis=0).reshape(shape).max(axis=(1, 3)))
 
 
-def _read_cores_of(source, z: int, resident_row: np.ndarray, brick: int, dims) -> dict:
-    """{(y, x): raw voxels [B, B, B(, c)]} of layer z's resident bricks (edge-padded to B at the
-    far faces), read as runs along x (a function of its arguments alone, so a process can run
-    it)."""
+def _read_cores_of(source, z: int, resident_row: np.ndarray, brick: int, dims,
+                   densities: bool = False, into=None):
+    """({(y, x): voxels [B, B, B(, c)]} of layer z's resident bricks (edge-padded to B at the far
+    faces), read as runs along x; `densities`: mapped by the source; seconds reading, seconds
+    mapping). `into` (a shared memory block's name, dtype, channels' shape): the cores are
+    written there instead, one after another in np.argwhere order, and the dict is empty (a
+    process's cores reach the caller so, not pickled). A function of its arguments alone, so a
+    process can run it."""
     B = brick
     nx, ny, nz = dims
-    out = {}
-    for y in range(resident_row.shape[0]):
-        xs = np.nonzero(resident_row[y])[0]
-        if not len(xs):
-            continue
-        for run in np.split(xs, np.nonzero(np.diff(xs) != 1)[0] + 1):
-            x0, x1 = int(run[0]), int(run[-1]) + 1
-            block = _edge_padded(source.read(z * B, min(z * B + B, nz), y * B,
-                                             min(y * B + B, ny), x0 * B, min(x1 * B, nx)),
-                                 (B, B, (x1 - x0) * B))
-            for x in range(x0, x1):
-                out[(y, x)] = block[:, :, (x - x0) * B:(x - x0 + 1) * B]
-    return out
+    cores, read_s, map_s = {}, 0.0, 0.0
+    block = out = None
+    if into is not None:
+        block = shared_memory.SharedMemory(name=into[0])
+    try:
+        if block is not None:
+            count = int(np.count_nonzero(resident_row))
+            out = np.ndarray((count, B, B, B) + tuple(into[2]), np.dtype(into[1]),
+                             buffer=block.buf)
+        i = 0
+        for y in range(resident_row.shape[0]):
+            xs = np.nonzero(resident_row[y])[0]
+            if not len(xs):
+                continue
+            for run in np.split(xs, np.nonzero(np.diff(xs) != 1)[0] + 1):
+                x0, x1 = int(run[0]), int(run[-1]) + 1
+                start = time.perf_counter()
+                raw = _edge_padded(source.read(z * B, min(z * B + B, nz), y * B,
+                                               min(y * B + B, ny), x0 * B, min(x1 * B, nx)),
+                                   (B, B, (x1 - x0) * B))
+                read_s += time.perf_counter() - start
+                if densities:
+                    start = time.perf_counter()
+                    raw = source.density(raw)
+                    map_s += time.perf_counter() - start
+                if out is not None and raw.dtype != out.dtype:
+                    raise TypeError(f"layer {z}'s cores are {raw.dtype}, their shared block "
+                                    f"{out.dtype}")
+                for x in range(x0, x1):
+                    core = raw[:, :, (x - x0) * B:(x - x0 + 1) * B]
+                    if out is None:
+                        cores[(y, x)] = core
+                    else:
+                        out[i] = core
+                    i += 1
+    finally:
+        if block is not None:
+            out = None                  # the block's buffer is no longer exported: it closes
+            block.close()
+    return cores, read_s, map_s
 
 
-# Layers assembled (and mapped to densities) at once while the caller takes an earlier one.
+class _CoreReader:
+    """The upload's reads of layers' resident cores (_read_cores_of), ahead of the layer
+    assembled, in processes (a large Zarr store, BrickStore._in_processes) or on threads. A
+    process writes a layer's cores into a shared memory block this reader creates for it (the
+    parent owns every block: it unlinks a block's name as soon as the layer's read is done, and
+    at close every block still named, after the readers have stopped, on errors and
+    KeyboardInterrupt too), so the cores are never pickled through a pipe; a layer that would
+    take the shared memory past its budget (_shared_budget) comes back pickled, as before."""
+
+    def __init__(self, store: "BrickStore", is_resident: np.ndarray, densities: bool,
+                 values: np.ndarray):
+        self.store = store
+        self.is_resident = is_resident
+        self.densities = densities
+        self.dtype = values.dtype
+        self.extra = tuple(values.shape[3:])
+        self.processes = store._in_processes()
+        self.ahead = reader_processes() if self.processes else 2
+        self.budget = _shared_budget() if self.processes else 0
+        self.shared = 0                          # bytes of the blocks not yet released
+        self.futures: dict[int, object] = {}
+        self.blocks: dict[int, shared_memory.SharedMemory] = {}
+        self.block_bytes: dict[int, int] = {}
+        self.got: dict[int, dict] = {}
+        self.submitted: set[int] = set()
+        self.unlinked: set[int] = set()
+        if self.processes:
+            # the resource tracker started before the readers are forked, so that the blocks
+            # they attach to are tracked by the parent's (which unlinks what is left at exit)
+            from multiprocessing import resource_tracker
+            resource_tracker.ensure_running()
+            self.pool = ProcessPoolExecutor(reader_processes(), mp_context=_spawn())
+            try:
+                # forked now, before any block exists: a reader forked later would inherit the
+                # blocks mapped here then, and keep their memory until the pool ends
+                self.pool.submit(os.getpid).result()
+            except BaseException:
+                self.pool.shutdown(wait=True, cancel_futures=True)
+                raise
+        else:
+            self.pool = ThreadPoolExecutor(reader_threads())
+
+    def submit(self, n: int) -> None:
+        """Reads layer n (once)."""
+        if n in self.submitted:
+            return
+        B = self.store.brick
+        count = int(np.count_nonzero(self.is_resident[n]))
+        nbytes = count * B ** 3 * int(np.prod(self.extra, dtype=np.int64)) * self.dtype.itemsize
+        into = None
+        if self.processes and count and self.shared + nbytes <= self.budget:
+            try:
+                block = shared_memory.SharedMemory(create=True, size=nbytes)
+            except OSError:      # no shared memory to be had (too many open, ...): pickled
+                block = None
+            if block is not None:
+                self.blocks[n], self.block_bytes[n] = block, nbytes
+                self.shared += nbytes
+                into = (block.name, self.dtype.str, self.extra)
+        self.submitted.add(n)
+        self.futures[n] = self.pool.submit(_read_cores_of, self.store.source, n,
+                                           self.is_resident[n], B, self.store.dims,
+                                           self.densities, into)
+
+    def cores(self, n: int) -> dict:
+        """{(y, x): core} of layer n (waited for; each counted as a read of its brick once)."""
+        if n not in self.got:
+            self.submit(n)
+            start = time.perf_counter()
+            cores, read_s, map_s = self.futures.pop(n).result()
+            store = self.store
+            store._add_seconds("upload_read_wait", start)
+            store.seconds["upload_read"] = store.seconds.get("upload_read", 0.0) + read_s
+            store.seconds["upload_map"] = store.seconds.get("upload_map", 0.0) + map_s
+            block = self.blocks.get(n)
+            if block is not None:
+                self._unlink(n)                 # its mapping here stays until released
+                B = store.brick
+                keys = [(int(y), int(x)) for y, x in np.argwhere(self.is_resident[n])]
+                shared = np.ndarray((len(keys), B, B, B) + self.extra, self.dtype,
+                                    buffer=block.buf)
+                cores = {key: shared[i] for i, key in enumerate(keys)}
+                del shared
+                store.handed["shared"] += 1
+            elif self.processes and cores:
+                store.handed["pickled"] += 1
+            self.got[n] = cores
+            for y, x in cores:
+                store.reads[n, y, x] += 1
+        return self.got[n]
+
+    def release_below(self, z: int) -> None:
+        """Drops the cores of the layers below z, closing their blocks."""
+        for n in [n for n in self.got if n < z]:
+            del self.got[n]
+            self._close(n)
+
+    def _unlink(self, n: int) -> None:
+        if n in self.blocks and n not in self.unlinked:
+            self.unlinked.add(n)
+            try:
+                self.blocks[n].unlink()
+            except FileNotFoundError:   # unlinked by another (the resource tracker at exit)
+                pass
+
+    def _close(self, n: int) -> None:
+        if n not in self.blocks:
+            return
+        try:
+            self._unlink(n)
+        finally:
+            block = self.blocks.pop(n)
+            self.shared -= self.block_bytes.pop(n)
+            try:
+                block.close()
+            except BufferError:   # a view of it still held (an error's traceback): freed with it
+                pass
+
+    def close(self) -> None:
+        """Stops the readers (the layers not started are dropped) and unlinks and closes every
+        block left."""
+        self.got.clear()
+        try:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+        finally:
+            for n in list(self.blocks):
+                self._close(n)
+
+
+# The shared memory the upload's reading processes may fill at once where there is no /dev/shm
+# to ask (not Linux).
+SHARED_BYTES = 4 << 30
+
+
+def _shared_budget() -> int:
+    """Bytes of shared memory blocks the upload's readers may hold at once: half of what
+    /dev/shm has free (a container's is often small, and a process writing a block past what
+    the file system holds is killed by SIGBUS), else SHARED_BYTES."""
+    try:
+        st = os.statvfs("/dev/shm")
+    except (OSError, AttributeError):
+        return SHARED_BYTES
+    return st.f_bavail * st.f_frsize // 2
+
+
+# Layers assembled at once (their bricks with aprons) while the caller takes an earlier one.
 SLAB_THREADS = 3
 
 

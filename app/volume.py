@@ -457,8 +457,25 @@ def normalise(raw: np.ndarray, value_range: tuple[float, float] | None, where: s
     lo, hi = (float(v) for v in value_range)
     if not (np.isfinite(lo) and np.isfinite(hi) and np.isfinite(hi - lo) and hi > lo):
         raise VolumeError(f"{where}: value range needs finite min < max, got {[lo, hi]}")
+    if float32_exact(raw.dtype, lo, hi):
+        data = np.empty(np.shape(raw), np.float32)   # the same values, in a quarter the time
+        np.subtract(raw, np.float32(lo), out=data)
+        data /= np.float32(hi - lo)
+        return np.clip(data, 0.0, 1.0, out=data), (float(lo), float(hi))
     data = (raw.astype(np.float64) - lo) / (hi - lo)
     return np.clip(data, 0.0, 1.0).astype(np.float32), (float(lo), float(hi))
+
+
+def float32_exact(dtype, lo: float, hi: float) -> bool:
+    """Whether normalise's mapping (raw - lo) / (hi - lo) gives the same float32 densities
+    computed in float32 as in float64: integers of at most 16 bits and a range of whole numbers
+    within 2^23, so that raw - lo and hi - lo are exact in float32 (whole numbers below 2^24) and
+    the one rounding left is the division's, correctly rounded either way (float64's quotient
+    rounded again to float32 is float32's own: double rounding is innocuous for division where
+    53 >= 2 x 24 + 1 bits, Figueroa 1995). tests/test_volume.py checks every 8- and 16-bit value."""
+    dtype = np.dtype(dtype)
+    return (dtype.kind in "ui" and dtype.itemsize <= 2
+            and all(float(v).is_integer() and abs(v) <= 2 ** 23 for v in (lo, hi)))
 
 
 def read_volume_array(spec: VolumeSpec, base_dir: str | None = None) -> "VolumeFile":

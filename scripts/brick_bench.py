@@ -12,8 +12,10 @@ GL_MAX_3D_TEXTURE_SIZE) rendered.
 2. Opens the volume under the cap (RenderSettings.volume_memory_bytes) and records: the level
    shown and its note, the pool's bytes, the time to the first raymarched image (open, range
    pass, upload, light grid, one frame), the raymarcher's 1080p frame rate (FRAMES frames as the
-   viewer draws them, each waited for, no readback; GPU ms from timer queries too), and the probe
-   bake plus light grid time.
+   viewer draws them, each waited for, no readback; GPU ms from timer queries too), the probe
+   bake plus light grid time, and where the open's time went (`open_breakdown`: the range
+   passes, the upload, its texture writes, the waits for the readers and the readers' reading
+   and mapping).
 3. rRMSE of that image against the uncapped render (level 0, bricked: no cap). Where level 0 does
    not fit the device, both are rendered over a crop: the central eighth of the box (a quarter of
    each side... half of each side) read as in-memory volumes (level 0's voxels, and the capped
@@ -264,7 +266,8 @@ def _open_capped(ctx, records, key, scene, settings, cap, s):
         "pool_bytes": int(pool.nbytes) if pool is not None else None,
         "pool_levels": pool.levels if pool is not None else None,
         "resident_bricks": int((pool.brick_of_slot != 0xFFFFFFFF).sum()) if pool is not None
-        else None, "bricked": r.resources.bricked, **_frames(r, s)}
+        else None, "bricked": r.resources.bricked, "open_breakdown": _open_breakdown(r),
+        **_frames(r, s)}
     r.invalidate()                               # the first image baked them: again, timed
     t = time.perf_counter()
     bake_ms = r.bake(seed=1)
@@ -364,6 +367,33 @@ def _progressive(ctx, records, scene, settings, cap):
     r.release()
 
 
+def _open_breakdown(r: Renderer) -> dict:
+    """Where the open's time went (app/bricks.py BrickStore.seconds, app/gl/brick_pool.py
+    BrickPool): wall seconds of level 0's range pass and of the shown level's, of the upload
+    (upload_store, all of it) and of its texture writes (with their count); the caller's waits
+    for the readers and for the assembling threads; and the seconds the readers spent reading
+    and mapping to densities, summed over them (processes or threads: more than wall time)."""
+    given = r.resources.given_volume
+    shown = r.resources.volume
+    pool = r.resources.volume_tex
+    level0 = getattr(getattr(given, "bricks", None), "seconds", {})
+    store = getattr(getattr(shown, "bricks", None), "seconds", {})
+    out = {"level0_range_pass_s": level0.get("range_pass"),
+           "shown_range_pass_s": store.get("range_pass") if shown is not given else None,
+           "upload_s": getattr(pool, "upload_seconds", None),
+           "texture_write_s": getattr(pool, "write_seconds", None),
+           "texture_writes": getattr(pool, "writes", None),
+           "bricks_written": getattr(pool, "uploads", None),
+           "wait_for_readers_s": store.get("upload_read_wait"),
+           "wait_for_assembly_s": store.get("upload_assembly_wait"),
+           "readers_read_s_summed": store.get("upload_read"),
+           "readers_map_s_summed": store.get("upload_map"),
+           # layers from the reading processes: in shared memory, or pickled (a /dev/shm too
+           # small for them; none from threads)
+           "layers_handed": dict(getattr(getattr(shown, "bricks", None), "handed", {}))}
+    return out
+
+
 def _long(ctx, records, lpath, s, long):
     max_side = int(ctx.info["GL_MAX_3D_TEXTURE_SIZE"])
     start = time.perf_counter()
@@ -389,6 +419,19 @@ def _report(out: Path, records: dict, s: Settings) -> None:
             f"{s.width}x{s.height} {c['fps']:.1f} fps, bake {c['bake_ms']:.0f} ms + light grid "
             f"{c['light_ms']:.0f} ms ({c['bake_and_light_wall_s']:.1f} s wall)")
         lines.append(f"- notes: {'; '.join(c['notes']) or 'none'}")
+        b = c.get("open_breakdown") or {}
+
+        def sec(key):
+            return "-" if b.get(key) is None else f"{b[key]:.2f} s"
+        lines.append(
+            f"- the open: range pass level 0 {sec('level0_range_pass_s')}, shown level "
+            f"{sec('shown_range_pass_s')}; upload {sec('upload_s')} (texture writes "
+            f"{sec('texture_write_s')} in {b.get('texture_writes')} writes of "
+            f"{b.get('bricks_written')} bricks; waiting for the readers "
+            f"{sec('wait_for_readers_s')}, for the assembly {sec('wait_for_assembly_s')}; the "
+            f"readers' reading {sec('readers_read_s_summed')} and mapping "
+            f"{sec('readers_map_s_summed')}, summed over them; layers from the reading "
+            f"processes {b.get('layers_handed')})")
     pg = records.get("progressive")
     if pg:
         lines.append(

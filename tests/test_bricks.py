@@ -54,6 +54,7 @@ def test_zarr_store_reads_constant_bricks_once_and_uploads_only_the_others(ctx, 
         assert np.all(store.reads[constant] == 1)         # never read again
         assert np.all(store.reads[~constant] == 2)        # read once more, to upload
         assert pool.uploads == int((~constant).sum())
+        assert pool.writes == -(-pool.uploads // pool.grid[0])   # a row of slots a write
         # what was uploaded is the whole loader's volume, bricked
         whole = load_volume(VolumeSpec(path=str(path), builtin=None))
         assert isinstance(whole.data, np.ndarray)
@@ -97,6 +98,8 @@ def test_majorant_ranges_from_bricks_contain_the_whole_arrays(channels):
                      ).astype(np.float32)
     data[:, :16, :24] = 0.0
     store = BrickStore(ArraySource(data), BRICK)
+    for got, want in zip(store.ranges(), brick_ranges(data, BRICK)):   # partial bricks too
+        np.testing.assert_array_equal(got, want)
     lo_b, hi_b = brick_density_range_grid(*store.ranges(), store.dims, BRICK)
     if channels > 1:
         grids = [density_range_grid(data[..., c]) for c in range(channels)]
@@ -222,6 +225,9 @@ def test_brick_bench_quick(tmp_path):
     assert any("coarser" in n for n in capped["notes"])
     assert capped["pool_bytes"] <= capped["cap_bytes"]
     assert capped["first_image_s"] > 0 and capped["fps"] > 0
+    b = capped["open_breakdown"]            # where the open's time went
+    assert b["level0_range_pass_s"] > 0 and b["shown_range_pass_s"] > 0 and b["upload_s"] > 0
+    assert 0 < b["texture_writes"] <= b["bricks_written"] and b["texture_write_s"] > 0
     assert 0 < rec["rrmse_vs_uncapped"]["rrmse"] < 1.0
     assert rec["long"]["bricked"] and rec["long"]["finite"] and rec["long"]["mean_radiance"] > 0
     assert rec["long"]["dims"][0] > rec["long"]["max_3d_texture_size"]
@@ -490,3 +496,187 @@ def test_bricked_zarr_store_refuses_channels_as_the_whole_loader_does(tmp_path):
     message = _refused(lambda: load_volume(spec, channels=five, brick=BRICK))
     assert message == f"{path}: 5 channels, at most 4 are shown at once (choose them with " \
                       "channels[i].index)"
+
+
+class _Blocks:
+    """app.bricks.shared_memory with the names of the blocks the caller's process creates
+    recorded (the readers, forked, attach to them)."""
+
+    def __init__(self):
+        from multiprocessing import shared_memory
+        self.module = shared_memory
+        self.names = []
+        self.pid = __import__("os").getpid()
+
+    def SharedMemory(self, *args, **kw):
+        block = self.module.SharedMemory(*args, **kw)
+        if kw.get("create") and __import__("os").getpid() == self.pid:
+            self.names.append(block.name)
+        return block
+
+    def left(self):
+        from pathlib import Path
+        return [n for n in self.names if (Path("/dev/shm") / n.lstrip("/")).exists()]
+
+
+def _processes(monkeypatch):
+    import app.bricks as bricks
+    monkeypatch.setattr(bricks, "PROCESS_READ_VOXELS", 1)
+    monkeypatch.setattr(bricks, "reader_processes", lambda: 2)
+    blocks = _Blocks()
+    monkeypatch.setattr(bricks, "shared_memory", blocks)
+    return blocks
+
+
+@pytest.mark.skipif(not __import__("os").path.isdir("/dev/shm"), reason="no /dev/shm to look in")
+@pytest.mark.parametrize("dtype, value_range", [("uint16", None), ("uint8", None),
+                                                ("float32", (-0.3, 1.7))])
+def test_upload_from_processes_maps_there_and_moves_bricks_through_shared_memory(
+        ctx, tmp_path, monkeypatch, dtype, value_range):
+    """A store read in processes: each reader maps its bricks to densities (uint16 and uint8 in
+    float32 arithmetic, app/volume.py float32_exact; float32 data with a fractional range in
+    float64, as normalise does) and hands them over in shared memory blocks, every one unlinked
+    afterwards; the atlas equals the whole loader's volume bit for bit (tolerance 0: the float32
+    mapping is exact there), the reads are counted as the threads' are, and the atlas is written
+    a row of slots at a time. uint8 with its type's range is the R16 atlas (exact_uint8)."""
+    from app.gl.brick_pool import atlas_payload
+    data = _blob()
+    if dtype == "uint8":
+        data = (data // 200).astype(np.uint8)
+    elif dtype == "float32":
+        data = data.astype(np.float32) / 20000.0
+    path = _zarr(tmp_path, data)
+    spec = VolumeSpec(path=str(path), builtin=None, value_range=value_range)
+    whole = load_volume(spec)
+    blocks = _processes(monkeypatch)
+    volume = load_volume(spec, brick=BRICK)
+    store = volume.bricks
+    assert store._in_processes()
+    shown, pool = place_volume(ctx, volume, brick_size=BRICK)
+    try:
+        assert blocks.names and not blocks.left()
+        assert store.handed == {"shared": len(blocks.names), "pickled": 0}
+        assert pool.exact_uint8 == (dtype == "uint8")
+        constant = store.constant()
+        assert np.all(store.reads[constant] == 1) and np.all(store.reads[~constant] == 2)
+        n = int((~constant).sum())
+        assert pool.uploads == n and pool.writes == -(-n // pool.grid[0]) < n   # a row a write
+        want = pack(whole.data, BRICK)
+        table = np.frombuffer(pool.table.read(), np.uint32).reshape(want.table.shape)
+        np.testing.assert_array_equal(table, want.table)
+        texel = np.uint16 if pool.exact_uint8 else np.float32
+        atlas = np.frombuffer(pool.atlas.read(), texel).reshape(want.atlas.shape)
+        encoded = np.frombuffer(atlas_payload(want.atlas, pool.exact_uint8), texel)
+        np.testing.assert_array_equal(atlas, encoded.reshape(want.atlas.shape))
+        assert store.seconds["upload_read"] > 0 and store.seconds["range_pass"] > 0
+        assert pool.write_seconds > 0 and pool.upload_seconds >= pool.write_seconds
+    finally:
+        pool.release()
+
+
+class _FailingSource:
+    """A Zarr source whose read of one layer fails (in the reading process)."""
+    process_safe = True
+
+    def __init__(self, source, z0):
+        self.source, self.z0 = source, z0
+        self.shape = source.shape
+
+    def read(self, z0, *rest):
+        if z0 == self.z0:
+            raise VolumeError(f"layer at {z0} unreadable")
+        return self.source.read(z0, *rest)
+
+    def density(self, raw):
+        return self.source.density(raw)
+
+
+@pytest.mark.skipif(not __import__("os").path.isdir("/dev/shm"), reason="no /dev/shm to look in")
+def test_shared_memory_is_unlinked_when_a_read_fails_or_the_upload_stops(tmp_path, monkeypatch):
+    """Every shared memory block is unlinked when a reader fails, when the caller stops early
+    (KeyboardInterrupt in the loop) and when it closes the generator."""
+    data = _blob((40, 24, 64))
+    path = _zarr(tmp_path, data)
+    blocks = _processes(monkeypatch)
+    store = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
+    _, _, _, resident = store.layout(4096)
+    layers = sorted(set(resident[:, 0].tolist()))
+    assert len(layers) >= 3
+
+    def dest(z, y, x):
+        return np.empty((BRICK + 2,) * 3, np.float32)
+
+    failing = BrickStore(_FailingSource(store.source, layers[-1] * BRICK), BRICK)
+    failing._ranges = store.raw_ranges()
+    with pytest.raises(VolumeError, match="unreadable"):
+        for _ in failing.write_resident(resident, dest, densities=True):
+            pass
+    assert blocks.names and not blocks.left()
+    blocks.names.clear()
+    with pytest.raises(KeyboardInterrupt):
+        for _ in store.write_resident(resident, dest, densities=True):
+            raise KeyboardInterrupt
+    assert blocks.names and not blocks.left()
+    blocks.names.clear()
+    layers = store.write_resident(resident, dest, densities=True)
+    next(layers)
+    layers.close()
+    assert blocks.names and not blocks.left()
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_upload_writes_rows_of_slots_equal_to_the_twins_pack(ctx, channels):
+    """upload_store from an array in memory (threads), one and several channels: the atlas
+    written a row of slots at a time (the last row partial) equals the twin's pack brick by
+    brick; a block past the end of its row is refused."""
+    from app.gl.brick_pool import upload_store
+    rng = np.random.default_rng(7)
+    data = np.zeros((20, 19, 33, channels), np.float32)
+    data[2:17, 3:15, 4:30] = rng.random((15, 12, 26, channels))
+    data = data[..., 0] if channels == 1 else data
+    store = BrickStore(ArraySource(data), 4)
+    pool = upload_store(ctx, store, False, 4096)
+    try:
+        want = pack(data, 4, 4096)
+        n = int(np.count_nonzero(want.brick_of_slot != 0xFFFFFFFF))
+        assert pool.uploads == n and n % pool.grid[0] != 0     # a partial last row
+        assert pool.writes == -(-n // pool.grid[0])
+        np.testing.assert_array_equal(pool.brick_of_slot, want.brick_of_slot)
+        atlas = np.frombuffer(pool.atlas.read(), np.float32).reshape(want.atlas.shape)
+        np.testing.assert_array_equal(atlas, want.atlas)
+        side = 6
+        with pytest.raises(ValueError, match="rows of"):
+            pool.write_slots(pool.grid[0] - 1, [0, 1],
+                             np.zeros((side, side, 2 * side) + data.shape[3:], np.float32))
+    finally:
+        pool.release()
+
+
+@pytest.mark.parametrize("budget", [0, 12 * BRICK ** 3 * 4])
+def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
+        tmp_path, monkeypatch, budget):
+    """Layers whose blocks would take the shared memory past its budget (half of /dev/shm's
+    free space: none here, or room for one layer's bricks) come back from the processes
+    pickled, as before: the same bricks with aprons as the threads' reads, each read once
+    more."""
+    import app.bricks as bricks
+    data = _blob()
+    path = _zarr(tmp_path, data)
+    threads = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
+    blocks = _processes(monkeypatch)
+    monkeypatch.setattr(bricks, "_shared_budget", lambda: budget)
+    procs = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
+    _, _, _, resident = procs.layout(4096)
+    seen = 0
+    for z, (y, x), block in procs.resident_layers(resident, densities=True):
+        want = threads.source.density(threads.pencil(z, y, x, x + 1, 1))
+        np.testing.assert_array_equal(block, want)
+        seen += 1
+    assert seen == len(resident)
+    layers = len(set(resident[:, 0].tolist()))
+    assert (len(blocks.names) == 0) if budget == 0 else (0 < len(blocks.names) < layers)
+    assert procs.handed == {"shared": len(blocks.names), "pickled": layers - len(blocks.names)}
+    assert not blocks.left()
+    is_resident = np.zeros(procs.reads.shape, bool)
+    is_resident[tuple(resident.T)] = True
+    assert np.all(procs.reads[is_resident] == 2) and np.all(procs.reads[~is_resident] == 1)

@@ -378,3 +378,40 @@ def test_volume_beyond_the_memory_left_is_refused_with_why():
     with pytest.raises(VolumeError, match="GL_MAX_3D_TEXTURE_SIZE of 2048.*bricking"):
         check_volume_fits("ct", (4096, 8, 8), 2, 2048, None, "GPU memory")
     check_volume_fits("ct", (2048, 8, 8), 2, 2048, None, "GPU memory")   # None: cannot tell
+
+
+@pytest.mark.parametrize("dtype, ranges", [
+    ("uint16", [(0, 65535), (0, 4095), (100, 1000), (-5, 70000), (12345, 12346),
+                (-2 ** 23, 2 ** 23), (65534, 65535)]),
+    ("int16", [(-32768, 32767), (-1000, 3000), (0, 1), (-2 ** 23, 2 ** 23 - 7)]),
+    ("uint8", [(0, 255), (3, 200)]),
+    ("int8", [(-128, 127), (-1, 1)])])
+def test_normalise_in_float32_equals_float64_for_every_small_integer(dtype, ranges):
+    """normalise maps 8- and 16-bit integers with a whole-number range in float32 arithmetic
+    (app/volume.py float32_exact; the bricked upload maps this way in its reading processes):
+    bit for bit the float64 mapping rounded to float32, for every value of the type."""
+    from app.volume import float32_exact
+    info = np.iinfo(dtype)
+    raw = np.arange(info.min, info.max + 1).astype(dtype).reshape(-1, 1, 1)
+    for lo, hi in ranges:
+        assert float32_exact(raw.dtype, lo, hi)
+        want = np.clip((raw.astype(np.float64) - lo) / (hi - lo), 0.0, 1.0).astype(np.float32)
+        got, used = normalise(raw, (float(lo), float(hi)), "where")
+        assert got.dtype == np.float32 and used == (lo, hi)
+        np.testing.assert_array_equal(got, want)
+        assert np.array_equal(np.signbit(got), np.signbit(want))    # no -0.0 either
+
+
+def test_normalise_keeps_float64_where_float32_is_not_exact():
+    """Float data, 32-bit integers and fractional or huge ranges keep the float64 mapping (the
+    float32 one could differ by more than float32's rounding there)."""
+    from app.volume import float32_exact
+    rng = np.random.default_rng(4)
+    cases = [(rng.normal(size=(3, 4, 5)).astype(np.float32), (-1.5, 2.25)),
+             (rng.integers(0, 2 ** 30, (3, 4, 5)).astype(np.int32), (0.0, 2.0 ** 30)),
+             (rng.integers(0, 2 ** 16, (3, 4, 5)).astype(np.uint16), (0.5, 1000.25)),
+             (rng.integers(0, 2 ** 16, (3, 4, 5)).astype(np.uint16), (0.0, 2.0 ** 24))]
+    for raw, (lo, hi) in cases:
+        assert not float32_exact(raw.dtype, lo, hi)
+        want = np.clip((raw.astype(np.float64) - lo) / (hi - lo), 0.0, 1.0).astype(np.float32)
+        np.testing.assert_array_equal(normalise(raw, (lo, hi), "where")[0], want)

@@ -1,7 +1,10 @@
 """A bricked volume on the GPU (glsl/lib/brick_pool.glsl; NumPy twin app/twins/brick_pool.py):
-the atlas of slots, the page table and the constants, written brick by brick (the host never
-needs the whole volume), and in the checking build the slot -> brick map it checks against."""
+the atlas of slots, the page table and the constants, written a row of slots at a time (the host
+never needs the whole volume), and in the checking build the slot -> brick map it checks
+against."""
 from __future__ import annotations
+
+import time
 
 import moderngl
 import numpy as np
@@ -20,9 +23,15 @@ BRICK_SLOTS_BINDING = 10    # lib/brick_pool.glsl, the checking build only
 
 def atlas_payload(block: np.ndarray, exact_uint8: bool) -> bytes:
     """A block of normalised densities as the atlas stores them (volume_texture's encoding)."""
+    return atlas_texels(block, exact_uint8).tobytes()
+
+
+def atlas_texels(block: np.ndarray, exact_uint8: bool) -> np.ndarray:
+    """atlas_payload as a C-contiguous array (what the writes hand to Texture3D.write, which
+    reads its buffer: no copy to bytes; float32 densities pass as they are)."""
     if exact_uint8:
-        return (np.round(block * 255.0).astype(np.uint16) * 257).astype(np.uint16).tobytes()
-    return np.ascontiguousarray(block, np.float32).tobytes()
+        return (np.round(block * 255.0).astype(np.uint16) * 257).astype(np.uint16)
+    return np.ascontiguousarray(block, np.float32)
 
 
 class BrickPool:
@@ -76,6 +85,9 @@ class BrickPool:
         self.brick_of_slot = np.full(int(np.prod(self.grid)), FREE_SLOT, np.uint32)
         self.slots_buffer = None
         self.uploads = 0      # bricks written (tests count them)
+        self.writes = 0       # Texture3D.write calls of the atlas (a row of slots each, at most)
+        self.write_seconds = 0.0  # in them
+        self.upload_seconds = None   # upload_store's, all of it
 
     @classmethod
     def from_packed(cls, ctx: moderngl.Context, packed: Packed, exact_uint8: bool = False):
@@ -108,14 +120,27 @@ class BrickPool:
 
     def write_slot(self, slot: int, brick: int, block: np.ndarray) -> None:
         """Writes brick `brick` (linear index) with its apron ((B + 2)^3 [z, y, x(, c)]) to slot."""
+        self.write_slots(slot, [brick], block)
+
+    def write_slots(self, first: int, bricks, block: np.ndarray) -> None:
+        """Writes bricks (linear indices) with their aprons to the slots first, first + 1, ... of
+        one row of slots (along x): block [B + 2, B + 2, k (B + 2)(, c)], the k bricks side by
+        side along x; one Texture3D.write."""
         side = slot_side(self.brick)
-        if block.shape[:3] != (side, side, side):
-            raise ValueError(f"brick block of shape {block.shape}, expected {side}^3")
-        o = slot_origin(slot, self.grid) * side
-        self.atlas.write(atlas_payload(block, self.exact_uint8),
-                         viewport=(int(o[0]), int(o[1]), int(o[2]), side, side, side), alignment=1)
-        self.brick_of_slot[slot] = brick
-        self.uploads += 1
+        k = len(bricks)
+        o = slot_origin(first, self.grid)
+        if block.shape[:3] != (side, side, k * side) or k < 1 or o[0] + k > self.grid[0]:
+            raise ValueError(f"block of shape {block.shape} for {k} bricks from slot {first} "
+                             f"(rows of {self.grid[0]} slots of {side}^3 texels)")
+        o = o * side
+        start = time.perf_counter()
+        self.atlas.write(atlas_texels(block, self.exact_uint8),
+                         viewport=(int(o[0]), int(o[1]), int(o[2]), k * side, side, side),
+                         alignment=1)
+        self.write_seconds += time.perf_counter() - start
+        self.writes += 1
+        self.brick_of_slot[first:first + k] = bricks
+        self.uploads += k
         if self.slots_buffer is not None:
             self.slots_buffer.write(self.brick_of_slot.tobytes())
 
@@ -162,11 +187,14 @@ def empty_pool(ctx: moderngl.Context, plan, exact_uint8: bool) -> "BrickPool":
 
 def upload_plan(ctx: moderngl.Context, plan, exact_uint8: bool) -> "BrickPool":
     """A BrickPool holding the resident bricks of an app.bricks.PoolPlan (each read once, its
-    apron from its neighbours: BrickStore.resident_layers; constant bricks are not read)."""
+    apron from its neighbours; constant bricks are not read), written a run of slots of a row at
+    a time (PoolPlan.rows)."""
+    start = time.perf_counter()
     pool = empty_pool(ctx, plan, exact_uint8)
     try:
-        for slot, brick, block in plan.blocks():
-            pool.write_slot(slot, brick, block)
+        for first, bricks, block in plan.rows():
+            pool.write_slots(first, bricks, block)
+        pool.upload_seconds = time.perf_counter() - start
     except BaseException:
         pool.release()
         raise

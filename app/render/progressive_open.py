@@ -24,8 +24,9 @@ from ..scene import Scene
 from ..volume import Volume, load_scene_volume
 from .volume_placement import device_limits, plan_placement
 
-# Bricks read ahead of the writes, at most (each (B + 2)^3 float32 texels: 1.1 MiB at B = 64).
-QUEUE_BRICKS = 512
+# Runs of slots read ahead of the writes, at most (PoolPlan.rows: a run is a row of the slot
+# grid at most, some 15 bricks of (B + 2)^3 float32 texels at B = 64: about 17 MiB).
+QUEUE_RUNS = 32
 _DONE = object()
 
 
@@ -40,7 +41,7 @@ class ProgressiveOpen:
         self._memory_bytes = memory_bytes
         self._brick_size = brick_size
         self._camera = camera
-        self._blocks: queue.Queue = queue.Queue(QUEUE_BRICKS)
+        self._blocks: queue.Queue = queue.Queue(QUEUE_RUNS)
         self._planned = threading.Event()
         self._cancelled = threading.Event()
         self.given: Volume | None = None           # the volume as loaded
@@ -64,7 +65,7 @@ class ProgressiveOpen:
             self._planned.set()
             if placement.plan is not None:
                 self.stage = "reading bricks"
-                for item in placement.plan.blocks():
+                for item in placement.plan.rows():
                     while not self._cancelled.is_set():
                         try:
                             self._blocks.put(item, timeout=0.1)
@@ -142,9 +143,9 @@ class ProgressiveOpen:
                 self.done = True
                 pool, self.pool = self.pool, None
                 return self.given, placement.shown, pool
-            slot, brick, block = item
-            self.pool.write_slot(slot, brick, block)
-            self.written += 1
+            first, bricks, block = item
+            self.pool.write_slots(first, bricks, block)
+            self.written += len(bricks)
             if time.perf_counter() >= deadline:
                 return None
 
