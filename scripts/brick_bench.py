@@ -4,7 +4,7 @@ GL_MAX_3D_TEXTURE_SIZE) rendered.
 
     python scripts/brick_bench.py OUT_DIR [--quick] [--size 2048] [--cap 4G]
         [--width 1920 --height 1080] [--frames 30] [--probes 32] [--long 20000,512,512]
-        [--parts write,write-long,capped,uncapped,long] [--reuse] [--stores DIR]
+        [--parts write,write-long,capped,progressive,uncapped,zoomed,long] [--reuse] [--stores DIR]
 
 1. Writes OUT_DIR/volume.zarr: an OME-Zarr image (levels 0.. each 2x box-filtered, chunks of
    64^3), uint16, a ball of smooth noise in vacuum, slab by slab (never whole in memory); and
@@ -20,7 +20,12 @@ GL_MAX_3D_TEXTURE_SIZE) rendered.
    not fit the device, both are rendered over a crop: the central eighth of the box (a quarter of
    each side... half of each side) read as in-memory volumes (level 0's voxels, and the capped
    level's over the same box), the same camera framing it.
-4. The long volume: bricked (not refused), time to its first raymarched image, and its frame.
+   The open again with RenderSettings.mixed_levels on (capped_mixed_levels).
+4. progressive: the open as the viewer does it (the store's small level drawn as a preview while
+   ProgressiveOpen loads the store on a thread; frames drawn meanwhile), timed from opening.
+5. zoomed: at a camera near the volume (ZOOMED_EYE), levels mixed by footprint against one whole
+   level: first image, frame rate, rRMSE of each against level 0 uncapped.
+6. The long volume: bricked (not refused), time to its first raymarched image, and its frame.
 
 Writes OUT_DIR/results.json (one record a measurement, with the device and the settings) and
 OUT_DIR/report.md. --quick: a 48^3 volume, a cap of 12 slots of 8^3 bricks, a 64 x 48 image, a
@@ -136,6 +141,11 @@ def write_ome_zarr(path: Path, dims, chunk: int, levels: int, value=density) -> 
     return time.perf_counter() - start
 
 
+# The zoomed view: the camera near the volume's +z face, where a voxel of level 0 covers up to
+# about 3 pixels of a 1080p image (0.3 to 0.5 at the overview's camera).
+ZOOMED_EYE = (0.15, 0.25, 0.75)
+
+
 def _scene(path: Path, s: Settings, crop=None):
     data = {"volume": {"path": str(path), "value_range": [0, 65535]},
             "transfer_function": {"colormap": "viridis",
@@ -186,7 +196,7 @@ def _region(volume, lo: float, hi: float) -> np.ndarray:
     return src.density(src.read(a[0], b[0], a[1], b[1], a[2], b[2]))
 
 
-PARTS = ("write", "write-long", "capped", "progressive", "uncapped", "long")
+PARTS = ("write", "write-long", "capped", "progressive", "uncapped", "zoomed", "long")
 
 
 def _written(path: Path, dims, reuse: bool, chunk: int, levels: int) -> float | None:
@@ -240,6 +250,10 @@ def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
     if "capped" in parts or "uncapped" in parts:
         _need(path)
         _capped(ctx, records, scene, settings, cap, s, parts)
+    if "zoomed" in parts:
+        from dataclasses import replace
+        zoomed = scene.replace(camera=replace(scene.camera, eye=ZOOMED_EYE))
+        _zoomed(ctx, records, _need(path) and zoomed, settings, cap, s)
     if "long" in parts:
         _long(ctx, records, _need(stores / "long.zarr"), s, long)
     (out / "results.json").write_text(json.dumps(records, indent=2))
@@ -282,11 +296,12 @@ def _open_capped(ctx, records, key, scene, settings, cap, s):
 
 
 def _capped(ctx, records, scene, settings, cap, s, parts):
-    # the default (levels mixed by the camera under the cap), then one whole level
+    # the default settings, then with levels mixed by the camera (RenderSettings.mixed_levels
+    # on; one whole level where no brick is worth a slot of the finer level)
     from dataclasses import replace
     capped_volume, capped_image = _open_capped(ctx, records, "capped", scene, settings, cap, s)
-    _, whole_image = _open_capped(ctx, records, "capped_whole_level", scene,
-                                  replace(settings, mixed_levels=False), cap, s)
+    _, mixed_image = _open_capped(ctx, records, "capped_mixed_levels", scene,
+                                  replace(settings, mixed_levels=True), cap, s)
     records["first_image_mean"] = records["capped"]["first_image_mean"]
     if "uncapped" not in parts:
         return
@@ -301,7 +316,7 @@ def _capped(ctx, records, scene, settings, cap, s, parts):
         r0.release()
         records["rrmse_vs_uncapped"] = {"what": "whole image, level 0 uncapped",
                                         "rrmse": rrmse(capped_image, full),
-                                        "rrmse_whole_level": rrmse(whole_image, full),
+                                        "rrmse_mixed_levels": rrmse(mixed_image, full),
                                         "rrmse_uncapped_other_seed": rrmse(full_again, full)}
     except VolumeError as exc:
         base = load_scene_volume(scene, s.brick or 64)
@@ -317,14 +332,31 @@ def _capped(ctx, records, scene, settings, cap, s, parts):
             "why": str(exc), "rrmse": rrmse(images[1], images[0])}
 
 
+def _zoomed(ctx, records, scene, settings, cap, s):
+    """The camera near the volume (ZOOMED_EYE): under the cap with levels mixed by footprint and
+    with one whole level, each against level 0 uncapped at the same seeds."""
+    from dataclasses import replace
+    _, mixed = _open_capped(ctx, records, "zoomed_mixed", scene,
+                            replace(settings, mixed_levels=True), cap, s)
+    _, whole = _open_capped(ctx, records, "zoomed_whole_level", scene,
+                            replace(settings, mixed_levels=False), cap, s)
+    r0 = Renderer(ctx, scene, settings=RenderSettings(brick_size=s.brick or 64))
+    full = r0.render("raymarch", spp=4, seed=7).image
+    again = r0.render("raymarch", spp=4, seed=8).image
+    level0 = list(r0.resources.volume.dims)
+    r0.release()
+    records["zoomed_rrmse_vs_uncapped"] = {
+        "eye": list(ZOOMED_EYE), "level0_dims": level0, "rrmse_mixed": rrmse(mixed, full),
+        "rrmse_whole_level": rrmse(whole, full), "rrmse_uncapped_other_seed": rrmse(again, full)}
+
+
 def _progressive(ctx, records, scene, settings, cap):
     """The viewer's open (app/viewer/launch.py, Viewer._poll_opening): the store's preview
     (zarr_preview) read and drawn, while ProgressiveOpen loads the store on a thread; each frame
     writes bricks for up to OPEN_WRITE_BUDGET_S and draws the preview's raymarched frame (the
     viewer's frame: begin, one sample, waited for, nothing read back); then the store's own first
     frame. Times from opening."""
-    from app.render.progressive_open import ProgressiveOpen
-    from app.viewer.viewer import OPEN_WRITE_BUDGET_S
+    from app.render.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
     from app.volume import zarr_preview
 
     def frame(r, seed, bake=False):
@@ -440,15 +472,24 @@ def _report(out: Path, records: dict, s: Settings) -> None:
             f"{pg['first_image_s']:.1f} s; {pg['frames_while_loading']} frames meanwhile "
             f"(median {pg['frame_ms_while_loading_median'] or 0:.0f} ms, longest "
             f"{pg['frame_ms_while_loading_max'] or 0:.0f} ms)")
-    w = records.get("capped_whole_level")
+    w = records.get("capped_mixed_levels")
     if w:
-        lines.append(f"- one whole level instead (mixed_levels off): level {w['level_dims']}, "
-                     f"first image {w['first_image_s']:.1f} s, {w['fps']:.1f} fps")
+        lines.append(f"- mixed_levels on: {w['notes'][-1] if w['notes'] else ''}; first image "
+                     f"{w['first_image_s']:.1f} s, {w['fps']:.1f} fps")
     if err:
         lines.append(f"- rRMSE against level 0: {err['rrmse']:.4f} ({err['what']})"
-                     + (f"; one whole level {err['rrmse_whole_level']:.4f}; level 0 against "
+                     + (f"; mixed_levels on {err['rrmse_mixed_levels']:.4f}; level 0 against "
                         f"itself at another seed {err['rrmse_uncapped_other_seed']:.4f}"
-                        if "rrmse_whole_level" in err else ""))
+                        if "rrmse_mixed_levels" in err else ""))
+    zm, zw, ze = (records.get(k) for k in ("zoomed_mixed", "zoomed_whole_level",
+                                            "zoomed_rrmse_vs_uncapped"))
+    if zm and zw and ze:
+        lines.append(
+            f"- zoomed (eye {ze['eye']}): levels mixed: {zm['notes'][-1] if zm['notes'] else ''}; "
+            f"first image {zm['first_image_s']:.1f} s, {zm['fps']:.1f} fps, rRMSE against "
+            f"level 0 {ze['rrmse_mixed']:.4f}; one whole level: first image "
+            f"{zw['first_image_s']:.1f} s, {zw['fps']:.1f} fps, rRMSE {ze['rrmse_whole_level']:.4f}"
+            f"; level 0 against itself at another seed {ze['rrmse_uncapped_other_seed']:.4f}")
     if lg:
         lines.append(f"- long volume {lg['dims']}: bricked {lg['bricked']}, first image "
                      f"{lg['first_image_s']:.1f} s, {lg['fps']:.1f} fps")
@@ -467,7 +508,8 @@ def main(argv=None) -> int:
     p.add_argument("--probes", type=int)
     p.add_argument("--long", type=lambda t: tuple(int(v) for v in t.split(",")))
     p.add_argument("--parts", type=lambda t: tuple(t.split(",")), default=PARTS,
-                   help="which parts: write,write-long,capped,progressive,uncapped,long (default all)")
+                   help="which parts: write,write-long,capped,progressive,uncapped,zoomed,long "
+                        "(default all)")
     p.add_argument("--reuse", action="store_true",
                    help="keep stores already written (same shape) and add to results.json")
     p.add_argument("--stores", type=Path,

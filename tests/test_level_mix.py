@@ -34,6 +34,7 @@ def _cap(scene) -> int:
 
 
 def _renderer(ctx, scene, **settings):
+    settings = {"mixed_levels": True, **settings}
     return Renderer(ctx, scene, settings=RenderSettings(brick_size=BRICK,
                                                         volume_memory_bytes=_cap(scene),
                                                         **settings))
@@ -126,7 +127,7 @@ def _checked():
 def test_every_method_reads_the_mixed_pool_with_no_page_miss(_checked):
     ctx, checks = _checked
     ctx.__enter__()
-    r = _renderer(ctx, _scene(16, 12))
+    r = _renderer(ctx, _scene(32, 24))
     try:
         assert r.resources.volume_tex.levels == 2
         checks.reset()

@@ -27,6 +27,8 @@ from .volume_placement import device_limits, plan_placement
 # Runs of slots read ahead of the writes, at most (PoolPlan.rows: a run is a row of the slot
 # grid at most, some 15 bricks of (B + 2)^3 float32 texels at B = 64: about 17 MiB).
 QUEUE_RUNS = 32
+# A viewer frame's time for writing the bricks of a volume opening (the viewer, brick_bench).
+OPEN_WRITE_BUDGET_S = 0.012
 _DONE = object()
 
 

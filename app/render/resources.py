@@ -53,7 +53,7 @@ def environment_textures(ctx: moderngl.Context, image: np.ndarray, distribution:
 class SceneResources:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
                  use_majorant_grid: bool = True, volume_memory_bytes: int | None = None,
-                 brick_size: int | None = None, mixed_levels: bool = True):
+                 brick_size: int | None = None, mixed_levels: bool = False):
         self.ctx = ctx
         self.scene: Scene | None = None
         self.volume: Volume | None = None

@@ -18,7 +18,7 @@ from ..gl.timer import GpuTimer
 from ..scene import SceneError, scene_to_dict
 from ..environment_map import load_scene_environment
 from ..channels import volume_inputs
-from ..render.progressive_open import ProgressiveOpen
+from ..render.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
 from ..volume import VolumeError, load_scene_volume, reads_lazily, zarr_preview
 from . import layout, orbit, overlays, panels
 from .display import BACKGROUND, DisplayPass, ErrorMeter
@@ -36,7 +36,6 @@ from .widgets import WidgetRects
 RECOVERABLE = (SceneError, VolumeError, ShaderError, moderngl.Error, OSError, ValueError, RuntimeError)
 SAVED_SCENE_NAME = "viewer_scene.json"
 SNAPSHOT_MAX_PROBES = 512      # a snapshot carries the probes' coefficients for grids this small
-OPEN_WRITE_BUDGET_S = 0.012    # a frame's time for writing the bricks of a volume opening
 
 
 class Viewer:
