@@ -664,13 +664,22 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
     raw_lo, raw_hi = store.raw_ranges()
     if not many:
         raw_lo, raw_hi = raw_lo[..., None], raw_hi[..., None]
+    lows = raw_lo.reshape(-1, len(shown)).min(axis=0)
+    highs = raw_hi.reshape(-1, len(shown)).max(axis=0)
+    series_lows, series_highs = lows, highs
+    if steps > 1 and any(d is None for d in domains) and array.dtype not in (np.uint8, np.int8):
+        # SPEC.md, Time series: every step normalised alike, by the whole series' range where
+        # the scene gives none: each other step's range pass (once per store)
+        series_lows, series_highs = _series_extremes(p, array, axes, shown, many, brick, time,
+                                                     lows, highs, spec.replace_nonfinite)
     ranges, raws = [], []
     for c, (domain, label) in enumerate(zip(domains, labels)):
-        # the channel's least and largest raw values, normalised as the whole loader normalises
-        # the channel: its domain, else the type's (8-bit), else these (refused where equal)
-        extremes = np.array([raw_lo[..., c].min(), raw_hi[..., c].max()], raw_lo.dtype)
+        # the channel's least and largest raw values (of the series, where it is one),
+        # normalised as the whole loader normalises the channel: its domain, else the type's
+        # (8-bit), else these (refused where equal); raw_min/max are the step's own
+        extremes = np.array([series_lows[c], series_highs[c]], raw_lo.dtype)
         ranges.append(normalise(extremes, domain, label)[1])
-        raws.append((float(extremes[0]), float(extremes[1])))
+        raws.append((float(lows[c]), float(highs[c])))
     source.value_range, source.value_ranges = ranges[0], ranges
     coarser = [source_of(a, ranges) for a in levels[1:]]
     notes = ()
@@ -683,6 +692,38 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
                     **({"channel_ranges": tuple(ranges), "channel_raw": tuple(raws)}
                        if many else {}))
     return dataclasses.replace(volume, time=time, time_steps=steps) if steps > 1 else volume
+
+
+# Each bricked time series' raw extremes over all its steps, per channel shown: {key: (lows, highs)}.
+_SERIES_EXTREMES: dict = {}
+
+
+def _series_extremes(p, array, axes: str, shown, many: bool, brick: int, time: int, lows, highs,
+                     replace_nonfinite=None):
+    """Per channel shown, the least and largest raw values over every step of a bricked Zarr
+    time series (`lows`, `highs`: step `time`'s, already read): the other steps' range passes,
+    once per store (kept while its files are unchanged)."""
+    from .bricks import BrickStore, ZarrSource
+    try:
+        stamp = p.stat().st_mtime_ns
+    except OSError:
+        stamp = None
+    key = (str(p.resolve()), stamp, axes, tuple(shown), replace_nonfinite)
+    if key not in _SERIES_EXTREMES or stamp is None:
+        lo, hi = np.array(lows), np.array(highs)
+        for step in range(dict(zip(axes, array.shape))["t"]):
+            if step == time:
+                continue
+            source = ZarrSource(array, axes, step, shown[0], None, str(p), replace_nonfinite,
+                                normalise,
+                                channels=shown if many else None,
+                                value_ranges=[None] * len(shown))
+            step_lo, step_hi = BrickStore(source, brick, p.name).raw_ranges()
+            lo = np.minimum(lo, step_lo.reshape(-1, len(shown)).min(axis=0))
+            hi = np.maximum(hi, step_hi.reshape(-1, len(shown)).max(axis=0))
+        _SERIES_EXTREMES.clear()          # one series at a time
+        _SERIES_EXTREMES[key] = (lo, hi)
+    return _SERIES_EXTREMES[key]
 
 
 def _large_zarr(p: Path) -> bool:

@@ -680,3 +680,38 @@ def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
     is_resident = np.zeros(procs.reads.shape, bool)
     is_resident[tuple(resident.T)] = True
     assert np.all(procs.reads[is_resident] == 2) and np.all(procs.reads[~is_resident] == 1)
+
+
+@pytest.mark.parametrize("channels", [1, 2])
+def test_bricked_time_series_is_normalised_by_the_whole_series_range(tmp_path, channels):
+    """SPEC.md, Time series: where the scene gives no range, every step is normalised by the
+    whole series' least and largest value, read brick by brick as read whole (each step's range
+    differs here, so a step's own range would give other densities)."""
+    import zarr
+    from app import volume as volume_module
+    r = np.random.default_rng(5)
+    shape = (3, channels, 16, 12, 20) if channels > 1 else (3, 16, 12, 20)
+    data = r.integers(100, 1000, shape).astype(np.uint16)
+    data[0] += 2000                       # step 0 holds the series' largest values
+    data[2] //= 4                         # step 2 its least
+    path = tmp_path / "series.zarr"
+    arr = zarr.create_array(str(path), shape=data.shape, dtype=data.dtype, chunks=(1,) + (8,) * (data.ndim - 1))
+    arr[...] = data
+    axes = "tczyx" if channels > 1 else "tzyx"
+    parsed = parse_scene({"volume": {"path": str(path), "axes": axes}, "time": 1})
+    volume_module._SERIES_EXTREMES.clear()
+    lazy = load_scene_volume(parsed, brick=BRICK)
+    whole = load_scene_volume(parsed)
+    _same_volume(lazy, whole)
+    lo, hi = float(data.min()), float(data.max())
+    assert lazy.value_range == (lo, hi) if channels == 1 else lazy.channel_ranges[0][1] == \
+        float(data[:, 0].max())
+    # another step reuses the series' extremes (no other step's range pass again)
+    calls = []
+    original = BrickStore.raw_ranges
+    BrickStore.raw_ranges = lambda self: calls.append(1) or original(self)
+    try:
+        step2 = load_scene_volume(parsed.replace(time=2), brick=BRICK)
+    finally:
+        BrickStore.raw_ranges = original
+    assert len(calls) == 1 and step2.value_range == lazy.value_range
