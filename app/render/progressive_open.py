@@ -8,8 +8,9 @@ milliseconds a frame (the GL context belongs to one thread). Meanwhile the viewe
     each frame: done = opening.poll(budget_s)   # None until the pool is whole, then
                 (given, shown, pool) = done      # what Resources.update(placed=...) adopts
 
-The result is the one place_volume gives (plan_placement's level, upload_store's bricks): only
-when the work is done changes."""
+The result is the one place_volume gives (plan_placement's level, PoolPlan.rows' bricks): only
+when the work is done changes. The reading processes are forked from this thread
+(app/bricks.py reader_processes); they read the store alone and never touch the context."""
 from __future__ import annotations
 
 import queue
@@ -67,15 +68,19 @@ class ProgressiveOpen:
             self._planned.set()
             if placement.plan is not None:
                 self.stage = "reading bricks"
-                for item in placement.plan.rows():
-                    while not self._cancelled.is_set():
-                        try:
-                            self._blocks.put(item, timeout=0.1)
-                            break
-                        except queue.Full:
-                            pass
-                    if self._cancelled.is_set():
-                        return
+                rows = placement.plan.rows()
+                try:
+                    for item in rows:
+                        while not self._cancelled.is_set():
+                            try:
+                                self._blocks.put(item, timeout=0.1)
+                                break
+                            except queue.Full:
+                                pass
+                        if self._cancelled.is_set():
+                            return
+                finally:
+                    rows.close()     # its readers stopped, their shared memory unlinked
         except BaseException as exc:   # reported by poll() on the context's thread
             self.error = exc
         finally:
@@ -140,6 +145,7 @@ class ProgressiveOpen:
                     self._finish_failed()
                 written = int((self.pool.brick_of_slot != FREE_SLOT).sum())
                 if written != self.bricks_total:
+                    self.cancel()
                     raise RuntimeError(f"progressive open wrote {written} of "
                                        f"{self.bricks_total} bricks")
                 self.done = True
