@@ -812,7 +812,8 @@ def test_large_zarr_store_opens_on_a_thread_behind_its_preview(display, tmp_path
         {"dump": "start.json"}, {"until": "loaded", "max_frames": 2000}, {"frames": 2},
         {"dump": "loaded.json"}, {"close": True}])
     view(["big.json", "--script", str(script), "--method", "raymarch", "--window", "900x640",
-          "--render-scale", "0.25"], tmp_path, display, harness=["--lazy-bytes", "1"])
+          "--render-scale", "0.25"], tmp_path, display,
+         harness=["--lazy-bytes", "1", "--open-delay", "1.0"])   # the first dump sees it loading
     start, loaded = dump(tmp_path / "start.json"), dump(tmp_path / "loaded.json")
     assert start["errors"] == [] and loaded["errors"] == []
     assert start["volume"]["dims"] == [20, 16, 12] and "preview" in start["volume_notes"][0]

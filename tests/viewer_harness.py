@@ -1,10 +1,12 @@
 """Helpers for tests/test_viewer.py: run the real viewer (``python -m app view``) in a real window
 on a private Xvfb, read its screenshots and state dumps.
 
-Run as a script it is the viewer with two test hooks:
+Run as a script it is the viewer with test hooks:
   python tests/viewer_harness.py --glsl DIR -- view ARGS...   the shaders come from DIR
   python tests/viewer_harness.py --release-check -- view ARGS... after the run, every GPU object
                                     the viewer made must have been released when it closed
+  --lazy-bytes N                    Zarr stores larger than N bytes are read brick by brick
+  --open-delay S                    a volume opening on a thread starts S seconds late
 """
 from __future__ import annotations
 
@@ -111,6 +113,11 @@ if __name__ == "__main__":
     if "--lazy-bytes" in hooks:   # Zarr stores larger than this are read brick by brick
         import app.volume
         app.volume.LAZY_BYTES = int(hooks[hooks.index("--lazy-bytes") + 1])
+    if "--open-delay" in hooks:   # a volume opening on a thread starts this many seconds late
+        import time as _time
+        from app.render.progressive_open import ProgressiveOpen
+        delay, work = float(hooks[hooks.index("--open-delay") + 1]), ProgressiveOpen._work
+        ProgressiveOpen._work = lambda self: (_time.sleep(delay), work(self))[1]
     if "--release-check" in hooks:
         sys.exit(_release_check(view_argv))
     from app.cli import main
