@@ -812,7 +812,7 @@ def test_large_zarr_store_opens_on_a_thread_behind_its_preview(display, tmp_path
         {"dump": "start.json"}, {"until": "loaded", "max_frames": 2000}, {"frames": 2},
         {"dump": "loaded.json"}, {"close": True}])
     view(["big.json", "--script", str(script), "--method", "raymarch", "--window", "900x640",
-          "--render-scale", "0.25"], tmp_path, display,
+          "--render-scale", "0.25", "--volume-memory", "64M"], tmp_path, display,
          harness=["--lazy-bytes", "1", "--open-delay", "1.0"])   # the first dump sees it loading
     start, loaded = dump(tmp_path / "start.json"), dump(tmp_path / "loaded.json")
     assert start["errors"] == [] and loaded["errors"] == []
@@ -822,3 +822,4 @@ def test_large_zarr_store_opens_on_a_thread_behind_its_preview(display, tmp_path
     assert not any("preview" in n for n in loaded["volume_notes"])
     assert any(m.startswith("loaded big.zarr in") for m in loaded["messages"])
     np.testing.assert_allclose(loaded["half_extent"], start["half_extent"])
+    assert loaded["settings"]["volume_memory_bytes"] == 64 << 20      # view --volume-memory
