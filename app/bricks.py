@@ -86,11 +86,53 @@ def level_needs(level_of_brick: np.ndarray, level: int, dims0, dims, brick: int)
     return need
 
 
+def level_tables(levels, level_of_brick: np.ndarray, brick: int):
+    """The page tables of a pool of mixed levels (lib/brick_pool.glsl BRICK_LEVELS), stacked
+    along z, level 0's first; `levels` [(dims, each brick's least value [bz, by, bx(, c)], its
+    constant mask)] finest first, `level_of_brick` [bz0, by0, bx0] the level each level-0 brick's
+    points read. The bricks a level holds (level 0's that read it; a coarser level's that such
+    points land in, level_needs) are constant (a row of the constants, each level's after the
+    earlier levels') or resident (slots level by level, in layer order); a level-0 brick that
+    reads level l holds REDIRECT | l, any other entry UNMAPPED. Returns (table, constants, each
+    level's resident bricks (n, 3) z, y, x, each level's first z in the table)."""
+    dims0 = levels[0][0]
+    counts = [brick_counts(d, brick) for d, _, _ in levels]
+    bx0, by0, _ = counts[0]
+    table_z = [int(z) for z in np.cumsum([0] + [c[2] for c in counts[:-1]])]
+    table = np.full((sum(c[2] for c in counts), by0, bx0), UNMAPPED, np.uint32)
+    constants, residents, slots = [], [], 0
+    for level, ((dims, lo, constant), c) in enumerate(zip(levels, counts)):
+        need = (level_of_brick == 0) if level == 0 else level_needs(level_of_brick, level, dims0,
+                                                                      dims, brick)
+        part = table[table_z[level]:table_z[level] + c[2], :c[1], :c[0]]
+        rows, which = constant_values(lo, constant & need)
+        part[constant & need] = CONSTANT | (which[constant & need] + sum(map(len, constants)))
+        constants.append(rows)
+        resident = np.argwhere(need & ~constant)
+        part[tuple(resident.T)] = np.arange(slots, slots + len(resident), dtype=np.uint32)
+        slots += len(resident)
+        residents.append(resident)
+    moved = level_of_brick > 0
+    table[:counts[0][2]][moved] = REDIRECT | level_of_brick[moved]
+    return table, np.concatenate(constants), residents, table_z
+
+
 def slot_origin(slot: int, grid) -> np.ndarray:
     """First texel (x, y, z) of a slot, counted as lib/brick_pool.glsl brick_slot_origin does
     (units of slots; times slot_side for texels)."""
     sx, sy, _ = grid
     return np.array([slot % sx, (slot // sx) % sy, slot // (sx * sy)], np.int64)
+
+
+def around(a: np.ndarray, op) -> np.ndarray:
+    """[bz, by, bx(, ...)]: op (np.minimum, np.maximum, np.logical_or, ...) over each brick and
+    the 26 neighbours its apron reaches (clamped at the faces)."""
+    p = np.pad(a, [(1, 1)] * 3 + [(0, 0)] * (a.ndim - 3), mode="edge")
+    out = a.copy()
+    nz, ny, nx = a.shape[:3]
+    for dz, dy, dx in np.ndindex(3, 3, 3):
+        out = op(out, p[dz:dz + nz, dy:dy + ny, dx:dx + nx])
+    return out
 
 
 def constant_bricks(brick_min: np.ndarray, brick_max: np.ndarray) -> np.ndarray:
@@ -102,16 +144,8 @@ def constant_bricks(brick_min: np.ndarray, brick_max: np.ndarray) -> np.ndarray:
     if lo.ndim == 3:
         lo, hi = lo[..., None], hi[..., None]
     one = np.all(lo == hi, axis=-1)
-    same = one.copy()
-    pad_lo = np.pad(lo, ((1, 1), (1, 1), (1, 1), (0, 0)), mode="edge")
-    pad_one = np.pad(one, 1, mode="edge")
-    bz, by, bx = one.shape
-    for dz in range(3):
-        for dy in range(3):
-            for dx in range(3):
-                same &= pad_one[dz:dz + bz, dy:dy + by, dx:dx + bx]
-                same &= np.all(pad_lo[dz:dz + bz, dy:dy + by, dx:dx + bx] == lo, axis=-1)
-    return same
+    return around(one, np.logical_and) & np.all(around(lo, np.minimum) == around(lo, np.maximum),
+                                                axis=-1)
 
 
 def constant_values(brick_min: np.ndarray, constant: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -340,7 +374,7 @@ class BrickStore:
         # with one level every brick not resident is constant, and none is added)
         lo, hi = self.raw_ranges()
         uniform = np.all((lo == hi).reshape(lo.shape[:3] + (-1,)), axis=-1)
-        read = is_resident | (_dilated(is_resident) & ~uniform)
+        read = is_resident | (around(is_resident, np.logical_or) & ~uniform)
         reader = _CoreReader(self, read, densities, values)
         try:
             with ThreadPoolExecutor(SLAB_THREADS) as assemble:
@@ -521,16 +555,6 @@ class _SlotRows:
             i = first - self.first_slot
             yield first, self.ids[i:i + k], staged
             self.next_run += 1
-
-
-def _dilated(mask: np.ndarray) -> np.ndarray:
-    """[bz, by, bx]: True where the brick or one of its 26 neighbours is True."""
-    out = mask.copy()
-    padded = np.pad(mask, 1)
-    nz, ny, nx = mask.shape
-    for dz, dy, dx in np.ndindex(3, 3, 3):
-        out |= padded[dz:dz + nz, dy:dy + ny, dx:dx + nx]
-    return out
 
 
 def _edge_padded(block: np.ndarray, shape) -> np.ndarray:

@@ -20,8 +20,8 @@ import math
 
 import numpy as np
 
-from ..bricks import (CONSTANT, REDIRECT, UNMAPPED, PoolPlan, bricks_reached, brick_counts,
-                      constant_values, level_needs, slot_bytes, slot_grid)
+from ..bricks import (PoolPlan, around, brick_counts, bricks_reached, constant_values,
+                      level_needs, level_tables, slot_bytes, slot_grid)
 from ..twins.camera import camera_frame
 from ..twins.majorant_grid import brick_density_range_grid
 
@@ -127,33 +127,13 @@ def mixed_plan(fine, coarse, cap: int, camera, half_extent, max_side: int,
 
 
 def _plan(fine, coarse, level_of, const_f, const_c, max_side: int, name: str) -> PoolPlan:
-    B = fine.brick
-    counts_f, counts_c = fine.counts, coarse.counts
-    bx, by, bz = counts_f
-    table = np.full((bz + counts_c[2], by, bx), UNMAPPED, np.uint32)
-    lo_f, _ = fine.ranges()
-    lo_c, _ = coarse.ranges()
-    # one table of constants for both levels: F's, then C's (a value twice is harmless)
-    constants_f, which_f = constant_values(lo_f, const_f)
-    constants_c, which_c = constant_values(lo_c, const_c)
-    constants = np.concatenate([constants_f, constants_c])
-    resident_f = np.argwhere((level_of == 0) & ~const_f)
-    need_c = level_needs(level_of, 1, fine.dims, coarse.dims, B)
-    resident_c = np.argwhere(need_c & ~const_c)
-    grid = slot_grid(len(resident_f) + len(resident_c), B, max_side)
-    top = table[:bz]
-    top[const_f] = CONSTANT | which_f[const_f]
-    top[level_of == 1] = REDIRECT | 1
-    for slot, (z, y, x) in enumerate(resident_f):
-        top[z, y, x] = slot
-    part = table[bz:bz + counts_c[2], :counts_c[1], :counts_c[0]]
-    sel = need_c & const_c
-    part[sel] = CONSTANT | (which_c[sel] + len(constants_f))
-    for slot, (z, y, x) in enumerate(resident_c, start=len(resident_f)):
-        part[z, y, x] = slot
-    return PoolPlan(fine.dims, B, fine.channels, table, constants, grid,
+    table, constants, (resident_f, resident_c), table_z = level_tables(
+        [(fine.dims, fine.ranges()[0], const_f), (coarse.dims, coarse.ranges()[0], const_c)],
+        level_of, fine.brick)
+    grid = slot_grid(len(resident_f) + len(resident_c), fine.brick, max_side)
+    return PoolPlan(fine.dims, fine.brick, fine.channels, table, constants, grid,
                     [(fine, resident_f, 0), (coarse, resident_c, 1)], name,
-                    level_dims=(fine.dims, coarse.dims), level_table_z=(0, bz))
+                    level_dims=(fine.dims, coarse.dims), level_table_z=tuple(table_z))
 
 
 def mixed_density_ranges(fine, coarse, level_of: np.ndarray, cells) -> tuple:
@@ -163,8 +143,8 @@ def mixed_density_ranges(fine, coarse, level_of: np.ndarray, cells) -> tuple:
     unioned over the bricks each macrocell's points read, as for one level."""
     lo_f, hi_f = (np.asarray(a, np.float32) for a in fine.ranges())
     lo_c, hi_c = (np.asarray(a, np.float32) for a in coarse.ranges())
-    lo_f, hi_f = _grown(lo_f, np.minimum), _grown(hi_f, np.maximum)
-    lo_c, hi_c = _grown(lo_c, np.minimum), _grown(hi_c, np.maximum)
+    lo_f, hi_f = around(lo_f, np.minimum), around(hi_f, np.maximum)
+    lo_c, hi_c = around(lo_c, np.minimum), around(hi_c, np.maximum)
     eff_lo, eff_hi = lo_f.copy(), hi_f.copy()
     for z, y, x in np.argwhere(level_of == 1):
         a, b = bricks_reached(fine.dims, coarse.dims, fine.brick, (x, y, z), (x, y, z))
@@ -172,14 +152,3 @@ def mixed_density_ranges(fine, coarse, level_of: np.ndarray, cells) -> tuple:
         eff_lo[z, y, x] = lo_c[sl].min(axis=(0, 1, 2))
         eff_hi[z, y, x] = hi_c[sl].max(axis=(0, 1, 2))
     return brick_density_range_grid(eff_lo, eff_hi, fine.dims, fine.brick, cells)
-
-
-def _grown(a: np.ndarray, op) -> np.ndarray:
-    """[bz, by, bx(, c)]: op over each brick and its 26 neighbours."""
-    pad = [(1, 1)] * 3 + [(0, 0)] * (a.ndim - 3)
-    p = np.pad(a, pad, mode="edge")
-    out = a.copy()
-    nz, ny, nx = a.shape[:3]
-    for dz, dy, dx in np.ndindex(3, 3, 3):
-        out = op(out, p[dz:dz + nz, dy:dy + ny, dx:dx + nx])
-    return out

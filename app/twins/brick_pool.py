@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..bricks import (APRON, CONSTANT, CONSTANTS_WIDTH, DEFAULT_BRICK_SIZE,  # noqa: F401
-                      FREE_SLOT, LEVEL_SHIFT, REDIRECT, UNMAPPED, brick_counts, constant_bricks,
-                      constant_values, level_needs, slot_grid, slot_origin, slot_side)
+                      FREE_SLOT, LEVEL_SHIFT, REDIRECT, brick_counts, constant_bricks,
+                      constant_values, level_tables, slot_grid, slot_origin, slot_side)
 from .medium import trilinear
 
 def brick_block(data: np.ndarray, b, brick: int) -> np.ndarray:
@@ -46,6 +46,16 @@ class Packed:
     @property
     def levels(self) -> int:
         return max(1, len(self.level_dims))
+
+    @property
+    def channels(self) -> int:
+        return 1 if self.atlas.ndim == 3 else self.atlas.shape[3]
+
+    def slot_texels(self, slot: np.ndarray) -> np.ndarray:
+        """The first texel (x, y, z) of slots (...), as brick_slot_origin counts them."""
+        sx, sy, _ = self.grid
+        return np.stack([slot % sx, (slot // sx) % sy, slot // (sx * sy)], -1) * \
+            slot_side(self.brick)
 
     def dims_of(self, level: int) -> tuple[int, int, int]:
         return self.dims if level == 0 else tuple(self.level_dims[level])
@@ -102,35 +112,17 @@ def pack_levels(levels: list[np.ndarray], level_of_brick: np.ndarray, brick: int
     point lands in (app/bricks.py level_needs), are resident or constant; slots level by level."""
     levels = [np.asarray(a, np.float32) for a in levels]
     dims = [tuple(a.shape[:3][::-1]) for a in levels]
-    counts = [brick_counts(d, brick) for d in dims]
-    bx0, by0, _ = counts[0]
-    table_z = np.cumsum([0] + [c[2] for c in counts[:-1]]).tolist()
-    table = np.full((sum(c[2] for c in counts), by0, bx0), UNMAPPED, np.uint32)
-    const_rows = [np.zeros(4, np.float32)]
-    index = {const_rows[0].tobytes(): 0}
-    blocks, owners = [], []
-    for level, (data, c) in enumerate(zip(levels, counts)):
-        need = (level_of_brick == 0) if level == 0 else level_needs(level_of_brick, level, dims[0],
-                                                                      dims[level], brick)
+    described = []
+    for data, d in zip(levels, dims):
         lo, hi = brick_ranges(data, brick)
-        constant = constant_bricks(lo, hi)
-        lo = lo if lo.ndim == 4 else lo[..., None]
-        part = table[table_z[level]:table_z[level] + c[2], :c[1], :c[0]]
-        for z, y, x in np.argwhere(need):
-            if constant[z, y, x]:
-                value = np.zeros(4, np.float32)
-                value[:lo.shape[-1]] = lo[z, y, x]
-                key = value.tobytes()
-                if key not in index:
-                    index[key] = len(const_rows)
-                    const_rows.append(value)
-                part[z, y, x] = CONSTANT | index[key]
-            else:
-                part[z, y, x] = len(blocks)
-                blocks.append(brick_block(data, (x, y, z), brick))
-                owners.append((level << LEVEL_SHIFT) | int(x + c[0] * (y + c[1] * z)))
-        if level == 0:
-            table[0:c[2]][level_of_brick > 0] = REDIRECT | level_of_brick[level_of_brick > 0]
+        described.append((d, lo, constant_bricks(lo, hi)))
+    table, constants, residents, table_z = level_tables(described, level_of_brick, brick)
+    blocks, owners = [], []
+    for level, (data, resident) in enumerate(zip(levels, residents)):
+        c = brick_counts(dims[level], brick)
+        for z, y, x in resident:
+            blocks.append(brick_block(data, (x, y, z), brick))
+            owners.append((level << LEVEL_SHIFT) | int(x + c[0] * (y + c[1] * z)))
     grid = slot_grid(len(blocks), brick, max_side)
     side = slot_side(brick)
     atlas = np.zeros((grid[2] * side, grid[1] * side, grid[0] * side) + levels[0].shape[3:],
@@ -140,8 +132,8 @@ def pack_levels(levels: list[np.ndarray], level_of_brick: np.ndarray, brick: int
         o = slot_origin(slot, grid) * side
         atlas[o[2]:o[2] + side, o[1]:o[1] + side, o[0]:o[0] + side] = block
         brick_of_slot[slot] = owner
-    return Packed(atlas, table, np.stack(const_rows), grid, brick, dims[0], brick_of_slot,
-                  tuple(dims), tuple(int(z) for z in table_z))
+    return Packed(atlas, table, constants, grid, brick, dims[0], brick_of_slot,
+                  tuple(dims), tuple(table_z))
 
 
 def _redirect(packed: Packed, uvw: np.ndarray):
@@ -171,12 +163,11 @@ def bricked_sample(packed: Packed, uvw: np.ndarray) -> np.ndarray:
     uvw = np.asarray(uvw, np.float64)
     _, t, b, entry = _redirect(packed, uvw)
     constant = (entry & CONSTANT) != 0
-    channels = 1 if packed.atlas.ndim == 3 else packed.atlas.shape[3]
+    channels = packed.channels
     out = np.empty(uvw.shape[:-1] + (channels,), np.float64)
     out[constant] = packed.constants[entry[constant] & ~CONSTANT][:, :channels]
     slot = np.where(constant, 0, entry)
-    origin = np.stack([slot % packed.grid[0], (slot // packed.grid[0]) % packed.grid[1],
-                       slot // (packed.grid[0] * packed.grid[1])], -1) * slot_side(packed.brick)
+    origin = packed.slot_texels(slot)
     coord = origin + APRON + (t - 0.5 - b * packed.brick)   # texel centres at integers
     resident = ~constant
     for c in range(channels):
@@ -189,14 +180,13 @@ def bricked_voxel(packed: Packed, v: np.ndarray) -> np.ndarray:
     """lib/brick_pool.glsl bricked_voxel at voxels v (..., 3) (x, y, z) inside the volume."""
     v = np.asarray(v, np.int64)
     b = np.clip(v // packed.brick, 0, np.asarray(brick_counts(packed.dims, packed.brick)) - 1)
-    entry = packed.table[b[..., 2], b[..., 1], b[..., 0]].astype(np.int64)
+    entry = packed.entry(b, 0)
     constant = (entry & CONSTANT) != 0
     slot = np.where(constant, 0, entry)
-    origin = np.stack([slot % packed.grid[0], (slot // packed.grid[0]) % packed.grid[1],
-                       slot // (packed.grid[0] * packed.grid[1])], -1) * slot_side(packed.brick)
+    origin = packed.slot_texels(slot)
     t = origin + APRON + v - b * packed.brick
     got = packed.atlas[t[..., 2], t[..., 1], t[..., 0]]
-    channels = 1 if packed.atlas.ndim == 3 else packed.atlas.shape[3]
+    channels = packed.channels
     got = got.reshape(v.shape[:-1] + (channels,)).astype(np.float64)
     got[constant] = packed.constants[entry[constant] & ~CONSTANT][:, :channels]
     return got
@@ -206,7 +196,7 @@ def bricked_voxel_range(packed: Packed, v: np.ndarray) -> tuple[np.ndarray, np.n
     """lib/brick_pool.glsl bricked_voxel_range at voxels v (..., 3): (least, largest), (..., C);
     (one level: the voxel's value twice)."""
     v = np.asarray(v, np.int64)
-    channels = 1 if packed.atlas.ndim == 3 else packed.atlas.shape[3]
+    channels = packed.channels
     b = np.clip(v // packed.brick, 0, np.asarray(packed.counts_of(0)) - 1)
     entry = packed.entry(b, 0)
     lo = np.empty(v.shape[:-1] + (channels,), np.float64)
@@ -222,9 +212,7 @@ def bricked_voxel_range(packed: Packed, v: np.ndarray) -> tuple[np.ndarray, np.n
     face = here & ((entry & CONSTANT) == 0) & np.any((local == 0) | (local == packed.brick - 1), -1)
     if packed.levels > 1 and face.any():
         slot = entry[face]
-        origin = np.stack([slot % packed.grid[0], (slot // packed.grid[0]) % packed.grid[1],
-                           slot // (packed.grid[0] * packed.grid[1])], -1) * \
-            slot_side(packed.brick) + APRON + local[face]
+        origin = packed.slot_texels(slot) + APRON + local[face]
         f_lo, f_hi = lo[face], hi[face]
         for off in np.ndindex(3, 3, 3):
             i = origin + np.asarray(off) - 1
@@ -243,9 +231,7 @@ def bricked_voxel_range(packed: Packed, v: np.ndarray) -> tuple[np.ndarray, np.n
         const = (e & CONSTANT) != 0
         vals = np.empty((8,) + lo[at].shape, np.float64)
         slot = np.where(const, 0, e)
-        origin = np.stack([slot % packed.grid[0], (slot // packed.grid[0]) % packed.grid[1],
-                           slot // (packed.grid[0] * packed.grid[1])], -1) * \
-            slot_side(packed.brick) + APRON - lb * packed.brick
+        origin = packed.slot_texels(slot) + APRON - lb * packed.brick
         first = np.floor(t - 0.5).astype(np.int64)
         for k, off in enumerate(np.ndindex(2, 2, 2)):
             w = np.clip(first + np.asarray(off[::-1]), lb * packed.brick - 1,
