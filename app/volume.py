@@ -655,8 +655,8 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
     many = len(shown) > 1
     spacing = spec.spacing or file_spacing or (1.0, 1.0, 1.0)
 
-    def source_of(a, ranges):
-        return ZarrSource(a, axes, time, shown[0], ranges[0], where, spec.replace_nonfinite,
+    def source_of(a, ranges, step=time):
+        return ZarrSource(a, axes, step, shown[0], ranges[0], where, spec.replace_nonfinite,
                           normalise, channels=shown if many else None, value_ranges=ranges)
 
     source = source_of(array, [None] * len(shown))
@@ -670,8 +670,9 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
     if steps > 1 and any(d is None for d in domains) and array.dtype not in (np.uint8, np.int8):
         # SPEC.md, Time series: every step normalised alike, by the whole series' range where
         # the scene gives none: each other step's range pass (once per store)
-        series_lows, series_highs = _series_extremes(p, array, axes, shown, many, brick, time,
-                                                     lows, highs, spec.replace_nonfinite)
+        series_lows, series_highs = _series_extremes(
+            p, steps, time, lows, highs, lambda step: source_of(array, [None] * len(shown), step),
+            brick, (axes, tuple(shown), spec.replace_nonfinite))
     ranges, raws = [], []
     for c, (domain, label) in enumerate(zip(domains, labels)):
         # the channel's least and largest raw values (of the series, where it is one),
@@ -698,29 +699,25 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
 _SERIES_EXTREMES: dict = {}
 
 
-def _series_extremes(p, array, axes: str, shown, many: bool, brick: int, time: int, lows, highs,
-                     replace_nonfinite=None):
+def _series_extremes(p, steps: int, time: int, lows, highs, source_at, brick: int, reading):
     """Per channel shown, the least and largest raw values over every step of a bricked Zarr
-    time series (`lows`, `highs`: step `time`'s, already read): the other steps' range passes,
-    once per store (kept while its files are unchanged)."""
-    from .bricks import BrickStore, ZarrSource
+    time series (`lows`, `highs`: step `time`'s, already read; source_at(step): a step's
+    ZarrSource; `reading`: what else the values depend on): the other steps' range passes, once
+    per store (kept while its files are unchanged)."""
+    from .bricks import BrickStore
     try:
         stamp = p.stat().st_mtime_ns
     except OSError:
         stamp = None
-    key = (str(p.resolve()), stamp, axes, tuple(shown), replace_nonfinite)
+    key = (str(p.resolve()), stamp, reading)
     if key not in _SERIES_EXTREMES or stamp is None:
         lo, hi = np.array(lows), np.array(highs)
-        for step in range(dict(zip(axes, array.shape))["t"]):
+        for step in range(steps):
             if step == time:
                 continue
-            source = ZarrSource(array, axes, step, shown[0], None, str(p), replace_nonfinite,
-                                normalise,
-                                channels=shown if many else None,
-                                value_ranges=[None] * len(shown))
-            step_lo, step_hi = BrickStore(source, brick, p.name).raw_ranges()
-            lo = np.minimum(lo, step_lo.reshape(-1, len(shown)).min(axis=0))
-            hi = np.maximum(hi, step_hi.reshape(-1, len(shown)).max(axis=0))
+            step_lo, step_hi = BrickStore(source_at(step), brick, p.name).raw_ranges()
+            lo = np.minimum(lo, step_lo.reshape(-1, len(lo)).min(axis=0))
+            hi = np.maximum(hi, step_hi.reshape(-1, len(hi)).max(axis=0))
         _SERIES_EXTREMES.clear()          # one series at a time
         _SERIES_EXTREMES[key] = (lo, hi)
     return _SERIES_EXTREMES[key]

@@ -71,13 +71,7 @@ class ProgressiveOpen:
                 rows = placement.plan.rows()
                 try:
                     for item in rows:
-                        while not self._cancelled.is_set():
-                            try:
-                                self._blocks.put(item, timeout=0.1)
-                                break
-                            except queue.Full:
-                                pass
-                        if self._cancelled.is_set():
+                        if not self._put(item):
                             return
                 finally:
                     rows.close()     # its readers stopped, their shared memory unlinked
@@ -85,15 +79,18 @@ class ProgressiveOpen:
             self.error = exc
         finally:
             self._planned.set()
-            self._put_done()
+            self._put(_DONE)
 
-    def _put_done(self) -> None:
+    def _put(self, item) -> bool:
+        """Queues item for the context's thread, waiting while the queue is full; False if the
+        open was cancelled meanwhile."""
         while not self._cancelled.is_set():
             try:
-                self._blocks.put(_DONE, timeout=0.1)
-                return
+                self._blocks.put(item, timeout=0.1)
+                return True
             except queue.Full:
                 pass
+        return False
 
     # ---- the context's thread ---------------------------------------------------------------
     @property
