@@ -78,6 +78,26 @@ def ctx():
     context.release()
 
 
+@pytest.fixture(scope="module")
+def _checked():
+    """A context of the module's own with the checking build (app/gl/checks.py) and its counts."""
+    from app.gl.checks import enable_checks
+    from app.gl.context import create_headless_context
+    context = create_headless_context()
+    checks = enable_checks(context)
+    yield context, checks
+    context.release()
+
+
+@pytest.fixture
+def checked_ctx(_checked):
+    """(context, checks) of the checking build (programs cached per context elsewhere in the
+    suite were compiled without it), current for the test (each test starts with the session's
+    context current)."""
+    _checked[0].__enter__()
+    return _checked
+
+
 def _make_session_context_current() -> None:
     """Tests that run the CLI or the benchmark in-process create a context of their own, which
     stays current after they end. The session context's objects, among them the programs cached

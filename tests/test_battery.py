@@ -9,29 +9,11 @@ import numpy as np
 import pytest
 
 from app.bench.scenes import BATTERY_SCENES, battery_scene
-from app.gl.checks import check_sites, enable_checks
-from app.gl.context import create_headless_context
+from app.gl.checks import check_sites
 from app.gl.shaders import compute_program, set_uniforms
 from app.gl.dispatch_log import DispatchLog
 from app.render.dispatch_budget import DISPATCH_BOUND_MS, device_slowdown
 from app.render.renderer import METHODS, Renderer
-
-
-@pytest.fixture(scope="module")
-def _checked():
-    context = create_headless_context()
-    checks = enable_checks(context)
-    yield context, checks
-    context.release()
-
-
-@pytest.fixture
-def checked_ctx(_checked):
-    """A context of its own with the checking build (programs cached per context elsewhere in the
-    suite were compiled without it), current for the test (conftest makes the session's current
-    before each test)."""
-    _checked[0].__enter__()
-    return _checked
 
 
 def test_every_site_of_the_checking_build_is_named():

@@ -56,22 +56,6 @@ def test_bricked_volume_renders_the_same_image_in_the_fragment_raymarcher(ctx):
     assert err < 1e-5, err
 
 
-@pytest.fixture(scope="module")
-def _checked():
-    from app.gl.checks import enable_checks
-    from app.gl.context import create_headless_context
-    context = create_headless_context()
-    checks = enable_checks(context)
-    yield context, checks
-    context.release()
-
-
-@pytest.fixture
-def checked_ctx(_checked):
-    _checked[0].__enter__()
-    return _checked
-
-
 def test_page_miss_check_stays_zero_with_every_method(checked_ctx):
     """The checking build (lib/brick_pool.glsl CHECK_SITE_PAGE_MISS) over every method and the
     bake of a bricked volume: no slot holds another brick than the page table says."""

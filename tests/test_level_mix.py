@@ -7,7 +7,6 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-import pytest
 
 from app.bench.metrics import rrmse
 from app.bench.scenes import battery_scene
@@ -114,19 +113,8 @@ def test_bricks_worth_a_slot_come_first_and_the_rest_stay_coarse(ctx):
         r.release()
 
 
-@pytest.fixture(scope="module")
-def _checked():
-    from app.gl.checks import enable_checks
-    from app.gl.context import create_headless_context
-    context = create_headless_context()
-    checks = enable_checks(context)
-    yield context, checks
-    context.release()
-
-
-def test_every_method_reads_the_mixed_pool_with_no_page_miss(_checked):
-    ctx, checks = _checked
-    ctx.__enter__()
+def test_every_method_reads_the_mixed_pool_with_no_page_miss(checked_ctx):
+    ctx, checks = checked_ctx
     r = _renderer(ctx, _scene(32, 24))
     try:
         assert r.resources.volume_tex.levels == 2
