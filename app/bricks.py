@@ -295,6 +295,11 @@ class BrickStore:
         self.reads[bz, by, x0:x1] += 1
         return block
 
+    @property
+    def ranges_read(self) -> bool:
+        """Whether the range pass has been read (raw_ranges reads it the first time)."""
+        return self._ranges is not None
+
     def ranges(self) -> tuple[np.ndarray, np.ndarray]:
         """Each brick's least and largest density [bz, by, bx(, c)]: the raw ones as densities
         (the mapping is monotonic, so the least raw value's density is the least density)."""

@@ -112,6 +112,22 @@ class Volume:
         return self.raw_dtype == "uint8" and all(
             r == (0.0, 255.0) for r in (self.channel_ranges or (self.value_range,)))
 
+    def raw_extents(self, read: bool = False) -> tuple[tuple[float, float], ...] | None:
+        """Each channel's least and largest raw value ((raw_min, raw_max) for one channel). A
+        store read brick by brick whose range pass was not needed has them once it is read
+        (`read`: read it now, every brick once); None until then."""
+        known = self.channel_raw or ((self.raw_min, self.raw_max),)
+        if all(np.isfinite(v) for pair in known for v in pair):
+            return known
+        if self.bricks is None or not (read or self.bricks.ranges_read):
+            return None
+        lo, hi = self.bricks.raw_ranges()
+        if lo.ndim == 3:
+            lo, hi = lo[..., None], hi[..., None]
+        n = lo.shape[-1]
+        return tuple((float(a), float(b)) for a, b in zip(lo.reshape(-1, n).min(axis=0),
+                                                         hi.reshape(-1, n).max(axis=0)))
+
     def histogram(self, bins: int = 128, channel: int = 0) -> np.ndarray:
         data = self.channel(channel)
         if hasattr(data, "sample"):   # read brick by brick
@@ -661,13 +677,22 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
 
     source = source_of(array, [None] * len(shown))
     store = BrickStore(source, brick, p.name)
-    raw_lo, raw_hi = store.raw_ranges()
-    if not many:
-        raw_lo, raw_hi = raw_lo[..., None], raw_hi[..., None]
-    lows = raw_lo.reshape(-1, len(shown)).min(axis=0)
-    highs = raw_hi.reshape(-1, len(shown)).max(axis=0)
+    # The range pass (every brick read once) is needed here only where a channel's values map
+    # by its own least and largest; else it waits for the placement, which may never need it
+    # (a cap that a coarser level shows that level 0 exceeds: app/render/volume_placement.py),
+    # and the raw extremes are NaN until it is read (Volume.raw_extents).
+    by_extremes = (any(d is None for d in domains)
+                   and array.dtype not in (np.uint8, np.int8))
+    if by_extremes:
+        raw_lo, raw_hi = store.raw_ranges()
+        if not many:
+            raw_lo, raw_hi = raw_lo[..., None], raw_hi[..., None]
+        lows = raw_lo.reshape(-1, len(shown)).min(axis=0)
+        highs = raw_hi.reshape(-1, len(shown)).max(axis=0)
+    else:
+        lows = highs = np.full(len(shown), np.nan)
     series_lows, series_highs = lows, highs
-    if steps > 1 and any(d is None for d in domains) and array.dtype not in (np.uint8, np.int8):
+    if steps > 1 and by_extremes:
         # SPEC.md, Time series: every step normalised alike, by the whole series' range where
         # the scene gives none: each other step's range pass (once per store)
         series_lows, series_highs = _series_extremes(
@@ -678,7 +703,8 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
         # the channel's least and largest raw values (of the series, where it is one),
         # normalised as the whole loader normalises the channel: its domain, else the type's
         # (8-bit), else these (refused where equal); raw_min/max are the step's own
-        extremes = np.array([series_lows[c], series_highs[c]], raw_lo.dtype)
+        extremes = (np.array([series_lows[c], series_highs[c]], array.dtype) if by_extremes
+                    else np.zeros(2, array.dtype))     # (a domain: the values are not looked at)
         ranges.append(normalise(extremes, domain, label)[1])
         raws.append((float(lows[c]), float(highs[c])))
     source.value_range, source.value_ranges = ranges[0], ranges

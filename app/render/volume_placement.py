@@ -14,7 +14,8 @@ from ..twins.majorant_grid import macrocell_counts
 from .level_mix import mixed_density_ranges, mixed_plan
 from ..bricks import (DEFAULT_BRICK_SIZE, ArraySource, BrickStore, LazyData, PoolPlan, box_filtered,
                       brick_counts, refuse_cap_below_brick, slot_bytes, slot_grid,
-                      source_box_filtered, texel_bytes)
+                      source_box_filtered, source_whole, texel_bytes)
+from ..level_bound import bound_level, varying_bricks
 from ..gl.brick_pool import upload_plan
 from ..gl.textures import device_available, volume_texture
 from ..volume import Volume, VolumeError
@@ -66,6 +67,33 @@ def level_bytes(store: BrickStore, channels: int, exact_uint8: bool, max_side: i
             + 4 * int(np.prod(brick_counts(store.dims, store.brick))) + 16 * constants)
 
 
+def _resident_at_least(volume: Volume, store: BrickStore, bounds: dict):
+    """(a lower bound on `store`'s bricks that are not constant, the coarser level's source it
+    was read from) from the volume's own coarser levels (app/level_bound.py), without the
+    store's range pass; None where no level of the store can tell."""
+    source = bound_level(volume.dims, volume.levels, store.brick)
+    if source is None:
+        return None
+    if id(source) not in bounds:
+        bounds[id(source)] = source_whole(source)
+    varying = varying_bricks(bounds[id(source)], volume.dims, store.brick)
+    return int(np.count_nonzero(varying)), source
+
+
+def _may_fit(at_least, store: BrickStore, channels: int, exact_uint8: bool, max_side: int,
+             cap: int) -> bool:
+    """Whether a level with at least at_least[0] bricks that are not constant may still fit one
+    atlas and the cap (level_bytes' least: those bricks' slots, the page table, one constant)."""
+    count = at_least[0]
+    try:
+        slot_grid(count, store.brick, max_side)
+    except ValueError:
+        return False
+    least = (count * slot_bytes(store.brick, channels, exact_uint8)
+             + 4 * int(np.prod(brick_counts(store.dims, store.brick))) + 16)
+    return least <= cap
+
+
 @dataclasses.dataclass
 class Placement:
     """Where a volume goes, decided on the host (no GL calls: app/render/progressive_open.py
@@ -103,15 +131,33 @@ def plan_placement(volume: Volume, limits, memory_bytes: int | None = None,
         cap, cap_name = available, where
     if cap is not None:
         refuse_cap_below_brick(cap, brick, channels, exact, volume.name)
-    current, level, first, first_need = volume, 0, None, None
+    current, level, over_cap = volume, 0, None
     finer = None                       # (the level one finer, its store)
+    bounds: dict = {}                  # the bound's coarse levels read, by source
     while True:
         store = _store(current, brick)
-        need = level_bytes(store, channels, current.exact_uint8, max_side)
-        if first is None:
-            first, first_need = store.resident_count(), need
-        if need is not None and (cap is None or need <= cap):
-            break
+        at_least = None
+        if cap is not None and not store.ranges_read:
+            at_least = _resident_at_least(current, store, bounds)
+        if at_least is not None and not _may_fit(at_least, store, channels, current.exact_uint8,
+                                                 max_side, cap):
+            need = None                # over the cap: its range pass is not read
+            if over_cap is None:
+                count, source = at_least
+                nx, ny, nz = source.shape[:3][::-1]
+                over_cap = (f"level 0 has at least {count} bricks that are not constant (seen "
+                            f"in its {nx} x {ny} x {nz} level), over the {_gib(cap)} cap "
+                            f"({cap_name})")
+        else:
+            need = level_bytes(store, channels, current.exact_uint8, max_side)
+            if over_cap is None:
+                first = store.resident_count()
+                over_cap = (f"level 0's {first} bricks exceed one atlas texture of "
+                            f"{max_side}^3 texels" if need is None else
+                            f"level 0's {first} bricks take {_gib(need)}, over the "
+                            f"{_gib(cap)} cap ({cap_name})")
+            if need is not None and (cap is None or need <= cap):
+                break
         if max(current.dims) <= brick:
             raise VolumeError(f"{volume.name}: even one brick of {brick}^3 voxels exceeds the "
                               f"{_gib(cap)} of {cap_name}")
@@ -136,12 +182,8 @@ def plan_placement(volume: Volume, limits, memory_bytes: int | None = None,
             shown.derived[("density ranges", cells)] = ranges
             return Placement(shown, plan)
     if level > 0:
-        why = (f"level 0's {first} bricks exceed one atlas texture of {max_side}^3 texels"
-               if first_need is None else
-               f"level 0's {first} bricks take {_gib(first_need)}, over the {_gib(cap)} cap "
-               f"({cap_name})")
         nx, ny, nz = current.dims
-        notes += (f"level {level}, {2 ** level}x coarser ({nx} x {ny} x {nz}): {why}",)
+        notes += (f"level {level}, {2 ** level}x coarser ({nx} x {ny} x {nz}): {over_cap}",)
     return Placement(dataclasses.replace(current, bricks=store, notes=notes),
                      store.pool_plan(max_side))
 

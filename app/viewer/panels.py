@@ -163,7 +163,12 @@ def data_section(v) -> None:
     imgui.text(f"dims {vol.dims[0]} x {vol.dims[1]} x {vol.dims[2]}   {vol.raw_dtype}")
     sp = vol.spacing
     imgui.text(f"spacing {sp[0]:g}, {sp[1]:g}, {sp[2]:g}")
-    imgui.text(f"values {vol.raw_min:g} .. {vol.raw_max:g}; 0..1 = {vol.value_range[0]:g} .. {vol.value_range[1]:g}")
+    # the values as loaded (level 0 of a store shown at a coarser level): a store whose range
+    # pass was not needed has them once read
+    extents = (v.session.renderer.resources.given_volume or vol).raw_extents()
+    values = (f"values {extents[0][0]:g} .. {extents[0][1]:g}" if extents else
+              "values: not read (the scene's range maps them)")
+    imgui.text(f"{values}; 0..1 = {vol.value_range[0]:g} .. {vol.value_range[1]:g}")
     xs, heights = v.histogram()
     if implot.begin_plot("##histogram", ImVec2(-1, 90 * v.ui_scale),
                          implot.Flags_.no_title | implot.Flags_.no_legend | implot.Flags_.no_menus
