@@ -185,3 +185,21 @@ def test_without_a_value_range_the_open_reads_the_range_pass(tmp_path):
     assert lazy.bricks.ranges_read
     (extent,) = lazy.raw_extents()
     assert extent[0] == 0.0 and extent[1] > 60000
+
+
+def test_mixed_levels_read_no_finer_range_pass_where_no_brick_is_worth_a_slot(tmp_path):
+    """Levels mixed by the camera: seen from far (no voxel of level 1 over the footprint that
+    earns a slot), level 0's range pass is still not read."""
+    from dataclasses import replace
+    brick = 16
+    scene = _store(tmp_path)
+    lazy = load_scene_volume(scene, brick=brick)
+    from app.bricks import slot_bytes
+    cap = level_bytes(BrickStore(lazy.levels[0], brick), 1, False, 2048) + 4 * slot_bytes(
+        brick, 1, False)           # room for a few of level 0's bricks, not for level 0
+    far = replace(scene.camera, eye=(0.0, 0.0, 40.0), target=(0.0, 0.0, 0.0))
+    placed = plan_placement(lazy, LIMITS, cap, brick, camera=far)
+    assert placed.shown.dims == (48, 48, 48) and not lazy.bricks.ranges_read
+    near = replace(scene.camera, eye=(0.0, 0.0, 0.9), target=(0.0, 0.0, 0.0))
+    placed = plan_placement(lazy, LIMITS, cap, brick, camera=near)
+    assert lazy.bricks.ranges_read            # here some bricks are worth one: it is read

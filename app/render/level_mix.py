@@ -74,17 +74,20 @@ def mixed_plan(fine, coarse, cap: int, camera, half_extent, max_side: int,
     B = fine.brick
     channels = fine.channels
     per_slot = slot_bytes(B, channels, exact_uint8)
-    const_f = fine.constant()
-    const_c = coarse.constant()
     fdims, cdims = fine.dims, coarse.dims
     counts_f, counts_c = fine.counts, coarse.counts
-    level_of = np.where(const_f, 0, 1).astype(np.int64)        # F's constant bricks read F
     px_c = footprints(fdims, B, half_extent, camera) * (np.max(np.asarray(fdims) /
                                                                np.asarray(cdims)))
-    candidates = np.argwhere(~const_f & (px_c > MIX_FOOTPRINT_PX))
+    seen = px_c > MIX_FOOTPRINT_PX
+    # which of F's bricks are constant needs F's range pass (seconds at 2048^3): only where the
+    # camera sees some brick large enough to be worth a slot
+    const_f = fine.constant() if seen.any() else None
+    candidates = np.argwhere(~const_f & seen) if const_f is not None else np.empty((0, 3))
     if not len(candidates):
         return None, (f"no brick of the finer level is seen with a voxel of the shown level "
                       f"over {MIX_FOOTPRINT_PX} px")
+    const_c = coarse.constant()
+    level_of = np.where(const_f, 0, 1).astype(np.int64)        # F's constant bricks read F
     order = np.argsort(-px_c[tuple(candidates.T)], kind="stable")
     table_texels = (counts_f[0] * counts_f[1] * (counts_f[2] + counts_c[2]))
 
