@@ -32,6 +32,15 @@ def _blob(shape=(24, 24, 64)) -> np.ndarray:
     return np.round(d).astype(np.uint16)
 
 
+def _written(raw, fill=0) -> np.ndarray:
+    """[bz, by, bx] 1 where a brick of BRICK voxels holds a raw value other than `fill` (in a
+    channel of raw [z, y, x(, c)]), else 0: with chunks of one brick, the bricks whose chunks Zarr
+    wrote (it leaves out a chunk equal to the fill value), the only ones the range pass reads."""
+    lo, hi = brick_ranges(raw, BRICK)
+    off = (lo != fill) | (hi != fill)
+    return (off if off.ndim == 3 else off.any(axis=-1)).astype(np.int64)
+
+
 def _zarr(tmp_path, data, chunks=(8, 8, 8)):
     import zarr
     path = tmp_path / "blob.zarr"
@@ -45,14 +54,19 @@ def test_zarr_store_reads_constant_bricks_once_and_uploads_only_the_others(ctx, 
     volume = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK)
     assert isinstance(volume.data, LazyData) and volume.dims == (64, 24, 24)
     store = volume.bricks
-    assert np.all(store.reads == 1)                      # the range pass: every brick once
+    # the range pass: every brick Zarr wrote once; the others (all 0, the fill value, so never
+    # written) not at all
+    written = _written(data)
+    assert 0 < written.sum() < written.size
+    np.testing.assert_array_equal(store.reads, written)
     assert (volume.raw_min, volume.raw_max) == (0.0, float(data.max()))
     shown, pool = place_volume(ctx, volume, brick_size=BRICK)
     try:
         constant = store.constant()
         assert constant.sum() >= constant.size // 2       # mostly empty
-        assert np.all(store.reads[constant] == 1)         # never read again
-        assert np.all(store.reads[~constant] == 2)        # read once more, to upload
+        np.testing.assert_array_equal(store.reads[constant], written[constant])   # not again
+        # read once more, to upload
+        np.testing.assert_array_equal(store.reads[~constant], written[~constant] + 1)
         assert pool.uploads == int((~constant).sum())
         assert pool.writes == -(-pool.uploads // pool.grid[0])   # a row of slots a write
         # what was uploaded is the whole loader's volume, bricked
@@ -266,7 +280,8 @@ def test_reads_in_processes_equal_threads(tmp_path, monkeypatch, channels):
     the same bricks with aprons as the threads' reads, each brick counted as often (one channel,
     and several read as [z, y, x, c])."""
     import app.bricks as bricks
-    path = (_zarr(tmp_path, _blob()) if channels == 1
+    raw = _blob() if channels == 1 else np.moveaxis(_channel_blobs(channels), 0, -1)
+    path = (_zarr(tmp_path, raw) if channels == 1
             else _zarr_channels(tmp_path, _channel_blobs(channels)))
     threads = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
     monkeypatch.setattr(bricks, "PROCESS_READ_VOXELS", 1)
@@ -276,7 +291,8 @@ def test_reads_in_processes_equal_threads(tmp_path, monkeypatch, channels):
     assert procs.channels == channels
     for a, b in zip(threads.raw_ranges(), procs.raw_ranges()):
         np.testing.assert_array_equal(a, b)
-    assert np.all(procs.reads == 1)
+    written = _written(raw)     # (the bricks whose chunks were never written are not read)
+    np.testing.assert_array_equal(procs.reads, written)
     # the upload's reads too: each resident brick with its apron as a clamped read gives it,
     # read once more; constant bricks not at all
     _, _, _, resident = procs.layout(4096)
@@ -287,7 +303,7 @@ def test_reads_in_processes_equal_threads(tmp_path, monkeypatch, channels):
     assert seen == len(resident) > 0
     is_resident = np.zeros(procs.reads.shape, bool)
     is_resident[tuple(resident.T)] = True
-    assert np.all(procs.reads[is_resident] == 2) and np.all(procs.reads[~is_resident] == 1)
+    np.testing.assert_array_equal(procs.reads, written + is_resident)
 
 
 # ---- several channels: a bricked Zarr store reads the scene's channels ---------------------------
@@ -372,13 +388,14 @@ def test_bricked_zarr_store_of_channels_is_the_whole_loaders_volume(ctx, tmp_pat
     _same_volume(lazy, whole)
     assert lazy.channel_count == count and lazy.bricks.channels == count
     assert lazy.exact_uint8 == (dtype == np.uint8)
-    assert np.all(lazy.bricks.reads == 1)
+    written = _written(np.moveaxis(data, 0, -1))   # the range pass reads these alone, once
+    np.testing.assert_array_equal(lazy.bricks.reads, written)
     constant = lazy.bricks.constant()
     lo, hi = lazy.bricks.ranges()
     assert np.any(constant_bricks(lo[..., 1], hi[..., 1]) & ~constant)   # one channel alone
     np.testing.assert_array_equal(constant, constant_bricks(*brick_ranges(whole.data, BRICK)))
     _uploaded_is_packed(ctx, lazy, whole.data)
-    assert np.all(lazy.bricks.reads[constant] == 1) and np.all(lazy.bricks.reads[~constant] == 2)
+    np.testing.assert_array_equal(lazy.bricks.reads, written + ~constant)
 
 
 @pytest.mark.parametrize("channels", [
@@ -558,7 +575,7 @@ def test_upload_from_processes_maps_there_and_moves_bricks_through_shared_memory
         assert store.handed == {"shared": len(blocks.names), "pickled": 0}
         assert pool.exact_uint8 == (dtype == "uint8")
         constant = store.constant()
-        assert np.all(store.reads[constant] == 1) and np.all(store.reads[~constant] == 2)
+        np.testing.assert_array_equal(store.reads, _written(data) + ~constant)
         n = int((~constant).sum())
         assert pool.uploads == n and pool.writes == -(-n // pool.grid[0]) < n   # a row a write
         want = pack(whole.data, BRICK)
@@ -679,7 +696,7 @@ def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
     assert not blocks.left()
     is_resident = np.zeros(procs.reads.shape, bool)
     is_resident[tuple(resident.T)] = True
-    assert np.all(procs.reads[is_resident] == 2) and np.all(procs.reads[~is_resident] == 1)
+    np.testing.assert_array_equal(procs.reads, _written(data) + is_resident)
 
 
 @pytest.mark.parametrize("channels", [1, 2])
