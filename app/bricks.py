@@ -8,11 +8,11 @@ several layers at once on threads (Zarr's decoders and NumPy's reductions run ou
 each of a store's chunks is decoded once a pass. A Zarr store's bricks whose chunks were never
 written (Zarr leaves out a chunk equal to the fill value; its store listed once, stored_chunks)
 are not read: each holds the fill value alone; a layer holding some is read as runs along x of its
-written bricks. The upload pass reads only the bricks that are not
-constant, each once, as runs along x without aprons (chunk-aligned: a pencil with its apron would
+written bricks. The upload pass reads only the bricks that are not constant and hold more than
+one value, each once, as runs along x without aprons (chunk-aligned: a pencil with its apron would
 decode the 3 x 3 rows of chunks around it, 9 times the data); each brick's apron is assembled from
-its neighbours' voxels: those read, or a constant brick's value (a constant brick, the brick and
-its apron one value, is never read again nor uploaded). The upload's readers map the bricks to
+its neighbours' voxels: those read, or a brick of one value's value (a constant brick, the brick
+and its apron one value, is never read again nor uploaded). The upload's readers map the bricks to
 densities themselves, and readers in processes hand them over in shared memory (_CoreReader), not
 pickled. `reads` counts, per brick, how many times its voxels were read.
 """
@@ -528,9 +528,10 @@ class BrickStore:
         order, once its bricks and every earlier layer's are written. `densities`: mapped by the
         source (app/volume.py normalise) where they are read. Every brick that is not constant is
         read once (runs along x, no apron, layers ahead in processes or on threads; from
-        processes through shared memory, _CoreReader); an apron voxel is its neighbour's: read,
-        or a constant brick's value (its least value), or at the volume's faces the edge voxel
-        repeated (as clamped texture coordinates read it)."""
+        processes through shared memory, _CoreReader), but for one of a single value (its
+        least, from the range pass); an apron voxel is its neighbour's: read, or a brick of one
+        value's value, or at the volume's faces the edge voxel repeated (as clamped texture
+        coordinates read it)."""
         bx, by, bz = self.counts
         values = (self.ranges() if densities else self.raw_ranges())[0]
         is_resident = np.zeros((bz, by, bx), bool)
@@ -538,12 +539,15 @@ class BrickStore:
             is_resident[tuple(np.asarray(resident).T)] = True
         layers_wanted = [int(z) for z in np.nonzero(is_resident.any(axis=(1, 2)))[0]]
         need = sorted({n for z in layers_wanted for n in (z - 1, z, z + 1) if 0 <= n < bz})
-        # the cores read: the resident bricks', and their neighbours' that hold more than one
+        # the cores read: the resident bricks' and their neighbours' that hold more than one
         # value (with mixed levels a neighbour may vary and yet not be resident at this level;
-        # with one level every brick not resident is constant, and none is added)
+        # with one level every brick not resident is constant, and none is added). A brick of
+        # one value (resident where a neighbour varies: a Zarr store's unwritten brick next to
+        # a written one, say) is not read: its voxels are that value, as its apron is for its
+        # neighbours
         lo, hi = self.raw_ranges()
         uniform = np.all((lo == hi).reshape(lo.shape[:3] + (-1,)), axis=-1)
-        read = is_resident | (around(is_resident, np.logical_or) & ~uniform)
+        read = around(is_resident, np.logical_or) & ~uniform
         reader = _CoreReader(self, read, densities, values)
         try:
             with ThreadPoolExecutor(SLAB_THREADS) as assemble:
@@ -575,7 +579,7 @@ class BrickStore:
                     out: np.ndarray) -> None:
         """Brick (z, y, x) with its apron into out [B + 2, B + 2, B + 2(, c)], from the cores of
         layers z - 1 .. z + 1 (near {n: {(y, x): core}}) and the other bricks' one value
-        (values [bz, by, bx(, c)]): per axis, the neighbour below's last voxel (at the volume's
+        (values [bz, by, bx(, c)]; the brick's own too, where it holds one): per axis, the neighbour below's last voxel (at the volume's
         first face the brick's own first one), the brick's, the neighbour above's first (at the
         last face the brick's own last)."""
         B = self.brick

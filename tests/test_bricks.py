@@ -41,6 +41,14 @@ def _written(raw, fill=0) -> np.ndarray:
     return (off if off.ndim == 3 else off.any(axis=-1)).astype(np.int64)
 
 
+def _varied(raw, brick=BRICK) -> np.ndarray:
+    """[bz, by, bx] 1 where a brick holds more than one raw value (in a channel of raw [z, y,
+    x(, c)]), else 0: the bricks the upload reads (a resident brick of one value, next to one that
+    varies, is that value without a read)."""
+    lo, hi = brick_ranges(raw, brick)
+    return (lo != hi).reshape(lo.shape[:3] + (-1,)).any(axis=-1).astype(np.int64)
+
+
 def _zarr(tmp_path, data, chunks=(8, 8, 8)):
     import zarr
     path = tmp_path / "blob.zarr"
@@ -64,9 +72,11 @@ def test_zarr_store_reads_constant_bricks_once_and_uploads_only_the_others(ctx, 
     try:
         constant = store.constant()
         assert constant.sum() >= constant.size // 2       # mostly empty
-        np.testing.assert_array_equal(store.reads[constant], written[constant])   # not again
-        # read once more, to upload
-        np.testing.assert_array_equal(store.reads[~constant], written[~constant] + 1)
+        # read once more, to upload, where it holds more than one value (every such brick is
+        # resident; one of a single value next to it is uploaded, not read); constant ones never
+        varied = _varied(data)
+        assert np.any(~constant & (varied == 0))
+        np.testing.assert_array_equal(store.reads, written + varied)
         assert pool.uploads == int((~constant).sum())
         assert pool.writes == -(-pool.uploads // pool.grid[0])   # a row of slots a write
         # what was uploaded is the whole loader's volume, bricked
@@ -148,11 +158,14 @@ def test_resident_bricks_with_aprons_equal_clamped_reads(shape, channels):
         np.testing.assert_array_equal(block, store.pencil(z, y, x, x + 1, 1))
         seen += 1
     assert seen == len(resident)
-    # pencil() above counted once more each; resident_layers once each, constant ones never
+    # pencil() above counted once more each; resident_layers once each where it holds more
+    # than one value, constant ones never
     added = store.reads - before
     is_resident = np.zeros(added.shape, bool)
     is_resident[tuple(resident.T)] = True
-    assert np.all(added[is_resident] == 2) and np.all(added[~is_resident] == 0)
+    varied = _varied(data, 4)
+    assert np.any(is_resident & (varied == 0))       # resident, of one value: not read
+    np.testing.assert_array_equal(added, is_resident + varied)
 
 
 def test_box_filtered_level_averages_pairs():
@@ -301,9 +314,7 @@ def test_reads_in_processes_equal_threads(tmp_path, monkeypatch, channels):
         np.testing.assert_array_equal(block, threads.pencil(z, y, x, x + 1, 1))
         seen += 1
     assert seen == len(resident) > 0
-    is_resident = np.zeros(procs.reads.shape, bool)
-    is_resident[tuple(resident.T)] = True
-    np.testing.assert_array_equal(procs.reads, written + is_resident)
+    np.testing.assert_array_equal(procs.reads, written + _varied(raw))
 
 
 # ---- several channels: a bricked Zarr store reads the scene's channels ---------------------------
@@ -395,7 +406,7 @@ def test_bricked_zarr_store_of_channels_is_the_whole_loaders_volume(ctx, tmp_pat
     assert np.any(constant_bricks(lo[..., 1], hi[..., 1]) & ~constant)   # one channel alone
     np.testing.assert_array_equal(constant, constant_bricks(*brick_ranges(whole.data, BRICK)))
     _uploaded_is_packed(ctx, lazy, whole.data)
-    np.testing.assert_array_equal(lazy.bricks.reads, written + ~constant)
+    np.testing.assert_array_equal(lazy.bricks.reads, written + _varied(np.moveaxis(data, 0, -1)))
 
 
 @pytest.mark.parametrize("channels", [
@@ -575,7 +586,7 @@ def test_upload_from_processes_maps_there_and_moves_bricks_through_shared_memory
         assert store.handed == {"shared": len(blocks.names), "pickled": 0}
         assert pool.exact_uint8 == (dtype == "uint8")
         constant = store.constant()
-        np.testing.assert_array_equal(store.reads, _written(data) + ~constant)
+        np.testing.assert_array_equal(store.reads, _written(data) + _varied(data))
         n = int((~constant).sum())
         assert pool.uploads == n and pool.writes == -(-n // pool.grid[0]) < n   # a row a write
         want = pack(whole.data, BRICK)
@@ -623,7 +634,10 @@ def test_shared_memory_is_unlinked_when_a_read_fails_or_the_upload_stops(tmp_pat
     def dest(z, y, x):
         return np.empty((BRICK + 2,) * 3, np.float32)
 
-    failing = BrickStore(_FailingSource(store.source, layers[-1] * BRICK), BRICK)
+    lo, hi = store.raw_ranges()       # (a brick of one value is not read: fail where one varies)
+    varied = sorted(set(np.argwhere(lo != hi)[:, 0].tolist()))
+    assert len(varied) >= 2
+    failing = BrickStore(_FailingSource(store.source, varied[-1] * BRICK), BRICK)
     failing._ranges = store.raw_ranges()
     with pytest.raises(VolumeError, match="unreadable"):
         for _ in failing.write_resident(resident, dest, densities=True):
@@ -669,15 +683,18 @@ def test_upload_writes_rows_of_slots_equal_to_the_twins_pack(ctx, channels):
         pool.release()
 
 
-@pytest.mark.parametrize("budget", [0, 12 * BRICK ** 3 * 4])
+@pytest.mark.parametrize("room", ["none", "one layer"])
 def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
-        tmp_path, monkeypatch, budget):
+        tmp_path, monkeypatch, room):
     """Layers whose blocks would take the shared memory past its budget (half of /dev/shm's
-    free space: none here, or room for one layer's bricks) come back from the processes
-    pickled, as before: the same bricks with aprons as the threads' reads, each read once
-    more."""
+    free space: none here, or room for the bricks of the layer reading most) come back from the
+    processes pickled, as before: the same bricks with aprons as the threads' reads, each read
+    once more (those of one value not at all)."""
     import app.bricks as bricks
     data = _blob()
+    varied = _varied(data)
+    read_layers = int(np.count_nonzero(varied.any(axis=(1, 2))))    # the layers the upload reads
+    budget = 0 if room == "none" else int(varied.sum(axis=(1, 2)).max()) * BRICK ** 3 * 4
     path = _zarr(tmp_path, data)
     threads = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
     blocks = _processes(monkeypatch)
@@ -690,13 +707,11 @@ def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
         np.testing.assert_array_equal(block, want)
         seen += 1
     assert seen == len(resident)
-    layers = len(set(resident[:, 0].tolist()))
-    assert (len(blocks.names) == 0) if budget == 0 else (0 < len(blocks.names) < layers)
-    assert procs.handed == {"shared": len(blocks.names), "pickled": layers - len(blocks.names)}
+    assert (len(blocks.names) == 0) if budget == 0 else (0 < len(blocks.names) < read_layers)
+    assert procs.handed == {"shared": len(blocks.names),
+                            "pickled": read_layers - len(blocks.names)}
     assert not blocks.left()
-    is_resident = np.zeros(procs.reads.shape, bool)
-    is_resident[tuple(resident.T)] = True
-    np.testing.assert_array_equal(procs.reads, _written(data) + is_resident)
+    np.testing.assert_array_equal(procs.reads, _written(data) + varied)
 
 
 @pytest.mark.parametrize("channels", [1, 2])
