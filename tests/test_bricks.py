@@ -747,3 +747,218 @@ def test_bricked_time_series_is_normalised_by_the_whole_series_range(tmp_path, c
     finally:
         BrickStore.raw_ranges = original
     assert len(calls) == 1 and step2.value_range == lazy.value_range
+
+
+# ---- a Zarr store's unwritten chunks: never read, the fill value -------------------------------
+
+def _sparse(fill: int, channels: int) -> np.ndarray:
+    """uint16 [z, y, x(, c)] of 24^3 (3 x 3 x 3 bricks of 8): the fill value but for a ramp across
+    two bricks, a brick of one other value, a few voxels in a far corner brick and, of several
+    channels, a small block in channel 2 alone (so a brick whose other channels are unwritten)."""
+    raw = np.full((24, 24, 24, channels), fill, np.uint16)
+    ramp = np.arange(5 * 5 * 11, dtype=np.uint16).reshape(5, 5, 11, 1)
+    raw[9:14, 10:15, 2:13] = fill + 1 + ramp + 10 * np.arange(channels, dtype=np.uint16)
+    raw[16:24, 0:8, 16:24] = fill + 77
+    raw[0:3, 20:24, 20:24] = fill + 5
+    if channels > 1:
+        raw[16:20, 16:20, 0:4, 2] = fill + 9
+    return raw[..., 0] if channels == 1 else raw
+
+
+def _sparse_store(path, raw: np.ndarray, fill: int, zarr_format: int, chunk: int, shard,
+                  separator: str):
+    """raw [z, y, x(, c)] as a Zarr array ([c, z, y, x] of several channels, a channel a chunk)
+    of chunks of `chunk` voxels (in shards of `shard`, or none), the fill value `fill` and chunk
+    keys separated by `separator`: Zarr writes only the chunks holding another value."""
+    import zarr
+    many = raw.ndim == 4
+    stored = np.ascontiguousarray(np.moveaxis(raw, -1, 0)) if many else raw
+    lead = (1,) if many else ()
+    extra = {"dimension_names": list("czyx")} if many and zarr_format == 3 else {}
+    if shard:
+        extra["shards"] = lead + (shard,) * 3
+    name = "default" if zarr_format == 3 else "v2"
+    array = zarr.create_array(str(path), shape=stored.shape, dtype=stored.dtype,
+                              chunks=lead + (chunk,) * 3, fill_value=fill,
+                              zarr_format=zarr_format,
+                              chunk_key_encoding={"name": name, "separator": separator}, **extra)
+    if many and zarr_format == 2:
+        array.attrs["_ARRAY_DIMENSIONS"] = list("czyx")
+    array[...] = stored
+    return path
+
+
+def _bricks_with_stored_chunks(raw: np.ndarray, fill: int, stored: int) -> np.ndarray:
+    """[bz, by, bx] 1 where a brick of BRICK voxels overlaps a stored chunk (or shard) of
+    `stored` voxels holding a value other than the fill value in a channel, else 0: the bricks
+    a read of a store Zarr wrote so must read (counted voxel by voxel, not as app/bricks.py
+    does)."""
+    off = raw != fill
+    if off.ndim == 4:
+        off = off.any(axis=-1)
+    present = np.zeros_like(off)
+    for z, y, x in np.ndindex(*(-(-n // stored) for n in off.shape)):
+        at = (slice(z * stored, (z + 1) * stored), slice(y * stored, (y + 1) * stored),
+              slice(x * stored, (x + 1) * stored))
+        present[at] = off[at].any()
+    out = np.zeros((3, 3, 3), np.int64)
+    for z, y, x in np.ndindex(3, 3, 3):
+        out[z, y, x] = present[z * BRICK:(z + 1) * BRICK, y * BRICK:(y + 1) * BRICK,
+                               x * BRICK:(x + 1) * BRICK].any()
+    return out
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+@pytest.mark.parametrize("fill", [0, 300])
+@pytest.mark.parametrize("zarr_format, chunk, shard, separator", [
+    (3, 8, None, "/"), (3, 4, None, "."), (3, 16, None, "/"), (3, 4, 8, "/"),
+    (2, 8, None, "."), (2, 4, None, "/"), (2, 16, None, ".")])
+def test_unwritten_chunks_are_not_read_and_read_as_the_fill_value(
+        ctx, tmp_path, monkeypatch, channels, fill, zarr_format, chunk, shard, separator):
+    """A store whose chunks are partly unwritten (zarr format 3 and 2, chunks smaller than a
+    brick, of one and larger, in shards, keys separated by '/' and '.', a fill value of 0 and
+    another, one channel and three): the range pass reads only the bricks that overlap a stored
+    chunk (of a sharded array, a stored shard), once, and the upload only those of more than one
+    value; the ranges, the constant bricks, the pool's plan and the upload are those of the
+    plain read (the same store with its listing failing: every brick read, as before) and of the
+    whole loader's volume, packed by the twin."""
+    import app.bricks as bricks
+    raw = _sparse(fill, channels)
+    path = _sparse_store(tmp_path / "sparse.zarr", raw, fill, zarr_format, chunk, shard,
+                         separator)
+    spec = VolumeSpec(path=str(path), builtin=None)
+    lazy = load_volume(spec, brick=BRICK)
+    store = lazy.bricks
+    written = _bricks_with_stored_chunks(raw, fill, shard or chunk)
+    assert 0 < written.sum() < written.size
+    np.testing.assert_array_equal(store.reads, written)
+
+    def unlisted(array):
+        raise OSError("no listing")
+    with monkeypatch.context() as m:
+        m.setattr(bricks, "_array_keys", unlisted)
+        plain = load_volume(spec, brick=BRICK).bricks
+    assert np.all(plain.reads == 1)                  # as before: every brick read once
+    for got, want in zip(store.raw_ranges() + store.ranges(), plain.raw_ranges() + plain.ranges()):
+        assert got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(store.constant(), plain.constant())
+    for got, want in zip(store.layout(4096), plain.layout(4096)):
+        np.testing.assert_array_equal(got, want)
+
+    whole = load_volume(spec)
+    assert isinstance(whole.data, np.ndarray)
+    _same_volume(lazy, whole)
+    _uploaded_is_packed(ctx, lazy, whole.data)
+    np.testing.assert_array_equal(store.reads, written + _varied(raw))
+
+
+def test_unwritten_bricks_of_a_time_step_and_the_channels_shown(tmp_path):
+    """A brick is unwritten where every chunk it overlaps of the time step read and of the
+    channels shown (in the scene's order, not the file's) was never written; the range pass
+    reads the others alone and gives the raw ranges of the step's voxels."""
+    import zarr
+    from app.bricks import ZarrSource
+    from app.volume import normalise
+    data = np.zeros((2, 4, 24, 24, 24), np.uint16)         # [t, c, z, y, x]
+    data[1, 2, 0:8, 0:8, 0:8] = 5                          # brick (0, 0, 0): step 1, channel 2
+    data[1, 1, 8:16, 0:8, 0:8] = 6                         # brick (1, 0, 0): step 1, channel 1
+    data[0, 0, 16:24, 0:8, 0:8] = 7                        # brick (2, 0, 0): step 0, channel 0
+    data[1, 0, 20:24, 20:24, 20:24] = 8                    # brick (2, 2, 2): step 1, channel 0
+    path = tmp_path / "series.zarr"
+    zarr.create_array(str(path), shape=data.shape, dtype=data.dtype, chunks=(1, 1, 8, 8, 8),
+                      dimension_names=list("tczyx"))[...] = data
+    array = zarr.open(str(path), mode="r")
+
+    def written(*bricks):
+        out = np.zeros((3, 3, 3), np.int64)
+        for b in bricks:
+            out[b] = 1
+        return out
+
+    for time, channel, shown, want in [
+            (1, 0, [2, 0], written((0, 0, 0), (2, 2, 2))),
+            (1, 1, None, written((1, 0, 0))),
+            (0, 0, [2, 0], written((2, 0, 0))),
+            (0, 3, None, written())]:
+        source = ZarrSource(array, "tczyx", time, channel, None, str(path), None, normalise,
+                            channels=shown, value_ranges=None if shown is None else [None] * 2)
+        mask, fill = source.unwritten_bricks(BRICK)
+        np.testing.assert_array_equal(mask, ~want.astype(bool))
+        assert fill.shape == (() if shown is None else (2,)) and fill.dtype == np.uint16
+        store = BrickStore(source, BRICK)
+        step = data[time, shown if shown else [channel]]
+        step = np.moveaxis(step, 0, -1) if shown else step[0]
+        for got, expected in zip(store.raw_ranges(), brick_ranges(step, BRICK)):
+            np.testing.assert_array_equal(got, expected)
+        np.testing.assert_array_equal(store.reads, want)
+
+
+def test_a_store_not_listed_is_read_whole(tmp_path):
+    """Where the chunks cannot be listed completely (a linked directory inside the array, a
+    store the listing does not know), every brick is read, as before."""
+    import os
+    import zarr
+    from app.bricks import ZarrSource, stored_chunks
+    from app.volume import normalise
+    raw = _sparse(0, 1)
+    path = _sparse_store(tmp_path / "linked.zarr", raw, 0, 3, 8, None, "/")
+    array = zarr.open(str(path), mode="r")
+    assert stored_chunks(array) is not None
+    os.rename(path / "c" / "1", tmp_path / "elsewhere")
+    os.symlink(tmp_path / "elsewhere", path / "c" / "1")
+    for opened in (zarr.open(str(path), mode="r"),
+                   zarr.open_array(zarr.storage.LoggingStore(zarr.storage.LocalStore(str(path))),
+                                   mode="r")):
+        assert stored_chunks(opened) is None
+        store = BrickStore(ZarrSource(opened, "zyx", 0, 0, None, str(path), None, normalise),
+                           BRICK)
+        for got, want in zip(store.raw_ranges(), brick_ranges(raw, BRICK)):
+            np.testing.assert_array_equal(got, want)
+        assert np.all(store.reads == 1)
+
+
+def test_unwritten_chunks_of_a_non_finite_fill_value(tmp_path):
+    """A float store whose fill value is NaN: its unwritten bricks hold the scene's
+    replace_nonfinite value without a read (the whole loader's volume); without one, the store
+    is refused as the whole loader refuses it."""
+    import zarr
+    raw = _sparse(0, 1).astype(np.float32)
+    raw[raw == 0] = np.nan
+    path = tmp_path / "nan.zarr"
+    zarr.create_array(str(path), shape=raw.shape, dtype=raw.dtype, chunks=(8, 8, 8),
+                      fill_value=np.nan)[...] = raw
+    spec = VolumeSpec(path=str(path), builtin=None, replace_nonfinite=0.5)
+    lazy = load_volume(spec, brick=BRICK)
+    whole = load_volume(spec)
+    # the densities and their range (raw_min differs, as it did before: the whole loader's is of
+    # the finite values, a bricked store's after the replacement)
+    assert lazy.value_range == whole.value_range == (0.5, float(np.nanmax(raw)))
+    np.testing.assert_array_equal(np.asarray(lazy.data), whole.data)
+    written = _bricks_with_stored_chunks(np.nan_to_num(raw, nan=0.0), 0.0, 8)
+    assert 0 < written.sum() < written.size
+    np.testing.assert_array_equal(lazy.bricks.reads, written)
+    refused = VolumeSpec(path=str(path), builtin=None)
+    with pytest.raises(VolumeError, match="NaN"):
+        load_volume(refused, brick=BRICK)
+    with pytest.raises(VolumeError, match="NaN"):
+        load_volume(refused)
+
+
+def test_bricks_overlapping_chunks_of_any_size():
+    """bricks_overlapping against each brick's voxels, chunks smaller and larger than a brick,
+    aligned or not, partial at the far faces."""
+    from app.bricks import bricks_overlapping
+    rng = np.random.default_rng(3)
+    for _ in range(100):
+        shape = tuple(int(n) for n in rng.integers(1, 30, 3))
+        chunks = tuple(int(n) for n in rng.integers(1, 12, 3))
+        brick = int(rng.integers(1, 10))
+        grid = rng.random(tuple(-(-n // c) for n, c in zip(shape, chunks))) < 0.2
+        voxels = np.zeros(shape, bool)
+        for cell in np.argwhere(grid):
+            voxels[tuple(slice(i * c, (i + 1) * c) for i, c in zip(cell, chunks))] = True
+        want = np.zeros(tuple(-(-n // brick) for n in shape), bool)
+        for b in np.ndindex(*want.shape):
+            want[b] = voxels[tuple(slice(i * brick, (i + 1) * brick) for i in b)].any()
+        np.testing.assert_array_equal(bricks_overlapping(grid, chunks, brick, shape), want)
