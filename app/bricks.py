@@ -579,9 +579,9 @@ class BrickStore:
                     out: np.ndarray) -> None:
         """Brick (z, y, x) with its apron into out [B + 2, B + 2, B + 2(, c)], from the cores of
         layers z - 1 .. z + 1 (near {n: {(y, x): core}}) and the other bricks' one value
-        (values [bz, by, bx(, c)]; the brick's own too, where it holds one): per axis, the neighbour below's last voxel (at the volume's
-        first face the brick's own first one), the brick's, the neighbour above's first (at the
-        last face the brick's own last)."""
+        (values [bz, by, bx(, c)]; the brick's own too, where it holds one): per axis, the
+        neighbour below's last voxel (at the volume's first face the brick's own first one), the
+        brick's, the neighbour above's first (at the last face the brick's own last)."""
         B = self.brick
         bx, by, bz = self.counts
 
