@@ -5,19 +5,25 @@ the levels a memory cap chooses between (a 2x box-filtered pyramid, or an OME-Za
 
 Reading: the range pass reads a layer of bricks (B voxels along z, the whole y and x) at a time,
 several layers at once on threads (Zarr's decoders and NumPy's reductions run outside the GIL), so
-each of a store's chunks is decoded once a pass. The upload pass reads only the bricks that are not
-constant, each once, as runs along x without aprons (chunk-aligned: a pencil with its apron would
+each of a store's chunks is decoded once a pass. A Zarr store's bricks whose chunks were never
+written (Zarr leaves out a chunk equal to the fill value; its store listed once, stored_chunks)
+are not read: each holds the fill value alone; a layer holding some is read as runs along x of its
+written bricks. The upload pass reads only the bricks that are not constant and hold more than
+one value, each once, as runs along x without aprons (chunk-aligned: a pencil with its apron would
 decode the 3 x 3 rows of chunks around it, 9 times the data); each brick's apron is assembled from
-its neighbours' voxels: those read, or a constant brick's value (a constant brick, the brick and
-its apron one value, is never read again nor uploaded). The upload's readers map the bricks to
+its neighbours' voxels: those read, or a brick of one value's value (a constant brick, the brick
+and its apron one value, is never read again nor uploaded). The upload's readers map the bricks to
 densities themselves, and readers in processes hand them over in shared memory (_CoreReader), not
 pickled. `reads` counts, per brick, how many times its voxels were read.
 """
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
+import re
 import time
+import weakref
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass
 from multiprocessing import shared_memory
@@ -193,6 +199,111 @@ class ArraySource:
         return np.asarray(self.data[z0:z1, y0:y1, x0:x1], np.float32)
 
 
+# A Zarr array's chunks are listed (stored_chunks) only where its grid of chunks (or shards) has at
+# most this many (a boolean each; a file each to list).
+MAX_LISTED_CHUNKS = 1 << 24
+
+# stored_chunks' listings: {id(array): (a weak reference to the array, its grid or None)}
+_STORED_CHUNKS: dict[int, tuple] = {}
+
+
+def stored_chunks(array) -> np.ndarray | None:
+    """[the array's grid of stored chunks, an index an axis] True where the array's store holds
+    the chunk's key: its store listed once per array object (the series' steps and channels of
+    one array share it). A sharded array's grid is of its shards (a shard stored: each of its
+    chunks maybe written). None where the listing cannot be trusted to hold every chunk Zarr
+    would read (a store other than a local directory, a zip file or memory: remote ones; a
+    linked directory inside the array; a chunk key encoding whose keys are not read back;
+    more than MAX_LISTED_CHUNKS; any error): every chunk then counts as written. The arrays
+    listed are opened read-only (app/volume_formats.py open_zarr): an array object written to
+    after its listing would need a new one."""
+    key = id(array)
+    held = _STORED_CHUNKS.get(key)
+    if held is not None and held[0]() is array:
+        return held[1]
+    try:
+        grid = _listed_chunk_grid(array)
+    except Exception:     # whatever the store or its codecs raise: listed as unknown, read all
+        grid = None
+    try:
+        _STORED_CHUNKS[key] = (weakref.ref(array, lambda _: _STORED_CHUNKS.pop(key, None)), grid)
+    except TypeError:     # an array that cannot be weakly referenced: not kept
+        pass
+    return grid
+
+
+def _listed_chunk_grid(array) -> np.ndarray | None:
+    stored = array.shards or array.chunks            # a key per shard where sharded
+    shape = tuple(-(-int(n) // int(c)) for n, c in zip(array.shape, stored))
+    if math.prod(shape) > MAX_LISTED_CHUNKS:
+        return None
+    keys = _array_keys(array)
+    if keys is None:
+        return None
+    # A key Zarr reads is its encoding of a chunk's coordinates (array.metadata.encode_chunk_key:
+    # "c/1/2/3", "c.1.2.3", "1.2.3", "1/2/3"): read back here as the key's whole numbers in
+    # order, kept where encoding them gives the key again (zarr.json, .zarray, "01" are not
+    # chunks Zarr reads). An encoding those numbers do not read back (checked on a few
+    # coordinates) is not listed.
+    encode = array.metadata.encode_chunk_key
+    last = tuple(n - 1 for n in shape)
+    for probe in ((0,) * len(shape), last, tuple(min(n, 10 + i) for i, n in enumerate(last))):
+        if _key_numbers(encode(probe)) != probe:
+            return None
+    grid = np.zeros(shape, bool)
+    for k in keys:
+        coords = _key_numbers(k)
+        if (len(coords) == len(shape) and all(c < n for c, n in zip(coords, shape))
+                and encode(coords) == k):
+            grid[coords] = True
+    return grid
+
+
+def _key_numbers(key: str) -> tuple[int, ...]:
+    return tuple(int(n) for n in re.findall(r"[0-9]+", key))
+
+
+def _array_keys(array) -> list[str] | None:
+    """The keys of the array's store under the array (relative to it), or None where the store
+    is not one whose listing is complete: a local directory (walked here, since the store's own
+    listing does not descend into linked directories, which Zarr reads through), a zip file or
+    memory."""
+    from zarr.core.sync import collect_aiterator
+    from zarr.storage import LocalStore, MemoryStore, ZipStore
+    store, path = array.store_path.store, array.store_path.path
+    if isinstance(store, LocalStore):
+        top = os.path.join(str(store.root), path)
+        keys = []
+
+        def refuse(error):
+            raise error
+        for folder, folders, files in os.walk(top, onerror=refuse):
+            if any(os.path.islink(os.path.join(folder, f)) for f in folders):
+                return None
+            where = os.path.relpath(folder, top).replace(os.sep, "/")
+            keys.extend(f if where == "." else f"{where}/{f}" for f in files)
+        return keys
+    if isinstance(store, (MemoryStore, ZipStore)):
+        prefix = f"{path}/" if path else ""
+        return [k[len(prefix):] for k in collect_aiterator(store.list_prefix(prefix))
+                if k.startswith(prefix)]
+    return None
+
+
+def bricks_overlapping(chunk_grid: np.ndarray, chunks, brick: int, shape) -> np.ndarray:
+    """[bz, by, bx] True where a brick of `brick` voxels overlaps a True cell of chunk_grid
+    ([z, y, x] a cell a chunk of `chunks` (z, y, x) voxels) of a volume of `shape` (z, y, x)."""
+    out = np.asarray(chunk_grid, bool)
+    for axis, (n, c) in enumerate(zip(shape, chunks)):
+        first = np.arange(0, n, brick)
+        last = np.minimum(first + brick, n) - 1
+        # the True cells among chunks first // c .. last // c of each brick, from running counts
+        counts = np.cumsum(out, axis=axis, dtype=np.int32)
+        counts = np.concatenate([np.zeros_like(np.take(counts, [0], axis)), counts], axis)
+        out = (np.take(counts, last // c + 1, axis) - np.take(counts, first // c, axis)) > 0
+    return out
+
+
 class ZarrSource:
     """One time step of a Zarr array, read region by region: one channel (`channel`; [z, y, x]),
     or several (`channels`, the file's channel indices in the order shown; [z, y, x, c]),
@@ -233,7 +344,9 @@ class ZarrSource:
 
     def read(self, z0, z1, y0, y1, x0, x1) -> np.ndarray:
         """Raw values, finite (non-finite ones replaced as the scene says, else refused)."""
-        raw = self.raw(z0, z1, y0, y1, x0, x1)
+        return self._finite(self.raw(z0, z1, y0, y1, x0, x1), z0, z1)
+
+    def _finite(self, raw: np.ndarray, z0: int, z1: int) -> np.ndarray:
         if raw.dtype.kind == "f":
             bad = ~np.isfinite(raw)
             if bad.any():
@@ -242,6 +355,49 @@ class ZarrSource:
                                       "Inf; give volume.replace_nonfinite to replace them")
                 raw = np.where(bad, raw.dtype.type(self.replace_nonfinite), raw)
         return raw
+
+    @property
+    def chunks(self) -> tuple[int, int, int]:
+        """The array's chunks' voxels along z, y, x (of a sharded array, its inner chunks: what
+        a read decodes)."""
+        size = dict(zip(self.axes, self.array.chunks))
+        return size["z"], size["y"], size["x"]
+
+    def unwritten_bricks(self, brick: int):
+        """(mask, fill): mask [bz, by, bx] True where every chunk (or shard) the brick overlaps
+        along z, y and x, of this time step and these channels, was never written to the store
+        (Zarr leaves out a chunk equal to the fill value), so that every voxel of it reads as
+        `fill`, the raw value read gives an unwritten voxel ([c] of several channels; the type
+        read gives). None where that is not known (stored_chunks cannot list the store, a
+        format 2 array without a fill value, a fill value a read would refuse as non-finite):
+        every brick is then read."""
+        grid = stored_chunks(self.array)
+        value = self.array.fill_value
+        if grid is None or value is None:
+            return None
+        fill = np.full(() if self.channels is None else (len(self.channels),), value,
+                       self.array.dtype)
+        try:
+            fill = self._finite(fill, 0, self.shape[0])
+        except VolumeError:             # a read refuses it, saying where: read those bricks
+            return None
+        stored = dict(zip(self.axes, self.array.shards or self.array.chunks))
+        pick = []
+        for a, n in zip(self.axes, grid.shape):
+            if a == "t":
+                pick.append([self.time // stored["t"]])
+            elif a == "c":
+                shown = [self.channel] if self.channels is None else self.channels
+                pick.append(sorted({c // stored["c"] for c in shown}))
+            else:
+                pick.append(np.arange(n))
+        picked = grid[np.ix_(*pick)]
+        others = tuple(i for i, a in enumerate(self.axes) if a not in "zyx")
+        written = picked.any(axis=others) if others else picked
+        kept = [a for a in self.axes if a in "zyx"]
+        written = np.transpose(written, [kept.index(a) for a in "zyx"])
+        mask = ~bricks_overlapping(written, [stored[a] for a in "zyx"], brick, self.shape[:3])
+        return mask, fill
 
     def density(self, raw: np.ndarray) -> np.ndarray:
         """Raw values as densities (app/volume.py normalise with the volume's value range; of
@@ -308,30 +464,43 @@ class BrickStore:
 
     def raw_ranges(self) -> tuple[np.ndarray, np.ndarray]:
         """Each brick's least and largest raw value [bz, by, bx(, c)] (one read of every brick,
-        the first time: a layer of bricks a read, layers on threads)."""
+        the first time: a layer of bricks a read, layers on threads; a Zarr store's bricks whose
+        chunks were never written are not read: each holds the fill value alone)."""
         if self._ranges is None:
             start = time.perf_counter()
             bx, by, bz = self.counts
+            found = getattr(self.source, "unwritten_bricks", None)
+            unwritten, fill = (found(self.brick) if found else None) or (None, None)
+            self._add_seconds("chunk_listing", start)
+            rows = [None if unwritten is None else unwritten[z] for z in range(bz)]
+            band = self._band_rows()
             if self._in_processes():
                 # a Zarr store's reads decode on one event loop, under the GIL (0.5 GB/s at best
                 # on the H100's host whatever the threads): separate processes read the layers
                 with ProcessPoolExecutor(reader_processes(), mp_context=_spawn()) as pool:
                     layers = list(pool.map(_layer_ranges_of, [self.source] * bz, range(bz),
                                            [self.brick] * bz, [self.counts] * bz,
-                                           [self.dims] * bz))
+                                           [self.dims] * bz, rows, [fill] * bz, [band] * bz))
             else:
                 with ThreadPoolExecutor(reader_threads()) as pool:
-                    layers = list(pool.map(self._layer_ranges, range(bz)))
-            self.reads += 1
+                    layers = list(pool.map(
+                        lambda z: _layer_ranges_of(self.source, z, self.brick, self.counts,
+                                                   self.dims, rows[z], fill, band), range(bz)))
+            self.reads += np.stack([layer[2] for layer in layers])
             lo = np.stack([layer[0] for layer in layers])
             hi = np.stack([layer[1] for layer in layers])
             self._ranges = (lo, hi)
             self._add_seconds("range_pass", start)
         return self._ranges
 
-    def _layer_ranges(self, z: int) -> tuple[np.ndarray, np.ndarray]:
-        """[by, bx(, c)] least and largest raw values of layer z's bricks."""
-        return _layer_ranges_of(self.source, z, self.brick, self.counts, self.dims)
+    def _band_rows(self) -> int:
+        """Rows of bricks (along y) whose voxels begin and end on the source's chunks' rows
+        (the fewest): a layer's written bricks are read a band of rows at a time, so that no
+        chunk is decoded twice in a layer (1 where the source says nothing of chunks)."""
+        chunks = getattr(self.source, "chunks", None)
+        if chunks is None:
+            return 1
+        return min(math.lcm(self.brick, int(chunks[1])) // self.brick, self.counts[1])
 
     def _in_processes(self) -> bool:
         """Whether the range pass reads in processes: a source that can be sent to one (a Zarr
@@ -364,9 +533,10 @@ class BrickStore:
         order, once its bricks and every earlier layer's are written. `densities`: mapped by the
         source (app/volume.py normalise) where they are read. Every brick that is not constant is
         read once (runs along x, no apron, layers ahead in processes or on threads; from
-        processes through shared memory, _CoreReader); an apron voxel is its neighbour's: read,
-        or a constant brick's value (its least value), or at the volume's faces the edge voxel
-        repeated (as clamped texture coordinates read it)."""
+        processes through shared memory, _CoreReader), but for one of a single value (its
+        least, from the range pass); an apron voxel is its neighbour's: read, or a brick of one
+        value's value, or at the volume's faces the edge voxel repeated (as clamped texture
+        coordinates read it)."""
         bx, by, bz = self.counts
         values = (self.ranges() if densities else self.raw_ranges())[0]
         is_resident = np.zeros((bz, by, bx), bool)
@@ -374,12 +544,15 @@ class BrickStore:
             is_resident[tuple(np.asarray(resident).T)] = True
         layers_wanted = [int(z) for z in np.nonzero(is_resident.any(axis=(1, 2)))[0]]
         need = sorted({n for z in layers_wanted for n in (z - 1, z, z + 1) if 0 <= n < bz})
-        # the cores read: the resident bricks', and their neighbours' that hold more than one
+        # the cores read: the resident bricks' and their neighbours' that hold more than one
         # value (with mixed levels a neighbour may vary and yet not be resident at this level;
-        # with one level every brick not resident is constant, and none is added)
+        # with one level every brick not resident is constant, and none is added). A brick of
+        # one value (resident where a neighbour varies: a Zarr store's unwritten brick next to
+        # a written one, say) is not read: its voxels are that value, as its apron is for its
+        # neighbours
         lo, hi = self.raw_ranges()
         uniform = np.all((lo == hi).reshape(lo.shape[:3] + (-1,)), axis=-1)
-        read = is_resident | (around(is_resident, np.logical_or) & ~uniform)
+        read = around(is_resident, np.logical_or) & ~uniform
         reader = _CoreReader(self, read, densities, values)
         try:
             with ThreadPoolExecutor(SLAB_THREADS) as assemble:
@@ -411,9 +584,9 @@ class BrickStore:
                     out: np.ndarray) -> None:
         """Brick (z, y, x) with its apron into out [B + 2, B + 2, B + 2(, c)], from the cores of
         layers z - 1 .. z + 1 (near {n: {(y, x): core}}) and the other bricks' one value
-        (values [bz, by, bx(, c)]): per axis, the neighbour below's last voxel (at the volume's
-        first face the brick's own first one), the brick's, the neighbour above's first (at the
-        last face the brick's own last)."""
+        (values [bz, by, bx(, c)]; the brick's own too, where it holds one): per axis, the
+        neighbour below's last voxel (at the volume's first face the brick's own first one), the
+        brick's, the neighbour above's first (at the last face the brick's own last)."""
         B = self.brick
         bx, by, bz = self.counts
 
@@ -575,21 +748,64 @@ def source_whole(source) -> np.ndarray:
     return source.density(source.read(0, nz, 0, ny, 0, nx))
 
 
-def _layer_ranges_of(source, z: int, brick: int, counts, dims) -> tuple[np.ndarray, np.ndarray]:
-    """[by, bx(, c)] least and largest raw values of layer z's bricks (a function of its
-    arguments alone, so a process can run it)."""
+def _layer_ranges_of(source, z: int, brick: int, counts, dims, unwritten_row=None, fill=None,
+                     band: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """([by, bx(, c)] least and largest raw values of layer z's bricks, [by, bx] True where the
+    brick was read): the whole layer in one read, or, where some of its bricks are unwritten
+    (unwritten_row [by, bx], those holding `fill` alone, unread), the written ones as runs along
+    x of bands of `band` rows (_written_regions). A function of its arguments alone, so a process
+    can run it."""
     bx, by, _ = counts
+    regions = _written_regions(unwritten_row, band, by, bx)
+    if regions == [(0, by, 0, bx)]:
+        lo, hi = _brick_extremes(source, z, brick, dims, regions[0])
+        return lo, hi, np.ones((by, bx), bool)
+    lo = np.empty((by, bx) + fill.shape, fill.dtype)
+    lo[...] = fill
+    hi = lo.copy()
+    read = np.zeros((by, bx), bool)
+    for y0, y1, x0, x1 in regions:
+        part_lo, part_hi = _brick_extremes(source, z, brick, dims, (y0, y1, x0, x1))
+        if part_lo.dtype != fill.dtype:
+            raise TypeError(f"layer {z} reads as {part_lo.dtype}, its fill value {fill.dtype}")
+        lo[y0:y1, x0:x1], hi[y0:y1, x0:x1] = part_lo, part_hi
+        read[y0:y1, x0:x1] = True
+    return lo, hi, read
+
+
+def _written_regions(unwritten_row, band: int, by: int, bx: int) -> list[tuple]:
+    """The regions of a layer's bricks (y0, y1, x0, x1; ends exclusive) that hold every brick not
+    in unwritten_row ([by, bx], None: none is): the whole layer where all are written, else per
+    band of `band` rows (a band's last rows may lie past by), the runs along x of the bricks
+    written in any of its rows (so a chunk the band's rows share is decoded once)."""
+    if unwritten_row is None or not unwritten_row.any():
+        return [(0, by, 0, bx)]
+    regions = []
+    for y0 in range(0, by, band):
+        y1 = min(y0 + band, by)
+        xs = np.nonzero(~unwritten_row[y0:y1].all(axis=0))[0]
+        if len(xs):
+            for run in np.split(xs, np.nonzero(np.diff(xs) != 1)[0] + 1):
+                regions.append((y0, y1, int(run[0]), int(run[-1]) + 1))
+    return regions
+
+
+def _brick_extremes(source, z: int, brick: int, dims, region) -> tuple[np.ndarray, np.ndarray]:
+    """[y1 - y0, x1 - x0(, c)] least and largest raw values of layer z's bricks in region (y0,
+    y1, x0, x1) of bricks, read at once."""
+    y0, y1, x0, x1 = region
     B = brick
     nx, ny, nz = dims
-    layer = source.read(z * B, min(z * B + B, nz), 0, ny, 0, nx)
+    block = source.read(z * B, min(z * B + B, nz), y0 * B, min(y1 * B, ny), x0 * B,
+                        min(x1 * B, nx))
     # partial bricks at the far faces: the edge voxel repeated changes no least or largest
-    d = layer.shape[0]
-    layer = _edge_padded(layer, (d, by * B, bx * B))
+    d = block.shape[0]
+    block = _edge_padded(block, (d, (y1 - y0) * B, (x1 - x0) * B))
     # along z first (whole planes, elementwise: a third of the time of reducing the three block
     # axes at once), then within each brick's B x B square
-    shape = (by, B, bx, B) + layer.shape[3:]
-    return (layer.min(axis=0).reshape(shape).min(axis=(1, 3)),
-            layer.max(axis=0).reshape(shape).max(axis=(1, 3)))
+    shape = (y1 - y0, B, x1 - x0, B) + block.shape[3:]
+    return (block.min(axis=0).reshape(shape).min(axis=(1, 3)),
+            block.max(axis=0).reshape(shape).max(axis=(1, 3)))
 
 
 def _read_cores_of(source, z: int, resident_row: np.ndarray, brick: int, dims,

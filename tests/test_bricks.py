@@ -32,6 +32,23 @@ def _blob(shape=(24, 24, 64)) -> np.ndarray:
     return np.round(d).astype(np.uint16)
 
 
+def _written(raw, fill=0) -> np.ndarray:
+    """[bz, by, bx] 1 where a brick of BRICK voxels holds a raw value other than `fill` (in a
+    channel of raw [z, y, x(, c)]), else 0: with chunks of one brick, the bricks whose chunks Zarr
+    wrote (it leaves out a chunk equal to the fill value), the only ones the range pass reads."""
+    lo, hi = brick_ranges(raw, BRICK)
+    off = (lo != fill) | (hi != fill)
+    return (off if off.ndim == 3 else off.any(axis=-1)).astype(np.int64)
+
+
+def _varied(raw, brick=BRICK) -> np.ndarray:
+    """[bz, by, bx] 1 where a brick holds more than one raw value (in a channel of raw [z, y,
+    x(, c)]), else 0: the bricks the upload reads (a resident brick of one value, next to one that
+    varies, is that value without a read)."""
+    lo, hi = brick_ranges(raw, brick)
+    return (lo != hi).reshape(lo.shape[:3] + (-1,)).any(axis=-1).astype(np.int64)
+
+
 def _zarr(tmp_path, data, chunks=(8, 8, 8)):
     import zarr
     path = tmp_path / "blob.zarr"
@@ -45,14 +62,21 @@ def test_zarr_store_reads_constant_bricks_once_and_uploads_only_the_others(ctx, 
     volume = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK)
     assert isinstance(volume.data, LazyData) and volume.dims == (64, 24, 24)
     store = volume.bricks
-    assert np.all(store.reads == 1)                      # the range pass: every brick once
+    # the range pass: every brick Zarr wrote once; the others (all 0, the fill value, so never
+    # written) not at all
+    written = _written(data)
+    assert 0 < written.sum() < written.size
+    np.testing.assert_array_equal(store.reads, written)
     assert (volume.raw_min, volume.raw_max) == (0.0, float(data.max()))
     shown, pool = place_volume(ctx, volume, brick_size=BRICK)
     try:
         constant = store.constant()
         assert constant.sum() >= constant.size // 2       # mostly empty
-        assert np.all(store.reads[constant] == 1)         # never read again
-        assert np.all(store.reads[~constant] == 2)        # read once more, to upload
+        # read once more, to upload, where it holds more than one value (every such brick is
+        # resident; one of a single value next to it is uploaded, not read); constant ones never
+        varied = _varied(data)
+        assert np.any(~constant & (varied == 0))
+        np.testing.assert_array_equal(store.reads, written + varied)
         assert pool.uploads == int((~constant).sum())
         assert pool.writes == -(-pool.uploads // pool.grid[0])   # a row of slots a write
         # what was uploaded is the whole loader's volume, bricked
@@ -134,11 +158,14 @@ def test_resident_bricks_with_aprons_equal_clamped_reads(shape, channels):
         np.testing.assert_array_equal(block, store.pencil(z, y, x, x + 1, 1))
         seen += 1
     assert seen == len(resident)
-    # pencil() above counted once more each; resident_layers once each, constant ones never
+    # pencil() above counted once more each; resident_layers once each where it holds more
+    # than one value, constant ones never
     added = store.reads - before
     is_resident = np.zeros(added.shape, bool)
     is_resident[tuple(resident.T)] = True
-    assert np.all(added[is_resident] == 2) and np.all(added[~is_resident] == 0)
+    varied = _varied(data, 4)
+    assert np.any(is_resident & (varied == 0))       # resident, of one value: not read
+    np.testing.assert_array_equal(added, is_resident + varied)
 
 
 def test_box_filtered_level_averages_pairs():
@@ -266,7 +293,8 @@ def test_reads_in_processes_equal_threads(tmp_path, monkeypatch, channels):
     the same bricks with aprons as the threads' reads, each brick counted as often (one channel,
     and several read as [z, y, x, c])."""
     import app.bricks as bricks
-    path = (_zarr(tmp_path, _blob()) if channels == 1
+    raw = _blob() if channels == 1 else np.moveaxis(_channel_blobs(channels), 0, -1)
+    path = (_zarr(tmp_path, raw) if channels == 1
             else _zarr_channels(tmp_path, _channel_blobs(channels)))
     threads = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
     monkeypatch.setattr(bricks, "PROCESS_READ_VOXELS", 1)
@@ -276,7 +304,8 @@ def test_reads_in_processes_equal_threads(tmp_path, monkeypatch, channels):
     assert procs.channels == channels
     for a, b in zip(threads.raw_ranges(), procs.raw_ranges()):
         np.testing.assert_array_equal(a, b)
-    assert np.all(procs.reads == 1)
+    written = _written(raw)     # (the bricks whose chunks were never written are not read)
+    np.testing.assert_array_equal(procs.reads, written)
     # the upload's reads too: each resident brick with its apron as a clamped read gives it,
     # read once more; constant bricks not at all
     _, _, _, resident = procs.layout(4096)
@@ -285,9 +314,7 @@ def test_reads_in_processes_equal_threads(tmp_path, monkeypatch, channels):
         np.testing.assert_array_equal(block, threads.pencil(z, y, x, x + 1, 1))
         seen += 1
     assert seen == len(resident) > 0
-    is_resident = np.zeros(procs.reads.shape, bool)
-    is_resident[tuple(resident.T)] = True
-    assert np.all(procs.reads[is_resident] == 2) and np.all(procs.reads[~is_resident] == 1)
+    np.testing.assert_array_equal(procs.reads, written + _varied(raw))
 
 
 # ---- several channels: a bricked Zarr store reads the scene's channels ---------------------------
@@ -373,13 +400,14 @@ def test_bricked_zarr_store_of_channels_is_the_whole_loaders_volume(ctx, tmp_pat
     _same_volume(lazy, whole)
     assert lazy.channel_count == count and lazy.bricks.channels == count
     assert lazy.exact_uint8 == (dtype == np.uint8)
-    assert np.all(lazy.bricks.reads == 1)
+    written = _written(np.moveaxis(data, 0, -1))   # the range pass reads these alone, once
+    np.testing.assert_array_equal(lazy.bricks.reads, written)
     constant = lazy.bricks.constant()
     lo, hi = lazy.bricks.ranges()
     assert np.any(constant_bricks(lo[..., 1], hi[..., 1]) & ~constant)   # one channel alone
     np.testing.assert_array_equal(constant, constant_bricks(*brick_ranges(whole.data, BRICK)))
     _uploaded_is_packed(ctx, lazy, whole.data)
-    assert np.all(lazy.bricks.reads[constant] == 1) and np.all(lazy.bricks.reads[~constant] == 2)
+    np.testing.assert_array_equal(lazy.bricks.reads, written + _varied(np.moveaxis(data, 0, -1)))
 
 
 @pytest.mark.parametrize("channels", [
@@ -559,7 +587,7 @@ def test_upload_from_processes_maps_there_and_moves_bricks_through_shared_memory
         assert store.handed == {"shared": len(blocks.names), "pickled": 0}
         assert pool.exact_uint8 == (dtype == "uint8")
         constant = store.constant()
-        assert np.all(store.reads[constant] == 1) and np.all(store.reads[~constant] == 2)
+        np.testing.assert_array_equal(store.reads, _written(data) + _varied(data))
         n = int((~constant).sum())
         assert pool.uploads == n and pool.writes == -(-n // pool.grid[0]) < n   # a row a write
         want = pack(whole.data, BRICK)
@@ -607,7 +635,10 @@ def test_shared_memory_is_unlinked_when_a_read_fails_or_the_upload_stops(tmp_pat
     def dest(z, y, x):
         return np.empty((BRICK + 2,) * 3, np.float32)
 
-    failing = BrickStore(_FailingSource(store.source, layers[-1] * BRICK), BRICK)
+    lo, hi = store.raw_ranges()       # (a brick of one value is not read: fail where one varies)
+    varied = sorted(set(np.argwhere(lo != hi)[:, 0].tolist()))
+    assert len(varied) >= 2
+    failing = BrickStore(_FailingSource(store.source, varied[-1] * BRICK), BRICK)
     failing._ranges = store.raw_ranges()
     with pytest.raises(VolumeError, match="unreadable"):
         for _ in failing.write_resident(resident, dest, densities=True):
@@ -653,15 +684,18 @@ def test_upload_writes_rows_of_slots_equal_to_the_twins_pack(ctx, channels):
         pool.release()
 
 
-@pytest.mark.parametrize("budget", [0, 12 * BRICK ** 3 * 4])
+@pytest.mark.parametrize("room", ["none", "one layer"])
 def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
-        tmp_path, monkeypatch, budget):
+        tmp_path, monkeypatch, room):
     """Layers whose blocks would take the shared memory past its budget (half of /dev/shm's
-    free space: none here, or room for one layer's bricks) come back from the processes
-    pickled, as before: the same bricks with aprons as the threads' reads, each read once
-    more."""
+    free space: none here, or room for the bricks of the layer reading most) come back from the
+    processes pickled, as before: the same bricks with aprons as the threads' reads, each read
+    once more (those of one value not at all)."""
     import app.bricks as bricks
     data = _blob()
+    varied = _varied(data)
+    read_layers = int(np.count_nonzero(varied.any(axis=(1, 2))))    # the layers the upload reads
+    budget = 0 if room == "none" else int(varied.sum(axis=(1, 2)).max()) * BRICK ** 3 * 4
     path = _zarr(tmp_path, data)
     threads = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
     blocks = _processes(monkeypatch)
@@ -674,13 +708,11 @@ def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
         np.testing.assert_array_equal(block, want)
         seen += 1
     assert seen == len(resident)
-    layers = len(set(resident[:, 0].tolist()))
-    assert (len(blocks.names) == 0) if budget == 0 else (0 < len(blocks.names) < layers)
-    assert procs.handed == {"shared": len(blocks.names), "pickled": layers - len(blocks.names)}
+    assert (len(blocks.names) == 0) if budget == 0 else (0 < len(blocks.names) < read_layers)
+    assert procs.handed == {"shared": len(blocks.names),
+                            "pickled": read_layers - len(blocks.names)}
     assert not blocks.left()
-    is_resident = np.zeros(procs.reads.shape, bool)
-    is_resident[tuple(resident.T)] = True
-    assert np.all(procs.reads[is_resident] == 2) and np.all(procs.reads[~is_resident] == 1)
+    np.testing.assert_array_equal(procs.reads, _written(data) + varied)
 
 
 @pytest.mark.parametrize("channels", [1, 2])
@@ -716,3 +748,218 @@ def test_bricked_time_series_is_normalised_by_the_whole_series_range(tmp_path, c
     finally:
         BrickStore.raw_ranges = original
     assert len(calls) == 1 and step2.value_range == lazy.value_range
+
+
+# ---- a Zarr store's unwritten chunks: never read, the fill value -------------------------------
+
+def _sparse(fill: int, channels: int) -> np.ndarray:
+    """uint16 [z, y, x(, c)] of 24^3 (3 x 3 x 3 bricks of 8): the fill value but for a ramp across
+    two bricks, a brick of one other value, a few voxels in a far corner brick and, of several
+    channels, a small block in channel 2 alone (so a brick whose other channels are unwritten)."""
+    raw = np.full((24, 24, 24, channels), fill, np.uint16)
+    ramp = np.arange(5 * 5 * 11, dtype=np.uint16).reshape(5, 5, 11, 1)
+    raw[9:14, 10:15, 2:13] = fill + 1 + ramp + 10 * np.arange(channels, dtype=np.uint16)
+    raw[16:24, 0:8, 16:24] = fill + 77
+    raw[0:3, 20:24, 20:24] = fill + 5
+    if channels > 1:
+        raw[16:20, 16:20, 0:4, 2] = fill + 9
+    return raw[..., 0] if channels == 1 else raw
+
+
+def _sparse_store(path, raw: np.ndarray, fill: int, zarr_format: int, chunk: int, shard,
+                  separator: str):
+    """raw [z, y, x(, c)] as a Zarr array ([c, z, y, x] of several channels, a channel a chunk)
+    of chunks of `chunk` voxels (in shards of `shard`, or none), the fill value `fill` and chunk
+    keys separated by `separator`: Zarr writes only the chunks holding another value."""
+    import zarr
+    many = raw.ndim == 4
+    stored = np.ascontiguousarray(np.moveaxis(raw, -1, 0)) if many else raw
+    lead = (1,) if many else ()
+    extra = {"dimension_names": list("czyx")} if many and zarr_format == 3 else {}
+    if shard:
+        extra["shards"] = lead + (shard,) * 3
+    name = "default" if zarr_format == 3 else "v2"
+    array = zarr.create_array(str(path), shape=stored.shape, dtype=stored.dtype,
+                              chunks=lead + (chunk,) * 3, fill_value=fill,
+                              zarr_format=zarr_format,
+                              chunk_key_encoding={"name": name, "separator": separator}, **extra)
+    if many and zarr_format == 2:
+        array.attrs["_ARRAY_DIMENSIONS"] = list("czyx")
+    array[...] = stored
+    return path
+
+
+def _bricks_with_stored_chunks(raw: np.ndarray, fill: int, stored: int) -> np.ndarray:
+    """[bz, by, bx] 1 where a brick of BRICK voxels overlaps a stored chunk (or shard) of
+    `stored` voxels holding a value other than the fill value in a channel, else 0: the bricks
+    a read of a store Zarr wrote so must read (counted voxel by voxel, not as app/bricks.py
+    does)."""
+    off = raw != fill
+    if off.ndim == 4:
+        off = off.any(axis=-1)
+    present = np.zeros_like(off)
+    for z, y, x in np.ndindex(*(-(-n // stored) for n in off.shape)):
+        at = (slice(z * stored, (z + 1) * stored), slice(y * stored, (y + 1) * stored),
+              slice(x * stored, (x + 1) * stored))
+        present[at] = off[at].any()
+    out = np.zeros((3, 3, 3), np.int64)
+    for z, y, x in np.ndindex(3, 3, 3):
+        out[z, y, x] = present[z * BRICK:(z + 1) * BRICK, y * BRICK:(y + 1) * BRICK,
+                               x * BRICK:(x + 1) * BRICK].any()
+    return out
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+@pytest.mark.parametrize("fill", [0, 300])
+@pytest.mark.parametrize("zarr_format, chunk, shard, separator", [
+    (3, 8, None, "/"), (3, 4, None, "."), (3, 16, None, "/"), (3, 4, 8, "/"),
+    (2, 8, None, "."), (2, 4, None, "/"), (2, 16, None, ".")])
+def test_unwritten_chunks_are_not_read_and_read_as_the_fill_value(
+        ctx, tmp_path, monkeypatch, channels, fill, zarr_format, chunk, shard, separator):
+    """A store whose chunks are partly unwritten (zarr format 3 and 2, chunks smaller than a
+    brick, of one and larger, in shards, keys separated by '/' and '.', a fill value of 0 and
+    another, one channel and three): the range pass reads only the bricks that overlap a stored
+    chunk (of a sharded array, a stored shard), once, and the upload only those of more than one
+    value; the ranges, the constant bricks, the pool's plan and the upload are those of the
+    plain read (the same store with its listing failing: every brick read, as before) and of the
+    whole loader's volume, packed by the twin."""
+    import app.bricks as bricks
+    raw = _sparse(fill, channels)
+    path = _sparse_store(tmp_path / "sparse.zarr", raw, fill, zarr_format, chunk, shard,
+                         separator)
+    spec = VolumeSpec(path=str(path), builtin=None)
+    lazy = load_volume(spec, brick=BRICK)
+    store = lazy.bricks
+    written = _bricks_with_stored_chunks(raw, fill, shard or chunk)
+    assert 0 < written.sum() < written.size
+    np.testing.assert_array_equal(store.reads, written)
+
+    def unlisted(array):
+        raise OSError("no listing")
+    with monkeypatch.context() as m:
+        m.setattr(bricks, "_array_keys", unlisted)
+        plain = load_volume(spec, brick=BRICK).bricks
+    assert np.all(plain.reads == 1)                  # as before: every brick read once
+    for got, want in zip(store.raw_ranges() + store.ranges(), plain.raw_ranges() + plain.ranges()):
+        assert got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(store.constant(), plain.constant())
+    for got, want in zip(store.layout(4096), plain.layout(4096)):
+        np.testing.assert_array_equal(got, want)
+
+    whole = load_volume(spec)
+    assert isinstance(whole.data, np.ndarray)
+    _same_volume(lazy, whole)
+    _uploaded_is_packed(ctx, lazy, whole.data)
+    np.testing.assert_array_equal(store.reads, written + _varied(raw))
+
+
+def test_unwritten_bricks_of_a_time_step_and_the_channels_shown(tmp_path):
+    """A brick is unwritten where every chunk it overlaps of the time step read and of the
+    channels shown (in the scene's order, not the file's) was never written; the range pass
+    reads the others alone and gives the raw ranges of the step's voxels."""
+    import zarr
+    from app.bricks import ZarrSource
+    from app.volume import normalise
+    data = np.zeros((2, 4, 24, 24, 24), np.uint16)         # [t, c, z, y, x]
+    data[1, 2, 0:8, 0:8, 0:8] = 5                          # brick (0, 0, 0): step 1, channel 2
+    data[1, 1, 8:16, 0:8, 0:8] = 6                         # brick (1, 0, 0): step 1, channel 1
+    data[0, 0, 16:24, 0:8, 0:8] = 7                        # brick (2, 0, 0): step 0, channel 0
+    data[1, 0, 20:24, 20:24, 20:24] = 8                    # brick (2, 2, 2): step 1, channel 0
+    path = tmp_path / "series.zarr"
+    zarr.create_array(str(path), shape=data.shape, dtype=data.dtype, chunks=(1, 1, 8, 8, 8),
+                      dimension_names=list("tczyx"))[...] = data
+    array = zarr.open(str(path), mode="r")
+
+    def written(*bricks):
+        out = np.zeros((3, 3, 3), np.int64)
+        for b in bricks:
+            out[b] = 1
+        return out
+
+    for time, channel, shown, want in [
+            (1, 0, [2, 0], written((0, 0, 0), (2, 2, 2))),
+            (1, 1, None, written((1, 0, 0))),
+            (0, 0, [2, 0], written((2, 0, 0))),
+            (0, 3, None, written())]:
+        source = ZarrSource(array, "tczyx", time, channel, None, str(path), None, normalise,
+                            channels=shown, value_ranges=None if shown is None else [None] * 2)
+        mask, fill = source.unwritten_bricks(BRICK)
+        np.testing.assert_array_equal(mask, ~want.astype(bool))
+        assert fill.shape == (() if shown is None else (2,)) and fill.dtype == np.uint16
+        store = BrickStore(source, BRICK)
+        step = data[time, shown if shown else [channel]]
+        step = np.moveaxis(step, 0, -1) if shown else step[0]
+        for got, expected in zip(store.raw_ranges(), brick_ranges(step, BRICK)):
+            np.testing.assert_array_equal(got, expected)
+        np.testing.assert_array_equal(store.reads, want)
+
+
+def test_a_store_not_listed_is_read_whole(tmp_path):
+    """Where the chunks cannot be listed completely (a linked directory inside the array, a
+    store the listing does not know), every brick is read, as before."""
+    import os
+    import zarr
+    from app.bricks import ZarrSource, stored_chunks
+    from app.volume import normalise
+    raw = _sparse(0, 1)
+    path = _sparse_store(tmp_path / "linked.zarr", raw, 0, 3, 8, None, "/")
+    array = zarr.open(str(path), mode="r")
+    assert stored_chunks(array) is not None
+    os.rename(path / "c" / "1", tmp_path / "elsewhere")
+    os.symlink(tmp_path / "elsewhere", path / "c" / "1")
+    for opened in (zarr.open(str(path), mode="r"),
+                   zarr.open_array(zarr.storage.LoggingStore(zarr.storage.LocalStore(str(path))),
+                                   mode="r")):
+        assert stored_chunks(opened) is None
+        store = BrickStore(ZarrSource(opened, "zyx", 0, 0, None, str(path), None, normalise),
+                           BRICK)
+        for got, want in zip(store.raw_ranges(), brick_ranges(raw, BRICK)):
+            np.testing.assert_array_equal(got, want)
+        assert np.all(store.reads == 1)
+
+
+def test_unwritten_chunks_of_a_non_finite_fill_value(tmp_path):
+    """A float store whose fill value is NaN: its unwritten bricks hold the scene's
+    replace_nonfinite value without a read (the whole loader's volume); without one, the store
+    is refused as the whole loader refuses it."""
+    import zarr
+    raw = _sparse(0, 1).astype(np.float32)
+    raw[raw == 0] = np.nan
+    path = tmp_path / "nan.zarr"
+    zarr.create_array(str(path), shape=raw.shape, dtype=raw.dtype, chunks=(8, 8, 8),
+                      fill_value=np.nan)[...] = raw
+    spec = VolumeSpec(path=str(path), builtin=None, replace_nonfinite=0.5)
+    lazy = load_volume(spec, brick=BRICK)
+    whole = load_volume(spec)
+    # the densities and their range (raw_min differs, as it did before: the whole loader's is of
+    # the finite values, a bricked store's after the replacement)
+    assert lazy.value_range == whole.value_range == (0.5, float(np.nanmax(raw)))
+    np.testing.assert_array_equal(np.asarray(lazy.data), whole.data)
+    written = _bricks_with_stored_chunks(np.nan_to_num(raw, nan=0.0), 0.0, 8)
+    assert 0 < written.sum() < written.size
+    np.testing.assert_array_equal(lazy.bricks.reads, written)
+    refused = VolumeSpec(path=str(path), builtin=None)
+    with pytest.raises(VolumeError, match="NaN"):
+        load_volume(refused, brick=BRICK)
+    with pytest.raises(VolumeError, match="NaN"):
+        load_volume(refused)
+
+
+def test_bricks_overlapping_chunks_of_any_size():
+    """bricks_overlapping against each brick's voxels, chunks smaller and larger than a brick,
+    aligned or not, partial at the far faces."""
+    from app.bricks import bricks_overlapping
+    rng = np.random.default_rng(3)
+    for _ in range(100):
+        shape = tuple(int(n) for n in rng.integers(1, 30, 3))
+        chunks = tuple(int(n) for n in rng.integers(1, 12, 3))
+        brick = int(rng.integers(1, 10))
+        grid = rng.random(tuple(-(-n // c) for n, c in zip(shape, chunks))) < 0.2
+        voxels = np.zeros(shape, bool)
+        for cell in np.argwhere(grid):
+            voxels[tuple(slice(i * c, (i + 1) * c) for i, c in zip(cell, chunks))] = True
+        want = np.zeros(tuple(-(-n // brick) for n in shape), bool)
+        for b in np.ndindex(*want.shape):
+            want[b] = voxels[tuple(slice(i * brick, (i + 1) * brick) for i in b)].any()
+        np.testing.assert_array_equal(bricks_overlapping(grid, chunks, brick, shape), want)
