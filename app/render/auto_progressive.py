@@ -1,0 +1,230 @@
+"""`auto` without a separate search: the cheapest image whose estimated error is within a target,
+a raymarched one over probes where some probe setting reaches it, else the path tracer's own.
+
+The path tracer's image accumulates at full resolution as two independent halves (doubling its
+samples a round). It is the reference everything is judged against, and also the fallback:
+- its own relative RMSE is estimated from the halves (app/render/refine.py: N^2 = w mean((a -
+  b)^2) estimates the mean's noise, T^2 = mean(m^2) - N^2 the image's power);
+- a raymarched image r (independent of the halves) has E[mean((r - m)^2)] = its squared error +
+  N^2, so mean((r - m)^2 - w (a - b)^2) / T^2 estimates its squared relative error. Averaged over
+  every pixel, that estimate is precise long before the path tracer itself is within the target
+  (the per-pixel noise averages away): on a 512^2 image a few to a few tens of samples decide a
+  probe setting at 1%.
+
+Every estimate carries its standard error over pixels (a pixel's three channels summed, so that
+they count once); a decision waits until the interval (EST +- Z standard errors) is on one side of
+the target. Probe settings are tried from the cheapest (LADDER, by bake cost), and only while what
+has been spent on them is
+within EXPLORE_SHARE of the path tracer's time so far plus its estimated time still to go: where
+no setting reaches the target (a floor of the probes above it) the trials cost at most that share
+over the path tracer's own time. A setting whose estimate is above the target gives way to the
+next; one whose estimate is within it but not yet certainly is kept while the path tracer's
+samples narrow the interval. Everything counts: bakes, light grids, raymarched frames and path
+traced samples (GPU time), and the host's wall time is reported beside it.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..scene import Scene
+from .auto_probes import PROBES_PER_VOXEL_LIMIT
+
+# (probes per axis, walks per probe), in order of bake cost (probes x walks, then probes)
+LADDER = ((8, 16), (16, 16), (32, 16), (32, 64), (64, 64), (128, 64), (128, 256), (192, 64),
+          (256, 64))
+RAYMARCH_FRAMES = 8        # a candidate's raymarched frames (its sub-pixel jitter averaged)
+EXPLORE_SHARE = 0.5        # probe trials' time at most this share of the path tracer's expected
+Z = 2.0                    # standard errors a decision stands clear of the target by
+MAX_PT_SPP = 1 << 16
+
+
+@dataclass
+class AutoResult:
+    image: np.ndarray
+    method: str                    # "raymarch" (over the probes chosen) or "pt"
+    scene: Scene                   # the scene rendered (the probes chosen, for raymarch)
+    target: float
+    estimate: float                # the image's estimated relative RMSE
+    standard_error: float          # of that estimate
+    met: bool
+    pt_spp: int                    # the path tracer's samples per pixel spent (both halves)
+    gpu_ms: float                  # everything the image cost on the GPU
+    pt_ms: float                   # of which the path tracer's
+    wall_s: float
+    trials: list[dict] = field(default_factory=list)
+    log: list[str] = field(default_factory=list)
+
+    def report(self) -> str:
+        what = (f"raymarched over {self.scene.probes.grid[0]}^3 probes x "
+                f"{self.scene.probes.samples} walks" if self.method == "raymarch"
+                else f"the path tracer at {self.pt_spp} spp")
+        head = (f"auto: {what}: estimated rRMSE {self.estimate:.4f} (+- {self.standard_error:.4f})"
+                f", target {self.target:.4f} {'met' if self.met else 'NOT met'}; "
+                f"{self.gpu_ms:.1f} ms of GPU time in all ({self.pt_ms:.1f} ms path tracing), "
+                f"{self.wall_s:.2f} s wall")
+        return "\n".join([head, *("  " + line for line in self.log)])
+
+
+def _per_pixel(x: np.ndarray) -> np.ndarray:
+    """[H, W, 3] -> [H * W] float64: a pixel's channels summed."""
+    return np.asarray(x, np.float64).reshape(-1, x.shape[-1]).sum(axis=1)
+
+
+class Halves:
+    """The path tracer's two independent halves, accumulated on the host."""
+
+    def __init__(self, shape):
+        self.sums = [np.zeros(shape, np.float64), np.zeros(shape, np.float64)]
+        self.counts = [0, 0]
+
+    def add(self, half: int, image: np.ndarray, spp: int) -> None:
+        self.sums[half] += np.asarray(image, np.float64) * spp
+        self.counts[half] += spp
+
+    @property
+    def spp(self) -> int:
+        return sum(self.counts)
+
+    def means(self):
+        return [s / max(n, 1) for s, n in zip(self.sums, self.counts)]
+
+    def mean(self) -> np.ndarray:
+        return (self.sums[0] + self.sums[1]) / max(self.spp, 1)
+
+    def terms(self):
+        """(per-pixel noise terms w (a - b)^2, per-pixel m^2, m): refine.py's sums, per pixel."""
+        a, b = self.means()
+        n_a, n_b = self.counts
+        w = n_a * n_b / float(n_a + n_b) ** 2
+        m = self.mean()
+        return _per_pixel(w * (a - b) ** 2), _per_pixel(m * m), m
+
+
+def _interval(values: np.ndarray, signal2: float) -> tuple[float, float]:
+    """(the relative error sqrt(mean(values) / signal2) clipped at 0, its standard error by the
+    delta method from the pixels' spread)."""
+    mean = float(values.mean())
+    se = float(values.std(ddof=1) / math.sqrt(len(values)))
+    est = math.sqrt(max(mean, 0.0) / signal2)
+    # d sqrt(x) = dx / (2 sqrt(x)); near 0 the bound sqrt(se / signal2) instead
+    err = se / signal2 / (2 * est) if est > 0 else math.sqrt(se / signal2)
+    return est, min(err, math.sqrt(se / signal2) + est)
+
+
+def estimate_pt(halves: Halves) -> tuple[float, float, float]:
+    """(the halves' mean's estimated relative RMSE, its standard error, T^2 per pixel)."""
+    noise, power, _ = halves.terms()
+    signal2 = float(power.mean() - noise.mean())
+    if not signal2 > 0:
+        return math.inf, math.inf, 0.0
+    est, se = _interval(noise, signal2)
+    return est, se, signal2
+
+
+def estimate_image(image: np.ndarray, halves: Halves) -> tuple[float, float]:
+    """An image's (independent of the halves) estimated relative RMSE against the exact image and
+    its standard error (the module's note)."""
+    noise, power, m = halves.terms()
+    signal2 = float(power.mean() - noise.mean())
+    if not signal2 > 0:
+        return math.inf, math.inf
+    values = _per_pixel((np.asarray(image, np.float64) - m) ** 2) - noise
+    return _interval(values, signal2)
+
+
+def candidates(scene: Scene, volume_dims, ladder=LADDER) -> list[Scene]:
+    """The ladder's probe settings for `scene`, cheapest first: SH order, precision, fit and
+    channels as `auto_probes` sets them; grids of at most PROBES_PER_VOXEL_LIMIT probes a voxel
+    along the volume's longest axis."""
+    limit = PROBES_PER_VOXEL_LIMIT * max(volume_dims)
+    ladder = [(g, n) for g, n in ladder if g <= limit] or [ladder[0]]
+    return [scene.replace(probes=replace(scene.probes, grid=(g, g, g), samples=n,
+                                         sh_order="auto", precision="rgba16f", fit="visible",
+                                         channels="auto"))
+            for g, n in ladder]
+
+
+def auto_render(renderer, target: float, progress=None, seed: int = 0,
+                max_pt_spp: int = MAX_PT_SPP, ladder=LADDER) -> AutoResult:
+    """Renders the scene the renderer holds within `target` (estimated relative RMSE) as cheaply
+    as the module's note says; leaves the renderer on the scene of the image returned."""
+    if not 0 < target < 1:
+        raise ValueError(f"auto target must be a relative RMSE in (0, 1), got {target}")
+    start = time.perf_counter()
+    original = renderer.scene
+    ladder = candidates(original, renderer.resources.volume.dims, ladder)
+    log: list[str] = []
+
+    def say(line: str) -> None:
+        log.append(line)
+        if progress:
+            progress(line)
+
+    halves = None
+    pt_ms = trial_ms = 0.0
+    trials: list[dict] = []
+    current = None            # (index into ladder, image, bake+render ms) of the probe setting
+    k = 0
+    batch = 1
+    round_ = 0
+    while True:
+        # the path tracer: a batch for each half (the original scene: probes do not matter)
+        if renderer.scene is not original:
+            renderer.set_scene(original)
+        for half in (0, 1):
+            run = renderer.render("pt", spp=batch, seed=seed + 1000 * round_ + half,
+                                  samples_per_pass=min(batch, 64))
+            if halves is None:
+                halves = Halves(run.image.shape)
+            halves.add(half, run.image, batch)
+            pt_ms += run.render_ms
+        pt_est, pt_se, _ = estimate_pt(halves)
+        say(f"path tracer {halves.spp} spp: rRMSE {pt_est:.4f} (+- {pt_se:.4f}), "
+            f"{pt_ms:.1f} ms")
+        if pt_est + Z * pt_se <= target:
+            renderer.set_scene(original)
+            return AutoResult(halves.mean().astype(np.float32), "pt", original, target, pt_est,
+                              pt_se, True, halves.spp, pt_ms + trial_ms, pt_ms,
+                              time.perf_counter() - start, trials, log)
+        # the path tracer's expected time still to go: its error falls as 1 / sqrt(samples)
+        pt_to_go = pt_ms * max((pt_est / target) ** 2 - 1.0, 0.0)
+        while k < len(ladder):
+            if current is None:
+                allowed = EXPLORE_SHARE * (pt_ms + pt_to_go)
+                if trials and trial_ms >= allowed:
+                    break                  # more path tracing first: the trials would not pay
+                renderer.set_scene(ladder[k])
+                run = renderer.render("raymarch", spp=RAYMARCH_FRAMES, seed=seed + 77,
+                                      samples_per_pass=RAYMARCH_FRAMES)
+                cost = run.bake_ms + run.render_ms
+                trial_ms += cost
+                current = (k, run.image, cost)
+            index, image, cost = current
+            est, se = estimate_image(image, halves)
+            p = ladder[index].probes
+            trial = {"grid": p.grid[0], "walks": p.samples, "ms": cost, "pt_spp": halves.spp,
+                     "rrmse": est, "standard_error": se}
+            trials.append(trial)
+            say(f"probes {p.grid[0]}^3 x {p.samples}: rRMSE {est:.4f} (+- {se:.4f}) "
+                f"after {halves.spp} spp, {cost:.1f} ms")
+            if est + Z * se <= target:
+                renderer.set_scene(ladder[index])
+                return AutoResult(np.asarray(image, np.float32), "raymarch", ladder[index],
+                                  target, est, se, True, halves.spp, pt_ms + trial_ms, pt_ms,
+                                  time.perf_counter() - start, trials, log)
+            if est > target:
+                k, current = k + 1, None   # likely above: the next setting, budget permitting
+                continue
+            break                          # likely within, not yet certain: more path tracing
+        if halves.spp >= max_pt_spp:
+            renderer.set_scene(original)
+            say(f"stopped at {halves.spp} spp, the most allowed")
+            return AutoResult(halves.mean().astype(np.float32), "pt", original, target, pt_est,
+                              pt_se, False, halves.spp, pt_ms + trial_ms, pt_ms,
+                              time.perf_counter() - start, trials, log)
+        batch = halves.spp // 2 if halves.spp >= 2 else 1   # doubles the total each round
+        round_ += 1

@@ -1,0 +1,89 @@
+"""`auto` without a search (app/render/auto_progressive.py): the error estimates against the
+path tracer's two halves, checked on images whose error is known; the choice on a small scene,
+checked against a converged reference."""
+import math
+
+import numpy as np
+import pytest
+
+from app.bench.metrics import rrmse
+from app.render.auto_progressive import Halves, auto_render, estimate_image, estimate_pt
+from app.render.renderer import Renderer
+from app.scene import parse_scene
+
+SCENE = {"volume": {"builtin": "cloud", "size": [20, 20, 20]}, "density_scale": 40.0,
+         "camera": {"eye": [0, 0.3, 2.2], "width": 32, "height": 32}}
+
+
+def _exact(shape=(96, 128, 3), seed=0):
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:shape[0], 0:shape[1]]
+    base = 0.2 + 0.8 * np.exp(-((x - 60) ** 2 + (y - 40) ** 2) / 900.0)
+    return (base[..., None] * rng.uniform(0.5, 1.0, size=(1, 1, 3))).astype(np.float64)
+
+
+@pytest.mark.parametrize("noise,bias", [(0.5, 0.02), (0.2, 0.05), (1.0, 0.01), (0.3, 0.0)])
+def test_estimates_find_the_known_errors(noise, bias):
+    """Halves of known per-sample noise around an exact image t, and an image r = t (1 + bias
+    pattern) + its own noise: the path tracer's estimated error is the halves' mean's true one,
+    and r's is its true error against t, each within a few of its standard errors; where r's
+    error is far below the path tracer's noise it is still resolved."""
+    t = _exact()
+    rng = np.random.default_rng(7)
+    halves = Halves(t.shape)
+    spp = 4
+    for half in (0, 1):
+        sample_noise = rng.normal(size=t.shape) * noise * t / math.sqrt(spp)
+        halves.add(half, t + sample_noise, spp)
+    est, se, _ = estimate_pt(halves)
+    true = rrmse(halves.mean(), t)
+    assert abs(est - true) <= 4 * se + 1e-3, (est, true, se)
+    pattern = np.sin(np.arange(t.shape[1]) / 7.0)[None, :, None]
+    r = t * (1 + bias * pattern) + rng.normal(size=t.shape) * 0.002 * t
+    est_r, se_r = estimate_image(r, halves)
+    true_r = rrmse(r, t)
+    assert abs(est_r - true_r) <= 4 * se_r + 2e-3, (est_r, true_r, se_r)
+    assert se_r < 0.5 * noise / math.sqrt(2 * spp)   # far finer than the halves' own noise
+
+
+def test_auto_returns_an_image_within_the_target(ctx):
+    """On a small cloud, loose target: the image returned (raymarched or path traced) is within
+    the target of a converged reference, and the report and the cost say what was spent."""
+    r = Renderer(ctx, parse_scene(SCENE))
+    try:
+        reference = r.render("pt", spp=2048, seed=99, samples_per_pass=256).image
+        before = r.scene
+        got = auto_render(r, 0.15, ladder=((2, 16), (4, 16), (6, 64)), max_pt_spp=4096)
+        assert got.met and got.estimate + 2 * got.standard_error <= 0.15
+        true = rrmse(got.image, reference)
+        assert true <= 0.15 + 0.03, (true, got.report())     # the reference's own noise
+        assert got.gpu_ms >= got.pt_ms > 0 and got.pt_spp >= 2
+        if got.method == "raymarch":
+            assert r.scene is got.scene and got.scene.probes.grid[0] in (2, 4, 6)
+        else:
+            assert r.scene == before
+        assert np.isfinite(got.image).all() and got.image.min() >= 0
+        assert "auto:" in got.report()
+    finally:
+        r.release()
+
+
+def test_auto_falls_back_to_the_path_tracer_where_no_probes_reach_the_target(ctx):
+    """A target no probe setting of the ladder reaches: the path tracer's image, with the trials
+    capped by their share of its time."""
+    r = Renderer(ctx, parse_scene(SCENE))
+    try:
+        got = auto_render(r, 0.04, ladder=((2, 16),), max_pt_spp=8192)
+        assert got.method == "pt" and got.met
+        assert all(t["grid"] == 2 for t in got.trials)
+    finally:
+        r.release()
+
+
+def test_auto_rejects_a_meaningless_target(ctx):
+    r = Renderer(ctx, parse_scene(SCENE))
+    try:
+        with pytest.raises(ValueError, match="target"):
+            auto_render(r, 1.5)
+    finally:
+        r.release()
