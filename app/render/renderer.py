@@ -213,6 +213,8 @@ class Renderer:
                        **(probe_defines or self._probe_defines())}
         if self.resources.defines():
             defines = {**(defines or {}), **self.resources.defines()}
+        if self._settings.sun_shadow_rays != 1:
+            defines = {**(defines or {}), "SUN_SHADOW_RAYS": self._settings.sun_shadow_rays}
         key = (method, tuple(sorted((defines or {}).items())))
         if key not in self._passes:
             self._passes[key] = PathTracer(self.ctx, defines)

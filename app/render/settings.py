@@ -116,6 +116,11 @@ class RenderSettings:
     # from 2.97% to 2.92% rRMSE against level 0, for frames 2.3x as long and a first image 5.8 s
     # later.
     mixed_levels: bool = False
+    # Independent ratio-tracked shadow rays towards the sun a scattering event averages, in the
+    # render passes (lib/integrator.glsl SUN_SHADOW_RAYS): 1, the default; more only measures how
+    # much of a path's variance the shadow ray's own noise holds (the mean is the same;
+    # scripts/experiments/experiment_shadow_variance.py).
+    sun_shadow_rays: int = 1
 
     def __post_init__(self):
         if self.walk_sun not in WALK_SUN_MODES:
@@ -142,6 +147,7 @@ class RenderSettings:
             _check_positive_int("brick size", self.brick_size)
             if self.brick_size < 2:
                 raise ValueError(f"brick size: expected at least 2 voxels, got {self.brick_size}")
+        _check_positive_int("sun shadow rays", self.sun_shadow_rays)
         _check_positive_int("light grid max side", self.light_max_side)
         if self.light_min_side is not None:
             _check_positive_int("light grid min side", self.light_min_side)
