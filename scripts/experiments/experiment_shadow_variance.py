@@ -2,24 +2,26 @@
 noise, and (step 6) what residual ratio tracking of the shadow ray with the light grid as its
 control takes away.
 
-    python scripts/experiments/experiment_shadow_variance.py OUT_DIR [--side 32] [--width 24]
-        [--height 24] [--spp 64] [--scenes fuel,hydrogen,...] [--rays 1,16]
+    python scripts/experiments/experiment_shadow_variance.py OUT_DIR [--side 32] [--width 48]
+        [--height 48] [--spp 16] [--images 8] [--scenes fuel,hydrogen,...] [--rays 1,16]
         [--tracking ratio,residual] [--bounces 1,own]
 
 Per scene, per max_bounces (1: the first event alone, the camera ray's free flight against the sun's
 shadow ray there; `own`: the scene's), per shadow-ray estimator (RenderSettings.shadow_tracking,
 where this checkout has it) and per count N of independent shadow rays a scattering event averages
 (RenderSettings.sun_shadow_rays; 1 is the renderers', 16 nearly a noiseless shadow ray): the path
-tracer renders two images of SPP samples a pixel with independent seeds. From them, as
-scripts/guided_variance.py does, a sample's relative variance
-    v = SPP * sum((a - b)^2) / 2 / sum(((a + b) / 2)^2)
-(the image's squared rRMSE at one sample) and the GPU ms a sample costs (timer queries; on llvmpipe
+tracer renders K images of SPP samples a pixel with independent seeds. From them a sample's relative
+variance
+    v = SPP * sum over pixels of var_k(image_k) / sum over pixels of mean_k(image_k)^2
+(the image's squared rRMSE at one sample; with K = 2 exactly scripts/guided_variance.py's
+SPP * sum((a - b)^2) / 2 / sum(((a + b) / 2)^2); more images, more degrees of freedom a pixel) and the GPU ms a sample costs (timer queries; on llvmpipe
 only indicative). Averaging N rays divides the shadow rays' own noise (their variance given the
 path) by N and leaves the rest, so v_N = A + B / N, and the shadow rays' share of a one-ray sample's
 variance is B / v_1 = (v_1 - v_N) N / ((N - 1) v_1) (the share column; from two noisy v's, a guide
 with its own error). Each row's image mean is compared with the first row's of its scene and
 bounces (z: the difference over its standard error from the two images' pixel noise): averaging
-rays, or another unbiased estimator of the ray, may not move the mean.
+rays, or another unbiased estimator of the ray, may not move the mean (|z| beyond 3 would say it
+did; with three colours and several rows a scene, a z of 2-3 now and then is chance).
 
 --side S: every volume at S voxels along its longest axis at most (data sets block-averaged, the
 built-in volumes generated at that size; the light grid follows); 0: each scene's own volume.
@@ -29,7 +31,7 @@ present) and `cloud`, the built-in default scene (parse_scene({})).
 Writes OUT_DIR/results.json (every row) and OUT_DIR/log.txt; the record's README says what ran.
 Full size on a GPU (the bench's scenes at 512^2 with their own volumes):
     python scripts/experiments/experiment_shadow_variance.py bench/h100-shadow-variance \\
-        --side 0 --width 512 --height 512 --spp 64
+        --side 0 --width 512 --height 512 --spp 64 --images 4
 """
 from __future__ import annotations
 
@@ -54,12 +56,13 @@ SCENES = (*ALL_SCENES, "cloud")
 HAS_TRACKING = "shadow_tracking" in {f.name for f in dataclasses.fields(RenderSettings)}
 
 
-def relative_variance(a: np.ndarray, b: np.ndarray, spp: int) -> float:
-    """One sample's relative variance from two independent images of spp samples each."""
-    a = np.asarray(a, np.float64)[..., :3]
-    b = np.asarray(b, np.float64)[..., :3]
-    mean = (a + b) / 2.0
-    return float(spp * np.sum((a - b) ** 2) / 2.0 / max(np.sum(mean ** 2), 1e-300))
+def relative_variance(images: list, spp: int) -> float:
+    """One sample's relative variance from K independent images of spp samples each: spp times the
+    pixels' variance across the images (K - 1 degrees of freedom a pixel), summed, over the sum
+    of the mean image's squares (two images: scripts/guided_variance.py's estimate)."""
+    stack = np.stack([np.asarray(i, np.float64)[..., :3] for i in images])
+    mean = stack.mean(axis=0)
+    return float(spp * np.sum(stack.var(axis=0, ddof=1)) / max(np.sum(mean ** 2), 1e-300))
 
 
 def block_average(data: np.ndarray, side: int) -> np.ndarray:
@@ -100,27 +103,26 @@ def scene_and_volume(name: str, side: int, width: int, height: int):
     return scene, small
 
 
-def render_pair(renderer: Renderer, spp: int, per_pass: int, seed: int):
-    """Two path-traced images of spp samples (seeds seed, seed + 1) and GPU ms a sample."""
-    renderer.render("pt", spp=min(per_pass, spp), seed=seed + 17, samples_per_pass=per_pass)
+def render_images(renderer: Renderer, count: int, spp: int, per_pass: int, seed: int):
+    """count path-traced images of spp samples (seeds seed, seed + 1, ...) and GPU ms a sample
+    (after an untimed render: a pass's first render holds one-off work)."""
+    renderer.render("pt", spp=min(per_pass, spp), seed=seed + 7919, samples_per_pass=per_pass)
     images, ms, stats = [], [], []
-    for s in (seed, seed + 1):
+    for s in range(seed, seed + count):
         result = renderer.render("pt", spp=spp, seed=s, samples_per_pass=per_pass)
         images.append(result.image)
         ms.append(result.render_ms / spp)
         stats.append(result.stats)
-    return images[0], images[1], float(np.mean(ms)), stats
+    return images, float(np.mean(ms)), stats
 
 
-def mean_and_error(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The image's mean RGB from the two images, and its variance (from their pixel differences,
-    pixels independent)."""
-    a = np.asarray(a, np.float64)[..., :3].reshape(-1, 3)
-    b = np.asarray(b, np.float64)[..., :3].reshape(-1, 3)
-    pixels = a.shape[0]
-    mean = (a + b).mean(axis=0) / 2.0
-    # var of (a + b) / 2 per pixel, estimated by (a - b)^2 / 4
-    var = ((a - b) ** 2).sum(axis=0) / 4.0 / pixels ** 2
+def mean_and_error(images: list) -> tuple[np.ndarray, np.ndarray]:
+    """The image's mean RGB over all images, and that mean's variance (from the pixels' variance
+    across the images, pixels independent)."""
+    stack = np.stack([np.asarray(i, np.float64)[..., :3].reshape(-1, 3) for i in images])
+    count, pixels = stack.shape[:2]
+    mean = stack.mean(axis=(0, 1))
+    var = stack.var(axis=0, ddof=1).sum(axis=0) / count / pixels ** 2
     return mean, var
 
 
@@ -132,7 +134,7 @@ def measure_scene(ctx, name: str, args, log) -> dict | None:
     renderer = Renderer(ctx, scene, volume)
     dims = tuple(int(v) for v in renderer.resources.volume.dims)
     out = {"scene": name, "volume_dims": dims, "width": args.width, "height": args.height,
-           "spp": args.spp, "own_max_bounces": scene.max_bounces, "rows": []}
+           "spp": args.spp, "images": args.images, "own_max_bounces": scene.max_bounces, "rows": []}
     try:
         for bounces_name in args.bounces.split(","):
             bounces = scene.max_bounces if bounces_name == "own" else int(bounces_name)
@@ -150,14 +152,15 @@ def measure_scene(ctx, name: str, args, log) -> dict | None:
                         changes["shadow_tracking"] = tracking
                     renderer.configure(**changes)
                     t0 = time.perf_counter()
-                    a, b, ms, stats = render_pair(renderer, args.spp, args.per_pass, args.seed)
-                    v = relative_variance(a, b, args.spp)
-                    mean, mean_var = mean_and_error(a, b)
+                    images, ms, stats = render_images(renderer, args.images, args.spp,
+                                                      args.per_pass, args.seed)
+                    v = relative_variance(images, args.spp)
+                    mean, mean_var = mean_and_error(images)
                     row = {"max_bounces": bounces, "tracking": tracking, "shadow_rays": rays,
                            "relative_variance": v, "ms_per_sample": ms,
                            "mean_rgb": mean.tolist(),
-                           "finite": bool(np.all(np.isfinite(a)) and np.all(np.isfinite(b))),
-                           "negative_pixels": int(np.sum(np.minimum(a, b) < 0.0)),
+                           "finite": bool(all(np.all(np.isfinite(i)) for i in images)),
+                           "negative_pixels": int(sum(np.sum(i < 0.0) for i in images)),
                            "truncated_paths": int(sum(s.get("truncated_paths", 0)
                                                       for s in stats)),
                            "wall_s": None}
@@ -196,9 +199,10 @@ def main(argv=None) -> int:
     p.add_argument("--scenes", default=",".join(SCENES))
     p.add_argument("--side", type=int, default=32,
                    help="voxels along the longest axis at most (0: each scene's own)")
-    p.add_argument("--width", type=int, default=24)
-    p.add_argument("--height", type=int, default=24)
-    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--width", type=int, default=48)
+    p.add_argument("--height", type=int, default=48)
+    p.add_argument("--spp", type=int, default=16, help="samples a pixel of each image")
+    p.add_argument("--images", type=int, default=8, help="independent images a row")
     p.add_argument("--per-pass", type=int, default=16, help="samples a render pass adds")
     p.add_argument("--rays", default="1,16", help="shadow rays an event averages, first 1")
     p.add_argument("--tracking", default="ratio,residual" if HAS_TRACKING else "ratio")
