@@ -28,6 +28,9 @@
 // (lib/guided_directions.glsl) and the throughput takes its weight phase / pdf. With a map, "the
 // phase function's pdf" of the MIS above is then that mixture's pdf, on both sides: p.phase_pdf
 // of the direction drawn (escapes) and the mixture evaluated at the map sample's direction.
+// the sun's shadow ray (ratio or residual ratio tracking)
+#include "lib/sun_shadow.glsl"
+
 uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
 uniform int max_path_steps;   // hang guard: tracking steps one path may take in all
@@ -334,8 +337,8 @@ int path_step(inout PathState p, inout int steps_left)
 #if !defined(WALK_SUN_GRID)   // grid-sun walks trace no shadow ray (their correction comes after)
     // SUN_SHADOW_RAYS rays in turn, each adding its share; a cut one resumes where it stopped.
     while (p.shadow_pending > 0) {
-        if (!transmittance_to_boundary_continue(p.x, sun_direction, p.shadow_t,
-                                                p.shadow_transmittance, p.rng, steps_left))
+        if (!sun_transmittance_continue(p.x, p.shadow_t, p.shadow_transmittance, p.rng,
+                                        steps_left))
             return STEP_SHADOW_CUT;
         p.shadow_pending -= 1;
         p.radiance += p.throughput * sun_irradiance
