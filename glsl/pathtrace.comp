@@ -10,6 +10,7 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #include "lib/lights.glsl"
 #include "lib/phase.glsl"
 #include "lib/tracking.glsl"
+#include "lib/sun_shadow.glsl"
 #if defined(PROBE_LIGHTING) || defined(GUIDED_RESIDUAL)
 #define PROBE_SAMPLING
 #include "lib/sh.glsl"

@@ -12,6 +12,7 @@ layout(local_size_x = 64) in;
 #include "lib/medium.glsl"
 #include "lib/lights.glsl"
 #include "lib/tracking.glsl"
+#include "lib/sun_shadow.glsl"
 
 layout(std430, binding = 3) buffer WalkRadiance { vec4 walk_radiance[]; };
 
@@ -36,7 +37,7 @@ void main()
     // keyed by the walk (as its own stream is, another seed): the same however a pass is cut
     uint rng = rng_seed(first_probe * directions + local, pass_index, seed ^ 0x68e31da4u);
     int steps = loop_budget;
-    float transmittance = transmittance_to_boundary(at.xyz, sun_direction, rng, steps);
+    float transmittance = sun_transmittance(at.xyz, rng, steps);
     if (transmittance < 0.0) {
         atomicAdd(tracking_stats.truncated_paths, 1u);
         walk_radiance[local] = vec4(0.0, 0.0, 0.0, 2.0);

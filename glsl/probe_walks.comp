@@ -31,8 +31,9 @@ layout(local_size_x = 64) in;
 #include "lib/probes.glsl"
 #if defined(WALK_SUN_GRID)
 #define LIGHT_GRID_FACE_MARCH 0
-#include "lib/light_grid.glsl"
 #endif
+#include "lib/light_grid.glsl"
+#include "lib/sun_shadow.glsl"
 #include "lib/integrator.glsl"
 #include "lib/walk_profile.glsl"
 #include "lib/probe_accum.glsl"

@@ -49,6 +49,11 @@ def min_side_for_probes(probe_grid: tuple[int, int, int] | None, floor: int = MI
     return max(floor, TEXELS_PER_PROBE * max(probe_grid)) if probe_grid else floor
 
 
+# Residual-tracked shadow rays (lib/sun_shadow.glsl): the control's lattice spacing along the ray,
+# in the grid's largest texel sides (one grid read a node).
+SHADOW_CONTROL_TEXELS = 1.0
+
+
 # On a CPU rasterizer the light grid keeps the volume's own resolution: upsampling a 24^3 test
 # volume's grid to 128^3 took 0.9 s per bake on llvmpipe's two cores against 12 ms, and every
 # light, transfer-function or probe edit re-bakes it.
@@ -238,7 +243,8 @@ class LightTransmittance:
         # lib/light_grid.glsl marches the last texel before the box's sun side itself
         texel = float(np.max(2.0 * np.asarray(self.layout.half_extent) / np.asarray(self.layout.size)))
         return {"light_transmittance": LIGHT_UNIT, **self.layout.uniforms(),
-                "light_grid_texel": texel, "light_grid_march_step": self.march_step}
+                "light_grid_texel": texel, "light_grid_march_step": self.march_step,
+                "shadow_control_step": SHADOW_CONTROL_TEXELS * texel}
 
     def read(self) -> np.ndarray:
         """The optical depth (z, y, x) of the texture, in the layout's sheared coordinates."""

@@ -102,13 +102,18 @@ class BakeProgress:
     standard_error: float    # estimated relative standard error of the probe radiance mean
 
 
+# How shadow rays towards the sun are tracked (lib/sun_shadow.glsl; RenderSettings.shadow_tracking).
+SHADOW_TRACKINGS = ("ratio", "residual")
+
+
 class ProbeGrid:
     def __init__(self, ctx: moderngl.Context, grid: tuple[int, int, int], samples: int,
                  precision: str = "rgba32f", sh_order: int = 2,
                  box: tuple | None = None, grey: bool = False, resumable: bool | None = None,
                  sun: str = "ray", adaptive: float = 0.0, environment_map: bool = False,
                  planes: tuple | None = None, sun_lobe: float = 0.0,
-                 sun_correction: float = 0.0, medium: dict | None = None):
+                 sun_correction: float = 0.0, medium: dict | None = None,
+                 shadow_tracking: str = "ratio"):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
         bake time); `sh_order` 0 to 4 decides which textures exist (lib/probe_packing.glsl).
         `resumable`: walks that suspend and resume across dispatches (default: where the driver limits loops;
@@ -125,7 +130,15 @@ class ProbeGrid:
         spaced, and the shaders are built without the warp (PROBE_WARP 0). `sun_lobe` > 0: each
         probe also holds a lobe about the sun's direction of that Henyey-Greenstein g beside its
         bands (lib/sun_lobe.glsl; SH order 3 only); 0: none. `medium`: the scene's medium
-        defines (SceneResources.medium_defines: its channels), which every pass is built with."""
+        defines (SceneResources.medium_defines: its channels), which every pass is built with.
+        `shadow_tracking`: how the walks' shadow rays towards the sun (sun "ray") and the grid
+        sun's correction rays (sun "grid") are tracked: "ratio", or "residual" with the light
+        grid as control (lib/sun_shadow.glsl; bake_pass(light=...) then needs the grid either
+        way)."""
+        if shadow_tracking not in SHADOW_TRACKINGS:
+            raise ValueError(f"shadow tracking {shadow_tracking!r}: expected one of "
+                             f"{', '.join(SHADOW_TRACKINGS)}")
+        self.shadow_tracking = shadow_tracking
         self.environment_map = bool(environment_map)
         self.medium = dict(medium or {})
         if not (math.isfinite(sun_lobe) and 0.0 <= sun_lobe < 1.0):
@@ -194,7 +207,9 @@ class ProbeGrid:
         self.noise = ctx.buffer(reserve=8 + 4 * self.count)
         defines = {"PROBE_IMAGE_FORMAT": precision, "PROBE_IMAGE_LIMIT": PROBE_IMAGE_LIMIT,
                    **self.defines()}
-        self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable), **self.defines()}
+        tracking = {"SHADOW_TRACKING_RESIDUAL": 1} if shadow_tracking == "residual" else {}
+        self._walk_defines = {"RESUMABLE_WALKS": int(self.resumable), **self.defines(),
+                              **tracking}
         if sun == "grid":
             self._walk_defines["WALK_SUN_GRID"] = 1
         if self.environment_map:
@@ -202,7 +217,7 @@ class ProbeGrid:
         self.walk_program = compute_program(ctx, "probe_walks.comp", self._walk_defines)
         # sun "grid": each walk's correction of the grid's sun, traced after the walks
         self.correction_program = (compute_program(ctx, "probe_sun_correction.comp",
-                                                   self.medium or None)
+                                                   {**self.medium, **tracking} or None)
                                    if sun == "grid" else None)
         self._walk_profile_program = None   # the WALK_PROFILE build, compiled when first asked for
         self.project_program = compute_program(ctx, "probe_project.comp", defines)
@@ -302,6 +317,11 @@ class ProbeGrid:
             return 0
         return (self.passes_total - self.passes_done) * self.count - self.next_probe
 
+    @property
+    def needs_light(self) -> bool:
+        """Whether the walks or their correction read the light grid (bake_pass(light=...))."""
+        return self.sun == "grid" or self.shadow_tracking == "residual"
+
     def bake_pass(self, resources: SceneResources, profile: GpuProfile | None = None,
                   counters: moderngl.Buffer | None = None, light=None) -> None:
         """Runs one pass over all probes (the rest of it, when bake_probes stopped within one).
@@ -328,8 +348,9 @@ class ProbeGrid:
         return ran
 
     def _run_probes(self, resources, k, profile, counters, light) -> None:
-        if self.sun == "grid" and light is None:
-            raise ValueError("a bake with sun='grid' needs the baked light grid (light=...)")
+        if self.needs_light and light is None:
+            raise ValueError("a bake with sun='grid' or residual shadow tracking needs the baked "
+                             "light grid (light=...)")
         section = profile.section if profile is not None else _no_section
         directions = self._pass_directions()
         scene = resources.scene
@@ -354,7 +375,7 @@ class ProbeGrid:
             uniforms["probe_warp"] = PROBE_WARP_UNIT
         walk_program = self._walk_program(counters is not None)
         resources.bind()
-        if self.sun == "grid":
+        if self.needs_light:
             light.bind()
             uniforms.update(light.uniforms())
         set_uniforms(walk_program, uniforms)

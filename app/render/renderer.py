@@ -213,6 +213,10 @@ class Renderer:
                        **(probe_defines or self._probe_defines())}
         if self.resources.defines():
             defines = {**(defines or {}), **self.resources.defines()}
+        if self._settings.sun_shadow_rays != 1:
+            defines = {**(defines or {}), "SUN_SHADOW_RAYS": self._settings.sun_shadow_rays}
+        if self._settings.shadow_tracking == "residual":
+            defines = {**(defines or {}), "SHADOW_TRACKING_RESIDUAL": 1}
         key = (method, tuple(sorted((defines or {}).items())))
         if key not in self._passes:
             self._passes[key] = PathTracer(self.ctx, defines)
@@ -248,9 +252,10 @@ class Renderer:
                 spec.layout, spec.adaptive_strength, spec.adaptive_indicator,
                 self.resources.use_majorant_grid, st.walk_sun, st.walk_adaptive, st.sun_lobe,
                 st.walk_sun_correction if st.walk_sun == "grid" else None,
+                st.shadow_tracking,
                 (st.light_max_side, st.light_min_side, st.light_follows_probes,
                  st.light_precision)
-                if st.walk_sun == "grid" else None)
+                if st.walk_sun == "grid" or st.shadow_tracking == "residual" else None)
 
     def probes_current(self) -> bool:
         return (self.probe_grid is not None and self.probe_grid.done
@@ -363,7 +368,8 @@ class Renderer:
                          g.adaptive, g.environment_map, g.planes, g.sun_lobe) != (
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
                 st.walk_sun, st.walk_adaptive, env_map, plan.planes, lobe) or (
-                g.sun_correction != st.walk_sun_correction) or g.medium != medium:
+                g.sun_correction != st.walk_sun_correction) or g.medium != medium or (
+                g.shadow_tracking != st.shadow_tracking):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
@@ -371,7 +377,8 @@ class Renderer:
                                         sun=st.walk_sun, adaptive=st.walk_adaptive,
                                         sun_correction=st.walk_sun_correction,
                                         environment_map=env_map, planes=plan.planes,
-                                        sun_lobe=lobe, medium=medium)
+                                        sun_lobe=lobe, medium=medium,
+                                        shadow_tracking=st.shadow_tracking)
         self.probe_grid.dispatch_target_ms = dispatch_target_ms(self)
         self.probe_grid.restart(seed, warm=warm)
         self._baked_key = self.bake_key()
@@ -386,7 +393,7 @@ class Renderer:
             return 0.0
         grid = self.start_bake(seed)
         total = self._light_for_walks() + self._take_fit_ms()
-        light = self._light if grid.sun == "grid" else None
+        light = self._light if grid.needs_light else None
         if progress is None:
             # One timed span: the passes queue up on the GPU with no wait between them.
             self.timer.start()
@@ -411,7 +418,7 @@ class Renderer:
     def _light_for_walks(self) -> float:
         """The light grid the walks read when walk_sun is "grid" (GPU ms if it was baked now; the
         bake's time includes it, and the raymarcher then finds it current)."""
-        return self.bake_light() if self.probe_grid.sun == "grid" else 0.0
+        return self.bake_light() if self.probe_grid.needs_light else 0.0
 
     def raymarcher(self, guided_level0: bool = False) -> Raymarcher:
         """The raymarcher for the probes in hand, or (guided_level0) `guided`'s level 0, an
@@ -560,7 +567,7 @@ class Renderer:
         if self.probe_grid is None or self._baked_key != self.bake_key():
             self.start_bake(seed, warm=self._settings.bake_warm)
         grid = self.probe_grid
-        if grid.sun == "grid":
+        if grid.needs_light:
             # the walks read the light grid: it comes first, in slices of the same budget
             light_ms = self.bake_light(budget_ms)
             if not self.light_current() or (budget_ms is not None and light_ms >= budget_ms):
@@ -568,7 +575,7 @@ class Renderer:
                 return light_ms
         else:
             light_ms = 0.0
-        light = self._light if grid.sun == "grid" else None
+        light = self._light if grid.needs_light else None
         self.timer.start()
         if budget_ms is None:
             grid.bake_pass(self.resources, light=light)
@@ -597,6 +604,11 @@ class Renderer:
         g = self.probe_grid
         return g is not None and (g.passes_done > 0 or g.next_probe > 0 or g.warm_walks > 0)
 
+    def needs_light(self, method: str) -> bool:
+        """Whether rendering `method` reads the light grid: the raymarcher and `guided` always,
+        every path-traced method where the shadow rays are residual-tracked against it."""
+        return method in ("raymarch", "guided") or self._settings.shadow_tracking == "residual"
+
     def add_samples(self, n: int = 1) -> float:
         """Adds n samples per pixel to the accumulation begun by begin(); returns GPU ms.
         Probe methods use the probes as they are now (bake them first for a final image)."""
@@ -610,7 +622,7 @@ class Renderer:
             extra["probe_gather_event"] = (self._settings.gather_event if method == "probes"
                                            else 1)
         # a sliced light-grid bake under way (bake_step) is read as it is, not finished here
-        light_ms = (self.bake_light() if method in ("raymarch", "guided")
+        light_ms = (self.bake_light() if self.needs_light(method)
                     and not self.light_baking() else 0.0)
         self.last_light_ms = light_ms
         level0_ms = 0.0
@@ -641,6 +653,9 @@ class Renderer:
         defines = (self._read_defines(self.probe_grid.defines())
                    if method in (*PROBE_LIGHTING, "guided") else None)
         tracer = self.pass_for(method, defines)
+        if self._settings.shadow_tracking == "residual":   # the shadow rays' control
+            self._light.bind()
+            extra = {**(extra or {}), **self._light.uniforms()}
         # Cut into dispatches of at most the device's target (dispatch_budget.py) by the GPU ms
         # per sample this pass took at this size last time: several samples a dispatch where they
         # fit, bands of rows where one sample of the whole image would not. Unknown yet: one
@@ -683,7 +698,7 @@ class Renderer:
         bake_ms = 0.0
         if self.needs_probes(method):
             bake_ms = self.bake(seed, progress=bake_progress)
-        if method in ("raymarch", "guided"):
+        if self.needs_light(method):
             bake_ms += self.bake_light()
         render_ms = 0.0
         chunk = max(samples_per_pass, 1)

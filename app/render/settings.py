@@ -19,7 +19,7 @@ from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_
                                   PRECISION as LIGHT_PRECISION, PRECISIONS as LIGHT_PRECISIONS,
                                   SEGMENT_TARGET_INVOCATIONS, SOFTWARE_MIN_SIDE)
 
-from .probes import WALK_SUN_MODES
+from .probes import SHADOW_TRACKINGS, WALK_SUN_MODES
 
 RAYMARCH_STAGES = ("compute", "fragment")
 # The latest event `probes` may gather at: beyond a few events the path tracer's own sampling
@@ -116,6 +116,17 @@ class RenderSettings:
     # from 2.97% to 2.92% rRMSE against level 0, for frames 2.3x as long and a first image 5.8 s
     # later.
     mixed_levels: bool = False
+    # Independent ratio-tracked shadow rays towards the sun a scattering event averages, in the
+    # render passes (lib/integrator.glsl SUN_SHADOW_RAYS): 1, the default; more only measures how
+    # much of a path's variance the shadow ray's own noise holds (the mean is the same;
+    # scripts/experiments/experiment_shadow_variance.py).
+    sun_shadow_rays: int = 1
+    # How every shadow ray towards the sun is tracked, in the renderers and the bake: "ratio"
+    # (ratio tracking against the macrocell majorants) or "residual" (residual ratio tracking with
+    # the light grid's optical depth as the control: the same collisions, factors near 1 where the
+    # grid follows the medium; unbiased for any grid; needs the light grid baked;
+    # lib/sun_shadow.glsl).
+    shadow_tracking: str = "ratio"
 
     def __post_init__(self):
         if self.walk_sun not in WALK_SUN_MODES:
@@ -142,6 +153,10 @@ class RenderSettings:
             _check_positive_int("brick size", self.brick_size)
             if self.brick_size < 2:
                 raise ValueError(f"brick size: expected at least 2 voxels, got {self.brick_size}")
+        _check_positive_int("sun shadow rays", self.sun_shadow_rays)
+        if self.shadow_tracking not in SHADOW_TRACKINGS:
+            raise ValueError(f"shadow tracking {self.shadow_tracking!r}: expected one of "
+                             f"{', '.join(SHADOW_TRACKINGS)}")
         _check_positive_int("light grid max side", self.light_max_side)
         if self.light_min_side is not None:
             _check_positive_int("light grid min side", self.light_min_side)

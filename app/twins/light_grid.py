@@ -77,3 +77,27 @@ def light_grid_lookup(optical_depth: np.ndarray, layout: LightGridLayout, points
     q = pts - np.asarray(layout.shear) * pts[..., layout.axis:layout.axis + 1]
     uvw = q / (2.0 * np.asarray(layout.half_extent)) + 0.5
     return trilinear(optical_depth, uvw * np.asarray(layout.size, np.float64) - 0.5)
+
+
+def light_grid_optical_depth(optical_depth: np.ndarray, layout: LightGridLayout, volume: Volume,
+                             table: np.ndarray, density_scale: float, sun_direction, points,
+                             texel: float, march_step: float) -> np.ndarray:
+    """lib/light_grid.glsl light_grid_optical_depth (LIGHT_GRID_FACE_MARCH 1) at world points
+    (..., 3): 0 where the sun's ray from the point does not cross the box; within one texel
+    (`texel`, LightTransmittance.uniforms' light_grid_texel) of where it leaves the box, the
+    midpoint march of sigma_t to the box (at most 8 points of about march_step); elsewhere the
+    grid's lookup."""
+    from .medium import box_intersect
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    d = np.asarray(sun_direction, np.float64)
+    d = d / np.linalg.norm(d)
+    t0, t1, hit = box_intersect(volume.half_extent, pts, np.broadcast_to(d, pts.shape))
+    tau = light_grid_lookup(optical_depth, layout, pts)
+    near = hit & (t1 < texel)
+    for i in np.flatnonzero(near):
+        n = int(np.clip(np.ceil((t1[i] - t0[i]) / march_step), 1, 8))
+        dt = (t1[i] - t0[i]) / n
+        ts = t0[i] + (np.arange(n) + 0.5) * dt
+        tau[i] = np.sum(sigma_t_at(volume, table, density_scale, pts[i] + ts[:, None] * d)) * dt
+    tau[~hit] = 0.0
+    return tau.reshape(np.shape(points)[:-1])

@@ -28,6 +28,9 @@
 // (lib/guided_directions.glsl) and the throughput takes its weight phase / pdf. With a map, "the
 // phase function's pdf" of the MIS above is then that mixture's pdf, on both sides: p.phase_pdf
 // of the direction drawn (escapes) and the mixture evaluated at the map sample's direction.
+// the sun's shadow ray (ratio or residual ratio tracking)
+#include "lib/sun_shadow.glsl"
+
 uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
 uniform int max_path_steps;   // hang guard: tracking steps one path may take in all
@@ -78,6 +81,14 @@ const int PATH_STEP_KEPT_BACK = 0;
 #define RR_START_BOUNCE 3
 #endif
 
+// Independent shadow rays towards the sun per scattering event, averaged (1: the renderers'; more:
+// an experiment's near-noiseless shadow ray, measuring how much of a path's variance the shadow
+// ray's own noise holds: scripts/experiments/experiment_shadow_variance.py,
+// RenderSettings.sun_shadow_rays). The mean is the same for any count.
+#ifndef SUN_SHADOW_RAYS
+#define SUN_SHADOW_RAYS 1
+#endif
+
 const int PATH_IDLE = 0;
 const int PATH_ACTIVE = 1;
 
@@ -98,7 +109,7 @@ struct PathState {
     int status;         // PATH_IDLE or PATH_ACTIVE
     float shadow_t;     // a shadow ray in progress at x: distance tracked so far (< 0: not begun)
     float shadow_transmittance;  // and its ratio-tracking estimate so far
-    int shadow_pending; // 1 while the shadow ray of the event at x is unfinished
+    int shadow_pending; // the sun's shadow rays of the event at x still to finish (0: none)
 #if defined(WALK_SUN_GRID)
     float correction_rate_sum;   // the walk's events' correction rates summed (see path_flight)
     // The walk's one candidate for the sun's correction: where, its weight W c / w (the
@@ -305,7 +316,7 @@ int path_flight(inout PathState p, inout int steps_left)
     if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
         p.shadow_t = -1.0;
         p.shadow_transmittance = 1.0;
-        p.shadow_pending = 1;
+        p.shadow_pending = SUN_SHADOW_RAYS;
     }
     return STEP_CONTINUE;
 }
@@ -324,17 +335,17 @@ int path_step(inout PathState p, inout int steps_left)
             return flight;
     }
 #if !defined(WALK_SUN_GRID)   // grid-sun walks trace no shadow ray (their correction comes after)
-    if (p.shadow_pending != 0) {
-        if (!transmittance_to_boundary_continue(p.x, sun_direction, p.shadow_t,
-                                                p.shadow_transmittance, p.rng, steps_left))
+    // SUN_SHADOW_RAYS rays in turn, each adding its share; a cut one resumes where it stopped.
+    while (p.shadow_pending > 0) {
+        if (!sun_transmittance_continue(p.x, p.shadow_t, p.shadow_transmittance, p.rng,
+                                        steps_left))
             return STEP_SHADOW_CUT;
-        p.shadow_pending = 0;
+        p.shadow_pending -= 1;
         p.radiance += p.throughput * sun_irradiance
-                      * (p.shadow_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy));
-#if defined(ENVIRONMENT_MAP)
-        p.shadow_t = -1.0;          // the map sample's shadow ray starts afresh
+                      * (p.shadow_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy)
+                         / float(SUN_SHADOW_RAYS));
+        p.shadow_t = -1.0;          // the next ray (or the map sample's) starts afresh
         p.shadow_transmittance = 1.0;
-#endif
     }
 #endif
 #if defined(ENVIRONMENT_MAP)
