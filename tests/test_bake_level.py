@@ -17,7 +17,7 @@ from app.render.probes import ProbeGrid
 from app.render.renderer import Renderer
 from app.render.settings import RenderSettings
 from app.scene import parse_scene
-from app.twins.majorant_grid import macrocell_counts
+from app.twins.majorant_grid import density_range_grid, macrocell_counts
 from app.volume import VolumeError, volume_from_array
 
 SCENE = {"volume": {"builtin": "cloud", "size": [16, 16, 16]}, "density_scale": 30.0,
@@ -103,7 +103,7 @@ def test_a_coarser_level_that_holds_the_same_medium_gives_the_same_probes(ctx):
 
 def test_the_coarse_level_is_coarser_and_its_majorant_grid_its_own(ctx):
     """The bake's texture holds coarser()'s level (2 x 2 x 2 averages, twice for level 2) and
-    its majorant grid is built over it; it changes the probes of a varied volume (the cloud)."""
+    its majorant grid is built over it, at the level shown's macrocells; it changes the probes of a varied volume (the cloud)."""
     scene = parse_scene(SCENE)
     r = Renderer(ctx, scene, settings=RenderSettings(bake_level=2))
     try:
@@ -113,7 +113,11 @@ def test_the_coarse_level_is_coarser_and_its_majorant_grid_its_own(ctx):
         expected = box_filtered(box_filtered(data))
         got = np.frombuffer(medium.volume_tex.read(), np.float32).reshape(expected.shape)
         assert np.array_equal(got, expected)
-        assert medium.majorant_grid.cells == macrocell_counts((4, 4, 4))
+        # its densities over the level shown's macrocells
+        assert medium.majorant_grid.cells == r.resources.majorant_grid.cells == macrocell_counts(
+            (16, 16, 16))
+        low, high = density_range_grid(expected, medium.majorant_grid.cells)
+        assert np.array_equal(medium.majorant_grid.d_max, high)
         assert medium.majorant_grid.builds == 1 and medium.gpu_bytes > 4 * 4 ** 3
         coarse = _coefficients(r)
         r.configure(bake_level=0)
