@@ -120,8 +120,11 @@ def test_the_coarse_level_is_coarser_and_its_majorant_grid_its_own(ctx):
         assert np.array_equal(medium.majorant_grid.d_max, high)
         assert medium.majorant_grid.builds == 1 and medium.gpu_bytes > 4 * 4 ** 3
         coarse = _coefficients(r)
+        note = r.bake_note()   # what `render` prints and the API's notes hold
+        assert "level 2 coarser" in note and "(4 x 4 x 4" in note and "bake_level" in note
         r.configure(bake_level=0)
         r.bake(seed=1)
+        assert r.bake_note() is None
         assert not np.allclose(_coefficients(r), coarse, rtol=1e-3)
     finally:
         r.release()

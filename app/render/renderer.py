@@ -134,6 +134,7 @@ class Renderer:
         self._image_light = _LightSlot()   # the light grid the image reads (the level shown)
         self._walk_light = _LightSlot()    # the bake's own at bake_level > 0 (the coarse level)
         self._bake_medium: BakeMedium | None = None   # the coarse level, made when first needed
+        self.baked_level = 0   # the bake level of the probes in hand (start_bake)
         self.last_sun_lobe_fit: SunLobeFit | None = None   # the last bake start's choice
         self._sun_lobe_fitter: SunLobeFitter | None = None   # made when first asked for
         self._fit_ms = 0.0   # GPU ms of the last bake start's pilot, not yet counted in a bake's time
@@ -415,9 +416,21 @@ class Renderer:
                                         environment_map=env_map, planes=plan.planes,
                                         sun_lobe=lobe, medium=medium)
         self.probe_grid.dispatch_target_ms = dispatch_target_ms(self)
+        self.baked_level = self.bake_level()
         self.probe_grid.restart(seed, warm=warm)
         self._baked_key = self.bake_key()
         return self.probe_grid
+
+    def bake_note(self) -> str | None:
+        """What the probes in hand were baked on where it is not the level shown (bake_level >
+        0), for `render`'s output and the API's notes; else None."""
+        level, medium = self.baked_level, self._bake_medium
+        if self.probe_grid is None or not level or medium is None or medium.volume is None:
+            return None
+        nx, ny, nz = medium.volume.dims
+        return (f"probes baked on a level {level} coarser than the one shown ({nx} x {ny} x {nz}, "
+                f"{medium.gpu_bytes / 2**20:.1f} MiB beside the volume): RenderSettings.bake_level, "
+                f"a shortcut with a bias (docs/bricking.md)")
 
     def bake(self, seed: int = 0, progress: Callable | None = None, profile=None,
              counters=None) -> float:
