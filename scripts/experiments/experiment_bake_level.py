@@ -19,8 +19,10 @@ Level -1 is recorded with the level the probes' spacing gave (resolved_level).
 Full size (a GPU): 512^2 images of the bench's scenes (app/bench/scenes.py): the data sets where
 ../shared/datasets has them, the thick and anisotropic clouds, and the battery's backlit shells of
 albedo 0.99 (g = 0.6 and 0.9, about two voxels thick) and its dense speck, probes 32^3 x 256.
---quick (llvmpipe, seconds to minutes): the built-in scenes at 20 voxels, 24^2 images, probes 5^3 x
-64, 512 reference samples, max_bounces at most 16, one seed; --side/--size/... override either.
+--quick (llvmpipe, about half a minute): the built-in scenes at 16 voxels, 16^2 images, probes 4^3 x
+32, 256 reference samples, 2 frames, max_bounces at most 16, one seed; --side/--size/... override
+either (bench/llvmpipe-bake-level's run: --quick --side 32 --size 48 --grid 8 --ref-spp 1024
+--seeds 2 --frames 8).
 Writes OUT_DIR/bake_level.json (meta: device from the GL renderer string, arguments; records) and
 prints a table.
 """
@@ -52,13 +54,13 @@ parser.add_argument("--quick", action="store_true", help="llvmpipe: small scenes
 parser.add_argument("--scenes", default=None, help="default: data sets found, then "
                     + ",".join(BUILT_IN) + " (--quick: the built-in ones)")
 parser.add_argument("--levels", default="0,1,2,-1")
-parser.add_argument("--size", type=int, default=None, help="image side (512; quick 24)")
+parser.add_argument("--size", type=int, default=None, help="image side (512; quick 16)")
 parser.add_argument("--side", type=int, default=None,
-                    help="built-in volumes' longest side in voxels (the bench's; quick 20)")
-parser.add_argument("--grid", type=int, default=None, help="probes per axis (32; quick 5)")
-parser.add_argument("--walks", type=int, default=None, help="walks per probe (256; quick 64)")
-parser.add_argument("--frames", type=int, default=None, help="raymarched frames (16; quick 4)")
-parser.add_argument("--ref-spp", type=int, default=None, help="reference spp (4096; quick 512)")
+                    help="built-in volumes' longest side in voxels (the bench's; quick 16)")
+parser.add_argument("--grid", type=int, default=None, help="probes per axis (32; quick 4)")
+parser.add_argument("--walks", type=int, default=None, help="walks per probe (256; quick 32)")
+parser.add_argument("--frames", type=int, default=None, help="raymarched frames (16; quick 2)")
+parser.add_argument("--ref-spp", type=int, default=None, help="reference spp (4096; quick 256)")
 parser.add_argument("--seeds", type=int, default=None, help="bakes per level (2; quick 1)")
 parser.add_argument("--max-bounces", type=int, default=None,
                     help="at most this many (the scene's; quick 16)")
@@ -70,12 +72,12 @@ def pick(value, full, quick):
     return value if value is not None else (quick if q else full)
 
 
-size = pick(args.size, 512, 24)
-side = pick(args.side, None, 20)
-grid = pick(args.grid, 32, 5)
-walks = pick(args.walks, 256, 64)
-frames = pick(args.frames, 16, 4)
-ref_spp = pick(args.ref_spp, 4096, 512)
+size = pick(args.size, 512, 16)
+side = pick(args.side, None, 16)
+grid = pick(args.grid, 32, 4)
+walks = pick(args.walks, 256, 32)
+frames = pick(args.frames, 16, 2)
+ref_spp = pick(args.ref_spp, 4096, 256)
 seeds = list(range(11, 11 + pick(args.seeds, 2, 1)))
 max_bounces = pick(args.max_bounces, None, 16)
 levels = [int(v) for v in args.levels.split(",")]
