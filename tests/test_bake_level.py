@@ -228,3 +228,28 @@ def test_the_probes_spacing_rule():
     # odd axes round up (coarser()'s padding): 15 -> 8 -> 4
     odd = volume_from_array(np.zeros((15, 15, 15), np.float32), value_range=(0.0, 1.0))
     assert level_dims(odd, 2)[1:] == [(8, 8, 8), (4, 4, 4)]
+
+
+def test_a_sliced_bake_at_a_coarser_level_ends_at_the_whole_bake(ctx):
+    """The viewer's budgeted slices (bake_step) bake the bake's own light grid a slab at a time,
+    then the walks, and end at the probes of one whole bake; the image's light grid is left to
+    the image (the raymarcher bakes it when it needs it)."""
+    r = Renderer(ctx, parse_scene(SCENE), settings=RenderSettings(bake_level=1))
+    try:
+        r.bake(seed=5)
+        whole = _coefficients(r)
+        r.invalidate()
+        light = r._walk_light.light
+        slabs = 0
+        while not r.walk_light_current():
+            assert r.bake_step(5, budget_ms=1e-6) > 0
+            slabs += 1
+        assert slabs == light.layers > 1
+        while not r.probes_current():
+            r.bake_step(5, budget_ms=1e-6)
+        assert np.array_equal(_coefficients(r), whole)
+        assert not r.light_current()
+        r.render("raymarch", spp=1, seed=5)
+        assert r.light_current() and r._light is not light
+    finally:
+        r.release()
