@@ -463,6 +463,8 @@ def render_to_files(args: argparse.Namespace) -> int:
               f"bake GPU time: {result.bake_ms:.1f} ms; last pass changed the probes by "
               f"{100 * rep.relative_change:.2f}% (est. standard error "
               f"{'n/a, one pass' if rep.passes_done < 2 else f'{100 * rep.standard_error:.2f}%'})")
+        if renderer.bake_note():
+            print(f"note: {renderer.bake_note()}")
         if args.method == "probes" and renderer.probe_gather_event > 1:
             k = renderer.probe_gather_event
             print(f"final gather: the probes read at scattering event {k}, the events before it "

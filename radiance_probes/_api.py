@@ -254,8 +254,10 @@ class Renderer:
     @property
     def notes(self) -> tuple[str, ...]:
         """How the data was read: DICOM series, orientation, the window chosen; and for a bricked
-        volume under a memory cap, the level shown."""
-        return self._renderer.resources.volume.notes
+        volume under a memory cap, the level shown; probes baked on a coarser level
+        (RenderSettings.bake_level)."""
+        note = self._renderer.bake_note()
+        return self._renderer.resources.volume.notes + ((note,) if note else ())
 
     @property
     def device(self) -> str:

@@ -53,11 +53,12 @@ class MajorantGrid:
         self.bound = 0.0      # >= every cell's majorant; 0 when the whole volume is transparent
         self.builds = 0       # how many times the grid was built on the GPU (tests count them)
 
-    def set_volume(self, volume: Volume) -> None:
+    def set_volume(self, volume: Volume, cells: tuple[int, int, int] | None = None) -> None:
         """The density range per macrocell of a new volume (NumPy, once per volume); of several
         channels, each channel's ([C, cz, cy, cx]; on the GPU one texture of the least and one
-        of the largest, a component a channel)."""
-        cells = macrocell_counts(volume.dims)
+        of the largest, a component a channel). `cells`: macrocells per axis (None: the volume's
+        own, macrocell_counts; the bake's coarser level takes the level shown's, bake_level.py)."""
+        cells = macrocell_counts(volume.dims) if cells is None else tuple(int(c) for c in cells)
         channels = volume.channel_count
         ranges = volume.derived.get(("density ranges", cells))   # a step of a series seen before
         if ranges is None:

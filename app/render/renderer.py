@@ -16,6 +16,7 @@ from ..gl.timer import GpuTimer
 from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation, SumAccumulation
+from .bake_level import SPACING_LEVEL, BakeMedium, spacing_level
 from .limits import check_image_size
 from .pathtracer import PathTracer
 from .light_transmittance import LightTransmittance, min_side_for_probes
@@ -94,6 +95,17 @@ def _slice_estimate(estimate: float | None, seen: float) -> float:
     return 0.5 * (estimate + seen)
 
 
+@dataclass
+class _LightSlot:
+    """A light grid and its bake's state: the image's (the raymarcher's sun, and the walks' at
+    bake_level 0), or the bake's own at bake_level k > 0 (in the coarse medium)."""
+    light: LightTransmittance | None = None
+    key: tuple | None = None       # what the texture holds, once done
+    pending: tuple | None = None   # the key of a sliced bake under way
+    spent_ms: float = 0.0          # its GPU ms so far
+    cost_ms: float = 0.0           # GPU ms the grid in hand took to bake
+
+
 class Renderer:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
                  settings: RenderSettings | None = None):
@@ -119,16 +131,16 @@ class Renderer:
         self.probe_grid: ProbeGrid | None = None
         self._baked_key: tuple | None = None
         self._raymarchers: dict[str, Raymarcher] = {}
-        self._light: LightTransmittance | None = None
+        self._image_light = _LightSlot()   # the light grid the image reads (the level shown)
+        self._walk_light = _LightSlot()    # the bake's own at bake_level > 0 (the coarse level)
+        self._bake_medium: BakeMedium | None = None   # the coarse level, made when first needed
+        self.baked_level = 0   # the bake level of the probes in hand (start_bake)
         self.last_sun_lobe_fit: SunLobeFit | None = None   # the last bake start's choice
         self._sun_lobe_fitter: SunLobeFitter | None = None   # made when first asked for
         self._fit_ms = 0.0   # GPU ms of the last bake start's pilot, not yet counted in a bake's time
         self._probe_ms: dict[tuple, float] = {}   # measured GPU ms per probe walked, per layout
         self._sample_ms: dict[tuple, float] = {}  # GPU ms per sample of a path-state pass, per size
         self.last_slice_ms = 0.0
-        self._light_key: tuple | None = None
-        self._light_pending: tuple | None = None   # the key of a sliced light-grid bake under way
-        self._light_spent_ms = 0.0                  # its GPU ms so far
         self._layer_ms: dict[tuple, float] = {}     # GPU ms per light-grid slab of rays, per size
         self.method = "pt"
         self._region_key: tuple | None = None
@@ -141,7 +153,16 @@ class Renderer:
         self.camera = None
         self.last_bake_ms = 0.0
         self.last_light_ms = 0.0
-        self.light_cost_ms = 0.0   # GPU ms the light grid in hand took to bake
+
+    @property
+    def _light(self) -> LightTransmittance | None:
+        """The light grid the image reads (the level shown)."""
+        return self._image_light.light
+
+    @property
+    def light_cost_ms(self) -> float:
+        """GPU ms the image's light grid in hand took to bake."""
+        return self._image_light.cost_ms
 
     @property
     def settings(self) -> RenderSettings:
@@ -255,7 +276,30 @@ class Renderer:
                 st.shadow_tracking,
                 (st.light_max_side, st.light_min_side, st.light_follows_probes,
                  st.light_precision)
-                if st.walk_sun == "grid" or st.shadow_tracking == "residual" else None)
+                if st.walk_sun == "grid" or st.shadow_tracking == "residual" else None,
+                self.bake_level())
+
+    def bake_level(self) -> int:
+        """The level the probes' bake walks, counted from the level shown (0: that level):
+        RenderSettings.bake_level, or for -1 the one the probes' spacing allows
+        (bake_level.spacing_level)."""
+        level = self._settings.bake_level
+        if level == SPACING_LEVEL:
+            plan = self.probe_plan()
+            level = spacing_level(self.resources.volume, plan.grid, plan.box)
+        return level
+
+    def bake_resources(self):
+        """What the bake's passes read the medium through: the scene's resources at bake level
+        0, else the coarse level's (bake_level.BakeMedium: its volume texture and majorant
+        grid, the rest the scene's). Refused (VolumeError naming bake_level) where that level
+        does not fit one texture."""
+        level = self.bake_level()
+        if level == 0:
+            return self.resources
+        if self._bake_medium is None:
+            self._bake_medium = BakeMedium(self.ctx)
+        return self._bake_medium.update(self.resources, level)
 
     def probes_current(self) -> bool:
         return (self.probe_grid is not None and self.probe_grid.done
@@ -358,12 +402,12 @@ class Renderer:
         if lobe > 0.0 and st.sun_lobe_fit:
             if self._sun_lobe_fitter is None:
                 self._sun_lobe_fitter = SunLobeFitter(self.ctx)
-            fit = self._sun_lobe_fitter.fit(self.resources, plan.box, plan.grid, spec.samples,
+            fit = self._sun_lobe_fitter.fit(self.bake_resources(), plan.box, plan.grid, spec.samples,
                                             plan.grey, env_map, seed)
             lobe = fit.h
             self.last_sun_lobe_fit = fit
             self._fit_ms += fit.gpu_ms
-        medium = self.resources.medium_defines()
+        medium = self.bake_resources().medium_defines()
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
                          g.adaptive, g.environment_map, g.planes, g.sun_lobe) != (
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
@@ -380,9 +424,21 @@ class Renderer:
                                         sun_lobe=lobe, medium=medium,
                                         shadow_tracking=st.shadow_tracking)
         self.probe_grid.dispatch_target_ms = dispatch_target_ms(self)
+        self.baked_level = self.bake_level()
         self.probe_grid.restart(seed, warm=warm)
         self._baked_key = self.bake_key()
         return self.probe_grid
+
+    def bake_note(self) -> str | None:
+        """What the probes in hand were baked on where it is not the level shown (bake_level >
+        0), for `render`'s output and the API's notes; else None."""
+        level, medium = self.baked_level, self._bake_medium
+        if self.probe_grid is None or not level or medium is None or medium.volume is None:
+            return None
+        nx, ny, nz = medium.volume.dims
+        return (f"probes baked on a level {level} coarser than the one shown ({nx} x {ny} x {nz}, "
+                f"{medium.gpu_bytes / 2**20:.1f} MiB beside the volume): RenderSettings.bake_level, "
+                f"a shortcut with a bias (docs/bricking.md)")
 
     def bake(self, seed: int = 0, progress: Callable | None = None, profile=None,
              counters=None) -> float:
@@ -393,17 +449,18 @@ class Renderer:
             return 0.0
         grid = self.start_bake(seed)
         total = self._light_for_walks() + self._take_fit_ms()
-        light = self._light if grid.needs_light else None
+        light = self.walk_light() if grid.needs_light else None
+        resources = self.bake_resources()
         if progress is None:
             # One timed span: the passes queue up on the GPU with no wait between them.
             self.timer.start()
             while not grid.done:
-                grid.bake_pass(self.resources, profile=profile, counters=counters, light=light)
+                grid.bake_pass(resources, profile=profile, counters=counters, light=light)
             self.timer.stop()
             total += self.timer.elapsed_ms
         while not grid.done:   # with progress: each pass waited for, so progress is shown live
             self.timer.start()
-            grid.bake_pass(self.resources, profile=profile, counters=counters, light=light)
+            grid.bake_pass(resources, profile=profile, counters=counters, light=light)
             self.timer.stop()
             total += self.timer.elapsed_ms
             progress(grid)
@@ -418,7 +475,7 @@ class Renderer:
     def _light_for_walks(self) -> float:
         """The light grid the walks read when walk_sun is "grid" (GPU ms if it was baked now; the
         bake's time includes it, and the raymarcher then finds it current)."""
-        return self.bake_light() if self.probe_grid.needs_light else 0.0
+        return self.bake_walk_light() if self.probe_grid.needs_light else 0.0
 
     def raymarcher(self, guided_level0: bool = False) -> Raymarcher:
         """The raymarcher for the probes in hand, or (guided_level0) `guided`'s level 0, an
@@ -448,13 +505,14 @@ class Renderer:
         return key, min_side
 
     def light_current(self) -> bool:
-        return self._light is not None and self._light_key == self._light_target()[0]
+        return self._light is not None and self._image_light.key == self._light_target()[0]
 
     def light_baking(self) -> bool:
         """Whether a sliced light-grid bake for the current scene is under way (bake_light with
         a budget): its texture then holds new layers and the previous grid's, and readers use it
         as it is rather than finish it in one go."""
-        return self._light_pending is not None and self._light_pending == self._light_target()[0]
+        pending = self._image_light.pending
+        return pending is not None and pending == self._light_target()[0]
 
     def bake_light(self, budget_ms: float | None = None) -> float:
         """Bakes the sun's transmittance grid for the raymarcher and the walks if stale; GPU ms.
@@ -463,41 +521,72 @@ class Renderer:
         (1/16 of the grid before any was timed; at least one layer). An edit in the middle of a
         sliced bake restarts it."""
         key, min_side = self._light_target()
+        return self._bake_light_slot(self._image_light, self.resources, key, min_side, budget_ms)
+
+    def _walk_light_target(self) -> tuple[tuple, int]:
+        """The key and least side of the light grid the walks read: the image's at bake level 0,
+        else its own in the coarse medium (the same settings, over the coarse level's voxels)."""
+        key, min_side = self._light_target()
+        level = self.bake_level()
+        return ((key, level) if level else key), min_side
+
+    def bake_walk_light(self, budget_ms: float | None = None) -> float:
+        """The light grid the walks read (walk_sun "grid"), baked if stale as bake_light does:
+        at bake level 0 the image's own, else the bake's in the coarse medium; GPU ms."""
+        if self.bake_level() == 0:
+            return self.bake_light(budget_ms)
+        key, min_side = self._walk_light_target()
+        return self._bake_light_slot(self._walk_light, self.bake_resources(), key, min_side,
+                                     budget_ms)
+
+    def walk_light(self) -> LightTransmittance | None:
+        """The light grid the walks read (bake_walk_light's)."""
+        return self._light if self.bake_level() == 0 else self._walk_light.light
+
+    def walk_light_current(self) -> bool:
+        if self.bake_level() == 0:
+            return self.light_current()
+        slot = self._walk_light
+        return slot.light is not None and slot.key == self._walk_light_target()[0]
+
+    def _bake_light_slot(self, slot: _LightSlot, resources, key: tuple, min_side: int,
+                         budget_ms: float | None) -> float:
+        """bake_light for one light grid (`slot`) over `resources`' medium."""
         st = self._settings
-        medium = self.resources.medium_defines()
-        if (self._light is None or self._light.max_side != st.light_max_side
-                or self._light.precision != st.light_precision or self._light.medium != medium):
-            if self._light is not None:
-                self._light.release()
-            self._light = LightTransmittance(self.ctx, st.light_max_side, st.light_precision,
-                                             medium=medium)
-            self._light_pending = None
-        self._light.segment_target = st.light_segment_target
-        if key == self._light_key:
+        medium = resources.medium_defines()
+        if (slot.light is None or slot.light.max_side != st.light_max_side
+                or slot.light.precision != st.light_precision or slot.light.medium != medium):
+            if slot.light is not None:
+                slot.light.release()
+            slot.light = LightTransmittance(self.ctx, st.light_max_side, st.light_precision,
+                                            medium=medium)
+            slot.pending = None
+        slot.light.segment_target = st.light_segment_target
+        if key == slot.key:
             return 0.0
-        light = self._light
-        if self._light_pending != key:
-            light.begin(self.resources, self.scene.light.direction, min_side)
-            self._light_key = None
-            self._light_pending = key
-            self._light_spent_ms = 0.0
+        light = slot.light
+        if slot.pending != key:
+            light.begin(resources, self.scene.light.direction, min_side)
+            slot.key = None
+            slot.pending = key
+            slot.spent_ms = 0.0
         layers = None
         if budget_ms is not None:
             per_layer = self._layer_ms.get(light.grid)
             layers = (max(1, light.layers // FIRST_SLICE_LIGHT_FRACTION) if per_layer is None
                       else max(1, int(budget_ms / max(per_layer, 1e-9))))
         self.timer.start()
-        ran = light.bake_layers(self.resources, layers)
+        ran = light.bake_layers(resources, layers)
         self.timer.stop()
         ms = self.timer.elapsed_ms
         if ran and layers is not None:
             seen = ms / ran
             per_layer = self._layer_ms.get(light.grid)
             self._layer_ms[light.grid] = _slice_estimate(per_layer, seen)
-        self._light_spent_ms += ms
+        slot.spent_ms += ms
         if light.done:
-            self._light_key, self._light_pending = key, None
-            self.light_cost_ms = self._light_spent_ms
+            slot.key, slot.pending = key, None
+            slot.cost_ms = slot.spent_ms
         return ms
 
     def light_grid_ms(self) -> float:
@@ -510,8 +599,8 @@ class Renderer:
         """Forgets the baked probes and light grid, so the next image pays for both again (the
         benchmark charges every record what its image cost)."""
         self._baked_key = None
-        self._light_key = None
-        self._light_pending = None
+        for slot in (self._image_light, self._walk_light):
+            slot.key = slot.pending = None
 
     def probe_uniforms(self) -> dict:
         self.probe_grid.bind()
@@ -569,16 +658,17 @@ class Renderer:
         grid = self.probe_grid
         if grid.needs_light:
             # the walks read the light grid: it comes first, in slices of the same budget
-            light_ms = self.bake_light(budget_ms)
-            if not self.light_current() or (budget_ms is not None and light_ms >= budget_ms):
+            light_ms = self.bake_walk_light(budget_ms)
+            if not self.walk_light_current() or (budget_ms is not None and light_ms >= budget_ms):
                 self.last_slice_ms = light_ms
                 return light_ms
         else:
             light_ms = 0.0
-        light = self._light if grid.needs_light else None
+        light = self.walk_light() if grid.needs_light else None
+        resources = self.bake_resources()
         self.timer.start()
         if budget_ms is None:
-            grid.bake_pass(self.resources, light=light)
+            grid.bake_pass(resources, light=light)
             self.timer.stop()
             ms = self.timer.elapsed_ms
         else:
@@ -587,7 +677,7 @@ class Renderer:
             per_probe = self._probe_ms.get(key)
             probes = (min(FIRST_SLICE_PROBES, grid.count) if per_probe is None
                       else max(1, int(left / max(per_probe, 1e-9))))
-            ran = grid.bake_probes(self.resources, probes, light=light)
+            ran = grid.bake_probes(resources, probes, light=light)
             self.timer.stop()
             ms = self.timer.elapsed_ms
             if ran:
@@ -714,8 +804,11 @@ class Renderer:
     def release(self) -> None:
         for p in (*self._passes.values(), *self._raymarchers.values()):
             p.release()
-        if self._light is not None:
-            self._light.release()
+        for slot in (self._image_light, self._walk_light):
+            if slot.light is not None:
+                slot.light.release()
+        if self._bake_medium is not None:
+            self._bake_medium.release()
         if self.probe_grid is not None:
             self.probe_grid.release()
         for acc in (self._acc, self._acc0):

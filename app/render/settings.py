@@ -19,6 +19,7 @@ from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_
                                   PRECISION as LIGHT_PRECISION, PRECISIONS as LIGHT_PRECISIONS,
                                   SEGMENT_TARGET_INVOCATIONS, SOFTWARE_MIN_SIDE)
 
+from .bake_level import check_bake_level
 from .probes import SHADOW_TRACKINGS, WALK_SUN_MODES
 
 RAYMARCH_STAGES = ("compute", "fragment")
@@ -127,6 +128,13 @@ class RenderSettings:
     # grid follows the medium; unbiased for any grid; needs the light grid baked;
     # lib/sun_shadow.glsl).
     shadow_tracking: str = "ratio"
+    # The probes' bake (its walks, their sun and its light grid, the probes' own sun) walks the
+    # volume this many levels coarser than the level shown (app/render/bake_level.py: coarser()'s
+    # level in one texture with its own majorant grid); what the image reads directly (camera
+    # rays, the raymarcher's sun, the path tracer) stays on the level shown. 0: the level shown
+    # (the default); -1: the coarsest level whose voxel is at most half the probe spacing along
+    # every axis. A shortcut with a bias (docs/bricking.md, measured against the path tracer).
+    bake_level: int = 0
 
     def __post_init__(self):
         if self.walk_sun not in WALK_SUN_MODES:
@@ -147,6 +155,7 @@ class RenderSettings:
         if isinstance(q, bool) or not isinstance(q, (int, float)) or not 0.0 <= q <= 1.0:
             raise ValueError(f"walk sun correction {q!r}: expected a rate in [0, 1]")
         check_gather_event(self.gather_event)
+        check_bake_level(self.bake_level)
         if self.volume_memory_bytes is not None:
             _check_positive_int("volume memory bytes", self.volume_memory_bytes)
         if self.brick_size is not None:
