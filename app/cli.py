@@ -204,6 +204,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--auto-probes", type=fraction, metavar="TARGET",
                    help="choose the cheapest probe setting whose image is within this relative "
                         "RMSE of a path-traced pilot (e.g. 0.05), report why, then render")
+    r.add_argument("--auto", type=fraction, metavar="TARGET",
+                   help="render the cheapest image whose estimated relative RMSE is within "
+                        "TARGET (e.g. 0.02): raymarched over probes where a probe setting reaches "
+                        "it, else the path tracer's, judged against the path tracer's own two "
+                        "halves as they accumulate (chooses the method and samples itself)")
     r.add_argument("--raymarch-stage", choices=RAYMARCH_STAGES, default="compute",
                    help="raymarch as a compute (default) or fragment shader")
     r.add_argument("--raymarch-step", type=positive_float,

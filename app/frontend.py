@@ -367,7 +367,7 @@ def render_defaults() -> dict:
     """Every option `render` has, at its default: what the viewer's headless fallback starts from."""
     return dict(scene=None, method="pt", spp=64, samples_per_pass=1, out="render.png", linear=None,
                 exr=None, probe_grid=None, probe_samples=None, sh_window=None, probe_precision=None,
-                auto_probes=None, raymarch_stage="compute", raymarch_step=None, seed=0, width=None,
+                auto_probes=None, auto=None, raymarch_stage="compute", raymarch_step=None, seed=0, width=None,
                 height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True,
                 gather_event=None, series=None, orientation=None, data_window=None, crop=None,
                 crop_voxels=None, clip_plane=None, no_crop=False, no_clip_plane=False,
@@ -386,6 +386,17 @@ def render_to_files(args: argparse.Namespace) -> int:
     from .environment_map import load_scene_environment
     from .volume import load_scene_volume
 
+    auto = getattr(args, "auto", None)
+    if auto is not None:
+        if args.auto_probes is not None:
+            raise OptionError("--auto and --auto-probes: --auto chooses the probes itself (or "
+                              "the path tracer); give one of them")
+        if getattr(args, "gather_event", None) is not None:
+            raise OptionError("--gather-event: --auto renders the raymarcher or the path tracer, "
+                              "neither reads it")
+        if args.method != "pt" or args.spp != 64:
+            print("note: --auto chooses the method and the samples: --method and --spp are not "
+                  "used", file=sys.stderr)
     if args.auto_probes is not None and args.method == "pt":
         raise OptionError("--auto-probes chooses probe settings: use it with a probe method")
     gather_event = getattr(args, "gather_event", None)
@@ -437,10 +448,19 @@ def render_to_files(args: argparse.Namespace) -> int:
     def on_bake_pass(grid) -> None:
         bake_report(grid.passes_done, grid.passes_total)
 
-    result = renderer.render(args.method, spp=args.spp, seed=args.seed,
-                             samples_per_pass=args.samples_per_pass,
-                             progress=progress_printer(f"{args.method} samples"),
-                             bake_progress=on_bake_pass)
+    if auto is not None:
+        from .render.auto_progressive import auto_render
+        from .render.renderer import RenderResult
+        got = auto_render(renderer, auto, seed=args.seed,
+                          progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
+        print(got.report())
+        scene, args.method = got.scene, got.method
+        result = RenderResult(got.image, got.method, got.pt_spp, got.gpu_ms)
+    else:
+        result = renderer.render(args.method, spp=args.spp, seed=args.seed,
+                                 samples_per_pass=args.samples_per_pass,
+                                 progress=progress_printer(f"{args.method} samples"),
+                                 bake_progress=on_bake_pass)
     errors = []
     if getattr(args, "colorbar", None):
         from .colorbar import scene_colorbar

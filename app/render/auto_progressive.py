@@ -152,8 +152,8 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
                 max_pt_spp: int = MAX_PT_SPP, ladder=LADDER) -> AutoResult:
     """Renders the scene the renderer holds within `target` (estimated relative RMSE) as cheaply
     as the module's note says; leaves the renderer on the scene of the image returned."""
-    if not 0 < target < 1:
-        raise ValueError(f"auto target must be a relative RMSE in (0, 1), got {target}")
+    if not 0 < target <= 1:
+        raise ValueError(f"auto target must be a relative RMSE in (0, 1], got {target}")
     start = time.perf_counter()
     original = renderer.scene
     ladder = candidates(original, renderer.resources.volume.dims, ladder)
