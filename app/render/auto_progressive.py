@@ -14,12 +14,12 @@ samples a round). It is the reference everything is judged against, and also the
 Every estimate carries its standard error over pixels (a pixel's three channels summed, so that
 they count once); a decision waits until the interval (EST +- Z standard errors) is on one side of
 the target. Probe settings are tried from the cheapest (LADDER, by bake cost), and only while what
-has been spent on them is
-within EXPLORE_SHARE of the path tracer's time so far plus its estimated time still to go: where
-no setting reaches the target (a floor of the probes above it) the trials cost at most that share
-over the path tracer's own time. A setting whose estimate is above the target gives way to the
-next; one whose estimate is within it but not yet certainly is kept while the path tracer's
-samples narrow the interval. Everything counts: bakes, light grids, raymarched frames and path
+has been spent on them, with the next one's expected cost (the last one's scaled by probes x
+walks), is within EXPLORE_SHARE of the path tracer's time so far plus its estimated time still to
+go: where no setting reaches the target (a floor of the probes above it) the trials cost at most
+that share over the path tracer's own time. A setting whose estimate is a standard error above the target
+gives way to the next; one not yet told apart from it is kept while the path tracer's samples
+narrow the interval. Everything counts: bakes, light grids, raymarched frames and path
 traced samples (GPU time), and the host's wall time is reported beside it.
 """
 from __future__ import annotations
@@ -37,7 +37,7 @@ from .auto_probes import PROBES_PER_VOXEL_LIMIT
 LADDER = ((8, 16), (16, 16), (32, 16), (32, 64), (64, 64), (128, 64), (128, 256), (192, 64),
           (256, 64))
 RAYMARCH_FRAMES = 8        # a candidate's raymarched frames (its sub-pixel jitter averaged)
-EXPLORE_SHARE = 0.5        # probe trials' time at most this share of the path tracer's expected
+EXPLORE_SHARE = 0.25       # probe trials' time at most this share of the path tracer's expected
 Z = 2.0                    # standard errors a decision stands clear of the target by
 MAX_PT_SPP = 1 << 16
 
@@ -148,6 +148,17 @@ def candidates(scene: Scene, volume_dims, ladder=LADDER) -> list[Scene]:
             for g, n in ladder]
 
 
+def _predicted_ms(ladder: list[Scene], k: int, trials: list[dict]) -> float:
+    """What setting k is expected to cost: the last trial's cost scaled by probes x walks (the
+    bake's work; the raymarched frames cost about the same whatever the probes)."""
+    last = trials[-1]
+    p = ladder[k].probes
+
+    def work(grid: int, walks: int) -> float:
+        return float(grid) ** 3 * walks
+    return last["ms"] * max(work(p.grid[0], p.samples) / work(last["grid"], last["walks"]), 1.0)
+
+
 def auto_render(renderer, target: float, progress=None, seed: int = 0,
                 max_pt_spp: int = MAX_PT_SPP, ladder=LADDER) -> AutoResult:
     """Renders the scene the renderer holds within `target` (estimated relative RMSE) as cheaply
@@ -195,8 +206,8 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
         while k < len(ladder):
             if current is None:
                 allowed = EXPLORE_SHARE * (pt_ms + pt_to_go)
-                if trials and trial_ms >= allowed:
-                    break                  # more path tracing first: the trials would not pay
+                if trials and trial_ms + _predicted_ms(ladder, k, trials) > allowed:
+                    break                  # more path tracing first: the trial would not pay
                 renderer.set_scene(ladder[k])
                 run = renderer.render("raymarch", spp=RAYMARCH_FRAMES, seed=seed + 77,
                                       samples_per_pass=RAYMARCH_FRAMES)
@@ -216,10 +227,10 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
                 return AutoResult(np.asarray(image, np.float32), "raymarch", ladder[index],
                                   target, est, se, True, halves.spp, pt_ms + trial_ms, pt_ms,
                                   time.perf_counter() - start, trials, log)
-            if est > target:
-                k, current = k + 1, None   # likely above: the next setting, budget permitting
+            if est - se > target:
+                k, current = k + 1, None   # above (a standard error clear): the next setting
                 continue
-            break                          # likely within, not yet certain: more path tracing
+            break                          # not yet told apart: more path tracing narrows it
         if halves.spp >= max_pt_spp:
             renderer.set_scene(original)
             say(f"stopped at {halves.spp} spp, the most allowed")
