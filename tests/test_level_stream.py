@@ -305,3 +305,52 @@ def test_a_store_placed_from_far_reads_level_0_when_the_camera_comes_near(ctx, t
     finally:
         r.release()
         fresh.release()
+
+
+def test_the_viewer_restreams_once_the_camera_settles_a_budget_a_frame(ctx, monkeypatch):
+    """Viewer._restream: nothing while the camera keeps moving; once it has not moved for
+    RESTREAM_SETTLE_S, a restream goes on a frame at a time (the Volume panel's status line)
+    and, when it commits, the session's accumulations restart."""
+    from app.render.settings import RenderSettings
+    from app.viewer import viewer as viewer_module
+    from app.viewer.state import ViewerState
+    scene = _at(_scene(32, 24), EYE_A)
+    settings = RenderSettings(brick_size=BRICK, volume_memory_bytes=_cap(scene), mixed_levels=True)
+    v = viewer_module.Viewer(ctx, ViewerState(scene, scene.camera), settings=settings)
+    clock = [100.0]
+    monkeypatch.setattr(viewer_module.time, "perf_counter", lambda: clock[0])
+    monkeypatch.setattr(viewer_module, "OPEN_WRITE_BUDGET_S", 0.0)   # one brick a frame
+    monkeypatch.setattr(v, "_mouse_held", lambda: False)               # (no ImGui frame)
+    try:
+        v.session.resize(32, 24)
+        v.session.set_methods(["raymarch"])
+        stream = v.session.renderer.resources.stream
+        v._restream()                       # the placement's camera, not yet settled
+        assert stream.camera is None and v.stream_wanted()
+        clock[0] += 1.0
+        v._restream()                       # settled: the mix already held, nothing written
+        assert stream.camera == v.stream_camera() and not v.stream_wanted()
+        uploads = v.session.renderer.resources.volume_tex.uploads
+        # a drag: a camera change each frame, no restream
+        for i in range(5):
+            v.state.set_camera(replace(v.state.scene.camera,
+                                       eye=tuple(EYE_B[k] + 0.01 * i for k in range(3))))
+            v.session.set_scene(v.state.scene)
+            clock[0] += 0.05
+            v._restream()
+            assert stream.pending is None
+        assert v.session.renderer.resources.volume_tex.uploads == uploads
+        restarts = v.session.restarts
+        clock[0] += 1.0
+        frames = 0
+        while v.stream_wanted():
+            v._restream()
+            frames += 1
+            assert frames < 100
+            if stream.pending is not None:
+                assert stream.status().startswith("streaming")
+                assert v.snapshot()["streaming"]["status"] == stream.status()
+        assert frames > 2 and v.session.restarts > restarts
+        assert v.snapshot()["streaming"]["commits"] >= 1
+    finally:
+        v.release()
