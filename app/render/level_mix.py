@@ -9,8 +9,9 @@ Each brick of F (the pool's level 0) reads F or C:
 - C elsewhere (bricks outside the view frustum always).
 
 The footprint of a voxel of world size s at distance d is s / (2 d tan(fov_y / 2) / height)
-pixels. The choice depends on the camera given when the volume is placed (a later camera keeps
-it: the medium stays one for every method and sample, and the viewer does not re-place it).
+pixels. The placement chooses for the camera it is given; C is resident whole and the atlas has
+every slot the cap allows, so F's bricks are streamed as the camera moves
+(app/render/level_stream.py: the same choice, choose_fine, made again for the new camera).
 Every method reads the same mixed medium: the path tracer stays the reference of what is shown.
 Off by default (RenderSettings.mixed_levels): the benchmark has not shown it paying.
 """
