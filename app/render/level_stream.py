@@ -34,7 +34,7 @@ import time
 
 import numpy as np
 
-from ..bricks import CONSTANT, FREE_SLOT, REDIRECT, constant_values
+from ..bricks import CONSTANT, REDIRECT, constant_values
 from .level_mix import choose_fine, footprints, mixed_density_ranges
 
 READ_C = REDIRECT | 1
