@@ -4,7 +4,8 @@ GL_MAX_3D_TEXTURE_SIZE) rendered.
 
     python scripts/brick_bench.py OUT_DIR [--quick] [--size 2048] [--cap 4G]
         [--width 1920 --height 1080] [--frames 30] [--probes 32] [--long 20000,512,512]
-        [--parts write,write-long,capped,progressive,uncapped,zoomed,long] [--reuse] [--stores DIR]
+        [--parts write,write-long,capped,progressive,uncapped,zoomed,long,stream] [--reuse]
+        [--stores DIR]
 
 1. Writes OUT_DIR/volume.zarr: an OME-Zarr image (levels 0.. each 2x box-filtered, chunks of
    64^3), uint16, a ball of smooth noise in vacuum, slab by slab (never whole in memory); and
@@ -26,6 +27,11 @@ GL_MAX_3D_TEXTURE_SIZE) rendered.
 5. zoomed: at a camera near the volume (ZOOMED_EYE), levels mixed by footprint against one whole
    level: first image, frame rate, rRMSE of each against level 0 uncapped.
 6. The long volume: bricked (not refused), time to its first raymarched image, and its frame.
+7. stream (only when named in --parts): mixed_levels on, opened at the overview camera, the camera
+   flown to ZOOMED_EYE in STREAM_STEPS steps; at each the pool restreamed as the viewer does it
+   (OPEN_WRITE_BUDGET_S of writes a frame, a raymarched frame drawn between), recording the bricks
+   evicted and loaded, the restream's wall seconds, the frames meanwhile and the probes' and
+   light grid's bake after its commit; at the end the rRMSE against level 0 as `zoomed` does.
 
 Writes OUT_DIR/results.json (one record a measurement, with the device and the settings) and
 OUT_DIR/report.md. --quick: a 48^3 volume, a cap of 12 slots of 8^3 bricks, a 64 x 48 image, a
@@ -197,6 +203,9 @@ def _region(volume, lo: float, hi: float) -> np.ndarray:
 
 
 PARTS = ("write", "write-long", "capped", "progressive", "uncapped", "zoomed", "long")
+KNOWN_PARTS = PARTS + ("stream",)      # stream: only when asked for
+# The stream part's camera path: this many steps from the overview to ZOOMED_EYE.
+STREAM_STEPS = 10
 
 
 def _written(path: Path, dims, reuse: bool, chunk: int, levels: int) -> float | None:
@@ -256,6 +265,8 @@ def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
         _zoomed(ctx, records, _need(path) and zoomed, settings, cap, s)
     if "long" in parts:
         _long(ctx, records, _need(stores / "long.zarr"), s, long)
+    if "stream" in parts:
+        _stream(ctx, records, _scene(_need(path), s), settings, cap, s)
     (out / "results.json").write_text(json.dumps(records, indent=2))
     _report(out, records, s)
     ctx.release()
@@ -348,6 +359,84 @@ def _zoomed(ctx, records, scene, settings, cap, s):
     records["zoomed_rrmse_vs_uncapped"] = {
         "eye": list(ZOOMED_EYE), "level0_dims": level0, "rrmse_mixed": rrmse(mixed, full),
         "rrmse_whole_level": rrmse(whole, full), "rrmse_uncapped_other_seed": rrmse(again, full)}
+
+
+def _stream(ctx, records, scene, settings, cap, s):
+    """mixed_levels on, opened at the overview; the camera flown to ZOOMED_EYE in STREAM_STEPS
+    steps, each restreamed as the viewer does once the camera settles (Viewer._restream: writes
+    of OPEN_WRITE_BUDGET_S a call, a raymarched frame drawn between calls, waited for), then the
+    probes and light grid baked again where the mix changed (the viewer does it in slices)."""
+    from dataclasses import replace
+    from app.render.progressive_open import OPEN_WRITE_BUDGET_S
+    start = time.perf_counter()
+    r = Renderer(ctx, scene, settings=replace(settings, mixed_levels=True))
+    r.render("raymarch", spp=1, seed=0)
+    ctx.finish()
+    stream = r.resources.stream
+    rec = {"cap_bytes": cap, "first_image_s": time.perf_counter() - start,
+           "notes": list(r.resources.volume.notes), "write_budget_s": OPEN_WRITE_BUDGET_S,
+           "streamed": stream is not None, "steps": []}
+    records["stream"] = rec
+    if stream is None:
+        r.release()
+        return
+    rec.update(f_slots=stream.mix.f_slots, c_slots=stream.mix.c_slots,
+               capacity=stream.mix.capacity, pool_bytes=int(r.resources.volume_tex.nbytes))
+    eye0 = np.asarray(scene.camera.eye, np.float64)
+    eye1 = np.asarray(ZOOMED_EYE, np.float64)
+    pool = r.resources.volume_tex
+    for step in range(1, STREAM_STEPS + 1):
+        eye = tuple(float(v) for v in eye0 + (eye1 - eye0) * step / STREAM_STEPS)
+        r.set_scene(r.scene.replace(camera=replace(r.scene.camera, eye=eye)))
+        uploads, table_writes = pool.uploads, pool.table_writes
+        read0 = stream.fine.seconds.get("range_pass")
+        frames, busy, calls, changed = [], 0.0, 0, False
+        t0 = time.perf_counter()
+        while True:
+            t = time.perf_counter()
+            changed |= r.restream(budget_s=OPEN_WRITE_BUDGET_S)
+            busy += time.perf_counter() - t
+            calls += 1
+            if stream.pending is None:
+                break
+            t = time.perf_counter()
+            r.begin("raymarch", seed=calls)
+            r.add_samples(1)
+            ctx.finish()
+            frames.append(time.perf_counter() - t)
+        wall = time.perf_counter() - t0
+        t = time.perf_counter()
+        bake_ms = r.bake(seed=1) + r.bake_light() if changed else 0.0
+        ctx.finish()
+        rebake = time.perf_counter() - t
+        t = time.perf_counter()
+        r.begin("raymarch", seed=0)
+        r.add_samples(1)
+        ctx.finish()
+        after = time.perf_counter() - t
+        last = stream.last
+        rec["steps"].append({
+            "eye": list(eye), "changed": bool(changed), "evicted": last.get("evicted", 0),
+            "loaded": last.get("loaded", 0), "worth": last.get("worth", 0),
+            "commits": last.get("commits", 0), "resident": stream.resident,
+            "restream_wall_s": wall, "restream_calls_s": busy, "calls": calls,
+            "bricks_written": pool.uploads - uploads,
+            "table_texels_written": pool.table_writes - table_writes,
+            "finer_range_pass_s": (stream.fine.seconds.get("range_pass")
+                                   if read0 is None else None),
+            "frames_meanwhile": len(frames),
+            "frame_ms_meanwhile_median": 1e3 * float(np.median(frames)) if frames else None,
+            "frame_ms_meanwhile_max": 1e3 * float(np.max(frames)) if frames else None,
+            "rebake_gpu_ms": bake_ms, "rebake_wall_s": rebake, "frame_after_ms": 1e3 * after})
+    image = r.render("raymarch", spp=4, seed=7).image
+    rec["pool_bytes_end"] = int(r.resources.volume_tex.nbytes)
+    r.release()
+    r0 = Renderer(ctx, scene.replace(camera=replace(scene.camera, eye=ZOOMED_EYE)),
+                  settings=RenderSettings(brick_size=s.brick or 64))
+    full = r0.render("raymarch", spp=4, seed=7).image
+    rec["level0_dims"] = list(r0.resources.volume.dims)
+    r0.release()
+    rec["rrmse_vs_level0"] = rrmse(image, full)
 
 
 def _progressive(ctx, records, scene, settings, cap):
@@ -490,6 +579,18 @@ def _report(out: Path, records: dict, s: Settings) -> None:
             f"level 0 {ze['rrmse_mixed']:.4f}; one whole level: first image "
             f"{zw['first_image_s']:.1f} s, {zw['fps']:.1f} fps, rRMSE {ze['rrmse_whole_level']:.4f}"
             f"; level 0 against itself at another seed {ze['rrmse_uncapped_other_seed']:.4f}")
+    st = records.get("stream")
+    if st and st.get("steps"):
+        steps = st["steps"]
+        lines.append(
+            f"- stream (mixed_levels, overview to zoomed in {len(steps)} steps, {st['f_slots']} "
+            f"slots for the finer level): loaded {[x['loaded'] for x in steps]}, evicted "
+            f"{[x['evicted'] for x in steps]}, restream wall s "
+            f"{[round(x['restream_wall_s'], 2) for x in steps]}, frames meanwhile median ms "
+            f"{[None if x['frame_ms_meanwhile_median'] is None else round(x['frame_ms_meanwhile_median'], 1) for x in steps]}"
+            f"; rRMSE against level 0 at the end {st['rrmse_vs_level0']:.4f}")
+    elif st:
+        lines.append(f"- stream: no mixed pool ({'; '.join(st['notes'])})")
     if lg:
         lines.append(f"- long volume {lg['dims']}: bricked {lg['bricked']}, first image "
                      f"{lg['first_image_s']:.1f} s, {lg['fps']:.1f} fps")
@@ -508,16 +609,17 @@ def main(argv=None) -> int:
     p.add_argument("--probes", type=int)
     p.add_argument("--long", type=lambda t: tuple(int(v) for v in t.split(",")))
     p.add_argument("--parts", type=lambda t: tuple(t.split(",")), default=PARTS,
-                   help="which parts: write,write-long,capped,progressive,uncapped,zoomed,long "
-                        "(default all)")
+                   help="which parts: write,write-long,capped,progressive,uncapped,zoomed,long,"
+                        "stream (default all but stream)")
     p.add_argument("--reuse", action="store_true",
                    help="keep stores already written (same shape) and add to results.json")
     p.add_argument("--stores", type=Path,
                    help="where the Zarr stores are written (default OUT_DIR)")
     args = p.parse_args(argv)
-    unknown = set(args.parts) - set(PARTS)
+    unknown = set(args.parts) - set(KNOWN_PARTS)
     if unknown:
-        p.error(f"--parts: unknown {', '.join(sorted(unknown))} (known: {', '.join(PARTS)})")
+        p.error(f"--parts: unknown {', '.join(sorted(unknown))} (known: "
+                f"{', '.join(KNOWN_PARTS)})")
     s = QUICK if args.quick else Settings()
     changes = {k: v for k, v in vars(args).items()
                if k not in ("out", "quick", "parts", "reuse", "stores") and v is not None}

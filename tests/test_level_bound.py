@@ -189,7 +189,9 @@ def test_without_a_value_range_the_open_reads_the_range_pass(tmp_path):
 
 def test_mixed_levels_read_no_finer_range_pass_where_no_brick_is_worth_a_slot(tmp_path):
     """Levels mixed by the camera: seen from far (no voxel of level 1 over the footprint that
-    earns a slot), level 0's range pass is still not read."""
+    earns a slot), level 0's range pass is still not read: the pool is a mix (its bricks of level
+    0 streamed in as the camera comes near: app/render/level_stream.py) where every brick of
+    level 0 reads level 1, level 1 whole."""
     from dataclasses import replace
     brick = 16
     scene = _store(tmp_path)
@@ -199,7 +201,11 @@ def test_mixed_levels_read_no_finer_range_pass_where_no_brick_is_worth_a_slot(tm
         brick, 1, False)           # room for a few of level 0's bricks, not for level 0
     far = replace(scene.camera, eye=(0.0, 0.0, 40.0), target=(0.0, 0.0, 0.0))
     placed = plan_placement(lazy, LIMITS, cap, brick, camera=far)
-    assert placed.shown.dims == (48, 48, 48) and not lazy.bricks.ranges_read
+    assert not lazy.bricks.ranges_read
+    plan = placed.plan
+    assert plan.level_dims == ((96, 96, 96), (48, 48, 48)) and plan.mix.const_f is None
+    assert np.all(plan.table[:6] == (0x40000000 | 1)) and plan.mix.f_slots >= 3
+    assert [len(r) for _, r, _ in plan.parts] == [plan.mix.c_slots, 0]
     near = replace(scene.camera, eye=(0.0, 0.0, 0.9), target=(0.0, 0.0, 0.0))
     placed = plan_placement(lazy, LIMITS, cap, brick, camera=near)
     assert lazy.bricks.ranges_read            # here some bricks are worth one: it is read

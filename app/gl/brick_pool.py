@@ -88,6 +88,11 @@ class BrickPool:
         self.writes = 0       # Texture3D.write calls of the atlas (a row of slots each, at most)
         self.write_seconds = 0.0  # in them
         self.upload_seconds = None   # upload_store's, all of it
+        self.table_writes = 0  # page-table texels written after the pool was made (streaming)
+        # a streamed mix (app/render/level_stream.py): the PoolPlan it was made from, and the
+        # LevelStream that changes it (made by the Renderer's resources on first use)
+        self.plan = None
+        self.stream = None
 
     @classmethod
     def from_packed(cls, ctx: moderngl.Context, packed: Packed, exact_uint8: bool = False):
@@ -144,6 +149,32 @@ class BrickPool:
         if self.slots_buffer is not None:
             self.slots_buffer.write(self.brick_of_slot.tobytes())
 
+    def write_table(self, entries) -> None:
+        """Writes page-table texels: entries [(z, y, x, value)] (the table's z, levels stacked),
+        one texel a write (a stream changes a few hundred at most)."""
+        for z, y, x, value in entries:
+            self.table.write(np.array([value], np.uint32).tobytes(),
+                             viewport=(int(x), int(y), int(z), 1, 1, 1))
+            self.table_writes += 1
+
+    def set_constants(self, constants: np.ndarray) -> None:
+        """The constants' texture made again for new rows (a stream reading F's range pass)."""
+        constants = np.asarray(constants, np.float32).reshape(-1, 4)
+        rows = -(-len(constants) // CONSTANTS_WIDTH)
+        width = min(len(constants), CONSTANTS_WIDTH)
+        padded = np.zeros((rows * width, 4), np.float32)
+        padded[:len(constants)] = constants
+        texture = self.ctx.texture((width, rows), 4, padded.tobytes(), dtype="f4")
+        texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.constants.release()
+        self.constants, self.constant_count = texture, len(constants)
+
+    def free_slots(self, slots) -> None:
+        """Marks slots as holding no brick (the checking build's slot map)."""
+        self.brick_of_slot[np.asarray(slots, np.int64)] = FREE_SLOT
+        if self.slots_buffer is not None:
+            self.slots_buffer.write(self.brick_of_slot.tobytes())
+
     def defines(self) -> dict:
         """What the passes that read it are compiled with (lib/brick_pool.glsl)."""
         return {"VOLUME_BRICKED": 1, **({"BRICK_LEVELS": self.levels} if self.levels > 1 else {})}
@@ -171,6 +202,9 @@ class BrickPool:
             self.slots_buffer.bind_to_storage_buffer(BRICK_SLOTS_BINDING)
 
     def release(self) -> None:
+        if self.stream is not None:
+            self.stream.cancel()         # its readers stopped
+            self.stream = None
         for obj in (self.atlas, self.table, self.constants, self.slots_buffer):
             if obj is not None:
                 obj.release()
@@ -180,9 +214,12 @@ class BrickPool:
 def empty_pool(ctx: moderngl.Context, plan, exact_uint8: bool) -> "BrickPool":
     """The pool of an app.bricks.PoolPlan with its page table and constants and no brick written
     yet."""
-    return BrickPool(ctx, plan.dims, plan.brick, plan.channels, plan.grid, plan.table,
+    pool = BrickPool(ctx, plan.dims, plan.brick, plan.channels, plan.grid, plan.table,
                      plan.constants, exact_uint8, plan.name, level_dims=plan.level_dims,
                      level_table_z=plan.level_table_z)
+    if getattr(plan, "mix", None) is not None:
+        pool.plan = plan
+    return pool
 
 
 def upload_plan(ctx: moderngl.Context, plan, exact_uint8: bool) -> "BrickPool":

@@ -9,8 +9,9 @@ Each brick of F (the pool's level 0) reads F or C:
 - C elsewhere (bricks outside the view frustum always).
 
 The footprint of a voxel of world size s at distance d is s / (2 d tan(fov_y / 2) / height)
-pixels. The choice depends on the camera given when the volume is placed (a later camera keeps
-it: the medium stays one for every method and sample, and the viewer does not re-place it).
+pixels. The placement chooses for the camera it is given; C is resident whole and the atlas has
+every slot the cap allows, so F's bricks are streamed as the camera moves
+(app/render/level_stream.py: the same choice, choose_fine, made again for the new camera).
 Every method reads the same mixed medium: the path tracer stays the reference of what is shown.
 Off by default (RenderSettings.mixed_levels): the benchmark has not shown it paying.
 """
@@ -20,8 +21,10 @@ import math
 
 import numpy as np
 
-from ..bricks import (PoolPlan, around, brick_counts, bricks_reached, constant_values,
-                      level_needs, level_tables, slot_bytes, slot_grid)
+from dataclasses import dataclass
+
+from ..bricks import (CONSTANT, REDIRECT, UNMAPPED, PoolPlan, around, brick_counts,
+                      bricks_reached, constant_values, slot_bytes, slot_side)
 from ..twins.camera import camera_frame
 from ..twins.majorant_grid import brick_density_range_grid
 
@@ -66,92 +69,179 @@ def footprints(dims, brick: int, half_extent, camera) -> np.ndarray:
     return np.where(out, -1.0, px)
 
 
+@dataclass
+class Mix:
+    """What a streamed mix chooses from (app/render/level_stream.py): the finer level F and the
+    coarser C (BrickStores), the volume's box, the slots of the pool's atlas (`capacity`, all the
+    cap allows) and how many of them C's bricks take (C is resident whole: slots 0 .. c_slots - 1)."""
+    fine: object
+    coarse: object
+    half_extent: tuple
+    capacity: int
+    c_slots: int
+    const_f: np.ndarray | None = None    # F's constant bricks when planned (None: unread)
+
+    @property
+    def f_slots(self) -> int:
+        """The slots left for F's bricks."""
+        return self.capacity - self.c_slots
+
+
+def choose_fine(mix: Mix, camera) -> tuple[np.ndarray, np.ndarray | None, int, np.ndarray]:
+    """The mix a camera deserves: (level_of [bz, by, bx] of F: 0 for F, 1 for C; F's constant
+    bricks (None while F's range pass is unread: they then read C); how many bricks are worth a
+    slot; the chosen F bricks that take a slot (n, 3) z, y, x, the most deserving first). F's
+    bricks that are not constant and where a voxel of C covers more than MIX_FOOTPRINT_PX pixels
+    take F's slots, largest footprint first, as many as `mix.f_slots`; bricks outside the view
+    frustum never. F's range pass is read the first time some brick is seen that large."""
+    fine, coarse = mix.fine, mix.coarse
+    ratio = float(np.max(np.asarray(fine.dims) / np.asarray(coarse.dims)))
+    px_c = footprints(fine.dims, fine.brick, mix.half_extent, camera) * ratio
+    seen = px_c > MIX_FOOTPRINT_PX
+    # which of F's bricks are constant needs F's range pass (seconds at 2048^3): only where the
+    # camera sees some brick large enough to be worth a slot (or it was read before)
+    const_f = fine.constant() if (seen.any() or fine.ranges_read) else None
+    level_of = np.ones(tuple(fine.counts[::-1]), np.int64)
+    if const_f is None:
+        return level_of, None, 0, np.empty((0, 3), np.int64)
+    level_of[const_f] = 0                        # F's constant bricks read F (exact, no slot)
+    candidates = np.argwhere(~const_f & seen)
+    order = np.argsort(-px_c[tuple(candidates.T)], kind="stable")
+    chosen = candidates[order[:max(mix.f_slots, 0)]]
+    level_of[tuple(chosen.T)] = 0
+    return level_of, const_f, len(candidates), chosen
+
+
+def stream_layout(mix: Mix, level_of: np.ndarray, const_f: np.ndarray | None, chosen):
+    """The page table and constants of a streamed mix (lib/brick_pool.glsl BRICK_LEVELS): C whole
+    (its table at F's, above it along z: each brick a slot 0 .. c_slots - 1 in layer order, or a
+    constant), and F's entries: a constant (where F's range pass is read), a slot (the `chosen`
+    bricks, c_slots on, in the order given) or REDIRECT | 1 (read C). The constants: C's rows,
+    then F's. Returns (table, constants, C's resident bricks (n, 3) z, y, x)."""
+    fine, coarse = mix.fine, mix.coarse
+    cf, cc = fine.counts, coarse.counts
+    table = np.full((cf[2] + cc[2], cf[1], cf[0]), UNMAPPED, np.uint32)
+    const_c = coarse.constant()
+    rows_c, which_c = constant_values(coarse.ranges()[0], const_c)
+    part = table[cf[2]:, :cc[1], :cc[0]]
+    part[const_c] = CONSTANT | which_c[const_c]
+    resident_c = np.argwhere(~const_c)
+    part[tuple(resident_c.T)] = np.arange(len(resident_c), dtype=np.uint32)
+    top = table[:cf[2]]
+    top[...] = REDIRECT | 1
+    constants = rows_c
+    if const_f is not None:
+        rows_f, which_f = constant_values(fine.ranges()[0], const_f)
+        top[const_f] = CONSTANT | (which_f[const_f] + len(rows_c))
+        constants = np.concatenate([rows_c, rows_f])
+    chosen = np.asarray(chosen, np.int64).reshape(-1, 3)
+    top[tuple(chosen.T)] = np.arange(len(resident_c), len(resident_c) + len(chosen),
+                                     dtype=np.uint32)
+    assert np.array_equal(top != (REDIRECT | 1), level_of == 0)
+    return table, constants, resident_c
+
+
+def slots_within(most: int, brick: int, max_side: int) -> tuple[int, int, int]:
+    """The slot grid (x, y, z) with the most slots up to `most` (the nearest a cube of those),
+    each axis within max_side texels: a mix's atlas takes every slot the cap allows
+    (slot_grid, which rounds a count up to a near cube, would leave up to a third unused)."""
+    per_axis = max_side // slot_side(brick)
+    if per_axis < 1 or most < 1:
+        raise ValueError("no slot")
+    n = np.arange(1, min(per_axis, most) + 1)
+    sx, sy = np.meshgrid(n, n, indexing="ij")
+    sz = np.minimum(per_axis, most // (sx * sy))
+    total = sx * sy * sz
+    spread = np.maximum(np.maximum(sx, sy), sz) - np.minimum(np.minimum(sx, sy), sz)
+    best = np.lexsort((spread.ravel(), -total.ravel()))[0]
+    return int(sx.ravel()[best]), int(sy.ravel()[best]), int(sz.ravel()[best])
+
+
 def mixed_plan(fine, coarse, cap: int, camera, half_extent, max_side: int,
                exact_uint8: bool, name: str = "volume") -> tuple[PoolPlan | None, str]:
     """The pool of `fine` (F, a BrickStore) and `coarse` (C, the finest whole level that fits
-    `cap`) mixed by footprint, and what it holds in words; (None, why) where no brick of F is
-    worth a slot."""
+    `cap`) mixed by footprint, and what it holds in words; (None, why) where the cap leaves no
+    slot for a brick of F. The atlas has every slot the cap allows (C's bricks whole, the rest
+    for F's, streamed as the camera moves: app/render/level_stream.py); the constants' bytes are
+    reserved for C's and a row for each brick of F, so the capacity does not depend on whether
+    F's range pass has been read."""
     B = fine.brick
-    channels = fine.channels
-    per_slot = slot_bytes(B, channels, exact_uint8)
+    per_slot = slot_bytes(B, fine.channels, exact_uint8)
     fdims, cdims = fine.dims, coarse.dims
     counts_f, counts_c = fine.counts, coarse.counts
-    px_c = footprints(fdims, B, half_extent, camera) * (np.max(np.asarray(fdims) /
-                                                               np.asarray(cdims)))
-    seen = px_c > MIX_FOOTPRINT_PX
-    # which of F's bricks are constant needs F's range pass (seconds at 2048^3): only where the
-    # camera sees some brick large enough to be worth a slot
-    const_f = fine.constant() if seen.any() else None
-    candidates = np.argwhere(~const_f & seen) if const_f is not None else np.empty((0, 3))
-    if not len(candidates):
-        return None, (f"no brick of the finer level is seen with a voxel of the shown level "
-                      f"over {MIX_FOOTPRINT_PX} px")
     const_c = coarse.constant()
-    level_of = np.where(const_f, 0, 1).astype(np.int64)        # F's constant bricks read F
-    order = np.argsort(-px_c[tuple(candidates.T)], kind="stable")
-    table_texels = (counts_f[0] * counts_f[1] * (counts_f[2] + counts_c[2]))
+    c_slots = int(np.count_nonzero(~const_c))
+    table_texels = counts_f[0] * counts_f[1] * (counts_f[2] + counts_c[2])
+    n_constants = (len(constant_values(coarse.ranges()[0], const_c)[0])
+                   + 1 + int(np.prod(counts_f)))
+    fixed = 4 * table_texels + 16 * n_constants
 
-    def fixed_bytes(n_constants: int) -> int:
-        return 4 * table_texels + 16 * n_constants
-
-    lo_f, _ = fine.ranges()
-    lo_c, _ = coarse.ranges()
-    n_constants = (len(constant_values(lo_f, const_f)[0]) + len(constant_values(lo_c, const_c)[0]))
-    # C's bricks as if no brick of F were taken (taking some only frees C's): an upper bound
-    resident_c = int((level_needs(level_of, 1, fdims, cdims, B) & ~const_c).sum())
-
-    def fits(slots: int) -> bool:
-        try:
-            grid = slot_grid(slots, B, max_side)
-        except ValueError:
-            return False
-        return int(np.prod(grid)) * per_slot + fixed_bytes(n_constants) <= cap
-
-    taken = 0
-    for k in order:
-        if not fits(resident_c + taken + 1):
-            break
-        z, y, x = candidates[k]
-        level_of[z, y, x] = 0
-        taken += 1
-    if not taken:
+    try:
+        grid = slots_within(max((cap - fixed) // per_slot, 0), B, max_side)
+    except ValueError:
+        grid = (0, 0, 0)
+    if int(np.prod(grid)) <= c_slots:
         return None, "the cap leaves no slot for a brick of the finer level"
-    plan = _plan(fine, coarse, level_of, const_f, const_c, max_side, name)
-    total = int(np.prod(plan.grid)) * per_slot + fixed_bytes(len(plan.constants))
-    if total > cap:          # (the slot grid rounds up; never seen, but never over the cap)
-        return None, "the mixed pool's atlas would exceed the cap"
+    mix = Mix(fine, coarse, tuple(float(v) for v in half_extent), int(np.prod(grid)), c_slots)
+    level_of, const_f, worth, chosen = choose_fine(mix, camera)
+    mix.const_f = const_f
+    # F's slots in layer order (PoolPlan.rows writes a level's bricks in consecutive slots)
+    layer = chosen[np.lexsort(chosen.T[::-1])]
+    table, constants, resident_c = stream_layout(mix, level_of, const_f, layer)
+    plan = PoolPlan(fdims, B, fine.channels, table, constants, grid,
+                    [(coarse, resident_c, 1), (fine, layer, 0)],
+                    name, level_dims=(fdims, cdims), level_table_z=(0, counts_f[2]))
     plan.level_of_brick = level_of
-    worth = len(candidates)
-    why = (f"{taken} of the {int((~const_f).sum())} bricks of level {fdims[0]} x {fdims[1]} x "
-           f"{fdims[2]} that are not constant read it (of {worth} seen with a voxel of the "
-           f"coarser level over {MIX_FOOTPRINT_PX} px, nearest the camera first), the rest the "
-           "coarser level")
+    plan.mix = mix
+    total = int(np.prod(plan.grid)) * per_slot + 4 * table.size + 16 * len(plan.constants)
+    if total > cap:          # (never: the constants are reserved for)
+        return None, "the mixed pool's atlas would exceed the cap"
+    taken = len(chosen)
+    if const_f is None:
+        why = (f"no brick of level {fdims[0]} x {fdims[1]} x {fdims[2]} is seen with a voxel of "
+               f"the coarser level over {MIX_FOOTPRINT_PX} px: the coarser level everywhere")
+    else:
+        why = (f"{taken} of the {int((~const_f).sum())} bricks of level {fdims[0]} x {fdims[1]} "
+               f"x {fdims[2]} that are not constant read it (of {worth} seen with a voxel of the "
+               f"coarser level over {MIX_FOOTPRINT_PX} px, nearest the camera first), the rest "
+               "the coarser level")
+    why += (f"; {mix.f_slots} slots for its bricks, streamed as the camera moves (the choice "
+            "above is for the camera the volume was placed with)")
     return plan, why
 
 
-def _plan(fine, coarse, level_of, const_f, const_c, max_side: int, name: str) -> PoolPlan:
-    table, constants, (resident_f, resident_c), table_z = level_tables(
-        [(fine.dims, fine.ranges()[0], const_f), (coarse.dims, coarse.ranges()[0], const_c)],
-        level_of, fine.brick)
-    grid = slot_grid(len(resident_f) + len(resident_c), fine.brick, max_side)
-    return PoolPlan(fine.dims, fine.brick, fine.channels, table, constants, grid,
-                    [(fine, resident_f, 0), (coarse, resident_c, 1)], name,
-                    level_dims=(fine.dims, coarse.dims), level_table_z=tuple(table_z))
+def coarse_ranges_read(fine, coarse) -> tuple[np.ndarray, np.ndarray]:
+    """[bz, by, bx(, c)] of F: the least and largest density the points of each brick of F read
+    where it reads C: over the bricks of C its points land in (bricks_reached) and their
+    neighbours (the apron). Per axis, then the box's least and largest axis by axis (the same
+    values as brick by brick, in array operations)."""
+    lo, hi = (np.asarray(v, np.float32) for v in coarse.ranges())
+    lo, hi = around(lo, np.minimum), around(hi, np.maximum)
+    for axis in (2, 1, 0):                    # x, y, z of the table's [z, y, x]
+        a = 2 - axis                          # that axis's index in (x, y, z)
+        n = fine.counts[a]
+        at = np.zeros((n, 3), np.int64)
+        at[:, a] = np.arange(n)
+        first, last = (r[:, a] for r in bricks_reached(fine.dims, coarse.dims, fine.brick,
+                                                        at, at))
+        span = int((last - first).max()) + 1
+        lo = np.minimum.reduce([np.take(lo, np.minimum(first + k, last), axis=axis)
+                                for k in range(span)])
+        hi = np.maximum.reduce([np.take(hi, np.minimum(first + k, last), axis=axis)
+                                for k in range(span)])
+    return lo, hi
 
 
 def mixed_density_ranges(fine, coarse, level_of: np.ndarray, cells) -> tuple:
     """The majorant grid's density ranges (app/twins/majorant_grid.py density_range_grid) of a
     mixed pool: per brick of F, the range of what its points read, with the apron (F's brick and
     its 26 neighbours in F; in C, the bricks its points land in and their neighbours), then
-    unioned over the bricks each macrocell's points read, as for one level."""
-    lo_f, hi_f = (np.asarray(a, np.float32) for a in fine.ranges())
-    lo_c, hi_c = (np.asarray(a, np.float32) for a in coarse.ranges())
-    lo_f, hi_f = around(lo_f, np.minimum), around(hi_f, np.maximum)
-    lo_c, hi_c = around(lo_c, np.minimum), around(hi_c, np.maximum)
-    eff_lo, eff_hi = lo_f.copy(), hi_f.copy()
-    for z, y, x in np.argwhere(level_of == 1):
-        a, b = bricks_reached(fine.dims, coarse.dims, fine.brick, (x, y, z), (x, y, z))
-        sl = (slice(a[2], b[2] + 1), slice(a[1], b[1] + 1), slice(a[0], b[0] + 1))
-        eff_lo[z, y, x] = lo_c[sl].min(axis=(0, 1, 2))
-        eff_hi[z, y, x] = hi_c[sl].max(axis=(0, 1, 2))
+    unioned over the bricks each macrocell's points read, as for one level. F's range pass is
+    read only where some brick reads F."""
+    eff_lo, eff_hi = coarse_ranges_read(fine, coarse)
+    f = level_of == 0
+    if f.any():
+        lo_f, hi_f = (np.asarray(v, np.float32) for v in fine.ranges())
+        eff_lo[f] = around(lo_f, np.minimum)[f]
+        eff_hi[f] = around(hi_f, np.maximum)[f]
     return brick_density_range_grid(eff_lo, eff_hi, fine.dims, fine.brick, cells)

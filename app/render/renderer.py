@@ -614,6 +614,27 @@ class Renderer:
             self._acc = Accumulation(self.ctx, width, height)
         return self._acc
 
+    # ---- streaming a mix of levels (RenderSettings.mixed_levels under a cap) -------------------
+    def restream(self, camera=None, budget_s: float | None = None) -> bool:
+        """Moves a mixed pool towards the bricks `camera` (None: the scene's) deserves
+        (app/render/level_stream.py); with `budget_s`, about that many seconds of writes, the
+        rest left to the next calls (the viewer's frames). True when the medium changed: the
+        majorant grid is then remade and the probes, light grid and visible region are stale
+        (an edit of the medium). Nothing where the volume is not a streamed mix, or the camera
+        deserves the mix held."""
+        stream = self.resources.stream
+        if stream is None:
+            return False
+        changed = stream.restream(self.scene.camera if camera is None else camera, budget_s)
+        if changed:
+            self.resources.medium_restreamed()
+        return changed
+
+    def streaming(self) -> bool:
+        """Whether a restream is under way (its next call goes on with it)."""
+        stream = self.resources.stream
+        return stream is not None and stream.pending is not None
+
     # ---- progressive rendering (the viewer calls these once per frame) -------------------------
     def begin(self, method: str = "pt", width: int | None = None, height: int | None = None,
               seed: int = 0) -> Accumulation:
@@ -783,7 +804,12 @@ class Renderer:
                width: int | None = None, height: int | None = None, samples_per_pass: int = 1,
                progress: Callable[[int, int], None] | None = None,
                bake_progress: Callable | None = None) -> RenderResult:
-        """Renders the current scene from scratch with `spp` samples per pixel."""
+        """Renders the current scene from scratch with `spp` samples per pixel. A streamed mix
+        of levels (RenderSettings.mixed_levels under a cap) is first made the one this camera
+        and image size deserve (restream, all of it)."""
+        if self.resources.stream is not None:
+            cam = self.scene.camera
+            self.restream(replace(cam, width=width or cam.width, height=height or cam.height))
         acc = self.begin(method, width, height, seed)
         bake_ms = 0.0
         if self.needs_probes(method):

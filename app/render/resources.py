@@ -19,6 +19,7 @@ from ..twins.medium import majorant
 from ..scene import Scene
 from ..transfer import transfer_table
 from ..volume import Volume, load_scene_volume
+from ..twins.majorant_grid import macrocell_counts
 from .majorant_grid import MAJORANT_UNIT, MajorantGrid
 from .volume_placement import place_volume
 
@@ -250,6 +251,34 @@ class SceneResources:
     def bricked(self) -> bool:
         """Whether the volume is read through a brick pool (lib/brick_pool.glsl)."""
         return isinstance(self.volume_tex, BrickPool)
+
+    @property
+    def stream(self):
+        """The mixed pool's LevelStream (app/render/level_stream.py; made on first use), None
+        where the volume is not a streamed mix of levels."""
+        pool = self.volume_tex
+        if not isinstance(pool, BrickPool) or pool.plan is None:
+            return None
+        if pool.stream is None:
+            from .level_stream import LevelStream
+            pool.stream = LevelStream(pool)
+        return pool.stream
+
+    def medium_restreamed(self) -> None:
+        """A stream's commit changed the medium (which bricks read which level): the majorant
+        grid's density ranges made for the new mix, and everything built from the volume made
+        stale as for a new volume (volume_version: the majorant grid, the probes, the light
+        grid, the visible region), without placing or uploading anything."""
+        volume = self.volume
+        cells = macrocell_counts(volume.dims)
+        volume.derived[("density ranges", cells)] = self.stream.density_ranges(cells)
+        self.volume_version += 1
+        self.majorant_grid.set_volume(volume)
+        s = self.scene
+        self.majorant_grid.build(self.transfer_gpu, self.medium_table, s.density_scale,
+                                 TRANSFER_UNIT, clip=self.clip, half_extent=volume.half_extent)
+        self._majorant_key = (self.volume_version, s.transfer_function, s.channels,
+                              s.density_scale, self.clip)
 
     def placement_camera(self, scene: Scene):
         """The camera levels are mixed for under a cap (place_volume), None: one whole level."""

@@ -190,6 +190,9 @@ def data_section(v) -> None:
         imgui.text_disabled("patient: +x left, +y superior, +z anterior, where the file says")
     if v.opening is not None:
         imgui.text_wrapped(v.opening.progress())
+    stream = v.session.renderer.resources.stream
+    if stream is not None and stream.status() is not None:
+        imgui.text_wrapped(stream.status())
     for note in vol.notes:
         if vol.dicom_listing is None or "DICOM series" not in note:   # the list below says it
             imgui.text_wrapped(note)

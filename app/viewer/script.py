@@ -120,7 +120,8 @@ class ScriptRunner:
         v = self.viewer
         checks = {"baked": lambda: v.session.probes_ready(),
                   "done": lambda: v.session.finished(v.state.max_samples, v.state.wants_probes()),
-                  "loaded": lambda: v.opening is None}
+                  "loaded": lambda: v.opening is None,
+                  "streamed": lambda: not v.stream_wanted()}
         if condition not in checks:
             raise ValueError(f"unknown condition {condition!r} (known: {', '.join(checks)})")
         for _ in range(max_frames):

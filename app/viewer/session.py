@@ -175,6 +175,14 @@ class RenderSession:
             self.restart()
         return changed
 
+    def restream(self, camera, budget_s: float | None = None) -> bool:
+        """Moves a mixed pool towards the bricks `camera` deserves (Renderer.restream, with a
+        budget of seconds of writes); restarts the accumulations when the medium changed."""
+        changed = self.renderer.restream(camera, budget_s)
+        if changed:
+            self.restart()
+        return changed
+
     def set_methods(self, methods: list[str]) -> None:
         for name in [m for m in self.views if m not in methods]:
             self._drop(name)

@@ -36,6 +36,9 @@ from .widgets import WidgetRects
 RECOVERABLE = (SceneError, VolumeError, ShaderError, moderngl.Error, OSError, ValueError, RuntimeError)
 SAVED_SCENE_NAME = "viewer_scene.json"
 SNAPSHOT_MAX_PROBES = 512      # a snapshot carries the probes' coefficients for grids this small
+# A mixed pool is streamed for the camera once it has not changed for this long (a drag's frames
+# do not each restream: a commit restarts the accumulations and the bake).
+RESTREAM_SETTLE_S = 0.3
 
 
 class Viewer:
@@ -57,6 +60,9 @@ class Viewer:
         self._pending_volume = None
         self._pending_placed = None              # (shown, texture or pool) of _pending_volume
         self.opening: ProgressiveOpen | None = None   # a volume loading on a thread
+        # a mixed pool streamed once the camera has settled (_restream)
+        self._camera_seen = None
+        self._camera_moved_at = 0.0
         self.input = None                        # the window's InputRouter
         self.ui_scale = 1.0
         self.window_size = (1, 1)
@@ -261,6 +267,46 @@ class Viewer:
         for note in shown.notes:
             self.state.note(note)
 
+    def stream_camera(self):
+        """The camera a mixed pool is streamed for: the scene's, at the size rendered."""
+        w, h = self.session.size
+        cam = self.state.scene.camera
+        return replace(cam, width=w, height=h) if w > 0 and h > 0 else cam
+
+    def _restream(self) -> None:
+        """A mixed pool (RenderSettings.mixed_levels under a cap) follows the camera once it has
+        settled (no camera change for RESTREAM_SETTLE_S, no button held): not on every frame of a
+        drag. A restream under way goes on a budget of OPEN_WRITE_BUDGET_S a frame (the Volume
+        panel shows it); a camera that settles elsewhere meanwhile starts it over."""
+        stream = self.session.renderer.resources.stream
+        if stream is None:
+            return
+        now = time.perf_counter()
+        cam = self.stream_camera()
+        if cam != self._camera_seen:
+            self._camera_seen, self._camera_moved_at = cam, now
+        settled = now - self._camera_moved_at >= RESTREAM_SETTLE_S and not self._mouse_held()
+        target = cam if settled else (stream.pending.camera if stream.pending else None)
+        if target is None or (stream.pending is None and target == stream.camera):
+            return
+        try:
+            self.session.restream(target, OPEN_WRITE_BUDGET_S)
+        except RECOVERABLE as exc:
+            stream.cancel()
+            self.state.error(f"streaming the finer level: {exc}")
+
+    def stream_wanted(self) -> bool:
+        """Whether a mixed pool has work for the camera: a restream under way, or a camera it
+        has not been streamed for (done once the camera settles)."""
+        stream = self.session.renderer.resources.stream
+        return stream is not None and (stream.pending is not None
+                                       or stream.camera != self.stream_camera())
+
+    def finish_streaming(self) -> None:
+        """Completes a restream for the current camera (scripted runs, screenshots)."""
+        if self.session.renderer.resources.stream is not None:
+            self.session.restream(self.stream_camera())
+
     def finish_opening(self) -> None:
         """Waits for a volume loading on a thread and shows it (scripted runs, screenshots)."""
         while self.opening is not None:
@@ -395,6 +441,7 @@ class Viewer:
         state.history.observe(state.scene, busy=self._mouse_held())
         self._poll_opening()
         self._sync()
+        self._restream()
         self._record_step()
         times = FrameTimes()
         if self._halted_scene is not None and self._halted_scene is not state.scene:
@@ -559,6 +606,7 @@ class Viewer:
                              if session.volume.dicom_series is not None else None),
             "volume_notes": list(session.volume.notes),
             "opening": None if self.opening is None else self.opening.progress(),
+            "streaming": self._stream_snapshot(),
             "playing": s.playing,
             "opacity_points": [list(p) for p in self.opacity_points()[0]],
             "clip_region": (None if session.renderer.resources.clip is None else
@@ -571,6 +619,14 @@ class Viewer:
             "errors": list(s.errors), "messages": list(s.messages),
             "widgets": {k: list(v) for k, v in self.widgets.rects.items()},
         }
+
+    def _stream_snapshot(self) -> dict | None:
+        stream = self.session.renderer.resources.stream
+        if stream is None:
+            return None
+        return {"status": stream.status(), "resident": stream.resident, "loaded": stream.loaded,
+                "evicted": stream.evicted, "commits": stream.commits,
+                "slots": stream.mix.f_slots, "wanted": self.stream_wanted()}
 
     def release(self) -> None:
         if self.opening is not None:

@@ -162,7 +162,7 @@ class ViewerWindow:
         while not self.should_close():
             v = self.viewer
             idle = (v.session.finished(v.state.max_samples, v.state.wants_probes())
-                    and v.files.pending is None)
+                    and v.files.pending is None and not v.stream_wanted())
             if idle:
                 glfw.wait_events_timeout(IDLE_WAIT_SECONDS)
             else:
