@@ -15,7 +15,7 @@ Every estimate carries its standard error over pixels (a pixel's three channels 
 they count once); a decision waits until the interval (EST +- Z standard errors) is on one side of
 the target. Probe settings are tried from the cheapest (LADDER, by bake cost), and only while what
 has been spent on them, with the next one's expected cost (the last one's scaled by probes x
-walks), is within EXPLORE_SHARE of the path tracer's time so far plus its estimated time still to
+walks, by at most GROWTH), is within EXPLORE_SHARE of the path tracer's time so far plus its estimated time still to
 go: where no setting reaches the target (a floor of the probes above it) the trials cost at most
 that share over the path tracer's own time. A setting whose estimate is a standard error above the target
 gives way to the next; one not yet told apart from it is kept while the path tracer's samples
@@ -37,7 +37,8 @@ from .auto_probes import PROBES_PER_VOXEL_LIMIT
 LADDER = ((8, 16), (16, 16), (32, 16), (32, 64), (64, 64), (128, 64), (128, 256), (192, 64),
           (256, 64))
 RAYMARCH_FRAMES = 8        # a candidate's raymarched frames (its sub-pixel jitter averaged)
-EXPLORE_SHARE = 0.25       # probe trials' time at most this share of the path tracer's expected
+EXPLORE_SHARE = 0.5        # probe trials' time at most this share of the path tracer's expected
+GROWTH = 3.0               # a trial expected to cost at most this many times the one before
 Z = 2.0                    # standard errors a decision stands clear of the target by
 MAX_PT_SPP = 1 << 16
 
@@ -150,13 +151,15 @@ def candidates(scene: Scene, volume_dims, ladder=LADDER) -> list[Scene]:
 
 def _predicted_ms(ladder: list[Scene], k: int, trials: list[dict]) -> float:
     """What setting k is expected to cost: the last trial's cost scaled by probes x walks (the
-    bake's work; the raymarched frames cost about the same whatever the probes)."""
+    bake's work), by at most GROWTH (on the H100 a step of the ladder cost 1.2 to 7x the one
+    before, the bakes' fixed costs weighing most at the small ones)."""
     last = trials[-1]
     p = ladder[k].probes
 
     def work(grid: int, walks: int) -> float:
         return float(grid) ** 3 * walks
-    return last["ms"] * max(work(p.grid[0], p.samples) / work(last["grid"], last["walks"]), 1.0)
+    ratio = work(p.grid[0], p.samples) / work(last["grid"], last["walks"])
+    return last["ms"] * min(max(ratio, 1.0), GROWTH)
 
 
 def auto_render(renderer, target: float, progress=None, seed: int = 0,
