@@ -8,7 +8,10 @@ Run on the GPU:
     python scripts/experiments/experiment_auto_progressive.py OUT_DIR
         [--scenes fuel,hydrogen,foot,bonsai,thick,anisotropic,grey] [--targets 0.05,0.02,0.01]
         [--ref-spp 4096] [--size 512]
-On llvmpipe, in seconds: --quick (a 20^3 cloud at 48^2, targets 0.2,0.1)."""
+On llvmpipe, in seconds: --quick (a 20^3 cloud at 48^2, targets 0.2,0.1).
+The table against a benchmark run (its path tracer's and its fastest setting's time to each target,
+app/bench/report.py time_to_error), from the records alone:
+    python scripts/experiments/experiment_auto_progressive.py OUT_DIR --compare bench/h100"""
 import argparse
 import json
 import sys
@@ -34,8 +37,45 @@ parser.add_argument("--targets", default="0.05,0.02,0.01")
 parser.add_argument("--ref-spp", type=int, default=4096, help="samples per reference half")
 parser.add_argument("--size", type=int, default=512)
 parser.add_argument("--quick", action="store_true")
+parser.add_argument("--compare", type=Path, help="write OUT_DIR/report.md against this bench run")
 args = parser.parse_args()
 out = Path(args.out)
+
+
+def compare(out: Path, bench: Path) -> None:
+    """report.md: each row of OUT_DIR/results.json beside the bench run's time to its target."""
+    from app.bench.report import load, main_records, time_to_error
+    data = load(bench)
+    rows = json.loads((out / "results.json").read_text())
+    lines = [f"# `render --auto` against fixed settings ({rows['device']})", "",
+             f"Fixed settings' times from `{bench}` (the path tracer's, and the fastest "
+             "of every method and setting there, to the same target: time_to_error of its "
+             "records, bake included). `auto`: everything its image cost (GPU ms).", "",
+             "| scene | target | auto chose | auto's error (measured) | auto | path tracer | "
+             "auto / path tracer | fastest fixed | auto / fastest |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in rows["rows"]:
+        recs = main_records(data, r["scene"])
+        pt = time_to_error([x for x in recs if x["method"] == "pt"], r["target"])
+        best = time_to_error(recs, r["target"])
+        chose = (f"raymarch {r['grid']}^3 x {r['walks']}" if r["method"] == "raymarch"
+                 else f"pt {r['pt_spp']} spp")
+
+        def ms(x):
+            return "not reached" if x is None else f"{x['total_ms']:.3g} ms"
+
+        def ratio(x):
+            return "-" if x is None else f"{r['gpu_ms'] / x['total_ms']:.2f}"
+        lines.append(f"| {r['scene']} | {r['target']:g} | {chose} | {r['rrmse']:.4f} | "
+                     f"{r['gpu_ms']:.3g} ms | {ms(pt)} | {ratio(pt)} | {ms(best)} | "
+                     f"{ratio(best)} |")
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    print(f"wrote {out / 'report.md'}")
+
+
+if args.compare is not None:
+    compare(out, args.compare)
+    sys.exit(0)
 out.mkdir(parents=True, exist_ok=True)
 targets = [float(v) for v in args.targets.split(",")]
 if args.quick:
