@@ -354,3 +354,28 @@ def test_the_viewer_restreams_once_the_camera_settles_a_budget_a_frame(ctx, monk
         assert v.snapshot()["streaming"]["commits"] >= 1
     finally:
         v.release()
+
+
+def test_a_mix_with_no_finer_brick_yet_is_the_coarser_level_alone_marched_as_it(ctx):
+    """Seen from far (no brick worth a slot), a streamed mix reads the coarser level everywhere:
+    the raymarcher steps at that level's half voxel and its image is the coarser level's placed
+    alone (mixed_levels off; the texture coordinates' rounding aside); once a brick of the finer
+    level is in, the step is the finer level's. (The path tracer's samples differ: its majorant
+    cells are the finer level's.)"""
+    scene = _at(_scene(), EYE_FAR)
+    r = _renderer(ctx, scene)
+    alone = _renderer(ctx, scene, mixed_levels=False)
+    try:
+        assert r.resources.stream is not None and r.resources.stream.resident == 0
+        assert alone.resources.volume.dims == r.resources.stream.coarse.dims
+        assert r.resources.march_step == pytest.approx(alone.resources.march_step)
+        a = r.render("raymarch", spp=2, seed=3).image
+        b = alone.render("raymarch", spp=2, seed=3).image
+        assert np.sqrt(np.mean((a - b) ** 2)) <= 1e-3 * np.sqrt(np.mean(b ** 2))
+        r.set_scene(_at(scene, EYE_A))
+        r.restream()
+        assert r.resources.stream.resident > 0
+        assert r.resources.march_step == pytest.approx(alone.resources.march_step / 2)
+    finally:
+        r.release()
+        alone.release()

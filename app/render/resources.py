@@ -319,9 +319,16 @@ class SceneResources:
 
     @property
     def march_step(self) -> float:
-        """Half the smallest voxel side in world units: the deterministic marches' step."""
+        """Half the smallest voxel side in world units: the deterministic marches' step. A
+        streamed mix with no brick of the finer level in a slot yet reads the coarser level at
+        every point, so it is marched at that level's half voxel (as the coarser level alone
+        would be: the overview's frames of a mix cost what that level's do)."""
         he = self.volume.half_extent
-        return float(min(2.0 * he[i] / self.volume.dims[i] for i in range(3)) / 2.0)
+        dims = self.volume.dims
+        stream = self.stream
+        if stream is not None and stream.resident == 0:
+            dims = stream.coarse.dims
+        return float(min(2.0 * he[i] / dims[i] for i in range(3)) / 2.0)
 
     def bake_key(self) -> tuple:
         """What the probes depend on: everything but the camera (camera moves never re-bake)."""
