@@ -135,6 +135,10 @@ def test_bricks_leave_and_come_back_read_once_a_load_within_the_slots(ctx):
         pool = r.resources.volume_tex
         fine = stream.fine
         at_a = set(stream.slot_of)
+        # a brick of one value (its apron not: else it is constant) is loaded from its range,
+        # not read (app/bricks.py: the upload reads bricks of more than one value)
+        lo, hi = (np.asarray(a) for a in fine.ranges())
+        one_value = np.all(lo == hi, axis=-1) if lo.ndim == 4 else lo == hi
         for eye in (EYE_B, EYE_C, EYE_A, EYE_FAR, EYE_A):
             before = fine.reads.copy()
             resident = set(stream.slot_of)
@@ -143,7 +147,7 @@ def test_bricks_leave_and_come_back_read_once_a_load_within_the_slots(ctx):
             delta = fine.reads - before
             assert delta.max() <= 1                       # every brick read once at most
             for b in loaded:
-                assert delta[b] == 1
+                assert delta[b] == (0 if one_value[b] else 1)
             assert stream.last["loaded"] == len(loaded)
             assert stream.last["evicted"] == len(resident - set(stream.slot_of))
             _within_cap(r, scene)
