@@ -46,14 +46,15 @@ def inside_ranges(n_fine: int, n_coarse: int, brick: int, margin: int) -> tuple[
 
 def _reduce_inside(values: np.ndarray, axis: int, j0: np.ndarray, j1: np.ndarray, op):
     """op (np.minimum or np.maximum) over [j0, j1) along `axis`, one row a brick (a row with
-    j1 <= j0 holds a value of its own; the caller masks it)."""
+    j1 <= j0 holds a value of its own; the caller masks it): the insides are a few voxels long,
+    so one gather a voxel of them (np.ufunc.reduceat took 0.4 s on a 256^3 level)."""
     n = values.shape[axis]
-    starts = np.minimum(j0, n - 1)
-    ends = np.clip(j1, starts + 1, n)
-    index = np.stack([starts, ends], axis=1).ravel()
-    if index[-1] >= n:               # reduceat's indices must be within the axis
-        index = index[:-1]
-    return op.reduceat(values, index, axis=axis).take(np.arange(0, 2 * len(j0), 2), axis=axis)
+    last = np.clip(np.maximum(j1, j0 + 1) - 1, 0, n - 1)
+    first = np.minimum(j0, last)
+    out = values.take(first, axis=axis)
+    for offset in range(1, int((last - first).max(initial=0)) + 1):
+        out = op(out, values.take(np.minimum(first + offset, last), axis=axis))
+    return out
 
 
 def varying_bricks(coarse: np.ndarray, fine_dims, brick: int, margin: int | None = None,

@@ -390,7 +390,7 @@ def _stream(ctx, records, scene, settings, cap, s):
         r.set_scene(r.scene.replace(camera=replace(r.scene.camera, eye=eye)))
         uploads, table_writes = pool.uploads, pool.table_writes
         read0 = stream.fine.seconds.get("range_pass")
-        frames, busy, calls, changed = [], 0.0, 0, False
+        frames, frames_gpu, busy, calls, changed = [], [], 0.0, 0, False
         t0 = time.perf_counter()
         while True:
             t = time.perf_counter()
@@ -401,7 +401,7 @@ def _stream(ctx, records, scene, settings, cap, s):
                 break
             t = time.perf_counter()
             r.begin("raymarch", seed=calls)
-            r.add_samples(1)
+            frames_gpu.append(r.add_samples(1))
             ctx.finish()
             frames.append(time.perf_counter() - t)
         wall = time.perf_counter() - t0
@@ -411,7 +411,7 @@ def _stream(ctx, records, scene, settings, cap, s):
         rebake = time.perf_counter() - t
         t = time.perf_counter()
         r.begin("raymarch", seed=0)
-        r.add_samples(1)
+        after_gpu = r.add_samples(1)
         ctx.finish()
         after = time.perf_counter() - t
         last = stream.last
@@ -427,6 +427,10 @@ def _stream(ctx, records, scene, settings, cap, s):
             "frames_meanwhile": len(frames),
             "frame_ms_meanwhile_median": 1e3 * float(np.median(frames)) if frames else None,
             "frame_ms_meanwhile_max": 1e3 * float(np.max(frames)) if frames else None,
+            # a frame's GPU time (the raymarched sample, timer queries), and its wall time with
+            # the accumulation's restart (begin) and the wait
+            "frame_gpu_ms_meanwhile_median": float(np.median(frames_gpu)) if frames_gpu else None,
+            "frame_gpu_ms_after": float(after_gpu),
             "rebake_gpu_ms": bake_ms, "rebake_wall_s": rebake, "frame_after_ms": 1e3 * after})
     image = r.render("raymarch", spp=4, seed=7).image
     rec["pool_bytes_end"] = int(r.resources.volume_tex.nbytes)
@@ -588,6 +592,8 @@ def _report(out: Path, records: dict, s: Settings) -> None:
             f"{[x['evicted'] for x in steps]}, restream wall s "
             f"{[round(x['restream_wall_s'], 2) for x in steps]}, frames meanwhile median ms "
             f"{[None if x['frame_ms_meanwhile_median'] is None else round(x['frame_ms_meanwhile_median'], 1) for x in steps]}"
+            f" (wall, the accumulation's restart included), a frame's GPU ms after each step "
+            f"{[round(x.get('frame_gpu_ms_after', float('nan')), 1) for x in steps]}"
             f"; rRMSE against level 0 at the end {st['rrmse_vs_level0']:.4f}")
     elif st:
         lines.append(f"- stream: no mixed pool ({'; '.join(st['notes'])})")
