@@ -451,6 +451,13 @@ class BrickStore:
         self.reads[bz, by, x0:x1] += 1
         return block
 
+    def raw_extremes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each channel's least and largest raw value over the volume ([c] each), from the range
+        pass (read now where it was not yet)."""
+        lo, hi = self.raw_ranges()
+        return (lo.reshape(-1, self.channels).min(axis=0),
+                hi.reshape(-1, self.channels).max(axis=0))
+
     @property
     def ranges_read(self) -> bool:
         """Whether the range pass has been read (raw_ranges reads it the first time)."""
@@ -784,11 +791,17 @@ def _written_regions(unwritten_row, band: int, by: int, bx: int) -> list[tuple]:
     regions = []
     for y0 in range(0, by, band):
         y1 = min(y0 + band, by)
-        xs = np.nonzero(~unwritten_row[y0:y1].all(axis=0))[0]
-        if len(xs):
-            for run in np.split(xs, np.nonzero(np.diff(xs) != 1)[0] + 1):
-                regions.append((y0, y1, int(run[0]), int(run[-1]) + 1))
+        regions.extend((y0, y1, x0, x1) for x0, x1 in runs(~unwritten_row[y0:y1].all(axis=0)))
     return regions
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """The runs of True in a 1D mask, as (first, end) (end exclusive), in order."""
+    xs = np.nonzero(mask)[0]
+    if not len(xs):
+        return []
+    return [(int(run[0]), int(run[-1]) + 1)
+            for run in np.split(xs, np.nonzero(np.diff(xs) != 1)[0] + 1)]
 
 
 def _brick_extremes(source, z: int, brick: int, dims, region) -> tuple[np.ndarray, np.ndarray]:
@@ -830,11 +843,7 @@ def _read_cores_of(source, z: int, resident_row: np.ndarray, brick: int, dims,
                              buffer=block.buf)
         i = 0
         for y in range(resident_row.shape[0]):
-            xs = np.nonzero(resident_row[y])[0]
-            if not len(xs):
-                continue
-            for run in np.split(xs, np.nonzero(np.diff(xs) != 1)[0] + 1):
-                x0, x1 = int(run[0]), int(run[-1]) + 1
+            for x0, x1 in runs(resident_row[y]):
                 start = time.perf_counter()
                 raw = _edge_padded(source.read(z * B, min(z * B + B, nz), y * B,
                                                min(y * B + B, ny), x0 * B, min(x1 * B, nx)),

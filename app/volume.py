@@ -121,12 +121,7 @@ class Volume:
             return known
         if self.bricks is None or not (read or self.bricks.ranges_read):
             return None
-        lo, hi = self.bricks.raw_ranges()
-        if lo.ndim == 3:
-            lo, hi = lo[..., None], hi[..., None]
-        n = lo.shape[-1]
-        return tuple((float(a), float(b)) for a, b in zip(lo.reshape(-1, n).min(axis=0),
-                                                         hi.reshape(-1, n).max(axis=0)))
+        return tuple((float(a), float(b)) for a, b in zip(*self.bricks.raw_extremes()))
 
     def histogram(self, bins: int = 128, channel: int = 0) -> np.ndarray:
         data = self.channel(channel)
@@ -684,11 +679,7 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
     by_extremes = (any(d is None for d in domains)
                    and array.dtype not in (np.uint8, np.int8))
     if by_extremes:
-        raw_lo, raw_hi = store.raw_ranges()
-        if not many:
-            raw_lo, raw_hi = raw_lo[..., None], raw_hi[..., None]
-        lows = raw_lo.reshape(-1, len(shown)).min(axis=0)
-        highs = raw_hi.reshape(-1, len(shown)).max(axis=0)
+        lows, highs = store.raw_extremes()
     else:
         lows = highs = np.full(len(shown), np.nan)
     series_lows, series_highs = lows, highs
@@ -741,9 +732,8 @@ def _series_extremes(p, steps: int, time: int, lows, highs, source_at, brick: in
         for step in range(steps):
             if step == time:
                 continue
-            step_lo, step_hi = BrickStore(source_at(step), brick, p.name).raw_ranges()
-            lo = np.minimum(lo, step_lo.reshape(-1, len(lo)).min(axis=0))
-            hi = np.maximum(hi, step_hi.reshape(-1, len(hi)).max(axis=0))
+            step_lo, step_hi = BrickStore(source_at(step), brick, p.name).raw_extremes()
+            lo, hi = np.minimum(lo, step_lo), np.maximum(hi, step_hi)
         _SERIES_EXTREMES.clear()          # one series at a time
         _SERIES_EXTREMES[key] = (lo, hi)
     return _SERIES_EXTREMES[key]
