@@ -64,7 +64,12 @@ def level_bytes(store: BrickStore, channels: int, exact_uint8: bool, max_side: i
         return None
     constants = int(np.count_nonzero(store.constant())) + 1
     return (int(np.prod(grid)) * slot_bytes(store.brick, channels, exact_uint8)
-            + 4 * int(np.prod(brick_counts(store.dims, store.brick))) + 16 * constants)
+            + _table_bytes(store, constants))
+
+
+def _table_bytes(store: BrickStore, constants: int) -> int:
+    """A pool's bytes besides its atlas: the page table (a texel a brick) and `constants` rows."""
+    return 4 * int(np.prod(brick_counts(store.dims, store.brick))) + 16 * constants
 
 
 def _resident_at_least(volume: Volume, store: BrickStore, bounds: dict):
@@ -89,8 +94,7 @@ def _may_fit(at_least, store: BrickStore, channels: int, exact_uint8: bool, max_
         slot_grid(count, store.brick, max_side)
     except ValueError:
         return False
-    least = (count * slot_bytes(store.brick, channels, exact_uint8)
-             + 4 * int(np.prod(brick_counts(store.dims, store.brick))) + 16)
+    least = count * slot_bytes(store.brick, channels, exact_uint8) + _table_bytes(store, 1)
     return least <= cap
 
 
