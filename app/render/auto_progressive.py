@@ -32,6 +32,7 @@ import numpy as np
 
 from ..scene import Scene
 from .auto_probes import PROBES_PER_VOXEL_LIMIT
+from .refine import weight
 
 # (probes per axis, walks per probe), in order of bake cost (probes x walks, then probes)
 LADDER = ((8, 16), (16, 16), (32, 16), (32, 64), (64, 64), (128, 64), (128, 256), (192, 64),
@@ -81,10 +82,12 @@ class Halves:
     def __init__(self, shape):
         self.sums = [np.zeros(shape, np.float64), np.zeros(shape, np.float64)]
         self.counts = [0, 0]
+        self._terms = None             # terms() of the samples so far
 
     def add(self, half: int, image: np.ndarray, spp: int) -> None:
         self.sums[half] += np.asarray(image, np.float64) * spp
         self.counts[half] += spp
+        self._terms = None
 
     @property
     def spp(self) -> int:
@@ -97,12 +100,14 @@ class Halves:
         return (self.sums[0] + self.sums[1]) / max(self.spp, 1)
 
     def terms(self):
-        """(per-pixel noise terms w (a - b)^2, per-pixel m^2, m): refine.py's sums, per pixel."""
-        a, b = self.means()
-        n_a, n_b = self.counts
-        w = n_a * n_b / float(n_a + n_b) ** 2
-        m = self.mean()
-        return _per_pixel(w * (a - b) ** 2), _per_pixel(m * m), m
+        """(per-pixel noise terms w (a - b)^2, per-pixel m^2, m): refine.py's sums, per pixel
+        (computed once per batch of samples: a round judges the path tracer and its trials on
+        the same)."""
+        if self._terms is None:
+            a, b = self.means()
+            m = self.mean()
+            self._terms = (_per_pixel(weight(*self.counts) * (a - b) ** 2), _per_pixel(m * m), m)
+        return self._terms
 
 
 def _interval(values: np.ndarray, signal2: float) -> tuple[float, float]:
