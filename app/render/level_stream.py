@@ -109,10 +109,10 @@ class LevelStream:
             self.last = {"evicted": 0, "loaded": 0, "worth": worth, "seconds":
                          time.perf_counter() - start, "commits": 0}
             return False
-        want = {tuple(int(v) for v in b) for b in chosen}
+        chosen = [tuple(int(v) for v in b) for b in chosen]    # nearest the camera first
+        want = set(chosen)
         evict = sorted(b for b in self.slot_of if b not in want)
-        loads = [tuple(int(v) for v in b) for b in chosen if tuple(int(v) for v in b)
-                 not in self.slot_of]
+        loads = [b for b in chosen if b not in self.slot_of]
         self.pending = t = _Transition(camera, level_of, const_f, {}, evict, None)
         self.last = {"evicted": len(evict), "loaded": len(loads), "worth": worth,
                      "commits": 0, "started": start}
@@ -157,10 +157,10 @@ class LevelStream:
             for b in t.evict:
                 top[b] = READ_C
             if t.const_f is not None and self.const_f is None:
-                rows_c = len(self.pool_constants_c())
+                rows_c = self.pool_constants_c()
                 rows_f, which_f = constant_values(self.fine.ranges()[0], t.const_f)
-                top[t.const_f] = CONSTANT | (which_f[t.const_f] + rows_c)
-                self.pool.set_constants(np.concatenate([self.pool_constants_c(), rows_f]))
+                top[t.const_f] = CONSTANT | (which_f[t.const_f] + len(rows_c))
+                self.pool.set_constants(np.concatenate([rows_c, rows_f]))
                 self.const_f = t.const_f
         if not evictions_only:
             for b in t.written:

@@ -105,6 +105,10 @@ class _LightSlot:
     spent_ms: float = 0.0          # its GPU ms so far
     cost_ms: float = 0.0           # GPU ms the grid in hand took to bake
 
+    def holds(self, key: tuple) -> bool:
+        """Whether its texture holds the grid of `key`, done."""
+        return self.light is not None and self.key == key
+
 
 class Renderer:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
@@ -505,7 +509,7 @@ class Renderer:
         return key, min_side
 
     def light_current(self) -> bool:
-        return self._light is not None and self._image_light.key == self._light_target()[0]
+        return self._image_light.holds(self._light_target()[0])
 
     def light_baking(self) -> bool:
         """Whether a sliced light-grid bake for the current scene is under way (bake_light with
@@ -546,8 +550,7 @@ class Renderer:
     def walk_light_current(self) -> bool:
         if self.bake_level() == 0:
             return self.light_current()
-        slot = self._walk_light
-        return slot.light is not None and slot.key == self._walk_light_target()[0]
+        return self._walk_light.holds(self._walk_light_target()[0])
 
     def _bake_light_slot(self, slot: _LightSlot, resources, key: tuple, min_side: int,
                          budget_ms: float | None) -> float:
