@@ -20,6 +20,7 @@ from app.twins.light_grid import light_grid_optical_depth
 from app.twins.medium import box_intersect, sigma_t_at
 from app.twins.sun_shadow import sun_transmittance
 from glsl_harness import run_kernel
+from test_guided import SCENE as GUIDED_SCENE, _z
 
 # ---------------------------------------------------------------------------------------------
 # the twin on a known medium
@@ -169,12 +170,8 @@ def test_glsl_residual_shadow_ray_agrees_with_its_twin(ctx, empty_space_skipping
 # ---------------------------------------------------------------------------------------------
 # the path tracer and the bake
 
-SCENE = {"volume": {"builtin": "cloud", "size": [16, 14, 12]}, "density_scale": 40.0,
-         "albedo": 0.9, "anisotropy": 0.5, "max_bounces": 12,
-         "light": {"direction": [0.4, 0.8, -0.45], "irradiance": [3, 3, 3]},
-         "environment": [0.1, 0.12, 0.15],
-         "camera": {"eye": [0.2, 0.3, 1.6], "width": 12, "height": 10},
-         "probes": {"grid": [4, 4, 4], "samples": 32}}
+# test_guided's small cloud, with fewer walks a probe
+SCENE = {**GUIDED_SCENE, "probes": {"grid": [4, 4, 4], "samples": 32}}
 
 
 def _means(r, seeds, spp=4):
@@ -185,12 +182,6 @@ def _means(r, seeds, spp=4):
         assert result.stats["truncated_paths"] == 0 and result.stats["nonfinite_samples"] == 0
         out.append(result.image.mean(axis=(0, 1)))
     return np.array(out, np.float64)
-
-
-def _z(a, b):
-    diff = a.mean(0) - b.mean(0)
-    se = np.sqrt(a.var(0, ddof=1) / len(a) + b.var(0, ddof=1) / len(b))
-    return diff / se
 
 
 @pytest.mark.parametrize("grid_scale", [1.0, 10.0, 0.0])
