@@ -415,3 +415,40 @@ def test_the_dependent_chain_marches_the_same_steps_as_the_ceiling(ctx):
     assert plain["sigma_t_sum"] > 0 and chain["sigma_t_sum"] == plain["sigma_t_sum"]
     assert chain["steps"] == plain["steps"] == 256 * 32 and chain["ms"] > 0
     r.release()
+
+
+def test_convergence_table_tells_a_floor_from_noise(tmp_path):
+    """Synthetic runs: an unbiased method whose error falls as samples^-1/2 (slope -0.5), a
+    biased one whose error levels off at a 3% floor (slope near 0), and one too short to judge.
+    The report's convergence table gives each its slope and says which keeps falling; the plot
+    is written."""
+    from app.bench.report import FLOOR_SLOPE, series, tail_slope
+    base = {"scene": "s", "device": "test", "width": 64, "height": 64, "reference_noise": 0.0,
+            "frame_ms": 1.0, "gpu_bytes": 0}
+    records = []
+    for spp in (1, 4, 16, 64, 256, 1024):
+        records.append(dict(base, method="pt", spp=spp, bake_ms=0.0, total_ms=2.0 * spp,
+                            rrmse=0.4 / spp ** 0.5, probe_grid=None, probe_samples=None))
+        records.append(dict(base, method="probes", spp=spp, bake_ms=50.0, total_ms=50 + 0.5 * spp,
+                            rrmse=(0.03 ** 2 + 0.3 ** 2 / spp) ** 0.5, probe_grid=32,
+                            probe_samples=64, precision="rgba32f", sh_window="none"))
+    for spp in (1, 4):
+        records.append(dict(base, method="guided", spp=spp, bake_ms=5.0, total_ms=5 + 3.0 * spp,
+                            rrmse=0.5 / spp ** 0.5, probe_grid=32, probe_samples=64,
+                            precision="rgba32f", sh_window="none"))
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps({"meta": {"device": "test", "config": {"width": 64, "height": 64}},
+                                "references": {"s": {"spp": 1, "noise_rrmse": 0.0}},
+                                "records": records}))
+    from app.bench.report import load, main_records
+    runs = series(main_records(load(path), "s"))
+    slopes = {k[0]: tail_slope(run) for k, run in runs.items()}
+    assert slopes["pt"] == pytest.approx(-0.5, abs=1e-9)
+    assert FLOOR_SLOPE < slopes["probes"] < 0           # 3.1% -> 3.0%: levelled off
+    assert slopes["guided"] is None                      # 4x of samples: too short to say
+    text = write_report(path).read_text()
+    section = text.split("## Convergence")[1].split("## ")[0]
+    assert "| s | pt | pt 1024 spp |" in section and "-0.50 | keeps falling |" in section
+    assert "| s | probes | probes 32^3x64, 1024 fr |" in section
+    assert "levels off (a floor)" in section and "guided" not in section
+    assert (tmp_path / "convergence.png").is_file()

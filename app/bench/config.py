@@ -116,6 +116,17 @@ PRESETS = {
     # the bake's profile against the GPU's ceiling, with the raymarcher's error (bake.py)
     "bake": BenchConfig(mode="bake", scenes=("bonsai", "fuel", "hydrogen", "foot"), ref_spp=16384,
                         raymarch_frames=(16,)),
+    # issue 29's "no floor": the path tracer and `guided` run on to 32768 samples per pixel, `probes`
+    # with a final gather to 16384, beside a short sweep of the raymarcher's and the probes'
+    # settings, so that the report's convergence table shows which errors keep falling (about 5
+    # minutes a dataset scene on an H100, most of it the reference and the long runs)
+    "convergence": BenchConfig(pt_spp=(1, 4, 16, 64, 256, 1024, 4096, 16384, 32768),
+                               probe_grids=(32,), probe_samples=(64, 256),
+                               large_grids=((128, 64),), gather_settings=((128, 64),),
+                               gather_frames=(16, 64, 256, 1024, 4096, 16384),
+                               guided_settings=((32, 256),),
+                               guided_frames=(4, 16, 64, 256, 1024, 4096, 16384, 32768),
+                               showcase=(0, 0), sweep_raymarch_steps=(0.5,), flip_frames=()),
     # the replayed viewer session (interact.py), two probe settings: about 4 minutes a scene on
     # an H100, a third of it the 12 references per scene (--ref-dir reuses them)
     "interact": BenchConfig(mode="interact", scenes=("bonsai", "foot"), ref_samples_per_pass=64),

@@ -354,6 +354,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
     lines += _layouts(data, scenes)
     lines += _sh_orders(data, scenes)
     lines += _gathers(data, scenes)
+    lines += convergence_lines(data, scenes, out)
     lines += ["", "## Raw results", "", "`results.json`: one record per scene, method and setting "
               "(`scene, method, probe_grid, probe_samples, spp, bake_ms, frame_ms, total_ms, rrmse, "
               "flip, gpu_bytes, device`, and the sweep's own fields)."]
@@ -504,6 +505,123 @@ def _gathers(data: dict, scenes: list[str]) -> list[str]:
             lines.append(f"| {g}^3 x {n} | {k} | " + " | ".join(row) + " |")
         lines.append("")
     return lines
+
+
+# A series levels off (a bias floor) where its error falls by less than this power of the time
+# its samples took, over the last 16x of samples; an unbiased estimator's falls as time^-0.5.
+FLOOR_SLOPE = -0.25
+SLOPE_SPAN = 16            # the slope is measured over the last this-many times the samples
+
+
+def series(records: list[dict]) -> dict[tuple, list[dict]]:
+    """A scene's progressive runs: its records grouped by method and setting (grid, walks, gather
+    event, raymarch step), each group by increasing samples per pixel."""
+    groups = defaultdict(list)
+    for r in records:
+        key = (r["method"], r.get("probe_grid"), r.get("probe_samples"), r.get("gather_event", 1),
+               r.get("raymarch_step", 0.5) if r["method"] == "raymarch" else 0.5)
+        groups[key].append(r)
+    return {k: sorted(v, key=lambda r: r["spp"]) for k, v in groups.items()}
+
+
+def tail_slope(run: list[dict]) -> float | None:
+    """d log(error) / d log(time of the samples) over the run's last SLOPE_SPAN times its samples
+    (the bake, a fixed cost, left out): -0.5 for an unbiased estimator's noise, towards 0 where a
+    bias floor is reached. None where the run is shorter than that, or an end is below the
+    reference's floor (its error is then not resolved)."""
+    last = run[-1]
+    first = next((r for r in run if r["spp"] * SLOPE_SPAN >= last["spp"]), None)
+    if first is None or first is last or last["spp"] < SLOPE_SPAN * run[0]["spp"]:
+        return None
+    if first["below_floor"] or last["below_floor"]:
+        return None
+    t0, t1 = first["total_ms"] - first["bake_ms"], last["total_ms"] - last["bake_ms"]
+    if t0 <= 0 or t1 <= t0:
+        return None
+    return math.log(last["error"] / first["error"]) / math.log(t1 / t0)
+
+
+def _longest_runs(data: dict, scene: str) -> dict[str, list[dict]]:
+    """Per method, the run (one setting) that reached the lowest error, `probes` with a final
+    gather apart from `probes` without."""
+    best: dict[str, list[dict]] = {}
+    for (method, _g, _n, event, _step), run in series(main_records(data, scene)).items():
+        name = "probes, gather" if method == "probes" and event > 1 else method
+        if name not in best or run[-1]["error"] < best[name][-1]["error"]:
+            best[name] = run
+    return best
+
+
+CONVERGENCE_ORDER = ("pt", "guided", "probes, gather", "probes", "probes-only", "raymarch")
+
+
+def convergence_lines(data: dict, scenes: list[str], out: Path) -> list[str]:
+    """Does each method's error keep falling? Per scene and method, the setting that got lowest:
+    its lowest error, the time it took, and the slope of its error against its samples' time over
+    its last 16x of samples (tail_slope), with convergence.png. Only where some run is that long."""
+    rows = []
+    for s in scenes:
+        for name, run in sorted(_longest_runs(data, s).items(),
+                                key=lambda kv: CONVERGENCE_ORDER.index(kv[0])):
+            slope = tail_slope(run)
+            if slope is None:
+                continue
+            verdict = ("levels off (a floor)" if slope > FLOOR_SLOPE
+                       else "keeps falling")
+            rows.append(f"| {s} | {name} | {label(run[-1])} | {err(run[-1])} | "
+                        f"{_ms(run[-1]['total_ms'])} | {slope:+.2f} | {verdict} |")
+    if not rows:
+        return []
+    plot_convergence(data, scenes, out / "convergence.png")
+    return ["", "## Convergence: which errors keep falling", "",
+            "![error against time, the longest run of each method](convergence.png)", "",
+            "Per scene and method, the setting that reached the lowest error: that error, the "
+            "total time it took (bake included), and the slope of log(error) against log(the "
+            f"samples' GPU time) over its last {SLOPE_SPAN}x of samples. An unbiased estimator's "
+            "noise falls as time^-0.5; a slope above "
+            f"{FLOOR_SLOPE:g} means the run has reached its bias floor.", "",
+            "| scene | method | longest run | lowest error | time | slope | |",
+            "|---|---|---|---|---|---|---|", *rows]
+
+
+def plot_convergence(data: dict, scenes: list[str], path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    colours = {**COLOURS, "probes, gather": "#17becf"}
+    cols = min(4, len(scenes))
+    rows = math.ceil(len(scenes) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.4 * cols, 3.8 * rows), squeeze=False)
+    for ax, scene in zip(axes.flat, scenes):
+        runs = _longest_runs(data, scene)
+        for name in CONVERGENCE_ORDER:
+            if name not in runs:
+                continue
+            run = runs[name]
+            ax.plot([r["total_ms"] for r in run], [r["error"] for r in run], marker="o", ms=3,
+                    lw=1.2, color=colours[name], label=name)
+        if "pt" in runs:
+            last = runs["pt"][-1]
+            t = [last["total_ms"] / 256, last["total_ms"] * 4]
+            ax.plot(t, [last["error"] * (x / last["total_ms"]) ** -0.5 for x in t], ls=":",
+                    color="grey", lw=1, label="time^-1/2")
+        ax.axhline(0.005, color="grey", lw=0.6, ls="--")
+        if floor(data, scene) > 0:
+            ax.axhline(floor(data, scene), color="grey", lw=0.6, ls=":")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(scene, fontsize=9)
+        ax.set_xlabel("time, bake included (GPU ms)", fontsize=8)
+        ax.set_ylabel("relative RMSE", fontsize=8)
+        ax.grid(True, which="both", alpha=0.2)
+    for ax in list(axes.flat)[len(scenes):]:
+        ax.axis("off")
+    axes.flat[0].legend(fontsize=6)
+    fig.suptitle(f"The longest run of each method (dashed: 0.5%): {data['meta']['device']}",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _sweeps(data: dict, scenes: list[str]) -> list[str]:

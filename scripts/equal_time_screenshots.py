@@ -1,0 +1,161 @@
+"""The methods at equal time (issue 29): on bonsai and the anisotropic cloud at 512^2, the path
+tracer, `probes`, `guided` and the raymarcher each given 100 ms and 1 s of GPU time, everything
+its image cost included (bake, light grid, samples), with a signed error map per image against a
+path-traced reference ((image - reference) / mean reference: red too bright, blue too dark, full
+colour at 10%) and its rRMSE corrected for the reference's noise.
+
+Each probe method runs at the setting a benchmark run found best for that budget on that scene
+(the lowest error among its records whose total time is within the budget; bench/h100 by
+default): the setting is chosen from records, the time and error here are measured anew. Samples
+are added while the next batch is predicted (from the samples' measured GPU time) to keep the
+image within the budget. Run on the GPU (about a minute a scene with REF_DIR, two without):
+    python scripts/equal_time_screenshots.py screenshots [REF_DIR|-] [scene ...] [--records DIR]
+REF_DIR: a bench run's folder whose refs/NAME.npy and measured noise are the reference (as
+`bench --ref-dir`); without it a reference of 32768 spp in two halves is rendered. Writes
+screenshots/equal_time_NAME.png."""
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from PIL import Image
+
+sys.path.insert(0, ".")
+from app.bench.metrics import corrected_rrmse, reference_noise, rrmse   # noqa: E402
+from app.bench.report import error_of, load as load_results              # noqa: E402
+from app.bench.scenes import bench_scene                                 # noqa: E402
+from app.gl.context import create_headless_context, describe             # noqa: E402
+from app.render.renderer import Renderer                                 # noqa: E402
+from app.volume import load_volume                                       # noqa: E402
+from panel_sheet import ldr, panel_sheet, signed_error                   # noqa: E402
+
+SIZE, PANEL, REF_SPP = 512, 256, 32768
+BUDGETS_MS = (100.0, 1000.0)
+METHODS = ("pt", "probes", "guided", "raymarch")
+MAX_RAYMARCH_FRAMES = 64   # past its jitter's averaging a raymarched image stops changing
+FULL = 0.1
+
+
+def best_setting(records: list[dict], scene: str, method: str, budget_ms: float) -> dict | None:
+    """The record of `method` on `scene` with the lowest error within `budget_ms` (None: no
+    record of it fits the budget)."""
+    fits = [r for r in records if r["scene"] == scene and r["method"] == method
+            and r["total_ms"] <= budget_ms and r.get("stage", "compute") == "compute"
+            and r.get("sh_window", "none") == "none" and not r.get("sh_order_variant")
+            and r.get("probe_layout", "uniform") == "uniform"]
+    return min(fits, key=lambda r: r["error"], default=None)
+
+
+def render_within(r: Renderer, method: str, budget_ms: float, size: int, seed: int):
+    """The image `method` makes within budget_ms of GPU time: bake and light grid first (fresh,
+    so that they count), then samples in batches the measured time per sample predicts fit.
+    Returns (image, total GPU ms, bake ms, samples)."""
+    # once small and untimed first, so that no shader's first use (a driver may compile it then)
+    # is charged to the image
+    r.render(method, spp=1, width=16, height=16, seed=seed)
+    r.invalidate()
+    acc = r.begin(method, size, size, seed)
+    bake_ms = r.bake(seed=11) if r.needs_probes(method) else 0.0
+    if r.needs_light(method):
+        bake_ms += r.bake_light()
+    last = r.add_samples(1)
+    spent, last_n = bake_ms + last, 1
+    limit = MAX_RAYMARCH_FRAMES if method == "raymarch" else 1 << 20
+    while acc.samples < limit:
+        # the dearer of the mean and the last batch's (`guided` adds a level-0 frame now and then)
+        per_sample = max((spent - bake_ms) / acc.samples, last / last_n)
+        n = min(int((budget_ms - spent) / per_sample), acc.samples, limit - acc.samples)
+        if n < 1:
+            break
+        last, last_n = r.add_samples(n), n
+        spent += last
+    return r.image(), spent, bake_ms, acc.samples
+
+
+def caption(method: str, rec: dict | None) -> str:
+    if method == "pt" or rec is None:
+        return method
+    text = f"{method} {rec['probe_grid']}^3 x {rec['probe_samples']}"
+    if rec.get("gather_event", 1) > 1:
+        text += f", gather {rec['gather_event']}"
+    if method == "raymarch" and rec.get("raymarch_step", 0.5) != 0.5:
+        text += f", step {rec['raymarch_step']:g}"
+    return text
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("out")
+    ap.add_argument("ref_dir", nargs="?", default="-")
+    ap.add_argument("scenes", nargs="*", default=["bonsai", "anisotropic"])
+    ap.add_argument("--records", default="bench/h100", help="the bench run choosing the settings")
+    ap.add_argument("--size", type=int, default=SIZE, help="image side (a quick check: 64)")
+    ap.add_argument("--ref-spp", type=int, default=REF_SPP)
+    args = ap.parse_args()
+    size = args.size
+    data = load_results(args.records)
+    records = [dict(r, error=error_of(data, r)) for r in data["records"] if r.get("mode") is None]
+    ctx = create_headless_context()
+    device = describe(ctx)
+    for name in args.scenes:
+        scene = bench_scene(name, size, size)
+        if scene is None:
+            print(f"{name}: dataset absent, skipped")
+            continue
+        r = Renderer(ctx, scene, load_volume(scene.volume, scene.base_dir))
+        if args.ref_dir != "-":
+            ref_dir = Path(args.ref_dir)
+            import numpy as np
+            ref = np.load(ref_dir / "refs" / f"{name}.npy")
+            known = load_results(ref_dir)["references"][name]
+            noise, spp = known["noise_rrmse"], known["spp"]
+        else:
+            halves = [r.render("pt", spp=args.ref_spp // 2, seed=100 + i,
+                               samples_per_pass=128).image for i in range(2)]
+            ref, noise = 0.5 * (halves[0] + halves[1]), reference_noise(*halves)
+            spp = args.ref_spp
+        panels = []
+        for budget in BUDGETS_MS:
+            row, maps = [], []
+            for method in METHODS:
+                rec = None if method == "pt" else best_setting(records, name, method, budget)
+                if method != "pt" and rec is None:
+                    print(f"{name} {method} {budget:g} ms: no setting of {args.records} fits")
+                    blank = Image.new("RGB", (PANEL, PANEL), (20, 20, 20))
+                    row.append((blank, method, f"no setting within {budget:g} ms"))
+                    maps.append((blank, f"error, {method}", ""))
+                    continue
+                r.configure(gather_event=1, raymarch_step=0.5)
+                if rec is not None:
+                    r.set_scene(scene.replace(probes=replace(
+                        scene.probes, grid=(rec["probe_grid"],) * 3, samples=rec["probe_samples"])))
+                    r.configure(gather_event=rec.get("gather_event", 1),
+                                raymarch_step=rec.get("raymarch_step", 0.5))
+                else:
+                    r.set_scene(scene)
+                image, ms, bake_ms, n = render_within(r, method, budget, size, seed=3)
+                e = corrected_rrmse(rrmse(image, ref), noise)
+                unit = "spp" if method in ("pt", "guided") else "frames"
+                print(f"{name} {budget:g} ms {caption(method, rec)}: {ms:.1f} ms GPU (bake "
+                      f"{bake_ms:.1f}), {n} {unit}, rRMSE {e:.4f}", flush=True)
+                row.append((ldr(image, PANEL), caption(method, rec),
+                            f"{ms:.0f} ms ({n} {unit}), rRMSE {100 * e:.2f}%"))
+                maps.append((signed_error(image, ref, PANEL, FULL), f"error, {method}",
+                             f"within {budget:g} ms"))
+            blank = Image.new("RGB", (PANEL, PANEL), (20, 20, 20))
+            panels += [(ldr(ref, PANEL), f"{name}: {budget:g} ms of GPU time",
+                        f"reference: path tracer, {spp} spp"), *row]
+            panels += [(blank, "error maps: red too bright,", f"blue too dark, full at {FULL:.0%}"),
+                       *maps]
+        sheet = panel_sheet(panels, PANEL, 1 + len(METHODS),
+                            f"equal GPU time, bake included; settings: the best of {args.records} "
+                            f"within each budget; {size}x{size}, {device}")
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        target = Path(args.out) / f"equal_time_{name}.png"
+        sheet.save(target, optimize=True)
+        print(f"wrote {target}")
+        r.release()
+
+
+if __name__ == "__main__":
+    main()
