@@ -87,3 +87,23 @@ def test_auto_rejects_a_meaningless_target(ctx):
             auto_render(r, 1.5)
     finally:
         r.release()
+
+
+def test_the_path_tracers_rounds_stop_near_the_samples_the_target_needs():
+    """An error falling exactly as 1 / sqrt(samples): the rounds never more than double, always
+    add samples, and stop within PT_MARGIN and a round's rounding of the samples the target
+    needs (doubling every round overshot by up to 2x)."""
+    from app.render.auto_progressive import PT_MARGIN, Z, next_pt_spp
+    for target, c in ((0.02, 0.47), (0.01, 0.31), (0.05, 0.9), (0.013, 0.2)):
+        need = (c / target) ** 2            # error c / sqrt(spp); se 1% of the estimate
+        spp = 2
+        while True:
+            est = c / math.sqrt(spp)
+            if est + Z * 0.01 * est <= target:
+                break
+            nxt = next_pt_spp(spp, est, 0.01 * est, target)
+            assert spp + 2 <= nxt <= 2 * spp and nxt % 2 == 0
+            spp = nxt
+        assert need <= spp * (1 + Z * 0.01) ** 2
+        assert spp <= max(need * (1 + Z * 0.01) ** 2 * PT_MARGIN + 2, 4), (target, spp, need)
+    assert next_pt_spp(8, math.inf, math.inf, 0.01) == 16

@@ -448,7 +448,7 @@ def test_convergence_table_tells_a_floor_from_noise(tmp_path):
     assert slopes["guided"] is None                      # 4x of samples: too short to say
     text = write_report(path).read_text()
     section = text.split("## Convergence")[1].split("## ")[0]
-    assert "| s | pt | pt 1024 spp |" in section and "-0.50 | keeps falling |" in section
+    assert "| s | pt | pt 1024 spp |" in section and "-0.50 | still falling |" in section
     assert "| s | probes | probes 32^3x64, 1024 fr |" in section
-    assert "levels off (a floor)" in section and "guided" not in section
+    assert "levelling off (a floor)" in section and "guided" not in section
     assert (tmp_path / "convergence.png").is_file()

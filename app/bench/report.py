@@ -566,8 +566,7 @@ def convergence_lines(data: dict, scenes: list[str], out: Path) -> list[str]:
             slope = tail_slope(run)
             if slope is None:
                 continue
-            verdict = ("levels off (a floor)" if slope > FLOOR_SLOPE
-                       else "keeps falling")
+            verdict = "levelling off (a floor)" if slope > FLOOR_SLOPE else "still falling"
             rows.append(f"| {s} | {name} | {label(run[-1])} | {err(run[-1])} | "
                         f"{_ms(run[-1]['total_ms'])} | {slope:+.2f} | {verdict} |")
     if not rows:
@@ -579,7 +578,9 @@ def convergence_lines(data: dict, scenes: list[str], out: Path) -> list[str]:
             "total time it took (bake included), and the slope of log(error) against log(the "
             f"samples' GPU time) over its last {SLOPE_SPAN}x of samples. An unbiased estimator's "
             "noise falls as time^-0.5; a slope above "
-            f"{FLOOR_SLOPE:g} means the run has reached its bias floor.", "",
+            f"{FLOOR_SLOPE:g} means the run is levelling off at its bias floor; a biased method "
+            "still falling at its last sample may yet level off further on (its run ends "
+            "there).", "",
             "| scene | method | longest run | lowest error | time | slope | |",
             "|---|---|---|---|---|---|---|", *rows]
 
