@@ -53,8 +53,8 @@ def compare(out: Path, bench: Path) -> None:
              "records, bake included). `auto`: everything its image cost (GPU ms).", "",
              "The bench's path tracer steps by 4x in samples, so its time to a target is "
              "coarse; `exact pt` is the path tracer at the samples the target needs (the bench "
-             "record's error at the first step that reaches it, falling as 1 / sqrt(samples)), "
-             "timed at this run's GPU ms per sample (`auto`'s own path-traced samples).", "",
+             "record's time and error at the first step that reaches it, the error falling as "
+             "1 / sqrt(time)).", "",
              "| scene | target | auto chose | auto's error (measured) | auto | path tracer | "
              "auto / path tracer | exact pt | auto / exact pt | fastest fixed | auto / fastest |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
@@ -70,10 +70,8 @@ def compare(out: Path, bench: Path) -> None:
 
         def ratio(x):
             return "-" if x is None else f"{r['gpu_ms'] / x['total_ms']:.2f}"
-        exact = None
-        if pt is not None and r["pt_spp"]:
-            spp = pt["spp"] * (pt["error"] / r["target"]) ** 2
-            exact = {"total_ms": spp * r["pt_ms"] / r["pt_spp"]}
+        exact = None if pt is None else {
+            "total_ms": pt["total_ms"] * (pt["error"] / r["target"]) ** 2}
         lines.append(f"| {r['scene']} | {r['target']:g} | {chose} | {r['rrmse']:.4f} | "
                      f"{r['gpu_ms']:.3g} ms | {ms(pt)} | {ratio(pt)} | {ms(exact)} | "
                      f"{ratio(exact)} | {ms(best)} | {ratio(best)} |")
