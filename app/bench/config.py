@@ -118,8 +118,8 @@ PRESETS = {
                         raymarch_frames=(16,)),
     # issue 29's "no floor": the path tracer and `guided` run on to 32768 samples per pixel, `probes`
     # with a final gather to 16384, beside a short sweep of the raymarcher's and the probes'
-    # settings, so that the report's convergence table shows which errors keep falling (about 5
-    # minutes a dataset scene on an H100, most of it the reference and the long runs)
+    # settings, so that the report's convergence table shows which errors keep falling (1 to 2.5
+    # minutes a scene on an H100, most of it the reference and the long runs)
     "convergence": BenchConfig(pt_spp=(1, 4, 16, 64, 256, 1024, 4096, 16384, 32768),
                                probe_grids=(32,), probe_samples=(64, 256),
                                large_grids=((128, 64),), gather_settings=((128, 64),),
