@@ -187,13 +187,31 @@ def _fmt(v, digits=4) -> str:
     return "n/a" if v is None else f"{v:.{digits}f}"
 
 
-def plot(data: dict, scenes: list[str], path: Path) -> None:
+def _scene_figure(scenes: list[str], cols: int, size: tuple[float, float]):
+    """A figure with one axes per scene, `cols` a row, each `size` inches: (fig, axes)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    cols = min(3, len(scenes))
+    cols = min(cols, len(scenes))
     rows = math.ceil(len(scenes) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.2 * rows), squeeze=False)
+    return plt.subplots(rows, cols, figsize=(size[0] * cols, size[1] * rows), squeeze=False)
+
+
+def _save_scene_figure(fig, axes, scenes: list[str], title: str, path: Path, legend_size: float,
+                       title_size: float) -> None:
+    """The axes beyond the scenes hidden, the first one's legend, the title; saved and closed."""
+    import matplotlib.pyplot as plt
+    for ax in list(axes.flat)[len(scenes):]:
+        ax.axis("off")
+    axes.flat[0].legend(fontsize=legend_size)
+    fig.suptitle(title, fontsize=title_size)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot(data: dict, scenes: list[str], path: Path) -> None:
+    fig, axes = _scene_figure(scenes, 3, (5.2, 4.2))
     for ax, scene in zip(axes.flat, scenes):
         recs = main_records(data, scene)
         for m in METHOD_ORDER:
@@ -219,13 +237,8 @@ def plot(data: dict, scenes: list[str], path: Path) -> None:
         ax.set_xlabel("time to image, bake included (GPU ms)")
         ax.set_ylabel("relative RMSE")
         ax.grid(True, which="both", alpha=0.2)
-    for ax in list(axes.flat)[len(scenes):]:
-        ax.axis("off")
-    axes.flat[0].legend(fontsize=7)
-    fig.suptitle(f"Error against time: {data['meta']['device']}", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save_scene_figure(fig, axes, scenes, f"Error against time: {data['meta']['device']}", path,
+                       7, 10)
 
 
 def dispatch_lines(data: dict, scenes: list[str]) -> list[str]:
@@ -586,13 +599,8 @@ def convergence_lines(data: dict, scenes: list[str], out: Path) -> list[str]:
 
 
 def plot_convergence(data: dict, scenes: list[str], path: Path) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     colours = {**COLOURS, "probes, gather": "#17becf"}
-    cols = min(4, len(scenes))
-    rows = math.ceil(len(scenes) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.4 * cols, 3.8 * rows), squeeze=False)
+    fig, axes = _scene_figure(scenes, 4, (4.4, 3.8))
     for ax, scene in zip(axes.flat, scenes):
         runs = _longest_runs(data, scene)
         for name in CONVERGENCE_ORDER:
@@ -615,14 +623,9 @@ def plot_convergence(data: dict, scenes: list[str], path: Path) -> None:
         ax.set_xlabel("time, bake included (GPU ms)", fontsize=8)
         ax.set_ylabel("relative RMSE", fontsize=8)
         ax.grid(True, which="both", alpha=0.2)
-    for ax in list(axes.flat)[len(scenes):]:
-        ax.axis("off")
-    axes.flat[0].legend(fontsize=6)
-    fig.suptitle(f"The longest run of each method (dashed: 0.5%): {data['meta']['device']}",
-                 fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save_scene_figure(fig, axes, scenes,
+                       f"The longest run of each method (dashed: 0.5%): {data['meta']['device']}",
+                       path, 6, 9)
 
 
 def _sweeps(data: dict, scenes: list[str]) -> list[str]:
