@@ -18,11 +18,12 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 from PIL import Image
 
 sys.path.insert(0, ".")
 from app.bench.metrics import corrected_rrmse, reference_noise, rrmse   # noqa: E402
-from app.bench.report import error_of, load as load_results              # noqa: E402
+from app.bench.report import equal_time, load as load_results, main_records   # noqa: E402
 from app.bench.scenes import bench_scene                                 # noqa: E402
 from app.gl.context import create_headless_context, describe             # noqa: E402
 from app.render.renderer import Renderer                                 # noqa: E402
@@ -36,14 +37,11 @@ MAX_RAYMARCH_FRAMES = 64   # past its jitter's averaging a raymarched image stop
 FULL = 0.1
 
 
-def best_setting(records: list[dict], scene: str, method: str, budget_ms: float) -> dict | None:
-    """The record of `method` on `scene` with the lowest error within `budget_ms` (None: no
-    record of it fits the budget)."""
-    fits = [r for r in records if r["scene"] == scene and r["method"] == method
-            and r["total_ms"] <= budget_ms and r.get("stage", "compute") == "compute"
-            and r.get("sh_window", "none") == "none" and not r.get("sh_order_variant")
-            and r.get("probe_layout", "uniform") == "uniform"]
-    return min(fits, key=lambda r: r["error"], default=None)
+def best_setting(data: dict, scene: str, method: str, budget_ms: float) -> dict | None:
+    """The record of `method` on `scene` with the lowest error within `budget_ms`, among the
+    run's main sweep with uniform probes (its report's equal-time table; None: none fits)."""
+    return equal_time([r for r in main_records(data, scene) if r["method"] == method
+                       and r.get("probe_layout", "uniform") == "uniform"], budget_ms)
 
 
 def render_within(r: Renderer, method: str, budget_ms: float, size: int, seed: int):
@@ -94,7 +92,6 @@ def main() -> None:
     args = ap.parse_args()
     size = args.size
     data = load_results(args.records)
-    records = [dict(r, error=error_of(data, r)) for r in data["records"] if r.get("mode") is None]
     ctx = create_headless_context()
     device = describe(ctx)
     for name in args.scenes:
@@ -105,7 +102,6 @@ def main() -> None:
         r = Renderer(ctx, scene, load_volume(scene.volume, scene.base_dir))
         if args.ref_dir != "-":
             ref_dir = Path(args.ref_dir)
-            import numpy as np
             ref = np.load(ref_dir / "refs" / f"{name}.npy")
             known = load_results(ref_dir)["references"][name]
             noise, spp = known["noise_rrmse"], known["spp"]
@@ -118,7 +114,7 @@ def main() -> None:
         for budget in BUDGETS_MS:
             row, maps = [], []
             for method in METHODS:
-                rec = None if method == "pt" else best_setting(records, name, method, budget)
+                rec = None if method == "pt" else best_setting(data, name, method, budget)
                 if method != "pt" and rec is None:
                     print(f"{name} {method} {budget:g} ms: no setting of {args.records} fits")
                     blank = Image.new("RGB", (PANEL, PANEL), (20, 20, 20))
