@@ -33,6 +33,12 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #if GUIDED_DIRECTIONS
 #include "lib/guided_directions.glsl"
 #endif
+#if defined(GUIDED_DISTANCES) && GUIDED_DISTANCES
+// defines tracking_collides, which lib/tracking.glsl declares
+#include "lib/guided_distances.glsl"
+#endif
+#elif defined(GUIDED_DISTANCES) && GUIDED_DISTANCES
+#error "GUIDED_DISTANCES guides `guided`'s level 1 (GUIDED_RESIDUAL) only"
 #endif
 #include "lib/integrator.glsl"
 

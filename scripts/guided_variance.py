@@ -2,7 +2,7 @@
 costs, measured from two independent images per estimator (no reference needed).
 
     python scripts/guided_variance.py OUT_DIR [--quick] [--scenes fuel,foot,...] [--spp 64]
-        [--probes 64,128] [--width 512 --height 512]
+        [--probes 64,128] [--width 512 --height 512] [--distances 0.5] [--estimators ROWS]
 
 Per scene the probes are baked once (GPU ms recorded), then each estimator renders two images of
 SPP samples per pixel with independent seeds:
@@ -18,7 +18,11 @@ SPP samples per pixel with independent seeds:
 - `guided, guided directions`: the `guided` row with guided directions on
   (RenderSettings.guided_directions 0.5, off by default: half the directions drawn from the phase function times
   the probes' radiance, lib/guided_directions.glsl): against `guided`, what guiding removes and
-  what its table costs a sample.
+  what its table costs a sample;
+- `guided, guided distances`: the `guided` row with guided distances on
+  (RenderSettings.guided_distances, --distances, 0.5 here, off by default: half of each
+  tentative collision's real-or-null choice by what the probes predict each brings back,
+  lib/guided_distances.glsl): against `guided`, what guiding the flights removes and costs.
 
 For two independent images a, b of SPP samples, E[(a - b)^2] / 2 is one image's variance, so a
 sample's relative variance is  v = SPP * sum((a - b)^2) / 2 / sum(((a + b) / 2)^2)  (the image's
@@ -54,10 +58,13 @@ TARGETS = (0.05, 0.02, 0.01, 0.005)
 # `guided` first, right after the bake (a scene change for the pt rows would make the probes and
 # the light grid stale, and their re-bake would be counted in the next render)
 ESTIMATORS = ("guided, first event", "guided", "guided, level-0 ratio 1",
-              "guided, guided directions", "pt", "pt, 1 bounce", "pt, 2 bounces")
+              "guided, guided directions", "guided, guided distances", "pt", "pt, 1 bounce",
+              "pt, 2 bounces")
 # guided directions' probability in the row that has them (the setting is off by default:
 # bench/h100-guided-directions measured this probability)
 GUIDED_DIRECTIONS = 0.5
+# guided distances' share in the row that has them (off by default; --distances sets it)
+GUIDED_DISTANCES = 0.5
 
 
 def relative_variance(a: np.ndarray, b: np.ndarray, spp: int) -> float:
@@ -85,7 +92,8 @@ def _estimate(renderer: Renderer, method: str, spp: int, per_dispatch: int, seed
 
 
 def measure_scene(ctx, name: str, width: int, height: int, grid: int, walks: int, spp: int,
-                  per_dispatch: int, log) -> dict | None:
+                  per_dispatch: int, log, distances: float = GUIDED_DISTANCES,
+                  estimators: tuple[str, ...] = ESTIMATORS) -> dict | None:
     scene = bench_scene(name, width, height)
     if scene is None:
         log(f"{name}: dataset absent, skipped")
@@ -99,13 +107,13 @@ def measure_scene(ctx, name: str, width: int, height: int, grid: int, walks: int
                                          sh_order=order))
     out = {"scene": name, "width": width, "height": height, "probe_grid": grid,
            "probe_samples": walks, "sh_order": order, "spp": spp,
-           "max_bounces": scene.max_bounces, "estimators": {}}
+           "max_bounces": scene.max_bounces, "guided_distances": distances, "estimators": {}}
     renderer = Renderer(ctx, scene)
     try:
         bake_ms = renderer.bake(seed=1)
         light_ms = renderer.bake_light()
         out["bake_ms"], out["light_ms"] = bake_ms, light_ms
-        for est in ESTIMATORS:
+        for est in estimators:
             t0 = time.perf_counter()
             if est.startswith("pt, "):
                 bounces = int(est.split()[1])
@@ -120,7 +128,8 @@ def measure_scene(ctx, name: str, width: int, height: int, grid: int, walks: int
             renderer.settings = replace(
                 renderer.settings, guided_direction_control=est != "guided, first event",
                 guided_level0_ratio=1.0 if est.endswith("ratio 1") else 0.25,
-                guided_directions=GUIDED_DIRECTIONS if est.endswith("guided directions") else 0.0)
+                guided_directions=GUIDED_DIRECTIONS if est.endswith("guided directions") else 0.0,
+                guided_distances=distances if est.endswith("guided distances") else 0.0)
             a, b, ms, levels = _estimate(renderer, method, spp, per_dispatch, seed=1000)
             v = relative_variance(a, b, spp)
             level_share = None
@@ -224,11 +233,20 @@ def main(argv=None) -> int:
     p.add_argument("--width", type=int, default=512)
     p.add_argument("--height", type=int, default=512)
     p.add_argument("--per-dispatch", type=int, default=16)
+    p.add_argument("--distances", type=float, default=GUIDED_DISTANCES,
+                   help="guided distances' share P in the row that has them")
+    p.add_argument("--estimators", default=",".join(ESTIMATORS).replace(", ", ": "),
+                   help="the rows to run, ',' between rows and ': ' for ', ' in a row's name")
     args = p.parse_args(argv)
     if args.quick:
         args.scenes, args.spp, args.probes = "anisotropic", 8, "8,32"
         args.width, args.height, args.per_dispatch = 48, 40, 8
     grid, walks = (int(v) for v in args.probes.split(","))
+    estimators = tuple(e.strip().replace(": ", ", ") for e in args.estimators.split(","))
+    unknown = [e for e in estimators if e not in ESTIMATORS]
+    if unknown or "pt" not in estimators:
+        p.error(f"--estimators: {unknown or 'pt is needed (every speed-up is against it)'}; "
+                f"rows: {', '.join(ESTIMATORS)}")
     args.out.mkdir(parents=True, exist_ok=True)
     from app.gl.context import create_headless_context, describe
     ctx = create_headless_context()
@@ -243,7 +261,7 @@ def main(argv=None) -> int:
     results = []
     for name in args.scenes.split(","):
         r = measure_scene(ctx, name, args.width, args.height, grid, walks, args.spp,
-                          args.per_dispatch, log)
+                          args.per_dispatch, log, args.distances, estimators)
         if r is not None:
             results.append(r)
     (args.out / "results.json").write_text(json.dumps({"device": device, "results": results},

@@ -49,19 +49,22 @@ def _z(a, b):
     return diff / se
 
 
-@pytest.mark.parametrize("probes, directions", [
-    ("baked", 0.5), ("zero", 0.5), ("times ten", 0.5), ("another sun", 0.5),
-    ("baked, first event only", 0.5),
-    ("baked", 0.0), ("zero", 1.0), ("times ten", 1.0), ("another sun", 1.0),
-    ("baked, first event only", 1.0)])
-def test_guided_mean_is_the_path_tracers_whatever_the_probes(ctx, probes, directions):
+@pytest.mark.parametrize("probes, directions, distances", [
+    ("baked", 0.5, 0.0), ("zero", 0.5, 0.0), ("times ten", 0.5, 0.0), ("another sun", 0.5, 0.0),
+    ("baked, first event only", 0.5, 0.0),
+    ("baked", 0.0, 0.0), ("zero", 1.0, 0.0), ("times ten", 1.0, 0.0), ("another sun", 1.0, 0.0),
+    ("baked, first event only", 1.0, 0.0),
+    ("baked", 0.0, 0.9), ("zero", 0.0, 0.5), ("times ten", 0.0, 0.9), ("another sun", 0.0, 0.9),
+    ("another sun", 0.5, 0.5)])
+def test_guided_mean_is_the_path_tracers_whatever_the_probes(ctx, probes, directions, distances):
     """With the direction control at every event (the default) and, "first event only", without
     it; with guided directions (RenderSettings.guided_directions 0.5 (off by default), and 1, every
-    direction drawn from the probes' table) and without them (0). The probes that guide the
-    directions are the same wrong ones as those that predict."""
+    direction drawn from the probes' table) and without them (0); with guided distances
+    (RenderSettings.guided_distances, off by default: 0.9 and 0.5 of each flight's decisions by
+    the probes). The probes that guide are the same wrong ones as those that predict."""
     scene = parse_scene(SCENE)
     r = Renderer(ctx, scene)
-    r.settings = replace(r.settings, guided_directions=directions)
+    r.settings = replace(r.settings, guided_directions=directions, guided_distances=distances)
     if probes == "baked, first event only":
         r.settings = replace(r.settings, guided_direction_control=False)
     try:
@@ -84,7 +87,7 @@ def test_guided_mean_is_the_path_tracers_whatever_the_probes(ctx, probes, direct
     finally:
         r.release()
     z = _z(guided, pt)
-    print(probes, directions, guided.mean(0), pt.mean(0), z)
+    print(probes, directions, distances, guided.mean(0), pt.mean(0), z)
     assert np.all(np.abs(z) < 3.5), z
 
 
@@ -128,7 +131,8 @@ def test_guided_without_scattering_is_the_transmitted_environment(ctx):
     assert np.all(np.abs(_z(guided, pt)) < 3.5)
 
 
-def test_guided_directions_under_an_environment_map(ctx, tmp_path):
+@pytest.mark.parametrize("distances", [0.0, 0.5])
+def test_guided_directions_under_an_environment_map(ctx, tmp_path, distances):
     """A map with a small bright patch (which the map's samples find) over a dim sky, no sun, and
     probes that claim the light comes from the opposite side (band 1 against the patch: their
     radiance towards it rings below 0, so the directions' table holds only its floor there).
@@ -136,7 +140,8 @@ def test_guided_directions_under_an_environment_map(ctx, tmp_path):
     towards the patch is well below HG's; the escapes' and the map samples' MIS weights both use
     the mixture's pdf (lib/integrator.glsl), and `guided` keeps the path tracer's mean. (At
     guided_directions 1 the weights' product over a path's events made the estimate so
-    heavy-tailed on these probes that 48 seeds of 4 samples fell 5 standard errors low.)"""
+    heavy-tailed on these probes that 48 seeds of 4 samples fell 5 standard errors low.) The same
+    with guided distances on too (0.5), their flights led by the same wrong probes."""
     from app.render.probe_layout import colour_channel
     from app.twins import environment_map as tw
     h, rotation = 16, 30.0
@@ -149,7 +154,7 @@ def test_guided_directions_under_an_environment_map(ctx, tmp_path):
     scene = parse_scene({**SCENE, "light": {"direction": [0, 1, 0], "irradiance": [0, 0, 0]},
                          "environment": {"map": str(path), "rotation": rotation}})
     r = Renderer(ctx, scene)
-    r.settings = replace(r.settings, guided_directions=0.5)
+    r.settings = replace(r.settings, guided_directions=0.5, guided_distances=distances)
     try:
         pt = _means(r, "pt", range(100, 148))
         r.bake(seed=3)

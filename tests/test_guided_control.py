@@ -125,9 +125,9 @@ def test_direction_control_has_mean_zero_over_guided_directions(g, probability):
 
 def test_the_variance_script_runs_and_the_control_acts(tmp_path):
     """scripts/guided_variance.py --quick (the anisotropic cloud, g = 0.8, whose probes hold
-    directions): every estimator's variance is finite and positive, the direction control and
-    guided directions change `guided`'s estimate (they act), and the report names every
-    estimator."""
+    directions): every estimator's variance is finite and positive, the direction control,
+    guided directions and guided distances change `guided`'s estimate (they act), and the report
+    names every estimator."""
     import json
     import subprocess
     import sys
@@ -139,13 +139,16 @@ def test_the_variance_script_runs_and_the_control_acts(tmp_path):
     (scene,) = data["results"]
     est = scene["estimators"]
     assert set(est) == {"pt", "pt, 1 bounce", "pt, 2 bounces", "guided, first event", "guided",
-                        "guided, level-0 ratio 1", "guided, guided directions"}
+                        "guided, level-0 ratio 1", "guided, guided directions",
+                        "guided, guided distances"}
     for name, rec in est.items():
         assert rec["finite"] and 0.0 < rec["relative_variance"] < np.inf, name
         assert rec["ms_per_sample"] > 0.0, name
     assert est["guided"]["relative_variance"] != est["guided, first event"]["relative_variance"]
     guided_directions = est["guided, guided directions"]   # guided directions act too
     assert guided_directions["relative_variance"] != est["guided"]["relative_variance"]
+    guided_distances = est["guided, guided distances"]
+    assert guided_distances["relative_variance"] != est["guided"]["relative_variance"]
     assert 0.0 < est["pt, 1 bounce"]["share_of_pt_variance"] < 2.0
     report = (tmp_path / "report.md").read_text()
     assert all(f"| {name} |" in report for name in est)

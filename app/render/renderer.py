@@ -235,6 +235,7 @@ class Renderer:
             defines = {"GUIDED_RESIDUAL": 1,
                        "GUIDED_DIRECTION_CONTROL": int(self._settings.guided_direction_control),
                        "GUIDED_DIRECTIONS": int(self._settings.guided_directions > 0.0),
+                       "GUIDED_DISTANCES": int(self._settings.guided_distances > 0.0),
                        **(probe_defines or self._probe_defines())}
         if self.resources.defines():
             defines = {**(defines or {}), **self.resources.defines()}
@@ -756,7 +757,8 @@ class Renderer:
                 self.timer.stop()
                 level0_ms = self.timer.elapsed_ms
             extra = {**extra, **self._light.uniforms(),
-                     "guided_direction_probability": float(self._settings.guided_directions)}
+                     "guided_direction_probability": float(self._settings.guided_directions),
+                     "guided_distance_probability": float(self._settings.guided_distances)}
         if method == "raymarch":
             self.timer.start()
             self.raymarcher().run(self.resources, self.camera, acc, n, self.seed,

@@ -105,6 +105,13 @@ class RenderSettings:
     # > 0 bakes order 2 for every method (9 coefficients a probe instead of 1). 1 draws from the
     # product alone: weights up to 20 an event where the probes are wrong (heavy-tailed).
     guided_directions: float = 0.0
+    # `guided`: the share P of a level-1 flight's real-or-null decisions (after its first event)
+    # taken by what the probes predict each choice brings back, the zero-variance choice, rather
+    # than by sigma_t / majorant alone; the path weighted so that the mean stays delta tracking's
+    # at any probes, each weight at most 1 / (1 - P) (lib/guided_distances.glsl). 0 (the
+    # default): delta tracking's own decisions. Costs a probe fetch and a light-grid read at each
+    # tentative collision where 0 < sigma_t < majorant.
+    guided_distances: float = 0.0
     # Bricked volumes (app/render/volume_placement.py): the volume's GPU memory at most, in bytes
     # (None: what the device has left); where one 3D texture exceeds it, the finest level whose
     # bricks fit is shown, with a note. `brick_size`: bricks of that many voxels per axis always
@@ -151,6 +158,9 @@ class RenderSettings:
         d = self.guided_directions
         if isinstance(d, bool) or not isinstance(d, (int, float)) or not 0.0 <= d <= 1.0:
             raise ValueError(f"guided directions {d!r}: expected a probability in [0, 1]")
+        d = self.guided_distances
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not 0.0 <= d < 1.0:
+            raise ValueError(f"guided distances {d!r}: expected a probability in [0, 1)")
         q = self.walk_sun_correction
         if isinstance(q, bool) or not isinstance(q, (int, float)) or not 0.0 <= q <= 1.0:
             raise ValueError(f"walk sun correction {q!r}: expected a rate in [0, 1]")

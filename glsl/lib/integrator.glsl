@@ -23,6 +23,10 @@
 // ENVIRONMENT_MAP_SAMPLING 0 turns the map's samples off (phase sampling alone, escapes weighted
 // 1): the same estimate with more noise, kept for measuring what importance sampling gains.
 //
+// GUIDED_RESIDUAL with GUIDED_DISTANCES 1 (`guided`'s level 1): a flight after a scattering event
+// decides real or null at its tentative collisions by what the probes predict each brings back,
+// the path weighted to keep delta tracking's mean (lib/guided_distances.glsl).
+//
 // GUIDED_RESIDUAL with GUIDED_DIRECTIONS 1 (`guided`'s level 1): the next direction at an event
 // before the last is drawn from the mixture of HG and HG times the probes' radiance
 // (lib/guided_directions.glsl) and the throughput takes its weight phase / pdf. With a map, "the
@@ -206,7 +210,19 @@ int path_flight(inout PathState p, inout int steps_left)
         return STEP_DONE;
     }
     float t;
+#if defined(GUIDED_RESIDUAL) && GUIDED_DISTANCES
+    // `guided`'s free-flight decisions (lib/guided_distances.glsl) on flights after a scattering
+    // event whose collision would be scattered at; the flight's weight joins the throughput
+    // whatever it ends in (an escape's environment, an event, a cut to resume).
+    guided_flight = p.bounce >= 1 && p.bounce < max_bounces;
+    guided_flight_sun_phase = phase_hg(dot(sun_direction, p.w), anisotropy);
+    guided_flight_weight = 1.0;
     int event = delta_track(p.x, p.w, t0, t1, p.rng, steps_left, t);
+    p.throughput *= guided_flight_weight;
+    guided_flight = false;
+#else
+    int event = delta_track(p.x, p.w, t0, t1, p.rng, steps_left, t);
+#endif
     if (event == TRACK_ESCAPED) {
         p.radiance += path_escape(p);
         return STEP_DONE;

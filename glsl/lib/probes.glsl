@@ -148,17 +148,24 @@ void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
         coeffs[k] *= probe_radiance_scale;
 }
 
-// Radiance in-scattered towards a ray travelling along d at x, from the probes' radiance convolved
-// with the phase function, never negative (SH ringing is clamped).
-vec3 probe_inscattered(vec3 x, vec3 d, out float sun_transmittance)
+// Radiance in-scattered towards a ray travelling along d, from coefficients probe_fetch has just
+// fetched (their sun lobe included): the probes' radiance convolved with the phase function, never
+// negative (SH ringing is clamped).
+vec3 probe_inscattered_from(vec3 coeffs[SH_COUNT], vec3 d)
 {
-    vec3 coeffs[SH_COUNT];
-    probe_fetch(x, coeffs, sun_transmittance);
     vec3 inscattered = sh_evaluate_convolved(coeffs, d, probe_band_factors);
 #if PROBE_SUN_LOBE
     inscattered += probe_fetched_lobe
                    * sun_lobe_convolved(dot(d, sun_direction), sun_lobe_phase_g, PROBE_SH_ORDER);
 #endif
     return sh_clamp_nonnegative(inscattered);
+}
+
+// The same at world point x (the fetch included).
+vec3 probe_inscattered(vec3 x, vec3 d, out float sun_transmittance)
+{
+    vec3 coeffs[SH_COUNT];
+    probe_fetch(x, coeffs, sun_transmittance);
+    return probe_inscattered_from(coeffs, d);
 }
 #endif

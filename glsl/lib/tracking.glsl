@@ -57,6 +57,20 @@ bool ratio_roulette(inout float transmittance, inout uint rng)
 
 #include "lib/cell_walk.glsl"
 
+// A tentative collision at x (majorant m) of a flight along d: real (true) or null. Delta
+// tracking's own decision, real with probability sigma_t / m; `guided`'s level 1 with
+// GUIDED_DISTANCES replaces it (lib/guided_distances.glsl, defined after the probes' includes)
+// with a decision that follows the probes and weights the path to keep the same mean.
+#if defined(GUIDED_DISTANCES) && GUIDED_DISTANCES
+bool tracking_collides(vec3 x, vec3 d, float m, inout uint rng);
+#else
+bool tracking_collides(vec3 x, vec3 d, float m, inout uint rng)
+{
+    return rng_next(rng) * m < sigma_t_at(x);
+}
+#endif
+
+
 #if !defined(GLOBAL_MAJORANT)
 // Starts a walk over the macrocells for t in [t, t_max] clipped to the box; m is the first cell's
 // majorant. False when nothing of the range lies in the box (or all is vacuum).
@@ -146,7 +160,7 @@ int delta_track_grid(vec3 origin, vec3 direction, float t_min, float t_max, inou
             PROFILE_COUNT(profile_cell_steps);
         if (!tentative)
             CHECK_LOOP(crossings, w.cells.x + w.cells.y + w.cells.z + 3, CHECK_SITE_CELL_LOOP);
-        if (tentative && rng_next(rng) * m < sigma_t_at(origin + t * direction)) {
+        if (tentative && tracking_collides(origin + t * direction, direction, m, rng)) {
             t_collision = t;
             return TRACK_COLLIDED;
         }
@@ -207,7 +221,7 @@ int delta_track(vec3 origin, vec3 direction, float t_min, float t_max, inout uin
         t -= log(1.0 - rng_next(rng)) / majorant;
         if (t >= t_max)
             return TRACK_ESCAPED;
-        if (rng_next(rng) * majorant < sigma_t_at(origin + t * direction)) {
+        if (tracking_collides(origin + t * direction, direction, majorant, rng)) {
             t_collision = t;
             return TRACK_COLLIDED;
         }
