@@ -1,5 +1,5 @@
-"""Guided distances (lib/guided_distances.glsl, twin app/twins/guided_distances.py): the real-or-null
-probability in GLSL against its twin; the twin's flights keep delta tracking's mean for predictions
+"""Guided distances (lib/guided_distances.glsl, twin app/twins/guided_distances.py): the
+real-or-null probability in GLSL against its twin; the twin's flights keep delta tracking's mean for predictions
 that are plainly wrong, with each decision's weight at most 1 / (1 - P); in `guided`, a flight it
 never guides changes nothing and one it guides changes the samples. The mean with wrong probes:
 tests/test_guided.py."""
