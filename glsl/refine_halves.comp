@@ -1,6 +1,5 @@
 // The viewer's `refine` (app/render/refine.py, NumPy twin `half_buffer_sums`): two independent
-// accumulations of its estimator, the halves A and B, each read as a sum of two parts (`guided`'s
-// level 1 and level 0; the path tracer fills the first, the second stays 0), combined into
+// `guided` accumulations, the halves A and B, each level 1 (residual) plus level 0, combined into
 // the image shown, their count-weighted mean m = (nA a + nB b) / (nA + nB); and, when asked, the
 // sums over pixels and channels that estimate its error, reduced on the GPU to 16 bytes:
 //   x: sum (a - b)^2        y: sum m^2        z: sum (r - m)^2 (r: the raymarcher's image)

@@ -1,7 +1,6 @@
 """The viewer's `refine` mode: the half-buffer error estimate (NumPy, on synthetic noise of known
 variance; and the GPU reduction against it), and the session showing the raymarcher at once after
-an edit and the path tracer (REFINE_ESTIMATOR) later (app/render/refine.py,
-app/viewer/session.py); the path tracer's halves go on through the bake's slices."""
+an edit and `guided` later (app/render/refine.py, app/viewer/session.py)."""
 from __future__ import annotations
 
 import math
@@ -13,7 +12,6 @@ import pytest
 from app.bench.metrics import rrmse
 from app.render.refine import HalfBuffers, error_from_sums, half_buffer_error, half_buffer_sums
 from app.scene import parse_scene
-from app.viewer.session import REFINE_ESTIMATOR
 
 SHAPE = (48, 64, 3)
 
@@ -43,7 +41,7 @@ def test_half_buffer_estimate_matches_the_true_error_of_their_mean(n_a, n_b, sca
     m = (n_a * a + n_b * b) / (n_a + n_b)
     expected = math.sqrt(np.mean(sigma ** 2) / (n_a + n_b)) / math.sqrt(np.mean(truth ** 2))
     measured = rrmse(m, truth)
-    est = half_buffer_error(a, b, n_a, n_b).halves
+    est = half_buffer_error(a, b, n_a, n_b).guided
     assert est == pytest.approx(expected, rel=0.05)
     assert est == pytest.approx(measured, rel=0.05)
     # without the denominator's correction the noisiest cases would miss by far more
@@ -59,7 +57,7 @@ def test_equal_halves_give_the_briefs_formula():
     a, b = _halves(rng, truth, 0.1, 4, 4)
     brief = math.sqrt(np.mean((a - b) ** 2)) / (2 * math.sqrt(np.mean(((a + b) / 2) ** 2)))
     # the same up to the denominator's noise correction (tiny at this noise)
-    assert half_buffer_error(a, b, 4, 4).halves == pytest.approx(brief, rel=0.01)
+    assert half_buffer_error(a, b, 4, 4).guided == pytest.approx(brief, rel=0.01)
 
 
 def test_raymarch_error_estimated_against_the_halves_mean():
@@ -72,7 +70,7 @@ def test_raymarch_error_estimated_against_the_halves_mean():
         a, b = _halves(rng, truth, scale * truth.mean(), 4, 4)
         est = half_buffer_error(a, b, 4, 4, raymarched=biased)
         assert est.raymarch == pytest.approx(rrmse(biased, truth), rel=0.1)
-    assert math.isnan(error_from_sums((1.0, 1.0, 0.0, 10), 0, 3).halves)   # a half empty
+    assert math.isnan(error_from_sums((1.0, 1.0, 0.0, 10), 0, 3).guided)   # a half empty
 
 
 def test_gpu_reduction_and_combine_match_numpy(ctx):
@@ -103,26 +101,26 @@ def test_gpu_reduction_and_combine_match_numpy(ctx):
         buffers.release()
 
 
-# ---- the session: the raymarcher at once, the path tracer later ----------------------------------
+# ---- the session: the raymarcher at once, guided later ------------------------------------------
 
-# 2^3 probes over a dense cloud: the raymarcher's interpolation is visibly biased, so refine's
-# estimator (the path tracer, unbiased) overtakes it within a few dozen samples at this size.
+# 2^3 probes over a dense cloud: the raymarcher's interpolation is visibly biased, so `guided`
+# (unbiased) overtakes it within a few dozen samples at this size.
 SCENE = {"volume": {"builtin": "cloud", "size": [12, 12, 12]}, "density_scale": 30.0,
          "albedo": 0.9, "camera": {"width": 24, "height": 16},
          "probes": {"grid": [2, 2, 2], "samples": 64, "fit": "box"}}
 MAX_SAMPLES = 512
 
 
-def _frames_until_estimator(s, limit=400) -> int:
+def _frames_until_guided(s, limit=400) -> int:
     for frame in range(limit):
         s.step(MAX_SAMPLES, True)
-        if s.refine_state()["shown"] == REFINE_ESTIMATOR:
+        if s.refine_state()["shown"] == "guided":
             return frame + 1
     raise AssertionError(f"refine still shows the raymarcher after {limit} frames: "
                          f"{s.refine_state()}")
 
 
-def test_refine_shows_the_raymarcher_at_once_then_the_estimator_after_every_edit(ctx):
+def test_refine_shows_the_raymarcher_at_once_then_guided_after_every_edit(ctx):
     from app.viewer.session import RefineView, RenderSession
     s = RenderSession(ctx, parse_scene(SCENE))
     try:
@@ -136,17 +134,13 @@ def test_refine_shows_the_raymarcher_at_once_then_the_estimator_after_every_edit
         assert np.abs(s.image("refine")).max() > 0
         np.testing.assert_array_equal(s.image("refine"), view.ray.read())
         assert "raymarch" in s.label("refine")
-        frames = _frames_until_estimator(s)
+        frames = _frames_until_guided(s)
         st = s.refine_state()
         est = st["estimated_rrmse"]
-        assert est["halves"] < est["raymarch"] and min(st["half_samples"]) >= 4
-        for _ in range(24):
-            s.step(MAX_SAMPLES, True)
-        frames += 24
-        assert s.refine_state()["reads"] < frames / 2   # the read-back is not every frame
+        assert est["guided"] < est["raymarch"] and min(st["half_samples"]) >= 4
+        assert st["reads"] < frames      # the read-back is not every frame
         np.testing.assert_array_equal(s.image("refine"), view.halves.combined.read())
-        assert f"refine  {REFINE_ESTIMATOR} " in s.label("refine")
-        assert "est. error" in s.label("refine")
+        assert "guided" in s.label("refine") and "est. error" in s.label("refine")
         # edits: a camera move, then a sun move (a re-bake): the raymarcher's image at once again
         scene = s.scene
         cam = scene.camera
@@ -157,13 +151,13 @@ def test_refine_shows_the_raymarcher_at_once_then_the_estimator_after_every_edit
             st = s.refine_state()
             assert st["shown"] == "raymarch" and st["raymarch_samples"] >= 1
             np.testing.assert_array_equal(s.image("refine"), view.ray.read())
-            _frames_until_estimator(s)
-        # the halves converge to the exact image: run to the cap, then their estimated error is
-        # their error against a path-traced reference (corrected for the reference's own noise)
+            _frames_until_guided(s)
+        # guided converges to the exact image: run to the cap, then its estimated error is its
+        # error against a path-traced reference (corrected for the reference's own noise)
         while not s.finished(MAX_SAMPLES, True):
             s.step(MAX_SAMPLES, True)
-        assert s.refine_state()["halves_samples"] == MAX_SAMPLES
-        est = s.refine_state()["estimated_rrmse"]["halves"]
+        assert s.refine_state()["guided_samples"] == MAX_SAMPLES
+        est = s.refine_state()["estimated_rrmse"]["guided"]
         r = s.renderer
         ref_a = r.render("pt", spp=4096, seed=901).image
         ref_b = r.render("pt", spp=4096, seed=902).image
@@ -177,7 +171,7 @@ def test_refine_shows_the_raymarcher_at_once_then_the_estimator_after_every_edit
 
 def test_interact_quick_preset_replays_refine(ctx, tmp_path):
     """`bench --preset interact-quick` replays refine (here alone, on one of its scenes): every
-    event's first frame shows the raymarcher, later frames the path tracer, its errors against the
+    event's first frame shows the raymarcher, later frames guided, its errors against the
     references recorded with the time to 2%, and the report says whether each event got within 2%
     within 1 s."""
     import json
@@ -196,77 +190,20 @@ def test_interact_quick_preset_replays_refine(ctx, tmp_path):
     took_over = 0
     for r in recs:
         shown = [s for _, _, _, s in r["frame_trace"]]
-        assert set(shown) <= {"raymarch", REFINE_ESTIMATOR}
+        assert set(shown) <= {"raymarch", "guided"}
         first = 0 if r["event"] != "orbit" else r["orbit_frames"] - 1
         assert shown[first] == "raymarch", (r["event"], shown)   # at once after the event
         after = shown[first:]
-        took_over += REFINE_ESTIMATOR in after
+        k = after.index("guided") if "guided" in after else len(after)
+        assert set(after[k:]) <= {"guided"}, (r["event"], shown)   # never back to the raymarcher
+        took_over += k < len(after)
         if r["converged"]:
-            assert shown[-1] == REFINE_ESTIMATOR
+            assert shown[-1] == "guided"
         assert "ms_to_2pct" in r and "wall_ms_to_2pct" in r
         assert r["final_rrmse"] is not None and np.isfinite(r["final_rrmse"])
-    # the path tracer replaced the raymarcher within the preset's 60 frames after most events (on
-    # this cloud the raymarcher over 8^3 probes is 6 to 12% off; the path tracer at 64x48 gets
-    # below that)
+    # guided replaced the raymarcher within the preset's 60 frames after most events (on this
+    # cloud the raymarcher over 8^3 probes is 6 to 12% off; guided at 64x48 gets below that)
     assert took_over >= len(recs) // 2, took_over
     text = write_report(path).read_text()
     assert "Within 2% within 1 s of every event" in text
     assert "| anisotropic | 64x48 | 8^3x128 | refine | 10 |" in text
-
-
-def test_the_estimators_halves_go_on_through_the_bake(ctx):
-    """The path tracer reads no probes: after an edit its halves sample from the edit's own frame
-    and keep their samples while the probes bake slice by slice (only the raymarcher restarts
-    after each slice); an edit still starts them afresh."""
-    from app.viewer.session import RenderSession
-    s = RenderSession(ctx, parse_scene({**SCENE, "probes": {"grid": [6, 6, 6], "samples": 256}}))
-    s.bake_budget_ms = 0.01   # a slice of the fewest walks: the bake takes many frames
-    try:
-        s.resize(24, 16)
-        s.set_methods(["refine"])
-        counts = []
-        for _ in range(6):
-            s.step(MAX_SAMPLES, True)
-            assert not s.renderer.probes_current()
-            counts.append(s.refine_state()["halves_samples"])
-        assert counts[0] >= 1 and all(b > a for a, b in zip(counts, counts[1:])), counts
-        assert REFINE_ESTIMATOR in s.label("refine")
-        s.set_scene(s.scene.replace(light=replace(s.scene.light, direction=(0.6, 0.6, 0.52))))
-        s.step(MAX_SAMPLES, True)
-        last_n, _ = s.views["refine"].dispatch_ms[REFINE_ESTIMATOR][-1]
-        assert s.refine_state()["halves_samples"] == last_n   # the edit's frame's samples alone
-        assert s.refine_state()["shown"] == "raymarch"
-    finally:
-        s.release()
-
-
-def test_refine_shows_the_image_with_the_smaller_estimated_error(ctx):
-    """At each check the view goes to the halves' mean when its estimate is below the
-    raymarcher's, and back to the raymarcher only when the raymarcher's is below
-    REFINE_BACK_MARGIN of the halves' (as when a bake ends after the path tracer took over); never
-    on a NaN estimate. The estimates here are set by hand, one per check."""
-    from app.render.refine import RefineEstimate
-    from app.viewer.session import REFINE_BACK_MARGIN, RenderSession
-    s = RenderSession(ctx, parse_scene(SCENE))
-    try:
-        s.resize(24, 16)
-        s.set_methods(["refine"])
-        while not s.renderer.probes_current():
-            s.step(MAX_SAMPLES, True)
-        view = s.views["refine"]
-        s.restart()                                   # an edit: the raymarcher shows
-        s.step(MAX_SAMPLES, True)
-        assert view.shown == "raymarch"
-        nan = float("nan")
-        shown = []
-        for halves, ray in [(0.05, 0.04), (nan, 0.01), (0.03, 0.04), (0.03, 0.03 * (1 + REFINE_BACK_MARGIN) / 2),
-                            (0.03, REFINE_BACK_MARGIN * 0.03 * 0.99), (0.02, nan), (0.01, 0.02)]:
-            view.halves.read_estimate = lambda with_ray, h=halves, r=ray: RefineEstimate(h, r, 0)
-            view.checked_stage = -1                   # the next frame checks
-            s.step(MAX_SAMPLES, True)
-            assert view.estimate.raymarch is ray      # this check's estimate was read
-            shown.append(view.shown)
-        assert shown == ["raymarch", "raymarch", REFINE_ESTIMATOR, REFINE_ESTIMATOR, "raymarch",
-                         "raymarch", REFINE_ESTIMATOR]
-    finally:
-        s.release()

@@ -758,10 +758,10 @@ def test_time_series_plays_steps_and_pauses(display, tmp_path):
     assert "Time step" in start["widgets"]
 
 
-def test_refine_shows_the_raymarcher_at_once_after_an_edit_then_the_path_tracer(display, tmp_path):
+def test_refine_shows_the_raymarcher_at_once_after_an_edit_then_guided(display, tmp_path):
     """Key 5 (refine) in the real window: after the switch and after an orbit, the first frame
-    shows the raymarcher's image and later frames the path tracer's (its caption with the error
-    estimated from the halves); the estimate's read-backs are fewer than the frames."""
+    shows the raymarcher's image and later frames guided's (its caption with the error estimated
+    from the halves); the estimate's read-backs are fewer than the frames."""
     scene = {"volume": {"builtin": "cloud", "size": [12, 12, 12]}, "density_scale": 30.0,
              "albedo": 0.9, "camera": {"width": 48, "height": 48},
              "probes": {"grid": [2, 2, 2], "samples": 64, "fit": "box"}}
@@ -778,14 +778,14 @@ def test_refine_shows_the_raymarcher_at_once_after_an_edit_then_the_path_tracer(
     for d in (first, orbit):
         assert d["method"] == "refine" and not d["errors"]
         st = d["refine"]
-        assert st["shown"] == "pt" and st["halves_samples"] == 128
+        assert st["shown"] == "guided" and st["guided_samples"] == 128
         assert st["shown_frames"][0] == "raymarch"                 # at once after the edit
-        assert "pt" in st["shown_frames"]                          # later frames: the path tracer
-        k = st["shown_frames"].index("pt")
-        assert set(st["shown_frames"][:k]) == {"raymarch"} and set(st["shown_frames"][k:]) == {"pt"}
+        assert "guided" in st["shown_frames"]                      # later frames: guided
+        k = st["shown_frames"].index("guided")
+        assert set(st["shown_frames"][:k]) == {"raymarch"} and set(st["shown_frames"][k:]) == {"guided"}
         est = st["estimated_rrmse"]
-        assert 0 < est["halves"] < 0.5 and st["reads"] < st["frames"]
-        assert "pt 128 spp, est. error" in d["labels"]["refine"]
+        assert 0 < est["guided"] < 0.5 and st["reads"] < st["frames"]
+        assert "guided 128 spp, est. error" in d["labels"]["refine"]
         assert d["samples"] == {"refine": 128}
     assert orbit["restarts"] > first["restarts"] and orbit["bakes_started"] == first["bakes_started"]
     assert orbit["scene"]["camera"]["eye"] != first["scene"]["camera"]["eye"]

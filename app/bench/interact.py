@@ -31,8 +31,8 @@ from .metrics import corrected_rrmse, rrmse
 from .records import log as _log
 
 TARGETS = (0.10, 0.05, 0.03, 0.02)
-# `refine` (the viewer's raymarcher, then the path tracer) is judged by this: within 2% of the
-# reference within 1 s of every event (report: interact_report.py)
+# `refine` (the viewer's raymarcher, then `guided`) is judged by this: within 2% of the reference
+# within 1 s of every event (report: interact_report.py)
 REFINE_GOAL = (0.02, 1000.0)
 EDITS = ("tf_drag", "sun_30deg", "density", "albedo")
 
@@ -113,7 +113,7 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
         frames.append(ms)
         walls.append(wall)
         trace.append([round(times.bake_ms, 3), round(times.render_ms, 3), times.samples,
-                      s.views[method].shown])   # refine: "raymarch" or "pt"
+                      s.views[method].shown])   # refine: "raymarch" or "guided"
         t, wall_t = t + ms, wall_t + wall
         after = f - lead
         if after < 0:

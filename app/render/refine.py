@@ -1,12 +1,11 @@
-"""The viewer's `refine` mode (app/viewer/session.py): an unbiased estimator (the path tracer;
-session.REFINE_ESTIMATOR) accumulated as two independent halves, their combined mean shown, and its
-error estimated from the two halves alone.
+"""The viewer's `refine` mode (app/viewer/session.py): `guided` accumulated as two independent
+halves, their combined mean shown, and its error estimated from the two halves alone.
 
 The estimator (NumPy: `half_buffer_error`; GPU: glsl/refine_halves.comp, which gives the same
 three sums for `error_from_sums`):
 
 Let a and b be the two halves' per-pixel means over n_a and n_b independent samples of an
-unbiased estimator with per-pixel mean t and variance s^2 (each channel a value; the estimator is
+unbiased estimator with per-pixel mean t and variance s^2 (each channel a value; `guided` is
 unbiased, so noise is its whole error). The image shown is m = (n_a a + n_b b) / (n_a + n_b), so
 Var(m) = s^2 / (n_a + n_b). The halves are independent with the same mean, so
 
@@ -45,9 +44,9 @@ GROUP_SIDE = 16
 
 @dataclass(frozen=True)
 class RefineEstimate:
-    """Estimated relative RMSEs against the exact image: the halves' mean and the raymarcher's
-    (NaN where not measured), and the halves' samples they were measured at."""
-    halves: float
+    """Estimated relative RMSEs against the exact image: the halves' mean (`guided`) and the
+    raymarcher's (NaN where not measured), and the guided samples they were measured at."""
+    guided: float
     raymarch: float
     samples: int
 
@@ -79,10 +78,10 @@ def error_from_sums(sums, n_a: int, n_b: int, samples: int = 0,
     signal2 = mean_sq / count - noise2
     if not signal2 > 0.0:
         return RefineEstimate(float("nan"), float("nan"), samples)
-    halves = math.sqrt(noise2 / signal2)
+    guided = math.sqrt(noise2 / signal2)
     raymarch = (math.sqrt(max(ray / count - noise2, 0.0) / signal2) if with_raymarch
                 else float("nan"))
-    return RefineEstimate(halves, raymarch, samples)
+    return RefineEstimate(guided, raymarch, samples)
 
 
 def half_buffer_error(a: np.ndarray, b: np.ndarray, n_a: int = 1, n_b: int = 1,
@@ -93,8 +92,7 @@ def half_buffer_error(a: np.ndarray, b: np.ndarray, n_a: int = 1, n_b: int = 1,
 
 
 class HalfBuffers:
-    """Two independent accumulations of the estimator (each a SumAccumulation, whose two parts
-    are `guided`'s level 1 and level 0; other methods fill the first and leave the second 0) and
+    """Two independent `guided` accumulations (each a SumAccumulation: level 1 and level 0) and
     the image shown, their count-weighted mean (an Accumulation: rgb the mean, alpha the count),
     combined on the GPU."""
 

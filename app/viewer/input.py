@@ -32,7 +32,7 @@ SHORTCUTS = (
     Shortcut("2", "method: probes", _method("probes")),
     Shortcut("3", "method: probes-only", _method("probes-only")),
     Shortcut("4", "method: raymarch", _method("raymarch")),
-    Shortcut("5", "method: refine (raymarch at once, then pt to the exact image)",
+    Shortcut("5", "method: refine (raymarch at once, then guided to the exact image)",
              _method("refine")),
     Shortcut("s", "split view on/off (method | split method)", lambda v: v.state.toggle_display("split")),
     Shortcut("e", "error view on/off (heat map against pt)", lambda v: v.state.toggle_display("error")),

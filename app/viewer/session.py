@@ -13,12 +13,10 @@ A frame's GPU time is budgeted as a whole (FRAME_BUDGET_MS): the bake slice firs
 samples per shown method as the rest of the frame holds by their measured cost, at least one.
 
 `refine` (RefineView) is two renderers in one view: after any edit the raymarcher's image shows
-at once, and samples of an unbiased estimator (REFINE_ESTIMATOR, the path tracer) accumulate beside
-it from the same frame in two independent halves (app/render/refine.py); the view switches to their
-mean when its error, estimated from the halves, falls below the raymarcher's, estimated against
-that same unbiased mean. The path tracer reads no probes, so its halves go on through the bake's
-slices (only the raymarcher restarts after each); an estimator that reads them (`guided`: its two
-levels must read the same probes for the whole accumulation) would wait for the bake.
+at once; once the probes are current, `guided` samples accumulate beside it in two independent
+halves (app/render/refine.py), and the view switches to their mean when its error, estimated from
+the halves, falls below the raymarcher's, estimated against that same unbiased mean. `guided`
+waits for the bake: its two levels must read the same probes for the whole accumulation.
 """
 from __future__ import annotations
 
@@ -45,22 +43,14 @@ RECENT_DISPATCHES = 5    # dispatches whose GPU ms per sample set the next frame
 # What a probe-lit method shows while its probes bake: the raymarcher over the probes as they are.
 PREVIEW_WHILE_BAKING = "raymarch"
 REFINE = "refine"
-# `refine`'s unbiased estimator: the path tracer. It was `guided` until bench/h100-convergence
-# showed the path tracer reaching 2%, 1% and 0.5% 1.7 to 14x sooner on every bench scene; it also
-# needs no probes, so it starts at an edit's own frame instead of after the bake.
-REFINE_ESTIMATOR = "pt"
 # `refine`: the raymarcher's frames it accumulates at most (its image is then as good as its bias
-# lets it be; the rest of each frame goes to the estimator); a reduction of the halves' error (a
-# 16-byte read-back) whenever the halves' samples double and at least every REFINE_CHECK_FRAMES
-# frames with samples (about 4 a second at 60 Hz), never every frame; the samples each half needs
-# before its estimate may switch the view; the seed offset of the second half.
+# lets it be; the rest of each frame goes to `guided`); a reduction of the halves' error (a 16-byte
+# read-back) whenever guided's samples double and at least every REFINE_CHECK_FRAMES frames with
+# guided samples (about 4 a second at 60 Hz), never every frame; the guided samples each half
+# needs before its estimate may switch the view; the seed offset of the second half.
 REFINE_RAYMARCH_FRAMES = 16
 REFINE_CHECK_FRAMES = 16
 REFINE_MIN_HALF_SAMPLES = 4
-# Back from the halves' mean to the raymarcher only where the raymarcher's estimated error is below
-# this share of the halves' (the two estimates share the halves' noise: without a margin the view
-# would flip between two images of about the same error at every check).
-REFINE_BACK_MARGIN = 0.95
 REFINE_HALF_SEED = 0x68E31DA4
 REFINE_HISTORY = 64     # frames after a restart whose shown image a refine view remembers (tests)
 
@@ -85,9 +75,8 @@ class MethodView:
 
 
 class RefineView:
-    """The `refine` view: the raymarcher's accumulation (`ray`), REFINE_ESTIMATOR's two halves and
-    their mean (`halves`), and which of the two the display shows (`shown`: "raymarch" or
-    REFINE_ESTIMATOR)."""
+    """The `refine` view: the raymarcher's accumulation (`ray`), `guided`'s two halves and their
+    mean (`halves`), and which of the two the display shows (`shown`: "raymarch" or "guided")."""
 
     def __init__(self, method: str = REFINE):
         self.method = method
@@ -98,8 +87,8 @@ class RefineView:
         self.dispatch_ms: dict = {}
         self.estimate: RefineEstimate | None = None   # the last check's
         self.frames_since_check = 0
-        self.checked_stage = 0          # bit_length of the halves' samples at the last check
-        self.switched_at: int | None = None   # the halves' samples when they first replaced it
+        self.checked_stage = 0          # bit_length of guided's samples at the last check
+        self.switched_at: int | None = None   # guided's samples when it replaced the raymarcher
         self.frames = 0                 # frames stepped since the last restart
         self.shown_frames: list[str] = []   # what each of the first REFINE_HISTORY of them showed
 
@@ -108,7 +97,7 @@ class RefineView:
         """What the display shows: the raymarcher's accumulation or the halves' mean."""
         if self.ray is None:
             return None
-        return self.halves.combined if self.shown == REFINE_ESTIMATOR else self.ray
+        return self.halves.combined if self.shown == "guided" else self.ray
 
     @property
     def samples(self) -> int:
@@ -116,8 +105,7 @@ class RefineView:
         return 0 if acc is None else acc.samples
 
     @property
-    def halves_samples(self) -> int:
-        """The estimator's samples per pixel in the two halves together."""
+    def guided_samples(self) -> int:
         return 0 if self.halves is None else self.halves.samples
 
     def release(self) -> None:
@@ -209,21 +197,17 @@ class RenderSession:
             self.size = size
             self.restart()
 
-    def restart(self, methods=None, probes_changed: bool = False) -> None:
-        """Begins the views of `methods` (all: None) afresh. `probes_changed`: only the probes
-        changed (a bake slice), so what reads no probes (refine's estimator, the path tracer)
-        keeps its samples."""
+    def restart(self, methods=None) -> None:
         for view in self.views.values():
             if methods is None or view.method in methods:
-                self._begin(view, probes_changed)
+                self._begin(view)
         self.restarts += 1
 
-    def _begin(self, view: MethodView, probes_changed: bool = False) -> None:
+    def _begin(self, view: MethodView) -> None:
         if self.size == (0, 0):
             return
         if isinstance(view, RefineView):
-            return self._begin_refine(view, probes_changed
-                                      and not self.renderer.needs_probes(REFINE_ESTIMATOR))
+            return self._begin_refine(view)
         r = self.renderer
         view.shown = self.shown_method(view.method)
         r._acc = view.acc  # the Renderer keeps one accumulation; each view lends it its own
@@ -232,17 +216,12 @@ class RenderSession:
         view.camera = r.camera
         r._acc = None
 
-    def _begin_refine(self, view: RefineView, keep_halves: bool = False) -> None:
-        """Both of refine's renderers afresh: the raymarcher's image is what shows. `keep_halves`
-        (after a bake slice, with an estimator that reads no probes): the raymarcher alone, the
-        estimator's halves and what the view shows kept."""
+    def _begin_refine(self, view: RefineView) -> None:
+        """Both of refine's renderers afresh: the raymarcher's image is what shows."""
         r = self.renderer
         r._acc = view.ray
         view.ray = r.begin("raymarch", *self.size, seed=self.seed)
         r._acc = None
-        view.ray.texture.filter = (self.filter, self.filter)
-        if keep_halves and view.halves is not None:   # (a bake slice moves no camera)
-            return
         view.camera = r.camera
         w, h = r.camera.width, r.camera.height
         if view.halves is None or (view.halves.width, view.halves.height) != (w, h):
@@ -269,7 +248,7 @@ class RenderSession:
         return self.renderer.probe_grid is not None and self.renderer.probes_current()
 
     def needs_probes(self, method: str) -> bool:
-        """Whether a view of `method` reads the probes (refine: its raymarcher does)."""
+        """Whether a view of `method` reads the probes (refine: its raymarcher and `guided` do)."""
         return method == REFINE or self.renderer.needs_probes(method)
 
     def shown_method(self, method: str) -> str:
@@ -299,7 +278,7 @@ class RenderSession:
             self.bake_passes_run += 1
             if r.probe_grid.passes_done not in (0, passes):   # a pass ended: its progress
                 self.bake_report = r.probe_grid.progress_report()
-            self.restart([m for m in self.views if self.needs_probes(m)], probes_changed=True)
+            self.restart([m for m in self.views if self.needs_probes(m)])
         # a view whose preview is over (the bake ended, or was never needed) starts its own method
         stale = [v.method for v in self.views.values() if not isinstance(v, RefineView)
                  and v.shown != self.shown_method(v.method)]
@@ -347,39 +326,32 @@ class RenderSession:
         return int(max(1, min(MAX_SAMPLES_PER_FRAME, budget_ms // per)))
 
     def _refine_done(self, view: RefineView, max_samples: int) -> bool:
-        """Nothing left for refine: probes current, the estimator at max_samples, the raymarcher
-        at its last frame, and both judged since."""
-        return (self.renderer.probes_current() and view.halves_samples >= max_samples
-                and view.ray.samples >= min(REFINE_RAYMARCH_FRAMES, max_samples)
-                and not self._check_pending(view))
+        """Nothing left for refine: probes current, guided at max_samples, and the raymarcher
+        either replaced or at its last frame."""
+        return (self.renderer.probes_current() and view.guided_samples >= max_samples
+                and (view.shown == "guided"
+                     or (view.ray.samples >= min(REFINE_RAYMARCH_FRAMES, max_samples)
+                         and not self._check_pending(view))))
 
     def _check_pending(self, view: RefineView) -> bool:
-        """Samples (the estimator's or the raymarcher's) since the last check."""
-        return (view.halves_samples > 0 and view.frames_since_check > 0
-                and self._estimator_ready())
-
-    def _estimator_ready(self) -> bool:
-        """Whether refine's estimator may sample: always, unless it reads probes that are not
-        current."""
-        r = self.renderer
-        return not r.needs_probes(REFINE_ESTIMATOR) or r.probes_current()
+        """Guided samples since the last check while the raymarcher is shown."""
+        return (view.shown == "raymarch" and view.guided_samples > 0
+                and view.frames_since_check > 0 and self.renderer.probes_current())
 
     def _step_refine(self, view: RefineView, budget_ms: float, max_samples: int) -> tuple[float, int]:
-        """One frame of refine within `budget_ms`: raymarched frames while the raymarcher is short
-        of REFINE_RAYMARCH_FRAMES (it restarts after each bake slice); the estimator's samples
-        (half the budget each while both run; at least one sample each), split between the halves
-        (the emptier first); then the halves combined on the GPU and, at a check, the two errors
-        read (16 bytes) and the view set to the image with the smaller: to the halves' mean once
-        its estimate is below the raymarcher's, back to the raymarcher where the raymarcher's is
-        below REFINE_BACK_MARGIN of it (a bake that finished after the halves took over). The frame
-        of a restart (any edit) always shows the raymarcher: the halves may take over from the
-        next frame on. Returns GPU ms and samples per pixel dispatched."""
+        """One frame of refine within `budget_ms`: raymarched frames while the raymarcher is shown
+        and short of REFINE_RAYMARCH_FRAMES; `guided` samples once the probes are current (half the
+        budget each while both run; at least one sample each), split between the halves (the
+        emptier first), then the halves combined on the GPU and, at a check, their error read
+        (16 bytes) and the view switched to guided if its estimate is below the raymarcher's.
+        The frame of a restart (any edit) always shows the raymarcher: guided may take over from
+        the next frame on. Returns GPU ms and samples per pixel dispatched."""
         r = self.renderer
         view.frames += 1
         ray_cap = min(REFINE_RAYMARCH_FRAMES, max_samples)
-        ray_todo = view.ray.samples < ray_cap
-        estimator_todo = self._estimator_ready() and view.halves_samples < max_samples
-        share = budget_ms / 2 if ray_todo and estimator_todo else budget_ms
+        ray_todo = view.shown == "raymarch" and view.ray.samples < ray_cap
+        guided_todo = r.probes_current() and view.guided_samples < max_samples
+        share = budget_ms / 2 if ray_todo and guided_todo else budget_ms
         ms_total, n_total = 0.0, 0
         if ray_todo:
             n = min(self.samples_per_frame(view, share, "raymarch"), ray_cap - view.ray.samples)
@@ -387,43 +359,39 @@ class RenderSession:
             self._note_dispatch(view, "raymarch", n, ms)
             ms_total, n_total = ms_total + ms, n_total + n
         halves = view.halves
-        if estimator_todo:
-            n = min(self.samples_per_frame(view, share, REFINE_ESTIMATOR),
-                    max_samples - halves.samples)
+        n, ms = 0, 0.0
+        if guided_todo:
+            n = min(self.samples_per_frame(view, share, "guided"), max_samples - halves.samples)
             first = halves.next_half()
-            ms = 0.0
             for index, k in ((first, (n + 1) // 2), (1 - first, n // 2)):
                 if k:
                     half = halves.halves[index]
                     seed = self.seed ^ (REFINE_HALF_SEED if index else 0)
-                    ms += self._lend(half.residual, half.level0, REFINE_ESTIMATOR, view.camera,
-                                     seed, index, k)
-            self._note_dispatch(view, REFINE_ESTIMATOR, n, ms)
-            ms_total, n_total = ms_total + ms, n_total + n
-        if halves.samples == 0 or not (ray_todo or estimator_todo or self._check_pending(view)):
+                    ms += self._lend(half.residual, half.level0, "guided", view.camera, seed,
+                                     index, k)
+            self._note_dispatch(view, "guided", n, ms)
+            view.frames_since_check += 1
+            stage = halves.samples.bit_length()
+            check = (stage != view.checked_stage or view.frames_since_check >= REFINE_CHECK_FRAMES
+                     or halves.samples >= max_samples)
+        elif self._check_pending(view):   # guided has stopped: its last samples not yet judged
+            stage, check = halves.samples.bit_length(), True
+        else:
             self._note_shown(view)
             return ms_total, n_total
-        if ray_todo or estimator_todo:
-            view.frames_since_check += 1
-        stage = halves.samples.bit_length()
-        stopped = halves.samples >= max_samples and view.ray.samples >= ray_cap
-        check = (view.frames > 1   # an edit's own frame shows the raymarcher
-                 and (stage != view.checked_stage or view.frames_since_check >= REFINE_CHECK_FRAMES
-                      or stopped))
-        halves.combine(view.ray, reduce=check)
+        check = check and view.frames > 1   # an edit's own frame shows the raymarcher
+        with_ray = view.shown == "raymarch"
+        halves.combine(view.ray if with_ray else None, reduce=check)
         if check:
-            view.estimate = halves.read_estimate(True)
+            view.estimate = halves.read_estimate(with_ray)
             view.frames_since_check, view.checked_stage = 0, stage
             est = view.estimate
-            if min(halves.counts) >= REFINE_MIN_HALF_SAMPLES:   # (no switch while either is NaN)
-                if view.shown == "raymarch" and est.halves < est.raymarch:
-                    view.shown = REFINE_ESTIMATOR
-                    if view.switched_at is None:
-                        view.switched_at = halves.samples
-                elif view.shown != "raymarch" and est.raymarch < REFINE_BACK_MARGIN * est.halves:
-                    view.shown = "raymarch"
+            if (with_ray and view.frames > 1 and min(halves.counts) >= REFINE_MIN_HALF_SAMPLES
+                    and est.guided < est.raymarch):   # (False while either is NaN)
+                view.shown = "guided"
+                view.switched_at = halves.samples
         self._note_shown(view)
-        return ms_total, n_total
+        return ms_total + ms, n_total + n
 
     @staticmethod
     def _note_shown(view: RefineView) -> None:
@@ -438,8 +406,7 @@ class RenderSession:
 
     def _lend(self, acc, acc0, method: str, camera, seed: int, slot: int, n: int) -> float:
         """n samples of `method` into accumulations the Renderer borrows for the call (acc0:
-        `guided`'s level 0, left empty by other methods; slot: the path states of refine's
-        half)."""
+        guided's level 0; slot: the path states of refine's half)."""
         r = self.renderer
         kept = r._acc0
         r._acc, r._acc0, r.method, r.camera, r.seed, r.pass_slot = acc, acc0, method, camera, seed, slot
@@ -474,12 +441,12 @@ class RenderSession:
 
     def view_done(self, method: str, target_spp: int) -> bool:
         """A view shows its own method's image with at least `target_spp` samples (refine:
-        the estimator's mean has replaced the raymarcher's image and holds that many)."""
+        `guided`'s mean has replaced the raymarcher's image and holds that many)."""
         view = self.views.get(method)
         if view is None:
             return False
         if isinstance(view, RefineView):
-            return view.shown == REFINE_ESTIMATOR and view.halves_samples >= target_spp
+            return view.shown == "guided" and view.guided_samples >= target_spp
         return view.shown == method and view.samples >= target_spp
 
     # ---- reading -------------------------------------------------------------------------------
@@ -501,22 +468,19 @@ class RenderSession:
         return f"{method}  {self.samples(method)} spp{extra}"
 
     def _refine_label(self, view: RefineView) -> str:
-        """refine's caption: what it shows, and the errors estimated from the halves."""
+        """refine's caption: what it shows, and the errors estimated from guided's halves."""
         est = view.estimate
 
         def pct(x) -> str:
             return "?" if x is None or not math.isfinite(x) else f"{100 * x:.1f}%"
-        halves = pct(None if est is None else est.halves)
-        name = REFINE_ESTIMATOR
-        if view.shown == name:
-            return f"{view.method}  {name} {view.halves_samples} spp, est. error {halves}"
+        guided = pct(None if est is None else est.guided)
+        if view.shown == "guided":
+            return f"{view.method}  guided {view.guided_samples} spp, est. error {guided}"
         text = f"{view.method}  raymarch {0 if view.ray is None else view.ray.samples} spp"
-        if not self._estimator_ready():
-            return f"{text} (bake {self._bake_percent()}%, then {name})"
-        bake = ("" if self.renderer.probes_current()
-                else f" (bake {self._bake_percent()}%)")
-        return (f"{text}{bake}, est. error {pct(None if est is None else est.raymarch)}; {name} "
-                f"{view.halves_samples} spp, est. {halves}")
+        if not self.renderer.probes_current():
+            return f"{text} (bake {self._bake_percent()}%, then guided)"
+        return (f"{text}, est. error {pct(None if est is None else est.raymarch)}; guided "
+                f"{view.guided_samples} spp, est. {guided}")
 
     def refine_state(self, method: str = REFINE) -> dict | None:
         """What a refine view holds (for the viewer's snapshot and the benchmark)."""
@@ -525,10 +489,10 @@ class RenderSession:
             return None
         est = view.estimate
         return {"shown": view.shown, "raymarch_samples": 0 if view.ray is None else view.ray.samples,
-                "estimator": REFINE_ESTIMATOR, "halves_samples": view.halves_samples,
+                "guided_samples": view.guided_samples,
                 "half_samples": [] if view.halves is None else list(view.halves.counts),
                 "estimated_rrmse": None if est is None else
-                {"halves": est.halves, "raymarch": est.raymarch, "samples": est.samples},
+                {"guided": est.guided, "raymarch": est.raymarch, "samples": est.samples},
                 "switched_at": view.switched_at, "frames": view.frames,
                 "shown_frames": list(view.shown_frames),
                 "reads": 0 if view.halves is None else view.halves.reads}
