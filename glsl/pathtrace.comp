@@ -19,6 +19,9 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #endif
 #if defined(GUIDED_RESIDUAL)
 #include "lib/guided_source.glsl"
+// here, outside the #if blocks below: the loader expands an include once, where first met, and
+// both guiding includes read it
+#include "lib/luminance.glsl"
 #if !defined(GUIDED_DIRECTION_CONTROL) || PROBE_SH_ORDER < 1
 #undef GUIDED_DIRECTION_CONTROL   // order 0 probes hold no direction: the control would be 0
 #define GUIDED_DIRECTION_CONTROL 0

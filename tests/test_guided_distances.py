@@ -59,6 +59,12 @@ def test_collision_probability_glsl_matches_its_twin(ctx):
     np.testing.assert_allclose(got, want, rtol=2e-6, atol=1e-7)
 
 
+def test_the_twins_flight_bound_is_the_glsls():
+    from app.gl.shaders import GLSL_DIR
+    text = (GLSL_DIR / "lib" / "guided_distances.glsl").read_text()
+    assert f"const float GUIDED_FLIGHT_WEIGHT_BOUND = {gdist.FLIGHT_WEIGHT_BOUND};" in text
+
+
 def test_probability_lies_inside_and_weights_are_bounded():
     """0 < p < 1 wherever 0 < a < 1 and P < 1; each outcome's probability times its weight is the
     analog one's; no weight exceeds 1 / (1 - P); P = 0 is delta tracking (p = a, weights 1); a

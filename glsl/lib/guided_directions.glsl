@@ -34,7 +34,7 @@ const int GUIDED_CELLS_COS = 8;
 const int GUIDED_CELLS_PHI = 8;
 const int GUIDED_CELLS = GUIDED_CELLS_COS * GUIDED_CELLS_PHI;
 const float GUIDED_CELL_FLOOR = 0.05;
-const vec3 GUIDED_LUMINANCE = vec3(0.2126, 0.7152, 0.0722);   // Rec. 709
+#include "lib/luminance.glsl"
 // Loop iterations one table may take at most, with the probe fetch before it and the draw after
 // (its cells times the SH loop, the fetch's and the reductions' loops, the search), charged to
 // the path's step budget as the map's samples are (lib/integrator.glsl): Mesa's llvmpipe ends an
@@ -51,7 +51,7 @@ void guided_direction_table(vec3 coeffs[SH_COUNT], vec3 w_in, float g,
     float luminance[SH_COUNT];   // window_l times the coefficients' luminance
     for (int l = 0; l < SH_BANDS; ++l)
         for (int k = l * l; k < (l + 1) * (l + 1); ++k)
-            luminance[k] = probe_window_factors[l] * dot(coeffs[k], GUIDED_LUMINANCE);
+            luminance[k] = probe_window_factors[l] * dot(coeffs[k], REC709_LUMINANCE);
     vec3 b1, b2;
     orthonormal_basis(w_in, b1, b2);
     float sum = 0.0;

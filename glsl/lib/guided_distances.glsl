@@ -8,8 +8,8 @@
 // tentative collision at x (majorant m, a = sigma_t / m the analog probability of a real
 // collision), that radiance is, in expectation,
 //     a * albedo * S  +  (1 - a) * B
-// S: what scattering at x sends back along -d, per unit sigma_s (the probes' inscattered radiance
-// plus the sun through the light grid: lib/guided_source.glsl's prediction); B: the radiance
+// S: what scattering at x sends back along -d, per unit sigma_s (lib/guided_source.glsl's
+// prediction: the probes' inscattered radiance plus the sun through the light grid); B: the radiance
 // arriving at x from d (the probes' radiance in direction d, windowed and clamped at 0), what a
 // null collision goes on to find. The zero-variance choice takes "real" with probability
 //     z = a albedo S / (a albedo S + (1 - a) B)
@@ -32,6 +32,9 @@
 // weight 1) and nothing is fetched. Flights from the camera are not guided: level 1 subtracts
 // the probes' prediction at its first event, so its camera ray's variance is not the radiance's.
 // Cost: a probe fetch and the light grid's transmittance at every tentative collision in between.
+#include "lib/guided_source.glsl"
+#include "lib/luminance.glsl"
+
 uniform float guided_distance_probability;   // P in [0, 1)
 const float GUIDED_FLIGHT_WEIGHT_BOUND = 4.0;
 
@@ -49,12 +52,10 @@ float guided_collision_probability(float a, float albedo_source, float beyond, f
     return (1.0 - P) * a + P * z;
 }
 
-const vec3 GUIDED_DISTANCE_LUMINANCE = vec3(0.2126, 0.7152, 0.0722);   // Rec. 709
-
 bool tracking_collides(vec3 x, vec3 d, float m, inout uint rng)
 {
     vec4 classified = classified_at(x);
-    float sigma_t = density_scale * classified.a;
+    float sigma_t = sigma_t_of(classified);
     float a = sigma_t / m;
     if (!guided_flight || !(a > 0.0 && a < 1.0)
         || !(guided_flight_weight <= GUIDED_FLIGHT_WEIGHT_BOUND
@@ -63,12 +64,11 @@ bool tracking_collides(vec3 x, vec3 d, float m, inout uint rng)
     vec3 coeffs[SH_COUNT];
     float probe_sun;
     probe_fetch(x, coeffs, probe_sun);
-    vec3 source = probe_inscattered_from(coeffs, d)
-                  + sun_irradiance * (light_grid_transmittance(x) * guided_flight_sun_phase);
+    vec3 source = guided_predicted_source_from(coeffs, x, d, guided_flight_sun_phase);
     vec3 beyond = sh_clamp_nonnegative(sh_evaluate_convolved(coeffs, d, probe_window_factors));
-    float albedo_source = max(dot(albedo * classified.rgb * source, GUIDED_DISTANCE_LUMINANCE), 0.0);
+    float albedo_source = max(dot(albedo_of(classified) * source, REC709_LUMINANCE), 0.0);
     float p = guided_collision_probability(a, albedo_source,
-                                           max(dot(beyond, GUIDED_DISTANCE_LUMINANCE), 0.0),
+                                           max(dot(beyond, REC709_LUMINANCE), 0.0),
                                            guided_distance_probability);
     if (rng_next(rng) < p) {
         guided_flight_weight *= a / p;

@@ -120,18 +120,30 @@ vec4 classified_at(vec3 p)
 #endif
 }
 
+// sigma_t and the single-scattering albedo per colour (sigma_s / sigma_t) of a transfer-function
+// RGBA (classified_at's): for a caller that needs both from one lookup.
+float sigma_t_of(vec4 classified)
+{
+    return density_scale * classified.a;
+}
+
+vec3 albedo_of(vec4 classified)
+{
+    return albedo * classified.rgb;
+}
+
 float sigma_t_at(vec3 p)
 {
-    return density_scale * classified_at(p).a;
+    return sigma_t_of(classified_at(p));
 }
 
 // Single-scattering albedo per colour (sigma_s / sigma_t) at p.
 vec3 albedo_at(vec3 p)
 {
 #if MEDIUM_CHANNELS > 1
-    return albedo * mixed_transfer_at(densities_at(p)).rgb;
+    return albedo_of(mixed_transfer_at(densities_at(p)));
 #else
-    return albedo * transfer_at(density_at(p)).rgb;
+    return albedo_of(transfer_at(density_at(p)));
 #endif
 }
 

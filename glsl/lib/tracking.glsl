@@ -70,7 +70,6 @@ bool tracking_collides(vec3 x, vec3 d, float m, inout uint rng)
 }
 #endif
 
-
 #if !defined(GLOBAL_MAJORANT)
 // Starts a walk over the macrocells for t in [t, t_max] clipped to the box; m is the first cell's
 // majorant. False when nothing of the range lies in the box (or all is vacuum).
