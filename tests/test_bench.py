@@ -108,7 +108,8 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
                          sweep_raymarch_steps=(0.5, 2.0), samples_per_dispatch=2,
                          flip_frames=(4,), image_frames=4, probe_layouts=("uniform", "extinction"),
                          probe_precision="rgba16f", sh_orders=(2, 3), gather_events=(2,),
-                         gather_settings=((2, 16),), gather_frames=(2, 4))
+                         gather_settings=((2, 16),), gather_frames=(2, 4),
+                         speed_check_rays=1 << 10)
     path = run_bench(config, tmp_path, command="test")
     data = json.loads(path.read_text())
     records = data["records"]
@@ -197,7 +198,8 @@ def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):
     config = BenchConfig(mode="cost", scenes=("anisotropic",), width=12,
                          height=12, ref_spp=32, ref_samples_per_pass=16, samples_per_dispatch=2,
                          cost_settings=((3, 16),), cost_probe_frames=2, cost_raymarch_frames=2,
-                         cost_pt_spp=2, cost_auto_targets=(0.9,), auto_check_frames=(1, 2))
+                         cost_pt_spp=2, cost_auto_targets=(0.9,), auto_check_frames=(1, 2),
+                         auto_pilot_side=16, auto_pilot_frames=8)
     first = run_bench(config, tmp_path / "a")
     # a second run reuses the first one's reference and its measured noise
     again = run_bench(config.scaled(reference_dir=str(tmp_path / "a")), tmp_path / "b")
@@ -213,6 +215,7 @@ def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):
     auto = [r for r in data["records"] if r.get("variant") == "auto 0.9"]
     assert [r["spp"] for r in auto] == [1, 2]        # checked after each of auto_check_frames
     assert all(r["auto_met"] == (r["rrmse"] <= 0.9) for r in auto)
+    assert all(r["auto_pilot_side"] == 16 and r["auto_pilot_frames"] == 8 for r in auto)
     assert auto[1]["total_ms"] > auto[0]["total_ms"]
     # the image's total charges the whole search (its bakes included), not just the render
     assert auto[0]["bake_ms"] > 0 and auto[0]["auto_search_ms"] >= auto[0]["bake_ms"]
@@ -452,3 +455,17 @@ def test_convergence_table_tells_a_floor_from_noise(tmp_path):
     assert "| s | probes | probes 32^3x64, 1024 fr |" in section
     assert "levelling off (a floor)" in section and "guided" not in section
     assert (tmp_path / "convergence.png").is_file()
+
+
+def test_the_benchs_defaults_are_the_modules():
+    """BenchConfig's speed_check_rays, auto_pilot_side and auto_pilot_frames default to
+    ceiling.SPEED_CHECK_RAYS and auto_probes' PILOT_SIDE and PILOT_FRAMES (config.py writes the
+    numbers out so that it imports no GL): the GPU presets measure what the records did."""
+    from app.bench.ceiling import SPEED_CHECK_RAYS
+    from app.bench.config import PRESETS
+    assert BenchConfig().speed_check_rays == SPEED_CHECK_RAYS
+    assert PRESETS["gpu"].speed_check_rays == PRESETS["interact"].speed_check_rays == SPEED_CHECK_RAYS
+    assert PRESETS["interact-quick"].speed_check_rays < SPEED_CHECK_RAYS
+    from app.render.auto_probes import PILOT_FRAMES, PILOT_SIDE
+    assert (BenchConfig().auto_pilot_side, BenchConfig().auto_pilot_frames) == (PILOT_SIDE,
+                                                                               PILOT_FRAMES)

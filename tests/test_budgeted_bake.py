@@ -207,7 +207,8 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
         scenes=("tiny",), interact_sizes=((24, 16),), interact_probes=((3, 64),),
         interact_ref_spp=64, ref_samples_per_pass=32, interact_orbit_frames=3,
         interact_max_frames=6, interact_frame_budget_ms=1.0,
-        interact_target_spp=(("probes", 4), ("raymarch", 2)), interact_tail_k=2)
+        interact_target_spp=(("probes", 4), ("raymarch", 2)), interact_tail_k=2,
+        speed_check_rays=1 << 10)
     path = run_bench(config, tmp_path / "a")
     data = json.loads(path.read_text())
     recs = data["records"]

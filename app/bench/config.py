@@ -61,6 +61,10 @@ class BenchConfig:
     # ... after these many raymarched frames: the pilot's trials take 256 (auto_probes.py
     # PILOT_FRAMES), so the last count judges the probes rather than the frames' own sampling
     auto_check_frames: tuple[int, ...] = (16, 64)
+    # `--auto-probes`' pilot in cost mode: its side in pixels and each trial's frames there
+    # (auto_probes.py PILOT_SIDE, PILOT_FRAMES, the defaults; the tests' tiny runs use fewer)
+    auto_pilot_side: int = 96
+    auto_pilot_frames: int = 256
     bake_settings: tuple[tuple[int, int], ...] = ((32, 256), (64, 512), (128, 256))  # grid, walks
     # (sun at walk events, light grid texels per axis at most, adaptive walks factor) per bake
     # setting; see bake.py
@@ -68,6 +72,8 @@ class BenchConfig:
         ("ray", 128, 0.0), ("ray", 512, 0.0), ("grid", 512, 0.0), ("grid", 512, 1.0))
     bake_repeats: int = 3                   # bakes timed per setting (the median is reported)
     ceiling_rays: int = 1 << 21             # rays of the ceiling's trilinear march (256 steps each)
+    # rays of the speed check before each setting (ceiling.py speed_check_ms; 64 steps each)
+    speed_check_rays: int = 1 << 18         # ceiling.SPEED_CHECK_RAYS, the default
     code_label: str = "current"             # names the code a bake run measured (before/after)
     # --preset interact (interact.py): the replayed viewer session
     interact_sizes: tuple[tuple[int, int], ...] = ((1920, 1080), (1280, 720))
@@ -138,7 +144,8 @@ PRESETS = {
                                                        ("refine", 64)),
                                   interact_methods=("probes", "raymarch", "refine"),
                                   interact_max_frames=60, interact_orbit_frames=12,
-                                  interact_ref_spp=512, ref_samples_per_pass=16, interact_tail_k=4),
+                                  interact_ref_spp=512, ref_samples_per_pass=16, interact_tail_k=4,
+                                  speed_check_rays=1 << 12),
     # the viewer's refine on the GPU at 1080p, the viewer's GPU probe default (128^3 x 64): is it
     # within 2% of the reference within 1 s of every edit? (about 2 minutes a scene on an H100)
     "interact-refine": BenchConfig(mode="interact", scenes=("bonsai", "foot"),
@@ -161,6 +168,7 @@ PRESETS = {
                               ref_spp=256, ref_samples_per_pass=64, bias_settings=((4, 64),),
                               bias_seeds=2, bias_frames=2, bias_probe_spp=2),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
+                         speed_check_rays=1 << 12,
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),
                          large_grids=(), probe_frames=(1, 4, 16), raymarch_frames=(1, 4),
                          gather_events=(2,), gather_settings=((8, 64),), gather_frames=(4, 16),

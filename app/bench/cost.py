@@ -98,7 +98,8 @@ def auto_scene(renderer, target: float, config, record, log, progressive) -> Non
     """`auto` chooses at its pilot resolution; this checks the choice at full resolution."""
     from ..render.auto_probes import choose_probes
     scene = renderer.scene
-    choice = choose_probes(renderer, target, "raymarch")
+    choice = choose_probes(renderer, target, "raymarch", pilot_side=config.auto_pilot_side,
+                           frames=config.auto_pilot_frames)
     renderer.set_scene(choice.scene)
     # The chosen setting's probes are the search's last trial (the camera never re-bakes): their
     # bake is already paid inside search_ms, and bake_ms says what it was.
@@ -114,6 +115,8 @@ def auto_scene(renderer, target: float, config, record, log, progressive) -> Non
                    fit="visible", probe_bytes=g.gpu_bytes, auto_target=target,
                    auto_pilot_rrmse=choice.rrmse, auto_met_on_pilot=choice.met,
                    auto_trials=choice.trials, auto_pilot_spp=choice.pilot_spp,
+                   auto_pilot_side=config.auto_pilot_side,
+                   auto_pilot_frames=config.auto_pilot_frames,
                    auto_search_ms=choice.search_ms)
         # Everything this image cost: the whole search (pilot path traces, each trial's bake and
         # pilot render, the chosen bake among them), the light grid if it was baked now, the

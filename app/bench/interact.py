@@ -187,7 +187,8 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
             return refs[key]
 
         def add(rec):
-            rec["speed_check_ms"] = speed_check_ms(r)   # the device's speed (ceiling.py)
+            # the device's speed (ceiling.py)
+            rec["speed_check_ms"] = speed_check_ms(r, config.speed_check_rays)
             results.add(rec)
             shown = ", ".join(f"{t}: {rec[f'ms_to_{t}pct']}" for t in (10, 5, 3))
             _log(f"  {tag} {rec['probe_grid']}^3x{rec['probe_samples']} {rec['event']} "

@@ -235,7 +235,7 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
 
     # Path tracer: one progressive run, snapshots at each spp.
     k = config.samples_per_dispatch
-    base["speed_check_ms"] = speed_check_ms(renderer)
+    base["speed_check_ms"] = speed_check_ms(renderer, config.speed_check_rays)
     for spp, image, *timing in _progressive(renderer, "pt", config.pt_spp, 5, k):
         record("pt", spp, image, timing)
         if spp == config.image_frames:
@@ -262,7 +262,7 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
         if scene.anisotropy != 0.0:   # with g = 0 every order renders order 0's image
             variants += [{"sh_order": order} for order in config.sh_orders if order != main_order]
         for variant in variants:
-            base["speed_check_ms"] = speed_check_ms(renderer)
+            base["speed_check_ms"] = speed_check_ms(renderer, config.speed_check_rays)
             renderer.set_scene(_with_probes(scene, grid, samples,
                                             **{"precision": precision, **variant}))
             # The light grid this setting's images use (its size follows the probe grid; the
