@@ -16,7 +16,17 @@ from app.render.level_mix import coarse_ranges_read, mixed_density_ranges
 from app.render.renderer import METHODS
 from app.twins.brick_pool import brick_block, bricked_sample, mixed_reference
 from app.twins.majorant_grid import brick_density_range_grid, macrocell_counts
-from test_level_mix import BRICK, _cap, _gpu_packed, _renderer, _scene
+from test_level_mix import BRICK, _cap, _gpu_packed, _renderer
+from test_level_mix import _scene as _mix_scene
+
+
+def _scene(width=48, height=36):
+    """test_level_mix's scene with 256 walks a probe instead of 2048: these tests compare two
+    renderers baked alike, or check reads, and the walks' re-bakes after every restream took
+    most of their time on llvmpipe (45 s in test_no_page_miss_after_restreams alone)."""
+    scene = _mix_scene(width, height)
+    return scene.replace(probes=replace(scene.probes, samples=256))
+
 
 # Level 0's slots (16 of its 27 bricks that are not constant) taken from:
 EYE_A = (-0.9, 0.55, 1.0)      # the -x +y +z corner (26 bricks worth a slot)
