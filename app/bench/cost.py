@@ -98,6 +98,9 @@ def auto_scene(renderer, target: float, config, record, log, progressive) -> Non
     """`auto` chooses at its pilot resolution; this checks the choice at full resolution."""
     from ..render.auto_probes import choose_probes
     scene = renderer.scene
+    # from nothing, as `render --auto-probes` starts: the search pays for every light grid and
+    # bake it uses, also one an earlier setting of this run left current
+    renderer.invalidate()
     choice = choose_probes(renderer, target, "raymarch", pilot_side=config.auto_pilot_side,
                            frames=config.auto_pilot_frames)
     renderer.set_scene(choice.scene)
@@ -105,7 +108,12 @@ def auto_scene(renderer, target: float, config, record, log, progressive) -> Non
     # bake is already paid inside search_ms, and bake_ms says what it was.
     renderer.bake(seed=11)
     light_ms = renderer.bake_light()   # 0 when the search's last trial baked this light grid
-    bake_ms = renderer.last_bake_ms + (light_ms or renderer.light_cost_ms)
+    # What the chosen probes and the image's light grid cost. Walks that read the light grid at
+    # bake level 0 baked the image's own, inside the bake's time (renderer._light_for_walks):
+    # counted once.
+    light_in_bake = renderer.probe_grid.needs_light and not renderer.baked_level
+    bake_ms = renderer.last_bake_ms + (light_ms or (0.0 if light_in_bake
+                                                    else renderer.light_cost_ms))
     g = renderer.probe_grid
     for n, image, *timing in progressive(renderer, "raymarch", config.auto_check_frames, 13,
                                          config.samples_per_dispatch):
