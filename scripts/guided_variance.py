@@ -79,8 +79,9 @@ def _estimate(renderer: Renderer, method: str, spp: int, per_dispatch: int, seed
     """Two images of spp samples (seeds seed, seed + 1): (image a, image b, GPU ms a sample,
     for `guided` each run's (level 0, level 1) images)."""
     images, ms, levels = [], [], []
-    # untimed first: a pass's first render held one-off work in its GPU time on the H100 (a row
-    # came out 1.6 to 3x slower than the same estimator's run after it)
+    # untimed first, so that a new variant's shaders are compiled before the timed runs (whose
+    # warm-up, records.warm_up, then brings the GPU's clock back up: the compile's seconds left the
+    # H100 at its idle clock, and a row came out 1.6 to 3x slow before the warm-up waited for it)
     renderer.render(method, spp=per_dispatch, seed=seed + 17, samples_per_pass=per_dispatch)
     for s in (seed, seed + 1):
         for _, image, _frame_ms, total_ms in progressive(renderer, method, (spp,), s, per_dispatch):

@@ -469,3 +469,34 @@ def test_the_benchs_defaults_are_the_modules():
     from app.render.auto_probes import PILOT_FRAMES, PILOT_SIDE
     assert (BenchConfig().auto_pilot_side, BenchConfig().auto_pilot_frames) == (PILOT_SIDE,
                                                                                PILOT_FRAMES)
+
+
+class _WarmUpRenderer:
+    """add_samples as a renderer's: GPU ms a dispatch, counted; ctx.info names the device."""
+    def __init__(self, device: str, ms: float):
+        from types import SimpleNamespace
+        self.ctx = SimpleNamespace(info={"GL_RENDERER": device})
+        self.ms, self.calls = ms, 0
+
+    def add_samples(self, n):
+        self.calls += 1
+        return self.ms
+
+
+def test_the_warm_up_waits_for_a_gpus_clock_not_for_llvmpipes():
+    """records.warm_up: on a GPU at least WARM_UP_WALL_S of wall time (its clock needs it to come
+    back up after an idle second), however little GPU time each dispatch takes; on llvmpipe
+    WARM_UP_MS of GPU work or WARM_UP_DISPATCHES, as before."""
+    import time
+
+    from app.bench import records
+    gpu = _WarmUpRenderer("NVIDIA H100 80GB HBM3/PCIe/SSE2", ms=0.5)
+    start = time.perf_counter()
+    warm = records.warm_up(gpu, 16)
+    assert time.perf_counter() - start >= records.WARM_UP_WALL_S
+    assert warm >= records.WARM_UP_MS and gpu.calls > records.WARM_UP_DISPATCHES
+    cpu = _WarmUpRenderer("llvmpipe (LLVM 15.0.6, 256 bits)", ms=0.5)
+    assert records.warm_up(cpu, 16) == 0.5 * records.WARM_UP_DISPATCHES
+    assert cpu.calls == records.WARM_UP_DISPATCHES
+    slow = _WarmUpRenderer("llvmpipe (LLVM 15.0.6, 256 bits)", ms=30.0)
+    assert records.warm_up(slow, 16) == 60.0 and slow.calls == 2

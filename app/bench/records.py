@@ -28,6 +28,30 @@ def log(msg: str) -> None:
 # nvidia-smi showed the H100 at 390 to 1665 MHz through probe sweeps that leave it mostly idle.
 WARM_UP_MS = 50.0
 WARM_UP_DISPATCHES = 32
+# ... and, on a GPU with a clock to raise, WARM_UP_WALL_S of wall time as well. After a second or
+# more with nothing to do (the host compiling a new variant's shaders), the H100 sits at its idle
+# 345 MHz and needs about 200 ms under load to reach 1980 MHz (bench/h100-clock-ramp): 50 ms of GPU
+# work at the low clock ended the warm-up before that, and the first row timed after a compile
+# came out 1.6 to 3x slow. A CPU rasteriser has no clock to raise.
+WARM_UP_WALL_S = 0.3
+
+
+def warm_up(renderer, per_dispatch: int) -> float:
+    """Untimed dispatches of the run begun: until WARM_UP_MS of GPU work, and on a GPU (not a CPU
+    rasteriser) WARM_UP_WALL_S of wall time as well; else at most WARM_UP_DISPATCHES. GPU ms."""
+    from ..gl.context import is_software
+    clocked = not is_software(renderer.ctx)
+    start = time.perf_counter()
+    warm_ms, dispatches = 0.0, 0
+    while True:
+        warm_ms += renderer.add_samples(per_dispatch)
+        dispatches += 1
+        if clocked:
+            elapsed = time.perf_counter() - start
+            if (warm_ms >= WARM_UP_MS and elapsed >= WARM_UP_WALL_S) or elapsed >= 10 * WARM_UP_WALL_S:
+                return warm_ms
+        elif warm_ms >= WARM_UP_MS or dispatches >= WARM_UP_DISPATCHES:
+            return warm_ms
 
 
 def progressive(renderer, method: str, snapshots, seed: int, per_dispatch: int):
@@ -38,14 +62,11 @@ def progressive(renderer, method: str, snapshots, seed: int, per_dispatch: int):
     dispatched first, each snapshot copied on the GPU, and the images are read back afterwards:
     reading and measuring an image between the timed dispatches left the GPU idle long enough to
     lower its clock (bench/archive/h100-runs-2's nvidia-smi logs)."""
-    # warm-up, not timed: at least WARM_UP_MS of GPU work, so that a GPU that lowered its clock
-    # while the host measured the previous run's images is back at speed
+    # warm-up, not timed: at least WARM_UP_MS of GPU work (and WARM_UP_WALL_S on a GPU), so that
+    # a GPU that lowered its clock while the host compiled shaders or measured the previous run's
+    # images is back at speed
     renderer.begin(method, seed=seed + 7919)
-    warm_ms = 0.0
-    for _ in range(WARM_UP_DISPATCHES):
-        warm_ms += renderer.add_samples(per_dispatch)
-        if warm_ms >= WARM_UP_MS:
-            break
+    warm_up(renderer, per_dispatch)
     acc = renderer.begin(method, seed=seed)
     per_sample: list[float] = []
     cumulative = 0.0
