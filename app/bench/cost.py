@@ -109,7 +109,7 @@ def auto_scene(renderer, target: float, config, record, log, progressive) -> Non
     renderer.bake(seed=11)
     light_ms = renderer.bake_light()   # 0 when the search's last trial baked this light grid
     # What the chosen probes and the image's light grid cost. Walks that read the light grid at
-    # bake level 0 baked the image's own, inside the bake's time (renderer._light_for_walks):
+    # bake level 0 baked the image's own, inside the bake's time (Renderer.bake_walk_light):
     # counted once.
     light_in_bake = renderer.probe_grid.needs_light and not renderer.baked_level
     bake_ms = renderer.last_bake_ms + (light_ms or (0.0 if light_in_bake
