@@ -22,7 +22,7 @@ def bookmark_list(text: str) -> list[str]:
 
 def add_animate_parser(sub, func) -> argparse.ArgumentParser:
     from .movie_writer import DEFAULT_CRF
-    from .render.renderer import RAYMARCH_STAGES
+    from .rendering.renderer import RAYMARCH_STAGES
     from .scene_types import MOVIE_METHODS as METHODS
     a = sub.add_parser("animate", help="render a movie: a turntable, or a flight through the "
                                        "scene's bookmarks (MP4, GIF or numbered PNGs)")
@@ -83,9 +83,9 @@ def run_animate(args: argparse.Namespace) -> int:
     from .movie import frame_count_note, movie_cameras, render_movie, series_steps
     from .movie_writer import MovieError, MovieWriter, check_movie_output
     from .progress import ProgressBar
-    from .render.limits import check_image_size
-    from .render.raymarch import check_step
-    from .render.renderer import Renderer
+    from .rendering.limits import check_image_size
+    from .rendering.raymarch import check_step
+    from .rendering.renderer import Renderer
     from .viewer.device_defaults import probes_named, with_device_probes
     from .volume import load_scene_volume
 
@@ -131,7 +131,7 @@ def run_animate(args: argparse.Namespace) -> int:
                                      probes_named(args.scene, args.probe_grid, args.probe_samples))
     if said and args.method != "pt":
         print(f"animate: {said}", file=sys.stderr)
-    from .render.settings import RenderSettings
+    from .rendering.settings import RenderSettings
     renderer = Renderer(ctx, scene, volume, RenderSettings(
         raymarch_stage=args.raymarch_stage,
         raymarch_step=args.raymarch_step or DEFAULT_RAYMARCH_STEP))

@@ -657,7 +657,7 @@ class PoolPlan:
     level_dims: tuple = ()           # mixed levels: each level's dims, level 0 first
     level_table_z: tuple = ()        # ... and the first z of its table
     level_of_brick: np.ndarray | None = None   # ... and the level each level-0 brick reads
-    mix: object = None               # ... streamed: app/render/level_mix.py Mix
+    mix: object = None               # ... streamed: app/rendering/level_mix.py Mix
 
     @property
     def resident(self) -> int:

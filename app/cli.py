@@ -1,4 +1,4 @@
-"""The console command ``radiance-probes`` (also ``python -m app``)."""
+"""The console command ``radiance-probes`` (also ``python -m radiance_probes``)."""
 from __future__ import annotations
 
 import argparse
@@ -170,7 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                  "reference volumetric path tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    from .render.renderer import METHODS, RAYMARCH_STAGES
+    from .rendering.renderer import METHODS, RAYMARCH_STAGES
     from .scene_types import PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS
     r = sub.add_parser("render", help="render a scene headless to a PNG (and linear .npy/.exr)")
     r.add_argument("scene", nargs="?", help="scene JSON or a volume file (default: built-in scene)")
@@ -308,7 +308,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from .gl.context import ContextError
     from .gl.shaders import ShaderError
-    from .render.limits import DeviceLimitError
+    from .rendering.limits import DeviceLimitError
     from .volume import VolumeError
     try:
         return args.func(args)

@@ -6,7 +6,7 @@ The rule: every option and scene value is checked before any GPU work, and a bad
 line naming the option (or the scene field) and the problem. Values are checked where they are
 parsed (argument types below; the scene's fields in app/scene.py); what depends on the device
 (image sizes against its GL limits) right after the context exists and before the scene is
-uploaded (app/render/limits.py); where the outputs go before the render starts. A render whose
+uploaded (app/rendering/limits.py); where the outputs go before the render starts. A render whose
 output cannot be written at the end is not lost: it is written elsewhere and the error says where.
 """
 from __future__ import annotations
@@ -380,9 +380,9 @@ def render_to_files(args: argparse.Namespace) -> int:
     check comes before the first GPU call. Returns the exit status."""
     from .gl.context import create_headless_context, describe
     from .imageio import save_exr, save_npy, save_png
-    from .render.limits import check_image_size
-    from .render.renderer import Renderer
-    from .render.raymarch import check_step
+    from .rendering.limits import check_image_size
+    from .rendering.renderer import Renderer
+    from .rendering.raymarch import check_step
     from .environment_map import load_scene_environment
     from .volume import load_scene_volume
 
@@ -401,7 +401,7 @@ def render_to_files(args: argparse.Namespace) -> int:
         raise OptionError("--auto-probes chooses probe settings: use it with a probe method")
     gather_event = getattr(args, "gather_event", None)
     if gather_event is not None:
-        from .render.settings import check_gather_event
+        from .rendering.settings import check_gather_event
         if args.method != "probes":
             raise OptionError(f"--gather-event: the probes method's option (a final gather), "
                               f"not {args.method}'s")
@@ -426,7 +426,7 @@ def render_to_files(args: argparse.Namespace) -> int:
             raise OptionError(f"--raymarch-step: {exc}") from None
     ctx = create_headless_context(args.gl_backend)
     check_image_size(ctx, scene.camera.width, scene.camera.height)
-    from .render.settings import RenderSettings
+    from .rendering.settings import RenderSettings
     renderer = Renderer(ctx, scene, volume, RenderSettings(
         raymarch_stage=args.raymarch_stage,
         raymarch_step=args.raymarch_step or DEFAULT_RAYMARCH_STEP,
@@ -437,7 +437,7 @@ def render_to_files(args: argparse.Namespace) -> int:
         if note not in volume.notes:
             print(f"note: {note}", file=sys.stderr)
     if args.auto_probes is not None:
-        from .render.auto_probes import choose_probes
+        from .rendering.auto_probes import choose_probes
         choice = choose_probes(renderer, args.auto_probes, args.method,
                                progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
         print(choice.report())
@@ -449,8 +449,8 @@ def render_to_files(args: argparse.Namespace) -> int:
         bake_report(grid.passes_done, grid.passes_total)
 
     if auto is not None:
-        from .render.auto_progressive import auto_render
-        from .render.renderer import RenderResult
+        from .rendering.auto_progressive import auto_render
+        from .rendering.renderer import RenderResult
         got = auto_render(renderer, auto, seed=args.seed,
                           progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
         print(got.report())
@@ -465,7 +465,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     if getattr(args, "colorbar", None):
         from .colorbar import scene_colorbar
         from .imageio import save_png8
-        from .render.tonemap import to_uint8
+        from .rendering.tonemap import to_uint8
         pixels = scene_colorbar(to_uint8(result.image, args.exposure), scene,
                                 renderer.resources.volume, args.colorbar, args.colorbar_title)
         out, err = save_or_rescue(save_png8, args.out, "--out", pixels)

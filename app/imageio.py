@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .render.tonemap import to_uint8
+from .rendering.tonemap import to_uint8
 
 
 def save_png(path: str | Path, image: np.ndarray, exposure: float = 1.0) -> Path:

@@ -1,6 +1,6 @@
 """A lower bound on a level's bricks that are not constant, read from a small coarser level of the
 same pyramid, so that a memory cap can pass over a level too large for it without its range pass
-(app/render/volume_placement.py; the range pass of level 0 of a 2048^3 store is seconds of reads).
+(app/rendering/volume_placement.py; the range pass of level 0 of a 2048^3 store is seconds of reads).
 
 Why it holds: a brick is constant (never uploaded, app/bricks.py constant_bricks) only if its
 densities are all one value. A pyramid's coarser voxel lies between the least and largest of the

@@ -72,8 +72,8 @@ class MovieFrames:
         """`times`: a time series' step of each frame (None: the scene's step throughout). A
         frame on another step than the last bakes that step's probes (restarted from the last
         step's: Renderer.bake; a finished bake is the same either way)."""
-        from .render.accumulation import Accumulation
-        from .render.frame_readback import FrameReadback
+        from .rendering.accumulation import Accumulation
+        from .rendering.frame_readback import FrameReadback
         self.renderer, self.cameras, self.method = renderer, list(cameras), method
         self.spp, self.seed, self.exposure = int(spp), int(seed), float(exposure)
         self.samples_per_pass, self.overlay = int(samples_per_pass), overlay

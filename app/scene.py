@@ -1,5 +1,5 @@
 """The scene of SPEC.md parsed once from JSON into the frozen dataclasses of app/scene_types.py
-(re-exported here, so ``from app.scene import Scene`` keeps working).
+(re-exported here, so ``from radiance_probes.scene import Scene`` keeps working).
 
 Every field has a default, so ``{}`` is the built-in default scene. Unknown fields and bad values
 raise :class:`SceneError` naming the field by its JSON path (``camera.fov_y``).

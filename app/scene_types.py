@@ -47,7 +47,7 @@ SH_WINDOWS = ("none", "hann", "lanczos")
 PROBE_PRECISIONS = ("rgba32f", "rgba16f")
 PROBE_FITS = ("visible", "box")
 PROBE_LAYOUTS = ("uniform", "adaptive")
-# What drives an adaptive layout's probe density (app/render/probe_planes.py): "extinction", the
+# What drives an adaptive layout's probe density (app/rendering/probe_planes.py): "extinction", the
 # variation of sigma_t along each axis; "sun", the variation of the sun's transmittance (light grid).
 PROBE_INDICATORS = ("extinction", "sun")
 # How a point blends the 8 probes around it (glsl/lib/probe_visibility.glsl): "trilinear", by
@@ -198,7 +198,7 @@ class ProbeSpec:
     # "auto": one channel when the transfer function's colours and both lights are grey, else 3.
     channels: str | int = "auto"
     # "uniform": probe planes evenly spaced along each axis; "adaptive": per axis, more planes where
-    # `adaptive_indicator` says the light changes fast (app/render/probe_planes.py), the same count.
+    # `adaptive_indicator` says the light changes fast (app/rendering/probe_planes.py), the same count.
     layout: str = "uniform"
     # 0: uniform; 1: the indicator alone decides (within the spacing bounds of probe_planes.py).
     adaptive_strength: float = 0.5
@@ -248,7 +248,7 @@ class BookmarkSpec:
                                    fov_y=self.fov_y)
 
 
-# The methods a movie renders (app/animate.py, the viewer's movie panel): app/render/renderer.py
+# The methods a movie renders (app/animate.py, the viewer's movie panel): app/rendering/renderer.py
 # METHODS but `guided`. The viewer's methods and display modes: those, and `refine` (the raymarcher
 # at once after an edit, then `guided` replacing it; app/viewer/session.py), and
 # app/viewer/state.py DISPLAY_MODES (a test keeps them so).

@@ -674,7 +674,7 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
     store = BrickStore(source, brick, p.name)
     # The range pass (every brick read once) is needed here only where a channel's values map
     # by its own least and largest; else it waits for the placement, which may never need it
-    # (a cap that a coarser level shows that level 0 exceeds: app/render/volume_placement.py),
+    # (a cap that a coarser level shows that level 0 exceeds: app/rendering/volume_placement.py),
     # and the raw extremes are NaN until it is read (Volume.raw_extents).
     by_extremes = (any(d is None for d in domains)
                    and array.dtype not in (np.uint8, np.int8))
@@ -855,7 +855,7 @@ def load_scene_volume(scene: Scene, brick: int | None = None) -> Volume:
     return load_volume(scene.volume, scene.base_dir, scene_channels(scene), scene.time, brick)
 
 
-# A preview of a Zarr store read brick by brick (app/render/progressive_open.py): its finest level
+# A preview of a Zarr store read brick by brick (app/rendering/progressive_open.py): its finest level
 # of at most this many voxels, read whole (256^3 of a 2048^3 store: a fraction of a second).
 PREVIEW_VOXELS = 1 << 25
 

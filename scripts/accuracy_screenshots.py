@@ -20,15 +20,15 @@ import numpy as np
 from PIL import Image, ImageDraw
 from panel_sheet import ldr, panel_sheet
 
-from app.bench.metrics import corrected_rrmse, rrmse
-from app.bench.report import load as load_results
-from app.bench.scenes import bench_scene
-from app.gl.context import create_headless_context, describe
-from app.render.renderer import Renderer
-from app.twins.camera import camera_frame
-from app.viewer.orbit import project, view_projection
-from app.viewer.probe_view import probe_centres, visible_cells
-from app.volume import load_volume
+from radiance_probes.bench.metrics import corrected_rrmse, rrmse
+from radiance_probes.bench.report import load as load_results
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.twins.camera import camera_frame
+from radiance_probes.viewer.orbit import project, view_projection
+from radiance_probes.viewer.probe_view import probe_centres, visible_cells
+from radiance_probes.volume import load_volume
 
 out = Path(sys.argv[1])
 ref_dir = Path(sys.argv[2]) if len(sys.argv) > 2 and sys.argv[2] != "-" else None

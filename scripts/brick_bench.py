@@ -52,13 +52,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.bench.metrics import rrmse  # noqa: E402
-from app.cli import memory_size  # noqa: E402
-from app.gl.context import create_headless_context, describe  # noqa: E402
-from app.render.renderer import Renderer  # noqa: E402
-from app.render.settings import RenderSettings  # noqa: E402
-from app.scene import parse_scene  # noqa: E402
-from app.volume import VolumeError, load_scene_volume, volume_from_array  # noqa: E402
+from radiance_probes.bench.metrics import rrmse  # noqa: E402
+from radiance_probes.cli import memory_size  # noqa: E402
+from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
+from radiance_probes.rendering.renderer import Renderer  # noqa: E402
+from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
+from radiance_probes.scene import parse_scene  # noqa: E402
+from radiance_probes.volume import VolumeError, load_scene_volume, volume_from_array  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,7 @@ def _coords(n: int, lo: int, hi: int) -> np.ndarray:
 def write_ome_zarr(path: Path, dims, chunk: int, levels: int, value=density) -> float:
     """An OME-Zarr image of `levels` levels (uint16, axes z, y, x), written slab by slab; seconds."""
     import zarr
-    from app.bricks import box_filtered
+    from radiance_probes.bricks import box_filtered
     start = time.perf_counter()
     if path.exists():
         shutil.rmtree(path)
@@ -238,7 +238,7 @@ def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
     old = out / "results.json"
     records: dict = json.loads(old.read_text()) if reuse and old.exists() else {}
     records.update({"device": describe(ctx), "settings": asdict(s), "quick": quick})
-    from app.bricks import slot_bytes
+    from radiance_probes.bricks import slot_bytes
     cap = s.cap or 12 * slot_bytes(s.brick, 1, False)
     levels = max(1, int(np.log2(max(s.size // 64, 1))) + 1) if not quick else 3
     path = stores / "volume.zarr"
@@ -367,7 +367,7 @@ def _stream(ctx, records, scene, settings, cap, s):
     of OPEN_WRITE_BUDGET_S a call, a raymarched frame drawn between calls, waited for), then the
     probes and light grid baked again where the mix changed (the viewer does it in slices)."""
     from dataclasses import replace
-    from app.render.progressive_open import OPEN_WRITE_BUDGET_S
+    from radiance_probes.rendering.progressive_open import OPEN_WRITE_BUDGET_S
     start = time.perf_counter()
     r = Renderer(ctx, scene, settings=replace(settings, mixed_levels=True))
     r.render("raymarch", spp=1, seed=0)
@@ -449,8 +449,8 @@ def _progressive(ctx, records, scene, settings, cap):
     writes bricks for up to OPEN_WRITE_BUDGET_S and draws the preview's raymarched frame (the
     viewer's frame: begin, one sample, waited for, nothing read back); then the store's own first
     frame. Times from opening."""
-    from app.render.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
-    from app.volume import zarr_preview
+    from radiance_probes.rendering.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
+    from radiance_probes.volume import zarr_preview
 
     def frame(r, seed, bake=False):
         if bake:        # a new volume: its probes and light grid first (the viewer's first frames)

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from app.gl.context import create_headless_context, describe  # noqa: E402
-from app.render.renderer import Renderer  # noqa: E402
-from app.scene import load_scene  # noqa: E402
+from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
+from radiance_probes.rendering.renderer import Renderer  # noqa: E402
+from radiance_probes.scene import load_scene  # noqa: E402
 
 root = Path(__file__).resolve().parents[1]
 scene = load_scene(sys.argv[1] if len(sys.argv) > 1 else root / "assets/scenes/sky.json")

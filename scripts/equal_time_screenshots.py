@@ -22,12 +22,12 @@ import numpy as np
 from PIL import Image
 
 sys.path.insert(0, ".")
-from app.bench.metrics import corrected_rrmse, reference_noise, rrmse   # noqa: E402
-from app.bench.report import equal_time, load as load_results, main_records   # noqa: E402
-from app.bench.scenes import bench_scene                                 # noqa: E402
-from app.gl.context import create_headless_context, describe             # noqa: E402
-from app.render.renderer import Renderer                                 # noqa: E402
-from app.volume import load_volume                                       # noqa: E402
+from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse   # noqa: E402
+from radiance_probes.bench.report import equal_time, load as load_results, main_records   # noqa: E402
+from radiance_probes.bench.scenes import bench_scene                                 # noqa: E402
+from radiance_probes.gl.context import create_headless_context, describe             # noqa: E402
+from radiance_probes.rendering.renderer import Renderer                                 # noqa: E402
+from radiance_probes.volume import load_volume                                       # noqa: E402
 from panel_sheet import ldr, panel_sheet, signed_error                   # noqa: E402
 
 SIZE, PANEL, REF_SPP = 512, 256, 32768

@@ -13,11 +13,11 @@ from pathlib import Path
 from PIL import Image
 
 sys.path.insert(0, ".")
-from app.bench.metrics import corrected_rrmse, reference_noise, rrmse
-from app.bench.scenes import bench_scene
-from app.gl.context import create_headless_context, describe
-from app.render.renderer import Renderer
-from app.volume import load_volume
+from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.volume import load_volume
 from panel_sheet import ldr, panel_sheet, signed_error
 
 out = Path(sys.argv[1])

@@ -48,11 +48,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.bench.records import progressive  # noqa: E402
-from app.bench.scenes import ALL_SCENES, bench_scene  # noqa: E402
-from app.render.probe_layout import resolve_sh_order  # noqa: E402
-from app.render.renderer import Renderer  # noqa: E402
-from app.render.settings import RenderSettings  # noqa: E402
+from radiance_probes.bench.records import progressive  # noqa: E402
+from radiance_probes.bench.scenes import ALL_SCENES, bench_scene  # noqa: E402
+from radiance_probes.rendering.probe_layout import resolve_sh_order  # noqa: E402
+from radiance_probes.rendering.renderer import Renderer  # noqa: E402
+from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
 
 TARGETS = (0.05, 0.02, 0.01, 0.005)
 # `guided` first, right after the bake (a scene change for the pt rows would make the probes and
@@ -249,7 +249,7 @@ def main(argv=None) -> int:
         p.error(f"--estimators: {unknown or 'pt is needed (every speed-up is against it)'}; "
                 f"rows: {', '.join(ESTIMATORS)}")
     args.out.mkdir(parents=True, exist_ok=True)
-    from app.gl.context import create_headless_context, describe
+    from radiance_probes.gl.context import create_headless_context, describe
     ctx = create_headless_context()
     device = describe(ctx)
     log_file = (args.out / "log.txt").open("w")

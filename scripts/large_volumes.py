@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from app.gl.context import create_headless_context, describe
-from app.gl.memory import gpu_available_bytes
-from app.render.renderer import Renderer
-from app.scene import parse_scene
-from app.scene_types import VolumeError
-from app.volume import load_scene_volume
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.gl.memory import gpu_available_bytes
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.scene import parse_scene
+from radiance_probes.scene_types import VolumeError
+from radiance_probes.volume import load_scene_volume
 
 
 def ct_like(shape_zyx: tuple[int, int, int]) -> np.ndarray:

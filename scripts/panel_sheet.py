@@ -6,13 +6,13 @@ import math
 import numpy as np
 from PIL import Image, ImageDraw
 
-from app.render.tonemap import to_uint8
+from radiance_probes.rendering.tonemap import to_uint8
 
 HEAD = 34     # caption lines above each panel
 
 
 def ldr(image, size: int, exposure: float = 1.0) -> Image.Image:
-    """A linear (H, W, 3) image tone mapped (app/render/tonemap.py) into a size x size panel."""
+    """A linear (H, W, 3) image tone mapped (app/rendering/tonemap.py) into a size x size panel."""
     return Image.fromarray(to_uint8(image, exposure)).resize((size, size), Image.LANCZOS)
 
 

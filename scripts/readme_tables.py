@@ -22,7 +22,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from app.bench import report as R  # noqa: E402
+from radiance_probes.bench import report as R  # noqa: E402
 
 RECORDS = "bench/h100"
 PREVIOUS = "bench/archive/h100-v12"

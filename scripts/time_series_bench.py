@@ -37,13 +37,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.bench.metrics import rrmse  # noqa: E402
-from app.gl.context import create_headless_context, describe, is_software  # noqa: E402
-from app.render.accumulation import Accumulation  # noqa: E402
-from app.render.renderer import Renderer  # noqa: E402
-from app.scene import parse_scene  # noqa: E402
-from app.viewer.session import RenderSession  # noqa: E402
-from app.volume import builtin_cloud  # noqa: E402
+from radiance_probes.bench.metrics import rrmse  # noqa: E402
+from radiance_probes.gl.context import create_headless_context, describe, is_software  # noqa: E402
+from radiance_probes.rendering.accumulation import Accumulation  # noqa: E402
+from radiance_probes.rendering.renderer import Renderer  # noqa: E402
+from radiance_probes.scene import parse_scene  # noqa: E402
+from radiance_probes.viewer.session import RenderSession  # noqa: E402
+from radiance_probes.volume import builtin_cloud  # noqa: E402
 
 
 @dataclass(frozen=True)

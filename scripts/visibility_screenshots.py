@@ -12,11 +12,11 @@ import numpy as np
 sys.path.insert(0, ".")
 sys.path.insert(0, str(Path(__file__).parent))
 from panel_sheet import ldr, panel_sheet
-from app.bench.metrics import rrmse
-from app.gl.context import create_headless_context
-from app.render.renderer import Renderer
-from app.scene import parse_scene
-from app.volume import Volume
+from radiance_probes.bench.metrics import rrmse
+from radiance_probes.gl.context import create_headless_context
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.scene import parse_scene
+from radiance_probes.volume import Volume
 
 SIZE, PANEL = 128, 256
 out = Path(sys.argv[1] if len(sys.argv) > 1 else "screenshots")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-import app.scene as _scene_module
+import radiance_probes.scene as _scene_module
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASETS = ROOT.parent / "shared" / "datasets"
@@ -42,7 +42,7 @@ def pytest_sessionfinish(session, exitstatus):
         import jsonschema
     except ImportError:   # the test extras are not installed: tests/test_scene_schema.py says so
         return
-    from app.scene_schema import scene_schema
+    from radiance_probes.scene_schema import scene_schema
     validator = jsonschema.Draft202012Validator(scene_schema())
     bad = []
     for data in PARSED_SCENES.values():
@@ -70,7 +70,7 @@ _SESSION_CONTEXT: list = []   # the session's context, once a test has asked for
 
 @pytest.fixture(scope="session")
 def ctx():
-    from app.gl.context import create_headless_context
+    from radiance_probes.gl.context import create_headless_context
     context = create_headless_context()
     _SESSION_CONTEXT.append(context)
     yield context
@@ -81,8 +81,8 @@ def ctx():
 @pytest.fixture(scope="module")
 def _checked():
     """A context of the module's own with the checking build (app/gl/checks.py) and its counts."""
-    from app.gl.checks import enable_checks
-    from app.gl.context import create_headless_context
+    from radiance_probes.gl.checks import enable_checks
+    from radiance_probes.gl.context import create_headless_context
     context = create_headless_context()
     checks = enable_checks(context)
     yield context, checks

@@ -15,8 +15,8 @@ import pytest
 from PIL import Image as PILImage
 
 import radiance_probes as rp
-from app.scene import SceneError
-from app.scene_types import VolumeError
+from radiance_probes.scene import SceneError
+from radiance_probes.scene_types import VolumeError
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = dict(width=24, height=20, probes={"grid": 4, "samples": 16})
@@ -120,14 +120,14 @@ def test_a_renderer_keeps_its_probes_across_frames():
 
 def test_the_api_releases_its_context(monkeypatch):
     """render() makes a context of its own and releases it, also when the render fails."""
-    import app.gl.context
+    import radiance_probes.gl.context
     made = []
-    real = app.gl.context.create_headless_context
+    real = radiance_probes.gl.context.create_headless_context
 
     def recording(*args, **kw):
         made.append(real(*args, **kw))
         return made[-1]
-    monkeypatch.setattr(app.gl.context, "create_headless_context", recording)
+    monkeypatch.setattr(radiance_probes.gl.context, "create_headless_context", recording)
     rp.render(blob(), spp=1, **SMALL)
     with pytest.raises(ValueError, match="method"):
         rp.render(blob(), method="nope", **SMALL)

@@ -1,4 +1,4 @@
-"""`auto` without a search (app/render/auto_progressive.py): the error estimates against the
+"""`auto` without a search (app/rendering/auto_progressive.py): the error estimates against the
 path tracer's two halves, checked on images whose error is known; the choice on a small scene,
 checked against a converged reference."""
 import math
@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from app.bench.metrics import rrmse
-from app.render.auto_progressive import Halves, auto_render, estimate_image, estimate_pt
-from app.render.renderer import Renderer
-from app.scene import parse_scene
+from radiance_probes.bench.metrics import rrmse
+from radiance_probes.rendering.auto_progressive import Halves, auto_render, estimate_image, estimate_pt
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.scene import parse_scene
 
 SCENE = {"volume": {"builtin": "cloud", "size": [20, 20, 20]}, "density_scale": 40.0,
          "camera": {"eye": [0, 0.3, 2.2], "width": 32, "height": 32}}
@@ -93,7 +93,7 @@ def test_the_path_tracers_rounds_stop_near_the_samples_the_target_needs():
     """An error falling exactly as 1 / sqrt(samples): the rounds never more than double, always
     add samples, and stop within PT_MARGIN and a round's rounding of the samples the target
     needs (doubling every round overshot by up to 2x)."""
-    from app.render.auto_progressive import PT_MARGIN, Z, next_pt_spp
+    from radiance_probes.rendering.auto_progressive import PT_MARGIN, Z, next_pt_spp
     for target, c in ((0.02, 0.47), (0.01, 0.31), (0.05, 0.9), (0.013, 0.2)):
         need = (c / target) ** 2            # error c / sqrt(spp); se 1% of the estimate
         spp = 2

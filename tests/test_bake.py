@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import app.render.probes as probes_module
-from app.gl.profiler import GpuProfile
-from app.render.renderer import Renderer
-from app.render.settings import RenderSettings
-from app.scene import parse_scene
+import radiance_probes.rendering.probes as probes_module
+from radiance_probes.gl.profiler import GpuProfile
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.rendering.settings import RenderSettings
+from radiance_probes.scene import parse_scene
 
 CAMERA = {"eye": [0.0, 0.2, 1.3], "target": [0, 0, 0], "fov_y": 40.0, "width": 8, "height": 8}
 # Thin enough that every walk ends well inside llvmpipe's loop limit, so the one-dispatch build can
@@ -196,8 +196,8 @@ def test_sun_from_the_light_grid_has_a_small_measured_bias(ctx):
 
 def _light_grid_and_twin(r):
     """The renderer's baked light grid (z, y, x), its layout, and the NumPy twin's bake of it."""
-    from app.render.light_transmittance import LIGHT_MARCH_VOXELS
-    from app.twins.light_grid import light_grid_bake
+    from radiance_probes.rendering.light_transmittance import LIGHT_MARCH_VOXELS
+    from radiance_probes.twins.light_grid import light_grid_bake
     r.configure(light_precision="f4")     # exact float32 sums (the default 16-bit texels round them)
     r.bake_light()
     s = r.scene
@@ -210,8 +210,8 @@ def _light_grid_and_twin(r):
 def test_light_grid_size_and_layout():
     """Texels over the box follow the volume and the probe grid; the sheared layout keeps the box's
     texel spacing and widens the two other axes by the sun's shear."""
-    from app.render.light_grid_layout import light_grid_layout
-    from app.render.light_transmittance import light_grid_size, min_side_for_probes
+    from radiance_probes.rendering.light_grid_layout import light_grid_layout
+    from radiance_probes.rendering.light_transmittance import light_grid_size, min_side_for_probes
     assert light_grid_size((64, 64, 64)) == (128, 128, 128)
     assert light_grid_size((256, 256, 100)) == (256, 256, 100)
     assert light_grid_size((1024, 512, 8)) == (512, 512, 8)
@@ -239,7 +239,7 @@ def test_light_grid_size_and_layout():
     big = light_grid_layout((512, 512, 512), (1.0, 1.0, 1.0), (0.5, 0.7071, 0.5), 512)
     assert np.prod(big.size) <= (1 << 29) and big.size[1] == 725
     # columns cut into segments only where there are few of them (a GPU they cannot fill)
-    from app.render.light_transmittance import column_segments
+    from radiance_probes.rendering.light_transmittance import column_segments
     small = light_grid_layout((128, 128, 128), (1.0, 1.0, 1.0), (0.0, 1.0, 0.0), 512)
     assert column_segments(small, 1 << 17) == 8 and column_segments(small, 0) == 1
     assert column_segments(small, 1 << 18) == 16   # at most 128 / MIN_SEGMENT_TEXELS
@@ -275,7 +275,7 @@ def test_light_grid_in_segments_equals_whole_columns(ctx, density_scale):
     it) store what one march per column stores, up to float rounding, also baked a slab of rays at
     a time; with an opaque core (density_scale 3000) the texels past tau = 104 hold 104 either
     way, as the twin's do."""
-    from app.render.light_transmittance import column_segments
+    from radiance_probes.rendering.light_transmittance import column_segments
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
                                    "density_scale": density_scale, "camera": CAMERA,
                                    "light": {"direction": [0.3, 0.8, -0.52]}}))
@@ -312,8 +312,8 @@ def test_light_grid_is_exact_in_a_homogeneous_box(ctx, direction):
     boundary towards the sun, which the grid holds at every texel centre inside the box and its
     trilinear lookup (the twin's, as the shaders read it) reproduces at random points away from
     the edges where that distance has a kink."""
-    from app.twins.light_grid import light_grid_lookup
-    from app.twins.medium import box_intersect, sigma_t_at
+    from radiance_probes.twins.light_grid import light_grid_lookup
+    from radiance_probes.twins.medium import box_intersect, sigma_t_at
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "constant", "size": [12, 10, 8]},
                                    "density_scale": 3.0, "camera": CAMERA,
                                    "light": {"direction": direction}}))
@@ -351,9 +351,9 @@ def test_light_grid_lookup_agrees_with_a_march_from_each_point(ctx):
     """The sheared grid read at random points of a cloud against the shadow march from each point
     (lib/shadow_march.glsl's twin): the sun's transmittance agrees to the grid's interpolation
     error (measured 0.63% relative RMS at these sizes), for a sun off every axis."""
-    from app.render.light_transmittance import LIGHT_MARCH_VOXELS
-    from app.twins.light_grid import light_grid_lookup
-    from app.twins.shadow_march import sun_optical_depth_march
+    from radiance_probes.rendering.light_transmittance import LIGHT_MARCH_VOXELS
+    from radiance_probes.twins.light_grid import light_grid_lookup
+    from radiance_probes.twins.shadow_march import sun_optical_depth_march
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [16, 12, 14]},
                                    "density_scale": 8.0, "camera": CAMERA,
                                    "light": {"direction": [0.5, 0.7, -0.3]}}))
@@ -379,10 +379,10 @@ def test_probes_sun_from_the_light_grid_or_a_march(ctx):
     """The probes' own sun (channel 27, probe_sun.comp): with the walks' sun from the light grid it
     is the grid's lookup at each probe (its twin), otherwise the march from the probe (its twin);
     the two agree to the grid's interpolation error (as the raymarcher's sun does)."""
-    from app.render.light_transmittance import LIGHT_MARCH_VOXELS
-    from app.twins.light_grid import light_grid_lookup
-    from app.twins.shadow_march import sun_optical_depth_march
-    from app.viewer.probe_view import probe_centres
+    from radiance_probes.rendering.light_transmittance import LIGHT_MARCH_VOXELS
+    from radiance_probes.twins.light_grid import light_grid_lookup
+    from radiance_probes.twins.shadow_march import sun_optical_depth_march
+    from radiance_probes.viewer.probe_view import probe_centres
     sun = [0.5, 0.7, -0.3]
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [16, 12, 14]},
                                    "density_scale": 8.0, "max_bounces": 2, "camera": CAMERA,
@@ -471,7 +471,7 @@ def test_adaptive_walks_are_unbiased_behind_a_backlit_shell(ctx):
     the rim. The mean probe radiance over 30 seeds with adaptive walks is within 3 standard errors
     of the same over 30 full bakes (the exact value's estimate). The rule that decided each probe's
     walks from its own running variance failed this: 3.4% dark at z = -4.6 (lib/probe_noise.glsl)."""
-    from app.bench.scenes import battery_scene
+    from radiance_probes.bench.scenes import battery_scene
     from dataclasses import replace
     scene = battery_scene("shell-g06", 16, 8, 8, grid=4, samples=256)
     scene = scene.replace(probes=replace(scene.probes, fit="box", sh_order=0), max_bounces=32)
@@ -519,7 +519,7 @@ def test_progress_sums_on_the_gpu_are_the_probes_column_sums(ctx):
 
 
 def test_accumulation_clears_on_the_gpu_and_leaves_the_framebuffer_alone(ctx):
-    from app.render.accumulation import Accumulation
+    from radiance_probes.rendering.accumulation import Accumulation
     acc = Accumulation(ctx, 5, 3)
     other = ctx.simple_framebuffer((2, 2))
     try:
@@ -543,7 +543,7 @@ def test_the_walks_grid_sun_corrected_by_shadow_rays_is_unbiased(ctx, shell):
     after the walks and weighted to correct the grid's transmittance: lib/integrator.glsl,
     glsl/probe_sun_correction.comp) the mean over 12 seeds is within 3 standard errors of the
     same with a ratio-tracked shadow ray at every event (the exact sun)."""
-    from app.bench.scenes import battery_scene
+    from radiance_probes.bench.scenes import battery_scene
     from dataclasses import replace
     scene = battery_scene(shell, 16, 8, 8, grid=4, samples=128)
     scene = scene.replace(probes=replace(scene.probes, fit="box", sh_order=0), max_bounces=32)

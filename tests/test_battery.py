@@ -8,12 +8,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.bench.scenes import BATTERY_SCENES, battery_scene
-from app.gl.checks import check_sites
-from app.gl.shaders import compute_program, set_uniforms
-from app.gl.dispatch_log import DispatchLog
-from app.render.dispatch_budget import DISPATCH_BOUND_MS, device_slowdown
-from app.render.renderer import METHODS, Renderer
+from radiance_probes.bench.scenes import BATTERY_SCENES, battery_scene
+from radiance_probes.gl.checks import check_sites
+from radiance_probes.gl.shaders import compute_program, set_uniforms
+from radiance_probes.gl.dispatch_log import DispatchLog
+from radiance_probes.rendering.dispatch_budget import DISPATCH_BOUND_MS, device_slowdown
+from radiance_probes.rendering.renderer import METHODS, Renderer
 
 
 def test_every_site_of_the_checking_build_is_named():

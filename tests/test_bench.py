@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from app.bench.config import BenchConfig
-from app.bench.metrics import corrected_floor, corrected_rrmse, flip, reference_noise, rrmse
-from app.bench.report import pareto, time_to_error, write_report
+from radiance_probes.bench.config import BenchConfig
+from radiance_probes.bench.metrics import corrected_floor, corrected_rrmse, flip, reference_noise, rrmse
+from radiance_probes.bench.report import pareto, time_to_error, write_report
 
 REQUIRED = ("scene", "method", "probe_grid", "probe_samples", "spp", "bake_ms", "frame_ms",
             "total_ms", "rrmse", "flip", "gpu_bytes", "device")
@@ -81,8 +81,8 @@ def test_pareto_and_time_to_error():
 def test_errors_below_the_reference_floor_are_never_stated():
     """Errors are stated corrected for the reference's noise, and never below what the correction
     resolves (the floor, from the noise and the pixel count)."""
-    from app.bench.metrics import corrected_floor
-    from app.bench.report import err, floor, main_records
+    from radiance_probes.bench.metrics import corrected_floor
+    from radiance_probes.bench.report import err, floor, main_records
     data = {"meta": {"config": {"width": 64, "height": 64}},
             "references": {"s": {"noise_rrmse": 0.02}},
             "records": [{"scene": "s", "method": "pt", "rrmse": 0.0201, "total_ms": 1.0},
@@ -100,7 +100,7 @@ def test_errors_below_the_reference_floor_are_never_stated():
 
 
 def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
-    from app.bench.runner import run_bench
+    from radiance_probes.bench.runner import run_bench
     config = BenchConfig(scenes=("anisotropic",), width=16, height=16, ref_spp=64,
                          ref_samples_per_pass=32, pt_spp=(1, 4), probe_grids=(2,),
                          probe_samples=(16,), large_grids=(), probe_frames=(1, 4),
@@ -142,7 +142,7 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
     # keeps higher bands for 128 walks or more); order 3 runs as a variant, out of the main tables
     orders = {(r["sh_order"], bool(r.get("sh_order_variant"))) for r in records if r["method"] != "pt"}
     assert orders == {(2, False), (3, True)}
-    from app.bench.report import main_records
+    from radiance_probes.bench.report import main_records
     main = main_records(data, "anisotropic")
     assert main and not any(r.get("sh_order_variant") for r in main)
     # the raymarch steps: the sweep's at every setting and variant (the main tables take them),
@@ -151,7 +151,7 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
     assert steps(main) == {0.5, 2.0}
     assert steps(r for r in records if r.get("sh_order_variant")) == {0.5, 2.0}
     assert steps(records) == {0.5, 1.0, 2.0}
-    from app.bench.report import label
+    from radiance_probes.bench.report import label
     assert [label(r) for r in main if r.get("raymarch_step") == 2.0][0].endswith(", step 2")
     assert data["references"]["anisotropic"]["noise_rrmse"] > 0
     assert (tmp_path / "images" / "anisotropic_reference.png").is_file()
@@ -177,7 +177,7 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
 def test_records_after_a_slow_speed_check_are_counted(tmp_path):
     """The report counts the records taken after a speed check slower than the scene's fastest
     by more than SPEED_CHECK_SLOWER (a shared or clocked-down GPU), and only those."""
-    from app.bench.ceiling import SPEED_CHECK_SLOWER
+    from radiance_probes.bench.ceiling import SPEED_CHECK_SLOWER
     def rec(check):
         return {"scene": "s", "method": "pt", "rrmse": 0.1, "total_ms": 1.0, "spp": 1,
                 "frame_ms": 1.0, "bake_ms": 0.0, "probe_grid": None, "probe_samples": None,
@@ -193,8 +193,8 @@ def test_records_after_a_slow_speed_check_are_counted(tmp_path):
 
 
 def test_cost_mode_measures_each_variant_against_the_baseline(ctx, tmp_path):
-    from app.bench.cost import PROBE_VARIANTS
-    from app.bench.runner import run_bench
+    from radiance_probes.bench.cost import PROBE_VARIANTS
+    from radiance_probes.bench.runner import run_bench
     config = BenchConfig(mode="cost", scenes=("anisotropic",), width=12,
                          height=12, ref_spp=32, ref_samples_per_pass=16, samples_per_dispatch=2,
                          cost_settings=((3, 16),), cost_probe_frames=2, cost_raymarch_frames=2,
@@ -229,7 +229,7 @@ def test_bake_mode_profiles_the_bake(ctx, tmp_path):
     """The bake mode's records carry the profile fields, consistent with each other: the sections
     add up to the profiled bake, walks per second follow from the walk count and bake time, the
     counters counted every walk, and total_ms charges the bake and light grid to the image."""
-    from app.bench.runner import run_bench
+    from radiance_probes.bench.runner import run_bench
     config = BenchConfig(mode="bake", scenes=("anisotropic",), width=12, height=12, ref_spp=32,
                          ref_samples_per_pass=16, samples_per_dispatch=2, raymarch_frames=(2,),
                          bake_settings=((3, 16), (2, 96)), bake_repeats=2, ceiling_rays=4096,
@@ -276,7 +276,7 @@ def test_results_are_written_at_most_every_interval_and_all_at_the_end(tmp_path)
     """Writing results.json after every record left the GPU idle long enough to clock down in the
     middle of timed runs: records now reach the file at most every flush_every_s seconds, and all
     of them (with FLIP filled in) at close."""
-    from app.bench.runner import Results
+    from radiance_probes.bench.runner import Results
     path = tmp_path / "results.json"
     results = Results(path, {"device": "test"})
     results.flush_every_s = 1e9
@@ -296,9 +296,9 @@ def test_results_are_written_at_most_every_interval_and_all_at_the_end(tmp_path)
 def test_progressive_snapshots_are_the_images_read_between_dispatches(ctx, method):
     """The benchmark's timed runs copy each snapshot on the GPU and read them all afterwards; the
     images are the ones a read-back after each snapshot's dispatches gives."""
-    from app.bench.records import progressive
-    from app.render.renderer import Renderer
-    from app.scene import parse_scene
+    from radiance_probes.bench.records import progressive
+    from radiance_probes.rendering.renderer import Renderer
+    from radiance_probes.scene import parse_scene
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [12, 10, 8]},
                                    "camera": {"eye": [0, 0.2, 1.3], "target": [0, 0, 0],
                                               "fov_y": 40.0, "width": 12, "height": 10},
@@ -321,7 +321,7 @@ def test_gpu_clock_log_summarises_what_nvidia_smi_printed(tmp_path):
     report, half of these below 90% of the maximum clock; nothing where nvidia-smi is absent."""
     import os
     import time
-    from app.bench.clock_log import ClockLog, report_lines
+    from radiance_probes.bench.clock_log import ClockLog, report_lines
     fake = tmp_path / "nvidia-smi"
     fake.write_text("#!/bin/sh\nwhile true; do\n echo '2026/11/23 10:00:00.000, 990, 1980, 12'\n"
                     " echo '2026/11/23 10:00:00.500, 1980, 1980, 99'\n sleep 0.05\ndone\n")
@@ -340,7 +340,7 @@ def test_gpu_clock_log_summarises_what_nvidia_smi_printed(tmp_path):
 
 def test_sh_orders_argument_names_what_is_wrong():
     import argparse
-    from app.cli import sh_orders_arg
+    from radiance_probes.cli import sh_orders_arg
     assert sh_orders_arg("2,3,4,3") == (2, 3, 4)
     for bad in ("", "5", "2,x", "-1"):
         with pytest.raises(argparse.ArgumentTypeError, match="SH orders 0 to 4"):
@@ -349,7 +349,7 @@ def test_sh_orders_argument_names_what_is_wrong():
 
 def test_auto_targets_argument_names_what_is_wrong():
     import argparse
-    from app.cli import auto_targets_arg
+    from radiance_probes.cli import auto_targets_arg
     assert auto_targets_arg("0.05,0.02,0.05") == (0.05, 0.02)
     for bad in ("", "0", "1.5", "0.05,x", "-0.1"):
         with pytest.raises(argparse.ArgumentTypeError, match=r"targets in \(0, 1\)"):
@@ -361,7 +361,7 @@ def test_archived_runs_load_and_report_as_the_plain_ones(tmp_path):
     transfer) reads as the same records, and its folder reports as the plain one's does."""
     import gzip
 
-    from app.bench.report import load, results_path
+    from radiance_probes.bench.report import load, results_path
     data = {"meta": {"device": "test", "command": "x"}, "references": {},
             "records": [{"scene": "s", "method": "pt", "rrmse": 0.1, "total_ms": 1.0}]}
     plain, archived = tmp_path / "plain", tmp_path / "archived"
@@ -381,7 +381,7 @@ def test_archived_runs_load_and_report_as_the_plain_ones(tmp_path):
 def test_merged_runs_keep_every_runs_clock_log(tmp_path):
     """Runs of one device merged into one report: their records and references together, and
     their clock logs one after the other, summarised over all of them (a slow second run shows)."""
-    from app.bench.report import merge
+    from radiance_probes.bench.report import merge
     rows = {"a": ["2026/11/25 06:00:00.000, 1980, 1980, 90"] * 3,
             "b": ["2026/11/25 06:05:00.000, 405, 1980, 10", "2026/11/25 06:05:00.500, 1980, 1980, 95"]}
     paths = []
@@ -408,9 +408,9 @@ def test_merged_runs_keep_every_runs_clock_log(tmp_path):
 def test_the_dependent_chain_marches_the_same_steps_as_the_ceiling(ctx):
     """The walk latency floor (DEPENDENT_CHAIN in glsl/ceiling_march.comp) reads the same sigma_t
     at the same points as the throughput ceiling; only the order of waiting differs."""
-    from app.bench.ceiling import measure_ceiling
-    from app.render.renderer import Renderer
-    from app.scene import parse_scene
+    from radiance_probes.bench.ceiling import measure_ceiling
+    from radiance_probes.rendering.renderer import Renderer
+    from radiance_probes.scene import parse_scene
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [16, 12, 14]},
                                    "density_scale": 50.0}))
     plain = measure_ceiling(r, rays=256, steps=32, repeats=1)
@@ -425,7 +425,7 @@ def test_convergence_table_tells_a_floor_from_noise(tmp_path):
     biased one whose error levels off at a 3% floor (slope near 0), and one too short to judge.
     The report's convergence table gives each its slope and says which keeps falling; the plot
     is written."""
-    from app.bench.report import FLOOR_SLOPE, series, tail_slope
+    from radiance_probes.bench.report import FLOOR_SLOPE, series, tail_slope
     base = {"scene": "s", "device": "test", "width": 64, "height": 64, "reference_noise": 0.0,
             "frame_ms": 1.0, "gpu_bytes": 0}
     records = []
@@ -443,7 +443,7 @@ def test_convergence_table_tells_a_floor_from_noise(tmp_path):
     path.write_text(json.dumps({"meta": {"device": "test", "config": {"width": 64, "height": 64}},
                                 "references": {"s": {"spp": 1, "noise_rrmse": 0.0}},
                                 "records": records}))
-    from app.bench.report import load, main_records
+    from radiance_probes.bench.report import load, main_records
     runs = series(main_records(load(path), "s"))
     slopes = {k[0]: tail_slope(run) for k, run in runs.items()}
     assert slopes["pt"] == pytest.approx(-0.5, abs=1e-9)
@@ -461,12 +461,12 @@ def test_the_benchs_defaults_are_the_modules():
     """BenchConfig's speed_check_rays, auto_pilot_side and auto_pilot_frames default to
     ceiling.SPEED_CHECK_RAYS and auto_probes' PILOT_SIDE and PILOT_FRAMES (config.py writes the
     numbers out so that it imports no GL): the GPU presets measure what the records did."""
-    from app.bench.ceiling import SPEED_CHECK_RAYS
-    from app.bench.config import PRESETS
+    from radiance_probes.bench.ceiling import SPEED_CHECK_RAYS
+    from radiance_probes.bench.config import PRESETS
     assert BenchConfig().speed_check_rays == SPEED_CHECK_RAYS
     assert PRESETS["gpu"].speed_check_rays == PRESETS["interact"].speed_check_rays == SPEED_CHECK_RAYS
     assert PRESETS["interact-quick"].speed_check_rays < SPEED_CHECK_RAYS
-    from app.render.auto_probes import PILOT_FRAMES, PILOT_SIDE
+    from radiance_probes.rendering.auto_probes import PILOT_FRAMES, PILOT_SIDE
     assert (BenchConfig().auto_pilot_side, BenchConfig().auto_pilot_frames) == (PILOT_SIDE,
                                                                                PILOT_FRAMES)
 
@@ -489,7 +489,7 @@ def test_the_warm_up_waits_for_a_gpus_clock_not_for_llvmpipes():
     WARM_UP_MS of GPU work or WARM_UP_DISPATCHES, as before."""
     import time
 
-    from app.bench import records
+    from radiance_probes.bench import records
     gpu = _WarmUpRenderer("NVIDIA H100 80GB HBM3/PCIe/SSE2", ms=0.5)
     start = time.perf_counter()
     warm = records.warm_up(gpu, 16)

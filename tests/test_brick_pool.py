@@ -7,10 +7,10 @@ import moderngl
 import numpy as np
 import pytest
 
-from app.gl.brick_pool import BrickPool
-from app.twins.brick_pool import (CONSTANT, bricked_sample, bricked_voxel, constant_bricks, pack,
+from radiance_probes.gl.brick_pool import BrickPool
+from radiance_probes.twins.brick_pool import (CONSTANT, bricked_sample, bricked_voxel, constant_bricks, pack,
                                   slot_grid)
-from app.twins.medium import trilinear
+from radiance_probes.twins.medium import trilinear
 from glsl_harness import run_kernel
 
 BRICK = 8
@@ -195,7 +195,7 @@ def test_glsl_bricked_sample_matches_twin_and_whole_texture(ctx, channels):
 # ---- mixed levels ----------------------------------------------------------------------------
 
 def _pyramid(channels: int = 1):
-    from app.bricks import box_filtered
+    from radiance_probes.bricks import box_filtered
     levels = [_data(channels)]
     for _ in range(2):
         levels.append(box_filtered(levels[-1]))
@@ -210,7 +210,7 @@ def _level_map(seed: int = 2) -> np.ndarray:
 
 @pytest.mark.parametrize("channels", [1, 3])
 def test_twin_mixed_levels_read_each_bricks_level(channels):
-    from app.twins.brick_pool import REDIRECT, mixed_reference, pack_levels
+    from radiance_probes.twins.brick_pool import REDIRECT, mixed_reference, pack_levels
     levels = _pyramid(channels)
     which = _level_map()
     packed = pack_levels(levels, which, BRICK)
@@ -233,7 +233,7 @@ def test_twin_mixed_voxel_ranges_hold_the_medium_over_each_cell():
     """visible_region.comp's cells between voxel centres: the medium at points inside a cell lies
     within the union of its 8 corners' bricked_voxel_range (in a coarser level's brick, the
     range of the voxels its filter blends)."""
-    from app.twins.brick_pool import bricked_voxel_range, pack_levels
+    from radiance_probes.twins.brick_pool import bricked_voxel_range, pack_levels
     levels = _pyramid()
     which = _level_map(5)
     packed = pack_levels(levels, which, BRICK)
@@ -249,7 +249,7 @@ def test_twin_mixed_voxel_ranges_hold_the_medium_over_each_cell():
     vals = bricked_sample(packed, inside.reshape(-1, 3)).reshape(len(cells), 16)
     assert np.all(vals >= lo - 1e-6) and np.all(vals <= hi + 1e-6)
     # level 0's voxels inside their brick are their own range; on its faces, with neighbours
-    from app.twins.brick_pool import CONSTANT as C
+    from radiance_probes.twins.brick_pool import CONSTANT as C
     z, y, x = next(b for b in np.argwhere(which == 0)
                    if not packed.table[b[0], b[1], b[2]] & C)
     inner = np.array([x, y, z]) * BRICK + 2
@@ -275,7 +275,7 @@ void main()
 
 @pytest.mark.parametrize("channels", [1, 3])
 def test_glsl_mixed_levels_match_the_twin(ctx, channels):
-    from app.twins.brick_pool import bricked_voxel_range, mixed_reference, pack_levels
+    from radiance_probes.twins.brick_pool import bricked_voxel_range, mixed_reference, pack_levels
     levels = _pyramid(channels)
     which = _level_map(11)
     packed = pack_levels(levels, which, BRICK)

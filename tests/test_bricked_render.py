@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.bench.scenes import battery_scene
-from app.render.renderer import METHODS, Renderer
-from app.render.settings import RenderSettings
-from app.twins.brick_pool import CONSTANT
+from radiance_probes.bench.scenes import battery_scene
+from radiance_probes.rendering.renderer import METHODS, Renderer
+from radiance_probes.rendering.settings import RenderSettings
+from radiance_probes.twins.brick_pool import CONSTANT
 
 
 def _scene(name="head", side=20):
@@ -118,8 +118,8 @@ def _channels_zarr(tmp_path) -> str:
 def test_bricked_zarr_store_of_channels_renders_the_same_image(ctx, tmp_path, method):
     """A Zarr store of 3 channels (one switched off, one in its own window) read brick by brick
     renders what the whole loader's volume renders in one texture."""
-    from app.bricks import LazyData
-    from app.scene import parse_scene
+    from radiance_probes.bricks import LazyData
+    from radiance_probes.scene import parse_scene
     scene = parse_scene({
         "volume": {"path": _channels_zarr(tmp_path)},
         "channels": [{"index": 0}, {"index": 1, "value_range": [0, 2000]},

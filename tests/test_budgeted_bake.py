@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.render.renderer import Renderer
-from app.scene import parse_scene
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.scene import parse_scene
 
 SCENE = {"volume": {"builtin": "cloud", "size": [8, 8, 8]}, "density_scale": 30.0,
          "albedo": 0.8, "camera": {"width": 24, "height": 16},
@@ -200,9 +200,9 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
     edits, the dispatch tail, the references cached by name and reused, the report and plot."""
     import json
 
-    from app.bench.config import PRESETS
-    from app.bench.report import write_report
-    from app.bench.runner import run_bench
+    from radiance_probes.bench.config import PRESETS
+    from radiance_probes.bench.report import write_report
+    from radiance_probes.bench.runner import run_bench
     config = PRESETS["interact"].scaled(
         scenes=("tiny",), interact_sizes=((24, 16),), interact_probes=((3, 64),),
         interact_ref_spp=64, ref_samples_per_pass=32, interact_orbit_frames=3,
@@ -263,7 +263,7 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
 
 
 def test_the_viewer_session_bakes_in_slices_and_shows_probes_after_each(ctx):
-    from app.viewer.session import RenderSession
+    from radiance_probes.viewer.session import RenderSession
     s = RenderSession(ctx, parse_scene(SCENE))
     try:
         s.resize(24, 16)
@@ -298,7 +298,7 @@ def test_probe_methods_show_the_raymarcher_while_baking_then_their_own(ctx):
     """While the probes bake, a `probes` view accumulates the raymarcher over the probes as they
     are (and says so in its caption); when the bake ends it restarts as `probes` and converges
     to the image of a finished bake. The frame's budget left after the slice sets the samples."""
-    from app.viewer.session import RenderSession
+    from radiance_probes.viewer.session import RenderSession
     s = RenderSession(ctx, parse_scene(SCENE))
     try:
         s.resize(24, 16)
@@ -340,7 +340,7 @@ def test_samples_per_frame_follow_the_recent_dispatches_cost_per_sample():
     """As many samples as fit in the budget at the median GPU ms per sample of the last
     RECENT_DISPATCHES dispatches: a dispatch that paid for a shader compile does not set the pace,
     and a change of cost (an edit) takes over within a few frames."""
-    from app.viewer.session import RECENT_DISPATCHES, MethodView, RenderSession
+    from radiance_probes.viewer.session import RECENT_DISPATCHES, MethodView, RenderSession
     view = MethodView("probes")
     per_frame = RenderSession.samples_per_frame
     assert per_frame(view, 6.0) == 1                                   # nothing timed yet

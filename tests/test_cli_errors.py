@@ -10,17 +10,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.cli import main
+from radiance_probes.cli import main
 
 
 @pytest.fixture
 def no_gpu(monkeypatch):
     """Any GL context made in the test fails it: the checks must come first."""
-    import app.gl.context
+    import radiance_probes.gl.context
 
     def refuse(*_a, **_k):
         raise AssertionError("a GL context was created before the input was checked")
-    monkeypatch.setattr(app.gl.context, "create_headless_context", refuse)
+    monkeypatch.setattr(radiance_probes.gl.context, "create_headless_context", refuse)
 
 
 def run(argv, capsys) -> tuple[int, list[str], str]:
@@ -106,7 +106,7 @@ def test_bad_render_option_is_one_line_before_any_gpu_work(options, needles, sce
 
 def test_a_huge_exposure_clips_to_white_without_numpy_warnings():
     import warnings
-    from app.render.tonemap import to_uint8
+    from radiance_probes.rendering.tonemap import to_uint8
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         out = to_uint8(np.full((2, 2, 3), 5.0, np.float32), 1e308)
@@ -168,7 +168,7 @@ class FakeContext:
 
 
 def test_image_size_against_the_device_limits(monkeypatch):
-    from app.render.limits import DeviceLimitError, check_image_size
+    from radiance_probes.rendering.limits import DeviceLimitError, check_image_size
     check_image_size(FakeContext(), 1024, 768)
     with pytest.raises(DeviceLimitError, match=r"image 5000 x 10: .*GL_MAX_TEXTURE_SIZE = 4096"):
         check_image_size(FakeContext(GL_MAX_TEXTURE_SIZE=4096), 5000, 10)
@@ -177,8 +177,8 @@ def test_image_size_against_the_device_limits(monkeypatch):
     with pytest.raises(DeviceLimitError, match=r"GL_MAX_COMPUTE_WORK_GROUP_COUNT = 100"):
         check_image_size(FakeContext(GL_MAX_COMPUTE_WORK_GROUP_COUNT=(100, 100, 100)), 801, 10)
     # Memory: a software renderer's comes from the host, checked before any allocation.
-    import app.gl.memory
-    monkeypatch.setattr(app.gl.memory, "host_available_bytes", lambda: 100 * 2**20)
+    import radiance_probes.gl.memory
+    monkeypatch.setattr(radiance_probes.gl.memory, "host_available_bytes", lambda: 100 * 2**20)
     soft = FakeContext(GL_RENDERER="llvmpipe (LLVM 15.0.7, 256 bits)")
     check_image_size(soft, 256, 256)
     with pytest.raises(DeviceLimitError, match=r"4096 x 4096: needs about .* GiB.*host memory"):
@@ -187,22 +187,22 @@ def test_image_size_against_the_device_limits(monkeypatch):
 
 def test_image_beyond_the_device_is_one_line_before_the_scene_is_uploaded(scene, tmp_path, capsys,
                                                                           monkeypatch):
-    import app.render.renderer
-    import app.render.limits
-    monkeypatch.setattr(app.render.limits, "_limit",
+    import radiance_probes.rendering.renderer
+    import radiance_probes.rendering.limits
+    monkeypatch.setattr(radiance_probes.rendering.limits, "_limit",
                         lambda ctx, name, default: 64 if name == "GL_MAX_TEXTURE_SIZE" else 1 << 20)
 
     def refuse(*_a, **_k):
         raise AssertionError("the renderer was built before the image size was checked")
-    monkeypatch.setattr(app.render.renderer, "Renderer", refuse)
+    monkeypatch.setattr(radiance_probes.rendering.renderer, "Renderer", refuse)
     one_error_line(["render", scene, "--out", tmp_path / "o.png", "--width", 65, "--height", 8],
                    capsys, "image 65 x 8", "GL_MAX_TEXTURE_SIZE = 64")
 
 
 def test_renderer_options_are_checked(ctx):
-    from app.render.renderer import Renderer
-    from app.render.settings import RenderSettings
-    from app.scene import parse_scene
+    from radiance_probes.rendering.renderer import Renderer
+    from radiance_probes.rendering.settings import RenderSettings
+    from radiance_probes.scene import parse_scene
     scene = parse_scene({"volume": {"builtin": "sphere", "size": [4, 4, 4]},
                          "camera": {"width": 4, "height": 4}})
     for bad in (0, -1.0, math.nan, math.inf, "0.5", True):
@@ -233,15 +233,15 @@ def test_a_failed_write_after_the_render_says_where_the_image_went(scene, tmp_pa
     """The output was writable when checked but not when the render ended (here: a save that
     fails for the asked path): the image is written to the temporary folder instead, the error
     line says where, and the exit is non-zero."""
-    import app.imageio
-    real_save_png = app.imageio.save_png
+    import radiance_probes.imageio
+    real_save_png = radiance_probes.imageio.save_png
     wanted = tmp_path / "o.png"
 
     def failing_save_png(path, image, exposure=1.0):
         if Path(path) == wanted:
             raise OSError(28, "No space left on device")
         return real_save_png(path, image, exposure)
-    monkeypatch.setattr(app.imageio, "save_png", failing_save_png)
+    monkeypatch.setattr(radiance_probes.imageio, "save_png", failing_save_png)
     monkeypatch.setattr("tempfile.tempdir", str(tmp_path / "rescue"))
     (tmp_path / "rescue").mkdir()
     rc, lines, out = run(["render", scene, "--out", wanted, "--spp", 1, "--linear",
@@ -291,16 +291,16 @@ def test_a_gather_past_a_small_max_bounces_is_said(tmp_path, capsys, max_bounces
 
 def test_view_with_a_missing_volume_is_one_line_before_any_window(tmp_path, capsys, no_gpu,
                                                                   monkeypatch):
-    import app.viewer.xvfb
-    monkeypatch.setattr(app.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
+    import radiance_probes.viewer.xvfb
+    monkeypatch.setattr(radiance_probes.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
         AssertionError("an X server was started before the volume was checked")))
     one_error_line(["view", tmp_path / "nowhere.raw", "--frames", 1], capsys, "nowhere.raw",
                    "not found")
 
 
 def test_view_screenshot_path_is_checked_before_any_window(scene, capsys, no_gpu, monkeypatch):
-    import app.viewer.xvfb
-    monkeypatch.setattr(app.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
+    import radiance_probes.viewer.xvfb
+    monkeypatch.setattr(radiance_probes.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
         AssertionError("an X server was started before --screenshot was checked")))
     one_error_line(["view", scene, "--screenshot", "/proc/shot.png", "--frames", 1], capsys,
                    "--screenshot /proc/shot.png", "cannot write there")
@@ -309,8 +309,8 @@ def test_view_screenshot_path_is_checked_before_any_window(scene, capsys, no_gpu
 
 def test_view_bad_script_is_one_line_before_any_window(scene, tmp_path, capsys, no_gpu,
                                                        monkeypatch):
-    import app.viewer.xvfb
-    monkeypatch.setattr(app.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
+    import radiance_probes.viewer.xvfb
+    monkeypatch.setattr(radiance_probes.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
         AssertionError("an X server was started before the script was read")))
     (tmp_path / "s.json").write_text('{"not": "a list"}')
     one_error_line(["view", scene, "--script", tmp_path / "s.json"], capsys, "s.json",
@@ -330,7 +330,7 @@ def test_bad_new_format_volumes_are_one_line(tmp_path, capsys, no_gpu, monkeypat
                          (tmp_path / "notes", "holds no DICOM files"),
                          (tmp_path / "bad.nii.gz", "cannot read NIfTI")):
         one_error_line(["render", path, "--out", tmp_path / "o.png"], capsys, str(path), needle)
-    import app.viewer.xvfb
-    monkeypatch.setattr(app.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
+    import radiance_probes.viewer.xvfb
+    monkeypatch.setattr(radiance_probes.viewer.xvfb.Xvfb, "start", lambda self: (_ for _ in ()).throw(
         AssertionError("an X server was started before the volume was checked")))
     one_error_line(["view", tmp_path / "empty", "--frames", 1], capsys, "holds no files")

@@ -81,7 +81,7 @@ def test_the_quoted_figures_are_the_records():
     readme = (ROOT / "README.md").read_text()
     assert tables.blocks(readme, "headline") == [tables.headline()]
     # the figures are real numbers: the path tracer's time to 5% on bonsai, from the records
-    from app.bench import report as R
+    from radiance_probes.bench import report as R
     recs = R.main_records(R.load(str(ROOT / "bench/h100")), "bonsai")
     pt = R.time_to_error([r for r in recs if r["method"] == "pt"], 0.05)
     assert pt is not None and pt["total_ms"] > 0
@@ -89,7 +89,7 @@ def test_the_quoted_figures_are_the_records():
 
 
 def test_the_readme_names_every_viewer_shortcut():
-    from app.viewer.input import SHORTCUTS
+    from radiance_probes.viewer.input import SHORTCUTS
     text = (ROOT / "README.md").read_text()
     section = text[text.index("## The viewer"):text.index("## The command line")]
     for shortcut in SHORTCUTS:
@@ -150,7 +150,7 @@ def test_the_experiments_index_names_every_script_and_record():
 
 
 def test_every_archived_run_is_listed_and_readable():
-    from app.bench.report import results_path
+    from radiance_probes.bench.report import results_path
     archive = ROOT / "bench" / "archive"
     listed = (archive / "README.md").read_text()
     for run in sorted(p for p in archive.iterdir() if p.is_dir()):

@@ -18,11 +18,11 @@ import math
 import numpy as np
 import pytest
 
-from app.environment_map import load_environment_map, read_environment_map
-from app.render.renderer import Renderer
-from app.render.resources import ENVIRONMENT_CDF_UNIT, ENVIRONMENT_MAP_UNIT, environment_textures
-from app.scene import EnvironmentMapSpec, SceneError, parse_scene
-from app.twins import environment_map as tw
+from radiance_probes.environment_map import load_environment_map, read_environment_map
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.rendering.resources import ENVIRONMENT_CDF_UNIT, ENVIRONMENT_MAP_UNIT, environment_textures
+from radiance_probes.scene import EnvironmentMapSpec, SceneError, parse_scene
+from radiance_probes.twins import environment_map as tw
 from glsl_harness import run_kernel
 
 # ---------------------------------------------------------------------------------------------
@@ -384,7 +384,7 @@ def test_small_bright_patch_renders_like_a_sun(ctx, patch_scenes):
 
 def test_background_is_the_map(ctx, tmp_path):
     """An empty volume: every method shows the map itself, read at the camera rays' directions."""
-    from app.twins.camera import camera_frame
+    from radiance_probes.twins.camera import camera_frame
     h = 32
     theta = (np.arange(h) + 0.5) / h * np.pi
     phi = (np.arange(2 * h) + 0.5) / (2 * h) * 2 * np.pi
@@ -513,12 +513,12 @@ def test_cli_bad_map_is_one_line_before_the_gpu(tmp_path, capsys, monkeypatch, m
     """The render command with a bad map: a non-zero exit, one line naming the file and the
     problem, and no GL context made (creating one fails the test)."""
     import json
-    import app.gl.context
-    from app.cli import main
+    import radiance_probes.gl.context
+    from radiance_probes.cli import main
 
     def refuse(*_a, **_k):
         raise AssertionError("a GL context was created before the map was checked")
-    monkeypatch.setattr(app.gl.context, "create_headless_context", refuse)
+    monkeypatch.setattr(radiance_probes.gl.context, "create_headless_context", refuse)
     for name, (path, problem) in _bad_maps(tmp_path).items():
         scene = tmp_path / f"scene_{name}.json"
         scene.write_text(json.dumps({"environment": {"map": path.name}}))

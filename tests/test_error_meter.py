@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.viewer.display import ErrorMeter, sample_stage
+from radiance_probes.viewer.display import ErrorMeter, sample_stage
 
 
 class FakeSession:

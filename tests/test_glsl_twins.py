@@ -22,13 +22,13 @@ Tolerances
 import numpy as np
 import pytest
 
-from app.twins import rng as nrng
-from app.twins.camera import camera_frame
-from app.gl.textures import TransferTable, volume_texture
-from app.twins.medium import albedo_at, box_intersect, density_at, sigma_t_at
-from app.scene import CameraSpec
-from app.transfer import lookup
-from app.volume import Volume
+from radiance_probes.twins import rng as nrng
+from radiance_probes.twins.camera import camera_frame
+from radiance_probes.gl.textures import TransferTable, volume_texture
+from radiance_probes.twins.medium import albedo_at, box_intersect, density_at, sigma_t_at
+from radiance_probes.scene import CameraSpec
+from radiance_probes.transfer import lookup
+from radiance_probes.volume import Volume
 from glsl_harness import run_kernel
 
 # ---------------------------------------------------------------------------------------------
@@ -357,8 +357,8 @@ def test_constant_table_is_exact(ctx):
 def test_transfer_table_binding_matches_the_shader():
     """Compute passes read the transfer table from the storage buffer TransferTable.use binds."""
     import re
-    from app.gl.textures import TRANSFER_TABLE_BINDING
-    from app.paths import GLSL_DIR
+    from radiance_probes.gl.textures import TRANSFER_TABLE_BINDING
+    from radiance_probes.paths import GLSL_DIR
     text = (GLSL_DIR / "lib" / "medium.glsl").read_text()
     bindings = re.findall(r"binding = (\d+)\) readonly buffer TransferTable", text)
     assert bindings == [str(TRANSFER_TABLE_BINDING)]
@@ -366,7 +366,7 @@ def test_transfer_table_binding_matches_the_shader():
 
 def test_transfer_buffer_only_on_a_gpu_with_its_binding():
     from types import SimpleNamespace
-    from app.gl.shaders import transfer_from_buffer
+    from radiance_probes.gl.shaders import transfer_from_buffer
 
     def device(renderer, bindings):
         return SimpleNamespace(info={"GL_RENDERER": renderer,

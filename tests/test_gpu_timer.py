@@ -6,9 +6,9 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from app.gl.memory import _gl_get_integer
-from app.gl.shaders import compute_program
-from app.gl.timer import GpuTimer
+from radiance_probes.gl.memory import _gl_get_integer
+from radiance_probes.gl.shaders import compute_program
+from radiance_probes.gl.timer import GpuTimer
 
 GL_DRAW_FRAMEBUFFER_BINDING = 0x8CA6
 GL_READ_FRAMEBUFFER_BINDING = 0x8CAA

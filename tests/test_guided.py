@@ -1,4 +1,4 @@
-"""`guided` (app/render/renderer.py; lib/guided_level0.glsl, lib/integrator.glsl GUIDED_RESIDUAL):
+"""`guided` (app/rendering/renderer.py; lib/guided_level0.glsl, lib/integrator.glsl GUIDED_RESIDUAL):
 level 0, an unbiased estimate of what the probes and the light grid predict along camera rays,
 plus level 1, a path-traced sample minus the single-collision estimate of the same prediction on
 the same random numbers. Its mean is the path tracer's whatever the probes hold: checked here
@@ -11,9 +11,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.render.renderer import Renderer
-from app.render.settings import RenderSettings
-from app.scene import parse_scene
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.rendering.settings import RenderSettings
+from radiance_probes.scene import parse_scene
 
 SCENE = {"volume": {"builtin": "cloud", "size": [16, 14, 12]}, "density_scale": 40.0,
          "albedo": 0.9, "anisotropy": 0.5, "max_bounces": 12,
@@ -142,8 +142,8 @@ def test_guided_directions_under_an_environment_map(ctx, tmp_path, distances):
     guided_directions 1 the weights' product over a path's events made the estimate so
     heavy-tailed on these probes that 48 seeds of 4 samples fell 5 standard errors low.) The same
     with guided distances on too (0.5), their flights led by the same wrong probes."""
-    from app.render.probe_layout import colour_channel
-    from app.twins import environment_map as tw
+    from radiance_probes.rendering.probe_layout import colour_channel
+    from radiance_probes.twins import environment_map as tw
     h, rotation = 16, 30.0
     sky = np.full((h, 2 * h, 3), 0.05, np.float32)
     sky[:h // 2] *= 3.0                                    # the upper half brighter

@@ -8,11 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.render.probes import band_factors, probe_unit, SH_WINDOW_IDS
-from app.render.probe_layout import TEXTURES_FOR_ORDER
-from app.twins.guided_direction_control import direction_control
-from app.twins.phase import phase_hg
-from app.twins.sh import SH_WINDOW_HANN, SH_WINDOW_LANCZOS, SH_WINDOW_NONE, sphere_quadrature
+from radiance_probes.rendering.probes import band_factors, probe_unit, SH_WINDOW_IDS
+from radiance_probes.rendering.probe_layout import TEXTURES_FOR_ORDER
+from radiance_probes.twins.guided_direction_control import direction_control
+from radiance_probes.twins.phase import phase_hg
+from radiance_probes.twins.sh import SH_WINDOW_HANN, SH_WINDOW_LANCZOS, SH_WINDOW_NONE, sphere_quadrature
 from glsl_harness import PROBE_FETCH_KERNEL, probe_texel_centres, probe_textures, run_kernel
 
 CONTROL_KERNEL = """
@@ -105,7 +105,7 @@ def test_direction_control_has_mean_zero_over_guided_directions(g, probability):
     E_pdf[E_phase[h] - h phase / pdf] = 0 by quadrature over the sphere, for coefficients unlike
     the table's (the table is built from other probes: the mean is 0 for any pdf), and the plain
     form E_phase[h] - h, without the weight, is not (the weight is needed)."""
-    from app.twins.guided_directions import direction_pdf
+    from radiance_probes.twins.guided_directions import direction_pdf
     order = 2
     rng = np.random.default_rng(int(10 * g) + 7)
     coeffs = rng.normal(size=(9, 3))

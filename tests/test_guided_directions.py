@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from numpy.polynomial.legendre import leggauss
 
-from app.render.probe_layout import TEXTURES_FOR_ORDER, resolve_sh_order
-from app.render.probes import band_factors, probe_unit
-from app.render.settings import RenderSettings
-from app.twins import guided_directions as gd
-from app.twins.phase import hg_primary_sample, orthonormal_basis, sample_hg, sample_hg_cos_theta
-from app.twins.sh import SH_WINDOW_HANN, SH_WINDOW_NONE, sphere_quadrature
+from radiance_probes.rendering.probe_layout import TEXTURES_FOR_ORDER, resolve_sh_order
+from radiance_probes.rendering.probes import band_factors, probe_unit
+from radiance_probes.rendering.settings import RenderSettings
+from radiance_probes.twins import guided_directions as gd
+from radiance_probes.twins.phase import hg_primary_sample, orthonormal_basis, sample_hg, sample_hg_cos_theta
+from radiance_probes.twins.sh import SH_WINDOW_HANN, SH_WINDOW_NONE, sphere_quadrature
 from glsl_harness import PROBE_FETCH_KERNEL, probe_textures, run_kernel
 
 HEAD = """
@@ -294,8 +294,8 @@ def test_guided_directions_setting_and_the_order_it_bakes(ctx):
     assert resolve_sh_order("auto", 0.0) == 0
     assert resolve_sh_order("auto", 0.8, 4096, directions=True) == resolve_sh_order("auto", 0.8, 4096)
     assert resolve_sh_order(0, 0.0, directions=True) == 0
-    from app.render.renderer import Renderer
-    from app.scene import parse_scene
+    from radiance_probes.rendering.renderer import Renderer
+    from radiance_probes.scene import parse_scene
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [8, 8, 8]},
                                    "anisotropy": 0.0, "probes": {"grid": [2, 2, 2],
                                                                  "samples": 4}}),

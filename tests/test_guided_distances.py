@@ -10,10 +10,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.render.renderer import Renderer
-from app.render.settings import RenderSettings
-from app.scene import parse_scene
-from app.twins import guided_distances as gdist
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.rendering.settings import RenderSettings
+from radiance_probes.scene import parse_scene
+from radiance_probes.twins import guided_distances as gdist
 from glsl_harness import run_kernel
 from test_guided import SCENE
 
@@ -60,7 +60,7 @@ def test_collision_probability_glsl_matches_its_twin(ctx):
 
 
 def test_the_twins_flight_bound_is_the_glsls():
-    from app.gl.shaders import GLSL_DIR
+    from radiance_probes.gl.shaders import GLSL_DIR
     text = (GLSL_DIR / "lib" / "guided_distances.glsl").read_text()
     assert f"const float GUIDED_FLIGHT_WEIGHT_BOUND = {gdist.FLIGHT_WEIGHT_BOUND};" in text
 

@@ -1,4 +1,4 @@
-"""The house rules, checked from the source: no import cycles in `app` (lazy imports inside
+"""The house rules, checked from the source: no import cycles in `radiance_probes` (the `app/` folder) (lazy imports inside
 functions count too: a cycle is a cycle whenever it closes), and no behaviour switched by
 environment variables other than the ones the README names as test shortcuts."""
 from __future__ import annotations
@@ -18,7 +18,8 @@ ALLOWED_ENV = {"RP_GL_BACKEND"}
 
 
 def module_name(path: Path) -> str:
-    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    """The installed name: the `app/` folder is the package `radiance_probes`."""
+    parts = ["radiance_probes", *path.relative_to(APP).with_suffix("").parts]
     if parts[-1] == "__init__":
         parts.pop()
     return ".".join(parts)
@@ -100,10 +101,10 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 def test_the_graph_sees_imports():
     """The checker itself: it finds relative, absolute, lazy and `from pkg import module` imports."""
     graph = import_graph()
-    assert "app.scene_types" in graph["app.volume"]
-    assert "app.frontend" in graph["app.cli"]
-    assert "app.viewer.launch" in graph["app.cli"]          # lazy, inside cmd_view
-    assert "app.frontend" in graph["app.viewer.launch"]
+    assert "radiance_probes.scene_types" in graph["radiance_probes.volume"]
+    assert "radiance_probes.frontend" in graph["radiance_probes.cli"]
+    assert "radiance_probes.viewer.launch" in graph["radiance_probes.cli"]          # lazy, inside cmd_view
+    assert "radiance_probes.frontend" in graph["radiance_probes.viewer.launch"]
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 

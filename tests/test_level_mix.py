@@ -1,4 +1,4 @@
-"""Mixed levels under a cap (app/render/level_mix.py, lib/brick_pool.glsl BRICK_LEVELS): the pool
+"""Mixed levels under a cap (app/rendering/level_mix.py, lib/brick_pool.glsl BRICK_LEVELS): the pool
 holds the finer level where the camera sees it largest and the coarser elsewhere, within the cap;
 what the GPU holds is the twin's mixed medium; the majorant grid bounds it; every method reads it
 with no page miss; and it is nearer the uncapped image than the coarser level alone."""
@@ -8,14 +8,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from app.bench.metrics import rrmse
-from app.bench.scenes import battery_scene
-from app.bricks import box_filtered, slot_bytes
-from app.render.level_mix import MIX_FOOTPRINT_PX, footprints
-from app.render.renderer import METHODS, Renderer
-from app.render.settings import RenderSettings
-from app.twins.brick_pool import Packed, bricked_sample, mixed_reference
-from app.twins.majorant_grid import macrocell_counts
+from radiance_probes.bench.metrics import rrmse
+from radiance_probes.bench.scenes import battery_scene
+from radiance_probes.bricks import box_filtered, slot_bytes
+from radiance_probes.rendering.level_mix import MIX_FOOTPRINT_PX, footprints
+from radiance_probes.rendering.renderer import METHODS, Renderer
+from radiance_probes.rendering.settings import RenderSettings
+from radiance_probes.twins.brick_pool import Packed, bricked_sample, mixed_reference
+from radiance_probes.twins.majorant_grid import macrocell_counts
 
 BRICK = 8
 

@@ -1,4 +1,4 @@
-"""Streaming a mixed pool's finer level as the camera moves (app/render/level_stream.py): after a
+"""Streaming a mixed pool's finer level as the camera moves (app/rendering/level_stream.py): after a
 restream the pool is what a fresh placement for that camera gives (page table per brick, the
 bricks' texels, the constants, the majorant grid, the images), each brick loaded is read once,
 the pool never holds more than its slots, the same camera writes nothing, a budget spreads the
@@ -11,11 +11,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.bricks import CONSTANT, REDIRECT, box_filtered
-from app.render.level_mix import coarse_ranges_read, mixed_density_ranges
-from app.render.renderer import METHODS
-from app.twins.brick_pool import brick_block, bricked_sample, mixed_reference
-from app.twins.majorant_grid import brick_density_range_grid, macrocell_counts
+from radiance_probes.bricks import CONSTANT, REDIRECT, box_filtered
+from radiance_probes.rendering.level_mix import coarse_ranges_read, mixed_density_ranges
+from radiance_probes.rendering.renderer import METHODS
+from radiance_probes.twins.brick_pool import brick_block, bricked_sample, mixed_reference
+from radiance_probes.twins.majorant_grid import brick_density_range_grid, macrocell_counts
 from test_level_mix import BRICK, _cap, _gpu_packed, _renderer
 from test_level_mix import _scene as _mix_scene
 
@@ -248,7 +248,7 @@ def test_no_page_miss_after_restreams(checked_ctx):
 
 def test_mixed_density_ranges_are_the_brick_by_brick_ranges(ctx):
     """coarse_ranges_read (array operations) against the bricks reached, brick by brick."""
-    from app.bricks import BrickStore, ArraySource, around, bricks_reached
+    from radiance_probes.bricks import BrickStore, ArraySource, around, bricks_reached
     rng = np.random.default_rng(1)
     fine_data = rng.uniform(0, 1, (27, 21, 37)).astype(np.float32)
     fine_data[:, :9] = 0.0
@@ -275,7 +275,7 @@ def test_mixed_density_ranges_are_the_brick_by_brick_ranges(ctx):
 
 def _packed_any(pool):
     """_gpu_packed for any brick size."""
-    from app.twins.brick_pool import Packed
+    from radiance_probes.twins.brick_pool import Packed
     gz, gy, gx = pool.grid[::-1]
     side = pool.brick + 2
     atlas = np.frombuffer(pool.atlas.read(), np.float32).reshape(gz * side, gy * side, gx * side)
@@ -290,11 +290,11 @@ def test_a_store_placed_from_far_reads_level_0_when_the_camera_comes_near(ctx, t
     level 0 reads level 1. Restreamed for a near camera, the range pass is read then, level 0's
     constant bricks become constants and its bricks worth a slot are loaded: the pool and image
     of a fresh placement for the near camera."""
-    from app.bricks import BrickStore, slot_bytes
-    from app.render.renderer import Renderer
-    from app.render.settings import RenderSettings
-    from app.render.volume_placement import level_bytes
-    from app.volume import load_scene_volume
+    from radiance_probes.bricks import BrickStore, slot_bytes
+    from radiance_probes.rendering.renderer import Renderer
+    from radiance_probes.rendering.settings import RenderSettings
+    from radiance_probes.rendering.volume_placement import level_bytes
+    from radiance_probes.volume import load_scene_volume
     from test_level_bound import _store
     brick = 16
     scene = _store(tmp_path)
@@ -325,9 +325,9 @@ def test_the_viewer_restreams_once_the_camera_settles_a_budget_a_frame(ctx, monk
     """Viewer._restream: nothing while the camera keeps moving; once it has not moved for
     RESTREAM_SETTLE_S, a restream goes on a frame at a time (the Volume panel's status line)
     and, when it commits, the session's accumulations restart."""
-    from app.render.settings import RenderSettings
-    from app.viewer import viewer as viewer_module
-    from app.viewer.state import ViewerState
+    from radiance_probes.rendering.settings import RenderSettings
+    from radiance_probes.viewer import viewer as viewer_module
+    from radiance_probes.viewer.state import ViewerState
     scene = _at(_scene(32, 24), EYE_A)
     settings = RenderSettings(brick_size=BRICK, volume_memory_bytes=_cap(scene), mixed_levels=True)
     v = viewer_module.Viewer(ctx, ViewerState(scene, scene.camera), settings=settings)

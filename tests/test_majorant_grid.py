@@ -13,14 +13,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from app.twins.majorant_grid import (MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_grid,
+from radiance_probes.twins.majorant_grid import (MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_grid,
                           voxel_ranges)
-from app.twins.medium import density_at, sigma_t_at
-from app.render.renderer import Renderer
-from app.render.resources import SceneResources
-from app.scene import parse_scene
-from app.transfer import transfer_table
-from app.volume import Volume, load_scene_volume
+from radiance_probes.twins.medium import density_at, sigma_t_at
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.rendering.resources import SceneResources
+from radiance_probes.scene import parse_scene
+from radiance_probes.transfer import transfer_table
+from radiance_probes.volume import Volume, load_scene_volume
 from glsl_harness import run_kernel
 
 WHITE = {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]}
@@ -508,7 +508,7 @@ def test_opaque_box_single_scattering_has_its_closed_form_with_and_without_the_g
     sigma_t (mu_s, mu_v: the sun's and the view's cosines to the face's normal). Both tracking
     modes must give it at sigma_t = 100 and 1e4. The grid's walk used to end at its last face's
     snap distance and skip the sliver of medium there: +86% at sigma_t = 1e4."""
-    from app.render.settings import RenderSettings
+    from radiance_probes.rendering.settings import RenderSettings
     sun = np.array([0.3, 0.8, 0.52])
     sun /= np.linalg.norm(sun)
     scene = parse_scene({"volume": {"builtin": "constant", "size": [8, 8, 8]},

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from app.camera_path import keyframes, turntable
-from app.cli import main
-from app.movie_writer import MovieError, MovieWriter, count_frames, movie_format
-from app.render.renderer import Renderer
-from app.scene import BookmarkSpec, CameraSpec, parse_scene
+from radiance_probes.camera_path import keyframes, turntable
+from radiance_probes.cli import main
+from radiance_probes.movie_writer import MovieError, MovieWriter, count_frames, movie_format
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.scene import BookmarkSpec, CameraSpec, parse_scene
 
 # ---- camera paths ------------------------------------------------------------------------------
 
@@ -75,9 +75,9 @@ def test_writer_frames_read_back(tmp_path, name):
 
 
 def test_frame_readback_is_the_png_tone_map(ctx):
-    from app.render.accumulation import Accumulation
-    from app.render.frame_readback import FrameReadback
-    from app.render.tonemap import to_uint8
+    from radiance_probes.rendering.accumulation import Accumulation
+    from radiance_probes.rendering.frame_readback import FrameReadback
+    from radiance_probes.rendering.tonemap import to_uint8
     rng = np.random.default_rng(1)
     image = (rng.uniform(0, 1.5, (21, 37, 4)) ** 2).astype(np.float32)
     acc = Accumulation(ctx, 37, 21)

@@ -13,9 +13,9 @@ import nrrd
 import numpy as np
 import pytest
 
-from app.orientation import PATIENT_WORLD, residual_degrees, to_patient
-from app.scene import VolumeSpec, parse_scene
-from app.volume import load_volume
+from radiance_probes.orientation import PATIENT_WORLD, residual_degrees, to_patient
+from radiance_probes.scene import VolumeSpec, parse_scene
+from radiance_probes.volume import load_volume
 from test_volume_formats import ct_slice
 
 DIMS = (6, 5, 4)   # x, y, z voxel counts: every axis a different length

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from app.twins.phase import phase_hg, sample_hg_cos_theta
+from radiance_probes.twins.phase import phase_hg, sample_hg_cos_theta
 from glsl_harness import run_kernel
 
 

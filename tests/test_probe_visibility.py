@@ -9,12 +9,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.gl.textures import TransferTable, volume_texture
-from app.render.renderer import Renderer
-from app.scene import parse_scene
-from app.twins.medium import sigma_t_at
-from app.twins.probe_visibility import blend, corner_weights
-from app.volume import Volume
+from radiance_probes.gl.textures import TransferTable, volume_texture
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.scene import parse_scene
+from radiance_probes.twins.medium import sigma_t_at
+from radiance_probes.twins.probe_visibility import blend, corner_weights
+from radiance_probes.volume import Volume
 from glsl_harness import PROBE_FETCH_KERNEL, run_kernel
 
 WHITE_RAMP = {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]}   # sigma_t = density_scale x density
@@ -63,7 +63,7 @@ def test_visibility_weights_match_the_numpy_twin(ctx):
     """probe_fetch with PROBE_VISIBILITY 1 against app/twins/probe_visibility.py (weights from the
     twin's sigma_t, blend of the probes' texels) on random probe values around a dense block in a
     noisy medium; where the twin finds no probe occluded, GL's trilinear filter."""
-    from app.twins.medium import trilinear
+    from radiance_probes.twins.medium import trilinear
     rng = np.random.default_rng(5)
     d = rng.uniform(0.0, 0.05, (N, N, N)).astype(np.float32)
     d[6:15, 4:12, 5:13] = 1.0

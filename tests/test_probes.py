@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from app.render.renderer import Renderer
-from app.scene import parse_scene
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.scene import parse_scene
 
 WHITE = {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]}
 WHITE_SOLID = {"rgba": [[1, 1, 1, 1.0], [1, 1, 1, 1.0]]}
@@ -164,7 +164,7 @@ def test_raymarch_fragment_equals_compute(ctx):
 def test_transfer_table_from_buffer_changes_no_image(ctx, monkeypatch):
     """Compute passes read the transfer table from a storage buffer on a GPU and with texelFetch on
     llvmpipe (app/gl/shaders.py transfer_from_buffer): the same values, so the same images."""
-    import app.gl.shaders as shaders
+    import radiance_probes.gl.shaders as shaders
     images = {}
     for from_buffer in (False, True):
         monkeypatch.setattr(shaders, "transfer_from_buffer", lambda ctx, v=from_buffer: v)
@@ -202,7 +202,7 @@ def test_raymarch_skipping_empty_space_changes_nothing(ctx):
 def test_raymarch_frames_in_one_dispatch_equal_one_per_dispatch(ctx, monkeypatch):
     """Small images march several frames per dispatch into layers, folded in frame order: the
     same running mean as one dispatch per frame."""
-    from app.render import raymarch
+    from radiance_probes.rendering import raymarch
     r = _renderer(ctx, camera={**CAMERA, "width": 24, "height": 20})
     r.bake()
     assert raymarch.frame_layers(24, 20, 5) == 5

@@ -1,6 +1,6 @@
 """The viewer's `refine` mode: the half-buffer error estimate (NumPy, on synthetic noise of known
 variance; and the GPU reduction against it), and the session showing the raymarcher at once after
-an edit and `guided` later (app/render/refine.py, app/viewer/session.py)."""
+an edit and `guided` later (app/rendering/refine.py, app/viewer/session.py)."""
 from __future__ import annotations
 
 import math
@@ -9,9 +9,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.bench.metrics import rrmse
-from app.render.refine import HalfBuffers, error_from_sums, half_buffer_error, half_buffer_sums
-from app.scene import parse_scene
+from radiance_probes.bench.metrics import rrmse
+from radiance_probes.rendering.refine import HalfBuffers, error_from_sums, half_buffer_error, half_buffer_sums
+from radiance_probes.scene import parse_scene
 
 SHAPE = (48, 64, 3)
 
@@ -81,7 +81,7 @@ def test_gpu_reduction_and_combine_match_numpy(ctx):
         parts = [rng.uniform(-0.2, 1.0, (h, w, 4)).astype(np.float32) for _ in range(5)]
         accs = [buffers.halves[0].residual, buffers.halves[0].level0, buffers.halves[1].residual,
                 buffers.halves[1].level0]
-        from app.render.accumulation import Accumulation
+        from radiance_probes.rendering.accumulation import Accumulation
         ray = Accumulation(ctx, w, h)
         for acc, data in zip([*accs, ray], parts):
             acc.texture.write(data.tobytes())
@@ -121,7 +121,7 @@ def _frames_until_guided(s, limit=400) -> int:
 
 
 def test_refine_shows_the_raymarcher_at_once_then_guided_after_every_edit(ctx):
-    from app.viewer.session import RefineView, RenderSession
+    from radiance_probes.viewer.session import RefineView, RenderSession
     s = RenderSession(ctx, parse_scene(SCENE))
     try:
         s.resize(24, 16)
@@ -176,9 +176,9 @@ def test_interact_quick_preset_replays_refine(ctx, tmp_path):
     within 1 s."""
     import json
 
-    from app.bench.config import PRESETS
-    from app.bench.report import write_report
-    from app.bench.runner import run_bench
+    from radiance_probes.bench.config import PRESETS
+    from radiance_probes.bench.report import write_report
+    from radiance_probes.bench.runner import run_bench
     preset = PRESETS["interact-quick"]
     assert "refine" in preset.interact_methods
     # at 32x24, a quarter of the preset's pixels (64x48 took 62 s on llvmpipe, 25 s here)

@@ -11,8 +11,8 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from app.scene import SceneError, load_scene, parse_scene
-from app.scene_schema import TABLE_END, TABLE_START, key_table, scene_schema, schema_text
+from radiance_probes.scene import SceneError, load_scene, parse_scene
+from radiance_probes.scene_schema import TABLE_END, TABLE_START, key_table, scene_schema, schema_text
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA_FILE = ROOT / "docs" / "scene.schema.json"
@@ -49,7 +49,7 @@ def test_every_asset_scene_validates_and_loads(validator):
 
 
 def test_the_default_scene_and_a_saved_one_validate(validator):
-    from app.scene import default_scene, scene_to_dict
+    from radiance_probes.scene import default_scene, scene_to_dict
     validator.validate({})
     validator.validate(scene_to_dict(default_scene()))
     full = parse_scene({"volume": {"path": "ct/", "window": "bone", "series": 2,

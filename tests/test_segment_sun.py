@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.twins.segment_sun import segment_sun_weight
+from radiance_probes.twins.segment_sun import segment_sun_weight
 from glsl_harness import run_kernel
 
 KERNEL = """
@@ -68,8 +68,8 @@ def test_raymarched_opaque_box_has_single_scatterings_closed_form(ctx, density_s
     face on: near the middle of the face, a semi-infinite medium's albedo E p mu_s / (mu_s + 1),
     whatever sigma_t. Taking the sun's transmittance at one point of each segment, the raymarcher
     gave 85% too little at sigma_t = 1e4 (its lit skin is far thinner than a step)."""
-    from app.render.renderer import Renderer
-    from app.scene import parse_scene
+    from radiance_probes.rendering.renderer import Renderer
+    from radiance_probes.scene import parse_scene
     sun = np.array([0.3, 0.8, 0.52])
     sun /= np.linalg.norm(sun)
     scene = parse_scene({"volume": {"builtin": "constant", "size": [8, 8, 8]},

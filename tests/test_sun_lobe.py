@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.twins import sun_lobe
+from radiance_probes.twins import sun_lobe
 from glsl_harness import probe_texel_centres, probe_textures, run_kernel
 
 MU, W = np.polynomial.legendre.leggauss(200)
@@ -72,7 +72,7 @@ def test_glsl_against_twin(ctx, h, g, n):
 def _lobe_scene(tmp_path, g, h, amplitude, base, sun):
     """An empty volume under an environment map L(omega) = base + amplitude HG_h(omega . sun):
     every walk escapes at once, so a probe sees exactly the map."""
-    from app.twins import environment_map as tw
+    from radiance_probes.twins import environment_map as tw
     rows = 96
     v = (np.arange(rows) + 0.5) / rows
     u = (np.arange(2 * rows) + 0.5) / (2 * rows)
@@ -82,7 +82,7 @@ def _lobe_scene(tmp_path, g, h, amplitude, base, sun):
     lum = base + amplitude * sun_lobe.hg(d @ s, h)
     path = tmp_path / "lobe.npy"
     np.save(path, np.repeat(lum[..., None], 3, axis=-1).astype(np.float32))
-    from app.scene import parse_scene
+    from radiance_probes.scene import parse_scene
     return parse_scene({"volume": {"builtin": "empty", "size": [4, 4, 4]}, "anisotropy": g,
                         "environment": {"map": str(path)},
                         "light": {"direction": list(sun), "irradiance": [0, 0, 0]},
@@ -93,8 +93,8 @@ def _lobe_scene(tmp_path, g, h, amplitude, base, sun):
 def test_bake_projects_the_lobe_and_leaves_the_bands_alone(ctx, tmp_path):
     """Probes that see base + A HG_h(omega . s) hold amplitude A in the lobe's channels (r is
     orthogonal to the bands and to the constant), and the same SH bands as without the lobe."""
-    from app.render.probe_layout import sun_lobe_g
-    from app.render.renderer import Renderer
+    from radiance_probes.rendering.probe_layout import sun_lobe_g
+    from radiance_probes.rendering.renderer import Renderer
     g, amplitude = 0.8, 0.7
     h = sun_lobe_g(g, 3)
     assert h == pytest.approx(g ** 3)
@@ -124,8 +124,8 @@ def test_bake_projects_the_lobe_and_leaves_the_bands_alone(ctx, tmp_path):
 def test_furnace_with_the_lobe_returns_the_environment(ctx, method):
     """A white furnace (albedo 1, every direction the same radiance): the lobe's projection is
     0 up to the quadrature of the walks' directions, and the image is the environment."""
-    from app.render.renderer import Renderer
-    from app.scene import parse_scene
+    from radiance_probes.rendering.renderer import Renderer
+    from radiance_probes.scene import parse_scene
     env = [0.3, 0.6, 0.9]
     scene = parse_scene({"volume": {"builtin": "cloud", "size": [16, 12, 14]}, "anisotropy": 0.8,
                          "transfer_function": {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]},
@@ -145,7 +145,7 @@ def test_furnace_with_the_lobe_returns_the_environment(ctx, method):
 
 
 def test_sun_lobe_g_rule():
-    from app.render.probe_layout import sun_lobe_g
+    from radiance_probes.rendering.probe_layout import sun_lobe_g
     assert sun_lobe_g(0.8, 3) == pytest.approx(0.512)
     assert sun_lobe_g(0.8, 2) == 0.0 and sun_lobe_g(0.8, 4) == 0.0
     assert sun_lobe_g(-0.8, 3) == 0.0 and sun_lobe_g(0.5, 3) == 0.0
@@ -177,9 +177,9 @@ def test_probe_inscattered_adds_the_convolved_lobe(ctx):
     """lib/probes.glsl probe_inscattered with PROBE_SUN_LOBE at the probes' texel centres, against
     NumPy: the convolved bands of the unpacked coefficients plus the lobe's amplitude (channels
     49 .. 51) times the convolved residual at d . s, clamped at 0."""
-    from app.render.probe_layout import TEXTURES_FOR_ORDER, colour_channel
-    from app.render.probes import probe_unit
-    from app.twins.sh import sh_band_factors, sh_basis
+    from radiance_probes.rendering.probe_layout import TEXTURES_FOR_ORDER, colour_channel
+    from radiance_probes.rendering.probes import probe_unit
+    from radiance_probes.twins.sh import sh_band_factors, sh_basis
     grid, order, g, h, scale = (3, 2, 2), 3, 0.8, 0.512, 2.0
     count = grid[0] * grid[1] * grid[2]
     ids = TEXTURES_FOR_ORDER[order]
@@ -220,7 +220,7 @@ def test_probe_inscattered_adds_the_convolved_lobe(ctx):
 def test_every_program_that_reads_lobe_probes_compiles(ctx):
     """The passes and the viewer's probe spheres build with PROBE_SUN_LOBE (the spheres' program
     once lacked the sun's direction the lobe needs)."""
-    from app.gl.shaders import compute_program, render_program
+    from radiance_probes.gl.shaders import compute_program, render_program
     defines = {"PROBE_SH_ORDER": 3, "PROBE_SUN_LOBE": 1}
     for grey in (0, 1):
         d = {**defines, "PROBE_GREY": grey}
@@ -232,7 +232,7 @@ def test_every_program_that_reads_lobe_probes_compiles(ctx):
 
 
 # ---------------------------------------------------------------------------------------------
-# The lobe's shape chosen per scene (app/render/sun_lobe_fit.py, glsl/sun_lobe_fit.comp)
+# The lobe's shape chosen per scene (app/rendering/sun_lobe_fit.py, glsl/sun_lobe_fit.comp)
 
 DIRECTIONS_KERNEL = """
 #include "lib/rng.glsl"
@@ -254,7 +254,7 @@ void main()
 
 def test_lobe_amplitudes_glsl_against_twin(ctx):
     import moderngl
-    from app.gl.shaders import compute_program, set_uniforms
+    from radiance_probes.gl.shaders import compute_program, set_uniforms
     probes, directions, seed, pass_index, g = 37, 64, 12345, 1, 0.8
     hs = (0.64, 0.512, 0.4096)
     dirs = run_kernel(ctx, DIRECTIONS_KERNEL, [], (probes * directions, 4),
@@ -315,7 +315,7 @@ def test_fit_chooses_the_lobe_the_probes_see(ctx, tmp_path, power):
     """Probes under an environment map base + A HG_h(omega . s): the pilot picks h among g^2, g^3
     and g^4 (the error the lobe removes is largest for the lobe that is there), and the bake's
     probes hold it."""
-    from app.render.renderer import Renderer
+    from radiance_probes.rendering.renderer import Renderer
     g = 0.8
     scene = _lobe_scene(tmp_path, g, g ** power, 0.7, 0.4, (-0.3, 0.35, -0.89))
     scene = scene.replace(probes=replace(scene.probes, grid=(8, 8, 8), samples=256))

@@ -13,12 +13,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.render.renderer import Renderer
-from app.render.settings import RenderSettings
-from app.scene import parse_scene
-from app.twins.light_grid import light_grid_optical_depth
-from app.twins.medium import box_intersect, sigma_t_at
-from app.twins.sun_shadow import sun_transmittance
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.rendering.settings import RenderSettings
+from radiance_probes.scene import parse_scene
+from radiance_probes.twins.light_grid import light_grid_optical_depth
+from radiance_probes.twins.medium import box_intersect, sigma_t_at
+from radiance_probes.twins.sun_shadow import sun_transmittance
 from glsl_harness import run_kernel
 from test_guided import SCENE as GUIDED_SCENE, _z
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.render.renderer import Renderer
-from app.scene import parse_scene
-from app.volume import load_scene_volume
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.scene import parse_scene
+from radiance_probes.volume import load_scene_volume
 from transport_reference import single_scatter_image, transmittance_image
 
 WHITE = {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]}

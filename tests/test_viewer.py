@@ -14,16 +14,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.twins.camera import camera_frame
-from app.scene import CameraSpec, load_scene, parse_scene
-from app.twins.sh import sh_evaluate
-from app.viewer import layout, orbit
-from app.viewer.probe_view import RADIUS_PER_SPACING, box_edges, probe_centres, uv_sphere
-from app.viewer.state import (ViewerState, add_point, angles_from_direction, direction_from_angles,
+from radiance_probes.twins.camera import camera_frame
+from radiance_probes.scene import CameraSpec, load_scene, parse_scene
+from radiance_probes.twins.sh import sh_evaluate
+from radiance_probes.viewer import layout, orbit
+from radiance_probes.viewer.probe_view import RADIUS_PER_SPACING, box_edges, probe_centres, uv_sphere
+from radiance_probes.viewer.state import (ViewerState, add_point, angles_from_direction, direction_from_angles,
                               move_point, remove_point)
 from viewer_harness import dump, png, srgb8, view, view_pixels, write_script
-from app.render.probe_layout import TEXTURES_FOR_ORDER
-from app.transfer import transfer_table
+from radiance_probes.rendering.probe_layout import TEXTURES_FOR_ORDER
+from radiance_probes.transfer import transfer_table
 
 # The test scene scatters isotropically (g = 0), so "auto" stores SH order 0: two textures.
 PROBE_TEXTURES_G0 = len(TEXTURES_FOR_ORDER[0])
@@ -121,9 +121,9 @@ def test_editing_an_explicit_tables_opacity_keeps_it_explicit():
 
 
 def test_probe_view_draws_the_visible_probes_and_thins_large_grids():
-    from app.twins.medium import sigma_t_at
-    from app.viewer.probe_view import MAX_SPHERES, select_probes, visible_cells
-    from app.volume import load_volume
+    from radiance_probes.twins.medium import sigma_t_at
+    from radiance_probes.viewer.probe_view import MAX_SPHERES, select_probes, visible_cells
+    from radiance_probes.volume import load_volume
     scene = parse_scene({"volume": {"builtin": "sphere", "size": [40, 40, 40]},
                          "transfer_function": {"opacity": [[0, 0], [0.5, 0], [0.6, 1], [1, 1]]}})
     volume = load_volume(scene.volume)
@@ -202,7 +202,7 @@ def test_sphere_mesh_faces_outwards_and_probe_centres_follow_the_spec():
 
 
 def test_headless_commands_do_not_import_the_window_toolkit():
-    code = ("import sys, app.cli; app.cli.build_parser(); "
+    code = ("import sys, radiance_probes.cli; radiance_probes.cli.build_parser(); "
             "print(any(m.split('.')[0] in ('glfw', 'imgui_bundle') for m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
@@ -222,7 +222,7 @@ def display():
     """One private X server for the session's viewer runs."""
     if shutil.which("Xvfb") is None and not os.path.exists("/usr/bin/Xvfb"):
         pytest.skip("Xvfb is not installed (scripts/setup.sh installs it)")
-    from app.viewer.xvfb import Xvfb
+    from radiance_probes.viewer.xvfb import Xvfb
     with Xvfb(1280, 800) as name:
         yield name
 
@@ -331,7 +331,7 @@ def test_error_view_is_a_heat_map_with_its_relative_rmse(run):
     assert d["display"] == "error" and d["samples"] == {"probes": SPP, "pt": SPP}
     assert 0.0 < d["rel_rmse"] < 1.5
     heat = view_pixels(png(out / "error.png"), d)
-    from app.viewer.display import heat_colours
+    from radiance_probes.viewer.display import heat_colours
     palette = np.round(heat_colours(256) * 255)
     nearest = np.abs(heat.reshape(-1, 1, 3) - palette[None]).sum(-1).min(-1)
     assert (nearest <= 12).mean() > 0.97                        # every pixel is a heat colour
@@ -400,7 +400,7 @@ def test_pan_zoom_and_reset(run):
 
 def test_probe_spheres_show_each_probes_sh_radiance(run):
     out, _ = run
-    from app.viewer.display import BACKGROUND
+    from radiance_probes.viewer.display import BACKGROUND
     alone = dump(out / "grid_alone.json")
     image = png(out / "grid_alone.png")
     assert alone["probe_view"] == "alone" and _sphere_colours_checked(image, alone) >= 4
@@ -463,7 +463,7 @@ def test_unseen_volume_with_an_explicit_table_and_a_fine_probe_grid(display, tmp
     function that leaves the air transparent, the probe view at 32^3. The editor shows the
     table's own opacity, and the probe view draws the probes in the visible head only, so most
     of the picture is still the volume."""
-    from app.transfer import opacity_points
+    from radiance_probes.transfer import opacity_points
     z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in (40, 48, 40)), indexing="ij")
     r = np.sqrt(x * x + (y / 1.1) ** 2 + z * z)
     head = np.where(r < 0.7, 0.55 + 0.3 * (r < 0.6), 0.02 * np.cos(9 * x) ** 2)
@@ -488,7 +488,7 @@ def test_unseen_volume_with_an_explicit_table_and_a_fine_probe_grid(display, tmp
     assert drawn["total"] == math.prod(alone["probe_grid"]) and max(alone["probe_grid"]) == 32
     assert 0 < drawn["visible"] < drawn["total"] and drawn["stride"] >= 1
     assert len(drawn["indices"]) <= min(drawn["visible"], 4096)
-    from app.viewer.display import BACKGROUND
+    from radiance_probes.viewer.display import BACKGROUND
     image = view_pixels(png(tmp_path / "alone.png"), alone)
     covered = ~_is_background(image, np.round(np.array(BACKGROUND) * 255))
     assert 0.02 < covered.mean() < 0.5, covered.mean()   # a lattice in the head, not a wall
@@ -588,7 +588,7 @@ def test_cli_screenshot_starts_its_own_display(display, tmp_path):
 
 def test_shader_error_is_shown_not_a_crash(display, tmp_path):
     glsl = tmp_path / "glsl"
-    from app.paths import GLSL_DIR
+    from radiance_probes.paths import GLSL_DIR
     shutil.copytree(GLSL_DIR, glsl)
     frag = glsl / "probe_sphere.frag"
     frag.write_text(frag.read_text().replace("frag_colour = vec4(", "frag_colour = vec5("))
@@ -666,7 +666,7 @@ def test_probe_view_shows_where_an_adaptive_layout_put_the_probes(display, tmp_p
     assert alone["probes_ready"] and planes is not None
     y = np.asarray(planes[1])
     assert y.min() > 0.2 and y.max() < 0.8            # drawn towards the slab
-    from app.viewer.display import BACKGROUND
+    from radiance_probes.viewer.display import BACKGROUND
     image = png(tmp_path / "alone.png")
     background = np.round(np.array(BACKGROUND) * 255)
     pixels = np.asarray(alone["probe_pixels"])

@@ -10,11 +10,11 @@ import shutil
 import numpy as np
 import pytest
 
-from app.scene import CameraSpec, load_scene, load_transfer_function, parse_scene
-from app.viewer.crop_handles import dragged, drag_start, handles, plane_polygon
-from app.viewer.history import SceneHistory
-from app.viewer.state import ViewerState
-from app.volume import Volume
+from radiance_probes.scene import CameraSpec, load_scene, load_transfer_function, parse_scene
+from radiance_probes.viewer.crop_handles import dragged, drag_start, handles, plane_polygon
+from radiance_probes.viewer.history import SceneHistory
+from radiance_probes.viewer.state import ViewerState
+from radiance_probes.volume import Volume
 from viewer_harness import dump, png, view, view_pixels, write_script
 
 # ---- undo and redo (no window) ---------------------------------------------------------------------
@@ -117,7 +117,7 @@ SCENE = {"volume": {"builtin": "cloud", "size": [24, 20, 16]}, "density_scale": 
 def display():
     if shutil.which("Xvfb") is None and not os.path.exists("/usr/bin/Xvfb"):
         pytest.skip("Xvfb is not installed (scripts/setup.sh installs it)")
-    from app.viewer.xvfb import Xvfb
+    from radiance_probes.viewer.xvfb import Xvfb
     with Xvfb(1280, 800) as name:
         yield name
 
@@ -198,7 +198,7 @@ def test_scene_saved_with_the_viewer_state_and_a_movie_recorded(session):
     rec = dump(out / "recorded.json")
     assert rec["recording"] is None and rec["errors"] == []
     assert any("recorded 2 frames" in m for m in rec["messages"])
-    from app.movie_writer import count_frames
+    from radiance_probes.movie_writer import count_frames
     assert count_frames(out / "movie.mp4") == 2
 
 

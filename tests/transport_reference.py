@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.twins.camera import camera_frame
-from app.twins.medium import box_intersect, sigma_t_at
-from app.twins.phase import phase_hg
-from app.scene import Scene
-from app.transfer import transfer_table
-from app.volume import Volume
+from radiance_probes.twins.camera import camera_frame
+from radiance_probes.twins.medium import box_intersect, sigma_t_at
+from radiance_probes.twins.phase import phase_hg
+from radiance_probes.scene import Scene
+from radiance_probes.transfer import transfer_table
+from radiance_probes.volume import Volume
 
 
 def pixel_rays(scene: Scene, sub: int):
@@ -58,7 +58,7 @@ def single_scatter_image(scene: Scene, volume: Volume, sub: int = 3, steps: int 
     dt = (t1 - t0) / steps
     out = np.zeros(dirs.shape[:-1] + (3,))
     tau_cam = np.zeros(dirs.shape[:-1])
-    from app.twins.medium import albedo_at
+    from radiance_probes.twins.medium import albedo_at
     for k in range(steps):
         t = t0 + (t1 - t0) * u[k]
         x = eye + t[..., None] * dirs

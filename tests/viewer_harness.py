@@ -1,4 +1,4 @@
-"""Helpers for tests/test_viewer.py: run the real viewer (``python -m app view``) in a real window
+"""Helpers for tests/test_viewer.py: run the real viewer (``python -m radiance_probes view``) in a real window
 on a private Xvfb, read its screenshots and state dumps.
 
 Run as a script it is the viewer with test hooks:
@@ -34,7 +34,7 @@ def view(args: list[str], cwd: Path, display: str | None, timeout: int = RUN_TIM
         env["DISPLAY"] = display
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     if harness is None:
-        cmd = [sys.executable, "-m", "app", "view", *args]
+        cmd = [sys.executable, "-m", "radiance_probes", "view", *args]
     else:
         cmd = [sys.executable, str(HARNESS), *harness, "--", "view", *args]
     proc = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
@@ -64,7 +64,7 @@ def view_pixels(image: np.ndarray, d: dict) -> np.ndarray:
 
 
 def srgb8(linear) -> np.ndarray:
-    from app.render.tonemap import to_uint8
+    from radiance_probes.rendering.tonemap import to_uint8
     return to_uint8(np.asarray(linear, np.float64)).astype(np.int16)
 
 
@@ -79,8 +79,8 @@ def _release_check(argv: list[str]) -> int:
     """Runs the viewer, remembers its GPU objects before the window closes, checks them after."""
     import moderngl
 
-    import app.viewer.window as window_module
-    from app.cli import main
+    import radiance_probes.viewer.window as window_module
+    from radiance_probes.cli import main
 
     seen: list = []
     original_close = window_module.ViewerWindow.close
@@ -108,17 +108,17 @@ if __name__ == "__main__":
     split = sys.argv.index("--")
     hooks, view_argv = sys.argv[1:split], sys.argv[split + 1:]
     if "--glsl" in hooks:
-        import app.gl.shaders as shaders
+        import radiance_probes.gl.shaders as shaders
         shaders.GLSL_DIR = Path(hooks[hooks.index("--glsl") + 1])
     if "--lazy-bytes" in hooks:   # Zarr stores larger than this are read brick by brick
-        import app.volume
-        app.volume.LAZY_BYTES = int(hooks[hooks.index("--lazy-bytes") + 1])
+        import radiance_probes.volume
+        radiance_probes.volume.LAZY_BYTES = int(hooks[hooks.index("--lazy-bytes") + 1])
     if "--open-delay" in hooks:   # a volume opening on a thread starts this many seconds late
         import time as _time
-        from app.render.progressive_open import ProgressiveOpen
+        from radiance_probes.rendering.progressive_open import ProgressiveOpen
         delay, work = float(hooks[hooks.index("--open-delay") + 1]), ProgressiveOpen._work
         ProgressiveOpen._work = lambda self: (_time.sleep(delay), work(self))[1]
     if "--release-check" in hooks:
         sys.exit(_release_check(view_argv))
-    from app.cli import main
+    from radiance_probes.cli import main
     sys.exit(main(view_argv))

@@ -6,10 +6,10 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from .scenes import ALL_SCENES, BATTERY_SCENES
-from ..render.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
+from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 
 # The sweep's probe layouts (`--probe-layouts`): "uniform", or an adaptive layout driven by that
-# indicator (app/render/probe_planes.py), each at the same probe counts.
+# indicator (app/rendering/probe_planes.py), each at the same probe counts.
 BENCH_PROBE_LAYOUTS = ("uniform", "extinction", "sun")
 
 

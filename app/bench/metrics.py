@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from ..render.tonemap import tonemap
+from ..rendering.tonemap import tonemap
 
 
 def rrmse(image: np.ndarray, reference: np.ndarray) -> float:

@@ -75,7 +75,7 @@ def _pt_to_error(renderer, camera, reference, noise, target: float, config) -> d
 
 def movie_scene(renderer, name: str, config, results, out: Path, device: str) -> None:
     from ..camera_path import turntable
-    from ..render.renderer import Renderer
+    from ..rendering.renderer import Renderer
     scene = renderer.scene
     grid, walks = config.movie_probes
     scene = scene.replace(probes=replace(scene.probes, grid=(grid,) * 3, samples=walks))

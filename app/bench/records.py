@@ -11,7 +11,7 @@ import numpy as np
 
 from ..gl.dispatch_log import active_log
 
-from ..render.pathtracer import PIXEL_STATE_BYTES
+from ..rendering.pathtracer import PIXEL_STATE_BYTES
 from .ceiling import SPEED_CHECK_SLOWER
 from .clock_log import report_lines as clock_report_lines
 from .config import BenchConfig

@@ -244,7 +244,7 @@ def plot(data: dict, scenes: list[str], path: Path) -> None:
 def dispatch_lines(data: dict, scenes: list[str]) -> list[str]:
     """The longest single dispatch per scene and method (every record holds the longest since the
     record before it: app/gl/dispatch_log.py), against DISPATCH_BOUND_MS."""
-    from ..render.dispatch_budget import DISPATCH_BOUND_MS
+    from ..rendering.dispatch_budget import DISPATCH_BOUND_MS
     recs = [r for r in data["records"] if r.get("longest_dispatch_ms") is not None]
     if not recs:
         return []

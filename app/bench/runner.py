@@ -23,7 +23,7 @@ from ..gl.checks import checks_for
 from ..gl.dispatch_log import DispatchLog
 from .records import log as _log, make_record, progressive as _progressive
 from .report import load as load_results
-from ..render.probe_layout import resolve_sh_order
+from ..rendering.probe_layout import resolve_sh_order
 from .scenes import bench_scene
 
 PROBE_METHODS = ("probes", "probes-only")
@@ -106,7 +106,7 @@ def _layout_info(renderer) -> dict:
 
 def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Path:
     from ..gl.context import create_headless_context, describe
-    from ..render.renderer import Renderer
+    from ..rendering.renderer import Renderer
     from ..volume import load_volume
 
     out = Path(out_dir)

@@ -14,7 +14,7 @@ from ..bricks import (APRON, CONSTANTS_WIDTH, FREE_SLOT, brick_counts, slot_byte
 from ..scene_types import VolumeError
 from ..twins.brick_pool import Packed
 
-# Texture units (0: the volume, here the atlas; 1 to 15: the passes' own, app/render/*.py).
+# Texture units (0: the volume, here the atlas; 1 to 15: the passes' own, app/rendering/*.py).
 ATLAS_UNIT = 0
 TABLE_UNIT = 16
 CONSTANTS_UNIT = 17
@@ -89,7 +89,7 @@ class BrickPool:
         self.write_seconds = 0.0  # in them
         self.upload_seconds = None   # upload_store's, all of it
         self.table_writes = 0  # page-table texels written after the pool was made (streaming)
-        # a streamed mix (app/render/level_stream.py): the PoolPlan it was made from, and the
+        # a streamed mix (app/rendering/level_stream.py): the PoolPlan it was made from, and the
         # LevelStream that changes it (made by the Renderer's resources on first use)
         self.plan = None
         self.stream = None

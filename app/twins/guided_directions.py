@@ -30,7 +30,7 @@ def cell_centre_directions(w_in, g: float) -> np.ndarray:
 
 def direction_table(coeffs, w_in, g: float, window: int, order: int = 2) -> np.ndarray:
     """The table's running sums (CELLS,) at an event reached along w_in; coeffs (SH_COUNT, 3).
-    The window is the renderer's (app/render/probes.py band_factors): max(order, 2) + 1 wide."""
+    The window is the renderer's (app/rendering/probes.py band_factors): max(order, 2) + 1 wide."""
     c = np.asarray(coeffs, np.float64)
     factors = sh_band_factors(1.0, window, max(order, 2))[sh_band(len(c))]
     luminance = factors * (c @ LUMINANCE)

@@ -15,7 +15,7 @@ Two stages:
   convex combination of those voxels, so its result lies in ``[min, max]`` up to float rounding,
   which ``DENSITY_WIDEN`` covers.
 - ``majorant_grid`` (whenever the transfer function or density_scale changes; on the GPU in
-  app/render/majorant_grid.py): ``density_scale * max A(d)`` over ``d`` in ``[min, max]``. ``A`` is
+  app/rendering/majorant_grid.py): ``density_scale * max A(d)`` over ``d`` in ``[min, max]``. ``A`` is
   piecewise linear, so its maximum over an interval is at the interval's ends or at a table node
   inside it. ``MAJORANT_SAFETY`` covers float32 rounding of the interpolation and the product.
 """

@@ -68,7 +68,7 @@ def run_view(args: argparse.Namespace) -> int:
     if has_display() or scripted:
         # A volume that does not load fails here, before a window, an X server or a GL context;
         # a Zarr store read brick by brick loads on a thread once the window is open, a preview
-        # of it shown meanwhile (app/render/progressive_open.py).
+        # of it shown meanwhile (app/rendering/progressive_open.py).
         volume = (zarr_preview(scene, memory_bytes=getattr(args, "volume_memory", None))
                   if reads_lazily(scene) else None)
         progressive = volume is not None
@@ -105,7 +105,7 @@ def _run_window(args: argparse.Namespace, scene: Scene, volume, steps, scripted:
     try:
         settings = None
         if getattr(args, "volume_memory", None):
-            from ..render.settings import RenderSettings
+            from ..rendering.settings import RenderSettings
             settings = RenderSettings(volume_memory_bytes=args.volume_memory)
         window = ViewerWindow(state, width, height, vsync=not scripted,
                               file_dialog=args.file_dialog, volume=volume, settings=settings)

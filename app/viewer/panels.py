@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
-from ..render.renderer import MAX_GATHER_EVENT, RAYMARCH_STAGES
+from ..rendering.renderer import MAX_GATHER_EVENT, RAYMARCH_STAGES
 from ..scene_types import VIEWER_METHODS as METHODS
 from ..scene import (ORIENTATIONS, PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS,
                      PROBE_LAYOUTS, PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS)
@@ -405,7 +405,7 @@ def auto_section(v) -> None:
     if changed:
         v.auto_target = float(t)
     if imgui.button("Auto: cheapest probes meeting it"):
-        from ..render.auto_probes import choose_probes
+        from ..rendering.auto_probes import choose_probes
         method = state.method if state.method != "pt" else "raymarch"
         choice = choose_probes(v.session.renderer, v.auto_target, method)
         p = choice.scene.probes

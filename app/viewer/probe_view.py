@@ -15,8 +15,8 @@ import moderngl
 import numpy as np
 
 from ..gl.shaders import render_program, set_uniforms
-from ..render.probes import ProbeGrid
-from ..render.resources import SceneResources
+from ..rendering.probes import ProbeGrid
+from ..rendering.resources import SceneResources
 from ..twins.probe_warp import probe_fractions, warp_exact
 from .orbit import gl_matrix
 

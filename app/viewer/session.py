@@ -14,7 +14,7 @@ samples per shown method as the rest of the frame holds by their measured cost, 
 
 `refine` (RefineView) is two renderers in one view: after any edit the raymarcher's image shows
 at once; once the probes are current, `guided` samples accumulate beside it in two independent
-halves (app/render/refine.py), and the view switches to their mean when its error, estimated from
+halves (app/rendering/refine.py), and the view switches to their mean when its error, estimated from
 the halves, falls below the raymarcher's, estimated against that same unbiased mean. `guided`
 waits for the bake: its two levels must read the same probes for the whole accumulation.
 """
@@ -29,11 +29,11 @@ import moderngl
 import numpy as np
 
 from ..gl.context import is_software
-from ..render.accumulation import Accumulation
-from ..render.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
-from ..render.probes import BakeProgress
-from ..render.refine import HalfBuffers, RefineEstimate
-from ..render.renderer import PROBE_LIGHTING, Renderer
+from ..rendering.accumulation import Accumulation
+from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
+from ..rendering.probes import BakeProgress
+from ..rendering.refine import HalfBuffers, RefineEstimate
+from ..rendering.renderer import PROBE_LIGHTING, Renderer
 from ..scene import Scene
 from ..volume import Volume
 
@@ -167,7 +167,7 @@ class RenderSession:
     # ---- configuration -------------------------------------------------------------------------
     def set_scene(self, scene: Scene, volume: Volume | None = None, placed=None) -> set[str]:
         """Adopts an edited scene; restarts the accumulations when anything visible changed.
-        `placed`: `volume` already placed (app/render/progressive_open.py)."""
+        `placed`: `volume` already placed (app/rendering/progressive_open.py)."""
         if scene is self.renderer.scene and volume is None:
             return set()
         changed = self.renderer.set_scene(scene, volume, placed)

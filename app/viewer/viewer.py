@@ -18,7 +18,7 @@ from ..gl.timer import GpuTimer
 from ..scene import SceneError, scene_to_dict
 from ..environment_map import load_scene_environment
 from ..channels import volume_inputs
-from ..render.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
+from ..rendering.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
 from ..volume import VolumeError, load_scene_volume, reads_lazily, zarr_preview
 from . import layout, orbit, overlays, panels
 from .display import BACKGROUND, DisplayPass, ErrorMeter
@@ -234,7 +234,7 @@ class Viewer:
         return self.session.renderer.resources.volume_memory_bytes
 
     def open_in_background(self, scene) -> None:
-        """Loads the scene's volume on a thread (app/render/progressive_open.py) while what is
+        """Loads the scene's volume on a thread (app/rendering/progressive_open.py) while what is
         shown now (a preview) stays; it replaces it once all its bricks are written."""
         if self.opening is not None:
             self.opening.cancel()

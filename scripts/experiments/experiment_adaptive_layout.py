@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from app.gl.context import create_headless_context
-from app.render.renderer import Renderer
-from app.scene import parse_scene
+from radiance_probes.gl.context import create_headless_context
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.scene import parse_scene
 
 ctx = create_headless_context()
 folder = Path(tempfile.mkdtemp())

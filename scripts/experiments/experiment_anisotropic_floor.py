@@ -14,12 +14,12 @@ from dataclasses import replace
 import numpy as np
 
 sys.path.insert(0, ".")
-import app.render.light_transmittance as light_module
-from app.bench.metrics import corrected_rrmse, reference_noise, rrmse
-from app.bench.scenes import bench_scene
-from app.gl.context import create_headless_context, describe
-from app.render.renderer import Renderer
-from app.volume import load_volume
+import radiance_probes.rendering.light_transmittance as light_module
+from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.volume import load_volume
 
 out_path = sys.argv[1]
 half_spp = int(sys.argv[2]) if len(sys.argv) > 2 else 4096

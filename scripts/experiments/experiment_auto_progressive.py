@@ -1,4 +1,4 @@
-"""Does `auto` without a search (app/render/auto_progressive.py) reach a target error for less than
+"""Does `auto` without a search (app/rendering/auto_progressive.py) reach a target error for less than
 the path tracer, and how near the best fixed setting? For each scene at 512^2 and each target:
 the image `auto_render` returns, its error against a path-traced reference (two independent halves,
 corrected for their noise), and everything it cost (GPU ms: path-traced samples, every trial's bake,
@@ -19,13 +19,13 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, ".")
-from app.bench.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
-from app.bench.scenes import bench_scene  # noqa: E402
-from app.gl.context import create_headless_context, describe  # noqa: E402
-from app.render.auto_progressive import auto_render  # noqa: E402
-from app.render.renderer import Renderer  # noqa: E402
-from app.scene import parse_scene  # noqa: E402
-from app.volume import load_volume  # noqa: E402
+from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
+from radiance_probes.bench.scenes import bench_scene  # noqa: E402
+from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
+from radiance_probes.rendering.auto_progressive import auto_render  # noqa: E402
+from radiance_probes.rendering.renderer import Renderer  # noqa: E402
+from radiance_probes.scene import parse_scene  # noqa: E402
+from radiance_probes.volume import load_volume  # noqa: E402
 
 QUICK = {"volume": {"builtin": "cloud", "size": [20, 20, 20]}, "density_scale": 40.0,
          "camera": {"eye": [0, 0.3, 2.2], "width": 48, "height": 48}}
@@ -44,7 +44,7 @@ out = Path(args.out)
 
 def compare(out: Path, bench: Path) -> None:
     """report.md: each row of OUT_DIR/results.json beside the bench run's time to its target."""
-    from app.bench.report import load, main_records, time_to_error
+    from radiance_probes.bench.report import load, main_records, time_to_error
     data = load(bench)
     rows = json.loads((out / "results.json").read_text())
     lines = [f"# `render --auto` against fixed settings ({rows['device']})", "",

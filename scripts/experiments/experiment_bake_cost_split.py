@@ -22,11 +22,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from app.bench.scenes import bench_scene  # noqa: E402
-from app.gl.profiler import GpuProfile  # noqa: E402
-from app.gl.context import is_software  # noqa: E402
-from app.render.dispatch_budget import DISPATCH_TARGET_MS  # noqa: E402
-from app.render.renderer import Renderer  # noqa: E402
+from radiance_probes.bench.scenes import bench_scene  # noqa: E402
+from radiance_probes.gl.profiler import GpuProfile  # noqa: E402
+from radiance_probes.gl.context import is_software  # noqa: E402
+from radiance_probes.rendering.dispatch_budget import DISPATCH_TARGET_MS  # noqa: E402
+from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 
 VARIANTS = {
     "defaults": {},
@@ -34,7 +34,7 @@ VARIANTS = {
     "no adaptive walks": {"walk_adaptive": 0.0},
     "neither": {"walk_sun_correction": 0.0, "walk_adaptive": 0.0},
     "sun by ray": {"walk_sun": "ray"},
-    # the bake's walk chunks cut at another target (app/render/dispatch_budget.py; inf: one
+    # the bake's walk chunks cut at another target (app/rendering/dispatch_budget.py; inf: one
     # dispatch a pass, as before the bounded dispatches)
     "chunks of 50 ms": {"_target": 50.0},
     "uncut": {"_target": float("inf")},
@@ -51,7 +51,7 @@ def main(argv=None) -> int:
     scenes = ("thick",) if args.quick else ("bonsai", "fuel", "thick", "anisotropic")
     settings = ((4, 16),) if args.quick else ((8, 16), (64, 128), (128, 64))
     size = 32 if args.quick else 512
-    from app.gl.context import create_headless_context, describe
+    from radiance_probes.gl.context import create_headless_context, describe
     ctx = create_headless_context()
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -66,7 +66,7 @@ def main(argv=None) -> int:
                                                          samples=walks)))
                 for label, change in VARIANTS.items():
                     change = dict(change)
-                    import app.render.renderer as renderer_module
+                    import radiance_probes.rendering.renderer as renderer_module
                     target = change.pop("_target", DISPATCH_TARGET_MS)
                     renderer_module.dispatch_target_ms = (
                         lambda _r, t=target: t if not is_software(_r.ctx) else float("inf"))

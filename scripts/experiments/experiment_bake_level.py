@@ -39,12 +39,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from app.bench.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
-from app.bench.scenes import BUILTIN_SCENES, DATASET_SCENES, bench_scene  # noqa: E402
-from app.gl.context import create_headless_context, describe  # noqa: E402
-from app.render.renderer import Renderer  # noqa: E402
-from app.render.settings import RenderSettings  # noqa: E402
-from app.scene import parse_scene  # noqa: E402
+from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
+from radiance_probes.bench.scenes import BUILTIN_SCENES, DATASET_SCENES, bench_scene  # noqa: E402
+from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
+from radiance_probes.rendering.renderer import Renderer  # noqa: E402
+from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
+from radiance_probes.scene import parse_scene  # noqa: E402
 
 BUILT_IN = ("thick", "anisotropic", "shell-g06", "shell-g09", "speck")
 

@@ -14,12 +14,12 @@ Usage:
 import argparse, json, statistics
 from dataclasses import replace
 import numpy as np
-from app.gl.context import create_headless_context, describe
-from app.gl.timer import GpuTimer
-from app.render.renderer import Renderer
-from app.bench.ceiling import speed_check_ms
-from app.bench.scenes import bench_scene
-from app.volume import load_volume
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.gl.timer import GpuTimer
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.bench.ceiling import speed_check_ms
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.volume import load_volume
 
 parser = argparse.ArgumentParser()
 parser.add_argument("out")

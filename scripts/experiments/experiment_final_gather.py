@@ -15,11 +15,11 @@ from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, ".")
-from app.bench.metrics import corrected_rrmse, reference_noise, rrmse
-from app.bench.scenes import bench_scene
-from app.gl.context import create_headless_context, describe
-from app.render.renderer import Renderer
-from app.volume import load_volume
+from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.volume import load_volume
 
 SETTINGS = {"anisotropic": "32x256,64x128,128x256", "bonsai": "64x64,128x64",
             "foot": "64x64,128x64", "fuel": "64x64", "hydrogen": "16x16", "thick": "16x16"}

@@ -9,9 +9,9 @@ tree = sys.argv[1]
 sys.path.insert(0, tree)
 os.chdir(tree)
 from dataclasses import replace
-from app.bench.scenes import bench_scene
-from app.gl.context import create_headless_context
-from app.render.renderer import Renderer
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.gl.context import create_headless_context
+from radiance_probes.rendering.renderer import Renderer
 ctx = create_headless_context()
 out = {}
 for name in ("thick", "anisotropic"):

@@ -9,8 +9,8 @@ import json
 import statistics
 import sys
 sys.path.insert(0, ".")
-from app.bench.config import PRESETS  # noqa: E402
-from app.bench.runner import run_bench  # noqa: E402
+from radiance_probes.bench.config import PRESETS  # noqa: E402
+from radiance_probes.bench.runner import run_bench  # noqa: E402
 out = sys.argv[1]
 base = PRESETS["interact"].scaled(scenes=("bonsai",), interact_sizes=((1920, 1080),),
                                   interact_methods=("raymarch",))

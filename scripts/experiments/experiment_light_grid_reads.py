@@ -9,10 +9,10 @@ Usage:
         [--scenes anisotropic,bonsai,thick,foot]"""
 import argparse, json, statistics
 from dataclasses import replace
-from app.gl.context import create_headless_context, describe
-from app.render.renderer import Renderer
-from app.bench.scenes import bench_scene
-from app.volume import load_volume
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.volume import load_volume
 
 parser = argparse.ArgumentParser()
 parser.add_argument("out")

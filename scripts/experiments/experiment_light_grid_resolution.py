@@ -7,11 +7,11 @@ bench/h100-light (per-texel march) and bench/h100-light-sheared (the sheared col
 import json, statistics, sys
 from dataclasses import replace
 import numpy as np
-from app.gl.context import create_headless_context, describe
-from app.render.renderer import Renderer
-from app.bench.scenes import bench_scene
-from app.bench.metrics import rrmse, corrected_rrmse
-from app.volume import load_volume
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.bench.metrics import rrmse, corrected_rrmse
+from radiance_probes.volume import load_volume
 
 ctx = create_headless_context()
 refs = dict(a.split("=", 1) for a in sys.argv[2:])

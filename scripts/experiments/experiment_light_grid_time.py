@@ -6,10 +6,10 @@ Usage:
     python scripts/experiments/experiment_light_grid_time.py OUT.json [scene ...]"""
 import dataclasses, json, statistics, sys
 from pathlib import Path
-from app.gl.context import create_headless_context, describe
-from app.render.renderer import Renderer
-from app.bench.scenes import bench_scene
-from app.volume import load_volume
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.volume import load_volume
 
 BEFORE = Path(__file__).resolve().parents[2] / "bench/h100-light-time/results.json"
 before = {}

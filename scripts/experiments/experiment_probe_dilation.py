@@ -5,13 +5,13 @@ on the read-back textures; raymarch rRMSE (corrected) per T. Usage: python scrip
 import json, sys
 from dataclasses import replace
 import numpy as np
-from app.gl.context import create_headless_context
-from app.render.renderer import Renderer
-from app.bench.scenes import bench_scene
-from app.bench.metrics import rrmse, corrected_rrmse
-from app.volume import load_volume
-from app.twins.medium import sigma_t_at
-from app.viewer.probe_view import probe_centres
+from radiance_probes.gl.context import create_headless_context
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.bench.metrics import rrmse, corrected_rrmse
+from radiance_probes.volume import load_volume
+from radiance_probes.twins.medium import sigma_t_at
+from radiance_probes.viewer.probe_view import probe_centres
 
 ctx = create_headless_context()
 # NAME=DIR pairs: DIR holds an earlier bench run's refs/NAME.npy and results.json

@@ -6,11 +6,11 @@ Usage:
     python scripts/experiments/experiment_raymarch_sizes.py OUT.json [--scenes bonsai,foot] [--grids 128x64,64x256] [--sizes WxH,...]"""
 import argparse, json, statistics
 from dataclasses import replace
-from app.gl.context import create_headless_context, describe
-from app.render.renderer import Renderer
-from app.bench.ceiling import speed_check_ms
-from app.bench.scenes import bench_scene
-from app.volume import load_volume
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.bench.ceiling import speed_check_ms
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.volume import load_volume
 
 parser = argparse.ArgumentParser()
 parser.add_argument("out")

@@ -8,11 +8,11 @@ import json
 import sys
 from dataclasses import replace
 sys.path.insert(0, ".")
-from app.bench.scenes import bench_scene
-from app.bench.interact import orbit, _rotate_y
-from app.gl.context import create_headless_context, describe
-from app.render.renderer import Renderer
-from app.volume import load_volume
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.bench.interact import orbit, _rotate_y
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.volume import load_volume
 
 ctx = create_headless_context()
 print(describe(ctx))

@@ -6,11 +6,11 @@ and bake_profile_after.json, with today's)."""
 import sys, json
 from dataclasses import replace
 sys.path.insert(0, ".")
-from app.bench.scenes import bench_scene
-from app.gl.context import create_headless_context, describe
-from app.gl.profiler import GpuProfile
-from app.render.renderer import Renderer
-from app.volume import load_volume
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.gl.profiler import GpuProfile
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.volume import load_volume
 ctx = create_headless_context(); print(describe(ctx))
 base = bench_scene("anisotropic", 512, 512)
 r = Renderer(ctx, base, load_volume(base.volume, base.base_dir))

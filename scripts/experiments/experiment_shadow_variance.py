@@ -46,11 +46,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from app.bench.scenes import ALL_SCENES, bench_scene  # noqa: E402
-from app.render.renderer import Renderer  # noqa: E402
-from app.render.settings import RenderSettings  # noqa: E402
-from app.scene import parse_scene  # noqa: E402
-from app.volume import load_volume  # noqa: E402
+from radiance_probes.bench.scenes import ALL_SCENES, bench_scene  # noqa: E402
+from radiance_probes.rendering.renderer import Renderer  # noqa: E402
+from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
+from radiance_probes.scene import parse_scene  # noqa: E402
+from radiance_probes.volume import load_volume  # noqa: E402
 
 SCENES = (*ALL_SCENES, "cloud")
 HAS_TRACKING = "shadow_tracking" in {f.name for f in dataclasses.fields(RenderSettings)}
@@ -210,7 +210,7 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=1000)
     args = p.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
-    from app.gl.context import create_headless_context, describe
+    from radiance_probes.gl.context import create_headless_context, describe
     ctx = create_headless_context()
     device = describe(ctx)
     log_file = (args.out / "log.txt").open("a")

@@ -4,12 +4,12 @@ Usage: python scripts/experiments/experiment_small_settings.py OUT.json SCENE[,S
 import sys, json, statistics, time
 from dataclasses import replace
 sys.path.insert(0, ".")
-from app.bench.scenes import bench_scene
-from app.bench.records import progressive
-from app.gl.context import create_headless_context, describe
-from app.gl.profiler import GpuProfile
-from app.render.renderer import Renderer
-from app.volume import load_volume
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.bench.records import progressive
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.gl.profiler import GpuProfile
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.volume import load_volume
 ctx = create_headless_context(); dev = describe(ctx); print(dev, flush=True)
 rows = []
 def med(xs): return statistics.median(xs)

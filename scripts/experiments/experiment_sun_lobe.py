@@ -7,7 +7,7 @@ Usage (GPU): python scripts/experiments/experiment_sun_lobe.py OUT.json SETTINGS
 [CHANGES ...]
   SETTINGS  GRIDxWALKS,...   e.g. 128x256,64x512
   LOBES     lobe g = (scene's g)^p for each p, 0 for none, "auto" for the shape the pilot chooses
-            (app/render/sun_lobe_fit.py); e.g. 0,3,auto (the bands above the order extrapolated
+            (app/rendering/sun_lobe_fit.py); e.g. 0,3,auto (the bands above the order extrapolated
             from the top two instead were measured too: bench/h100-sun-lobe)
   CHANGES   scene changes as JSON, each its own scene: '{"anisotropy": 0.9}',
             '{"light": [1, 0.2, 0]}' (the sun's direction), '{"albedo": 0.8}', and probe
@@ -19,12 +19,12 @@ from dataclasses import replace
 import numpy as np
 
 sys.path.insert(0, ".")
-import app.render.probe_layout as layout_module
-from app.bench.metrics import corrected_rrmse, reference_noise, rrmse
-from app.bench.scenes import bench_scene
-from app.gl.context import create_headless_context, describe
-from app.render.renderer import Renderer
-from app.volume import load_volume
+import radiance_probes.rendering.probe_layout as layout_module
+from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.volume import load_volume
 
 out_path = sys.argv[1]
 settings = [tuple(int(v) for v in s.split("x")) for s in sys.argv[2].split(",")]

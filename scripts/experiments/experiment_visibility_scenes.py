@@ -9,11 +9,11 @@ import sys
 import numpy as np
 
 sys.path.insert(0, ".")
-from app.bench.metrics import rrmse
-from app.gl.context import create_headless_context
-from app.render.renderer import Renderer
-from app.scene import parse_scene
-from app.volume import Volume
+from radiance_probes.bench.metrics import rrmse
+from radiance_probes.gl.context import create_headless_context
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.scene import parse_scene
+from radiance_probes.volume import Volume
 
 ctx = create_headless_context()
 n = 24

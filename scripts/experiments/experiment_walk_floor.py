@@ -18,12 +18,12 @@ from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, ".")
-from app.bench.bake import _profile
-from app.bench.ceiling import measure_ceiling
-from app.bench.scenes import bench_scene
-from app.gl.context import create_headless_context, describe
-from app.render.renderer import Renderer
-from app.volume import load_volume
+from radiance_probes.bench.bake import _profile
+from radiance_probes.bench.ceiling import measure_ceiling
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.volume import load_volume
 
 parser = argparse.ArgumentParser()
 parser.add_argument("out")

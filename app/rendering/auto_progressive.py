@@ -4,7 +4,7 @@ a raymarched one over probes where some probe setting reaches it, else the path 
 The path tracer's image accumulates at full resolution as two independent halves (a round
 doubles its samples, or adds fewer where its error's fall predicts the target sooner:
 next_pt_spp). It is the reference everything is judged against, and also the fallback:
-- its own relative RMSE is estimated from the halves (app/render/refine.py: N^2 = w mean((a -
+- its own relative RMSE is estimated from the halves (app/rendering/refine.py: N^2 = w mean((a -
   b)^2) estimates the mean's noise, T^2 = mean(m^2) - N^2 the image's power);
 - a raymarched image r (independent of the halves) has E[mean((r - m)^2)] = its squared error +
   N^2, so mean((r - m)^2 - w (a - b)^2) / T^2 estimates its squared relative error. Averaged over

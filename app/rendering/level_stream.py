@@ -1,4 +1,4 @@
-"""Streaming a mixed pool's finer level as the camera moves (app/render/level_mix.py): the pool's
+"""Streaming a mixed pool's finer level as the camera moves (app/rendering/level_mix.py): the pool's
 atlas has every slot the cap allows; the coarser level C is resident whole and stays; the finer
 level F's bricks come and go.
 

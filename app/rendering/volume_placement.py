@@ -100,7 +100,7 @@ def _may_fit(at_least, store: BrickStore, channels: int, exact_uint8: bool, max_
 
 @dataclasses.dataclass
 class Placement:
-    """Where a volume goes, decided on the host (no GL calls: app/render/progressive_open.py
+    """Where a volume goes, decided on the host (no GL calls: app/rendering/progressive_open.py
     decides on a thread): `shown` the volume shown (a coarser level under a cap, or a mix of two
     levels, with its note), `plan` its pool where it is bricked (None: one texture)."""
     shown: Volume
@@ -119,7 +119,7 @@ def plan_placement(volume: Volume, limits, memory_bytes: int | None = None,
     """Where `volume` goes under `limits` (device_limits): one texture where it fits, else the
     finest level whose bricks that are not constant fit the cap, and with a `camera` the memory
     it leaves filled with the next finer level's bricks the camera sees largest
-    (app/render/level_mix.py). Reads the range passes it needs; no GL calls."""
+    (app/rendering/level_mix.py). Reads the range passes it needs; no GL calls."""
     max_side, available, where = limits
     channels = volume.channel_count
     exact = volume.exact_uint8

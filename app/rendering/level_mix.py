@@ -11,7 +11,7 @@ Each brick of F (the pool's level 0) reads F or C:
 The footprint of a voxel of world size s at distance d is s / (2 d tan(fov_y / 2) / height)
 pixels. The placement chooses for the camera it is given; C is resident whole and the atlas has
 every slot the cap allows, so F's bricks are streamed as the camera moves
-(app/render/level_stream.py: the same choice, choose_fine, made again for the new camera).
+(app/rendering/level_stream.py: the same choice, choose_fine, made again for the new camera).
 Every method reads the same mixed medium: the path tracer stays the reference of what is shown.
 Off by default (RenderSettings.mixed_levels): the benchmark has not shown it paying.
 """
@@ -71,7 +71,7 @@ def footprints(dims, brick: int, half_extent, camera) -> np.ndarray:
 
 @dataclass
 class Mix:
-    """What a streamed mix chooses from (app/render/level_stream.py): the finer level F and the
+    """What a streamed mix chooses from (app/rendering/level_stream.py): the finer level F and the
     coarser C (BrickStores), the volume's box, the slots of the pool's atlas (`capacity`, all the
     cap allows) and how many of them C's bricks take (C is resident whole: slots 0 .. c_slots - 1)."""
     fine: object
@@ -162,7 +162,7 @@ def mixed_plan(fine, coarse, cap: int, camera, half_extent, max_side: int,
     """The pool of `fine` (F, a BrickStore) and `coarse` (C, the finest whole level that fits
     `cap`) mixed by footprint, and what it holds in words; (None, why) where the cap leaves no
     slot for a brick of F. The atlas has every slot the cap allows (C's bricks whole, the rest
-    for F's, streamed as the camera moves: app/render/level_stream.py); the constants' bytes are
+    for F's, streamed as the camera moves: app/rendering/level_stream.py); the constants' bytes are
     reserved for C's and a row for each brick of F, so the capacity does not depend on whether
     F's range pass has been read."""
     B = fine.brick

@@ -85,7 +85,7 @@ class SceneResources:
         # stepping back and forth, or playing the series again, uploads nothing.
         self.step_cache_bytes = STEP_CACHE_BYTES
         self._steps: OrderedDict = OrderedDict()
-        # Bricking (app/render/volume_placement.py): the cap on the volume's GPU memory (None:
+        # Bricking (app/rendering/volume_placement.py): the cap on the volume's GPU memory (None:
         # what the device has left) and a forced brick size (None: bricks of 64 voxels where one
         # texture does not fit). The volume given or loaded is kept (`given`) to place again
         # when they change.
@@ -98,7 +98,7 @@ class SceneResources:
     def update(self, scene: Scene, volume: Volume | None = None, placed=None) -> set[str]:
         """Adopt a new scene; returns which parts changed ('volume', 'transfer', 'medium', ...).
         `placed`: (the volume shown, its texture or BrickPool) of `volume`, already placed
-        (app/render/progressive_open.py); else place_volume places it here."""
+        (app/rendering/progressive_open.py); else place_volume places it here."""
         changed: set[str] = set()
         old = self.scene
         # The map first: a bad file fails before anything on the GPU changes.
@@ -254,7 +254,7 @@ class SceneResources:
 
     @property
     def stream(self):
-        """The mixed pool's LevelStream (app/render/level_stream.py; made on first use), None
+        """The mixed pool's LevelStream (app/rendering/level_stream.py; made on first use), None
         where the volume is not a streamed mix of levels."""
         pool = self.volume_tex
         if not isinstance(pool, BrickPool) or pool.plan is None:

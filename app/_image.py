@@ -41,7 +41,7 @@ class Image:
     # ---- what a person sees ------------------------------------------------------------------
     def srgb8(self, exposure: float | None = None) -> np.ndarray:
         """The tone-mapped 8-bit sRGB picture (H, W, 3)."""
-        from app.render.tonemap import to_uint8
+        from radiance_probes.rendering.tonemap import to_uint8
         return to_uint8(self.linear, self.exposure if exposure is None else exposure)
 
     def png_bytes(self, exposure: float | None = None) -> bytes:
@@ -60,7 +60,7 @@ class Image:
 
     def save(self, path: str | Path, exposure: float | None = None) -> Path:
         """Writes the image by its suffix: .png (tone-mapped), .npy or .exr (linear)."""
-        from app.imageio import save_exr, save_npy, save_png
+        from radiance_probes.imageio import save_exr, save_npy, save_png
         p = Path(path)
         suffix = p.suffix.lower()
         if suffix == ".png":

@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from app.scene import Scene, SceneError, load_scene, parse_scene, scene_to_dict
-from app.scene_types import CameraSpec, VolumeError, VolumeSpec
-from app.volume import Volume, load_scene_volume, normalise
+from radiance_probes.scene import Scene, SceneError, load_scene, parse_scene, scene_to_dict
+from radiance_probes.scene_types import CameraSpec, VolumeError, VolumeSpec
+from radiance_probes.volume import Volume, load_scene_volume, normalise
 
 from ._image import Image
 
@@ -185,7 +185,7 @@ def build_scene(data: Any = None, scene: Any = None, options: dict | None = None
         elif axes is None and array.ndim == 3 and not parsed.channels and not parsed.time:
             volume = volume_from_array(array, parsed.volume)
         else:   # channels or time steps (app/volume.py volume_from_array reads them as a file)
-            from app.volume import volume_from_array as from_axes
+            from radiance_probes.volume import volume_from_array as from_axes
             if axes is None and array.ndim != 3:
                 raise VolumeError(f"a {array.ndim}D array (shape {tuple(array.shape)}): say which "
                                   "axis is which with axes=, e.g. \"czyx\" or \"tzyx\"")
@@ -207,7 +207,7 @@ def build_scene(data: Any = None, scene: Any = None, options: dict | None = None
 def check_clip(scene: Scene, volume: Volume) -> None:
     """A crop beyond the volume, or one that keeps nothing, is refused before any GPU work (as the
     command line does): an empty image is never meant."""
-    from app.frontend import check_clip as check
+    from radiance_probes.frontend import check_clip as check
     check(scene, volume)
 
 
@@ -235,8 +235,8 @@ class Renderer:
 
     def __init__(self, data: Any = None, *, scene: Any = None, settings=None,
                  gl_backend: str | None = None, **scene_options):
-        from app.gl.context import create_headless_context
-        from app.render.renderer import Renderer as AppRenderer
+        from radiance_probes.gl.context import create_headless_context
+        from radiance_probes.rendering.renderer import Renderer as AppRenderer
         self._data = data
         self._base = scene
         self._options = dict(scene_options)
@@ -261,12 +261,12 @@ class Renderer:
 
     @property
     def device(self) -> str:
-        from app.gl.context import describe
+        from radiance_probes.gl.context import describe
         return describe(self._ctx)
 
     @property
     def settings(self):
-        """How it renders and bakes (app.render.settings.RenderSettings, resolved for the
+        """How it renders and bakes (app.rendering.settings.RenderSettings, resolved for the
         device); change it with configure()."""
         return self._renderer.settings
 
@@ -393,7 +393,7 @@ def view(data: Any = None, method: str = "raymarch", *, scene: Any = None, block
     if isinstance(env, dict) and built.base_dir and not Path(env["map"]).is_absolute():
         env["map"] = str((Path(built.base_dir) / env["map"]).resolve())
     (folder / "scene.json").write_text(json.dumps(scene_data, indent=2))
-    argv = [sys.executable, "-m", "app", "view", str(folder / "scene.json"), "--method", method]
+    argv = [sys.executable, "-m", "radiance_probes", "view", str(folder / "scene.json"), "--method", method]
     if screenshot is not None:
         argv += ["--screenshot", str(screenshot)]
     if frames is not None:

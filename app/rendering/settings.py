@@ -112,14 +112,14 @@ class RenderSettings:
     # default): delta tracking's own decisions. Costs a probe fetch and a light-grid read at each
     # tentative collision where 0 < sigma_t < majorant.
     guided_distances: float = 0.0
-    # Bricked volumes (app/render/volume_placement.py): the volume's GPU memory at most, in bytes
+    # Bricked volumes (app/rendering/volume_placement.py): the volume's GPU memory at most, in bytes
     # (None: what the device has left); where one 3D texture exceeds it, the finest level whose
     # bricks fit is shown, with a note. `brick_size`: bricks of that many voxels per axis always
     # (None: bricks of 64 only where one texture does not fit; tests force small ones).
     volume_memory_bytes: int | None = None
     brick_size: int | None = None
     # True: under a cap given, the memory the shown level leaves holds the next finer level's
-    # bricks where the scene's camera sees them largest (app/render/level_mix.py). Off by
+    # bricks where the scene's camera sees them largest (app/rendering/level_mix.py). Off by
     # default: on the H100 (bench/h100-bricks-open) it took a zoomed view of the 2048^3 volume
     # from 2.97% to 2.92% rRMSE against level 0, for frames 2.3x as long and a first image 5.8 s
     # later.
@@ -136,7 +136,7 @@ class RenderSettings:
     # lib/sun_shadow.glsl).
     shadow_tracking: str = "ratio"
     # The probes' bake (its walks, their sun and its light grid, the probes' own sun) walks the
-    # volume this many levels coarser than the level shown (app/render/bake_level.py: coarser()'s
+    # volume this many levels coarser than the level shown (app/rendering/bake_level.py: coarser()'s
     # level in one texture with its own majorant grid); what the image reads directly (camera
     # rays, the raymarcher's sun, the path tracer) stays on the level shown. 0: the level shown
     # (the default); -1: the coarsest level whose voxel is at most half the probe spacing along

@@ -126,7 +126,7 @@ class ProbeGrid:
         asked-for walks give a probe of average noise; 0 (default): every probe takes them all.
         `environment_map`: the walks' build for a scene whose environment is a map (they sample it
         at each scattering event; lib/integrator.glsl). `planes`: an adaptive layout's probe
-        planes per axis, world fractions of the box (app/render/probe_planes.py); None: evenly
+        planes per axis, world fractions of the box (app/rendering/probe_planes.py); None: evenly
         spaced, and the shaders are built without the warp (PROBE_WARP 0). `sun_lobe` > 0: each
         probe also holds a lobe about the sun's direction of that Henyey-Greenstein g beside its
         bands (lib/sun_lobe.glsl; SH order 3 only); 0: none. `medium`: the scene's medium

@@ -621,7 +621,7 @@ class Renderer:
     # ---- streaming a mix of levels (RenderSettings.mixed_levels under a cap) -------------------
     def restream(self, camera=None, budget_s: float | None = None) -> bool:
         """Moves a mixed pool towards the bricks `camera` (None: the scene's) deserves
-        (app/render/level_stream.py); with `budget_s`, about that many seconds of writes, the
+        (app/rendering/level_stream.py); with `budget_s`, about that many seconds of writes, the
         rest left to the next calls (the viewer's frames). True when the medium changed: the
         majorant grid is then remade and the probes, light grid and visible region are stale
         (an edit of the medium). Nothing where the volume is not a streamed mix, or the camera
