@@ -1,4 +1,4 @@
-// `guided`'s level 0 (app/render/renderer.py, RenderSettings.guided_*): an unbiased estimate of
+// `guided`'s level 0 (app/rendering/renderer.py, RenderSettings.guided_*): an unbiased estimate of
 // what the probes predict a camera ray sees,
 //   F = integral over the ray of T(t) sigma_s(t) S(x(t), d) dt + T(t_exit) L_env(d),
 //   S(x, d) = the probes' inscattered radiance (lib/probes.glsl probe_inscattered)

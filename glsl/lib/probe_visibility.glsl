@@ -37,9 +37,9 @@
 #if PROBE_VISIBILITY
 const float PROBE_VISIBILITY_TOLERANCE = 0.01;
 // PROBE_VISIBILITY_MAX_CELL: the widest probe spacing over the uniform one (1, or an adaptive
-// layout's bound, probe_planes.py MAX_SPACING), from app/render/renderer.py
+// layout's bound, probe_planes.py MAX_SPACING), from app/rendering/renderer.py
 #ifndef PROBE_VISIBILITY_MAX_CELL
-#error "PROBE_VISIBILITY_MAX_CELL: set by app/render/renderer.py with PROBE_VISIBILITY"
+#error "PROBE_VISIBILITY_MAX_CELL: set by app/rendering/renderer.py with PROBE_VISIBILITY"
 #endif
 
 // The 8 probes around a point and their normalised weights; corner c is base + (c & 1, (c >> 1) & 1,

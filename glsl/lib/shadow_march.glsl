@@ -7,7 +7,7 @@
 // sum is the same, over the same points (app/twins/shadow_march.py has no grid and must agree).
 // This jump was taken out after the bake benchmark lost the H100's context with it in place
 // (commit 03404d4); it is back under this define, with the checking build's caps on both of its
-// loops, while that loss is investigated (app/render/probes.py SUN_MARCH_SKIPS_EMPTY_CELLS).
+// loops, while that loss is investigated (app/rendering/probes.py SUN_MARCH_SKIPS_EMPTY_CELLS).
 #include "lib/cell_walk.glsl"
 
 uniform float march_step;  // world units between quadrature points

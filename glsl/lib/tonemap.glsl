@@ -1,4 +1,4 @@
-// Display encoding (the twin of app/render/tonemap.py): exposure is applied by the caller, then
+// Display encoding (the twin of app/rendering/tonemap.py): exposure is applied by the caller, then
 // clip to [0, 1] and the sRGB transfer curve.
 vec3 srgb_encode(vec3 linear)
 {
