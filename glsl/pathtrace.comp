@@ -64,7 +64,7 @@ uniform int loop_reserve;      // suspend a path when the budget falls to this
 // memset and upload on every restart, that is every camera move in the viewer).
 uniform int restart;
 // The first image row of this dispatch: a large image is dispatched in bands of rows, so that no
-// dispatch runs long (app/render/renderer.py DISPATCH_TARGET_MS).
+// dispatch runs long (app/rendering/renderer.py DISPATCH_TARGET_MS).
 uniform int row_offset;
 
 void main()

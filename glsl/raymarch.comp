@@ -2,7 +2,7 @@
 // dispatch adds frame frame_index to the accumulation. Otherwise it marches gl_NumWorkGroups.z
 // frames at once (frame_index + layer), each into its layer of frame_values, and
 // raymarch_resolve.comp folds them into the accumulation in frame order: a small image fills a
-// large GPU only with several frames in flight (app/render/raymarch.py LAYER_PIXELS). A uniform,
+// large GPU only with several frames in flight (app/rendering/raymarch.py LAYER_PIXELS). A uniform,
 // not a define, so that one program (one compile) serves both.
 layout(local_size_x = 8, local_size_y = 8) in;
 #include "raymarch_common.glsl"

@@ -1,4 +1,4 @@
-// Which lobe shape a scene's probes should hold (app/render/sun_lobe_fit.py, which chooses from
+// Which lobe shape a scene's probes should hold (app/rendering/sun_lobe_fit.py, which chooses from
 // these numbers; NumPy twin: app/twins/sun_lobe.py lobe_amplitudes). One invocation per probe of a
 // pilot bake's pass, whose walks are in walk_radiance (probe_walks.comp): for each candidate h
 // (the lobe HG_h about the sun's direction, lib/sun_lobe.glsl) the lobe's amplitude as the bake
