@@ -281,6 +281,9 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
     if all(r.get("mode") == "interact" for r in data["records"]) and data["records"]:
         from .interact_report import write_interact_report
         return write_interact_report(data, out)
+    if all(r.get("mode") == "denoise" for r in data["records"]) and data["records"]:
+        from .denoise import write_denoise_report
+        return write_denoise_report(data, out)
     if all(r.get("mode") == "movie" for r in data["records"]) and data["records"]:
         from .movie import write_movie_report
         return write_movie_report(data, out)

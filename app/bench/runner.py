@@ -214,6 +214,10 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
         reference = _reference(renderer, name, config, results, out)
         return bias_scene(renderer, name, config, results, out, device, reference,
                           results.references[name]["noise_rrmse"])
+    if config.mode == "denoise":
+        from .denoise import denoise_scene
+        return denoise_scene(renderer, name, config, results, out, device,
+                             _reference(renderer, name, config, results, out))
     if config.mode == "bake":
         from .bake import bake_scene
         return bake_scene(renderer, name, config, results, out, device,

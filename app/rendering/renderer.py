@@ -26,6 +26,8 @@ from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extincti
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
 from .dispatch_budget import dispatch_target_ms
+from .denoise import GUIDE_SETS, Denoised, radiance_as_albedo, shared_denoiser
+from .denoise_guides import GUIDE_FRAMES, DenoiseGuides
 from .raymarch import Raymarcher, min_step_voxels
 from .resources import SceneResources
 from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noqa: F401 (re-exported)
@@ -72,6 +74,11 @@ class RenderResult:
     render_ms: float           # GPU time of the render passes (timestamp queries)
     bake_ms: float = 0.0       # GPU time of probe baking, where the method has one
     stats: dict = field(default_factory=dict)
+    # With denoise: the raw image, what the denoiser did (Denoised: device, note, ms of its parts)
+    # and the guides' GPU ms (their passes, counted apart from render_ms)
+    raw_image: np.ndarray | None = None
+    denoised: Denoised | None = None
+    guides_ms: float = 0.0
 
     @property
     def ms_per_sample(self) -> float:
@@ -157,6 +164,8 @@ class Renderer:
         self.camera = None
         self.last_bake_ms = 0.0
         self.last_light_ms = 0.0
+        self._guides: DenoiseGuides | None = None
+        self._guide_acc: Accumulation | None = None   # the raymarched image a "probes" guide uses
 
     @property
     def _light(self) -> LightTransmittance | None:
@@ -808,8 +817,11 @@ class Renderer:
     def render(self, method: str = "pt", spp: int = 64, seed: int = 0,
                width: int | None = None, height: int | None = None, samples_per_pass: int = 1,
                progress: Callable[[int, int], None] | None = None,
-               bake_progress: Callable | None = None) -> RenderResult:
-        """Renders the current scene from scratch with `spp` samples per pixel. A streamed mix
+               bake_progress: Callable | None = None, denoise: bool = False,
+               denoise_guides: str = "albedo-normal") -> RenderResult:
+        """Renders the current scene from scratch with `spp` samples per pixel; with `denoise`,
+        the image goes through the denoiser with `denoise_guides` (RenderResult.raw_image keeps
+        the raw one; .denoised says what ran, or why not). A streamed mix
         of levels (RenderSettings.mixed_levels under a cap) is first made the one this camera
         and image size deserve (restream, all of it)."""
         if self.resources.stream is not None:
@@ -830,9 +842,66 @@ class Renderer:
         rgba = acc.read_rgba()
         stats = self.resources.read_stats()
         stats["min_samples"] = int(rgba[..., 3].min())
-        return RenderResult(rgba[..., :3].copy(), method, spp, render_ms, bake_ms, stats=stats)
+        image = rgba[..., :3].copy()
+        if not denoise:
+            return RenderResult(image, method, spp, render_ms, bake_ms, stats=stats)
+        denoised, guides_ms = self.denoise(image, denoise_guides)
+        return RenderResult(denoised.image, method, spp, render_ms, bake_ms, stats=stats,
+                            raw_image=image, denoised=denoised, guides_ms=guides_ms)
+
+    # ---- the denoiser's guides (denoise_guides.py) and the denoiser (denoise.py) ----------------
+    def denoise_guides(self, guides: str = "albedo-normal", frames: int = GUIDE_FRAMES,
+                       probe_frames: int = 16) -> tuple[np.ndarray | None, np.ndarray | None, float]:
+        """The noise-free guides of the camera begun (begin(); else the scene's) as the denoiser
+        takes them: (albedo, normal, GPU ms), each None where the set has none. "albedo" and
+        "albedo-normal": where each ray first scatters in expectation (glsl/denoise_guides.comp,
+        `frames` jittered rays a pixel); "probes": the raymarched image over the probes in hand
+        (`probe_frames` frames; bake first), scaled into [0, 1], in the albedo's place."""
+        if guides not in GUIDE_SETS:
+            raise ValueError(f"unknown denoise guides {guides!r} (known: {', '.join(GUIDE_SETS)})")
+        if guides == "none":
+            return None, None, 0.0
+        camera = self.camera or camera_frame(self.scene.camera)
+        step = self.raymarch_step_voxels * 2 * self.resources.march_step
+        if guides == "probes":
+            if not self.probes_shown():
+                raise RuntimeError("the probes guide needs probes: bake first")
+            acc = self._guide_acc
+            if acc is None or (acc.width, acc.height) != (camera.width, camera.height):
+                if acc is not None:
+                    acc.release()
+                acc = self._guide_acc = Accumulation(self.ctx, camera.width, camera.height)
+            acc.reset()
+            light_ms = self.bake_light()
+            extra = self.probe_uniforms()
+            self.timer.start()
+            self.raymarcher().run(self.resources, camera, acc, probe_frames, self.seed ^ 0x2545F491,
+                                  step, {**extra, **self._light.uniforms()})
+            self.timer.stop()
+            return radiance_as_albedo(acc.read()), None, light_ms + self.timer.elapsed_ms
+        if self._guides is None:
+            self._guides = DenoiseGuides(self.ctx, self.resources.medium_defines())
+        self.timer.start()
+        self._guides.run(self.resources, camera, step, frames, self.seed)
+        self.timer.stop()
+        albedo, normal = self._guides.read()
+        return albedo, (normal if guides == "albedo-normal" else None), self.timer.elapsed_ms
+
+    def denoise(self, image: np.ndarray, guides: str = "albedo-normal",
+                quality: str = "high") -> tuple[Denoised, float]:
+        """`image` (of the camera begun) through the denoiser with `guides`: (Denoised, the
+        guides' GPU ms). Where the denoiser cannot run, Denoised holds the raw image and a note."""
+        denoiser = shared_denoiser("auto", quality)
+        if not denoiser.available:
+            return Denoised(np.asarray(image, np.float32), None, denoiser.failure), 0.0
+        albedo, normal, guides_ms = self.denoise_guides(guides)
+        return denoiser(image, albedo, normal), guides_ms
 
     def release(self) -> None:
+        if self._guides is not None:
+            self._guides.release()
+        if self._guide_acc is not None:
+            self._guide_acc.release()
         for p in (*self._passes.values(), *self._raymarchers.values()):
             p.release()
         for slot in (self._image_light, self._walk_light):

@@ -1,0 +1,309 @@
+"""`bench --preset denoise`: every noisy method raw and through the denoiser (app/rendering/denoise.py)
+with each set of guides, against the scene's path-traced reference.
+
+Each snapshot of a progressive run (records.progressive: the path tracer, `probes` at its first
+event and with a gather, `guided`) is recorded raw, then once per guide set of
+`config.denoise_guides` as its denoised twin (`denoise` names the guides). A twin's total is the
+raw image's total plus everything the denoised image cost beyond it:
+  - the guides' GPU time (glsl/denoise_guides.comp; for the "probes" guide the raymarched frames,
+    and the bake and light grid of its probes where the method had not paid for them already);
+  - the read-back of the image from GL and the upload of the result (io_ms, measured at this size);
+  - the filter's own wall time: the copy to its device, OIDN's execute (synchronous), the copy back.
+The raymarcher's images (noise-free already) are recorded raw beside them.
+
+Also measured once a run (meta.denoise_cost): the whole cost at 512^2, 1920x1080 and 3840x2160 for
+each of OIDN's quality settings; and per scene, the denoiser's own bias (a denoised image's mean
+against the raw one's, and its error at the longest run's samples against the raw image's)."""
+from __future__ import annotations
+
+import statistics
+import time
+
+import numpy as np
+
+from ..imageio import save_png
+from ..rendering.denoise import QUALITIES, shared_denoiser
+from .records import log, make_record, progressive
+
+NOISY = ("pt", "probes", "guided")
+COST_SIZES = ((512, 512), (1920, 1080), (3840, 2160))
+
+
+def _with_probes(scene, grid: int, walks: int):
+    from dataclasses import replace
+    return scene.replace(probes=replace(scene.probes, grid=(grid, grid, grid), samples=walks))
+
+
+def io_ms(renderer, width: int, height: int, repeats: int = 5) -> tuple[float, float]:
+    """Wall ms (median) to read an RGBA32F image of this size back from GL, and to upload an RGB
+    float image of that size into a texture: what a denoised frame adds around the filter."""
+    from ..rendering.accumulation import Accumulation
+    ctx = renderer.ctx
+    acc = Accumulation(ctx, width, height)
+    tex = ctx.texture((width, height), 3, dtype="f4")
+    data = np.zeros((height, width, 3), np.float32)
+    reads, writes = [], []
+    try:
+        for _ in range(repeats):
+            ctx.finish()
+            t0 = time.perf_counter()
+            acc.read()
+            t1 = time.perf_counter()
+            tex.write(data.tobytes())
+            ctx.finish()
+            t2 = time.perf_counter()
+            reads.append(1e3 * (t1 - t0))
+            writes.append(1e3 * (t2 - t1))
+    finally:
+        acc.release()
+        tex.release()
+    return statistics.median(reads), statistics.median(writes)
+
+
+def denoise_cost(renderer, sizes=COST_SIZES, qualities=QUALITIES, repeats: int = 5) -> list[dict]:
+    """The whole cost of one denoised frame at each size and quality, guided by an albedo and a
+    normal: read-back, the filter's parts (median of `repeats` after one untimed call), upload."""
+    rng = np.random.default_rng(0)
+    rows = []
+    for width, height in sizes:
+        read_ms, upload_ms = io_ms(renderer, width, height)
+        color = rng.exponential(1.0, (height, width, 3)).astype(np.float32)
+        albedo = np.full_like(color, 0.5)
+        normal = np.zeros_like(color)
+        normal[..., 2] = 1.0
+        for quality in qualities:
+            denoiser = shared_denoiser("auto", quality)
+            if not denoiser.available:
+                return [{"note": denoiser.failure}]
+            denoiser(color, albedo, normal)   # untimed: the filter's first call builds it
+            parts = [denoiser(color, albedo, normal).ms for _ in range(repeats)]
+            row = {"width": width, "height": height, "quality": quality,
+                   "device": denoiser.device, "readback_ms": read_ms, "upload_result_ms": upload_ms}
+            for key in parts[0]:
+                row[key] = statistics.median(p[key] for p in parts)
+            row["total_ms"] = read_ms + upload_ms + sum(row[k] for k in parts[0])
+            rows.append(row)
+            log(f"  denoise cost {width}x{height} {quality} on {denoiser.device}: "
+                f"filter {row['filter_ms']:.2f} ms, total {row['total_ms']:.2f} ms")
+    return rows
+
+
+def denoise_scene(renderer, name: str, config, results, out, device: str,
+                  reference: np.ndarray) -> None:
+    scene = renderer.scene
+    base = {"scene": name, "device": device, "width": config.width, "height": config.height,
+            "mode": "denoise",
+            "reference_noise": results.references.get(name, {}).get("noise_rrmse")}
+    denoiser = shared_denoiser("auto", config.denoise_quality)
+    if not denoiser.available:
+        raise SystemExit(f"bench --preset denoise: {denoiser.failure}")
+    if "denoise_cost" not in results.meta and config.denoise_cost:
+        results.meta["denoise_cost"] = denoise_cost(renderer)
+    read_ms, upload_ms = io_ms(renderer, config.width, config.height)
+    around_ms = read_ms + upload_ms
+    results.meta.setdefault("denoise_io_ms", {})[name] = {"readback_ms": read_ms,
+                                                         "upload_result_ms": upload_ms}
+    k = config.samples_per_dispatch
+
+    # The "probes" guide's probes (config.denoise_guide_probes), baked once: what they cost is
+    # charged to every record whose method did not bake them itself.
+    grid, walks = config.denoise_guide_probes
+    renderer.set_scene(_with_probes(scene, grid, walks))
+    renderer.invalidate()
+    guide_bake_ms = renderer.bake(seed=11) + renderer.bake_light()
+    guides = {}   # guide set -> (albedo, normal, GPU ms)
+    renderer.begin("raymarch")   # the scene's camera at the run's size
+    for g in config.denoise_guides:
+        guides[g] = renderer.denoise_guides(g)
+        log(f"  guides {g}: {guides[g][2]:.2f} ms")
+    renderer.set_scene(scene)
+
+    def add(method: str, frames: int, image: np.ndarray, timing, bake_ms: float,
+            own_probes: bool, **extra) -> None:
+        rec = make_record(base, config, method, frames, image, reference, timing, bake_ms, **extra)
+        flip = frames in config.flip_frames or frames == max(config.pt_spp)
+        results.add(rec, image if flip else None, reference)
+        for g, (albedo, normal, guide_ms) in guides.items():
+            d = denoiser(image, albedo, normal)
+            charged = guide_ms + (0.0 if own_probes or g != "probes" else guide_bake_ms)
+            twin = make_record(base, config, method, frames, d.image, reference, timing, bake_ms,
+                               **extra)
+            twin.update(denoise=g, denoise_device=d.device, guides_ms=charged, io_ms=around_ms,
+                        filter_parts_ms=d.ms, mean_ratio=float(d.image.mean() / max(image.mean(), 1e-30)))
+            twin["total_ms"] = rec["total_ms"] + charged + around_ms + d.total_ms
+            results.add(twin, d.image if flip else None, reference)
+            if frames == config.image_frames:
+                save_png(out / "images" / f"{name}_{method}_{frames}_{g}.png", d.image)
+        if frames == config.image_frames:
+            save_png(out / "images" / f"{name}_{method}_{frames}_raw.png", image)
+
+    for frames, image, *timing in progressive(renderer, "pt", config.pt_spp, 5, k):
+        add("pt", frames, image, timing, 0.0, False)
+    log(f"  pt: {max(config.pt_spp)} spp")
+    for (grid, walks), events, frames_list in (
+            (config.denoise_probe_setting, (1,), config.probe_frames),
+            (config.denoise_gather_setting, config.gather_events, config.gather_frames)):
+        renderer.set_scene(_with_probes(scene, grid, walks))
+        renderer.invalidate()
+        bake_ms = renderer.bake(seed=11)
+        own = (grid, walks) == tuple(config.denoise_guide_probes)
+        for event in events:
+            renderer.configure(gather_event=event)
+            for frames, image, *timing in progressive(renderer, "probes", frames_list, 13, k):
+                add("probes", frames, image, timing, bake_ms, own, probe_grid=grid,
+                    probe_samples=walks, gather_event=event)
+        renderer.configure(gather_event=1)
+        log(f"  probes {grid}^3 x {walks}, events {events}")
+    grid, walks = config.denoise_guided_setting
+    renderer.set_scene(_with_probes(scene, grid, walks))
+    renderer.invalidate()
+    bake_ms = renderer.bake(seed=11) + renderer.bake_light()
+    own = (grid, walks) == tuple(config.denoise_guide_probes)
+    for frames, image, *timing in progressive(renderer, "guided", config.guided_frames, 19, k):
+        add("guided", frames, image, timing, bake_ms, own, probe_grid=grid, probe_samples=walks)
+    log(f"  guided {grid}^3 x {walks}")
+    # the clean base: the raymarcher over the guide's probes (raw only)
+    grid, walks = config.denoise_guide_probes
+    renderer.set_scene(_with_probes(scene, grid, walks))
+    renderer.invalidate()
+    bake_ms = renderer.bake(seed=11) + renderer.bake_light()
+    for frames, image, *timing in progressive(renderer, "raymarch", config.raymarch_frames, 17, k):
+        rec = make_record(base, config, "raymarch", frames, image, reference, timing, bake_ms,
+                          probe_grid=grid, probe_samples=walks)
+        results.add(rec, image if frames in config.flip_frames else None, reference)
+    renderer.set_scene(scene)
+
+
+# ---- the report ---------------------------------------------------------------------------------
+def variant(r: dict) -> str:
+    name = r["method"]
+    if r["method"] == "probes" and r.get("gather_event", 1) > 1:
+        name = f"probes, gather {r['gather_event']}"
+    if r["method"] in ("probes", "guided", "raymarch") and r.get("probe_grid"):
+        name += f" {r['probe_grid']}^3x{r['probe_samples']}"
+    return name + (f" + OIDN({r['denoise']})" if r.get("denoise") else "")
+
+
+def write_denoise_report(data: dict, out):
+    from .report import _header, _ms, error_of, floor
+    meta = data["meta"]
+    recs = data["records"]
+    scenes = list(dict.fromkeys(r["scene"] for r in recs))
+    targets = (0.05, 0.02, 0.01)
+    lines = [*_header("# Denoised and raw: time to each error", meta),
+             f"Image {meta['config']['width']}x{meta['config']['height']}. Errors are relative RMSE "
+             "against the path-traced reference, corrected for its noise (SPEC.md), and mean "
+             "LDR-FLIP where measured. A denoised record's total is its raw image's GPU total plus "
+             "the guides' GPU time (and, for the probes guide, its probes' bake where the method "
+             "did not bake them), the read-back from GL and upload of the result, and the filter's "
+             "wall time (OIDN, synchronous). `OIDN(g)`: the filter guided by g (none: the colour "
+             "alone; albedo and albedo-normal: glsl/denoise_guides.comp; probes: the raymarched "
+             "probes as albedo).", ""]
+    for s in scenes:
+        rs = [r for r in recs if r["scene"] == s]
+        lines += [f"## {s}", "", "| target | path tracer | best raw | best of all | speed-up over "
+                  "the path tracer |", "|---|---|---|---|---|"]
+        for t in targets:
+            def best(pred):
+                hits = [r for r in rs if pred(r) and error_of(data, r) <= t]
+                return min(hits, key=lambda r: r["total_ms"]) if hits else None
+            pt = best(lambda r: r["method"] == "pt" and not r.get("denoise"))
+            raw = best(lambda r: not r.get("denoise"))
+            top = best(lambda r: True)
+
+            def cell(r):
+                if r is None:
+                    return "never"
+                f = f", FLIP {r['flip']:.3f}" if r.get("flip") is not None else ""
+                return f"{variant(r)} @ {r['spp']}: {_ms(r['total_ms'])}{f}"
+            speed = (f"{pt['total_ms'] / top['total_ms']:.1f}x" if pt and top else
+                     "path tracer never" if top else "-")
+            lines.append(f"| {t:.0%} | {cell(pt)} | {cell(raw)} | {cell(top)} | {speed} |")
+        lines += ["", "Every variant's error by samples (raw / denoised with each guide set):", ""]
+        groups: dict[str, dict] = {}
+        for r in rs:
+            key = variant(dict(r, denoise=None))
+            groups.setdefault(key, {}).setdefault(r["spp"], {})[r.get("denoise") or "raw"] = r
+        guide_names = list(dict.fromkeys(r["denoise"] for r in rs if r.get("denoise")))
+        cols = ["raw", *guide_names]
+        lines += ["| variant | spp | " + " | ".join(cols) + " | total ms (raw; denoised) |",
+                  "|---|---|" + "---|" * len(cols) + "---|"]
+        for key, by_spp in groups.items():
+            for spp in sorted(by_spp):
+                row = by_spp[spp]
+                vals = []
+                for c in cols:
+                    r = row.get(c)
+                    if r is None:
+                        vals.append("-")
+                        continue
+                    e = error_of(data, r)
+                    v = f"{e:.4f}" if e >= floor(data, s) else f"<{floor(data, s):.4f}"
+                    if r.get("flip") is not None:
+                        v += f" (FLIP {r['flip']:.3f})"
+                    vals.append(v)
+                totals = "; ".join(_ms(row[c]["total_ms"]) for c in cols if c in row)
+                lines.append(f"| {key} | {spp} | " + " | ".join(vals) + f" | {totals} |")
+        # the denoiser's own bias
+        bias = [r for r in rs if r.get("denoise")]
+        if bias:
+            worst = max(bias, key=lambda r: abs(r["mean_ratio"] - 1.0))
+            longest = max(r["spp"] for r in rs if r["method"] == "pt")
+            raw_long = next((r for r in rs if r["method"] == "pt" and r["spp"] == longest
+                             and not r.get("denoise")), None)
+            lines += ["", f"Denoiser bias: the largest change of an image's mean by the filter is "
+                      f"{100 * (worst['mean_ratio'] - 1):+.2f}% ({variant(worst)} @ {worst['spp']}). "
+                      f"At {longest} spp the raw path tracer is at "
+                      f"{error_of(data, raw_long):.4f}" if raw_long else ""]
+            if raw_long:
+                lines[-1] += ", denoised: " + ", ".join(
+                    f"{r['denoise']} {error_of(data, r):.4f}" for r in rs
+                    if r["method"] == "pt" and r["spp"] == longest and r.get("denoise")) + "."
+        lines.append("")
+    cost = meta.get("denoise_cost") or []
+    if cost and "note" not in cost[0]:
+        lines += ["## The denoiser's whole cost", "", "Wall ms, medians; guided by an albedo and a "
+                  "normal. Read-back: an RGBA32F image from GL; upload: the result into a texture.",
+                  "", "| size | quality | device | read-back | to device | filter | from device | "
+                  "upload | total |", "|---|---|---|---|---|---|---|---|---|"]
+        for c in cost:
+            lines.append(f"| {c['width']}x{c['height']} | {c['quality']} | {c['device']} | "
+                         f"{c['readback_ms']:.2f} | {c['upload_ms']:.2f} | {c['filter_ms']:.2f} | "
+                         f"{c['download_ms']:.2f} | {c['upload_result_ms']:.2f} | "
+                         f"{c['total_ms']:.2f} |")
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    _plot(data, scenes, out / "denoise.png")
+    return path
+
+
+def _plot(data: dict, scenes: list[str], path) -> None:
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return
+    from .report import error_of
+    cols = min(3, len(scenes)) or 1
+    rows = (len(scenes) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(5 * cols, 4 * rows), squeeze=False)
+    for ax, s in zip(axes.flat, scenes):
+        rs = [r for r in data["records"] if r["scene"] == s]
+        series: dict[str, list] = {}
+        for r in rs:
+            series.setdefault(variant(r), []).append(r)
+        for name, run in series.items():
+            run = sorted(run, key=lambda r: r["total_ms"])
+            xs = [r["total_ms"] for r in run]
+            ys = [max(error_of(data, r), 1e-4) for r in run]
+            ax.loglog(xs, ys, "-" if "OIDN" in name else "--", marker=".", label=name, lw=1)
+        ax.set_title(s)
+        ax.set_xlabel("total ms")
+        ax.set_ylabel("rRMSE")
+        ax.grid(True, which="both", alpha=0.3)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=6)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

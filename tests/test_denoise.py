@@ -1,0 +1,168 @@
+"""The denoising stage (app/rendering/denoise.py) on OIDN's CPU device, and its guides
+(glsl/denoise_guides.comp) against their NumPy twin (app/twins/denoise_guides.py)."""
+from __future__ import annotations
+
+import builtins
+import sys
+
+import numpy as np
+import pytest
+
+from radiance_probes.rendering import denoise as denoise_module
+from radiance_probes.rendering.denoise import Denoiser, sanitize
+from radiance_probes.rendering.denoise_guides import DenoiseGuides
+from radiance_probes.rendering.resources import SceneResources
+from radiance_probes.scene import parse_scene
+from radiance_probes.twins.camera import camera_frame
+from radiance_probes.twins.denoise_guides import guide_frame
+from radiance_probes.volume import Volume
+
+pytest.importorskip("pyoidn", reason="the denoiser's library (pyoidn) is a dependency: install it")
+
+
+def _clean_and_noisy(seed=0, size=96):
+    """A smooth HDR image with a sharp edge, and a Monte Carlo-like noisy copy of it (each pixel's
+    mean is the clean value: exponential weights of mean 1)."""
+    y, x = np.mgrid[0:size, 0:size] / size
+    clean = np.stack([0.2 + x, 0.3 + y, 0.5 + 2.0 * (x > 0.5)], axis=-1).astype(np.float32)
+    rng = np.random.default_rng(seed)
+    noisy = clean * rng.exponential(1.0, (size, size, 1)).astype(np.float32)
+    return clean, noisy
+
+
+def rmse(a, b):
+    return float(np.sqrt(np.mean((a - b) ** 2)))
+
+
+@pytest.fixture(scope="module")
+def cpu_denoiser():
+    d = Denoiser("cpu")
+    yield d
+    d.close()
+
+
+def test_the_filter_brings_a_noisy_image_closer_to_its_clean_answer(cpu_denoiser):
+    clean, noisy = _clean_and_noisy()
+    out = cpu_denoiser(noisy)
+    assert out.denoised and out.device == "cpu" and out.note is None
+    assert out.image.shape == noisy.shape and out.image.dtype == np.float32
+    assert rmse(out.image, clean) < 0.25 * rmse(noisy, clean)
+    # a noise-free albedo guide that knows the edge helps further, and the result keeps the mean
+    albedo = np.clip(clean / clean.max(), 0, 1)
+    guided = cpu_denoiser(noisy, albedo)
+    assert rmse(guided.image, clean) < rmse(out.image, clean)
+    assert abs(guided.image.mean() / clean.mean() - 1.0) < 0.03
+    assert set(out.ms) == {"upload_ms", "filter_ms", "download_ms"}
+
+
+def test_no_nan_inf_or_negative_out_even_when_they_come_in(cpu_denoiser):
+    clean, noisy = _clean_and_noisy(seed=1, size=48)
+    bad = noisy.copy()
+    bad[3, 4] = np.nan
+    bad[10, 10] = np.inf
+    bad[20, 30] = -np.inf
+    bad[5, 40] = -7.0
+    out = cpu_denoiser(bad, albedo=np.full_like(bad, np.nan), normal=np.full_like(bad, 5.0))
+    assert out.denoised
+    assert np.isfinite(out.image).all() and out.image.min() >= 0.0
+    s = sanitize(bad)
+    assert np.isfinite(s).all() and s.min() == 0.0 and s[10, 10].max() == 0.0
+
+
+def test_shapes_are_checked_with_a_message(cpu_denoiser):
+    clean, noisy = _clean_and_noisy(size=16)
+    with pytest.raises(ValueError, match="albedo image is"):
+        cpu_denoiser(noisy, albedo=np.zeros((8, 8, 3), np.float32))
+    with pytest.raises(ValueError, match=r"\(height, width, 3\)"):
+        cpu_denoiser(noisy[..., :2])
+    with pytest.raises(ValueError, match="normal guide needs an albedo"):
+        cpu_denoiser(noisy, normal=np.zeros_like(noisy))
+    with pytest.raises(ValueError, match="quality"):
+        Denoiser("cpu", quality="best")
+
+
+def test_a_missing_library_gives_the_note_and_the_raw_image(monkeypatch):
+    real_import = builtins.__import__
+
+    def no_pyoidn(name, *args, **kwargs):
+        if name == "pyoidn" or name.startswith("pyoidn."):
+            raise ImportError("No module named 'pyoidn'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.delitem(sys.modules, "pyoidn", raising=False)
+    monkeypatch.setattr(builtins, "__import__", no_pyoidn)
+    d = Denoiser("cpu")
+    clean, noisy = _clean_and_noisy(size=16)
+    noisy[0, 0] = np.nan
+    out = d(noisy)
+    assert not out.denoised and out.device is None
+    assert "pip install pyoidn" in out.note and "as rendered" in out.note
+    np.testing.assert_array_equal(out.image, sanitize(noisy))
+    assert not d.available          # remembered: no second try every frame
+
+
+def test_a_failing_filter_gives_the_note_and_the_raw_image(cpu_denoiser, monkeypatch):
+    d = Denoiser("cpu")
+    clean, noisy = _clean_and_noisy(size=16)
+    assert d(noisy).denoised
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("out of memory")
+
+    monkeypatch.setattr(d, "_filter_for", broken)
+    out = d(noisy[:8, :8].copy())
+    assert not out.denoised and "out of memory" in out.note
+    np.testing.assert_array_equal(out.image, noisy[:8, :8])
+    d.close()
+
+
+def test_shared_denoiser_is_one_per_setting():
+    a = denoise_module.shared_denoiser("cpu", "fast")
+    assert denoise_module.shared_denoiser("cpu", "fast") is a
+    assert denoise_module.shared_denoiser("cpu", "high") is not a
+
+
+# ---- the guides: GLSL against the NumPy twin --------------------------------------------------
+CAMERA = {"eye": [0.35, 0.5, 1.6], "target": [0, 0, 0], "fov_y": 40.0, "width": 12, "height": 10}
+
+
+def _ball_volume() -> Volume:
+    """A ball of density with a soft rim inside a box, off-centre: normals point every way."""
+    n = 20
+    z, y, x = np.mgrid[0:n, 0:n, 0:n] / (n - 1) - 0.5
+    r = np.sqrt((x - 0.08) ** 2 + y ** 2 + (z + 0.05) ** 2)
+    data = np.clip((0.36 - r) / 0.08, 0.0, 1.0).astype(np.float32)
+    return Volume(data, (1.0, 1.0, 1.0), "ball", (0.0, 1.0), "float32", 0.0, 1.0)
+
+
+@pytest.mark.parametrize("tf", [{"colormap": "viridis"},
+                                {"rgba": [[0.9, 0.2, 0.1, 0.0], [0.1, 0.8, 0.3, 1.0]]}])
+def test_guides_match_their_numpy_twin(ctx, tf):
+    volume = _ball_volume()
+    scene = parse_scene({"volume": {"builtin": "empty", "size": [2, 2, 2]}, "transfer_function": tf,
+                         "density_scale": 30.0, "albedo": 0.8, "camera": CAMERA})
+    resources = SceneResources(ctx, scene, volume)
+    guides = DenoiseGuides(ctx, resources.defines())
+    try:
+        camera = camera_frame(scene.camera)
+        step = 2.0 * resources.march_step
+        guides.run(resources, camera, step, frames=1, seed=7)
+        albedo, normal = guides.read()
+        want_albedo, want_normal = guide_frame(volume, resources.medium_table, 30.0, 0.8, camera,
+                                               step, 2.0 * resources.march_step, frame=0, seed=7)
+    finally:
+        guides.release()
+        resources.release()
+    np.testing.assert_allclose(albedo, want_albedo, atol=2e-3)
+    # GL filters with 8-bit fixed-point weights, and a normalised difference of two close fetches
+    # amplifies that where the gradient is weak: a few pixels differ by up to 0.03, the mean not
+    diff = np.abs(normal - want_normal)
+    assert diff.mean() < 2e-3 and diff.max() < 0.06
+    assert np.abs(want_normal).mean() > 0.05
+    # the test means something: rays that miss are white, rays through the ball are not, and its
+    # normals face the camera (towards +z of the eye, on the near side)
+    assert (albedo.max(axis=-1) <= 1.0 + 1e-5).all()
+    assert albedo[0, 0] == pytest.approx([1, 1, 1], abs=1e-5)
+    centre = albedo[5, 6]
+    assert centre.max() < 0.99
+    assert normal[5, 6] @ np.array(CAMERA["eye"]) / np.linalg.norm(CAMERA["eye"]) > 0.3
