@@ -34,22 +34,26 @@ def _with_probes(scene, grid: int, walks: int):
     return scene.replace(probes=replace(scene.probes, grid=(grid, grid, grid), samples=walks))
 
 
-def io_ms(renderer, width: int, height: int, repeats: int = 5) -> tuple[float, float]:
-    """Wall ms (median) to read an RGBA32F image of this size back from GL, and to upload an RGB
-    float image of that size into a texture: what a denoised frame adds around the filter."""
+def io_ms(renderer, width: int, height: int, repeats: int = 5,
+          guides: tuple[str, ...] = ("albedo", "normal")) -> tuple[float, float]:
+    """Wall ms (median) to read an accumulation of this size back from GL into the denoiser's
+    colour (Renderer.denoise), and to upload its output into a texture: what a denoised frame adds
+    around the filter."""
     from ..rendering.accumulation import Accumulation
     ctx = renderer.ctx
+    denoiser = shared_denoiser("auto", "high")
     acc = Accumulation(ctx, width, height)
     tex = ctx.texture((width, height), 3, dtype="f4")
+    staged = denoiser.staging(width, height, guides)
     data = np.zeros((height, width, 3), np.float32)
     reads, writes = [], []
     try:
         for _ in range(repeats):
             ctx.finish()
             t0 = time.perf_counter()
-            acc.read()
+            acc.texture.read_into(staged)
             t1 = time.perf_counter()
-            tex.write(data.tobytes())
+            tex.write(data)
             ctx.finish()
             t2 = time.perf_counter()
             reads.append(1e3 * (t1 - t0))
@@ -62,29 +66,52 @@ def io_ms(renderer, width: int, height: int, repeats: int = 5) -> tuple[float, f
 
 def denoise_cost(renderer, sizes=COST_SIZES, qualities=QUALITIES, repeats: int = 5) -> list[dict]:
     """The whole cost of one denoised frame at each size and quality, guided by an albedo and a
-    normal: read-back, the filter's parts (median of `repeats` after one untimed call), upload."""
+    normal already on the filter's device (they change with the camera, not every frame), as
+    Renderer.denoise does it: GL read straight into the filter's colour, the filter, the output
+    uploaded into a texture. Medians of `repeats` after one untimed frame (which builds the
+    filter and uploads the guides)."""
+    from ..rendering.accumulation import Accumulation
+    ctx = renderer.ctx
     rng = np.random.default_rng(0)
     rows = []
     for width, height in sizes:
-        read_ms, upload_ms = io_ms(renderer, width, height)
-        color = rng.exponential(1.0, (height, width, 3)).astype(np.float32)
-        albedo = np.full_like(color, 0.5)
-        normal = np.zeros_like(color)
+        acc = Accumulation(ctx, width, height)
+        acc.texture.write(rng.exponential(1.0, (height, width, 4)).astype(np.float32))
+        tex = ctx.texture((width, height), 3, dtype="f4")
+        albedo = np.full((height, width, 3), 0.5, np.float32)
+        normal = np.zeros_like(albedo)
         normal[..., 2] = 1.0
-        for quality in qualities:
-            denoiser = shared_denoiser("auto", quality)
-            if not denoiser.available:
-                return [{"note": denoiser.failure}]
-            denoiser(color, albedo, normal)   # untimed: the filter's first call builds it
-            parts = [denoiser(color, albedo, normal).ms for _ in range(repeats)]
-            row = {"width": width, "height": height, "quality": quality,
-                   "device": denoiser.device, "readback_ms": read_ms, "upload_result_ms": upload_ms}
-            for key in parts[0]:
-                row[key] = statistics.median(p[key] for p in parts)
-            row["total_ms"] = read_ms + upload_ms + sum(row[k] for k in parts[0])
-            rows.append(row)
-            log(f"  denoise cost {width}x{height} {quality} on {denoiser.device}: "
-                f"filter {row['filter_ms']:.2f} ms, total {row['total_ms']:.2f} ms")
+        try:
+            for quality in qualities:
+                denoiser = shared_denoiser("auto", quality)
+                staged = denoiser.staging(width, height, ("albedo", "normal"))
+                if staged is None:
+                    return [{"note": denoiser.failure}]
+                parts = []
+                for i in range(repeats + 1):
+                    ctx.finish()
+                    t0 = time.perf_counter()
+                    acc.texture.read_into(staged)
+                    t1 = time.perf_counter()
+                    d = denoiser(staged, albedo, normal, copy=False)
+                    t2 = time.perf_counter()
+                    tex.write(d.image)
+                    ctx.finish()
+                    t3 = time.perf_counter()
+                    if i:
+                        parts.append({"readback_ms": 1e3 * (t1 - t0), **d.ms,
+                                      "upload_result_ms": 1e3 * (t3 - t2),
+                                      "total_ms": 1e3 * (t3 - t0)})
+                row = {"width": width, "height": height, "quality": quality,
+                       "device": denoiser.device}
+                for k in parts[0]:
+                    row[k] = statistics.median(p[k] for p in parts)
+                rows.append(row)
+                log(f"  denoise cost {width}x{height} {quality} on {denoiser.device}: "
+                    f"filter {row['filter_ms']:.2f} ms, total {row['total_ms']:.2f} ms")
+        finally:
+            acc.release()
+            tex.release()
     return rows
 
 
@@ -124,7 +151,7 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
         flip = frames in config.flip_frames or frames == max(config.pt_spp)
         results.add(rec, image if flip else None, reference)
         for g, (albedo, normal, guide_ms) in guides.items():
-            d = denoiser(image, albedo, normal)
+            d = denoiser(image, albedo, normal)   # (its copy into the filter's colour: upload_ms)
             charged = guide_ms + (0.0 if own_probes or g != "probes" else guide_bake_ms)
             twin = make_record(base, config, method, frames, d.image, reference, timing, bake_ms,
                                **extra)
@@ -264,8 +291,9 @@ def write_denoise_report(data: dict, out):
     if cost and "note" not in cost[0]:
         lines += ["## The denoiser's whole cost", "", "Wall ms, medians; guided by an albedo and a "
                   "normal. Read-back: an RGBA32F image from GL; upload: the result into a texture.",
-                  "", "| size | quality | device | read-back | to device | filter | from device | "
-                  "upload | total |", "|---|---|---|---|---|---|---|---|---|"]
+                  "", "| size | quality | device | read-back into the filter's colour | checks "
+                  "and guides | filter | output checks | upload | total |",
+                  "|---|---|---|---|---|---|---|---|---|"]
         for c in cost:
             lines.append(f"| {c['width']}x{c['height']} | {c['quality']} | {c['device']} | "
                          f"{c['readback_ms']:.2f} | {c['upload_ms']:.2f} | {c['filter_ms']:.2f} | "

@@ -59,6 +59,14 @@ def sanitize(image: np.ndarray) -> np.ndarray:
     return out
 
 
+def _make_usable(image: np.ndarray) -> None:
+    """In place: NaN and infinite values to 0 (only where there are any: one summing pass finds
+    out), negatives to 0."""
+    if not np.isfinite(image.sum(dtype=np.float64)):
+        np.nan_to_num(image, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+    np.maximum(image, 0.0, out=image)
+
+
 def radiance_as_albedo(image: np.ndarray) -> np.ndarray:
     """A noise-free radiance image (the raymarched probes) as an albedo guide: divided by one
     scale, the ALBEDO_SCALE_QUANTILE quantile of each pixel's largest channel, and clipped to
@@ -144,19 +152,28 @@ class Denoiser:
         return self._load()
 
     # ---- the filter ----------------------------------------------------------------------------
+    # The colour and the output live in pinned host memory that OIDN's device reads and writes
+    # directly (OIDN_STORAGE_HOST): the caller reads GL straight into the colour (staging()), and
+    # the result is read where the filter wrote it. The guides live on the device, uploaded when a
+    # different array is given (they change with the camera, not with every frame). Measured on an
+    # H200 (lab/denoise_io.py, docs/experiments.md): a copy through pageable memory there moved
+    # about 1 GB/s, and was most of a 512^2 frame's 12 ms around a 1.1 ms filter.
     def _filter_for(self, width: int, height: int, guides: tuple[str, ...]):
         key = (width, height, guides)
         if key in self._filters:
             return self._filters[key]
-        for old in self._filters.values():   # one size at a time: the viewer's resize frees the last
-            self._release_filter(old)
-        self._filters.clear()
+        for old_key in [k for k in self._filters if k[:2] != (width, height)]:
+            self._release_filter(self._filters.pop(old_key))   # one size at a time (a resize)
         oidn = self._oidn
         flt = oidn.Filter(self._device, oidn.OIDN_FILTER_TYPE_RT)
-        nbytes = width * height * 3 * 4
-        buffers = {}
-        for name in ("color", "output", *guides):
-            buffers[name] = oidn.Buffer(self._device, nbytes)
+        pixels = width * height
+        host = oidn.OIDN_STORAGE_HOST if self.device == "cuda" else None
+        buffers = {"color": self._buffer(pixels * 16, host), "output": self._buffer(pixels * 12, host)}
+        flt.set_image("color", buffers["color"], oidn.OIDN_FORMAT_FLOAT3, width, height, 0, 16,
+                      width * 16)
+        flt.set_image("output", buffers["output"], oidn.OIDN_FORMAT_FLOAT3, width, height)
+        for name in guides:
+            buffers[name] = self._buffer(pixels * 12, None)
             flt.set_image(name, buffers[name], oidn.OIDN_FORMAT_FLOAT3, width, height)
         flt.set_bool("hdr", True)
         flt.set_bool("cleanAux", True)    # the guides are noise-free (no prefiltering)
@@ -164,8 +181,20 @@ class Denoiser:
                          "fast": oidn.OIDN_QUALITY_FAST}[self.quality])
         flt.commit()
         self._raise_error("filter setup")
-        self._filters[key] = (flt, buffers)
-        return flt, buffers
+        views = {name: self._view(buffers[name]) for name in ("color", "output")}
+        entry = {"filter": flt, "buffers": buffers, "color": views["color"].reshape(height, width, 4),
+                 "output": views["output"].reshape(height, width, 3), "guides": {}}
+        self._filters[key] = entry
+        return entry
+
+    def _buffer(self, nbytes: int, storage):
+        return (self._oidn.Buffer(self._device, nbytes) if storage is None else
+                self._oidn.Buffer(self._device, nbytes, storage=storage))
+
+    def _view(self, buffer) -> np.ndarray:
+        """A NumPy view of a buffer the host can address (host storage; the CPU device's)."""
+        from pyoidn.capi import oidn_ffi
+        return np.frombuffer(oidn_ffi.buffer(buffer.get_data(), buffer.size), np.float32)
 
     def _raise_error(self, what: str) -> None:
         error = self._device.get_error()
@@ -174,52 +203,72 @@ class Denoiser:
 
     @staticmethod
     def _release_filter(entry) -> None:
-        flt, buffers = entry
-        flt.release()
-        for b in buffers.values():
+        entry["filter"].release()
+        for b in entry["buffers"].values():
             b.release()
 
+    def staging(self, width: int, height: int, guides: tuple[str, ...] = ()) -> np.ndarray | None:
+        """The colour's RGBA float32 (height, width, 4) in the filter's own memory, for a caller
+        that reads GL straight into it (texture.read_into) and then passes it as `color`: no copy.
+        None where the filter cannot run."""
+        if not self._load():
+            return None
+        try:
+            return self._filter_for(width, height, tuple(guides))["color"]
+        except Exception as exc:
+            self.failure = f"the denoiser failed ({exc}). Showing the image as rendered."
+            self.close()
+            return None
+
     def __call__(self, color: np.ndarray, albedo: np.ndarray | None = None,
-                 normal: np.ndarray | None = None) -> Denoised:
-        """The denoised colour (H, W, 3), guided by the noise-free `albedo` (in [0, 1]) and
-        `normal` (in [-1, 1]) where given (a normal needs an albedo: OIDN's rule). The raw
-        colour, made finite and non-negative, with a note where the filter cannot run."""
+                 normal: np.ndarray | None = None, copy: bool = True) -> Denoised:
+        """The denoised colour (H, W, 3) of `color` (H, W, 3 or 4: RGB, or RGBA whose alpha is
+        ignored), guided by the noise-free `albedo` (in [0, 1]) and `normal` (in [-1, 1]) where
+        given (a normal needs an albedo: OIDN's rule). Negative, NaN and infinite colours are
+        taken as 0. `copy` False: the image is a view of the filter's output, valid until the
+        next call. Where the filter cannot run: the raw colour, made finite and non-negative,
+        with a note."""
         color = np.asarray(color)
-        _check_image("colour", color)
+        if color.ndim != 3 or color.shape[2] not in (3, 4) or min(color.shape[:2]) == 0:
+            raise ValueError(f"denoise: the colour image must be (height, width, 3), got "
+                             f"{color.shape}")
         if normal is not None and albedo is None:
             raise ValueError("denoise: a normal guide needs an albedo guide as well (OIDN)")
-        raw = sanitize(color)
-        if not self._load():
-            return Denoised(raw, None, self.failure)
-        t0 = time.perf_counter()
-        guides = {}
-        for name, image, low in (("albedo", albedo, 0.0), ("normal", normal, -1.0)):
+        height, width = color.shape[:2]
+        for name, image in (("albedo", albedo), ("normal", normal)):
             if image is not None:
-                image = np.asarray(image)
-                _check_image(name, image, color.shape)
-                guide = np.nan_to_num(np.asarray(image, np.float32), nan=0.0, posinf=1.0,
-                                      neginf=low)
-                guides[name] = np.ascontiguousarray(np.clip(guide, low, 1.0))
-        height, width = raw.shape[:2]
+                _check_image(name, np.asarray(image), (height, width, 3))
+        if not self._load():
+            return Denoised(sanitize(color[..., :3]), None, self.failure)
+        guides = {n: g for n, g in (("albedo", albedo), ("normal", normal)) if g is not None}
+        t0 = time.perf_counter()
         try:
-            flt, buffers = self._filter_for(width, height, tuple(guides))
-            nbytes = raw.nbytes
-            buffers["color"].write(0, nbytes, raw)
+            entry = self._filter_for(width, height, tuple(guides))
+            staged = entry["color"]
+            if not np.shares_memory(color, staged):
+                staged[..., :3] = color[..., :3]
+            _make_usable(staged)
             for name, guide in guides.items():
-                buffers[name].write(0, nbytes, guide)
+                if entry["guides"].get(name) is not guide:   # a new guide: upload it once
+                    low = -1.0 if name == "normal" else 0.0
+                    g = np.nan_to_num(np.asarray(guide, np.float32), nan=0.0, posinf=1.0,
+                                      neginf=low)
+                    g = np.ascontiguousarray(np.clip(g, low, 1.0))
+                    entry["buffers"][name].write(0, g.nbytes, g)
+                    entry["guides"][name] = guide
             t1 = time.perf_counter()
-            flt.execute()
+            entry["filter"].execute()
             self._raise_error("filter")
             t2 = time.perf_counter()
-            out = np.empty_like(raw)
-            buffers["output"].read(0, nbytes, out)
+            out = entry["output"]
+            _make_usable(out)
+            if copy:
+                out = out.copy()
             t3 = time.perf_counter()
         except Exception as exc:
             self.failure = f"the denoiser failed ({exc}). Showing the image as rendered."
             self.close()
-            return Denoised(raw, None, self.failure)
-        out[~np.isfinite(out)] = 0.0
-        np.maximum(out, 0.0, out=out)
+            return Denoised(sanitize(color[..., :3]), None, self.failure)
         return Denoised(out, self.device, None,
                         {"upload_ms": 1e3 * (t1 - t0), "filter_ms": 1e3 * (t2 - t1),
                          "download_ms": 1e3 * (t3 - t2)})

@@ -26,7 +26,7 @@ from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extincti
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
 from .dispatch_budget import dispatch_target_ms
-from .denoise import GUIDE_SETS, Denoised, radiance_as_albedo, shared_denoiser
+from .denoise import GUIDE_SETS, Denoised, radiance_as_albedo, sanitize, shared_denoiser
 from .denoise_guides import GUIDE_FRAMES, DenoiseGuides
 from .raymarch import Raymarcher, min_step_voxels
 from .resources import SceneResources
@@ -166,6 +166,8 @@ class Renderer:
         self.last_light_ms = 0.0
         self._guides: DenoiseGuides | None = None
         self._guide_acc: Accumulation | None = None   # the raymarched image a "probes" guide uses
+        self._guides_key: tuple | None = None         # what the guides kept were made for
+        self._guides_kept: tuple = (None, None)
 
     @property
     def _light(self) -> LightTransmittance | None:
@@ -845,7 +847,7 @@ class Renderer:
         image = rgba[..., :3].copy()
         if not denoise:
             return RenderResult(image, method, spp, render_ms, bake_ms, stats=stats)
-        denoised, guides_ms = self.denoise(image, denoise_guides)
+        denoised, guides_ms = self.denoise(None, denoise_guides)
         return RenderResult(denoised.image, method, spp, render_ms, bake_ms, stats=stats,
                             raw_image=image, denoised=denoised, guides_ms=guides_ms)
 
@@ -856,13 +858,22 @@ class Renderer:
         takes them: (albedo, normal, GPU ms), each None where the set has none. "albedo" and
         "albedo-normal": where each ray first scatters in expectation (glsl/denoise_guides.comp,
         `frames` jittered rays a pixel); "probes": the raymarched image over the probes in hand
-        (`probe_frames` frames; bake first), scaled into [0, 1], in the albedo's place."""
+        (`probe_frames` frames; bake first), scaled into [0, 1], in the albedo's place. Kept
+        while the camera, the medium and the probes stay: the same arrays again and 0 ms (the
+        denoiser then keeps them on its device too)."""
         if guides not in GUIDE_SETS:
             raise ValueError(f"unknown denoise guides {guides!r} (known: {', '.join(GUIDE_SETS)})")
         if guides == "none":
             return None, None, 0.0
         camera = self.camera or camera_frame(self.scene.camera)
         step = self.raymarch_step_voxels * 2 * self.resources.march_step
+        key = (guides, tuple(camera.uniforms().items()), self.resources.bake_key(), step,
+               frames, probe_frames,
+               (self._baked_key, self.probe_grid.passes_done, self.probe_grid.next_probe)
+               if guides == "probes" and self.probe_grid is not None else None)
+        if self._guides_key == key:
+            albedo, normal = self._guides_kept
+            return albedo, normal, 0.0
         if guides == "probes":
             if not self.probes_shown():
                 raise RuntimeError("the probes guide needs probes: bake first")
@@ -878,24 +889,41 @@ class Renderer:
             self.raymarcher().run(self.resources, camera, acc, probe_frames, self.seed ^ 0x2545F491,
                                   step, {**extra, **self._light.uniforms()})
             self.timer.stop()
-            return radiance_as_albedo(acc.read()), None, light_ms + self.timer.elapsed_ms
-        if self._guides is None:
-            self._guides = DenoiseGuides(self.ctx, self.resources.medium_defines())
-        self.timer.start()
-        self._guides.run(self.resources, camera, step, frames, self.seed)
-        self.timer.stop()
-        albedo, normal = self._guides.read()
-        return albedo, (normal if guides == "albedo-normal" else None), self.timer.elapsed_ms
+            albedo, normal, ms = radiance_as_albedo(acc.read()), None, light_ms + self.timer.elapsed_ms
+        else:
+            if self._guides is None:
+                self._guides = DenoiseGuides(self.ctx, self.resources.medium_defines())
+            self.timer.start()
+            self._guides.run(self.resources, camera, step, frames, self.seed)
+            self.timer.stop()
+            albedo, normal = self._guides.read()
+            normal = normal if guides == "albedo-normal" else None
+            ms = self.timer.elapsed_ms
+        self._guides_key, self._guides_kept = key, (albedo, normal)
+        return albedo, normal, ms
 
-    def denoise(self, image: np.ndarray, guides: str = "albedo-normal",
-                quality: str = "high") -> tuple[Denoised, float]:
-        """`image` (of the camera begun) through the denoiser with `guides`: (Denoised, the
-        guides' GPU ms). Where the denoiser cannot run, Denoised holds the raw image and a note."""
+    def denoise(self, image: np.ndarray | None = None, guides: str = "albedo-normal",
+                quality: str = "high", copy: bool = True) -> tuple[Denoised, float]:
+        """The image of the camera begun (None: the accumulation in hand, read from GL straight
+        into the denoiser's memory) through the denoiser with `guides`: (Denoised, the guides'
+        GPU ms). Where the denoiser cannot run, Denoised holds the raw image and a note."""
         denoiser = shared_denoiser("auto", quality)
         if not denoiser.available:
-            return Denoised(np.asarray(image, np.float32), None, denoiser.failure), 0.0
+            raw = self.image() if image is None else image
+            return Denoised(sanitize(raw), None, denoiser.failure), 0.0
         albedo, normal, guides_ms = self.denoise_guides(guides)
-        return denoiser(image, albedo, normal), guides_ms
+        if image is None:
+            acc = self._acc
+            names = tuple(n for n, g in (("albedo", albedo), ("normal", normal)) if g is not None)
+            staged = (denoiser.staging(acc.width, acc.height, names)
+                      if self.method != "guided" else None)
+            if staged is not None:
+                self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+                acc.texture.read_into(staged)
+                image = staged
+            else:
+                image = self.image()
+        return denoiser(image, albedo, normal, copy=copy), guides_ms
 
     def release(self) -> None:
         if self._guides is not None:

@@ -1,0 +1,26 @@
+# Sourced at the start of a command on the lent GPU machine (the `device` tool), from the repo root:
+#   source lab/device.sh
+# It sets up OpenGL (../shared/gpu/prepare.sh's .gl and .whl, carried), makes the app/ folder
+# importable as `radiance_probes`, unpacks carried datasets (.data/*.gz) where the bench scenes look
+# for them, and puts Open Image Denoise on the path once it is assembled in /tmp/devcache/oidn (see
+# lab/README.md: the library is larger than one call may carry, so it travels in parts).
+source .gl/on-device.sh
+mkdir -p /tmp/pkg && ln -sfn "$PWD/app" /tmp/pkg/radiance_probes
+export PYTHONPATH=/tmp/pkg:$PYTHONPATH
+mkdir -p ../shared/datasets /tmp/devcache
+for f in .data/*.gz; do
+  [ -f "$f" ] || continue
+  raw=../shared/datasets/$(basename "$f" .gz)
+  [ -f "$raw" ] || gunzip -c "$f" > "$raw"
+done
+for i in 1 2 3; do [ -f .oidnp$i/part ] && cp .oidnp$i/part /tmp/devcache/oidn.part$i; done
+if [ ! -d /tmp/devcache/oidn/pyoidn ] && [ -f /tmp/devcache/oidn.part1 ] && [ -f /tmp/devcache/oidn.part2 ] \
+   && [ -f /tmp/devcache/oidn.part3 ] && [ -d .oidnp3 ]; then
+  mkdir -p /tmp/devcache/oidn
+  cat /tmp/devcache/oidn.part1 /tmp/devcache/oidn.part2 /tmp/devcache/oidn.part3 | tar xz -C /tmp/devcache/oidn
+  (cd /tmp/devcache/oidn/pyoidn/oidn/lib && ln -sf libOpenImageDenoise.so.2 libOpenImageDenoise.so \
+    && ln -sf libOpenImageDenoise.so.2 "libOpenImageDenoise.so.$(ls libOpenImageDenoise_core.so.* | sed 's/.*core\.so\.//')")
+  python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/devcache/oidn .oidnp3/*.whl
+fi
+[ -d /tmp/devcache/oidn/pyoidn ] && export PYTHONPATH=/tmp/devcache/oidn:$PYTHONPATH
+true
