@@ -110,7 +110,8 @@ class BenchConfig:
     # --preset denoise (denoise.py): each noisy method raw and denoised with each guide set
     denoise_guides: tuple[str, ...] = ("none", "albedo", "albedo-normal", "probes")
     denoise_quality: str = "high"
-    denoise_guide_probes: tuple[int, int] = (64, 128)     # the "probes" guide's grid, walks
+    # the "probes" guide's (grid, walks) settings, each a guide of its own
+    denoise_guide_probes: tuple[tuple[int, int], ...] = ((64, 128), (32, 64))
     denoise_probe_setting: tuple[int, int] = (64, 128)    # `probes` at its first event
     denoise_gather_setting: tuple[int, int] = (128, 64)   # `probes` with a gather (gather_events)
     denoise_guided_setting: tuple[int, int] = (64, 128)
@@ -177,16 +178,17 @@ PRESETS = {
                               bias_seeds=2, bias_frames=2, bias_probe_spp=2),
     # the denoiser over every noisy method on the seven bench scenes (denoise.py)
     "denoise": BenchConfig(mode="denoise", ref_spp=16384, ref_samples_per_pass=256,
-                           pt_spp=(4, 16, 64, 256, 1024, 4096), probe_frames=(4, 16, 64, 256),
+                           pt_spp=(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096),
+                           probe_frames=(4, 16, 64, 256),
                            gather_events=(2,), gather_frames=(4, 16, 64, 256, 1024),
-                           guided_frames=(4, 16, 64, 256, 1024), raymarch_frames=(4, 16),
+                           guided_frames=(4, 16, 64, 128, 256, 1024), raymarch_frames=(4, 16),
                            flip_frames=(16, 256), image_frames=64),
     "denoise-quick": BenchConfig(mode="denoise", scenes=("tiny",), width=32, height=32,
                                  ref_spp=256, ref_samples_per_pass=32, pt_spp=(4, 16),
                                  probe_frames=(4,), gather_events=(2,), gather_frames=(4,),
                                  guided_frames=(4,), raymarch_frames=(2,), flip_frames=(16,),
                                  image_frames=16, samples_per_dispatch=4,
-                                 denoise_guide_probes=(4, 32), denoise_probe_setting=(4, 32),
+                                 denoise_guide_probes=((4, 32),), denoise_probe_setting=(4, 32),
                                  denoise_gather_setting=(4, 16), denoise_guided_setting=(4, 32),
                                  denoise_cost=False, speed_check_rays=1 << 12),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,

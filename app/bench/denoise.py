@@ -132,40 +132,51 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
                                                          "upload_result_ms": upload_ms}
     k = config.samples_per_dispatch
 
-    # The "probes" guide's probes (config.denoise_guide_probes), baked once: what they cost is
-    # charged to every record whose method did not bake them itself.
-    grid, walks = config.denoise_guide_probes
-    renderer.set_scene(_with_probes(scene, grid, walks))
-    renderer.invalidate()
-    guide_bake_ms = renderer.bake(seed=11) + renderer.bake_light()
+    # The "probes" guide at each of config.denoise_guide_probes (grid, walks), baked once each:
+    # what a setting's bake cost is charged to every record whose method did not bake it itself.
     guides = {}   # guide set -> (albedo, normal, GPU ms)
-    renderer.begin("raymarch")   # the scene's camera at the run's size
+    guide_bake_ms = {}
     for g in config.denoise_guides:
-        guides[g] = renderer.denoise_guides(g)
-        log(f"  guides {g}: {guides[g][2]:.2f} ms")
+        settings = config.denoise_guide_probes if g == "probes" else ((0, 0),)
+        for grid, walks in settings:
+            name = g if g != "probes" else f"probes {grid}x{walks}"
+            if g == "probes":
+                renderer.set_scene(_with_probes(scene, grid, walks))
+                renderer.invalidate()
+                guide_bake_ms[name] = renderer.bake(seed=11) + renderer.bake_light()
+            renderer.begin("raymarch")   # the scene's camera at the run's size
+            guides[name] = renderer.denoise_guides(g)
+            log(f"  guides {name}: {guides[name][2]:.2f} ms")
     renderer.set_scene(scene)
 
     def add(method: str, frames: int, image: np.ndarray, timing, bake_ms: float,
-            own_probes: bool, **extra) -> None:
+            own_probes: tuple | None, **extra) -> None:
         rec = make_record(base, config, method, frames, image, reference, timing, bake_ms, **extra)
         flip = frames in config.flip_frames or frames == max(config.pt_spp)
         results.add(rec, image if flip else None, reference)
         for g, (albedo, normal, guide_ms) in guides.items():
-            d = denoiser(image, albedo, normal)   # (its copy into the filter's colour: upload_ms)
-            charged = guide_ms + (0.0 if own_probes or g != "probes" else guide_bake_ms)
-            twin = make_record(base, config, method, frames, d.image, reference, timing, bake_ms,
+            # The image is copied into the filter's colour here (prepare_ms, not charged): in
+            # Renderer.denoise, GL reads it straight there, which io_ms's read-back times.
+            d = denoiser(image, albedo, normal, copy=False)
+            denoised = d.image.copy()
+            charged = guide_ms + (0.0 if g not in guide_bake_ms or own_probes == g
+                                  else guide_bake_ms[g])
+            twin = make_record(base, config, method, frames, denoised, reference, timing, bake_ms,
                                **extra)
             twin.update(denoise=g, denoise_device=d.device, guides_ms=charged, io_ms=around_ms,
-                        filter_parts_ms=d.ms, mean_ratio=float(d.image.mean() / max(image.mean(), 1e-30)))
-            twin["total_ms"] = rec["total_ms"] + charged + around_ms + d.total_ms
-            results.add(twin, d.image if flip else None, reference)
+                        filter_parts_ms=d.ms,
+                        mean_ratio=float(denoised.mean() / max(image.mean(), 1e-30)))
+            twin["total_ms"] = (rec["total_ms"] + charged + around_ms + d.ms["filter_ms"]
+                                + d.ms["check_ms"])
+            results.add(twin, denoised if flip else None, reference)
             if frames == config.image_frames:
-                save_png(out / "images" / f"{name}_{method}_{frames}_{g}.png", d.image)
+                save_png(out / "images" / f"{name}_{method}_{frames}_{g.replace(' ', '_')}.png",
+                         denoised)
         if frames == config.image_frames:
             save_png(out / "images" / f"{name}_{method}_{frames}_raw.png", image)
 
     for frames, image, *timing in progressive(renderer, "pt", config.pt_spp, 5, k):
-        add("pt", frames, image, timing, 0.0, False)
+        add("pt", frames, image, timing, 0.0, None)
     log(f"  pt: {max(config.pt_spp)} spp")
     for (grid, walks), events, frames_list in (
             (config.denoise_probe_setting, (1,), config.probe_frames),
@@ -173,7 +184,7 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
         renderer.set_scene(_with_probes(scene, grid, walks))
         renderer.invalidate()
         bake_ms = renderer.bake(seed=11)
-        own = (grid, walks) == tuple(config.denoise_guide_probes)
+        own = f"probes {grid}x{walks}"
         for event in events:
             renderer.configure(gather_event=event)
             for frames, image, *timing in progressive(renderer, "probes", frames_list, 13, k):
@@ -185,12 +196,12 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
     renderer.set_scene(_with_probes(scene, grid, walks))
     renderer.invalidate()
     bake_ms = renderer.bake(seed=11) + renderer.bake_light()
-    own = (grid, walks) == tuple(config.denoise_guide_probes)
+    own = f"probes {grid}x{walks}"
     for frames, image, *timing in progressive(renderer, "guided", config.guided_frames, 19, k):
         add("guided", frames, image, timing, bake_ms, own, probe_grid=grid, probe_samples=walks)
     log(f"  guided {grid}^3 x {walks}")
-    # the clean base: the raymarcher over the guide's probes (raw only)
-    grid, walks = config.denoise_guide_probes
+    # the clean base: the raymarcher over the first guide setting's probes (raw only)
+    grid, walks = config.denoise_guide_probes[0]
     renderer.set_scene(_with_probes(scene, grid, walks))
     renderer.invalidate()
     bake_ms = renderer.bake(seed=11) + renderer.bake_light()
@@ -291,14 +302,14 @@ def write_denoise_report(data: dict, out):
     if cost and "note" not in cost[0]:
         lines += ["## The denoiser's whole cost", "", "Wall ms, medians; guided by an albedo and a "
                   "normal. Read-back: an RGBA32F image from GL; upload: the result into a texture.",
-                  "", "| size | quality | device | read-back into the filter's colour | checks "
-                  "and guides | filter | output checks | upload | total |",
+                  "", "| size | quality | device | read-back into the filter's colour | "
+                  "prepare | filter | output check | upload | total |",
                   "|---|---|---|---|---|---|---|---|---|"]
         for c in cost:
             lines.append(f"| {c['width']}x{c['height']} | {c['quality']} | {c['device']} | "
-                         f"{c['readback_ms']:.2f} | {c['upload_ms']:.2f} | {c['filter_ms']:.2f} | "
-                         f"{c['download_ms']:.2f} | {c['upload_result_ms']:.2f} | "
-                         f"{c['total_ms']:.2f} |")
+                         f"{c['readback_ms']:.2f} | {c.get('prepare_ms', c.get('upload_ms', 0)):.2f} | "
+                         f"{c['filter_ms']:.2f} | {c.get('check_ms', c.get('download_ms', 0)):.2f} | "
+                         f"{c['upload_result_ms']:.2f} | {c['total_ms']:.2f} |")
     path = out / "report.md"
     path.write_text("\n".join(lines) + "\n")
     _plot(data, scenes, out / "denoise.png")

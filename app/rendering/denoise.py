@@ -10,9 +10,10 @@ It never takes an image away: where the library cannot load, the device cannot b
 filter fails, `denoise` returns the raw image with a note saying why (`Denoised.note`), and the
 stage remembers the failure so that a viewer does not try again every frame.
 
-Cost, measured by the caller's clock: the host copy to the filter's device, the filter, and the copy
-back (`Denoised.ms`, wall time; OIDN's execute is synchronous). The read-back from GL and the upload
-of the result are the caller's (the renderer's and the viewer's), and their records add them.
+Cost (`Denoised.ms`, wall time; OIDN's execute is synchronous): prepare_ms (the colour's copy into
+the filter's memory where the caller did not read GL straight into it, and a new guide's upload),
+filter_ms, check_ms (one pass over the output, and its copy where asked). The read-back from GL and
+the upload of the result are the caller's (Renderer.denoise, the viewer), and records add them.
 """
 from __future__ import annotations
 
@@ -247,7 +248,6 @@ class Denoiser:
             staged = entry["color"]
             if not np.shares_memory(color, staged):
                 staged[..., :3] = color[..., :3]
-            _make_usable(staged)
             for name, guide in guides.items():
                 if entry["guides"].get(name) is not guide:   # a new guide: upload it once
                     low = -1.0 if name == "normal" else 0.0
@@ -257,11 +257,16 @@ class Denoiser:
                     entry["buffers"][name].write(0, g.nbytes, g)
                     entry["guides"][name] = guide
             t1 = time.perf_counter()
-            entry["filter"].execute()
-            self._raise_error("filter")
+            self._execute(entry)
             t2 = time.perf_counter()
             out = entry["output"]
-            _make_usable(out)
+            # OIDN reads NaN as 0 and clamps the colour to [0, FLT_MAX] on its device; an infinite
+            # input alone survives that, and shows as a non-finite or overflowing output: then
+            # (rarely) the input is made usable on the host and filtered again
+            if not np.isfinite(out.sum(dtype=np.float64)):
+                _make_usable(staged)
+                self._execute(entry)
+                _make_usable(out)
             if copy:
                 out = out.copy()
             t3 = time.perf_counter()
@@ -270,8 +275,12 @@ class Denoiser:
             self.close()
             return Denoised(sanitize(color[..., :3]), None, self.failure)
         return Denoised(out, self.device, None,
-                        {"upload_ms": 1e3 * (t1 - t0), "filter_ms": 1e3 * (t2 - t1),
-                         "download_ms": 1e3 * (t3 - t2)})
+                        {"prepare_ms": 1e3 * (t1 - t0), "filter_ms": 1e3 * (t2 - t1),
+                         "check_ms": 1e3 * (t3 - t2)})
+
+    def _execute(self, entry) -> None:
+        entry["filter"].execute()
+        self._raise_error("filter")
 
     def close(self) -> None:
         for entry in self._filters.values():
