@@ -39,10 +39,10 @@ COLOUR_SOURCES = {"colormap": ("colors", "rgba"), "colors": ("colormap", "rgba")
                   "rgba": ("colormap", "colors", "opacity"), "opacity": ("rgba",)}
 SCENE_KEYS = tuple(f.name for f in dataclasses.fields(Scene)
                    if f.name not in ("base_dir", "environment_map"))
-METHODS = ("raymarch", "probes", "probes-only", "pt")
+METHODS = ("raymarch", "probes", "probes-only", "pt", "guided")
 # Samples per pixel a render takes unless told: the raymarcher's frames differ only by their
 # jittered start; the others are Monte Carlo.
-DEFAULT_SPP = {"raymarch": 4, "probes": 64, "probes-only": 64, "pt": 64}
+DEFAULT_SPP = {"raymarch": 4, "probes": 64, "probes-only": 64, "pt": 64, "guided": 64}
 # window="auto": the values between these percentiles map to densities 0 and 1.
 AUTO_WINDOW_PERCENTILES = (0.5, 99.5)
 AUTO_WINDOW_SAMPLES = 1 << 21     # voxels the percentiles are taken over, at most (a regular subsample)
@@ -316,10 +316,14 @@ class Renderer:
 
     # ---- images -------------------------------------------------------------------------------
     def render(self, method: str = "raymarch", spp: int | None = None, camera: Any = None,
-               seed: int = 0, exposure: float = 1.0, **scene_options) -> Image:
+               seed: int = 0, exposure: float = 1.0, denoise: bool = False,
+               denoise_guides: str = "auto", **scene_options) -> Image:
         """One image of the current scene (with `camera` and any scene options changed first):
         `method` raymarch (interactive, over the probes), probes, probes-only, or pt (the
-        reference path tracer); `spp` samples (raymarched frames) per pixel."""
+        reference path tracer) or guided (the path tracer with the probes as a control variate);
+        `spp` samples (raymarched frames) per pixel. `denoise`: through the denoiser (Open Image
+        Denoise), guided by `denoise_guides` (auto, none, albedo, albedo-normal, probes); where it
+        cannot run, the raw image and a note (Image.notes)."""
         if method not in METHODS:
             raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
         spp = DEFAULT_SPP[method] if spp is None else spp
@@ -333,9 +337,13 @@ class Renderer:
                 r.set_scene(self.scene)
             if r.needs_probes(method) and not r.probes_current():
                 self.bakes += 1
-            result = r.render(method, spp=spp, seed=seed)
+            result = r.render(method, spp=spp, seed=seed, denoise=denoise,
+                              denoise_guides=denoise_guides)
+        notes = self.notes
+        if result.denoised is not None and not result.denoised.denoised:
+            notes = (*notes, result.denoised.note)
         return Image(result.image, method, spp, self.scene, result.render_ms, result.bake_ms,
-                     exposure, self.notes)
+                     exposure, notes)
 
     def widget(self, method: str = "raymarch", spp: int | None = None, exposure: float = 1.0):
         """In Jupyter: the image with sliders that orbit the camera (needs ipywidgets)."""
@@ -361,16 +369,18 @@ class Renderer:
 
 def render(data: Any = None, method: str = "raymarch", spp: int | None = None, *,
            scene: Any = None, camera: Any = None, seed: int = 0, exposure: float = 1.0,
-           settings=None, gl_backend: str | None = None, **scene_options) -> Image:
+           denoise: bool = False, denoise_guides: str = "auto", settings=None,
+           gl_backend: str | None = None, **scene_options) -> Image:
     """Renders `data` once and releases the GL context. `data`: a NumPy array [z, y, x] of any
     numeric dtype (give spacing=(x, y, z) where voxels are not cubes), a volume file, a folder
     (TIFF slices or DICOM, searched recursively), a scene JSON file, or None (the built-in
     cloud). Keywords are scene keys or their shortcuts (colormap=, opacity=, width=, window=,
     series=, orientation=, density_scale=, ...); `settings` a RenderSettings (how it bakes and
-    renders)."""
+    renders). `denoise`: through the denoiser (Renderer.render)."""
     with Renderer(data, scene=scene, settings=settings, gl_backend=gl_backend,
                   **scene_options) as r:
-        return r.render(method, spp, camera=camera, seed=seed, exposure=exposure)
+        return r.render(method, spp, camera=camera, seed=seed, exposure=exposure, denoise=denoise,
+                        denoise_guides=denoise_guides)
 
 
 def view(data: Any = None, method: str = "raymarch", *, scene: Any = None, block: bool = True,

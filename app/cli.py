@@ -170,6 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                  "reference volumetric path tracer.")
     sub = parser.add_subparsers(dest="command", required=True)
 
+    from .rendering.denoise import GUIDE_CHOICES
     from .rendering.renderer import METHODS, RAYMARCH_STAGES
     from .scene_types import PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS
     r = sub.add_parser("render", help="render a scene headless to a PNG (and linear .npy/.exr)")
@@ -214,6 +215,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--raymarch-step", type=positive_float,
                    help="raymarch step in voxels (default 0.5, or the finest the shader's 8192 "
                         "steps across the box allow, whichever is longer)")
+    r.add_argument("--denoise", action="store_true",
+                   help="pass the image through the denoiser (Open Image Denoise; its CUDA device "
+                        "on an NVIDIA GPU, else the CPU): far less noise from few samples, fine "
+                        "detail may soften (docs/denoising.md)")
+    r.add_argument("--denoise-guides", choices=GUIDE_CHOICES, default="auto",
+                   help="what guides the denoiser: auto (default: the probes' raymarched image "
+                        "where the method has probes, else the albedo and normal at few samples), "
+                        "none, albedo, albedo-normal, probes")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--width", type=positive_int)
     r.add_argument("--height", type=positive_int)

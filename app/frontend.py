@@ -367,7 +367,8 @@ def render_defaults() -> dict:
     """Every option `render` has, at its default: what the viewer's headless fallback starts from."""
     return dict(scene=None, method="pt", spp=64, samples_per_pass=1, out="render.png", linear=None,
                 exr=None, probe_grid=None, probe_samples=None, sh_window=None, probe_precision=None,
-                auto_probes=None, auto=None, raymarch_stage="compute", raymarch_step=None, seed=0, width=None,
+                auto_probes=None, auto=None, denoise=False, denoise_guides="auto",
+                raymarch_stage="compute", raymarch_step=None, seed=0, width=None,
                 height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True,
                 gather_event=None, series=None, orientation=None, data_window=None, crop=None,
                 crop_voxels=None, clip_plane=None, no_crop=False, no_clip_plane=False,
@@ -460,7 +461,28 @@ def render_to_files(args: argparse.Namespace) -> int:
         result = renderer.render(args.method, spp=args.spp, seed=args.seed,
                                  samples_per_pass=args.samples_per_pass,
                                  progress=progress_printer(f"{args.method} samples"),
-                                 bake_progress=on_bake_pass)
+                                 bake_progress=on_bake_pass,
+                                 denoise=getattr(args, "denoise", False),
+                                 denoise_guides=getattr(args, "denoise_guides", "auto"))
+    if getattr(args, "denoise", False):
+        if auto is not None:   # auto_render returned its image: denoise that one
+            from .rendering.denoise import choose_guides, shared_denoiser
+            renderer.begin(args.method)
+            guides = choose_guides(args.denoise_guides, result.spp,
+                                   renderer.needs_probes(args.method) and renderer.probes_shown())
+            albedo, normal, _ = renderer.denoise_guides(guides)
+            if shared_denoiser().available:
+                d = shared_denoiser()(result.image, albedo, normal)
+            else:
+                from .rendering.denoise import Denoised, sanitize
+                d = Denoised(sanitize(result.image), None, shared_denoiser().failure)
+            result.image, result.denoised = d.image, d
+        d = result.denoised
+        if d is not None and d.denoised:
+            print(f"denoised on OIDN's {d.device} device (guides: {args.denoise_guides}): "
+                  f"filter {d.ms['filter_ms']:.1f} ms")
+        elif d is not None:
+            print(f"note: {d.note}", file=sys.stderr)
     errors = []
     if getattr(args, "colorbar", None):
         from .colorbar import scene_colorbar

@@ -341,6 +341,8 @@ def _plot(data: dict, scenes: list[str], path) -> None:
         ax.set_xlabel("total ms")
         ax.set_ylabel("rRMSE")
         ax.grid(True, which="both", alpha=0.3)
+    for ax in list(axes.flat)[len(scenes):]:
+        ax.set_visible(False)
     handles, labels = axes.flat[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=6)
     fig.tight_layout(rect=(0, 0.12, 1, 1))

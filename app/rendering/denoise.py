@@ -27,6 +27,28 @@ QUALITIES = ("high", "balanced", "fast")
 # where each camera ray first scatters; that albedo and the normal there; the raymarched image
 # over the probes, scaled into [0, 1], in the albedo's place.
 GUIDE_SETS = ("none", "albedo", "albedo-normal", "probes")
+# "auto" (choose_guides): what bench/h200-denoise measured best, on the geometric mean of seven
+# scenes' errors: the probes' image wherever the method has probes, up to PROBE_GUIDE_MAX_SPP (25-30%
+# below the colour alone at 1-4 samples, 10% at 64, even at 256, 13% above at 1024); for the path
+# tracer the albedo and normal up to NORMAL_GUIDE_MAX_SPP (14-16% below at 1-4, 8% at 16, 3% above
+# at 64); else the colour alone.
+GUIDE_CHOICES = ("auto", *GUIDE_SETS)
+PROBE_GUIDE_MAX_SPP = 256
+NORMAL_GUIDE_MAX_SPP = 16
+
+
+def choose_guides(guides: str, spp: int, has_probes: bool) -> str:
+    """The guide set to use: `guides` itself, or for "auto" the measured best for an image of
+    `spp` samples (has_probes: the method's probes are in hand, so their image costs a raymarch)."""
+    if guides not in GUIDE_CHOICES:
+        raise ValueError(f"unknown denoise guides {guides!r} (known: {', '.join(GUIDE_CHOICES)})")
+    if guides != "auto":
+        return guides
+    if has_probes and spp <= PROBE_GUIDE_MAX_SPP:
+        return "probes"
+    return "albedo-normal" if spp <= NORMAL_GUIDE_MAX_SPP else "none"
+
+
 # radiance_as_albedo: the image's value at this quantile (of each pixel's largest channel) maps to 1
 ALBEDO_SCALE_QUANTILE = 0.995
 DEVICES = ("auto", "cuda", "cpu")

@@ -26,7 +26,8 @@ from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extincti
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
 from .dispatch_budget import dispatch_target_ms
-from .denoise import GUIDE_SETS, Denoised, radiance_as_albedo, sanitize, shared_denoiser
+from .denoise import (GUIDE_SETS, Denoised, choose_guides, radiance_as_albedo, sanitize,
+                      shared_denoiser)
 from .denoise_guides import GUIDE_FRAMES, DenoiseGuides
 from .raymarch import Raymarcher, min_step_voxels
 from .resources import SceneResources
@@ -820,10 +821,11 @@ class Renderer:
                width: int | None = None, height: int | None = None, samples_per_pass: int = 1,
                progress: Callable[[int, int], None] | None = None,
                bake_progress: Callable | None = None, denoise: bool = False,
-               denoise_guides: str = "albedo-normal") -> RenderResult:
+               denoise_guides: str = "auto") -> RenderResult:
         """Renders the current scene from scratch with `spp` samples per pixel; with `denoise`,
         the image goes through the denoiser with `denoise_guides` (RenderResult.raw_image keeps
-        the raw one; .denoised says what ran, or why not). A streamed mix
+        the raw one; .denoised says what ran, or why not; "auto": denoise.choose_guides). A
+        streamed mix
         of levels (RenderSettings.mixed_levels under a cap) is first made the one this camera
         and image size deserve (restream, all of it)."""
         if self.resources.stream is not None:
@@ -847,7 +849,8 @@ class Renderer:
         image = rgba[..., :3].copy()
         if not denoise:
             return RenderResult(image, method, spp, render_ms, bake_ms, stats=stats)
-        denoised, guides_ms = self.denoise(None, denoise_guides)
+        guides = choose_guides(denoise_guides, spp, self.needs_probes(method) and self.probes_shown())
+        denoised, guides_ms = self.denoise(None, guides)
         return RenderResult(denoised.image, method, spp, render_ms, bake_ms, stats=stats,
                             raw_image=image, denoised=denoised, guides_ms=guides_ms)
 
