@@ -220,3 +220,55 @@ def test_render_denoise_from_the_command_line_and_the_api(tmp_path, capsys):
     image = rp.render(method="guided", spp=2, width=16, height=16, denoise=True,
                       probes={"grid": [4, 4, 4], "samples": 16})
     assert image.shape == (16, 16, 3) and not image.notes
+
+
+def test_the_viewers_denoise_switch(ctx, monkeypatch):
+    """The session's Denoise: off by default on llvmpipe; switched on, the path tracer's view
+    shows a filtered image, made again when its samples double (not every frame), dropped at a
+    restart until the next; refine's guided image too. A failing filter switches it off with
+    the note and the raw image shows."""
+    from radiance_probes.viewer import denoise_view
+    from radiance_probes.viewer.session import RenderSession
+    monkeypatch.setattr(denoise_view, "INTERVAL_S", 1e9)   # the doubling rule alone
+    s = RenderSession(ctx, parse_scene({
+        "volume": {"builtin": "cloud", "size": [12, 12, 12]}, "density_scale": 30.0,
+        "albedo": 0.9, "camera": {"width": 24, "height": 16},
+        "probes": {"grid": [2, 2, 2], "samples": 32, "fit": "box"}}))
+    try:
+        assert not s.denoise.enabled
+        s.resize(24, 16)
+        s.set_methods(["pt"])
+        s.step(64, False)
+        assert s.texture("pt") is s.views["pt"].acc.texture and s.denoise.runs == 0
+        s.denoise.set_enabled(True)
+        counts = []
+        for _ in range(12):
+            s.step(64, False)
+            counts.append((s.views["pt"].acc.samples, s.denoise.runs))
+        assert s.texture("pt") is not s.views["pt"].acc.texture
+        filtered = s.denoise.images["pt"]
+        # one filtered image per doubling of the samples, never more than one a frame
+        samples = counts[-1][0]
+        assert 1 <= counts[-1][1] <= 1 + samples.bit_length()
+        assert counts[-1][1] < len(counts) or samples < 2
+        assert filtered.samples <= samples < 2 * filtered.samples
+        shown = np.frombuffer(s.texture("pt").read(), np.float32)
+        assert np.isfinite(shown).all() and shown.max() > 0
+        s.restart()
+        assert s.texture("pt") is s.views["pt"].acc.texture     # raw until the next filter
+        s.set_methods(["refine"])
+        for _ in range(400):
+            s.step(256, True)
+            if s.refine_state()["shown"] == "guided" and s.denoise.texture(
+                    "refine", s.views["refine"], s.restarts) is not None:
+                break
+        assert s.texture("refine") is not s.views["refine"].acc.texture
+        monkeypatch.setattr(denoise_view, "shared_denoiser",
+                            lambda: type("Broken", (), {"staging": lambda *a: None,
+                                                        "failure": "no library"})())
+        s.set_methods(["pt"])
+        s.step(256, False)
+        assert not s.denoise.enabled and s.denoise.note == "no library"
+        assert s.texture("pt") is s.views["pt"].acc.texture
+    finally:
+        s.release()

@@ -856,8 +856,10 @@ class Renderer:
 
     # ---- the denoiser's guides (denoise_guides.py) and the denoiser (denoise.py) ----------------
     def denoise_guides(self, guides: str = "albedo-normal", frames: int = GUIDE_FRAMES,
-                       probe_frames: int = 16) -> tuple[np.ndarray | None, np.ndarray | None, float]:
-        """The noise-free guides of the camera begun (begin(); else the scene's) as the denoiser
+                       probe_frames: int = 16, camera=None
+                       ) -> tuple[np.ndarray | None, np.ndarray | None, float]:
+        """The noise-free guides of `camera` (a CameraFrame; None: the camera begun, else the
+        scene's) as the denoiser
         takes them: (albedo, normal, GPU ms), each None where the set has none. "albedo" and
         "albedo-normal": where each ray first scatters in expectation (glsl/denoise_guides.comp,
         `frames` jittered rays a pixel); "probes": the raymarched image over the probes in hand
@@ -868,7 +870,7 @@ class Renderer:
             raise ValueError(f"unknown denoise guides {guides!r} (known: {', '.join(GUIDE_SETS)})")
         if guides == "none":
             return None, None, 0.0
-        camera = self.camera or camera_frame(self.scene.camera)
+        camera = camera or self.camera or camera_frame(self.scene.camera)
         step = self.raymarch_step_voxels * 2 * self.resources.march_step
         key = (guides, tuple(camera.uniforms().items()), self.resources.bake_key(), step,
                frames, probe_frames,

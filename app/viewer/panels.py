@@ -93,6 +93,16 @@ def render_section(v) -> None:
                  else "(none in visible medium)")
         imgui.text_disabled(f"{len(drawn['indices'])} of {drawn['total']} probes drawn, "
                             f"{where}{stride}; colour: radiance at the exposure below")
+    dn = v.session.denoise
+    changed, value = imgui.checkbox("Denoise", dn.enabled)
+    ui.note("Denoise")
+    if changed:
+        dn.set_enabled(value)
+    if dn.note:
+        imgui.text_wrapped(dn.note)
+    elif dn.enabled and dn.runs:
+        imgui.text_disabled(f"filtered {dn.runs} images; last frame's filtering "
+                            f"{dn.last_ms:.1f} ms (wall)")
     changed, value = imgui.checkbox("Volume box", state.show_box)
     ui.note("Volume box")
     if changed:

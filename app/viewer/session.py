@@ -36,6 +36,7 @@ from ..rendering.refine import HalfBuffers, RefineEstimate
 from ..rendering.renderer import PROBE_LIGHTING, Renderer
 from ..scene import Scene
 from ..volume import Volume
+from .denoise_view import ViewDenoise
 
 FRAME_HISTORY = 240
 MAX_SAMPLES_PER_FRAME = 64
@@ -123,6 +124,7 @@ class FrameTimes:
     render_ms: float = 0.0
     display_ms: float = 0.0
     samples: int = 0          # samples per pixel dispatched in the frame, over its views
+    denoise_ms: float = 0.0   # wall ms the Denoise switch's filtering took (not GPU time)
 
     @property
     def total_ms(self) -> float:
@@ -151,6 +153,9 @@ class RenderSession:
         device = "software" if is_software(ctx) else "gpu"
         self.bake_budget_ms = BAKE_BUDGET_MS[device]
         self.frame_budget_ms = FRAME_BUDGET_MS[device]
+        # Denoise: on by default on a GPU; on a CPU rasteriser the filter (OIDN's CPU device)
+        # takes as long as several frames, so it waits to be switched on
+        self.denoise = ViewDenoise(ctx, enabled=device == "gpu")
 
     @property
     def scene(self) -> Scene:
@@ -302,6 +307,7 @@ class RenderSession:
             del recent[:-RECENT_DISPATCHES]
             times.render_ms += ms
             times.samples += n
+        times.denoise_ms = self.denoise.update(self)
         self.last = times
         return times
 
@@ -451,8 +457,12 @@ class RenderSession:
 
     # ---- reading -------------------------------------------------------------------------------
     def texture(self, method: str):
+        """What the display shows of a view: its filtered image where the Denoise switch has
+        one for the current accumulation, else the accumulation."""
         view = self.views.get(method)
-        return None if view is None or view.acc is None else view.acc.texture
+        if view is None or view.acc is None:
+            return None
+        return self.denoise.texture(method, view, self.restarts) or view.acc.texture
 
     def samples(self, method: str) -> int:
         view = self.views.get(method)
@@ -521,5 +531,6 @@ class RenderSession:
     def release(self) -> None:
         for name in list(self.views):
             self._drop(name)
+        self.denoise.release()
         self.renderer.release()
 

@@ -1,0 +1,112 @@
+"""The viewer's Denoise switch: each shown view of a noisy method (the path tracer, `probes`,
+`probes-only`, and `refine` once `guided` shows) through the denoiser (app/rendering/denoise.py),
+with the guides Renderer.denoise_guides makes for the view's camera ("auto": the probes' image
+where the view has probes, else the albedo and normal at few samples).
+
+The filter runs on the newest accumulated image, not every frame: whenever the samples have
+doubled since the last filtered image (1, 2, 4, ...), and at least every INTERVAL_S while they
+grow. A view shows its raw image until its first filtered one, and again after any restart until
+the next. On the H200 a 1080p filter with its read-back and upload costs about 25 ms
+(bench/h200-denoise), so the doubling keeps its share of a 14 ms frame small after the first
+second. OIDN has no temporal mode: the filtered images of a still camera change as samples come
+(docs/denoising.md measures the flicker)."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import moderngl
+
+from ..rendering.denoise import choose_guides, shared_denoiser
+
+DENOISED = ("pt", "probes", "probes-only", "guided")
+INTERVAL_S = 0.5
+
+
+@dataclass
+class _Filtered:
+    texture: object
+    generation: tuple      # (the accumulation's id, the session's restarts) it was made from
+    samples: int           # samples of the image it filtered
+    at: float              # when (monotonic seconds)
+
+
+class ViewDenoise:
+    def __init__(self, ctx: moderngl.Context, enabled: bool):
+        self.ctx = ctx
+        self.enabled = enabled
+        self.images: dict[str, _Filtered] = {}
+        self.note: str | None = None     # why it switched itself off (the library, the filter)
+        self.last_ms = 0.0               # wall ms of the last update's filtering
+        self.runs = 0                    # filtered images made (tests, the Stats panel)
+
+    def set_enabled(self, on: bool) -> None:
+        self.enabled = bool(on)
+        if on:
+            self.note = None
+
+    def _due(self, name: str, generation: tuple, samples: int, now: float) -> bool:
+        old = self.images.get(name)
+        if old is None or old.generation != generation:
+            return samples > 0
+        return samples >= 2 * old.samples or (samples > old.samples and now - old.at >= INTERVAL_S)
+
+    def update(self, session) -> float:
+        """Filters each view that is due; returns the wall ms it took."""
+        self.last_ms = 0.0
+        if not self.enabled:
+            return 0.0
+        start = time.perf_counter()
+        r = session.renderer
+        denoiser = shared_denoiser()
+        for name, view in session.views.items():
+            acc, shown = view.acc, view.shown
+            generation = (id(acc), session.restarts)
+            if acc is None or shown not in DENOISED or acc.samples == 0:
+                self.images.pop(name, None)
+                continue
+            now = time.monotonic()
+            if not self._due(name, generation, acc.samples, now):
+                continue
+            has_probes = session.needs_probes(name) and r.probes_current()
+            guides = choose_guides("auto", acc.samples, has_probes)
+            albedo, normal, _ = r.denoise_guides(guides, camera=view.camera)
+            names = tuple(n for n, g in (("albedo", albedo), ("normal", normal)) if g is not None)
+            staged = denoiser.staging(acc.width, acc.height, names)
+            if staged is None:
+                self.note, self.enabled = denoiser.failure, False
+                self.images.clear()
+                break
+            self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+            acc.texture.read_into(staged)
+            d = denoiser(staged, albedo, normal, copy=False)
+            if not d.denoised:
+                self.note, self.enabled = d.note, False
+                self.images.clear()
+                break
+            old = self.images.get(name)
+            texture = old.texture if old is not None else None
+            if texture is None or texture.size != (acc.width, acc.height):
+                if texture is not None:
+                    texture.release()
+                texture = self.ctx.texture((acc.width, acc.height), 3, dtype="f4")
+                texture.filter = acc.texture.filter
+            texture.write(d.image)
+            self.images[name] = _Filtered(texture, generation, acc.samples, now)
+            self.runs += 1
+        self.last_ms = 1e3 * (time.perf_counter() - start)
+        return self.last_ms
+
+    def texture(self, name: str, view, restarts: int):
+        """The view's filtered image, where one of its current accumulation exists."""
+        if not self.enabled or view is None or view.acc is None:
+            return None
+        got = self.images.get(name)
+        if got is None or got.generation != (id(view.acc), restarts):
+            return None
+        return got.texture
+
+    def release(self) -> None:
+        for got in self.images.values():
+            got.texture.release()
+        self.images.clear()
