@@ -53,6 +53,10 @@ def add_animate_parser(sub, func) -> argparse.ArgumentParser:
                         f"{DEFAULT_SPP})")
     a.add_argument("--samples-per-pass", type=positive_int, default=16,
                    help="samples per pixel in one GPU dispatch (default 16)")
+    a.add_argument("--denoise", action="store_true",
+                   help="pass every frame through the denoiser (Open Image Denoise, guided by "
+                        "the probes' image or the albedo and normal): no temporal filtering, so "
+                        "a noisy method's frames can flicker (docs/denoising.md)")
     a.add_argument("--width", type=positive_int)
     a.add_argument("--height", type=positive_int)
     a.add_argument("--exposure", type=positive_float, default=1.0)
@@ -146,12 +150,15 @@ def run_animate(args: argparse.Namespace) -> int:
                 "once for the whole movie"), file=sys.stderr)
         result = render_movie(renderer, cameras, writer, args.method, args.spp, args.seed,
                               args.exposure, args.samples_per_pass, overlay,
-                              progress=lambda done, total: bar.update(done), times=times)
+                              progress=lambda done, total: bar.update(done), times=times,
+                              denoise=getattr(args, "denoise", False))
     except MovieError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     finally:
         renderer.release()
+    if result.denoise_note:
+        print(f"note: {result.denoise_note}", file=sys.stderr)
     print(f"device: {describe(ctx)}")
     print(f"movie: {result.summary()}")
     note = frame_count_note(result.path, result.frames)

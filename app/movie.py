@@ -31,6 +31,7 @@ class MovieResult:
     render_ms: float           # GPU time of the frames' samples
     wall_s: float              # the whole movie on the host's clock: bake, frames, encoding
     kept: dict = field(default_factory=dict)   # frame index -> linear image (bench)
+    denoise_note: str | None = None            # why frames were not denoised, where asked
 
     def summary(self) -> str:
         return (f"{self.frames} frames {self.width}x{self.height}, {self.method} at {self.spp} "
@@ -68,8 +69,11 @@ class MovieFrames:
 
     def __init__(self, renderer, cameras: list[CameraSpec], method: str = "raymarch",
                  spp: int = 16, seed: int = 0, exposure: float = 1.0,
-                 samples_per_pass: int = 16, overlay=None, times: list[int] | None = None):
-        """`times`: a time series' step of each frame (None: the scene's step throughout). A
+                 samples_per_pass: int = 16, overlay=None, times: list[int] | None = None,
+                 denoise: bool = False):
+        """`times`: a time series' step of each frame (None: the scene's step throughout);
+        `denoise`: each frame through the denoiser (Renderer.denoise, "auto" guides; a note in
+        `denoise_note` and the raw frames where it cannot run). A
         frame on another step than the last bakes that step's probes (restarted from the last
         step's: Renderer.bake; a finished bake is the same either way)."""
         from .rendering.accumulation import Accumulation
@@ -86,6 +90,8 @@ class MovieFrames:
             raise ValueError(f"{len(times)} time steps for {len(self.cameras)} frames")
         self.times = None if times is None else [int(t) for t in times]
         self.scene_time = renderer.scene.time   # given back when the movie is done
+        self.denoise = denoise and method != "raymarch"   # the raymarcher's frames are not noisy
+        self.denoise_note: str | None = None
 
     @property
     def done(self) -> bool:
@@ -107,8 +113,17 @@ class MovieFrames:
             acc = r.begin(self.method, seed=self.seed)
             while acc.samples < self.spp:
                 self.render_ms += r.add_samples(min(self.samples_per_pass, self.spp - acc.samples))
-            linear = acc.read() if keep_linear else None
-            pixels = self.readback.read(acc, self.exposure)
+            if self.denoise:
+                from .rendering.denoise import choose_guides
+                from .rendering.tonemap import to_uint8
+                has_probes = r.needs_probes(self.method) and r.probes_shown()
+                d, _ = r.denoise(None, choose_guides("auto", self.spp, has_probes))
+                self.denoise_note = self.denoise_note or d.note
+                linear = d.image if keep_linear else None
+                pixels = to_uint8(d.image, self.exposure)
+            else:
+                linear = acc.read() if keep_linear else None
+                pixels = self.readback.read(acc, self.exposure)
         finally:
             r._acc = lent
             # the step stays until the movie is done: going back between frames would re-bake
@@ -128,13 +143,13 @@ class MovieFrames:
 def render_movie(renderer, cameras: list[CameraSpec], writer, method: str = "raymarch",
                  spp: int = 16, seed: int = 0, exposure: float = 1.0, samples_per_pass: int = 16,
                  overlay=None, progress=None, keep: tuple[int, ...] = (),
-                 times: list[int] | None = None) -> MovieResult:
+                 times: list[int] | None = None, denoise: bool = False) -> MovieResult:
     """Renders every camera into `writer` (None: frames are not written, only kept or timed);
     `overlay`: a colorbar.ColorbarOverlay laid over each frame; `progress(done, total)` after each
     frame; `keep`: frame indices whose linear images come back in MovieResult.kept."""
     start = time.perf_counter()
     frames = MovieFrames(renderer, cameras, method, spp, seed, exposure, samples_per_pass, overlay,
-                         times)
+                         times, denoise)
     kept = {}
     try:
         while not frames.done:
@@ -151,7 +166,8 @@ def render_movie(renderer, cameras: list[CameraSpec], writer, method: str = "ray
         frames.release()
     return MovieResult(path=path, frames=len(cameras), width=frames.width, height=frames.height,
                        method=method, spp=spp, bakes=frames.bakes, bake_ms=frames.bake_ms,
-                       render_ms=frames.render_ms, wall_s=time.perf_counter() - start, kept=kept)
+                       render_ms=frames.render_ms, wall_s=time.perf_counter() - start, kept=kept,
+                       denoise_note=frames.denoise_note)
 
 
 def series_steps(steps: int, frames: int) -> list[int]:

@@ -91,6 +91,9 @@ class BenchConfig:
     interact_orbit_frames: int = 60
     interact_ref_spp: int = 1024                     # reference per event state (two halves)
     interact_tail_k: int = 8                         # samples per dispatch against 1
+    # the viewer's Denoise switch in the replay (None: its default, on on a GPU); the errors are
+    # then the shown (filtered) image's, and a frame's time adds the filtering's wall ms
+    interact_denoise: bool | None = None
     # --preset movie (movie.py): a turntable raymarched over probes baked once, timed whole,
     # its error at a few frames against path-traced references, the path tracer's time beside
     movie_frames: int = 120
@@ -116,6 +119,8 @@ class BenchConfig:
     denoise_gather_setting: tuple[int, int] = (128, 64)   # `probes` with a gather (gather_events)
     denoise_guided_setting: tuple[int, int] = (64, 128)
     denoise_cost: bool = True                             # the cost table at 512^2, 1080p, 4K
+    denoise_flicker_spp: tuple[int, ...] = (4, 16)        # flicker: the path tracer at these spp
+    denoise_flicker_frames: int = 8                       # ... this many independent images each
 
     def scaled(self, **changes) -> "BenchConfig":
         return replace(self, **changes)
@@ -160,6 +165,11 @@ PRESETS = {
     "interact-refine": BenchConfig(mode="interact", scenes=("bonsai", "foot"),
                                    ref_samples_per_pass=64, interact_sizes=((1920, 1080),),
                                    interact_probes=((128, 64),), interact_methods=("refine",)),
+    # the same with the Denoise switch off (what the viewer showed before it had one)
+    "interact-refine-raw": BenchConfig(mode="interact", scenes=("bonsai", "foot"),
+                                       ref_samples_per_pass=64, interact_sizes=((1920, 1080),),
+                                       interact_probes=((128, 64),), interact_methods=("refine",),
+                                       interact_denoise=False),
     # the movie of the issue: 120 frames of bonsai at 1080p on the lent GPU (about 4 minutes,
     # most of it the three references and the path tracer's runs)
     "movie": BenchConfig(mode="movie", scenes=("bonsai",), width=1920, height=1080,
@@ -183,6 +193,16 @@ PRESETS = {
                            gather_events=(2,), gather_frames=(4, 16, 64, 256, 1024),
                            guided_frames=(4, 16, 64, 128, 256, 1024), raymarch_frames=(4, 16),
                            flip_frames=(16, 256), image_frames=64),
+    # the denoiser's bias on the stress battery (a denoised image's mean against the raw one's)
+    "denoise-battery": BenchConfig(mode="denoise", scenes=BATTERY_SCENES, width=256, height=256,
+                                   ref_spp=8192, ref_samples_per_pass=256,
+                                   pt_spp=(4, 16, 64, 256, 1024), probe_frames=(4, 64),
+                                   gather_events=(2,), gather_frames=(16, 256),
+                                   guided_frames=(16, 256), raymarch_frames=(16,),
+                                   denoise_guide_probes=((32, 64),), denoise_probe_setting=(32, 64),
+                                   denoise_gather_setting=(32, 64),
+                                   denoise_guided_setting=(32, 64), denoise_cost=False,
+                                   flip_frames=(), image_frames=64, denoise_flicker_spp=()),
     "denoise-quick": BenchConfig(mode="denoise", scenes=("tiny",), width=32, height=32,
                                  ref_spp=256, ref_samples_per_pass=32, pt_spp=(4, 16),
                                  probe_frames=(4,), gather_events=(2,), gather_frames=(4,),
@@ -190,7 +210,8 @@ PRESETS = {
                                  image_frames=16, samples_per_dispatch=4,
                                  denoise_guide_probes=((4, 32),), denoise_probe_setting=(4, 32),
                                  denoise_gather_setting=(4, 16), denoise_guided_setting=(4, 32),
-                                 denoise_cost=False, speed_check_rays=1 << 12),
+                                 denoise_cost=False, speed_check_rays=1 << 12,
+                                 denoise_flicker_spp=(4,), denoise_flicker_frames=3),
     "quick": BenchConfig(width=96, height=96, ref_spp=2048, ref_samples_per_pass=16,
                          speed_check_rays=1 << 12,
                          pt_spp=(1, 4, 16), samples_per_dispatch=4, probe_grids=(4, 8), probe_samples=(16, 64),

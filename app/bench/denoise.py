@@ -139,14 +139,14 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
     for g in config.denoise_guides:
         settings = config.denoise_guide_probes if g == "probes" else ((0, 0),)
         for grid, walks in settings:
-            name = g if g != "probes" else f"probes {grid}x{walks}"
+            guide = g if g != "probes" else f"probes {grid}x{walks}"
             if g == "probes":
                 renderer.set_scene(_with_probes(scene, grid, walks))
                 renderer.invalidate()
-                guide_bake_ms[name] = renderer.bake(seed=11) + renderer.bake_light()
+                guide_bake_ms[guide] = renderer.bake(seed=11) + renderer.bake_light()
             renderer.begin("raymarch")   # the scene's camera at the run's size
-            guides[name] = renderer.denoise_guides(g)
-            log(f"  guides {name}: {guides[name][2]:.2f} ms")
+            guides[guide] = renderer.denoise_guides(g)
+            log(f"  guides {guide}: {guides[guide][2]:.2f} ms")
     renderer.set_scene(scene)
 
     def add(method: str, frames: int, image: np.ndarray, timing, bake_ms: float,
@@ -177,6 +177,7 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
 
     for frames, image, *timing in progressive(renderer, "pt", config.pt_spp, 5, k):
         add("pt", frames, image, timing, 0.0, None)
+    flicker(renderer, name, config, results, guides, denoiser)
     log(f"  pt: {max(config.pt_spp)} spp")
     for (grid, walks), events, frames_list in (
             (config.denoise_probe_setting, (1,), config.probe_frames),
@@ -210,6 +211,27 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
                           probe_grid=grid, probe_samples=walks)
         results.add(rec, image if frames in config.flip_frames else None, reference)
     renderer.set_scene(scene)
+
+
+def flicker(renderer, name: str, config, results, guides: dict, denoiser) -> None:
+    """OIDN has no temporal mode: on a still camera, successive images of the same view (the path
+    tracer's, independent seeds) differ, raw and denoised. Flicker = mean over pixels of the
+    standard deviation over the images, over the mean image's mean (meta.denoise_flicker)."""
+    rows = []
+    for spp in config.denoise_flicker_spp:
+        raw, filtered = [], {g: [] for g in guides}
+        for i in range(config.denoise_flicker_frames):
+            image = renderer.render("pt", spp=spp, seed=7000 + i).image
+            raw.append(image)
+            for g, (albedo, normal, _) in guides.items():
+                filtered[g].append(denoiser(image, albedo, normal).image)
+
+        def measure(images):
+            stack = np.stack(images)
+            return float(stack.std(axis=0).mean() / max(stack.mean(), 1e-30))
+        rows.append({"spp": spp, "frames": config.denoise_flicker_frames, "raw": measure(raw),
+                     **{g: measure(v) for g, v in filtered.items()}})
+    results.meta.setdefault("denoise_flicker", {})[name] = rows
 
 
 # ---- the report ---------------------------------------------------------------------------------
@@ -282,6 +304,16 @@ def write_denoise_report(data: dict, out):
                     vals.append(v)
                 totals = "; ".join(_ms(row[c]["total_ms"]) for c in cols if c in row)
                 lines.append(f"| {key} | {spp} | " + " | ".join(vals) + f" | {totals} |")
+        flick = data["meta"].get("denoise_flicker", {}).get(s)
+        if flick:
+            names = [k for k in flick[0] if k not in ("spp", "frames")]
+            lines += ["", f"Flicker on a still camera (the path tracer, {flick[0]['frames']} "
+                      "independent images of the view: per-pixel standard deviation over them, "
+                      "mean over the image, relative to its mean):", "",
+                      "| spp | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+            for row in flick:
+                lines.append(f"| {row['spp']} | " + " | ".join(f"{row[n]:.4f}" for n in names)
+                             + " |")
         # the denoiser's own bias
         bias = [r for r in rs if r.get("denoise")]
         if bias:

@@ -109,7 +109,7 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
             s.set_scene(scenes[f])
         times = s.step(target_spp, needs)
         wall = (time.perf_counter() - start) * 1e3
-        ms = times.total_ms
+        ms = times.total_ms + times.denoise_ms   # the Denoise switch's filtering (wall ms)
         frames.append(ms)
         walls.append(wall)
         trace.append([round(times.bake_ms, 3), round(times.render_ms, 3), times.samples,
@@ -123,7 +123,7 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
         view = s.views[method]
         converged = (not needs or r.probes_current()) and s.view_done(method, target_spp)
         if after in checks or converged or f == lead + config.interact_max_frames - 1:
-            error = corrected_rrmse(rrmse(s.image(method), reference), noise)
+            error = corrected_rrmse(rrmse(s.shown_image(method), reference), noise)
             curve.append((t, wall_t, error))
         if converged:
             break
@@ -173,6 +173,8 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
     session = RenderSession(r.ctx, start, renderer=r)
     session.bake_budget_ms = config.interact_bake_budget_ms
     session.frame_budget_ms = config.interact_frame_budget_ms
+    if config.interact_denoise is not None:
+        session.denoise.set_enabled(config.interact_denoise)
     for width, height in config.interact_sizes:
         size_cfg = config.scaled(width=width, height=height, ref_spp=config.interact_ref_spp)
         session.resize(width, height)
@@ -204,6 +206,7 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
             base = {"mode": "interact", "scene": name, "device": device, "width": width,
                     "height": height, "probe_grid": grid, "probe_samples": walks,
                     "bake_budget_ms": config.interact_bake_budget_ms,
+                    "denoise": session.denoise.enabled,
                     "frame_budget_ms": config.interact_frame_budget_ms}
             for method in config.interact_methods:
                 # load: nothing baked yet

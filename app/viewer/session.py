@@ -519,6 +519,18 @@ class RenderSession:
         view = self.views.get(method)
         return None if view is None or view.acc is None else view.acc.read()
 
+    def shown_image(self, method: str) -> np.ndarray | None:
+        """What the display shows of a view (texture()), as a linear RGB image (H, W, 3): its
+        filtered image where the Denoise switch has one, else its accumulation."""
+        view = self.views.get(method)
+        if view is None or view.acc is None:
+            return None
+        texture = self.denoise.texture(method, view, self.restarts)
+        if texture is None:
+            return view.acc.read()
+        w, h = texture.size
+        return np.frombuffer(texture.read(), np.float32).reshape(h, w, 3).copy()
+
     def set_filter(self, linear: bool) -> None:
         self.filter = moderngl.LINEAR if linear else moderngl.NEAREST
         for view in self.views.values():
