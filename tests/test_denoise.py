@@ -272,3 +272,38 @@ def test_the_viewers_denoise_switch(ctx, monkeypatch):
         assert s.texture("pt") is s.views["pt"].acc.texture
     finally:
         s.release()
+
+
+def test_keep_block_means_gives_back_the_raw_means():
+    """keep_block_means: the whole image's mean exactly, each tile's to the interpolation's
+    smoothing; a constant difference is added exactly; the tile means match a direct sum."""
+    from radiance_probes.rendering.denoise import _block_means, keep_block_means
+    rng = np.random.default_rng(3)
+    raw = rng.exponential(1.0, (70, 90, 3)).astype(np.float32)
+    means = _block_means(raw, 32)
+    assert means.shape == (3, 3, 3)
+    np.testing.assert_allclose(means[2, 2], raw[64:, 64:].mean(axis=(0, 1)), rtol=1e-5)
+    np.testing.assert_allclose(means[0, 1], raw[:32, 32:64].mean(axis=(0, 1)), rtol=1e-5)
+    filtered = np.full_like(raw, 0.25)
+    keep_block_means(means, filtered)
+    assert filtered.mean() == pytest.approx(raw.mean(), rel=2e-3)
+    flat = np.full_like(raw, 2.0)
+    shifted = np.full_like(raw, 1.5)
+    keep_block_means(_block_means(flat, 32), shifted)
+    np.testing.assert_allclose(shifted, 2.0, rtol=1e-6)
+
+
+def test_a_signed_image_keeps_its_negative_values_and_its_mean(cpu_denoiser):
+    """guided's images are signed: filtered as such, negative regions stay negative and the mean
+    stays the raw one's (clamping at 0 would raise it)."""
+    y, x = np.mgrid[0:64, 0:64] / 64
+    clean = np.stack([np.sin(6 * x) + 0.3 * y, 0.5 + 0 * x, 0.2 * np.cos(5 * y)], -1)
+    clean = clean.astype(np.float32)
+    rng = np.random.default_rng(4)
+    noisy = clean + rng.normal(0.0, 0.3, clean.shape).astype(np.float32)
+    signed = cpu_denoiser(noisy, signed=True).image
+    clamped = cpu_denoiser(noisy, keep_means=False).image
+    assert (signed[clean < -0.5] < 0).mean() > 0.9
+    assert clamped.min() >= 0.0
+    assert abs(signed.mean() - noisy.mean()) < 1e-3 * np.abs(noisy).mean() + 1e-4
+    assert rmse(signed, clean) < 0.7 * rmse(noisy, clean)

@@ -157,7 +157,7 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
         for g, (albedo, normal, guide_ms) in guides.items():
             # The image is copied into the filter's colour here (prepare_ms, not charged): in
             # Renderer.denoise, GL reads it straight there, which io_ms's read-back times.
-            d = denoiser(image, albedo, normal, copy=False)
+            d = denoiser(image, albedo, normal, copy=False, signed=method == "guided")
             denoised = d.image.copy()
             charged = guide_ms + (0.0 if g not in guide_bake_ms or own_probes == g
                                   else guide_bake_ms[g])

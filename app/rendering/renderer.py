@@ -928,7 +928,7 @@ class Renderer:
                 image = staged
             else:
                 image = self.image()
-        return denoiser(image, albedo, normal, copy=copy), guides_ms
+        return denoiser(image, albedo, normal, copy=copy, signed=self.method == "guided"), guides_ms
 
     def release(self) -> None:
         if self._guides is not None:

@@ -79,7 +79,7 @@ class ViewDenoise:
                 break
             self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
             acc.texture.read_into(staged)
-            d = denoiser(staged, albedo, normal, copy=False)
+            d = denoiser(staged, albedo, normal, copy=False, signed=shown == "guided")
             if not d.denoised:
                 self.note, self.enabled = d.note, False
                 self.images.clear()
