@@ -4,6 +4,7 @@ records (bench/*/results.json or results.json.gz).
     python scripts/readme_tables.py speed [--records bench/h100] [--previous bench/archive/h100-v10]
     python scripts/readme_tables.py interact [--records bench/h100-interact]
     python scripts/readme_tables.py headline [--records bench/h100]
+    python scripts/readme_tables.py denoise [--records bench/h200-denoise]
     python scripts/readme_tables.py --write      # rewrite every generated block in place
     python scripts/readme_tables.py --check      # exit 1 where a block is stale
 
@@ -27,8 +28,10 @@ from radiance_probes.bench import report as R  # noqa: E402
 RECORDS = "bench/h100"
 PREVIOUS = "bench/archive/h100-v12"
 INTERACT_RECORDS = "bench/h100-interact"
+DENOISE_RECORDS = "bench/h200-denoise"
 # The files holding generated blocks, and the blocks each holds.
-GENERATED = {"README.md": ("headline",), "docs/benchmarks.md": ("speed", "interact")}
+GENERATED = {"README.md": ("denoise",), "docs/benchmarks.md": ("speed", "interact"),
+             "docs/denoising.md": ("denoise",)}
 
 # issue 11's targets: 5% and 2% on every scene, bonsai's 2% and the foot's 1% within 500 ms
 SPEED_ROWS = [("fuel", "fuel", (0.05, 0.02, 0.01)), ("hydrogen", "hydrogen", (0.05, 0.02, 0.01)),
@@ -113,6 +116,33 @@ def headline(records: str = RECORDS) -> str:
     return "\n".join(out) + "\n"
 
 
+def denoise(records: str = DENOISE_RECORDS) -> str:
+    """Per scene, the time to 5%, 2% and 1% error (corrected for the reference's noise): the path
+    tracer's, then the best method's raw or denoised (everything its image cost), the speed-up."""
+    from radiance_probes.bench.denoise import error_of
+    data = _load(records)
+    out = ["| scene | to 5%: path tracer, best | to 2% | to 1% |", "| --- | --- | --- | --- |"]
+    for scene, label, _ in SPEED_ROWS:
+        recs = [r for r in data["records"] if r["scene"] == scene]
+        if not recs:
+            continue
+        cells = []
+        for t in (0.05, 0.02, 0.01):
+            hits = [r for r in recs if error_of(data, r) <= t]
+            pts = [r for r in hits if r["method"] == "pt" and not r.get("denoise")]
+            pt = min(pts, key=lambda r: r["total_ms"]) if pts else None
+            best = min(hits, key=lambda r: r["total_ms"]) if hits else None
+            if best is None:
+                cells.append("not reached")
+            elif pt is None:
+                cells.append(f"-, {_ms(best['total_ms'])}")
+            else:
+                cells.append(f"{_ms(pt['total_ms'])}, {_ms(best['total_ms'])} "
+                             f"({_times(pt['total_ms'] / best['total_ms'])})")
+        out.append(f"| {label} | {cells[0]} | {cells[1]} | {cells[2]} |")
+    return "\n".join(out) + "\n"
+
+
 def interact(records: str = INTERACT_RECORDS, method: str = "raymarch", width: int = 1920,
              grid: int = 128) -> str:
     data = _load(records)
@@ -151,7 +181,7 @@ def interact(records: str = INTERACT_RECORDS, method: str = "raymarch", width: i
     return "\n".join(out) + "\n"
 
 
-TABLES = {"speed": speed, "interact": interact, "headline": headline}
+TABLES = {"speed": speed, "interact": interact, "headline": headline, "denoise": denoise}
 
 
 def block_pattern(name: str) -> re.Pattern:
@@ -209,6 +239,8 @@ def main() -> int:
         print(interact(args.records or INTERACT_RECORDS, args.method, args.width, args.grid), end="")
     elif args.table == "headline":
         print(headline(args.records or RECORDS), end="")
+    elif args.table == "denoise":
+        print(denoise(args.records or DENOISE_RECORDS), end="")
     else:
         parser.error("name a table, or --write / --check")
     return 0

@@ -1,5 +1,5 @@
 """The denoising stage (app/rendering/denoise.py) on OIDN's CPU device, and its guides
-(glsl/denoise_guides.comp) against their NumPy twin (app/twins/denoise_guides.py)."""
+(glsl/denoise_guide_images.comp) against their NumPy twin (app/twins/denoise_guides.py)."""
 from __future__ import annotations
 
 import builtins

@@ -79,13 +79,20 @@ def test_the_quoted_figures_are_the_records():
     tables = readme_tables()
     assert tables.stale() == [], "run: python scripts/readme_tables.py --write"
     readme = (ROOT / "README.md").read_text()
-    assert tables.blocks(readme, "headline") == [tables.headline()]
+    assert tables.blocks(readme, "denoise") == [tables.denoise()]
+    assert tables.blocks((ROOT / "docs" / "denoising.md").read_text(), "denoise") == [
+        tables.denoise()]
     # the figures are real numbers: the path tracer's time to 5% on bonsai, from the records
     from radiance_probes.bench import report as R
-    recs = R.main_records(R.load(str(ROOT / "bench/h100")), "bonsai")
-    pt = R.time_to_error([r for r in recs if r["method"] == "pt"], 0.05)
-    assert pt is not None and pt["total_ms"] > 0
-    assert f"| bonsai | {tables._ms(pt['total_ms'])}, " in tables.headline()
+    from radiance_probes.bench.denoise import error_of
+    data = R.load(str(ROOT / "bench/h200-denoise"))
+    pts = [r for r in data["records"] if r["scene"] == "bonsai" and r["method"] == "pt"
+           and not r.get("denoise") and error_of(data, r) <= 0.05]
+    pt = min(pts, key=lambda r: r["total_ms"])
+    assert pt["total_ms"] > 0
+    assert f"| bonsai | {tables._ms(pt['total_ms'])}, " in tables.denoise()
+    # and the probe methods' headline the README quotes in words is still what bench/h100 gives
+    assert "| bonsai | 215 ms, 37.9 ms (5.7x)" in tables.headline()
 
 
 def test_the_readme_names_every_viewer_shortcut():

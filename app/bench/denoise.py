@@ -5,7 +5,7 @@ Each snapshot of a progressive run (records.progressive: the path tracer, `probe
 event and with a gather, `guided`) is recorded raw, then once per guide set of
 `config.denoise_guides` as its denoised twin (`denoise` names the guides). A twin's total is the
 raw image's total plus everything the denoised image cost beyond it:
-  - the guides' GPU time (glsl/denoise_guides.comp; for the "probes" guide the raymarched frames,
+  - the guides' GPU time (glsl/denoise_guide_images.comp; for the "probes" guide the raymarched frames,
     and the bake and light grid of its probes where the method had not paid for them already);
   - the read-back of the image from GL and the upload of the result (io_ms, measured at this size);
   - the filter's own wall time: the copy to its device, OIDN's execute (synchronous), the copy back.
@@ -23,7 +23,8 @@ import numpy as np
 
 from ..imageio import save_png
 from ..rendering.denoise import QUALITIES, shared_denoiser
-from .records import log, make_record, progressive
+from .metrics import corrected_floor, corrected_rrmse
+from .records import caveat, log, make_record, progressive
 
 NOISY = ("pt", "probes", "guided")
 COST_SIZES = ((512, 512), (1920, 1080), (3840, 2160))
@@ -244,8 +245,30 @@ def variant(r: dict) -> str:
     return name + (f" + OIDN({r['denoise']})" if r.get("denoise") else "")
 
 
+def _ms(v: float) -> str:
+    return f"{v / 1000:.3g} s" if v >= 1000 else f"{v:.3g} ms"
+
+
+def error_of(data: dict, record: dict) -> float:
+    """A record's rRMSE corrected for its reference's noise (report.error_of's rule)."""
+    noise = record.get("reference_noise")
+    if noise is None:
+        noise = data["references"].get(record["scene"], {}).get("noise_rrmse", 0.0)
+    return corrected_rrmse(record["rrmse"], float(noise or 0.0))
+
+
+def floor(data: dict, scene: str) -> float:
+    config = data["meta"].get("config", {})
+    noise = data["references"].get(scene, {}).get("noise_rrmse", 0.0)
+    return corrected_floor(float(noise), int(config.get("width", 512)) * int(config.get("height", 512)))
+
+
+def _header(title: str, meta: dict) -> list[str]:
+    return [title, "", f"Device: **{meta['device']}**. Command: `{meta.get('command', '')}`.", "",
+            *caveat(meta)]
+
+
 def write_denoise_report(data: dict, out):
-    from .report import _header, _ms, error_of, floor
     meta = data["meta"]
     recs = data["records"]
     scenes = list(dict.fromkeys(r["scene"] for r in recs))
@@ -257,7 +280,7 @@ def write_denoise_report(data: dict, out):
              "the guides' GPU time (and, for the probes guide, its probes' bake where the method "
              "did not bake them), the read-back from GL and upload of the result, and the filter's "
              "wall time (OIDN, synchronous). `OIDN(g)`: the filter guided by g (none: the colour "
-             "alone; albedo and albedo-normal: glsl/denoise_guides.comp; probes: the raymarched "
+             "alone; albedo and albedo-normal: glsl/denoise_guide_images.comp; probes: the raymarched "
              "probes as albedo).", ""]
     for s in scenes:
         rs = [r for r in recs if r["scene"] == s]
@@ -355,7 +378,6 @@ def _plot(data: dict, scenes: list[str], path) -> None:
         import matplotlib.pyplot as plt
     except ImportError:
         return
-    from .report import error_of
     cols = min(3, len(scenes)) or 1
     rows = (len(scenes) + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(5 * cols, 4 * rows), squeeze=False)

@@ -3,7 +3,7 @@
 The filter runs on OIDN's CUDA device where one is present (the NVIDIA GPU the renderer runs on),
 and on its CPU device elsewhere (llvmpipe, CI). It uses OIDN's own devices and buffers, no deep
 learning framework. An image goes in as linear HDR RGB (SPEC.md's image), optionally with noise-free
-guides of the same size (glsl/denoise_guides.comp: the expected albedo and normal along each camera
+guides of the same size (glsl/denoise_guide_images.comp: the expected albedo and normal along each camera
 ray), and comes out as a finite, non-negative image of the same shape.
 
 It never takes an image away: where the library cannot load, the device cannot be made, or the

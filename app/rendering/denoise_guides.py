@@ -1,4 +1,4 @@
-"""The denoiser's guides on the GPU (glsl/denoise_guides.comp; NumPy twin
+"""The denoiser's guides on the GPU (glsl/denoise_guide_images.comp; NumPy twin
 app/twins/denoise_guides.py): the expected albedo and normal where each camera ray first scatters,
 as two running-mean images over the same jittered rays the raymarcher takes."""
 from __future__ import annotations
@@ -21,7 +21,7 @@ GUIDE_FRAMES = 4
 class DenoiseGuides:
     def __init__(self, ctx: moderngl.Context, defines: dict | None = None):
         self.ctx = ctx
-        self.program = compute_program(ctx, "denoise_guides.comp", defines)
+        self.program = compute_program(ctx, "denoise_guide_images.comp", defines)
         self.albedo: Accumulation | None = None
         self.normal: Accumulation | None = None
 

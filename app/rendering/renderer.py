@@ -861,7 +861,7 @@ class Renderer:
         """The noise-free guides of `camera` (a CameraFrame; None: the camera begun, else the
         scene's) as the denoiser
         takes them: (albedo, normal, GPU ms), each None where the set has none. "albedo" and
-        "albedo-normal": where each ray first scatters in expectation (glsl/denoise_guides.comp,
+        "albedo-normal": where each ray first scatters in expectation (glsl/denoise_guide_images.comp,
         `frames` jittered rays a pixel); "probes": the raymarched image over the probes in hand
         (`probe_frames` frames; bake first), scaled into [0, 1], in the albedo's place. Kept
         while the camera, the medium and the probes stay: the same arrays again and 0 ms (the

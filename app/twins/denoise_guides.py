@@ -1,4 +1,4 @@
-"""NumPy twin of glsl/lib/denoise_guides.glsl and glsl/denoise_guides.comp: the denoiser's albedo
+"""NumPy twin of glsl/lib/denoise_guides.glsl and glsl/denoise_guide_images.comp: the denoiser's albedo
 and normal guides of one jittered frame (the raymarcher's rays and segments)."""
 from __future__ import annotations
 
@@ -60,7 +60,7 @@ def guide_march(volume, table, density_scale: float, albedo: float, origin: np.n
 def guide_frame(volume, table, density_scale: float, albedo: float, camera: CameraFrame,
                 step: float, gradient_step: float, frame: int = 0, seed: int = 0,
                 clip=None) -> tuple[np.ndarray, np.ndarray]:
-    """One frame of denoise_guides.comp: (albedo, normal) images (H, W, 3)."""
+    """One frame of denoise_guide_images.comp: (albedo, normal) images (H, W, 3)."""
     w, h = camera.width, camera.height
     py, px = np.mgrid[0:h, 0:w]
     rng = rng_seed((py * w + px).ravel(), frame, seed)
