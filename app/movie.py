@@ -100,34 +100,34 @@ class MovieFrames:
     def frame(self, keep_linear: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """The next frame as 8-bit RGB (the overlay drawn in), and its linear image if asked."""
         r = self.renderer
-        scene, lent = r.scene, r._acc
-        r._acc = self.acc
+        scene = r.scene
         step = scene.time if self.times is None else self.times[self.next]
-        try:
-            r.set_scene(scene.replace(camera=self.cameras[self.next], time=step))
-            if r.needs_probes(self.method) and not r.probes_current():
-                self.bake_ms += r.bake(self.seed)     # before the first frame only (tests count)
-                self.bakes += 1
-            if self.method == "raymarch":
-                self.bake_ms += r.bake_light()
-            acc = r.begin(self.method, seed=self.seed)
-            while acc.samples < self.spp:
-                self.render_ms += r.add_samples(min(self.samples_per_pass, self.spp - acc.samples))
-            if self.denoise:
-                from .rendering.denoise import choose_guides
-                from .rendering.tonemap import to_uint8
-                has_probes = r.needs_probes(self.method) and r.probes_shown()
-                d, _ = r.denoise(None, choose_guides("auto", self.spp, has_probes))
-                self.denoise_note = self.denoise_note or d.note
-                linear = d.image if keep_linear else None
-                pixels = to_uint8(d.image, self.exposure)
-            else:
-                linear = acc.read() if keep_linear else None
-                pixels = self.readback.read(acc, self.exposure)
-        finally:
-            r._acc = lent
-            # the step stays until the movie is done: going back between frames would re-bake
-            r.set_scene(scene.replace(time=step))
+        with r.lend(self.acc):
+            try:
+                r.set_scene(scene.replace(camera=self.cameras[self.next], time=step))
+                if r.needs_probes(self.method) and not r.probes_current():
+                    self.bake_ms += r.bake(self.seed)     # before the first frame only (tests count)
+                    self.bakes += 1
+                if self.method == "raymarch":
+                    self.bake_ms += r.bake_light()
+                acc = r.begin(self.method, seed=self.seed)
+                while acc.samples < self.spp:
+                    self.render_ms += r.add_samples(min(self.samples_per_pass,
+                                                        self.spp - acc.samples))
+                if self.denoise:
+                    from .rendering.denoise import choose_guides
+                    from .rendering.tonemap import to_uint8
+                    has_probes = r.needs_probes(self.method) and r.probes_shown()
+                    d, _ = r.denoise(None, choose_guides("auto", self.spp, has_probes))
+                    self.denoise_note = self.denoise_note or d.note
+                    linear = d.image if keep_linear else None
+                    pixels = to_uint8(d.image, self.exposure)
+                else:
+                    linear = acc.read() if keep_linear else None
+                    pixels = self.readback.read(acc, self.exposure)
+            finally:
+                # the step stays until the movie is done: going back between frames would re-bake
+                r.set_scene(scene.replace(time=step))
         if self.overlay is not None:
             pixels = self.overlay.apply(pixels)
         self.next += 1

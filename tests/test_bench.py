@@ -253,6 +253,7 @@ def test_bake_mode_profiles_the_bake(ctx, tmp_path):
         assert sections == pytest.approx(r["bake_profiled_ms"], rel=1e-6)
         assert r["walks_per_s"] == pytest.approx(r["walks"] / (r["probe_bake_ms"] / 1e3))
         assert r["total_ms"] == pytest.approx(r["probe_bake_ms"] + r["light_ms"] + r["render_ms"])
+        assert r["light_ms"] > 0   # the light grid's real time (it was 0: a stale attribute)
         assert r["steps_per_walk"] >= 1.0 and r["ceiling_fraction"] > 0
     text = write_report(path).read_text()
     assert "The probe bake" in text and "| current | 3^3 x 16" in text and "sun grid" in text

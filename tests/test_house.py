@@ -151,3 +151,19 @@ def test_the_design_layout_names_every_module():
         assert f"`{path.name}`" in line, f"docs/design.md's layout entry for {folder}/ omits {path.name}"
     for name in re.findall(r"`(app/[\w/]+\.py)`", section):
         assert (ROOT / name).is_file(), f"docs/design.md's layout names {name}, which does not exist"
+
+
+def test_no_front_end_touches_a_renderers_private_fields():
+    """The viewer, movies, the bench and the API drive a frame through the Renderer's public API
+    (lend, begin, add_samples, forget_probes, ...): no file outside app/rendering/ reads or
+    assigns a Renderer's private attribute."""
+    pattern = re.compile(r"\b(?:r|renderer|self\.renderer|session\.renderer|self\._renderer)"
+                         r"\._[a-z][a-z0-9_]*")
+    found = []
+    for path in APP.rglob("*.py"):
+        if path.relative_to(APP).parts[0] == "rendering":
+            continue
+        for i, line in enumerate(path.read_text().splitlines(), 1):
+            if pattern.search(line.split("#")[0]):
+                found.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
+    assert not found, "\n".join(found)

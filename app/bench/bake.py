@@ -39,7 +39,7 @@ def _profiling_supported(renderer) -> bool:
 
 
 def _rebake(renderer, seed: int, **kw) -> float:
-    renderer._baked_key = None   # forces a bake of the same setting again
+    renderer.forget_probes()   # forces a bake of the same setting again
     return renderer.bake(seed=seed, **kw)
 
 
@@ -113,15 +113,15 @@ def bake_scene(renderer, name: str, config, results, out, device: str,
             info.update({k: None for k in ("bake_walk_ms", "bake_project_ms", "bake_sun_ms",
                                            "bake_other_ms", "steps_per_walk", "ceiling_fraction")})
         _rebake(renderer, 11)   # the probes the image uses: the plain build's, seed 11
-        renderer._light_key = None
+        renderer.forget_light_grid()   # its real time (an attribute gone long ago made it 0)
         light_ms = renderer.bake_light()
         k = config.samples_per_dispatch
         for frames, image, *timing in _progressive(renderer, "raymarch", config.raymarch_frames,
                                                    17, k):
             rec = make_record(base, config, "raymarch", frames, image, reference, timing,
                               bake_ms + light_ms, light_ms=light_ms, probe_bake_ms=bake_ms,
-                              light_bytes=renderer._light.gpu_bytes,
-                              light_grid=list(renderer._light.texture.size), **info)
+                              light_bytes=renderer.light_grid.gpu_bytes,
+                              light_grid=list(renderer.light_grid.texture.size), **info)
             results.add(rec, image, reference)
         tag = f"{label}_{walk_sun}{light_side}_a{adaptive:g}_{grid}x{samples}"
         save_png(out / "images" / f"{name}_bake_{tag}.png", image)

@@ -316,8 +316,8 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
                         record("raymarch", frames, image, timing, bake_ms + light_ms,
                                flip=step == 0.5 or showcase, raymarch_step=step, stage=stage,
                                light_ms=light_ms,
-                               light_bytes=renderer._light.gpu_bytes,
-                               light_grid=list(renderer._light.texture.size),
+                               light_bytes=renderer.light_grid.gpu_bytes,
+                               light_grid=list(renderer.light_grid.texture.size),
                                **probe_info)
                         if (showcase and not variant and stage == "compute" and step == 0.5
                                 and frames == config.raymarch_frames[-1]):

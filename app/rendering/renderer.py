@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
@@ -165,6 +166,7 @@ class Renderer:
         self.camera = None
         self.last_bake_ms = 0.0
         self.last_light_ms = 0.0
+        self.lent_accumulation: Accumulation | None = None   # lend(): what begin made in the block
         self._guides: DenoiseGuides | None = None
         self._guide_acc: Accumulation | None = None   # the raymarched image a "probes" guide uses
         self._guides_key: tuple | None = None         # what the guides kept were made for
@@ -610,6 +612,51 @@ class Renderer:
         also when an earlier call baked the same grid (the benchmark charges it to every image)."""
         self.bake_light()
         return self.light_cost_ms
+
+    # ---- the public frame API: accumulations a caller owns (the viewer, movies, the bench) -----
+    @contextmanager
+    def lend(self, acc: Accumulation | None, method: str | None = None, camera=None,
+             seed: int | None = None, level0: Accumulation | None = None, slot: int = 0):
+        """Within the block, begin() and add_samples() work on `acc` (None: begin makes one)
+        instead of the Renderer's own accumulation: a caller's view, a movie's frame, one of
+        refine's halves. `method`, `camera`, `seed` set what add_samples continues (a view
+        begun earlier); `level0`: guided's level 0 to go with it; `slot`: the path states of a
+        second accumulation of one method (refine's halves). Everything is given back after
+        the block; `lend(...)` yields the Renderer, and `lent_accumulation` is what begin made."""
+        kept = (self._acc, self._acc0, self.method, self.camera, self.seed, self.pass_slot)
+        self._acc = acc
+        if level0 is not None:
+            self._acc0 = level0
+        if method is not None:
+            self.method = method
+        if camera is not None:
+            self.camera = camera
+        if seed is not None:
+            self.seed = seed
+        self.pass_slot = slot
+        try:
+            yield self
+        finally:
+            self.lent_accumulation = self._acc
+            self._acc, self._acc0, self.method, self.camera, self.seed, self.pass_slot = kept
+
+    def bake_started_for_scene(self) -> bool:
+        """Whether the probes in hand (finished or not) are the current scene's bake."""
+        return self.probe_grid is not None and self._baked_key == self.bake_key()
+
+    def forget_probes(self) -> None:
+        """The next bake() bakes the same probes again (the bench times repeated bakes); the
+        light grid stays."""
+        self._baked_key = None
+
+    def forget_light_grid(self) -> None:
+        """The next bake_light() bakes the image's light grid again (its time is then real)."""
+        self._image_light.key = self._image_light.pending = None
+
+    @property
+    def light_grid(self) -> LightTransmittance | None:
+        """The light grid the image reads (its size and memory are in the records)."""
+        return self._light
 
     def invalidate(self) -> None:
         """Forgets the baked probes and light grid, so the next image pays for both again (the

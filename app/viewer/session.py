@@ -215,20 +215,18 @@ class RenderSession:
             return self._begin_refine(view)
         r = self.renderer
         view.shown = self.shown_method(view.method)
-        r._acc = view.acc  # the Renderer keeps one accumulation; each view lends it its own
-        view.acc = r.begin(view.shown, *self.size, seed=self.seed)
+        with r.lend(view.acc):   # the Renderer keeps one accumulation; each view lends it its own
+            view.acc = r.begin(view.shown, *self.size, seed=self.seed)
+            view.camera = r.camera
         view.acc.texture.filter = (self.filter, self.filter)
-        view.camera = r.camera
-        r._acc = None
 
     def _begin_refine(self, view: RefineView) -> None:
         """Both of refine's renderers afresh: the raymarcher's image is what shows."""
         r = self.renderer
-        r._acc = view.ray
-        view.ray = r.begin("raymarch", *self.size, seed=self.seed)
-        r._acc = None
-        view.camera = r.camera
-        w, h = r.camera.width, r.camera.height
+        with r.lend(view.ray):
+            view.ray = r.begin("raymarch", *self.size, seed=self.seed)
+            view.camera = r.camera
+        w, h = view.camera.width, view.camera.height
         if view.halves is None or (view.halves.width, view.halves.height) != (w, h):
             if view.halves is not None:
                 view.halves.release()
@@ -273,7 +271,7 @@ class RenderSession:
         times = FrameTimes()
         r = self.renderer
         if want_probes and not r.probes_current():
-            starting = r.probe_grid is None or r._baked_key != r.bake_key()
+            starting = not r.bake_started_for_scene()
             passes = None if starting else r.probe_grid.passes_done
             times.bake_ms = r.bake_step(self.seed, budget_ms=self.bake_budget_ms)
             if starting:
@@ -413,21 +411,12 @@ class RenderSession:
     def _lend(self, acc, acc0, method: str, camera, seed: int, slot: int, n: int) -> float:
         """n samples of `method` into accumulations the Renderer borrows for the call (acc0:
         guided's level 0; slot: the path states of refine's half)."""
-        r = self.renderer
-        kept = r._acc0
-        r._acc, r._acc0, r.method, r.camera, r.seed, r.pass_slot = acc, acc0, method, camera, seed, slot
-        try:
+        with self.renderer.lend(acc, method, camera, seed, level0=acc0, slot=slot) as r:
             return r.add_samples(n)
-        finally:
-            r._acc, r._acc0, r.pass_slot = None, kept, 0
 
     def _add_samples(self, view: MethodView, n: int) -> float:
-        r = self.renderer
-        r._acc, r.method, r.camera, r.seed = view.acc, view.shown, view.camera, self.seed
-        try:
+        with self.renderer.lend(view.acc, view.shown, view.camera, self.seed) as r:
             return r.add_samples(n)
-        finally:
-            r._acc = None
 
     def record_frame(self, times: FrameTimes) -> None:
         self.history.append(times.total_ms)
