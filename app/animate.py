@@ -53,16 +53,21 @@ def add_animate_parser(sub, func) -> argparse.ArgumentParser:
                         f"{DEFAULT_SPP})")
     a.add_argument("--samples-per-pass", type=positive_int, default=16,
                    help="samples per pixel in one GPU dispatch (default 16)")
-    a.add_argument("--width", type=positive_int)
-    a.add_argument("--height", type=positive_int)
-    a.add_argument("--exposure", type=positive_float, default=1.0)
-    a.add_argument("--seed", type=int, default=0)
+    a.add_argument("--width", type=positive_int,
+                   help="frame width in pixels (camera.width; default: the scene's, 512)")
+    a.add_argument("--height", type=positive_int,
+                   help="frame height in pixels (camera.height; default: the scene's, 512)")
+    a.add_argument("--exposure", type=positive_float, default=1.0,
+                   help="exposure of the tone-mapped frames (default 1)")
+    a.add_argument("--seed", type=int, default=0,
+                   help="random seed of the samples (default 0): the same seed, the same image")
     a.add_argument("--quality", type=lambda t: positive_int(t, 51), default=DEFAULT_CRF,
                    metavar="CRF", help=f"MP4: H.264 constant rate factor, lower is better "
                                        f"(default {DEFAULT_CRF})")
     a.add_argument("--probe-grid", type=grid_arg, help="probes per axis: N or NX,NY,NZ (1..256)")
     a.add_argument("--probe-samples", type=positive_int, help="walks per probe")
-    a.add_argument("--raymarch-stage", choices=RAYMARCH_STAGES, default="compute")
+    a.add_argument("--raymarch-stage", choices=RAYMARCH_STAGES, default="compute",
+                   help="raymarch as a compute (default) or fragment shader")
     a.add_argument("--raymarch-step", type=positive_float, help="raymarch step in voxels")
     add_volume_options(a)
     add_scene_edit_options(a)

@@ -7,8 +7,8 @@ import os
 import sys
 from pathlib import Path
 
-from ..frontend import (apply_options, check_output, render_defaults, render_to_files,
-                        scene_from_arg)
+from ..frontend import (SCENE_KEY_DESTS, apply_options, check_output, render_defaults,
+                        render_to_files, scene_from_arg)
 from ..scene import Scene
 from .device_defaults import RENDER_SCALE, probes_named, with_device_probes
 from .files import bundled_scene_for
@@ -170,7 +170,7 @@ def headless_fallback(args: argparse.Namespace, reason: str) -> int:
                    **{k: getattr(args, k, None) for k in ("series", "orientation", "data_window",
                                                           "crop", "crop_voxels", "clip_plane",
                                                           "transfer_function",
-                                                          "volume_memory")},
+                                                          "volume_memory", *SCENE_KEY_DESTS)},
                    no_crop=getattr(args, "no_crop", False),
                    no_clip_plane=getattr(args, "no_clip_plane", False))
     return render_to_files(argparse.Namespace(**options))
