@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .scene_flags import with_flag
 from .scene_types import VolumeError
 from .volume_formats import spacing_or_none
 
@@ -327,7 +328,7 @@ def read_dicom(path: str | Path, need_spacing: bool, wanted: str | int | None = 
         how = "the largest that makes a volume" if wanted is None else "as the scene names"
         notes.append(f"{p.name} holds {len(listing.series)} DICOM series; opened {how}: "
                      f"{chosen.label()}. The others: {others}. Open another with --series N "
-                     f"(volume.series); `radiance-probes series {p}` lists them all")
+                     f"({with_flag('volume.series')}); `radiance-probes series {p}` lists them all")
     if listing.skipped:
         names = ", ".join(f.name for f in listing.skipped[:NAMED_SKIPPED])
         n = len(listing.skipped)

@@ -19,6 +19,7 @@ import numpy as np
 from . import dicom
 from . import volume_formats as formats
 from .orientation import NRRD_SPACES, patient_axes, to_patient, unit_columns
+from .scene_flags import flag_for, with_flag
 from .scene_types import Scene, VolumeError, VolumeSpec
 from .volume_axes import resolve_axes, to_canonical
 
@@ -374,11 +375,13 @@ def _read_raw(p: Path, dims: tuple[int, int, int] | None, dtype: str | None) -> 
     if dims is None:
         if not m:
             raise VolumeError(f"{p}: cannot tell the dimensions from the name; expected "
-                              "'name_XxYxZ_dtype.raw' or give volume.dims and volume.dtype")
+                              "'name_XxYxZ_dtype.raw' or give "
+                              f"{with_flag('volume.dims')} and {with_flag('volume.dtype')}")
         dims = (int(m.group(1)), int(m.group(2)), int(m.group(3)))
     if dtype is None:
         if not m:
-            raise VolumeError(f"{p}: cannot tell the data type from the name; give volume.dtype")
+            raise VolumeError(f"{p}: cannot tell the data type from the name; give "
+                              f"{with_flag('volume.dtype')}")
         dtype = m.group(4).lower()
     if dtype not in RAW_DTYPES:
         raise VolumeError(f"{p}: unknown data type '{dtype}' (known: {', '.join(RAW_DTYPES)})")
@@ -438,7 +441,7 @@ def _read_npy(p: Path) -> np.ndarray:
         raise VolumeError(f"{p}: cannot read .npy ({_one_line(exc)})") from None
     if data.ndim < 3:
         raise VolumeError(f"{p}: expected a 3D array [z, y, x] (or 4D or 5D with channels and "
-                          f"time steps: see volume.axes), got shape {list(data.shape)}")
+                          f"time steps: see {with_flag('volume.axes')}), got shape {list(data.shape)}")
     return data
 
 
@@ -452,7 +455,7 @@ def normalise(raw: np.ndarray, value_range: tuple[float, float] | None, where: s
         if bad.any():
             if replace_nonfinite is None:
                 raise VolumeError(f"{where}: {int(bad.sum())} voxels are NaN or Inf; give "
-                                  "volume.replace_nonfinite to replace them")
+                                  f"{with_flag('volume.replace_nonfinite')} to replace them")
             raw = np.where(bad, raw.dtype.type(replace_nonfinite), raw)
     if value_range is None:
         if raw.dtype == np.uint8:
@@ -462,8 +465,9 @@ def normalise(raw: np.ndarray, value_range: tuple[float, float] | None, where: s
         else:
             lo, hi = float(raw.min()), float(raw.max())
             if not hi > lo:
-                raise VolumeError(f"{where}: every voxel is {lo}; give volume.value_range to say "
-                                  "what density that is")
+                raise VolumeError(f"{where}: every voxel is {lo}; give "
+                                  f"{with_flag('volume.value_range')} to say what density "
+                                  "that is")
             value_range = (lo, hi)
     lo, hi = (float(v) for v in value_range)
     if not (np.isfinite(lo) and np.isfinite(hi) and np.isfinite(hi - lo) and hi > lo):
@@ -500,8 +504,8 @@ def read_volume_array(spec: VolumeSpec, base_dir: str | None = None) -> "VolumeF
     listing = series = None
     axes: str | None = "zyx"
     if spec.series is not None and not (p.is_dir() or dicom.is_dicomdir(p)):
-        raise VolumeError(f"{p}: volume.series {spec.series} names a DICOM series, but this is "
-                          "not a DICOM folder or DICOMDIR")
+        raise VolumeError(f"{p}: {with_flag('volume.series')} {spec.series} names a DICOM series, "
+                          "but this is not a DICOM folder or DICOMDIR")
     if formats.is_zarr(p):
         raw, file_spacing, axes = formats.read_zarr(p, need_spacing)
     elif p.is_dir() and spec.series is None and formats.tiff_files(p):
@@ -567,7 +571,7 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
             raise VolumeError(f"unknown built-in volume '{name}' (known: {', '.join(BUILTIN_VOLUMES)})")
         if time != 0:
             raise VolumeError(f"built-in '{name}': time step {time} asked for, but the volume has "
-                              "no time axis (one step); see the scene's time")
+                              "no time axis (one step); see the scene's time (--time STEP)")
         data = BUILTIN_VOLUMES[name](tuple(spec.size))
         domain = spec.domain
         if channels is not None:
@@ -593,7 +597,7 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
     if not 0 <= time < steps:
         raise VolumeError(f"{where}: time step {time} asked for, but the volume has "
                           + (f"{steps} time steps (0 to {steps - 1})" if steps > 1 else
-                             "no time axis (one step)") + "; see the scene's time")
+                             "no time axis (one step)") + "; see the scene's time (--time STEP)")
     fallback = _series_domains(raw, spec) if steps > 1 else None
     step = raw[time]
     oblique = 0.0
@@ -648,14 +652,15 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
     if not 0 <= time < steps:
         raise VolumeError(f"{where}: time step {time} asked for, but the volume has "
                           + (f"{steps} time steps (0 to {steps - 1})" if steps > 1 else
-                             "no time axis (one step)") + "; see the scene's time")
+                             "no time axis (one step)") + "; see the scene's time (--time STEP)")
     count = size.get("c", 1)
     if channels is None and count > 1:
         channels = default_channels(count, where)       # more than MAX_CHANNELS refused
     if channels is not None:
         if len(channels) > MAX_CHANNELS:
             raise VolumeError(f"{where}: {len(channels)} channels, at most {MAX_CHANNELS} are "
-                              "shown at once (choose them with channels[i].index)")
+                              "shown at once (choose them with channels[i].index, "
+                              f"{flag_for('channels')})")
         check_channel_count(channels, count, where)     # a channel the store lacks refused
         shown = [i if ch.index is None else ch.index for i, ch in enumerate(channels)]
         labels = [f"{where} (channel {index}{f' {ch.name}' if ch.name else ''})"

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .scene_flags import with_flag
 from .scene_types import VolumeError
 
 CANONICAL = "tczyx"
@@ -58,12 +59,13 @@ def resolve_axes(found: str | None, shape: tuple[int, ...], scene_axes: str | No
     ndim = len(shape)
     if scene_axes is not None:
         if len(scene_axes) != ndim:
-            raise VolumeError(f"{where}: volume.axes {scene_axes!r} names {len(scene_axes)} axes "
+            raise VolumeError(f"{where}: {with_flag('volume.axes')} {scene_axes!r} names "
+                              f"{len(scene_axes)} axes "
                               f"but the array has {ndim} (shape {list(shape)})")
         if found is not None:
             for i, (f, s) in enumerate(zip(found, scene_axes)):
                 if f not in "?1" and f != s:
-                    raise VolumeError(f"{where}: volume.axes {scene_axes!r} disagrees with the "
+                    raise VolumeError(f"{where}: {with_flag('volume.axes')} {scene_axes!r} disagrees with the "
                                       f"file's own axes {found!r} (axis {i}: the file says "
                                       f"{AXIS_NAMES[f]}, the scene {AXIS_NAMES[s]})")
         return scene_axes
@@ -71,7 +73,7 @@ def resolve_axes(found: str | None, shape: tuple[int, ...], scene_axes: str | No
         if ndim == 3:
             return "zyx"
         raise VolumeError(f"{where}: a {ndim}D array (shape {list(shape)}) whose file does not say "
-                          "which axis is which; give volume.axes, e.g. \"czyx\" for channels or "
+                          f"which axis is which; give {with_flag('volume.axes')}, e.g. \"czyx\" for channels or "
                           "\"tzyx\" for time steps")
     axes = list(found)
     unnamed = [i for i, a in enumerate(axes) if a == "?"]
@@ -79,7 +81,7 @@ def resolve_axes(found: str | None, shape: tuple[int, ...], scene_axes: str | No
         axes[unnamed[0]] = "z"      # a plain stack's pages
     elif unnamed:
         raise VolumeError(f"{where}: the file leaves {len(unnamed)} of its axes unnamed "
-                          f"({_describe(found, shape)}, ? unnamed); give volume.axes, e.g. "
+                          f"({_describe(found, shape)}, ? unnamed); give {with_flag('volume.axes')}, e.g. "
                           "\"czyx\" or \"tzyx\", to say which is which")
     return "".join(axes)
 
