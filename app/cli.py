@@ -241,7 +241,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("series", help="list the series of a DICOM folder tree or DICOMDIR "
                                       "(description, modality, size, slices) and which opens")
-    s.add_argument("path", help="a folder (searched recursively) or a DICOMDIR file")
+    s.add_argument("path", help="a folder (searched recursively), a DICOMDIR file or a "
+                                "multi-frame DICOM file")
     s.set_defaults(func=cmd_series)
 
     j = sub.add_parser("schema", help="the scene file's JSON Schema (docs/scene.schema.json), "

@@ -99,7 +99,8 @@ def keys() -> dict[str, Key]:
         "volume.path": Key(
             "A volume file or folder, relative to the scene file's folder (or absolute): .raw, "
             ".nrrd/.nhdr, .npy, .nii/.nii.gz, .tif/.tiff, a folder of TIFF slices or steps, a Zarr "
-            "or OME-Zarr store, a folder of DICOM files (searched recursively) or a DICOMDIR. "
+            "or OME-Zarr store, a folder of DICOM files (searched recursively), a DICOMDIR, or "
+            "a multi-frame DICOM file (enhanced CT or MR, RT dose). "
             "Excludes volume.builtin.",
             {"type": "string", "minLength": 1}, default="none (the built-in volume)",
             values="a path"),

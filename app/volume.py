@@ -31,7 +31,8 @@ VOLUME_SUFFIXES = ((".raw", ".nrrd", ".nhdr", ".npy") + formats.NIFTI_SUFFIXES
 
 def is_volume_path(p: Path) -> bool:
     """A file load_volume reads by its name, a DICOMDIR, or a folder (a TIFF stack or DICOM)."""
-    return p.is_dir() or formats.has_suffix(p, VOLUME_SUFFIXES) or dicom.is_dicomdir(p)
+    return (p.is_dir() or formats.has_suffix(p, VOLUME_SUFFIXES + dicom.DICOM_SUFFIXES)
+            or dicom.is_dicomdir(p))
 
 
 RAW_DTYPES = {
@@ -520,8 +521,13 @@ def read_volume_array(spec: VolumeSpec, base_dir: str | None = None) -> "VolumeF
         raw, file_spacing, direction, axes = formats.read_nifti(p, need_spacing)
     elif formats.has_suffix(p, formats.TIFF_SUFFIXES):
         raw, axes = formats.read_tiff(p)
-    elif formats.has_suffix(p, dicom.DICOM_SUFFIXES):
-        raise VolumeError(f"{p}: a single DICOM file; give the folder holding its series")
+    elif dicom.is_dicom_file(p) and not formats.has_suffix(p, VOLUME_SUFFIXES):
+        if dicom.frames_in(p) < 2:
+            raise VolumeError(f"{p}: a single DICOM file of one slice; give the folder holding "
+                              "its series")
+        got = dicom.read_dicom(p, need_spacing, None)   # a multi-frame file: a volume of its own
+        raw, file_spacing, direction, notes = got.data, got.spacing, got.direction, got.notes
+        listing, series = got.listing, got.series
     else:
         suffix = p.suffix.lower()
         if suffix == ".raw":
