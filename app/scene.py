@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -179,7 +180,11 @@ def _parse_axes(value: Any) -> str:
     if not isinstance(value, str) or not value:
         raise SceneError(f"volume.axes: expected a string of axis letters such as \"czyx\", "
                          f"got {value!r}")
-    axes = value.lower()
+    text = value.lower()
+    if not re.fullmatch(r"([a-z?][0-9]*)+", text) or re.search(r"(^|[a-z])0", text):
+        raise SceneError(f"volume.axes: expected axis letters, each with its count where a page "
+                         f"axis is split (\"c3zyx\"), got {value!r}")
+    axes = re.sub(r"[0-9]+", "", text)
     unknown = sorted(set(axes) - set(AXIS_LETTERS))
     if unknown:
         raise SceneError(f"volume.axes: unknown axis {unknown[0]!r} in {value!r} (letters: t time, "
@@ -191,7 +196,7 @@ def _parse_axes(value: Any) -> str:
     if missing:
         raise SceneError(f"volume.axes: {value!r} lacks {', '.join(missing)} (a volume always has "
                          "z, y and x)")
-    return axes
+    return text
 
 
 def _parse_channels(d: Any, has_transfer_function: bool,

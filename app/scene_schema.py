@@ -142,8 +142,10 @@ def keys() -> dict[str, Key]:
         "volume.axes": Key(
             "Which array axis is which, one letter each: t (time), c (channel), z, y, x; z, y and "
             "x always. Needed for a .npy of more than 3 dimensions and a file whose metadata "
-            "leaves axes unnamed; where the file names its axes (ImageJ, OME, Zarr) it must agree.",
-            {"type": "string", "pattern": f"^[{AXIS_LETTERS}]{{3,5}}$"},
+            "leaves axes unnamed; where the file names its axes (ImageJ, OME, Zarr) it must agree. "
+            "A count after letters splits a TIFF's unnamed page axis: \"c3zyx\" reads 96 pages as "
+            "3 channels of 32 slices.",
+            {"type": "string", "pattern": f"^([{AXIS_LETTERS}]([1-9][0-9]*)?){{3,5}}$"},
             default="the file's own (3D .npy: zyx)", values="e.g. \"czyx\", \"tzyx\""),
         "volume.orientation": Key(
             "data: the array's axes on world x, y, z as stored; patient: permuted and flipped so "

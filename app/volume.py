@@ -21,7 +21,7 @@ from . import volume_formats as formats
 from .orientation import NRRD_SPACES, patient_axes, to_patient, unit_columns
 from .scene_flags import flag_for, with_flag
 from .scene_types import Scene, VolumeError, VolumeSpec
-from .volume_axes import resolve_axes, to_canonical
+from .volume_axes import resolve_axes, split_pages, to_canonical
 
 # What load_volume takes, by file name ending (a folder is a TIFF stack, DICOM images or a Zarr
 # store; a file named DICOMDIR indexes a DICOM set).
@@ -540,11 +540,40 @@ def read_volume_array(spec: VolumeSpec, base_dir: str | None = None) -> "VolumeF
             raise VolumeError(f"{p}: unknown volume format '{suffix}' (known: "
                               f"{', '.join(VOLUME_SUFFIXES)}, a DICOMDIR, a Zarr store, or a "
                               "folder of TIFF or DICOM slices)")
-    raw = to_canonical(raw, resolve_axes(axes, tuple(raw.shape), spec.axes, str(p)), str(p))
+    raw, axes, scene_axes = split_pages(raw, axes, spec.axes, str(p))
+    notes += _page_stack_note(p, raw, axes, scene_axes)
+    raw = to_canonical(raw, resolve_axes(axes, tuple(raw.shape), scene_axes, str(p)), str(p))
     if min(raw.shape) < 1:
         raise VolumeError(f"{p}: volume has zero size, shape {raw.shape[:1:-1]} (x, y, z)")
     return VolumeFile(raw, file_spacing if need_spacing else None, p.name, direction, notes,
                       listing, series)
+
+
+def time_note(name: str, steps: int, time: int) -> tuple[str, ...]:
+    """A volume with a time axis says so: how many steps, which is shown, how to show another."""
+    if steps < 2:
+        return ()
+    return (f"{name} is a time series of {steps} steps; showing step {time} (--time N, or the "
+            f"scene's time, picks another from 0 to {steps - 1}; the viewer's Time panel plays "
+            "them)",)
+
+
+def _page_stack_note(p: Path, raw: np.ndarray, axes: str | None, scene_axes: str | None
+                     ) -> tuple[str, ...]:
+    """A plain multi-page TIFF (its pages unnamed, read as z) whose page count a plausible channel
+    count divides: a note that says so, and how to read the pages as channels instead."""
+    if (scene_axes is not None or axes is None or raw.ndim != 3 or axes.count("?") != 1
+            or not formats.has_suffix(p, formats.TIFF_SUFFIXES)):
+        return ()
+    pages = raw.shape[axes.index("?")]
+    counts = [c for c in (3, 4) if pages % c == 0 and pages > c]
+    if not counts:
+        return ()
+    ways = " or ".join(f"c{c}zyx ({c} channels of {pages // c} slices)" for c in counts)
+    return (f"{p.name}: its {pages} pages carry no axes metadata and were read as {pages} z "
+            f"slices; if they hold channels one after another, read them with --axes {ways} "
+            f"(--set volume.axes=c{counts[0]}zyx; zc{counts[0]}yx where the channels alternate "
+            "page by page)",)
 
 
 @dataclass(frozen=True, eq=False)
@@ -605,6 +634,7 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
                           + (f"{steps} time steps (0 to {steps - 1})" if steps > 1 else
                              "no time axis (one step)") + "; see the scene's time (--time STEP)")
     fallback = _series_domains(raw, spec) if steps > 1 else None
+    notes += time_note(name, steps, time)
     step = raw[time]
     oblique = 0.0
     orientation = "data"
@@ -711,7 +741,7 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
         raws.append((float(lows[c]), float(highs[c])))
     source.value_range, source.value_ranges = ranges[0], ranges
     coarser = [source_of(a, ranges) for a in levels[1:]]
-    notes = ()
+    notes = time_note(p.name, steps, time)
     if spec.orientation == "patient":
         notes += (f"{p.name} says nothing of the patient's orientation: shown as stored "
                   "(orientation \"data\")",)
