@@ -705,7 +705,7 @@ def render_to_files(args: argparse.Namespace) -> int:
         from .rendering.auto_probes import choose_probes
         choice = choose_probes(renderer, args.auto_probes, args.method,
                                progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
-        print(choice.report())
+        print(choice.report(trials=False))   # each trial was printed as it came
         scene = choice.scene
         renderer.set_scene(scene)
     bake_report = progress_printer("probe bake passes")
@@ -718,9 +718,11 @@ def render_to_files(args: argparse.Namespace) -> int:
         from .rendering.renderer import RenderResult
         got = auto_render(renderer, auto, seed=args.seed,
                           progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
-        print(got.report())
+        print(got.report(log=False))         # each trial was printed as it came
         scene, args.method = got.scene, got.method
-        result = RenderResult(got.image, got.method, got.pt_spp, got.gpu_ms)
+        # the image's own render and bake: the rejected settings' are in the report's total
+        result = RenderResult(got.image, got.method, got.image_spp, got.image_ms,
+                              got.image_bake_ms)
     else:
         result = renderer.render(args.method, spp=args.spp, seed=args.seed,
                                  samples_per_pass=args.samples_per_pass,
