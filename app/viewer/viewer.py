@@ -41,6 +41,18 @@ SNAPSHOT_MAX_PROBES = 512      # a snapshot carries the probes' coefficients for
 RESTREAM_SETTLE_S = 0.3
 
 
+
+def could_not_open(path, exc: BaseException) -> str:
+    """'could not open PATH: WHY', the path said once: a loader's message starts with the path it
+    failed on (as given, resolved, or its name), which the viewer's own words already name."""
+    text = str(exc)
+    p = Path(str(path)).expanduser()
+    for prefix in sorted({str(path), str(p), str(p.resolve()), p.name}, key=len, reverse=True):
+        if prefix and text.startswith(prefix + ":"):
+            text = text[len(prefix) + 1:].lstrip()
+            break
+    return f"could not open {path}: {text}"
+
 class Viewer:
     def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = "",
                  file_dialog: str = "auto", volume=None, settings=None):
@@ -216,7 +228,7 @@ class Viewer:
                        if reads_lazily(scene) else None)
             volume = preview if preview is not None else load_scene_volume(scene)
         except RECOVERABLE as exc:
-            self.state.error(f"could not open {path}: {exc}")
+            self.state.error(could_not_open(path, exc))
             return False
         self.state.load_scene(scene, scene_path)
         self.state.show_channels(volume.channel_count)
@@ -255,7 +267,7 @@ class Viewer:
             done = opening.poll(OPEN_WRITE_BUDGET_S)
         except RECOVERABLE as exc:
             self.opening = None
-            self.state.error(f"could not open {opening.scene_name}: {exc}")
+            self.state.error(could_not_open(opening.scene_name, exc))
             return
         if done is None:
             return
