@@ -200,7 +200,8 @@ def build_scene(data: Any = None, scene: Any = None, options: dict | None = None
         parsed = parsed.replace(volume=dataclasses.replace(parsed.volume,
                                                            value_range=volume.value_range))
     check_clip(parsed, volume)
-    return parsed, volume
+    from radiance_probes.framing import frame_default_camera
+    return frame_default_camera(parsed, volume.half_extent), volume   # the whole box in view
 
 
 def check_clip(scene: Scene, volume: Volume) -> None:

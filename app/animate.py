@@ -94,9 +94,11 @@ def run_animate(args: argparse.Namespace) -> int:
     from .viewer.device_defaults import probes_named, with_device_probes
     from .volume import load_scene_volume
 
+    from .framing import frame_default_camera
     scene = apply_options(scene_from_arg(args.scene), args)
-    cam = scene.camera
     volume = load_scene_volume(scene)
+    scene = frame_default_camera(scene, volume.half_extent)   # a default view sees the whole box
+    cam = scene.camera
     frames = args.frames
     times = None
     if args.time_series:

@@ -649,6 +649,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     from .rendering.renderer import Renderer
     from .rendering.raymarch import check_step
     from .environment_map import load_scene_environment
+    from .framing import frame_default_camera
     from .volume import load_scene_volume
 
     auto = getattr(args, "auto", None)
@@ -677,6 +678,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     scene = apply_options(scene_from_arg(args.scene), args)
     check_outputs(args)
     volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
+    scene = frame_default_camera(scene, volume.half_extent)   # a default view sees the whole box
     for note in volume.notes:
         print(f"note: {note}", file=sys.stderr)
     if getattr(args, "colorbar", None) and volume.channel_count > 1:

@@ -31,6 +31,7 @@ from .state import ViewerState
 from ..transfer import opacity_points
 from .tf_editor import histogram_curve
 from .widgets import WidgetRects
+from ..framing import frame_default_camera
 
 # What a bad scene, volume or shader raises; anything else is a bug and is not swallowed.
 RECOVERABLE = (SceneError, VolumeError, ShaderError, moderngl.Error, OSError, ValueError, RuntimeError)
@@ -230,6 +231,8 @@ class Viewer:
         except RECOVERABLE as exc:
             self.state.error(could_not_open(path, exc))
             return False
+        _, _, w, h = self.view_rect_window()
+        scene = frame_default_camera(scene, volume.half_extent, w / max(h, 1.0))
         self.state.load_scene(scene, scene_path)
         self.state.show_channels(volume.channel_count)
         self._pending_volume = volume
