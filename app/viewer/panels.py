@@ -433,19 +433,27 @@ def stats_section(v) -> None:
     imgui.text(f"{v.device}")
     w, h = session.size
     imgui.text(f"render {w} x {h} px, window {v.framebuffer_size[0]} x {v.framebuffer_size[1]}")
-    imgui.text(f"GPU frame {t.total_ms:.2f} ms (render {t.render_ms:.2f}, bake {t.bake_ms:.2f}, "
-               f"display {t.display_ms:.2f})")
+    wall = session.pacer.wall
+    if wall:
+        frame = session.pacer.frame_ms
+        imgui.text(f"frame {'?' if frame is None else f'{frame:.0f}'} ms wall clock (render "
+                   f"{t.render_ms:.0f}, bake {t.bake_ms:.0f})")
+    else:
+        imgui.text(f"GPU frame {t.total_ms:.2f} ms (render {t.render_ms:.2f}, bake "
+                   f"{t.bake_ms:.2f}, display {t.display_ms:.2f})")
     history = np.asarray(session.history, np.float64)
     if history.size and implot.begin_plot("##frame times", ImVec2(-1, 90 * v.ui_scale),
                                           implot.Flags_.no_menus | implot.Flags_.no_box_select
                                           | implot.Flags_.no_legend | implot.Flags_.no_inputs):
         implot.setup_axes("", "ms", implot.AxisFlags_.no_tick_labels, implot.AxisFlags_.auto_fit)
         implot.setup_axis_limits(implot.ImAxis_.x1, 0, max(len(history), 2), implot.Cond_.always)
-        implot.plot_line("GPU ms", history)
+        implot.plot_line("wall ms" if wall else "GPU ms", history)
         implot.end_plot()
-    imgui.text_disabled("GPU time per frame from timestamp queries")
+    imgui.text_disabled(f"wall-clock time per frame: {session.pacer.reason}; the frames are paced "
+                        "by it" if wall else "GPU time per frame from timestamp queries")
     if session.probe_grid is not None:
-        imgui.text(f"bake {session.bake_ms:.1f} ms GPU, probes {session.probe_grid.gpu_bytes / 2**20:.2f} MiB")
+        imgui.text(f"bake {session.bake_ms:.1f} ms {'wall clock' if wall else 'GPU'}, probes "
+                   f"{session.probe_grid.gpu_bytes / 2**20:.2f} MiB")
 
 
 def camera_section(v) -> None:

@@ -604,6 +604,7 @@ class Viewer:
             "probe_sh_order": grid.sh_order if grid is not None else None,
             "probe_bytes": grid.gpu_bytes if grid is not None else 0,
             "bake_ms": session.bake_ms, "frame_ms": session.last.total_ms,
+            "clock": session.pacer.clock, "frame_wall_ms": session.pacer.frame_ms,
             "rel_rmse": self.error_meter.value if s.display == "error" else None,
             "probe_pixels": self.probe_pixels() if s.probe_view != "off" else [],
             "probes_drawn": self.probes_drawn(),
