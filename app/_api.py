@@ -22,6 +22,7 @@ import numpy as np
 
 from radiance_probes.scene import Scene, SceneError, load_scene, parse_scene, scene_to_dict
 from radiance_probes.scene_types import CameraSpec, VolumeError, VolumeSpec
+from radiance_probes.scene_flags import COLOUR_SOURCES
 from radiance_probes.volume import Volume, load_scene_volume, normalise
 
 from ._image import Image
@@ -33,10 +34,8 @@ SHORTCUTS = {
     **{k: "transfer_function" for k in ("colormap", "colors", "opacity", "rgba", "resolution")},
     **{k: "camera" for k in ("width", "height", "fov_y", "eye", "target", "up")},
 }
-# A transfer function's colours come from one of these: giving one replaces the others the base
-# scene had (update(colormap="viridis") after colour points, update(rgba=...) after a colormap).
-COLOUR_SOURCES = {"colormap": ("colors", "rgba"), "colors": ("colormap", "rgba"),
-                  "rgba": ("colormap", "colors", "opacity"), "opacity": ("rgba",)}
+# A transfer function's colours come from one of COLOUR_SOURCES: giving one replaces the others the
+# base scene had (update(colormap="viridis") after colour points, update(rgba=...) after a colormap).
 SCENE_KEYS = tuple(f.name for f in dataclasses.fields(Scene)
                    if f.name not in ("base_dir", "environment_map"))
 METHODS = ("raymarch", "probes", "probes-only", "pt", "guided")
@@ -201,7 +200,8 @@ def build_scene(data: Any = None, scene: Any = None, options: dict | None = None
         parsed = parsed.replace(volume=dataclasses.replace(parsed.volume,
                                                            value_range=volume.value_range))
     check_clip(parsed, volume)
-    return parsed, volume
+    from radiance_probes.framing import frame_default_camera
+    return frame_default_camera(parsed, volume.half_extent), volume   # the whole box in view
 
 
 def check_clip(scene: Scene, volume: Volume) -> None:

@@ -57,16 +57,21 @@ def add_animate_parser(sub, func) -> argparse.ArgumentParser:
                    help="pass every frame through the denoiser (Open Image Denoise, guided by "
                         "the probes' image or the albedo and normal): no temporal filtering, so "
                         "a noisy method's frames can flicker (docs/denoising.md)")
-    a.add_argument("--width", type=positive_int)
-    a.add_argument("--height", type=positive_int)
-    a.add_argument("--exposure", type=positive_float, default=1.0)
-    a.add_argument("--seed", type=int, default=0)
+    a.add_argument("--width", type=positive_int,
+                   help="frame width in pixels (camera.width; default: the scene's, 512)")
+    a.add_argument("--height", type=positive_int,
+                   help="frame height in pixels (camera.height; default: the scene's, 512)")
+    a.add_argument("--exposure", type=positive_float, default=1.0,
+                   help="exposure of the tone-mapped frames (default 1)")
+    a.add_argument("--seed", type=int, default=0,
+                   help="random seed of the samples (default 0): the same seed, the same image")
     a.add_argument("--quality", type=lambda t: positive_int(t, 51), default=DEFAULT_CRF,
                    metavar="CRF", help=f"MP4: H.264 constant rate factor, lower is better "
                                        f"(default {DEFAULT_CRF})")
     a.add_argument("--probe-grid", type=grid_arg, help="probes per axis: N or NX,NY,NZ (1..256)")
     a.add_argument("--probe-samples", type=positive_int, help="walks per probe")
-    a.add_argument("--raymarch-stage", choices=RAYMARCH_STAGES, default="compute")
+    a.add_argument("--raymarch-stage", choices=RAYMARCH_STAGES, default="compute",
+                   help="raymarch as a compute (default) or fragment shader")
     a.add_argument("--raymarch-step", type=positive_float, help="raymarch step in voxels")
     add_volume_options(a)
     add_scene_edit_options(a)
@@ -93,9 +98,11 @@ def run_animate(args: argparse.Namespace) -> int:
     from .viewer.device_defaults import probes_named, with_device_probes
     from .volume import load_scene_volume
 
+    from .framing import frame_default_camera
     scene = apply_options(scene_from_arg(args.scene), args)
-    cam = scene.camera
     volume = load_scene_volume(scene)
+    scene = frame_default_camera(scene, volume.half_extent)   # a default view sees the whole box
+    cam = scene.camera
     frames = args.frames
     times = None
     if args.time_series:

@@ -30,6 +30,7 @@ from multiprocessing import shared_memory
 
 import numpy as np
 
+from .scene_flags import with_flag
 from .scene_types import VolumeError
 
 APRON = 1
@@ -352,7 +353,7 @@ class ZarrSource:
             if bad.any():
                 if self.replace_nonfinite is None:
                     raise VolumeError(f"{self.where}: voxels in z {z0} to {z1 - 1} are NaN or "
-                                      "Inf; give volume.replace_nonfinite to replace them")
+                                      f"Inf; give {with_flag('volume.replace_nonfinite')} to replace them")
                 raw = np.where(bad, raw.dtype.type(self.replace_nonfinite), raw)
         return raw
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .scene_flags import with_flag
 from .scene_types import (MAX_CHANNELS, ChannelSpec, Scene, SceneError, TransferFunctionSpec,
                           VolumeError, channel_transfer_function)
 from .transfer import transfer_table
@@ -22,7 +23,7 @@ def default_channels(count: int, where: str) -> tuple[ChannelSpec, ...]:
     if count > MAX_CHANNELS:
         raise VolumeError(f"{where}: the volume has {count} channels; at most {MAX_CHANNELS} are "
                           "shown at once: choose them with the scene's channels list, e.g. "
-                          "\"channels\": [{\"index\": 0}, {\"index\": 2}]")
+                          "\"channels\": [{\"index\": 0}, {\"index\": 2}] (--channel 0,2)")
     return tuple(ChannelSpec(transfer_function=channel_transfer_function(i), index=i)
                  for i in range(count))
 
@@ -34,7 +35,7 @@ def check_channel_count(channels: tuple[ChannelSpec, ...], count: int, where: st
         if index >= count:
             has = "one channel" if count == 1 else f"{count} channels (0 to {count - 1})"
             raise VolumeError(f"{where}: channels[{i}] shows the file's channel {index}, but the "
-                              f"volume has {has}")
+                              f"volume has {has}; --channel I,J,... picks them")
 
 
 def scene_channels(scene: Scene) -> tuple[ChannelSpec, ...] | None:
@@ -55,7 +56,10 @@ def effective_channels(scene: Scene, count: int) -> tuple[ChannelSpec, ...] | No
         return None
     if scene.transfer_function != TransferFunctionSpec():
         raise SceneError(f"transfer_function: the volume has {count} channels; give each its own "
-                         "(channels[i].transfer_function) instead of one for the scene")
+                         f"(channels[i].transfer_function: --channel "
+                         f"{','.join(map(str, range(count)))} makes the list, then --set "
+                         "channels[0].transfer_function.colormap=NAME) instead of one for the "
+                         "scene")
     return default_channels(count, "volume")
 
 

@@ -175,7 +175,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .scene_types import PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS
     r = sub.add_parser("render", help="render a scene headless to a PNG (and linear .npy/.exr)")
     r.add_argument("scene", nargs="?", help="scene JSON or a volume file (default: built-in scene)")
-    r.add_argument("--method", choices=METHODS, default="pt")
+    r.add_argument("--method", choices=METHODS, default="pt",
+                   help="render method (default pt, the path tracer; README's 'Which method "
+                        "when')")
     r.add_argument("--spp", type=positive_int, default=64, help="samples per pixel (default 64)")
     r.add_argument("--samples-per-pass", type=positive_int, default=1,
                    help="samples per pixel in one GPU dispatch (default 1)")
@@ -184,8 +186,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--exr", help="also write the linear image as OpenEXR")
     r.add_argument("--probe-grid", type=grid_arg, help="probes per axis: N or NX,NY,NZ (1..256)")
     r.add_argument("--probe-samples", type=positive_int, help="walks per probe")
-    r.add_argument("--sh-window", choices=("none", "hann", "lanczos"))
-    r.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"))
+    r.add_argument("--sh-window", choices=("none", "hann", "lanczos"),
+                   help="window on the probes' spherical harmonics against ringing near sharp "
+                        "light (probes.sh_window; default none)")
+    r.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"),
+                   help="the probe textures' format; rgba16f takes half the memory "
+                        "(probes.precision; default rgba32f)")
     r.add_argument("--probe-layout", choices=PROBE_LAYOUTS,
                    help="probe planes evenly spaced (uniform) or denser where the indicator "
                         "varies (adaptive); default: the scene's (uniform)")
@@ -223,9 +229,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what guides the denoiser: auto (default: the probes' raymarched image "
                         "where the method has probes, else the albedo and normal at few samples), "
                         "none, albedo, albedo-normal, probes")
-    r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--width", type=positive_int)
-    r.add_argument("--height", type=positive_int)
+    r.add_argument("--seed", type=int, default=0,
+                   help="random seed of the samples (default 0): the same seed, the same image")
+    r.add_argument("--width", type=positive_int,
+                   help="image width in pixels (camera.width; default: the scene's, 512)")
+    r.add_argument("--height", type=positive_int,
+                   help="image height in pixels (camera.height; default: the scene's, 512)")
     r.add_argument("--exposure", type=positive_float, default=1.0, help="PNG exposure (default 1)")
     r.add_argument("--no-empty-space-skipping", dest="empty_space_skipping", action="store_false",
                    help="track with one global majorant instead of the macrocell grid (the same "
@@ -241,7 +250,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("series", help="list the series of a DICOM folder tree or DICOMDIR "
                                       "(description, modality, size, slices) and which opens")
-    s.add_argument("path", help="a folder (searched recursively) or a DICOMDIR file")
+    s.add_argument("path", help="a folder (searched recursively), a DICOMDIR file or a "
+                                "multi-frame DICOM file")
     s.set_defaults(func=cmd_series)
 
     j = sub.add_parser("schema", help="the scene file's JSON Schema (docs/scene.schema.json), "

@@ -3,7 +3,11 @@ one or more series; each is listed (number, description, modality, size, slice c
 for whether its slices make one volume, the largest that does opens unless the scene names
 another (``volume.series``: its SeriesInstanceUID or its number in the listing), and its slices
 are read ordered by ImagePositionPatient along the slice normal (never by file name) with
-RescaleSlope/RescaleIntercept applied.
+RescaleSlope/RescaleIntercept applied. A multi-frame file is a series of slices too: an enhanced CT
+or MR places each frame by its per-frame functional groups (PlanePositionSequence,
+PlaneOrientationSequence, PixelMeasuresSequence, PixelValueTransformationSequence for the rescale,
+each from the per-frame item or else the shared one), an RT dose grid by its GridFrameOffsetVector
+(offsets along the normal from ImagePositionPatient), its values scaled by DoseGridScaling (Gy).
 
 Headers are read first without pixel data (listing a tree costs a header per file); only the chosen
 series' pixels are decoded. Every problem ends in one :class:`VolumeError` naming the folder or file
@@ -17,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .scene_flags import with_flag
 from .scene_types import VolumeError
 from .volume_formats import spacing_or_none
 
@@ -71,6 +76,14 @@ class DicomSeries:
     # per file in `files`' order: the position along the slice normal, and the geometry
     positions: tuple[float, ...] = field(default=(), repr=False)
     orientation: tuple[float, ...] | None = field(default=None, repr=False)  # the shared IOP
+    # Multi-frame files: per entry of `files`, its frame (None: a single-frame file), and the
+    # rescale (slope, intercept) each frame has (empty: each file's RescaleSlope/Intercept); the
+    # pixel spacing (rows, columns) and slice thickness the functional groups give; what it is.
+    frames: tuple[int | None, ...] = field(default=(), repr=False)
+    rescale: tuple[tuple[float, float], ...] = field(default=(), repr=False)
+    pixel_spacing: tuple[float, float] | None = field(default=None, repr=False)
+    thickness: float | None = field(default=None, repr=False)
+    kind: str = ""                   # "" (single-frame files), "enhanced multi-frame", "RT dose grid"
 
     @property
     def slices(self) -> int:
@@ -88,6 +101,8 @@ class DicomSeries:
             text += f"#{self.series_number} "
         text += f'"{self.description}" ' if self.description else ""
         text += f"{self.modality or '?'}, {self.columns} x {self.rows} x {self.slices}"
+        if self.kind:
+            text += f" ({self.kind})"
         if self.problem:
             text += f" (not a volume: {self.problem})" if reason else " (not a volume)"
         return text
@@ -131,6 +146,31 @@ class DicomListing:
 
 def is_dicomdir(p: Path) -> bool:
     return p.is_file() and p.name.upper() == DICOMDIR_NAME
+
+
+def is_dicom_file(p: Path) -> bool:
+    """A file named .dcm, or one with DICOM's preamble ("DICM" at byte 128), as scanners export
+    them without a suffix."""
+    if not p.is_file():
+        return False
+    if p.suffix.lower() in DICOM_SUFFIXES:
+        return True
+    try:
+        with open(p, "rb") as fh:
+            fh.seek(128)
+            return fh.read(4) == b"DICM"
+    except OSError:
+        return False
+
+
+def frames_in(p: Path) -> int:
+    """A DICOM file's NumberOfFrames (1 where it has none); 0 where it is not readable DICOM."""
+    import pydicom
+    try:
+        ds = pydicom.dcmread(str(p), stop_before_pixels=True)
+        return _frame_count(ds, p)
+    except Exception:
+        return 0
 
 
 def _tree_files(folder: Path) -> list[Path]:
@@ -178,9 +218,9 @@ def _list_series(p: Path) -> DicomListing:
 
     if not p.exists():
         raise VolumeError(f"{p}: not found")
-    if not (p.is_dir() or is_dicomdir(p)):
-        raise VolumeError(f"{p}: not a folder or a DICOMDIR file")
-    files = _dicomdir_files(p) if is_dicomdir(p) else _tree_files(p)
+    if not (p.is_dir() or p.is_file()):
+        raise VolumeError(f"{p}: not a folder, a DICOMDIR or a DICOM file")
+    files = (_dicomdir_files(p) if is_dicomdir(p) else _tree_files(p) if p.is_dir() else [p])
     if not files:
         raise VolumeError(f"{p}: the folder holds no files (expected DICOM images, or a folder of "
                           "TIFF slices)")
@@ -222,31 +262,149 @@ def _list_series(p: Path) -> DicomListing:
     return DicomListing(p, series, tuple(skipped), other)
 
 
+@dataclass(frozen=True)
+class _Slice:
+    """One slice of a series: a single-frame file, or one frame of a multi-frame file."""
+    file: Path
+    frame: int | None                       # None: a single-frame file
+    orientation: np.ndarray | None          # ImageOrientationPatient
+    position: np.ndarray | None             # ImagePositionPatient
+    rescale: tuple[float, float] | None = None   # multi-frame: (slope, intercept)
+    pixel_spacing: np.ndarray | None = None      # multi-frame: from its functional groups
+    thickness: float | None = None
+
+    @property
+    def name(self) -> str:
+        return self.file.name if self.frame is None else f"{self.file.name} frame {self.frame + 1}"
+
+
+def _frame_count(ds, f: Path) -> int:
+    try:
+        frames = int(ds.get("NumberOfFrames", 1) or 1)
+    except (TypeError, ValueError):
+        frames = 0
+    if frames < 1:
+        raise VolumeError(f"{f}: cannot read NumberOfFrames ({str(ds.get('NumberOfFrames'))!r})")
+    return frames
+
+
+def _slices_of(f: Path, ds) -> tuple[list[_Slice], str, str | None]:
+    """A file's slices, what kind of file it is ("" single-frame, "enhanced multi-frame", "RT dose
+    grid"), and why its frames cannot be placed (None: they can)."""
+    frames = _frame_count(ds, f)
+    if frames == 1 and "PerFrameFunctionalGroupsSequence" not in ds:
+        return [_Slice(f, None, _floats(ds, "ImageOrientationPatient", 6, f),
+                       _floats(ds, "ImagePositionPatient", 3, f))], "", None
+    if "PerFrameFunctionalGroupsSequence" in ds:
+        return _enhanced_slices(f, ds, frames)
+    if "GridFrameOffsetVector" in ds:
+        return _dose_slices(f, ds, frames)
+    return [], "", (f"{f.name} is a multi-frame image of {frames} frames that places none of them "
+                    "(no per-frame functional groups, no GridFrameOffsetVector: a cine loop or a "
+                    "secondary capture?), so its frames do not make a volume")
+
+
+def _enhanced_slices(f: Path, ds, frames: int) -> tuple[list[_Slice], str, str | None]:
+    """An enhanced CT, MR or PET image: each frame placed by its functional groups, the per-frame
+    item's macro first, else the shared one's."""
+    kind = "enhanced multi-frame"
+    per = list(ds.PerFrameFunctionalGroupsSequence)
+    if len(per) != frames:
+        return [], kind, (f"{f.name} has {len(per)} per-frame functional groups for its {frames} "
+                          "frames")
+    shared_seq = ds.get("SharedFunctionalGroupsSequence")
+    shared = shared_seq[0] if shared_seq else None
+    out = []
+    for k, item in enumerate(per):
+        where = f"{f}, frame {k + 1}"
+
+        def macro(sequence: str, keyword: str, n: int):
+            for group in (item, shared):
+                inner = group.get(sequence) if group is not None else None
+                if inner and keyword in inner[0]:
+                    return _floats(inner[0], keyword, n, where)
+            return _floats(ds, keyword, n, where) if keyword in ds else None
+
+        slope = macro("PixelValueTransformationSequence", "RescaleSlope", 1)
+        intercept = macro("PixelValueTransformationSequence", "RescaleIntercept", 1)
+        gap = (macro("PixelMeasuresSequence", "SpacingBetweenSlices", 1)
+               if macro("PixelMeasuresSequence", "SpacingBetweenSlices", 1) is not None
+               else macro("PixelMeasuresSequence", "SliceThickness", 1))
+        out.append(_Slice(f, k, macro("PlaneOrientationSequence", "ImageOrientationPatient", 6),
+                          macro("PlanePositionSequence", "ImagePositionPatient", 3),
+                          (1.0 if slope is None else float(slope[0]),
+                           0.0 if intercept is None else float(intercept[0])),
+                          macro("PixelMeasuresSequence", "PixelSpacing", 2),
+                          None if gap is None else float(gap[0])))
+    return out, kind, None
+
+
+def _dose_slices(f: Path, ds, frames: int) -> tuple[list[_Slice], str, str | None]:
+    """An RT dose grid: frame k at ImagePositionPatient + GridFrameOffsetVector[k] along the
+    normal (offsets from 0: relative; else, for an axial grid, the frames' z), its values x
+    DoseGridScaling."""
+    kind = "RT dose grid"
+    iop = _floats(ds, "ImageOrientationPatient", 6, f)
+    origin = _floats(ds, "ImagePositionPatient", 3, f)
+    if iop is None or origin is None:
+        return [], kind, f"{f.name}: an RT dose grid without ImageOrientationPatient and ImagePositionPatient"
+    offsets = _floats(ds, "GridFrameOffsetVector", frames, f)
+    normal = np.cross(iop[:3], iop[3:])
+    if offsets[0] != 0.0:   # absolute z positions, defined for an axial grid only
+        if not np.allclose(np.abs(normal), (0.0, 0.0, 1.0), atol=ORIENTATION_TOLERANCE):
+            return [], kind, (f"{f.name}: its GridFrameOffsetVector gives absolute positions "
+                              f"(from {offsets[0]:.6g}), which a grid not axial (normal "
+                              f"{_g(normal)}) cannot have")
+        offsets = (offsets - origin[2]) * normal[2]
+    scaling = _floats(ds, "DoseGridScaling", 1, f)
+    rescale = (1.0 if scaling is None else float(scaling[0]), 0.0)
+    return [_Slice(f, k, iop, origin + float(o) * normal, rescale) for k, o in
+            enumerate(offsets)], kind, None
+
+
 def _series(number: int, uid: str, members: list) -> DicomSeries:
-    """A series' entry: its slices ordered along the normal, and whether they make one volume."""
+    """A series' entry: its slices (single-frame files, or a multi-frame file's frames) ordered
+    along the normal, and whether they make one volume."""
     ds0 = members[0][1]
     info = dict(number=number, uid=uid,
                 series_number=str(ds0.get("SeriesNumber", "") or "").strip(),
                 description=" ".join(str(ds0.get("SeriesDescription", "") or "").split()),
                 modality=str(ds0.get("Modality", "") or ""),
                 columns=int(ds0.get("Columns", 0) or 0), rows=int(ds0.get("Rows", 0) or 0))
-    files = tuple(f for f, _ in members)
-
-    def entry(problem=None, ordered=files, positions=(), orientation=None):
-        return DicomSeries(files=ordered, problem=problem, positions=positions,
-                           orientation=orientation, **info)
-
+    slices: list[_Slice] = []
+    kinds = set()
+    problem = None
     for f, ds in members:
-        if int(ds.get("NumberOfFrames", 1) or 1) != 1:
-            return entry(f"{f.name} is a multi-frame image; expected a series of single slices")
+        got, kind, why = _slices_of(f, ds)
+        slices += got
+        kinds.add(kind)
+        problem = problem or why
+    kind = " and ".join(sorted(k for k in kinds if k))
+
+    def entry(problem=None, ordered=None, positions=(), orientation=None):
+        ordered = ordered if ordered is not None else (
+            slices or [_Slice(f, None, None, None) for f, _ in members])
+        multi = any(sl.frame is not None for sl in ordered)
+        first = ordered[0]
+        return DicomSeries(files=tuple(sl.file for sl in ordered), problem=problem,
+                           positions=positions, orientation=orientation,
+                           frames=tuple(sl.frame for sl in ordered) if multi else (),
+                           rescale=(tuple(sl.rescale or (1.0, 0.0) for sl in ordered)
+                                    if multi else ()),
+                           pixel_spacing=(None if first.pixel_spacing is None else
+                                          tuple(float(v) for v in first.pixel_spacing)),
+                           thickness=first.thickness, kind=kind, **info)
+
+    if problem:
+        return entry(problem)
     sizes = {(int(ds.get("Columns", 0) or 0), int(ds.get("Rows", 0) or 0)) for _, ds in members}
     if len(sizes) > 1:
         a, b = sorted(sizes)[:2]
         return entry(f"slices of different sizes ({a[0]} x {a[1]} and {b[0]} x {b[1]}, columns x "
                      "rows)")
-    iops = [_floats(ds, "ImageOrientationPatient", 6, f) for f, ds in members]
+    iops = [sl.orientation for sl in slices]
     if iops[0] is None:
-        if len(members) == 1:
+        if len(slices) == 1:
             return entry(orientation=None)   # one image without geometry (a radiograph): as is
         return entry("no ImageOrientationPatient: the slices cannot be ordered")
     if any(o is None for o in iops):
@@ -256,31 +414,38 @@ def _series(number: int, uid: str, members: list) -> DicomSeries:
         if not any(np.allclose(o, d, atol=ORIENTATION_TOLERANCE) for d in distinct):
             distinct.append(o)
     if len(distinct) > 1:
-        return entry(f"its {len(members)} slices lie in {len(distinct)} different orientations "
+        return entry(f"its {len(slices)} slices lie in {len(distinct)} different orientations "
                      "(a localiser or projections?)")
     iop = distinct[0]
     normal = np.cross(iop[:3], iop[3:])
     if not np.linalg.norm(normal) > 1e-6:
         return entry(f"ImageOrientationPatient {_g(iop)} has parallel row and column directions")
     normal /= np.linalg.norm(normal)
+    spacings = {tuple(sl.pixel_spacing) for sl in slices if sl.pixel_spacing is not None}
+    if len(spacings) > 1:
+        a, b = sorted(spacings)[:2]
+        return entry(f"frames of different pixel spacings ({_g(a)} and {_g(b)})")
     positions = []
-    for f, ds in members:
-        pos = _floats(ds, "ImagePositionPatient", 3, f)
+    for sl in slices:
+        pos = sl.position
         if pos is None:
-            if len(members) > 1:
-                return entry(f"{f.name} has no ImagePositionPatient: the slices cannot be ordered")
+            if len(slices) > 1:
+                return entry(f"{sl.name} has no ImagePositionPatient: the slices cannot be "
+                             "ordered")
             pos = np.zeros(3)
         positions.append(pos)
-    order = sorted(range(len(members)), key=lambda k: float(positions[k] @ normal))
+    order = sorted(range(len(slices)), key=lambda k: float(positions[k] @ normal))
     points = np.array([positions[k] for k in order])
     along = points @ normal
-    ordered = tuple(files[k] for k in order)
-    if len(members) > 1:
+    ordered = [slices[k] for k in order]
+    if len(slices) > 1:
         gaps = np.diff(along)
         k = int(np.argmin(gaps))
         if not gaps[k] > 1e-6:
             return entry(f"{ordered[k].name} and {ordered[k + 1].name} lie at the same position "
-                         f"along the slice normal ({along[k]:.6g})")
+                         f"along the slice normal ({along[k]:.6g})" +
+                         (" (several stacks or time points in one file?)"
+                          if ordered[k].frame is not None else ""))
         if gaps.max() - gaps.min() > SLICE_GAP_TOLERANCE * gaps.mean():
             return entry(f"uneven slice spacing along the normal (gaps from {gaps.min():.6g} to "
                          f"{gaps.max():.6g}): a slice missing?")
@@ -327,7 +492,7 @@ def read_dicom(path: str | Path, need_spacing: bool, wanted: str | int | None = 
         how = "the largest that makes a volume" if wanted is None else "as the scene names"
         notes.append(f"{p.name} holds {len(listing.series)} DICOM series; opened {how}: "
                      f"{chosen.label()}. The others: {others}. Open another with --series N "
-                     f"(volume.series); `radiance-probes series {p}` lists them all")
+                     f"({with_flag('volume.series')}); `radiance-probes series {p}` lists them all")
     if listing.skipped:
         names = ", ".join(f.name for f in listing.skipped[:NAMED_SKIPPED])
         n = len(listing.skipped)
@@ -345,17 +510,23 @@ def _read_pixels(series: DicomSeries, need_spacing: bool, where: str
                  ) -> tuple[np.ndarray, tuple[float, float, float] | None]:
     import pydicom
     planes, slopes, intercepts, first = [], [], [], None
-    for f in series.files:
-        try:
-            ds = pydicom.dcmread(str(f))
-        except Exception as exc:
-            raise VolumeError(f"{f}: cannot read DICOM ({_one_line(exc)})") from None
-        if "PixelData" not in ds:
-            raise VolumeError(f"{f}: an image without pixel data (a truncated file?)")
-        try:
-            pixels = ds.pixel_array
-        except Exception as exc:
-            raise VolumeError(f"{f}: cannot decode the pixel data ({_one_line(exc)})") from None
+    frames = series.frames or (None,) * series.slices
+    decoded: dict[Path, tuple] = {}   # a multi-frame file is decoded once for all its frames
+    for k, (f, frame) in enumerate(zip(series.files, frames)):
+        if f not in decoded:
+            try:
+                ds = pydicom.dcmread(str(f))
+            except Exception as exc:
+                raise VolumeError(f"{f}: cannot read DICOM ({_one_line(exc)})") from None
+            if "PixelData" not in ds:
+                raise VolumeError(f"{f}: an image without pixel data (a truncated file?)")
+            try:
+                decoded[f] = (ds, ds.pixel_array)
+            except Exception as exc:
+                raise VolumeError(f"{f}: cannot decode the pixel data ({_one_line(exc)})") from None
+        ds, pixels = decoded[f]
+        if frame is not None and pixels.ndim == 3 and _frame_count(ds, f) > 1:
+            pixels = pixels[frame]
         if pixels.ndim != 2:
             raise VolumeError(f"{f}: pixel data of shape {list(pixels.shape)}; expected one "
                               "channel (rows x columns)")
@@ -363,11 +534,16 @@ def _read_pixels(series: DicomSeries, need_spacing: bool, where: str
             raise VolumeError(f"{where}: slices of different sizes: {f.name} is {pixels.shape[1]} "
                               f"x {pixels.shape[0]}, the series {series.columns} x {series.rows} "
                               "(columns x rows)")
-        slope = _floats(ds, "RescaleSlope", 1, f)
-        intercept = _floats(ds, "RescaleIntercept", 1, f)
+        if series.rescale:
+            slope, intercept = series.rescale[k]
+        else:
+            slope, intercept = (_floats(ds, "RescaleSlope", 1, f),
+                                _floats(ds, "RescaleIntercept", 1, f))
+            slope = 1.0 if slope is None else float(slope[0])
+            intercept = 0.0 if intercept is None else float(intercept[0])
         planes.append(pixels)
-        slopes.append(1.0 if slope is None else float(slope[0]))
-        intercepts.append(0.0 if intercept is None else float(intercept[0]))
+        slopes.append(slope)
+        intercepts.append(intercept)
         first = first if first is not None else (f, ds)
     stack = np.stack(planes)
     slopes, intercepts = np.array(slopes), np.array(intercepts)
@@ -378,9 +554,12 @@ def _read_pixels(series: DicomSeries, need_spacing: bool, where: str
                  + intercepts[:, None, None]).astype(np.float32)
 
     first_f, ds = first
-    ps = _floats(ds, "PixelSpacing", 2, first_f)
+    ps = (np.array(series.pixel_spacing) if series.pixel_spacing is not None else
+          _floats(ds, "PixelSpacing", 2, first_f))
     if series.slices > 1:
         dz = float(np.mean(np.diff(series.positions)))
+    elif series.thickness is not None:
+        dz = series.thickness
     else:
         thickness = (_floats(ds, "SpacingBetweenSlices", 1, first_f)
                      if "SpacingBetweenSlices" in ds else _floats(ds, "SliceThickness", 1, first_f))

@@ -12,7 +12,9 @@ output cannot be written at the end is not lost: it is written elsewhere and the
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import re
 from dataclasses import replace
 import os
 import sys
@@ -22,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .scene import Scene, SceneError, default_scene, load_scene, parse_scene, scene_to_dict
+from .scene import (Scene, SceneError, TransferFunctionSpec, default_scene, load_scene, parse_scene,
+                    scene_to_dict, transfer_to_dict)
 
 MAX_SPP = (1 << 31) - 1        # samples per pixel reach the shaders as a 32-bit uniform
 MAX_WINDOW_SIDE = 16384
@@ -158,9 +161,266 @@ def scene_from_arg(arg: str | None) -> Scene:
     return parse_scene({"volume": {"path": str(p)}})
 
 
+# ---- scene keys on the command line: --set KEY=VALUE and the named flags ----------------------
+
+def _numbers(text: str, n: int | None, what: str) -> list[float]:
+    """`n` finite numbers separated by commas (any count where n is None)."""
+    try:
+        values = [float(t) for t in text.replace(" ", "").split(",")]
+    except ValueError:
+        values = []
+    if not values or (n is not None and len(values) != n) or not all(map(math.isfinite, values)):
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+    return values
+
+
+def spacing_arg(text: str) -> list[float]:
+    """--spacing: X,Y,Z voxel sizes > 0 (or one size for all three)."""
+    values = _numbers(text, None, "X,Y,Z: three voxel sizes > 0 (or one for all three)")
+    if len(values) == 1:
+        values *= 3
+    if len(values) != 3 or min(values) <= 0:
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z: three voxel sizes > 0 (or one for all "
+                                         f"three), got {text!r}")
+    return values
+
+
+def value_range_arg(text: str) -> list[float]:
+    """--value-range: LO,HI data values, LO < HI."""
+    lo, hi = _numbers(text, 2, "LO,HI: the data values shown as density 0 and 1")
+    if not hi > lo:
+        raise argparse.ArgumentTypeError(f"expected LO,HI with LO < HI, got {text!r}")
+    return [lo, hi]
+
+
+def dims_arg(text: str) -> list[int]:
+    """--dims: X,Y,Z voxel counts of a .raw file."""
+    values = _numbers(text, 3, "X,Y,Z: three voxel counts")
+    if not all(v.is_integer() and v >= 1 for v in values):
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z: three whole voxel counts >= 1, got "
+                                         f"{text!r}")
+    return [int(v) for v in values]
+
+
+def finite_float(text: str) -> float:
+    return _numbers(text, 1, "a finite number")[0]
+
+
+def time_arg(text: str) -> int:
+    """--time: a time step from 0."""
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a time step 0, 1, 2, ..., got {text!r}")
+    return v
+
+
+def channel_arg(text: str) -> list[int]:
+    """--channel: the file's channels to show, I or I,J,... from 0."""
+    try:
+        values = [int(t) for t in text.replace(" ", "").split(",")]
+    except ValueError:
+        values = []
+    if not values or min(values) < 0 or len(set(values)) != len(values):
+        raise argparse.ArgumentTypeError(f"expected the file's channels to show, I or I,J,... "
+                                         f"(from 0, each once), got {text!r}")
+    return values
+
+
+def opacity_arg(text: str) -> list[list[float]]:
+    """--opacity: [density, opacity] points as D,A,D,A,... (or their JSON list), each in [0, 1],
+    densities not decreasing."""
+    expected = ("D,A,D,A,...: [density, opacity] points, each in [0, 1], densities not "
+                "decreasing (e.g. 0,0,0.3,0,1,1)")
+    try:
+        data = json.loads(text)
+        flat = [float(v) for point in data for v in point] if isinstance(data, list) else []
+    except (ValueError, TypeError):
+        flat = _numbers(text, None, expected)
+    if not flat or len(flat) % 2 or not all(math.isfinite(v) and 0 <= v <= 1 for v in flat):
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+    points = [flat[i:i + 2] for i in range(0, len(flat), 2)]
+    if any(b[0] < a[0] for a, b in zip(points, points[1:])):
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+    return points
+
+
+_SET_KEY = re.compile(r"[a-z_]+(\[\d+\])?(\.[a-z_]+(\[\d+\])?)*")
+
+
+def set_value(text: str):
+    """A --set value: JSON where it parses (1.5, [1, 1, 2], true, "text", {...}), else a comma
+    list of numbers (1,1,2), else the text itself (czyx, grey)."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        pass
+    if "," in text:
+        try:
+            return [float(t) if not t.strip().lstrip("+-").isdigit() else int(t)
+                    for t in text.split(",")]
+        except ValueError:
+            pass
+    return text
+
+
+def set_arg(text: str) -> tuple[str, object, str]:
+    """--set KEY=VALUE: (the scene key, its value, the text given)."""
+    key, sep, value = text.partition("=")
+    key = key.strip()
+    if not sep or not _SET_KEY.fullmatch(key):
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE with a scene key of "
+                                         f"docs/scene-format.md (e.g. --set volume.spacing=1,1,2), got "
+                                         f"{text!r}")
+    return key, set_value(value.strip()), text
+
+
+def add_scene_key_options(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The flags that set scene keys (app/scene_flags.py names them in messages): --set for any
+    key, and a flag of its own for the keys users set most."""
+    from .transfer import ALIASES, COLORMAPS
+    from .volume import RAW_DTYPES
+    parser.add_argument("--set", dest="set", action="append", type=set_arg, metavar="KEY=VALUE",
+                        help="set any scene key (docs/scene-format.md), e.g. volume.spacing=1,1,2 "
+                             "or transfer_function.colormap=grey; the value is read as JSON where "
+                             "it parses, else as a comma list of numbers, else as text; repeatable, "
+                             "applied after the other flags")
+    parser.add_argument("--spacing", type=spacing_arg, metavar="X,Y,Z",
+                        help="voxel size along x, y, z (volume.spacing; default: the file's, "
+                             "else 1,1,1)")
+    parser.add_argument("--value-range", type=value_range_arg, metavar="LO,HI",
+                        help="the data values shown as density 0 and 1 (volume.value_range; "
+                             "default: the data's range)")
+    parser.add_argument("--dims", type=dims_arg, metavar="X,Y,Z",
+                        help="a .raw file's voxels along x, y, z (volume.dims) where its name "
+                             "does not say")
+    parser.add_argument("--dtype", choices=tuple(RAW_DTYPES), metavar="TYPE",
+                        help=f"a .raw file's sample type (volume.dtype): {', '.join(RAW_DTYPES)}")
+    parser.add_argument("--axes", metavar="LETTERS",
+                        help="which array axis is which, e.g. czyx (channels) or tzyx (time "
+                             "steps); letters t, c, z, y, x (volume.axes)")
+    parser.add_argument("--replace-nonfinite", type=finite_float, metavar="VALUE",
+                        help="replace NaN and Inf voxels by this value (volume.replace_nonfinite; "
+                             "default: refuse them)")
+    parser.add_argument("--colormap", choices=COLORMAPS, metavar="NAME",
+                        help="the transfer function's colours: "
+                             f"{', '.join(c for c in COLORMAPS if c not in ALIASES)} "
+                             "(transfer_function.colormap; also " +
+                             ", ".join(f"{a} for {c}" for a, c in ALIASES.items()) + ")")
+    parser.add_argument("--opacity", type=opacity_arg, metavar="D,A,D,A,...",
+                        help="the transfer function's opacity as [density, opacity] points, "
+                             "densities in [0, 1] over the value range (transfer_function.opacity; "
+                             "default 0,0,0.2,0,1,1)")
+    parser.add_argument("--time", type=time_arg, metavar="STEP",
+                        help="the time step shown of a volume with a time axis, from 0 (time)")
+    parser.add_argument("--channel", type=channel_arg, metavar="I[,J,...]",
+                        help="the file's channels shown, from 0 (channels; default: all, at most "
+                             "4)")
+    return parser
+
+
+# Each named flag: its argparse dest and the scene key it sets.
+SCENE_KEY_FLAGS = {"spacing": "volume.spacing", "value_range": "volume.value_range",
+                   "dims": "volume.dims", "dtype": "volume.dtype", "axes": "volume.axes",
+                   "replace_nonfinite": "volume.replace_nonfinite",
+                   "colormap": "transfer_function.colormap", "opacity": "transfer_function.opacity",
+                   "time": "time", "channel": "channels"}
+SCENE_KEY_DESTS = ("set", *SCENE_KEY_FLAGS)
+
+
+def _set_key(data: dict, key: str, value, option: str) -> None:
+    """Sets `key` (dotted, with [i] for list items) in the scene's JSON data; a key that excludes
+    another in its object (volume.window and volume.value_range, a colormap and colour points)
+    drops it; JSON null drops the key."""
+    from .scene_flags import EXCLUDES
+    parts = re.findall(r"([a-z_]+)(?:\[(\d+)\])?", key)
+    node = data
+    for depth, (name, index) in enumerate(parts):
+        last = depth == len(parts) - 1
+        if name == "transfer_function" and data.get("channels") and depth == 0:
+            raise OptionError(f"{option}: the scene has channels, each with its own transfer "
+                              "function: set one with --set channels[I].transfer_function."
+                              f"{parts[-1][0] if len(parts) > 1 else 'colormap'}=...")
+        if not isinstance(node, dict):
+            raise OptionError(f"{option}: {key}: {'.'.join(p[0] for p in parts[:depth])} is not "
+                              "an object of keys")
+        if index:
+            items = node.get(name)
+            if not isinstance(items, list) or int(index) >= len(items):
+                have = len(items) if isinstance(items, list) else 0
+                raise OptionError(f"{option}: the scene's {name} list has {have} "
+                                  f"entr{'y' if have == 1 else 'ies'}, so "
+                                  f"{name}[{index}] is not one" +
+                                  (" (--channel I,J,... makes the list)" if name == "channels"
+                                   else ""))
+            if last:
+                items[int(index)] = value
+            else:
+                if not isinstance(items[int(index)], dict):
+                    items[int(index)] = {}
+                node = items[int(index)]
+            continue
+        if last:
+            if value is None:
+                node.pop(name, None)
+            else:
+                node[name] = value
+            for other in EXCLUDES.get(parts[depth - 1][0] if depth else "", {}).get(name, ()):
+                node.pop(other, None)
+        else:
+            if isinstance(node.get(name), str) and name == "transfer_function":
+                node[name] = {}   # a transfer-function file's name: the flag replaces it
+            node = node.setdefault(name, {})
+
+
+def _channels_value(data: dict, indices: list[int]) -> list[dict]:
+    """--channel I,J: the scene's own entries for those file channels where it has them."""
+    have = {c.get("index", i): c for i, c in enumerate(data.get("channels") or [])
+            if isinstance(c, dict)}
+    return [{**have[i], "index": i} if i in have else {"index": i} for i in indices]
+
+
+def scene_key_edits(data: dict, args: argparse.Namespace) -> dict[str, str]:
+    """Applies the named flags and then every --set to the scene's JSON data; returns which option
+    set each key (for messages)."""
+    given = {dest: getattr(args, dest, None) for dest in SCENE_KEY_FLAGS}
+    if given["value_range"] is not None and getattr(args, "data_window", None) is not None:
+        raise OptionError("--value-range and --data-window: each gives the values shown; give "
+                          "one of them")
+    options: dict[str, str] = {}
+    if given["channel"] is not None:     # first: --colormap and --opacity then go to its channel
+        tf = None if data.get("channels") else data.pop("transfer_function", None)
+        data["channels"] = _channels_value(data, given["channel"])
+        if len(given["channel"]) == 1 and tf and tf != transfer_to_dict(TransferFunctionSpec()):
+            data["channels"][0]["transfer_function"] = tf   # one channel: the scene's own, kept
+        options["channels"] = "--channel"
+    for dest, key in SCENE_KEY_FLAGS.items():
+        value = given[dest]
+        if value is None or dest == "channel":
+            continue
+        option = "--" + dest.replace("_", "-")
+        if key.startswith("transfer_function.") and data.get("channels"):
+            if len(data["channels"]) > 1:
+                raise OptionError(f"{option}: the scene shows {len(data['channels'])} channels, "
+                                  "each with its own transfer function: set one with --set "
+                                  f"channels[I].{key}=...")
+            key = f"channels[0].{key}"
+        _set_key(data, key, value, option)
+        options[key] = option
+    for key, value, text in getattr(args, "set", None) or ():
+        option = f"--set {text}"
+        _set_key(data, key, value, option)
+        options[key] = option
+    return options
+
+
 def add_scene_edit_options(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """The options `render`, `view` and `animate` share that edit the scene: the crop box, the
-    clip plane and a transfer function kept in a file (docs/crop-and-movies.md)."""
+    clip plane and a transfer function kept in a file (docs/crop-and-movies.md), and the scene
+    keys (--set and the named flags)."""
+    add_scene_key_options(parser)
     parser.add_argument("--crop", nargs=6, type=float, metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
                         help="keep only the box between these world corners (the volume's longest "
                              "side is 1, centred at the origin)")
@@ -270,7 +530,8 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
         scene = scene.replace(crop=replace(scene.crop, enabled=False))
     if getattr(args, "no_clip_plane", False) and scene.clip_plane is not None:
         scene = scene.replace(clip_plane=replace(scene.clip_plane, enabled=False))
-    if not probes and not camera and not volume and not edits:
+    keys_given = any(getattr(args, dest, None) is not None for dest in SCENE_KEY_DESTS)
+    if not probes and not camera and not volume and not edits and not keys_given:
         return scene
     data = scene_to_dict(scene)
     data["probes"].update(probes)
@@ -279,10 +540,14 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
         data["volume"].pop("value_range", None)   # the window given replaces the scene's range
     data["volume"].update(volume)
     data.update(edits)
+    key_options = scene_key_edits(data, args)
     try:
         return parse_scene(data, base_dir=scene.base_dir)
     except SceneError as exc:
         text = str(exc)
+        for key, option in reversed(key_options.items()):
+            if any(text.startswith(start) for start in (key, f"unknown field {key}")):
+                raise OptionError(f"{option}: {text}") from None
         for name, option in _OPTION_FIELDS.items():
             if text.startswith(name):
                 if name == "crop." and data.get("crop", {}).get("units") == "voxels":
@@ -373,7 +638,7 @@ def render_defaults() -> dict:
                 gather_event=None, series=None, orientation=None, data_window=None, crop=None,
                 crop_voxels=None, clip_plane=None, no_crop=False, no_clip_plane=False,
                 transfer_function=None, colorbar=None, colorbar_title="value",
-                volume_memory=None)
+                volume_memory=None, **dict.fromkeys(SCENE_KEY_DESTS))
 
 
 def render_to_files(args: argparse.Namespace) -> int:
@@ -385,6 +650,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     from .rendering.renderer import Renderer
     from .rendering.raymarch import check_step
     from .environment_map import load_scene_environment
+    from .framing import frame_default_camera
     from .volume import load_scene_volume
 
     auto = getattr(args, "auto", None)
@@ -413,6 +679,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     scene = apply_options(scene_from_arg(args.scene), args)
     check_outputs(args)
     volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
+    scene = frame_default_camera(scene, volume.half_extent)   # a default view sees the whole box
     for note in volume.notes:
         print(f"note: {note}", file=sys.stderr)
     if getattr(args, "colorbar", None) and volume.channel_count > 1:
@@ -441,7 +708,7 @@ def render_to_files(args: argparse.Namespace) -> int:
         from .rendering.auto_probes import choose_probes
         choice = choose_probes(renderer, args.auto_probes, args.method,
                                progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
-        print(choice.report())
+        print(choice.report(trials=False))   # each trial was printed as it came
         scene = choice.scene
         renderer.set_scene(scene)
     bake_report = progress_printer("probe bake passes")
@@ -454,9 +721,11 @@ def render_to_files(args: argparse.Namespace) -> int:
         from .rendering.renderer import RenderResult
         got = auto_render(renderer, auto, seed=args.seed,
                           progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
-        print(got.report())
+        print(got.report(log=False))         # each trial was printed as it came
         scene, args.method = got.scene, got.method
-        result = RenderResult(got.image, got.method, got.pt_spp, got.gpu_ms)
+        # the image's own render and bake: the rejected settings' are in the report's total
+        result = RenderResult(got.image, got.method, got.image_spp, got.image_ms,
+                              got.image_bake_ms)
     else:
         result = renderer.render(args.method, spp=args.spp, seed=args.seed,
                                  samples_per_pass=args.samples_per_pass,

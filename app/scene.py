@@ -9,9 +9,11 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any, Mapping
 
+from .scene_flags import flag_for, with_flag
 from .scene_types import (AXIS_LETTERS, CROP_UNITS, MAX_CHANNELS, ChannelSpec,
                           channel_transfer_function, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
                           MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
@@ -93,7 +95,8 @@ def _fields(cls) -> set[str]:
 def _parse_volume(d: Any) -> VolumeSpec:
     d = _object(d, "volume", _fields(VolumeSpec))
     if "path" in d and "builtin" in d:
-        raise SceneError("volume: give either volume.path or volume.builtin, not both")
+        raise SceneError(f"volume: give either {with_flag('volume.path')} or "
+                         f"{with_flag('volume.builtin')}, not both")
     kw: dict[str, Any] = {}
     if "path" in d:
         if not isinstance(d["path"], str) or not d["path"]:
@@ -103,7 +106,8 @@ def _parse_volume(d: Any) -> VolumeSpec:
         kw["builtin"] = _choice(d["builtin"], "volume.builtin", tuple(BUILTIN_VOLUMES))
     if "size" in d:
         if kw.get("path"):
-            raise SceneError("volume.size: only for built-in volumes (use volume.dims for files)")
+            raise SceneError("volume.size: only for built-in volumes (use "
+                             f"{with_flag('volume.dims')} for files)")
         kw["size"] = tuple(_integer(v, f"volume.size[{i}]", 1, 2048)
                            for i, v in enumerate(_vector(d["size"], "volume.size", 3)))
     if "spacing" in d:
@@ -112,7 +116,8 @@ def _parse_volume(d: Any) -> VolumeSpec:
         kw["value_range"] = _parse_value_range(d["value_range"], "volume.value_range")
     if d.get("window") is not None:
         if "value_range" in kw:
-            raise SceneError("volume.window: give either volume.window or volume.value_range, "
+            raise SceneError(f"volume.window: give either {with_flag('volume.window')} or "
+                             f"{with_flag('volume.value_range')}, "
                              "not both")
         kw["window"] = _parse_window(d["window"])
     if d.get("dims") is not None:
@@ -124,7 +129,8 @@ def _parse_volume(d: Any) -> VolumeSpec:
         kw["replace_nonfinite"] = _number(d["replace_nonfinite"], "volume.replace_nonfinite")
     if d.get("series") is not None:
         if not kw.get("path"):
-            raise SceneError("volume.series: only for a DICOM folder or DICOMDIR (volume.path)")
+            raise SceneError("volume.series: only for a DICOM folder or DICOMDIR "
+                             f"({with_flag('volume.path')})")
         kw["series"] = _series(d["series"])
     if "orientation" in d:
         kw["orientation"] = _choice(d["orientation"], "volume.orientation", ORIENTATIONS)
@@ -174,7 +180,11 @@ def _parse_axes(value: Any) -> str:
     if not isinstance(value, str) or not value:
         raise SceneError(f"volume.axes: expected a string of axis letters such as \"czyx\", "
                          f"got {value!r}")
-    axes = value.lower()
+    text = value.lower()
+    if not re.fullmatch(r"([a-z?][0-9]*)+", text) or re.search(r"(^|[a-z])0", text):
+        raise SceneError(f"volume.axes: expected axis letters, each with its count where a page "
+                         f"axis is split (\"c3zyx\"), got {value!r}")
+    axes = re.sub(r"[0-9]+", "", text)
     unknown = sorted(set(axes) - set(AXIS_LETTERS))
     if unknown:
         raise SceneError(f"volume.axes: unknown axis {unknown[0]!r} in {value!r} (letters: t time, "
@@ -186,7 +196,7 @@ def _parse_axes(value: Any) -> str:
     if missing:
         raise SceneError(f"volume.axes: {value!r} lacks {', '.join(missing)} (a volume always has "
                          "z, y and x)")
-    return axes
+    return text
 
 
 def _parse_channels(d: Any, has_transfer_function: bool,
@@ -200,10 +210,11 @@ def _parse_channels(d: Any, has_transfer_function: bool,
                          "for a one-channel volume)")
     if len(d) > MAX_CHANNELS:
         raise SceneError(f"channels: {len(d)} channels, at most {MAX_CHANNELS} are shown at once "
-                         "(choose them with channels[i].index)")
+                         f"(choose them with channels[i].index, {flag_for('channels')})")
     if has_transfer_function:
         raise SceneError("transfer_function: a scene with channels gives each channel its own "
-                         "(channels[i].transfer_function), not one for the scene")
+                         f"({with_flag('channels[i].transfer_function')}), not one for the "
+                         "scene")
     out, seen = [], {}
     for i, c in enumerate(d):
         name = f"channels[{i}]"
@@ -308,7 +319,8 @@ def _parse_crop(d: Any) -> CropSpec:
         lo, hi = _vector(d["min"], "crop.min", 3), _vector(d["max"], "crop.max", 3)
     for i, axis in enumerate("xyz"):
         if not hi[i] > lo[i]:
-            raise SceneError(f"crop.max[{i}]: must be > crop.min[{i}] (the box's {axis} extent), "
+            raise SceneError(f"crop.max[{i}]: must be > crop.min[{i}] (the box's {axis} extent; "
+                             f"{flag_for('crop')}), "
                              f"got min {lo[i]:g}, max {hi[i]:g}")
     enabled = _boolean(d.get("enabled", True), "crop.enabled")
     return CropSpec(min=lo, max=hi, units=units, enabled=enabled)

@@ -99,7 +99,8 @@ def keys() -> dict[str, Key]:
         "volume.path": Key(
             "A volume file or folder, relative to the scene file's folder (or absolute): .raw, "
             ".nrrd/.nhdr, .npy, .nii/.nii.gz, .tif/.tiff, a folder of TIFF slices or steps, a Zarr "
-            "or OME-Zarr store, a folder of DICOM files (searched recursively) or a DICOMDIR. "
+            "or OME-Zarr store, a folder of DICOM files (searched recursively), a DICOMDIR, or "
+            "a multi-frame DICOM file (enhanced CT or MR, RT dose). "
             "Excludes volume.builtin.",
             {"type": "string", "minLength": 1}, default="none (the built-in volume)",
             values="a path"),
@@ -141,8 +142,10 @@ def keys() -> dict[str, Key]:
         "volume.axes": Key(
             "Which array axis is which, one letter each: t (time), c (channel), z, y, x; z, y and "
             "x always. Needed for a .npy of more than 3 dimensions and a file whose metadata "
-            "leaves axes unnamed; where the file names its axes (ImageJ, OME, Zarr) it must agree.",
-            {"type": "string", "pattern": f"^[{AXIS_LETTERS}]{{3,5}}$"},
+            "leaves axes unnamed; where the file names its axes (ImageJ, OME, Zarr) it must agree. "
+            "A count after letters splits a TIFF's unnamed page axis: \"c3zyx\" reads 96 pages as "
+            "3 channels of 32 slices.",
+            {"type": "string", "pattern": f"^([{AXIS_LETTERS}]([1-9][0-9]*)?){{3,5}}$"},
             default="the file's own (3D .npy: zyx)", values="e.g. \"czyx\", \"tzyx\""),
         "volume.orientation": Key(
             "data: the array's axes on world x, y, z as stored; patient: permuted and flipped so "
@@ -199,7 +202,10 @@ def keys() -> dict[str, Key]:
                            number(0, MAX_BOUNCES_LIMIT, integer=True)),
         "camera": Key("A pinhole camera.", {}),
         "camera.eye": Key("Where the camera is (world units; the volume's box is centred at the "
-                          "origin, its longest side 1).", vector(3)),
+                          "origin, its longest side 1). Where the scene leaves the view at its "
+                          "default and the box does not fit the image (a tall image, a long "
+                          "box), the eye moves back along its direction until the whole box is "
+                          "in view.", vector(3)),
         "camera.target": Key("The point it looks at (not the eye).", vector(3)),
         "camera.up": Key("Up on the image (not along the view).", vector(3)),
         "camera.fov_y": Key("Vertical field of view, degrees.", number(0.0, 179.0, lo_open=True)),

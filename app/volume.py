@@ -19,8 +19,9 @@ import numpy as np
 from . import dicom
 from . import volume_formats as formats
 from .orientation import NRRD_SPACES, patient_axes, to_patient, unit_columns
+from .scene_flags import flag_for, with_flag
 from .scene_types import Scene, VolumeError, VolumeSpec
-from .volume_axes import resolve_axes, to_canonical
+from .volume_axes import resolve_axes, split_pages, to_canonical
 
 # What load_volume takes, by file name ending (a folder is a TIFF stack, DICOM images or a Zarr
 # store; a file named DICOMDIR indexes a DICOM set).
@@ -30,7 +31,8 @@ VOLUME_SUFFIXES = ((".raw", ".nrrd", ".nhdr", ".npy") + formats.NIFTI_SUFFIXES
 
 def is_volume_path(p: Path) -> bool:
     """A file load_volume reads by its name, a DICOMDIR, or a folder (a TIFF stack or DICOM)."""
-    return p.is_dir() or formats.has_suffix(p, VOLUME_SUFFIXES) or dicom.is_dicomdir(p)
+    return (p.is_dir() or formats.has_suffix(p, VOLUME_SUFFIXES + dicom.DICOM_SUFFIXES)
+            or dicom.is_dicomdir(p))
 
 
 RAW_DTYPES = {
@@ -374,11 +376,13 @@ def _read_raw(p: Path, dims: tuple[int, int, int] | None, dtype: str | None) -> 
     if dims is None:
         if not m:
             raise VolumeError(f"{p}: cannot tell the dimensions from the name; expected "
-                              "'name_XxYxZ_dtype.raw' or give volume.dims and volume.dtype")
+                              "'name_XxYxZ_dtype.raw' or give "
+                              f"{with_flag('volume.dims')} and {with_flag('volume.dtype')}")
         dims = (int(m.group(1)), int(m.group(2)), int(m.group(3)))
     if dtype is None:
         if not m:
-            raise VolumeError(f"{p}: cannot tell the data type from the name; give volume.dtype")
+            raise VolumeError(f"{p}: cannot tell the data type from the name; give "
+                              f"{with_flag('volume.dtype')}")
         dtype = m.group(4).lower()
     if dtype not in RAW_DTYPES:
         raise VolumeError(f"{p}: unknown data type '{dtype}' (known: {', '.join(RAW_DTYPES)})")
@@ -438,7 +442,7 @@ def _read_npy(p: Path) -> np.ndarray:
         raise VolumeError(f"{p}: cannot read .npy ({_one_line(exc)})") from None
     if data.ndim < 3:
         raise VolumeError(f"{p}: expected a 3D array [z, y, x] (or 4D or 5D with channels and "
-                          f"time steps: see volume.axes), got shape {list(data.shape)}")
+                          f"time steps: see {with_flag('volume.axes')}), got shape {list(data.shape)}")
     return data
 
 
@@ -452,7 +456,7 @@ def normalise(raw: np.ndarray, value_range: tuple[float, float] | None, where: s
         if bad.any():
             if replace_nonfinite is None:
                 raise VolumeError(f"{where}: {int(bad.sum())} voxels are NaN or Inf; give "
-                                  "volume.replace_nonfinite to replace them")
+                                  f"{with_flag('volume.replace_nonfinite')} to replace them")
             raw = np.where(bad, raw.dtype.type(replace_nonfinite), raw)
     if value_range is None:
         if raw.dtype == np.uint8:
@@ -462,8 +466,9 @@ def normalise(raw: np.ndarray, value_range: tuple[float, float] | None, where: s
         else:
             lo, hi = float(raw.min()), float(raw.max())
             if not hi > lo:
-                raise VolumeError(f"{where}: every voxel is {lo}; give volume.value_range to say "
-                                  "what density that is")
+                raise VolumeError(f"{where}: every voxel is {lo}; give "
+                                  f"{with_flag('volume.value_range')} to say what density "
+                                  "that is")
             value_range = (lo, hi)
     lo, hi = (float(v) for v in value_range)
     if not (np.isfinite(lo) and np.isfinite(hi) and np.isfinite(hi - lo) and hi > lo):
@@ -500,8 +505,8 @@ def read_volume_array(spec: VolumeSpec, base_dir: str | None = None) -> "VolumeF
     listing = series = None
     axes: str | None = "zyx"
     if spec.series is not None and not (p.is_dir() or dicom.is_dicomdir(p)):
-        raise VolumeError(f"{p}: volume.series {spec.series} names a DICOM series, but this is "
-                          "not a DICOM folder or DICOMDIR")
+        raise VolumeError(f"{p}: {with_flag('volume.series')} {spec.series} names a DICOM series, "
+                          "but this is not a DICOM folder or DICOMDIR")
     if formats.is_zarr(p):
         raw, file_spacing, axes = formats.read_zarr(p, need_spacing)
     elif p.is_dir() and spec.series is None and formats.tiff_files(p):
@@ -516,8 +521,13 @@ def read_volume_array(spec: VolumeSpec, base_dir: str | None = None) -> "VolumeF
         raw, file_spacing, direction, axes = formats.read_nifti(p, need_spacing)
     elif formats.has_suffix(p, formats.TIFF_SUFFIXES):
         raw, axes = formats.read_tiff(p)
-    elif formats.has_suffix(p, dicom.DICOM_SUFFIXES):
-        raise VolumeError(f"{p}: a single DICOM file; give the folder holding its series")
+    elif dicom.is_dicom_file(p) and not formats.has_suffix(p, VOLUME_SUFFIXES):
+        if dicom.frames_in(p) < 2:
+            raise VolumeError(f"{p}: a single DICOM file of one slice; give the folder holding "
+                              "its series")
+        got = dicom.read_dicom(p, need_spacing, None)   # a multi-frame file: a volume of its own
+        raw, file_spacing, direction, notes = got.data, got.spacing, got.direction, got.notes
+        listing, series = got.listing, got.series
     else:
         suffix = p.suffix.lower()
         if suffix == ".raw":
@@ -530,11 +540,40 @@ def read_volume_array(spec: VolumeSpec, base_dir: str | None = None) -> "VolumeF
             raise VolumeError(f"{p}: unknown volume format '{suffix}' (known: "
                               f"{', '.join(VOLUME_SUFFIXES)}, a DICOMDIR, a Zarr store, or a "
                               "folder of TIFF or DICOM slices)")
-    raw = to_canonical(raw, resolve_axes(axes, tuple(raw.shape), spec.axes, str(p)), str(p))
+    raw, axes, scene_axes = split_pages(raw, axes, spec.axes, str(p))
+    notes += _page_stack_note(p, raw, axes, scene_axes)
+    raw = to_canonical(raw, resolve_axes(axes, tuple(raw.shape), scene_axes, str(p)), str(p))
     if min(raw.shape) < 1:
         raise VolumeError(f"{p}: volume has zero size, shape {raw.shape[:1:-1]} (x, y, z)")
     return VolumeFile(raw, file_spacing if need_spacing else None, p.name, direction, notes,
                       listing, series)
+
+
+def time_note(name: str, steps: int, time: int) -> tuple[str, ...]:
+    """A volume with a time axis says so: how many steps, which is shown, how to show another."""
+    if steps < 2:
+        return ()
+    return (f"{name} is a time series of {steps} steps; showing step {time} (--time N, or the "
+            f"scene's time, picks another from 0 to {steps - 1}; the viewer's Time panel plays "
+            "them)",)
+
+
+def _page_stack_note(p: Path, raw: np.ndarray, axes: str | None, scene_axes: str | None
+                     ) -> tuple[str, ...]:
+    """A plain multi-page TIFF (its pages unnamed, read as z) whose page count a plausible channel
+    count divides: a note that says so, and how to read the pages as channels instead."""
+    if (scene_axes is not None or axes is None or raw.ndim != 3 or axes.count("?") != 1
+            or not formats.has_suffix(p, formats.TIFF_SUFFIXES)):
+        return ()
+    pages = raw.shape[axes.index("?")]
+    counts = [c for c in (3, 4) if pages % c == 0 and pages > c]
+    if not counts:
+        return ()
+    ways = " or ".join(f"c{c}zyx ({c} channels of {pages // c} slices)" for c in counts)
+    return (f"{p.name}: its {pages} pages carry no axes metadata and were read as {pages} z "
+            f"slices; if they hold channels one after another, read them with --axes {ways} "
+            f"(--set volume.axes=c{counts[0]}zyx; zc{counts[0]}yx where the channels alternate "
+            "page by page)",)
 
 
 @dataclass(frozen=True, eq=False)
@@ -567,7 +606,7 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
             raise VolumeError(f"unknown built-in volume '{name}' (known: {', '.join(BUILTIN_VOLUMES)})")
         if time != 0:
             raise VolumeError(f"built-in '{name}': time step {time} asked for, but the volume has "
-                              "no time axis (one step); see the scene's time")
+                              "no time axis (one step); see the scene's time (--time STEP)")
         data = BUILTIN_VOLUMES[name](tuple(spec.size))
         domain = spec.domain
         if channels is not None:
@@ -593,8 +632,9 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
     if not 0 <= time < steps:
         raise VolumeError(f"{where}: time step {time} asked for, but the volume has "
                           + (f"{steps} time steps (0 to {steps - 1})" if steps > 1 else
-                             "no time axis (one step)") + "; see the scene's time")
+                             "no time axis (one step)") + "; see the scene's time (--time STEP)")
     fallback = _series_domains(raw, spec) if steps > 1 else None
+    notes += time_note(name, steps, time)
     step = raw[time]
     oblique = 0.0
     orientation = "data"
@@ -648,14 +688,15 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
     if not 0 <= time < steps:
         raise VolumeError(f"{where}: time step {time} asked for, but the volume has "
                           + (f"{steps} time steps (0 to {steps - 1})" if steps > 1 else
-                             "no time axis (one step)") + "; see the scene's time")
+                             "no time axis (one step)") + "; see the scene's time (--time STEP)")
     count = size.get("c", 1)
     if channels is None and count > 1:
         channels = default_channels(count, where)       # more than MAX_CHANNELS refused
     if channels is not None:
         if len(channels) > MAX_CHANNELS:
             raise VolumeError(f"{where}: {len(channels)} channels, at most {MAX_CHANNELS} are "
-                              "shown at once (choose them with channels[i].index)")
+                              "shown at once (choose them with channels[i].index, "
+                              f"{flag_for('channels')})")
         check_channel_count(channels, count, where)     # a channel the store lacks refused
         shown = [i if ch.index is None else ch.index for i, ch in enumerate(channels)]
         labels = [f"{where} (channel {index}{f' {ch.name}' if ch.name else ''})"
@@ -700,7 +741,7 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
         raws.append((float(lows[c]), float(highs[c])))
     source.value_range, source.value_ranges = ranges[0], ranges
     coarser = [source_of(a, ranges) for a in levels[1:]]
-    notes = ()
+    notes = time_note(p.name, steps, time)
     if spec.orientation == "patient":
         notes += (f"{p.name} says nothing of the patient's orientation: shown as stored "
                   "(orientation \"data\")",)

@@ -5,15 +5,20 @@ A file's axes come as letters of AXIS_LETTERS ("tczyx"), with "?" for an axis it
 unnamed (tifffile's I and Q, a plain multi-page TIFF's pages). A file whose format names none
 (.npy) gives None. The rules (resolve_axes):
 - the scene's volume.axes, where given, must have one letter per array axis and agree with every
-  axis the file names; it names the file's unnamed ones;
+  axis the file names; it names the file's unnamed ones; a count after letters splits the file's
+  one unnamed axis into several (split_pages: "c3zyx" reads a plain TIFF's 96 pages as 3 channels
+  of 32 slices);
 - without it, one unnamed axis is z where the file names no z (a plain TIFF stack's pages), a
   3D array without names is [z, y, x] (SPEC.md), and anything else is refused: reading a
   [c, z, y, x] array as 96 z-slices, as this code once did, draws a flat box a third as wide.
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
+from .scene_flags import with_flag
 from .scene_types import VolumeError
 
 CANONICAL = "tczyx"
@@ -47,6 +52,62 @@ def tiff_axes(axes: str, shape: tuple[int, ...], where: str) -> str:
     return "".join(out)
 
 
+def axis_counts(scene_axes: str) -> tuple[str, dict[str, int]]:
+    """volume.axes as its letters and the counts some carry ("c3zyx": "czyx", {"c": 3})."""
+    letters, counts = "", {}
+    for letter, count in re.findall(r"([a-z?])([0-9]*)", scene_axes):
+        letters += letter
+        if count:
+            counts[letter] = int(count)
+    return letters, counts
+
+
+def split_pages(data: np.ndarray, found: str | None, scene_axes: str | None, where: str
+                ) -> tuple[np.ndarray, str | None, str | None]:
+    """A file whose one unnamed axis ("?", a plain TIFF's pages) holds several axes one after
+    another (tifffile writes a [c, z, y, x] array without metadata as c * z pages): the scene's
+    volume.axes names more axes than the array has, and counts them ("c3zyx": 3 channels of
+    pages / 3 slices; one of the split axes may go uncounted, it takes the rest). The pages are
+    split in their order (the last named varying fastest). Returns the array, the file's axes and
+    the scene's letters (counts dropped); an array to leave as it is passes through."""
+    if scene_axes is None:
+        return data, found, None
+    letters, counts = axis_counts(scene_axes)
+    extra = len(letters) - data.ndim
+    if extra <= 0:
+        if counts:
+            raise VolumeError(f"{where}: {with_flag('volume.axes')} {scene_axes!r} counts "
+                              f"{', '.join(counts)}, but the array's {data.ndim} axes (shape "
+                              f"{list(data.shape)}) have nothing to split: counts split a TIFF's "
+                              "unnamed page axis")
+        return data, found, letters
+    if found is None or found.count("?") != 1:
+        return data, found, letters     # resolve_axes names the mismatch
+    i = found.index("?")
+    group = letters[i:i + extra + 1]
+    outside = sorted(set(counts) - set(group))
+    if outside:
+        raise VolumeError(f"{where}: {with_flag('volume.axes')} {scene_axes!r} counts "
+                          f"{outside[0]}, which is not among the axes the pages split into "
+                          f"({', '.join(group)})")
+    pages = data.shape[i]
+    uncounted = [a for a in group if a not in counts]
+    known = int(np.prod([counts[a] for a in group if a in counts]))
+    if len(uncounted) > 1 or pages % known or (not uncounted and known != pages):
+        raise VolumeError(f"{where}: {with_flag('volume.axes')} {scene_axes!r} splits the "
+                          f"{pages} pages into {', '.join(group)}: count all of them but one, "
+                          f"the counts dividing {pages} (e.g. "
+                          f"{letters.replace(group[0], group[0] + str(_divisor(pages)), 1)})")
+    sizes = [counts.get(a, pages // known) for a in group]
+    shape = data.shape[:i] + tuple(sizes) + data.shape[i + 1:]
+    return data.reshape(shape), found[:i] + "?" * len(group) + found[i + 1:], letters
+
+
+def _divisor(n: int) -> int:
+    """A small count that divides n (a plausible channel count first), for an example."""
+    return next((d for d in (3, 4, 2) if n % d == 0), n)
+
+
 def _describe(axes: str, shape: tuple[int, ...]) -> str:
     return "[" + ", ".join(f"{a} {n}" for a, n in zip(axes, shape)) + "]"
 
@@ -57,13 +118,17 @@ def resolve_axes(found: str | None, shape: tuple[int, ...], scene_axes: str | No
     naming the axis problem."""
     ndim = len(shape)
     if scene_axes is not None:
+        if any(ch.isdigit() for ch in scene_axes):
+            raise VolumeError(f"{where}: {with_flag('volume.axes')} {scene_axes!r} counts axes, "
+                              "which only split a multi-page TIFF's unnamed page axis")
         if len(scene_axes) != ndim:
-            raise VolumeError(f"{where}: volume.axes {scene_axes!r} names {len(scene_axes)} axes "
+            raise VolumeError(f"{where}: {with_flag('volume.axes')} {scene_axes!r} names "
+                              f"{len(scene_axes)} axes "
                               f"but the array has {ndim} (shape {list(shape)})")
         if found is not None:
             for i, (f, s) in enumerate(zip(found, scene_axes)):
                 if f not in "?1" and f != s:
-                    raise VolumeError(f"{where}: volume.axes {scene_axes!r} disagrees with the "
+                    raise VolumeError(f"{where}: {with_flag('volume.axes')} {scene_axes!r} disagrees with the "
                                       f"file's own axes {found!r} (axis {i}: the file says "
                                       f"{AXIS_NAMES[f]}, the scene {AXIS_NAMES[s]})")
         return scene_axes
@@ -71,7 +136,7 @@ def resolve_axes(found: str | None, shape: tuple[int, ...], scene_axes: str | No
         if ndim == 3:
             return "zyx"
         raise VolumeError(f"{where}: a {ndim}D array (shape {list(shape)}) whose file does not say "
-                          "which axis is which; give volume.axes, e.g. \"czyx\" for channels or "
+                          f"which axis is which; give {with_flag('volume.axes')}, e.g. \"czyx\" for channels or "
                           "\"tzyx\" for time steps")
     axes = list(found)
     unnamed = [i for i, a in enumerate(axes) if a == "?"]
@@ -79,7 +144,7 @@ def resolve_axes(found: str | None, shape: tuple[int, ...], scene_axes: str | No
         axes[unnamed[0]] = "z"      # a plain stack's pages
     elif unnamed:
         raise VolumeError(f"{where}: the file leaves {len(unnamed)} of its axes unnamed "
-                          f"({_describe(found, shape)}, ? unnamed); give volume.axes, e.g. "
+                          f"({_describe(found, shape)}, ? unnamed); give {with_flag('volume.axes')}, e.g. "
                           "\"czyx\" or \"tzyx\", to say which is which")
     return "".join(axes)
 

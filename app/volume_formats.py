@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .orientation import RAS_TO_LPS, unit_columns
+from .scene_flags import with_flag
 from .scene_types import VolumeError
 from .volume_axes import tiff_axes
 
@@ -45,7 +46,7 @@ def spacing_or_none(values, where: str, need: bool) -> tuple[float, float, float
     if need:
         shown = "absent" if not spacing else "[" + ", ".join(f"{s:g}" for s in spacing) + "]"
         raise VolumeError(f"{where}: missing spacing: the header's voxel sizes are {shown}; give "
-                          "volume.spacing")
+                          f"{with_flag('volume.spacing')}")
     return None
 
 

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from radiance_probes.bench.metrics import rrmse
-from radiance_probes.rendering.auto_progressive import Halves, auto_render, estimate_image, estimate_pt
+from radiance_probes.rendering.auto_progressive import (RAYMARCH_FRAMES, Halves, auto_render,
+                                                        estimate_image, estimate_pt)
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.scene import parse_scene
 
@@ -60,10 +61,18 @@ def test_auto_returns_an_image_within_the_target(ctx):
         assert got.gpu_ms >= got.pt_ms > 0 and got.pt_spp >= 2
         if got.method == "raymarch":
             assert r.scene is got.scene and got.scene.probes.grid[0] in (2, 4, 6)
+            # the image's own time: its render (and its bake), not the rejected settings'
+            assert got.image_spp == RAYMARCH_FRAMES and got.image_ms > 0
+            chosen = got.trials[-1]["ms"]
+            assert got.image_ms + got.image_bake_ms == pytest.approx(chosen)
         else:
             assert r.scene == before
+            assert (got.image_spp, got.image_ms) == (got.pt_spp, got.pt_ms)
         assert np.isfinite(got.image).all() and got.image.min() >= 0
         assert "auto:" in got.report()
+        # the trials' lines once each: in the log (what progress printed), out of report(log=False)
+        assert got.report().splitlines()[1:] == ["  " + line for line in got.log]
+        assert got.report(log=False) == got.report().splitlines()[0]
     finally:
         r.release()
 
@@ -76,6 +85,9 @@ def test_auto_falls_back_to_the_path_tracer_where_no_probes_reach_the_target(ctx
         got = auto_render(r, 0.04, ladder=((2, 16),), max_pt_spp=8192)
         assert got.method == "pt" and got.met
         assert all(t["grid"] == 2 for t in got.trials)
+        # ms per sample is the path tracer's own: the rejected setting's bake is left out
+        assert (got.image_spp, got.image_ms) == (got.pt_spp, got.pt_ms)
+        assert got.gpu_ms > got.image_ms
     finally:
         r.release()
 
@@ -107,3 +119,20 @@ def test_the_path_tracers_rounds_stop_near_the_samples_the_target_needs():
         assert need <= spp * (1 + Z * 0.01) ** 2
         assert spp <= max(need * (1 + Z * 0.01) ** 2 * PT_MARGIN + 2, 4), (target, spp, need)
     assert next_pt_spp(8, math.inf, math.inf, 0.01) == 16
+
+
+def test_the_command_line_prints_each_trial_once(tmp_path, capsys):
+    """render --auto: each trial's line once (as it comes), then the outcome; the time per sample
+    printed is the image's own."""
+    import json
+
+    from radiance_probes.cli import main
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps(SCENE))
+    assert main(["render", str(scene), "--auto", "0.1", "--out", str(tmp_path / "a.png")]) == 0
+    out, err = capsys.readouterr()
+    lines = [line.removeprefix("auto:").strip() for line in (out + err).splitlines()
+             if "rRMSE" in line]
+    assert sum("probes" in line for line in lines) >= 1, out + err   # a trial was made
+    assert len(lines) == len(set(lines)), out + err
+    assert "ms per sample" in out

@@ -524,7 +524,7 @@ def test_bricked_zarr_store_refuses_channels_as_the_whole_loader_does(tmp_path):
     five = tuple(ChannelSpec(transfer_function=None, index=i) for i in range(5))
     message = _refused(lambda: load_volume(spec, channels=five, brick=BRICK))
     assert message == f"{path}: 5 channels, at most 4 are shown at once (choose them with " \
-                      "channels[i].index)"
+                      "channels[i].index, --channel I[,J,...])"
 
 
 class _Blocks:

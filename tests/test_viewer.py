@@ -296,6 +296,11 @@ def test_pt_screenshot_shows_the_volume_and_the_panels(run):
     assert volume[h // 3: 2 * h // 3, w // 3: 2 * w // 3].mean() > 0.3
     sidebar = image[:, : d["view_rect_framebuffer"][0]]
     assert len(np.unique(sidebar.reshape(-1, 3), axis=0)) > 50  # text and widgets
+    # every radio button of the panel lies whole inside it ("refine" was cut to "refi")
+    edge = d["view_rect_window"][0]
+    for name in ("pt", "probes", "probes-only", "raymarch", "refine", "view error", "probes alone"):
+        x0, _, x1, _ = d["widgets"][name]
+        assert 0 <= x0 < x1 <= edge, (name, d["widgets"][name], edge)
 
 
 def test_probe_method_bakes_once_and_renders(run):

@@ -161,7 +161,7 @@ def test_dicom_orders_along_the_normal_when_positions_descend(tmp_path):
     ("gap", "uneven slice spacing"),
     ("no spacing", "missing spacing"),
     ("empty", "holds no files"),
-    ("frames", "cannot read the DICOM series"),
+    ("frames", "cannot read NumberOfFrames"),
     ("orientations", "3 different orientations"),
     ("gantry tilt", "step sideways"),
 ])

@@ -170,7 +170,7 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
     from ..viewer.session import RenderSession
     r = renderer
     start = r.scene
-    session = RenderSession(r.ctx, start, renderer=r)
+    session = RenderSession(r.ctx, start, renderer=r, clock="gpu")   # GPU and wall times apart
     session.bake_budget_ms = config.interact_bake_budget_ms
     session.frame_budget_ms = config.interact_frame_budget_ms
     if config.interact_denoise is not None:

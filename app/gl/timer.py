@@ -189,3 +189,43 @@ class SpanClock:
         for start, end, _ in self._spans:
             self._gl.glDeleteQueries(2, (ctypes.c_uint * 2)(start, end))
         self._spans.clear()
+
+
+class WallTimer:
+    """The wall clock from start() to the end of the work between start() and stop() (a glFinish
+    at each end, so that work queued before is not counted and work queued between is): the
+    viewer's timer where GPU timestamps cannot be believed (app/viewer/pacing.py). Holds the GPU
+    timer it replaces, released with it."""
+
+    available = True
+
+    def __init__(self, ctx, replaces=None):
+        import time
+        self._clock = time.perf_counter
+        self._ctx = ctx
+        self.replaces = replaces
+        self._start = self._stop = 0.0
+
+    def start(self) -> None:
+        self._ctx.finish()
+        self._start = self._clock()
+
+    def stop(self) -> None:
+        self._ctx.finish()
+        self._stop = self._clock()
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    @property
+    def elapsed_ms(self) -> float:
+        return 1000.0 * (self._stop - self._start)
+
+    def release(self) -> None:
+        if self.replaces is not None:
+            self.replaces.release()
+            self.replaces = None

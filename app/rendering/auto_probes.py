@@ -54,7 +54,9 @@ class AutoChoice:
     # also when the renderer already held them) and every trial's pilot render.
     search_ms: float = 0.0
 
-    def report(self) -> str:
+    def report(self, trials: bool = True) -> str:
+        """The choice and why, then (trials=True) every setting tried; a caller that printed the
+        trials as they came (progress) leaves them out."""
         from .probe_layout import resolve_sh_order
         p = self.scene.probes
         order = resolve_sh_order(p.sh_order, self.scene.anisotropy, p.samples)
@@ -63,7 +65,7 @@ class AutoChoice:
                 f"(noise {self.pilot_noise:.4f}); target {self.target:.4f} "
                 f"{'met' if self.met else 'NOT met'}")
         rows = [f"  tried {t['grid']}^3 x {t['walks']}: rRMSE {t['rrmse']:.4f}, bake "
-                f"{t['bake_ms']:.1f} ms" for t in self.trials]
+                f"{t['bake_ms']:.1f} ms" for t in (self.trials if trials else ())]
         return "\n".join([head, *("  " + r for r in self.reasons), *rows])
 
 
@@ -136,7 +138,7 @@ def choose_probes(renderer, target: float = 0.05, method: str = "raymarch",
                          "probes": renderer.probe_grid.count}
                 trials.append(trial)
                 if progress:
-                    progress(f"{grid}^3 x {n}: rRMSE {err:.4f}")
+                    progress(f"tried {grid}^3 x {n}: rRMSE {err:.4f}, bake {bake_ms:.1f} ms")
                 if err <= PILOT_MARGIN * target:
                     best_here = trial
                     break          # fewer walks first: the first that meets it is the cheapest

@@ -63,8 +63,16 @@ class AutoResult:
     wall_s: float
     trials: list[dict] = field(default_factory=list)
     log: list[str] = field(default_factory=list)
+    # The image returned alone: its samples per pixel, its render's GPU ms and its probes' bake
+    # (the rejected settings' bakes and the path tracing a raymarched image was judged by are
+    # in gpu_ms only), for a time per sample that is the image's own.
+    image_spp: int = 0
+    image_ms: float = 0.0
+    image_bake_ms: float = 0.0
 
-    def report(self) -> str:
+    def report(self, log: bool = True) -> str:
+        """The outcome, then (log=True) every trial's line; a caller that printed the lines as
+        they came (progress) leaves them out."""
         what = (f"raymarched over {self.scene.probes.grid[0]}^3 probes x "
                 f"{self.scene.probes.samples} walks" if self.method == "raymarch"
                 else f"the path tracer at {self.pt_spp} spp")
@@ -72,7 +80,7 @@ class AutoResult:
                 f", target {self.target:.4f} {'met' if self.met else 'NOT met'}; "
                 f"{self.gpu_ms:.1f} ms of GPU time in all ({self.pt_ms:.1f} ms path tracing), "
                 f"{self.wall_s:.2f} s wall")
-        return "\n".join([head, *("  " + line for line in self.log)])
+        return "\n".join([head, *("  " + line for line in (self.log if log else ()))])
 
 
 def _per_pixel(x: np.ndarray) -> np.ndarray:
@@ -224,7 +232,7 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
             renderer.set_scene(original)
             return AutoResult(halves.mean().astype(np.float32), "pt", original, target, pt_est,
                               pt_se, True, halves.spp, pt_ms + trial_ms, pt_ms,
-                              time.perf_counter() - start, trials, log)
+                              time.perf_counter() - start, trials, log, halves.spp, pt_ms)
         # the path tracer's expected time still to go: its error falls as 1 / sqrt(samples)
         pt_to_go = pt_ms * max((pt_est / target) ** 2 - 1.0, 0.0)
         while k < len(ladder):
@@ -237,8 +245,8 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
                                       samples_per_pass=RAYMARCH_FRAMES)
                 cost = run.bake_ms + run.render_ms
                 trial_ms += cost
-                current = (k, run.image, cost)
-            index, image, cost = current
+                current = (k, run.image, cost, run)
+            index, image, cost, chosen = current
             est, se = estimate_image(image, halves)
             p = ladder[index].probes
             trial = {"grid": p.grid[0], "walks": p.samples, "ms": cost, "pt_spp": halves.spp,
@@ -250,7 +258,8 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
                 renderer.set_scene(ladder[index])
                 return AutoResult(np.asarray(image, np.float32), "raymarch", ladder[index],
                                   target, est, se, True, halves.spp, pt_ms + trial_ms, pt_ms,
-                                  time.perf_counter() - start, trials, log)
+                                  time.perf_counter() - start, trials, log, chosen.spp,
+                                  chosen.render_ms, chosen.bake_ms)
             if est - se > target:
                 k, current = k + 1, None   # above (a standard error clear): the next setting
                 continue
@@ -260,6 +269,6 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
             say(f"stopped at {halves.spp} spp, the most allowed")
             return AutoResult(halves.mean().astype(np.float32), "pt", original, target, pt_est,
                               pt_se, False, halves.spp, pt_ms + trial_ms, pt_ms,
-                              time.perf_counter() - start, trials, log)
+                              time.perf_counter() - start, trials, log, halves.spp, pt_ms)
         batch = max(1, (next_pt_spp(halves.spp, pt_est, pt_se, target) - halves.spp) // 2)
         round_ += 1

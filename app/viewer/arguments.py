@@ -35,9 +35,14 @@ def add_view_parser(sub, func) -> argparse.ArgumentParser:
                    help="display exposure (default: the scene's saved one, else 1)")
     v.add_argument("--probe-grid", type=grid_arg, help="probes per axis: N or NX,NY,NZ (1..256)")
     v.add_argument("--probe-samples", type=positive_int, help="walks per probe")
-    v.add_argument("--sh-window", choices=("none", "hann", "lanczos"))
-    v.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"))
-    v.add_argument("--seed", type=int, default=0)
+    v.add_argument("--sh-window", choices=("none", "hann", "lanczos"),
+                   help="window on the probes' spherical harmonics against ringing near sharp "
+                        "light (probes.sh_window; default none)")
+    v.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"),
+                   help="the probe textures' format; rgba16f takes half the memory "
+                        "(probes.precision; default rgba32f)")
+    v.add_argument("--seed", type=int, default=0,
+                   help="random seed of the samples (default 0): the same seed, the same image")
     v.add_argument("--volume-memory", type=memory_size, metavar="BYTES",
                    help="the volume's GPU memory at most (e.g. 4G, 512M): where one 3D texture "
                         "exceeds it, the finest level whose bricks fit is shown, with a note")

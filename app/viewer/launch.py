@@ -7,8 +7,8 @@ import os
 import sys
 from pathlib import Path
 
-from ..frontend import (apply_options, check_output, render_defaults, render_to_files,
-                        scene_from_arg)
+from ..frontend import (SCENE_KEY_DESTS, apply_options, check_output, render_defaults,
+                        render_to_files, scene_from_arg)
 from ..scene import Scene
 from .device_defaults import RENDER_SCALE, probes_named, with_device_probes
 from .files import bundled_scene_for
@@ -49,8 +49,16 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
     return apply_options(scene, args)
 
 
+def view_aspect(window: tuple[int, int]) -> float:
+    """The picture's aspect in a window of this size (the panel on its left)."""
+    from .layout import SIDEBAR_WIDTH
+    width, height = window
+    return max(width - SIDEBAR_WIDTH, 1) / max(height, 1)
+
+
 def run_view(args: argparse.Namespace) -> int:
     from ..environment_map import load_scene_environment
+    from ..framing import frame_default_camera
     from ..volume import load_scene_volume, reads_lazily, zarr_preview
     scene = scene_from_args(args)
     progressive = False
@@ -74,6 +82,7 @@ def run_view(args: argparse.Namespace) -> int:
         progressive = volume is not None
         if volume is None:
             volume = load_scene_volume(scene)
+        scene = frame_default_camera(scene, volume.half_extent, view_aspect(args.window))
         load_scene_environment(scene)   # and an environment map (kept in its cache)
         for note in volume.notes:
             print(f"view: note: {note}", file=sys.stderr)
@@ -170,7 +179,7 @@ def headless_fallback(args: argparse.Namespace, reason: str) -> int:
                    **{k: getattr(args, k, None) for k in ("series", "orientation", "data_window",
                                                           "crop", "crop_voxels", "clip_plane",
                                                           "transfer_function",
-                                                          "volume_memory")},
+                                                          "volume_memory", *SCENE_KEY_DESTS)},
                    no_crop=getattr(args, "no_crop", False),
                    no_clip_plane=getattr(args, "no_clip_plane", False))
     return render_to_files(argparse.Namespace(**options))

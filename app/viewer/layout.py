@@ -3,6 +3,8 @@ reports, top-left origin) and in framebuffer pixels (GL's bottom-left origin). O
 screen the framebuffer has more pixels than the window has coordinates."""
 from __future__ import annotations
 
+SIDEBAR_WIDTH = 370           # the panel's logical pixels, before the UI scale
+
 
 def view_rect_window(window_size, sidebar_width: float) -> tuple[float, float, float, float]:
     w, h = window_size

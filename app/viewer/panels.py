@@ -13,6 +13,7 @@ from ..scene_types import VIEWER_METHODS as METHODS
 from ..scene import (ORIENTATIONS, PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS,
                      PROBE_LAYOUTS, PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS)
 from ..volume import BUILTIN_VOLUMES
+from .layout import SIDEBAR_WIDTH
 from .overlays import shortcut_table
 from .state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
 from .crop_panel import crop_section
@@ -20,7 +21,6 @@ from .movie_panel import movie_section
 from .time_panel import time_section
 from .tf_editor import data_ticks, heat_legend, transfer_panel
 
-SIDEBAR_WIDTH = 370           # logical pixels, before the UI scale
 
 
 def sidebar(v) -> None:
@@ -31,6 +31,7 @@ def sidebar(v) -> None:
     flags = (imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse
              | imgui.WindowFlags_.no_title_bar)
     imgui.begin("Radiance probes", None, flags)
+    imgui.push_text_wrap_pos(0.0)     # every text and hint wraps at the panel's edge, never cut
     imgui.push_item_width(-150 * s)
     for title, draw in SECTIONS:
         if title == "Time" and v.time_steps <= 1:   # only for a volume with a time axis
@@ -45,15 +46,25 @@ def sidebar(v) -> None:
     if v.state.messages:
         imgui.separator()
         imgui.text_wrapped(v.state.messages[-1])
+    imgui.pop_text_wrap_pos()
     imgui.end()
+
+
+def radio_width(choice: str, style) -> float:
+    """A radio button's width: its circle (the frame height), the gap and its label."""
+    return (imgui.get_frame_height() + style.item_inner_spacing.x
+            + imgui.calc_text_size(choice).x)
 
 
 def _radio_row(v, label: str, choices, current: str, prefix: str = "") -> str | None:
     imgui.text(label)
     chosen = None
+    style = imgui.get_style()
+    right = imgui.get_cursor_screen_pos().x + imgui.get_content_region_avail().x
     for i, choice in enumerate(choices):
-        if i:
-            imgui.same_line()
+        if i and (imgui.get_item_rect_max().x + style.item_spacing.x
+                  + radio_width(choice, style) <= right):
+            imgui.same_line()           # on this line where it fits whole, else on the next
         if imgui.radio_button(f"{choice}##{label}", current == choice):
             chosen = choice
         v.widgets.note(f"{prefix}{choice}")
@@ -432,19 +443,27 @@ def stats_section(v) -> None:
     imgui.text(f"{v.device}")
     w, h = session.size
     imgui.text(f"render {w} x {h} px, window {v.framebuffer_size[0]} x {v.framebuffer_size[1]}")
-    imgui.text(f"GPU frame {t.total_ms:.2f} ms (render {t.render_ms:.2f}, bake {t.bake_ms:.2f}, "
-               f"display {t.display_ms:.2f})")
+    wall = session.pacer.wall
+    if wall:
+        frame = session.pacer.frame_ms
+        imgui.text(f"frame {'?' if frame is None else f'{frame:.0f}'} ms wall clock (render "
+                   f"{t.render_ms:.0f}, bake {t.bake_ms:.0f})")
+    else:
+        imgui.text(f"GPU frame {t.total_ms:.2f} ms (render {t.render_ms:.2f}, bake "
+                   f"{t.bake_ms:.2f}, display {t.display_ms:.2f})")
     history = np.asarray(session.history, np.float64)
     if history.size and implot.begin_plot("##frame times", ImVec2(-1, 90 * v.ui_scale),
                                           implot.Flags_.no_menus | implot.Flags_.no_box_select
                                           | implot.Flags_.no_legend | implot.Flags_.no_inputs):
         implot.setup_axes("", "ms", implot.AxisFlags_.no_tick_labels, implot.AxisFlags_.auto_fit)
         implot.setup_axis_limits(implot.ImAxis_.x1, 0, max(len(history), 2), implot.Cond_.always)
-        implot.plot_line("GPU ms", history)
+        implot.plot_line("wall ms" if wall else "GPU ms", history)
         implot.end_plot()
-    imgui.text_disabled("GPU time per frame from timestamp queries")
+    imgui.text_disabled(f"wall-clock time per frame: {session.pacer.reason}; the frames are paced "
+                        "by it" if wall else "GPU time per frame from timestamp queries")
     if session.probe_grid is not None:
-        imgui.text(f"bake {session.bake_ms:.1f} ms GPU, probes {session.probe_grid.gpu_bytes / 2**20:.2f} MiB")
+        imgui.text(f"bake {session.bake_ms:.1f} ms {'wall clock' if wall else 'GPU'}, probes "
+                   f"{session.probe_grid.gpu_bytes / 2**20:.2f} MiB")
 
 
 def camera_section(v) -> None:

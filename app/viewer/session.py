@@ -11,6 +11,9 @@ switch to their own when the probes are current.
 
 A frame's GPU time is budgeted as a whole (FRAME_BUDGET_MS): the bake slice first, then as many
 samples per shown method as the rest of the frame holds by their measured cost, at least one.
+Where GPU timestamps cannot be believed (a software renderer; a GPU whose timestamps stay far
+below the wall clock) the renderer's timer becomes the wall clock and a frame's work gets what
+WALL_FRAME_MS leaves after the rest of the frame (app/viewer/pacing.py).
 
 `refine` (RefineView) is two renderers in one view: after any edit the raymarcher's image shows
 at once; once the probes are current, `guided` samples accumulate beside it in two independent
@@ -22,6 +25,7 @@ from __future__ import annotations
 
 import math
 import statistics
+import time
 from collections import deque
 from dataclasses import dataclass
 
@@ -29,6 +33,7 @@ import moderngl
 import numpy as np
 
 from ..gl.context import is_software
+from ..gl.timer import WallTimer
 from ..rendering.accumulation import Accumulation
 from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from ..rendering.probes import BakeProgress
@@ -37,6 +42,7 @@ from ..rendering.renderer import PROBE_LIGHTING, Renderer
 from ..scene import Scene
 from ..volume import Volume
 from .denoise_view import ViewDenoise
+from .pacing import FramePacer
 
 FRAME_HISTORY = 240
 MAX_SAMPLES_PER_FRAME = 64
@@ -125,17 +131,25 @@ class FrameTimes:
     display_ms: float = 0.0
     samples: int = 0          # samples per pixel dispatched in the frame, over its views
     denoise_ms: float = 0.0   # wall ms the Denoise switch's filtering took (not GPU time)
+    clock: str = "gpu"        # what bake_ms and render_ms are: GPU time, or "wall" clock time
+    frame_wall_ms: float | None = None   # the whole frame's wall time (its display and panels too)
 
     @property
     def total_ms(self) -> float:
         return self.bake_ms + self.render_ms + self.display_ms
 
+    @property
+    def work_ms(self) -> float:
+        return self.bake_ms + self.render_ms
+
 
 class RenderSession:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
-                 seed: int = 0, renderer: Renderer | None = None, settings=None):
+                 seed: int = 0, renderer: Renderer | None = None, settings=None,
+                 clock: str | None = None):
         """`renderer`: one to drive instead of a new one (the interact benchmark's replay);
-        `settings`: the new one's RenderSettings (None: the defaults)."""
+        `settings`: the new one's RenderSettings (None: the defaults); `clock`: "gpu" or "wall"
+        to pace by that clock always (None: by the device, app/viewer/pacing.py)."""
         self.ctx = ctx
         self.renderer = (renderer if renderer is not None else
                          Renderer(ctx, scene, volume, settings=settings))
@@ -156,6 +170,16 @@ class RenderSession:
         # Denoise: on by default on a GPU; on a CPU rasteriser the filter (OIDN's CPU device)
         # takes as long as several frames, so it waits to be switched on
         self.denoise = ViewDenoise(ctx, enabled=device == "gpu")
+        self.pacer = FramePacer(device == "software", ctx.info.get("GL_RENDERER", ""), clock)
+        self._frame_began: float | None = None   # when the last working frame's step began
+        if self.pacer.wall:
+            self._use_wall_clock()
+
+    def _use_wall_clock(self) -> None:
+        """The renderer's timer becomes the wall clock (bake slices and samples timed by it)."""
+        r = self.renderer
+        if not isinstance(r.timer, WallTimer):
+            r.timer = WallTimer(self.ctx, replaces=r.timer)
 
     @property
     def scene(self) -> Scene:
@@ -268,12 +292,13 @@ class RenderSession:
         `frame_budget_ms` holds, shared between the views, at least one each. The views that read
         probes restart after every slice, from the probes as they are then; a probe-lit view
         shows the raymarcher until the bake is done."""
-        times = FrameTimes()
+        times = FrameTimes(clock=self.pacer.clock)
         r = self.renderer
+        budget = self.pacer.work_budget_ms(self.frame_budget_ms)
         if want_probes and not r.probes_current():
             starting = not r.bake_started_for_scene()
             passes = None if starting else r.probe_grid.passes_done
-            times.bake_ms = r.bake_step(self.seed, budget_ms=self.bake_budget_ms)
+            times.bake_ms = r.bake_step(self.seed, budget_ms=min(self.bake_budget_ms, budget))
             if starting:
                 self.bake_ms = 0.0
                 self.bake_generation += 1
@@ -291,7 +316,7 @@ class RenderSession:
                 and not (r.needs_probes(v.shown) and r.probe_grid is None)   # nothing to read yet
                 and (not self._refine_done(v, max_samples) if isinstance(v, RefineView)
                      else v.acc.samples < max_samples)]
-        share = max(self.frame_budget_ms - times.bake_ms, 0.0) / max(len(todo), 1)
+        share = max(budget - times.bake_ms, 0.0) / max(len(todo), 1)
         for view in todo:
             if isinstance(view, RefineView):
                 ms, n = self._step_refine(view, share, max_samples)
@@ -419,7 +444,22 @@ class RenderSession:
             return r.add_samples(n)
 
     def record_frame(self, times: FrameTimes) -> None:
-        self.history.append(times.total_ms)
+        """A frame drawn: its times kept for the Stats panel, and (where it did work, and so did
+        the frame before it) its whole wall time, from this step to the next, told to the pacer,
+        which may stop believing the GPU's timestamps (the renderer's timer then becomes the wall
+        clock)."""
+        now = time.perf_counter()
+        working = times.samples > 0 or times.bake_ms > 0
+        if working and self._frame_began is not None:
+            wall = 1000.0 * (now - self._frame_began)
+            self.pacer.observe(wall, times.total_ms,
+                               times.work_ms if times.clock == "wall" else None)
+            if self.pacer.wall:
+                self._use_wall_clock()
+        self._frame_began = now if working else None
+        times.frame_wall_ms = self.pacer.frame_ms
+        self.history.append(self.pacer.frame_ms if self.pacer.wall and self.pacer.frame_ms
+                            else times.total_ms)
 
     def finished(self, max_samples: int, want_probes: bool) -> bool:
         """True when another step would do nothing (the viewer may then wait for events)."""

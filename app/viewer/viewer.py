@@ -31,6 +31,7 @@ from .state import ViewerState
 from ..transfer import opacity_points
 from .tf_editor import histogram_curve
 from .widgets import WidgetRects
+from ..framing import frame_default_camera
 
 # What a bad scene, volume or shader raises; anything else is a bug and is not swallowed.
 RECOVERABLE = (SceneError, VolumeError, ShaderError, moderngl.Error, OSError, ValueError, RuntimeError)
@@ -40,6 +41,18 @@ SNAPSHOT_MAX_PROBES = 512      # a snapshot carries the probes' coefficients for
 # do not each restream: a commit restarts the accumulations and the bake).
 RESTREAM_SETTLE_S = 0.3
 
+
+
+def could_not_open(path, exc: BaseException) -> str:
+    """'could not open PATH: WHY', the path said once: a loader's message starts with the path it
+    failed on (as given, resolved, or its name), which the viewer's own words already name."""
+    text = str(exc)
+    p = Path(str(path)).expanduser()
+    for prefix in sorted({str(path), str(p), str(p.resolve()), p.name}, key=len, reverse=True):
+        if prefix and text.startswith(prefix + ":"):
+            text = text[len(prefix) + 1:].lstrip()
+            break
+    return f"could not open {path}: {text}"
 
 class Viewer:
     def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = "",
@@ -216,8 +229,10 @@ class Viewer:
                        if reads_lazily(scene) else None)
             volume = preview if preview is not None else load_scene_volume(scene)
         except RECOVERABLE as exc:
-            self.state.error(f"could not open {path}: {exc}")
+            self.state.error(could_not_open(path, exc))
             return False
+        _, _, w, h = self.view_rect_window()
+        scene = frame_default_camera(scene, volume.half_extent, w / max(h, 1.0))
         self.state.load_scene(scene, scene_path)
         self.state.show_channels(volume.channel_count)
         self._pending_volume = volume
@@ -255,7 +270,7 @@ class Viewer:
             done = opening.poll(OPEN_WRITE_BUDGET_S)
         except RECOVERABLE as exc:
             self.opening = None
-            self.state.error(f"could not open {opening.scene_name}: {exc}")
+            self.state.error(could_not_open(opening.scene_name, exc))
             return
         if done is None:
             return
@@ -589,6 +604,7 @@ class Viewer:
             "probe_sh_order": grid.sh_order if grid is not None else None,
             "probe_bytes": grid.gpu_bytes if grid is not None else 0,
             "bake_ms": session.bake_ms, "frame_ms": session.last.total_ms,
+            "clock": session.pacer.clock, "frame_wall_ms": session.pacer.frame_ms,
             "rel_rmse": self.error_meter.value if s.display == "error" else None,
             "probe_pixels": self.probe_pixels() if s.probe_view != "off" else [],
             "probes_drawn": self.probes_drawn(),
