@@ -95,7 +95,7 @@ def run_animate(args: argparse.Namespace) -> int:
     from .rendering.limits import check_image_size
     from .rendering.raymarch import check_step
     from .rendering.renderer import Renderer
-    from .viewer.device_defaults import probes_named, with_device_probes
+    from .rendering.device_defaults import probes_named, with_device_probes
     from .volume import load_scene_volume
 
     from .framing import frame_default_camera

@@ -20,7 +20,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 from panel_sheet import ldr, panel_sheet
 
-from radiance_probes.bench.metrics import corrected_rrmse, rrmse
+from radiance_probes.rendering.metrics import corrected_rrmse, rrmse
 from radiance_probes.bench.report import load as load_results
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe

@@ -52,7 +52,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from radiance_probes.bench.metrics import rrmse  # noqa: E402
+from radiance_probes.rendering.metrics import rrmse  # noqa: E402
 from radiance_probes.cli import memory_size  # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402

@@ -12,7 +12,7 @@ import numpy as np
 sys.path.insert(0, ".")
 sys.path.insert(0, str(Path(__file__).parent))
 from panel_sheet import ldr, panel_sheet
-from radiance_probes.bench.metrics import rrmse
+from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.gl.context import create_headless_context
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.scene import parse_scene

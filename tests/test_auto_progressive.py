@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from radiance_probes.bench.metrics import rrmse
+from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.rendering.auto_progressive import (RAYMARCH_FRAMES, Halves, auto_render,
                                                         estimate_image, estimate_pt)
 from radiance_probes.rendering.renderer import Renderer

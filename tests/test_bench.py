@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from radiance_probes.bench.config import BenchConfig
-from radiance_probes.bench.metrics import corrected_floor, corrected_rrmse, flip, reference_noise, rrmse
+from radiance_probes.rendering.metrics import corrected_floor, corrected_rrmse, flip, reference_noise, rrmse
 from radiance_probes.bench.report import pareto, time_to_error, write_report
 
 REQUIRED = ("scene", "method", "probe_grid", "probe_samples", "spp", "bake_ms", "frame_ms",
@@ -81,7 +81,7 @@ def test_pareto_and_time_to_error():
 def test_errors_below_the_reference_floor_are_never_stated():
     """Errors are stated corrected for the reference's noise, and never below what the correction
     resolves (the floor, from the noise and the pixel count)."""
-    from radiance_probes.bench.metrics import corrected_floor
+    from radiance_probes.rendering.metrics import corrected_floor
     from radiance_probes.bench.report import err, floor, main_records
     data = {"meta": {"config": {"width": 64, "height": 64}},
             "references": {"s": {"noise_rrmse": 0.02}},
@@ -177,7 +177,7 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
 def test_records_after_a_slow_speed_check_are_counted(tmp_path):
     """The report counts the records taken after a speed check slower than the scene's fastest
     by more than SPEED_CHECK_SLOWER (a shared or clocked-down GPU), and only those."""
-    from radiance_probes.bench.ceiling import SPEED_CHECK_SLOWER
+    from radiance_probes.rendering.ceiling import SPEED_CHECK_SLOWER
     def rec(check):
         return {"scene": "s", "method": "pt", "rrmse": 0.1, "total_ms": 1.0, "spp": 1,
                 "frame_ms": 1.0, "bake_ms": 0.0, "probe_grid": None, "probe_samples": None,
@@ -409,7 +409,7 @@ def test_merged_runs_keep_every_runs_clock_log(tmp_path):
 def test_the_dependent_chain_marches_the_same_steps_as_the_ceiling(ctx):
     """The walk latency floor (DEPENDENT_CHAIN in glsl/ceiling_march.comp) reads the same sigma_t
     at the same points as the throughput ceiling; only the order of waiting differs."""
-    from radiance_probes.bench.ceiling import measure_ceiling
+    from radiance_probes.rendering.ceiling import measure_ceiling
     from radiance_probes.rendering.renderer import Renderer
     from radiance_probes.scene import parse_scene
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [16, 12, 14]},
@@ -462,7 +462,7 @@ def test_the_benchs_defaults_are_the_modules():
     """BenchConfig's speed_check_rays, auto_pilot_side and auto_pilot_frames default to
     ceiling.SPEED_CHECK_RAYS and auto_probes' PILOT_SIDE and PILOT_FRAMES (config.py writes the
     numbers out so that it imports no GL): the GPU presets measure what the records did."""
-    from radiance_probes.bench.ceiling import SPEED_CHECK_RAYS
+    from radiance_probes.rendering.ceiling import SPEED_CHECK_RAYS
     from radiance_probes.bench.config import PRESETS
     assert BenchConfig().speed_check_rays == SPEED_CHECK_RAYS
     assert PRESETS["gpu"].speed_check_rays == PRESETS["interact"].speed_check_rays == SPEED_CHECK_RAYS

@@ -173,7 +173,7 @@ def test_a_denoised_render_is_closer_to_the_converged_image(ctx):
     """Renderer.render(denoise=True) on a small cloud: the denoised 4-sample image is closer to a
     256-sample reference than the raw one, keeps its mean, and says what ran; every guide set
     runs (the probes' after a bake)."""
-    from radiance_probes.bench.metrics import rrmse
+    from radiance_probes.rendering.metrics import rrmse
     from radiance_probes.rendering.renderer import Renderer
     scene = parse_scene({"volume": {"builtin": "cloud", "size": [16, 16, 16]},
                          "density_scale": 40.0, "albedo": 0.9,

@@ -167,3 +167,14 @@ def test_no_front_end_touches_a_renderers_private_fields():
             if pattern.search(line.split("#")[0]):
                 found.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
     assert not found, "\n".join(found)
+
+
+def test_the_layers_hold():
+    """pyproject.toml's import contracts (scene and IO, the twins and the GPU layer, the
+    renderers, the front ends: no layer imports one above it), checked by import-linter."""
+    import subprocess
+    import sys
+    lint = Path(sys.executable).parent / "lint-imports"
+    out = subprocess.run([str(lint)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-2000:]
+    assert "0 broken" in out.stdout and out.stdout.count(" KEPT") >= 4

@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from radiance_probes.bench.metrics import rrmse
+from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.bench.scenes import battery_scene
 from radiance_probes.bricks import box_filtered, slot_bytes
 from radiance_probes.rendering.level_mix import MIX_FOOTPRINT_PX, footprints

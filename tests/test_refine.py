@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from radiance_probes.bench.metrics import rrmse
+from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.rendering.refine import HalfBuffers, error_from_sums, half_buffer_error, half_buffer_sums
 from radiance_probes.scene import parse_scene
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..imageio import save_png
 from .records import log as _log, make_record, progressive as _progressive
-from .ceiling import measure_ceiling
+from ..rendering.ceiling import measure_ceiling
 
 
 def _profiling_supported(renderer) -> bool:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..bench.metrics import block_rrmse, rrmse
+from ..rendering.metrics import block_rrmse, rrmse
 from .records import log as _log
 
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..imageio import save_png
 from ..rendering.denoise import QUALITIES, shared_denoiser
-from .metrics import corrected_floor, corrected_rrmse
+from ..rendering.metrics import corrected_floor, corrected_rrmse
 from .records import caveat, log, make_record, progressive
 
 NOISY = ("pt", "probes", "guided")

@@ -26,8 +26,8 @@ import numpy as np
 
 from ..imageio import save_png
 from ..transfer import opacity_points, rgba_with_opacity
-from .ceiling import speed_check_ms
-from .metrics import corrected_rrmse, rrmse
+from ..rendering.ceiling import speed_check_ms
+from ..rendering.metrics import corrected_rrmse, rrmse
 from .records import log as _log
 
 TARGETS = (0.10, 0.05, 0.03, 0.02)

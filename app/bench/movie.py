@@ -27,7 +27,7 @@ import numpy as np
 from ..imageio import save_png
 from ..movie import render_movie
 from ..movie_writer import MovieWriter, count_frames
-from .metrics import corrected_rrmse, reference_noise, rrmse
+from ..rendering.metrics import corrected_rrmse, reference_noise, rrmse
 from .records import log
 
 

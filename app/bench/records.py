@@ -12,10 +12,10 @@ import numpy as np
 from ..gl.dispatch_log import active_log
 
 from ..rendering.pathtracer import PIXEL_STATE_BYTES
-from .ceiling import SPEED_CHECK_SLOWER
+from ..rendering.ceiling import SPEED_CHECK_SLOWER
 from .clock_log import report_lines as clock_report_lines
 from .config import BenchConfig
-from .metrics import rrmse
+from ..rendering.metrics import rrmse
 
 ACCUMULATION_BYTES = 16   # RGBA32F running mean per pixel
 
@@ -132,7 +132,7 @@ def speed_checks(data: dict, scenes: list[str],
         return []
     return ["", "## The device's speed during the run", "",
             f"{when[0].upper()}{when[1:]} the run times the same small trilinear march through "
-            "the scene's medium (`speed_check_ms`, app/bench/ceiling.py). "
+            "the scene's medium (`speed_check_ms`, app/rendering/ceiling.py). "
             f"Records taken after a check more than {SPEED_CHECK_SLOWER:.1f}x slower than the "
             "scene's fastest ran on a GPU that was shared or clocked down: their times are not "
             "comparable.", "",

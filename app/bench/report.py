@@ -8,7 +8,7 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
-from .metrics import corrected_floor, corrected_rrmse
+from ..rendering.metrics import corrected_floor, corrected_rrmse
 from .records import caveat, speed_checks
 
 METHOD_ORDER = ("pt", "probes", "probes-only", "raymarch", "guided")
@@ -307,7 +307,7 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
               "Each reference is two independent path-traced halves; its relative noise is "
               "rRMSE(half A, half B) / 2. Every error in this report is the measured rRMSE "
               "corrected for that noise, sqrt((e^2 - noise^2) / (1 - noise^2)) (derived in "
-              "app/bench/metrics.py, tested on synthetic images with known error; results.json "
+              "app/rendering/metrics.py, tested on synthetic images with known error; results.json "
               "keeps the measured `rrmse`). The correction resolves errors down to 3 standard "
               "errors of its own estimate (the floor, about a tenth of the noise at 512^2): a "
               "smaller error is written `<floor` and plotted on the floor as a triangle, and "

@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from ..imageio import save_png
-from .ceiling import speed_check_ms
+from ..rendering.ceiling import speed_check_ms
 from .clock_log import ClockLog
 from .config import BenchConfig
-from .metrics import flip, reference_noise
+from ..rendering.metrics import flip, reference_noise
 from ..gl.checks import checks_for
 from ..gl.dispatch_log import DispatchLog
 from .records import log as _log, make_record, progressive as _progressive

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..bench.metrics import reference_noise, rrmse
+from .metrics import reference_noise, rrmse
 from ..scene import Scene
 
 # Up to 256 per axis (MAX_PROBE_AXIS): within 500 ms the benchmark's best bonsai and foot came from

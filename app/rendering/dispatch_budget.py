@@ -20,7 +20,7 @@ DISPATCH_BOUND_MS = 50.0    # no dispatch longer than this on the H100, at any s
 DISPATCH_TARGET_MS = 15.0   # what the cutting aims at: estimates come from earlier dispatches
                             # of the same pass, and the next one's work may differ by 3x (20 ms
                             # gave bake chunks of up to 115 ms on the battery's shells)
-# The speed check's GPU ms on the H100 (app/bench/ceiling.py speed_check_ms: 2^18 rays x 64
+# The speed check's GPU ms on the H100 (app/rendering/ceiling.py speed_check_ms: 2^18 rays x 64
 # trilinear steps; bench/h100 records, median over the run: 0.171 ms).
 H100_SPEED_CHECK_MS = 0.171
 CALIBRATION_RAYS = 1 << 14   # a sixteenth of the speed check's rays, scaled up
@@ -36,7 +36,7 @@ def device_slowdown(renderer) -> float:
     if not is_software(ctx):
         return 1.0
     if ctx not in _slowdown:
-        from ..bench.ceiling import SPEED_CHECK_RAYS, SPEED_CHECK_STEPS, measure_ceiling
+        from .ceiling import SPEED_CHECK_RAYS, SPEED_CHECK_STEPS, measure_ceiling
         ms = measure_ceiling(renderer, CALIBRATION_RAYS, SPEED_CHECK_STEPS, repeats=1)["ms"]
         _slowdown[ctx] = max(1.0, ms * (SPEED_CHECK_RAYS / CALIBRATION_RAYS) / H100_SPEED_CHECK_MS)
     return _slowdown[ctx]

@@ -7,7 +7,7 @@ import moderngl
 import numpy as np
 
 from ..gl.shaders import compute_program, set_uniforms
-from .light_grid_layout import LightGridLayout, light_grid_layout
+from ..light_grid_layout import LightGridLayout, light_grid_layout
 from .resources import SceneResources
 
 LIGHT_UNIT = 9

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .medium import sigma_t_at, trilinear
-from ..rendering.light_grid_layout import LightGridLayout
+from ..light_grid_layout import LightGridLayout
 from ..volume import Volume
 
 

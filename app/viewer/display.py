@@ -5,7 +5,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from ..bench.metrics import rrmse
+from ..rendering.metrics import rrmse
 from ..gl.shaders import render_program, set_uniforms
 from ..transfer import colormap_rgb
 

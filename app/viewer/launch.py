@@ -10,7 +10,7 @@ from pathlib import Path
 from ..frontend import (SCENE_KEY_DESTS, apply_options, check_output, render_defaults,
                         render_to_files, scene_from_arg)
 from ..scene import Scene
-from .device_defaults import RENDER_SCALE, probes_named, with_device_probes
+from ..rendering.device_defaults import RENDER_SCALE, probes_named, with_device_probes
 from .files import bundled_scene_for
 from .state import ViewerState
 from .xvfb import Xvfb, XvfbError, has_display

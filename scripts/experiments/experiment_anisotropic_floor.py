@@ -3,7 +3,7 @@ bench's g = 0.8 cloud at 512^2, raymarched from 128^3 x 256 probes at SH order 3
 one thing changed at a time: the raymarch step, the light grid's resolution and precision; and the
 same scene with single scattering only (max_bounces 1: the sun from the light grid, the environment
 through the probes) against a single-scattering path trace. Errors are rRMSE against two path-traced
-halves, measured and corrected for the reference's noise (app/bench/metrics.py); `rim_*` are over
+halves, measured and corrected for the reference's noise (app/rendering/metrics.py); `rim_*` are over
 the brightest tenth of the reference's pixels: mean of image / mean of reference, and that tenth's
 share of the squared error.
 Usage (GPU): python scripts/experiments/experiment_anisotropic_floor.py OUT.json [REFERENCE_SPP_PER_HALF]"""
@@ -15,7 +15,7 @@ import numpy as np
 
 sys.path.insert(0, ".")
 import radiance_probes.rendering.light_transmittance as light_module
-from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse
+from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, ".")
-from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
+from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
 from radiance_probes.bench.scenes import bench_scene  # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
 from radiance_probes.rendering.auto_progressive import auto_render  # noqa: E402

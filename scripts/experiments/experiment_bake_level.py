@@ -6,7 +6,7 @@
         [--ref-spp 4096] [--seeds 2] [--max-bounces N]
 
 Per scene: a path-traced reference (`pt`, which always walks the level shown) of two independent
-halves, whose difference gives its noise (app/bench/metrics.py reference_noise); then per bake
+halves, whose difference gives its noise (app/rendering/metrics.py reference_noise); then per bake
 level, for each seed, the probes baked from cold and the raymarcher's image (--frames frames):
   - bake_ms: the probes' bake (after an untimed one at the same level) (its walks' light grid included: the image's at level 0, its own in
     the coarse medium above), GPU time;
@@ -39,7 +39,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
+from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
 from radiance_probes.bench.scenes import BUILTIN_SCENES, DATASET_SCENES, bench_scene  # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402

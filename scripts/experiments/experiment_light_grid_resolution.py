@@ -10,7 +10,7 @@ import numpy as np
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.bench.scenes import bench_scene
-from radiance_probes.bench.metrics import rrmse, corrected_rrmse
+from radiance_probes.rendering.metrics import rrmse, corrected_rrmse
 from radiance_probes.volume import load_volume
 
 ctx = create_headless_context()

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, ".")
-from radiance_probes.bench.metrics import reference_noise, rrmse
+from radiance_probes.rendering.metrics import reference_noise, rrmse
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer

@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, ".")
 import radiance_probes.rendering.probe_layout as layout_module
-from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse
+from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer

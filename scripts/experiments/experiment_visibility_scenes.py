@@ -9,7 +9,7 @@ import sys
 import numpy as np
 
 sys.path.insert(0, ".")
-from radiance_probes.bench.metrics import rrmse
+from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.gl.context import create_headless_context
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.scene import parse_scene

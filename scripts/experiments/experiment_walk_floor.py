@@ -19,7 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, ".")
 from radiance_probes.bench.bake import _profile
-from radiance_probes.bench.ceiling import measure_ceiling
+from radiance_probes.rendering.ceiling import measure_ceiling
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from ..rendering.tonemap import tonemap
+from .tonemap import tonemap
 
 
 def rrmse(image: np.ndarray, reference: np.ndarray) -> float:
