@@ -176,6 +176,15 @@ def add_scene_edit_options(parser: argparse.ArgumentParser) -> argparse.Argument
     parser.add_argument("--transfer-function", metavar="JSON",
                         help="a transfer function saved on its own (the scene's transfer_function "
                              "key as a file) instead of the scene's")
+    from .clinical_presets import CLINICAL_PRESETS
+    parser.add_argument("--clinical-preset", metavar="NAME", choices=tuple(CLINICAL_PRESETS),
+                        help="a CT transfer function on Hounsfield units, coloured like an "
+                             "anatomy atlas, with its surface shading: "
+                             + "; ".join(f"{k}: {v.description}" for k, v in
+                                         CLINICAL_PRESETS.items())
+                             + ". Without --data-window it sets its own window. A CT opens with "
+                               "ct_bone (or its --data-window's preset) unless the scene has a "
+                               "transfer function")
     return parser
 
 
@@ -235,7 +244,8 @@ _OPTION_FIELDS = {"crop.": "--crop", "clip_plane.": "--clip-plane",
                   "probes.layout": "--probe-layout", "probes.adaptive_strength": "--adaptive-strength",
                   "probes.adaptive_indicator": "--adaptive-indicator",
                   "probes.interpolation": "--probe-interpolation", "volume.series": "--series",
-                  "volume.orientation": "--orientation", "volume.window": "--data-window"}
+                  "volume.orientation": "--orientation", "volume.window": "--data-window",
+                  "transfer_function.preset": "--clinical-preset"}
 
 
 def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
@@ -257,6 +267,13 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
                                             ("window", getattr(args, "data_window", None)))
               if value is not None}
     edits = _scene_edits(args)
+    clinical = getattr(args, "clinical_preset", None)
+    if clinical is not None:
+        if getattr(args, "transfer_function", None):
+            raise OptionError("--clinical-preset and --transfer-function: give one of them")
+        if scene.channels:
+            raise OptionError("--clinical-preset: the scene has channels, each with its own "
+                              "transfer function; clinical presets are for one-channel CT")
     if getattr(args, "transfer_function", None):
         from .scene import load_transfer_function
         if scene.channels:
@@ -270,9 +287,12 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
         scene = scene.replace(crop=replace(scene.crop, enabled=False))
     if getattr(args, "no_clip_plane", False) and scene.clip_plane is not None:
         scene = scene.replace(clip_plane=replace(scene.clip_plane, enabled=False))
-    if not probes and not camera and not volume and not edits:
+    if not probes and not camera and not volume and not edits and clinical is None:
         return scene
     data = scene_to_dict(scene)
+    if clinical is not None:
+        data["transfer_function"] = {"preset": clinical,
+                                     "resolution": scene.transfer_function.resolution}
     data["probes"].update(probes)
     data["camera"].update(camera)
     if "window" in volume:
@@ -371,7 +391,7 @@ def render_defaults() -> dict:
                 height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True,
                 gather_event=None, series=None, orientation=None, data_window=None, crop=None,
                 crop_voxels=None, clip_plane=None, no_crop=False, no_clip_plane=False,
-                transfer_function=None, colorbar=None, colorbar_title="value",
+                transfer_function=None, clinical_preset=None, colorbar=None, colorbar_title="value",
                 volume_memory=None)
 
 
@@ -385,6 +405,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     from .rendering.raymarch import check_step
     from .environment_map import load_scene_environment
     from .volume import load_scene_volume
+    from .clinical_presets import opening_scene
 
     auto = getattr(args, "auto", None)
     if auto is not None:
@@ -414,6 +435,10 @@ def render_to_files(args: argparse.Namespace) -> int:
     volume = load_scene_volume(scene)      # a file that does not load fails before the GPU starts
     for note in volume.notes:
         print(f"note: {note}", file=sys.stderr)
+    scene = opening_scene(scene, volume)   # a CT with no transfer function: its clinical preset
+    if scene.transfer_function.preset is not None:
+        print(f"note: transfer function: the clinical preset {scene.transfer_function.preset} "
+              f"(--clinical-preset)", file=sys.stderr)
     if getattr(args, "colorbar", None) and volume.channel_count > 1:
         raise OptionError(f"--colorbar: a colour bar shows one transfer function; this volume has "
                           f"{volume.channel_count} channels, each with its own")

@@ -21,6 +21,7 @@ from .scene_types import (AXIS_LETTERS, CROP_UNITS, MAX_CHANNELS, ChannelSpec,
                           ClipPlaneSpec, CropSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene,
                           SceneError, TransferFunctionSpec, ViewerSpec, VolumeSpec, scene_to_dict,
                           transfer_to_dict, window_range)
+from .clinical_presets import CLINICAL_PRESETS, expand as expand_clinical, preset as clinical_preset
 from .transfer import COLORMAPS
 from .volume import BUILTIN_VOLUMES, RAW_DTYPES
 
@@ -243,9 +244,24 @@ def _parse_channels(d: Any, has_transfer_function: bool,
     return tuple(out)
 
 
-def _parse_transfer(d: Any, name: str = "transfer_function") -> TransferFunctionSpec:
+def _parse_transfer(d: Any, name: str = "transfer_function",
+                    preset_domain: tuple[float, float] | None = None) -> TransferFunctionSpec:
+    """`preset_domain`: the data values the volume maps to densities 0 and 1, which a clinical
+    preset's Hounsfield units are placed by (None: no preset may be given here)."""
     d = _object(d, name, _fields(TransferFunctionSpec))
     kw: dict[str, Any] = {}
+    if "preset" in d:
+        others = sorted(set(d) & {"colormap", "colors", "opacity", "rgba"})
+        if others:
+            raise SceneError(f"{name}.preset: a clinical preset gives the colours and opacity; "
+                             f"give it or {name}.{others[0]}, not both")
+        if preset_domain is None:
+            raise SceneError(f"{name}.preset: clinical presets are for the scene's one "
+                             "transfer_function of a one-channel volume (not a channel's, not a "
+                             "transfer-function file)")
+        label = _choice(d["preset"], f"{name}.preset", tuple(CLINICAL_PRESETS))
+        colors, opacity = expand_clinical(label, preset_domain)
+        kw.update(colors=colors, opacity=opacity, preset=label)
     if "rgba" in d and ("colormap" in d or "opacity" in d or "colors" in d):
         raise SceneError(f"{name}: give either rgba rows or colormap/colors and opacity, not both")
     if "colormap" in d and "colors" in d:
@@ -541,6 +557,16 @@ def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
         tf = d["transfer_function"]
         if isinstance(tf, str):   # a transfer-function file, relative to the scene's folder
             kw["transfer_function"] = _transfer_file(tf, base_dir, "transfer_function")
+        elif isinstance(tf, Mapping) and "preset" in tf and d.get("channels") is None:
+            # A clinical preset is placed by the volume's window; with none given, the preset's
+            # own window becomes the volume's.
+            volume = kw.get("volume", VolumeSpec())
+            if volume.domain is None:
+                name = _choice(tf["preset"], "transfer_function.preset", tuple(CLINICAL_PRESETS))
+                lo, hi = clinical_preset(name).window
+                volume = dataclasses.replace(volume, window=(0.5 * (lo + hi), hi - lo))
+                kw["volume"] = volume
+            kw["transfer_function"] = _parse_transfer(tf, preset_domain=volume.domain)
         else:
             kw["transfer_function"] = _parse_transfer(tf)
     if "density_scale" in d:

@@ -81,6 +81,11 @@ def _colormaps() -> tuple[str, ...]:
     return tuple(COLORMAPS)
 
 
+def _clinical() -> dict:
+    from .clinical_presets import CLINICAL_PRESETS
+    return CLINICAL_PRESETS
+
+
 def _builtins() -> tuple[str, ...]:
     from .volume import BUILTIN_VOLUMES
     return tuple(BUILTIN_VOLUMES)
@@ -173,6 +178,14 @@ def keys() -> dict[str, Key]:
             f"{MAX_TRANSFER_ROWS} rows). Excludes colormap, colors and opacity.",
             {"type": "array", "minItems": 2, "maxItems": MAX_TRANSFER_ROWS,
              "items": vector(4, unit)}, default="none (colormap and opacity)"),
+        "transfer_function.preset": Key(
+            "A clinical CT preset on Hounsfield units (app/clinical_presets.py): "
+            + "; ".join(f"{k}: {v.description}" for k, v in _clinical().items())
+            + ". It gives the colours and opacity, placed by the volume's window (with none given "
+            "it sets its own, volume.window), and the surface's shading where the scene gives no "
+            "surface. Data not in Hounsfield units (8-bit, or no value below 0) is refused. A "
+            "saved scene holds the colours and opacity it made. Excludes colormap, colors, "
+            "opacity and rgba.", choice(_clinical()), default="none"),
         "transfer_function.resolution": Key("Rows of the table the colormap and opacity make.",
                                             number(2, MAX_TRANSFER_ROWS, integer=True)),
         "density_scale": Key("Extinction sigma_t per unit of world length at opacity 1 (the "

@@ -104,6 +104,10 @@ class TransferFunctionSpec:
     # Colour control points (density, r, g, b), linearly interpolated and constant beyond the
     # first and last: they replace the colormap's colours (JSON "colors"; excludes "colormap").
     colors: tuple[tuple[float, float, float, float], ...] | None = None
+    # The clinical preset (app/clinical_presets.py) the colours and opacity were expanded from
+    # (JSON "preset": NAME, in place of colormap, colors, opacity and rgba): a label for the
+    # viewer; the colours and opacity are what renders, and what a saved scene holds.
+    preset: str | None = field(default=None, compare=False)
 
 
 # The letters of volume.axes: time, channel and the three space axes.
@@ -376,6 +380,7 @@ def transfer_to_dict(tf: TransferFunctionSpec) -> dict:
     """The transfer function as the JSON the scene's transfer_function key (and a transfer-function
     file) holds: rgba rows, or colour points or a colormap with the opacity curve."""
     sub = _plain(tf)
+    sub.pop("preset")   # the expanded colours and opacity are written
     if tf.rgba is not None:
         for key in ("colormap", "opacity", "colors"):
             sub.pop(key)

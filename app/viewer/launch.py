@@ -51,6 +51,7 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
 
 def run_view(args: argparse.Namespace) -> int:
     from ..environment_map import load_scene_environment
+    from ..clinical_presets import opening_scene
     from ..volume import load_scene_volume, reads_lazily, zarr_preview
     scene = scene_from_args(args)
     progressive = False
@@ -74,6 +75,7 @@ def run_view(args: argparse.Namespace) -> int:
         progressive = volume is not None
         if volume is None:
             volume = load_scene_volume(scene)
+            scene = opening_scene(scene, volume)   # a CT opens with its clinical preset
         load_scene_environment(scene)   # and an environment map (kept in its cache)
         for note in volume.notes:
             print(f"view: note: {note}", file=sys.stderr)

@@ -299,7 +299,16 @@ class ViewerState:
                 changes["rgba"] = rgba_with_opacity(tf, changes.pop("opacity"))
         if "colormap" in changes:      # a colormap replaces colour points
             changes.setdefault("colors", None)
+        changes.setdefault("preset", None)   # an edited preset is a preset no longer
         self.set_edited_transfer(replace(tf, **changes))
+
+    def set_clinical_preset(self, name: str, domain: tuple[float, float]) -> None:
+        """The scene's transfer function becomes the clinical preset `name` (app/clinical_presets.py),
+        placed by `domain`, the data values the volume maps to densities 0 and 1."""
+        from ..clinical_presets import with_preset
+        if self.scene.channels:
+            raise ValueError("clinical presets are for one-channel CT volumes")
+        self.scene = with_preset(self.scene, name, domain)
 
     def cycle_colormap(self, step: int = 1) -> None:
         from ..transfer import COLORMAPS, ALIASES

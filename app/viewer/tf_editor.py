@@ -117,6 +117,8 @@ def transfer_editor(v) -> None:
         imgui.text_wrapped(f"The scene gives an explicit RGBA table ({len(tf.rgba)} rows): editing the "
                            "curve rewrites its opacity and keeps its colours; choosing a colormap "
                            "replaces its colours and keeps the curve.")
+    if not state.scene.channels:
+        _clinical_presets(v)
     current = ALIASES.get(tf.colormap, tf.colormap)
     names = list(PRESETS) if tf.colors is None else ["colour points", *PRESETS]
     shown = current if tf.colors is None else "colour points"
@@ -135,6 +137,26 @@ def transfer_editor(v) -> None:
     window_editor(v)
     _opacity_presets(v)
     _opacity_editor(v, width)
+
+
+def _clinical_presets(v) -> None:
+    """The clinical CT presets (app/clinical_presets.py): picking one replaces the colours and
+    opacity, placed by the volume's window; data not in Hounsfield units says so instead."""
+    from ..clinical_presets import CLINICAL_PRESETS, hounsfield_problem
+    state, ui = v.state, v.widgets
+    names = ["(none)", *CLINICAL_PRESETS]
+    current = state.transfer_function.preset
+    changed, index = imgui.combo("CT preset", names.index(current) if current in names else 0,
+                                 names)
+    ui.note("CT preset")
+    if changed and index > 0:
+        volume = v.session.volume
+        problem = hounsfield_problem(volume)
+        if problem is not None:
+            state.error(f"the clinical preset {names[index]} is meant for Hounsfield units, but "
+                        f"{problem}")
+            return
+        state.set_clinical_preset(names[index], state.scene.volume.domain or volume.value_range)
 
 
 def medium_sliders(v) -> None:

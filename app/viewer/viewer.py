@@ -19,6 +19,7 @@ from ..scene import SceneError, scene_to_dict
 from ..environment_map import load_scene_environment
 from ..channels import volume_inputs
 from ..rendering.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
+from ..clinical_presets import opening_scene
 from ..volume import VolumeError, load_scene_volume, reads_lazily, zarr_preview
 from . import layout, orbit, overlays, panels
 from .display import BACKGROUND, DisplayPass, ErrorMeter
@@ -215,6 +216,8 @@ class Viewer:
             preview = (zarr_preview(scene, memory_bytes=self.volume_memory_bytes)
                        if reads_lazily(scene) else None)
             volume = preview if preview is not None else load_scene_volume(scene)
+            if preview is None:
+                scene = opening_scene(scene, volume)   # a CT opens with its clinical preset
         except RECOVERABLE as exc:
             self.state.error(f"could not open {path}: {exc}")
             return False
