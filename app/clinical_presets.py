@@ -180,13 +180,16 @@ def opening_preset(scene, volume) -> str | None:
 
 def with_preset(scene, name: str, domain: tuple[float, float]):
     """The scene with the clinical preset `name` as its transfer function, placed by `domain`
-    (the data values its volume maps to densities 0 and 1)."""
+    (the data values its volume maps to densities 0 and 1), and its surface shading."""
     import dataclasses
-    from .scene_types import TransferFunctionSpec
+    from .scene_types import SurfaceSpec, TransferFunctionSpec
     colors, opacity = expand(name, domain)
     tf = TransferFunctionSpec(colors=colors, opacity=opacity, preset=name,
                               resolution=scene.transfer_function.resolution)
-    return dataclasses.replace(scene, transfer_function=tf)
+    p = preset(name)
+    surface = SurfaceSpec(gradient_factor=p.gradient_factor, roughness=p.roughness,
+                          specular=tuple(p.specular))
+    return dataclasses.replace(scene, transfer_function=tf, surface=surface)
 
 
 def opening_scene(scene, volume):

@@ -19,7 +19,8 @@ from .scene_types import (AXIS_LETTERS, CROP_UNITS, MAX_CHANNELS, ChannelSpec,
                           SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
                           VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
                           ClipPlaneSpec, CropSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene,
-                          SceneError, TransferFunctionSpec, ViewerSpec, VolumeSpec, scene_to_dict,
+                          SceneError, SurfaceSpec, TransferFunctionSpec, ViewerSpec, VolumeSpec,
+                          scene_to_dict, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS,
                           transfer_to_dict, window_range)
 from .clinical_presets import CLINICAL_PRESETS, expand as expand_clinical, preset as clinical_preset
 from .transfer import COLORMAPS
@@ -32,7 +33,8 @@ __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_S
            "BookmarkSpec", "CameraSpec", "ChannelSpec", "MAX_CHANNELS", "ClipPlaneSpec", "CropSpec", "EnvironmentMapSpec",
            "ViewerSpec", "load_transfer_function", "parse_transfer_function",
            "save_transfer_function", "transfer_to_dict",
-           "LightSpec", "ProbeSpec", "Scene", "SceneError", "TransferFunctionSpec", "VolumeSpec",
+           "LightSpec", "ProbeSpec", "Scene", "SceneError", "SurfaceSpec", "TransferFunctionSpec",
+           "VolumeSpec",
            "default_scene", "load_scene", "parse_scene", "scene_to_dict"]
 
 # --------------------------------------------------------------------------------------------
@@ -520,6 +522,27 @@ def _parse_probes(d: Any) -> ProbeSpec:
     return ProbeSpec(**kw)
 
 
+def _parse_surface(d: Any) -> SurfaceSpec:
+    """{"gradient_factor": k, "roughness": alpha, "specular": [r, g, b]} (SurfaceSpec)."""
+    d = _object(d, "surface", _fields(SurfaceSpec))
+    kw: dict[str, Any] = {}
+    if "gradient_factor" in d:
+        kw["gradient_factor"] = _number(d["gradient_factor"], "surface.gradient_factor", 0.0,
+                                        MAX_GRADIENT_FACTOR)
+    if "roughness" in d:
+        kw["roughness"] = _number(d["roughness"], "surface.roughness", MIN_ROUGHNESS, 1.0)
+    if "specular" in d:
+        kw["specular"] = _vector(d["specular"], "surface.specular", 3, lo=0.0, hi=1.0)
+    return SurfaceSpec(**kw)
+
+
+def preset_surface(name: str) -> SurfaceSpec:
+    """The surface a clinical preset shades with."""
+    p = clinical_preset(name)
+    return SurfaceSpec(gradient_factor=p.gradient_factor, roughness=p.roughness,
+                       specular=tuple(p.specular))
+
+
 def _transfer_file(path: str, base_dir: str | Path | None, name: str) -> TransferFunctionSpec:
     p = Path(path).expanduser()
     if not p.is_absolute() and base_dir is not None:
@@ -583,6 +606,10 @@ def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
     kw["camera"] = _parse_camera(d.get("camera", {}))
     if "probes" in d:
         kw["probes"] = _parse_probes(d["probes"])
+    if d.get("surface") is not None:
+        kw["surface"] = _parse_surface(d["surface"])
+    elif kw.get("transfer_function") is not None and kw["transfer_function"].preset is not None:
+        kw["surface"] = preset_surface(kw["transfer_function"].preset)   # the preset's shading
     if d.get("crop") is not None:
         kw["crop"] = _parse_crop(d["crop"])
     if d.get("clip_plane") is not None:

@@ -25,6 +25,7 @@ from .scene_types import (AXIS_LETTERS, CHANNEL_COLOURS, CROP_UNITS, MAX_CHANNEL
                           SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
                           VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
                           ChannelSpec, ClipPlaneSpec, CropSpec, LightSpec, ProbeSpec, Scene,
+                          SurfaceSpec, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS,
                           TransferFunctionSpec, ViewerSpec, VolumeSpec)
 
 SCHEMA_ID = "https://radiance-probes.invalid/scene.schema.json"
@@ -32,7 +33,7 @@ SCHEMA_ID = "https://radiance-probes.invalid/scene.schema.json"
 # (written as "environment": {"map": ...}).
 NOT_KEYS = {"base_dir", "environment_map"}
 NESTED = {"volume": VolumeSpec, "transfer_function": TransferFunctionSpec, "light": LightSpec,
-          "camera": CameraSpec, "probes": ProbeSpec, "crop": CropSpec,
+          "camera": CameraSpec, "probes": ProbeSpec, "surface": SurfaceSpec, "crop": CropSpec,
           "clip_plane": ClipPlaneSpec, "viewer": ViewerSpec}
 # Scene fields that are lists of objects (each item's keys are named "bookmarks[].name", ...).
 LISTS = {"bookmarks": BookmarkSpec, "channels": ChannelSpec}
@@ -193,6 +194,22 @@ def keys() -> dict[str, Key]:
         "albedo": Key("Single-scattering albedo, times the colormap's colour.", unit),
         "anisotropy": Key("Henyey-Greenstein g: > 0 forward, 0 isotropic, < 0 backward.",
                           number(-1.0, 1.0, lo_open=True, hi_open=True)),
+        "surface": Key(
+            "Hybrid scattering: surfaces inside the volume (glsl/lib/hybrid_scattering.glsl). At "
+            "each scattering event a surface BRDF scatters with probability 1 - exp(-k length(grad A)), "
+            "A = sigma_t / density_scale (the transfer function's opacity) and its gradient in "
+            "world units, the phase function otherwise. A clinical preset sets it where the "
+            "scene does not.", {}),
+        "surface.gradient_factor": Key(
+            "k: 0 scatters by the phase function alone (the images without surfaces, bit for "
+            "bit); larger makes weaker edges surfaces (a jump of A from 0 to 1 over one voxel "
+            "of a 256-voxel side is a gradient of length ~128).", number(0.0, MAX_GRADIENT_FACTOR)),
+        "surface.roughness": Key("GGX alpha of the specular lobe (0.02: nearly a mirror, 1: "
+                                 "rough).", number(MIN_ROUGHNESS, 1.0)),
+        "surface.specular": Key(
+            "The specular lobe's Fresnel colour F0 (constant); the diffuse lobe is the "
+            "transfer function's colour times albedo times 1 - max(F0). [0, 0, 0]: diffuse "
+            "alone, which absorbs nothing.", vector(3, unit)),
         "light": Key("The sun: a directional light.", {}),
         "light.direction": Key("Towards the light, from the scene (normalised; not zero).",
                                vector(3)),

@@ -210,6 +210,25 @@ class ProbeSpec:
     interpolation: str = "trilinear"
 
 
+# The surface's bounds (glsl/lib/hybrid_scattering.glsl): k beyond this makes every point with any
+# gradient a surface (P = 1 - exp(-k |grad A|) rounds to 1 for |grad A| > 4e-3); GGX alpha below
+# MIN_ROUGHNESS is a mirror the float pdf cannot hold.
+MAX_GRADIENT_FACTOR = 1e4
+MIN_ROUGHNESS = 0.02
+
+
+@dataclass(frozen=True)
+class SurfaceSpec:
+    """Hybrid scattering (docs/scene-format.md, Surfaces): at each scattering event a surface BRDF
+    scatters with probability 1 - exp(-gradient_factor |grad A|) (A = sigma_t / density_scale, in
+    world units), the phase function otherwise. 0: the phase function alone (today's images, bit
+    for bit). The BRDF: Lambertian diffuse (1 - max(specular)) / pi plus GGX of `roughness`
+    (alpha) with the constant Fresnel colour `specular`."""
+    gradient_factor: float = 0.0
+    roughness: float = 0.5
+    specular: tuple[float, float, float] = (0.04, 0.04, 0.04)
+
+
 # Crop boxes are given in world units or in voxel indices (docs/crop-and-movies.md).
 CROP_UNITS = ("world", "voxels")
 
@@ -287,6 +306,7 @@ class Scene:
     max_bounces: int = 64
     camera: CameraSpec = field(default_factory=CameraSpec)
     probes: ProbeSpec = field(default_factory=ProbeSpec)
+    surface: SurfaceSpec = field(default_factory=SurfaceSpec)
     crop: CropSpec | None = None
     clip_plane: ClipPlaneSpec | None = None
     bookmarks: tuple[BookmarkSpec, ...] = ()
@@ -326,6 +346,8 @@ def scene_to_dict(scene: Scene) -> dict:
                                [channel_to_dict(c) for c in v] if f.name == "channels" else
                                v if f.name == "time" else _plain(v))
             continue
+        if f.name == "surface" and v == SurfaceSpec():
+            continue   # k = 0: written only where the scene has surfaces
         if f.name == "environment" and scene.environment_map is not None:
             m = scene.environment_map
             out[f.name] = {"map": m.path, "scale": m.scale, "rotation": m.rotation}

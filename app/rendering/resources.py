@@ -243,8 +243,13 @@ class SceneResources:
 
     def medium_defines(self) -> dict:
         """What every pass that includes lib/medium.glsl is compiled with for this scene: nothing
-        for one channel (the one-channel code, unchanged), else MEDIUM_CHANNELS."""
+        for one channel (the one-channel code, unchanged), else MEDIUM_CHANNELS; and
+        HYBRID_SCATTERING where the scene's surface.gradient_factor is above 0."""
         defines = {} if self.tables is None else {"MEDIUM_CHANNELS": self.tables.count}
+        if self.scene.surface.gradient_factor > 0.0:
+            # hybrid scattering (glsl/lib/hybrid_scattering.glsl: the medium scatters by a
+            # surface BRDF too); k = 0 compiles every pass without it, as it was
+            defines = {**defines, "HYBRID_SCATTERING": 1}
         return {**defines, **self.volume_tex.defines()} if self.bricked else defines
 
     @property
@@ -335,7 +340,8 @@ class SceneResources:
         s = self.scene
         return (self.volume_version, s.transfer_function, s.channels, s.density_scale, s.albedo,
                 s.anisotropy,
-                s.light, s.environment, s.environment_map, s.max_bounces, s.probes.grid, s.probes.samples,
+                s.light, s.environment, s.environment_map, s.max_bounces, s.surface,
+                s.probes.grid, s.probes.samples,
                 s.probes.precision, self.clip)
 
     def uniforms(self) -> dict:
@@ -359,9 +365,22 @@ class SceneResources:
             "anisotropy": float(s.anisotropy),
             "max_path_steps": int(self.max_path_steps),
             **self.environment_uniforms(),
+            **self.surface_uniforms(),
             **region_uniforms(self.clip),
             **(self.volume_tex.uniforms() if self.bricked else {}),
         }
+
+    def surface_uniforms(self) -> dict:
+        """glsl/lib/hybrid_scattering.glsl's uniforms (where k > 0; the passes without it have no
+        such uniforms): k, roughness, F0 and the gradient's step, one voxel per axis."""
+        surface = self.scene.surface
+        if not surface.gradient_factor > 0.0:
+            return {}
+        he, dims = self.volume.half_extent, self.volume.dims
+        return {"surface_gradient_factor": float(surface.gradient_factor),
+                "surface_roughness": float(surface.roughness),
+                "surface_specular": tuple(float(c) for c in surface.specular),
+                "surface_gradient_step": tuple(float(2.0 * he[i] / dims[i]) for i in range(3))}
 
     def environment_uniforms(self) -> dict:
         if self.environment is None:

@@ -32,8 +32,19 @@
 // (lib/guided_directions.glsl) and the throughput takes its weight phase / pdf. With a map, "the
 // phase function's pdf" of the MIS above is then that mixture's pdf, on both sides: p.phase_pdf
 // of the direction drawn (escapes) and the mixture evaluated at the map sample's direction.
+//
+// HYBRID_SCATTERING (the scene's surface.gradient_factor k > 0; lib/hybrid_scattering.glsl): each
+// real scattering event is a surface's with probability 1 - exp(-k |grad A|) (the path's status is
+// then PATH_ACTIVE_SURFACE until its next direction is drawn), and the event's kernel is the
+// surface BRDF times the cosine instead of the phase function, in the sun's estimate, the map's
+// sample and its MIS, the next direction (drawn from the BRDF, weighted K / pdf; never guided) and,
+// at a probe renderer's gather event, the probes' radiance (diffuse irradiance from the SH and a
+// specular term). Without it the code below is as it was, unchanged.
 // the sun's shadow ray (ratio or residual ratio tracking)
 #include "lib/sun_shadow.glsl"
+#if defined(HYBRID_SCATTERING)
+#include "lib/hybrid_scattering.glsl"
+#endif
 
 uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
@@ -95,6 +106,9 @@ const int PATH_STEP_KEPT_BACK = 0;
 
 const int PATH_IDLE = 0;
 const int PATH_ACTIVE = 1;
+#if defined(HYBRID_SCATTERING)
+const int PATH_ACTIVE_SURFACE = 2;   // active, at an event the surface BRDF scatters (p.x, p.w)
+#endif
 
 const int PATH_DONE = 0;
 const int PATH_SUSPENDED = 1;
@@ -164,6 +178,24 @@ void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
     p.env_pending = 0;
 #endif
 }
+
+#if defined(HYBRID_SCATTERING)
+// The surface normal at the path's event, facing back along its arriving direction p.w.
+vec3 path_surface_normal(PathState p)
+{
+    return surface_normal(opacity_gradient(p.x), -p.w);
+}
+
+// The event's kernel towards the light direction l (unit, towards the light): the phase function,
+// or at a surface event the BRDF times the cosine (lib/hybrid_scattering.glsl).
+vec3 path_event_kernel(PathState p, vec3 l)
+{
+    if (p.status == PATH_ACTIVE_SURFACE)
+        return surface_kernel(path_surface_normal(p), -p.w, l, surface_roughness,
+                              surface_specular);
+    return vec3(phase_hg(dot(l, p.w), anisotropy));
+}
+#endif
 
 #if defined(ENVIRONMENT_MAP)
 // The map's radiance for a path that leaves the box along p.w: weighted against the map's own
@@ -238,6 +270,12 @@ int path_flight(inout PathState p, inout int steps_left)
     p.throughput *= albedo_at(p.x);
     if (all(equal(p.throughput, vec3(0.0))))
         return STEP_DONE;
+#if defined(HYBRID_SCATTERING)
+    // A surface's event with probability 1 - exp(-k |grad A|) (lib/hybrid_scattering.glsl).
+    p.status = PATH_ACTIVE;
+    if (rng_next(p.rng) < surface_probability(opacity_gradient(p.x), surface_gradient_factor))
+        p.status = PATH_ACTIVE_SURFACE;
+#endif
 #if defined(GUIDED_RESIDUAL)
     // `guided`'s level 1: minus the single-collision estimate of level 0's F at this first event
     // (the same random numbers: the same collision), so the sample is the path's estimate minus
@@ -253,10 +291,26 @@ int path_flight(inout PathState p, inout int steps_left)
     // transmittance (probes-only). The path ends there.
     if (p.bounce >= probe_gather_event) {
         float probe_sun_transmittance;
+#if defined(HYBRID_SCATTERING)
+        if (p.status == PATH_ACTIVE_SURFACE) {
+            vec3 coeffs[SH_COUNT];
+            probe_fetch(p.x, coeffs, probe_sun_transmittance);
+            p.radiance += p.throughput * surface_probe_radiance(coeffs, path_surface_normal(p),
+                                                                -p.w, surface_specular);
+        } else {
+#endif
         p.radiance += p.throughput * probe_inscattered(p.x, p.w, probe_sun_transmittance);
+#if defined(HYBRID_SCATTERING)
+        }
+#endif
 #if PROBE_LIGHTING == 2
+#if defined(HYBRID_SCATTERING)
+        p.radiance += p.throughput * sun_irradiance
+                      * (probe_sun_transmittance * path_event_kernel(p, sun_direction));
+#else
         p.radiance += p.throughput * sun_irradiance
                       * (probe_sun_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy));
+#endif
         return STEP_DONE;
 #endif
     }
@@ -268,6 +322,23 @@ int path_flight(inout PathState p, inout int steps_left)
         vec3 env_w = environment_sample(rng_next(p.rng), rng_next(p.rng), env_pdf);
         steps_left -= ENVIRONMENT_SAMPLE_STEPS;
         p.env_pending = 0;
+#if defined(HYBRID_SCATTERING)
+        if (env_pdf > 0.0 && p.status == PATH_ACTIVE_SURFACE) {
+            // a surface's event: the BRDF's kernel, weighted against its own sampling's pdf
+            vec3 n = path_surface_normal(p);
+            vec3 le = environment_radiance(env_w)
+                      * surface_kernel(n, -p.w, env_w, surface_roughness, surface_specular);
+            if (any(greaterThan(le, vec3(0.0)))) {
+                float direction_pdf = surface_pdf(n, -p.w, env_w, surface_roughness,
+                                                  surface_specular);
+                p.env_w = env_w;
+                p.env_weight = le * (mis_power(env_pdf, direction_pdf) / env_pdf);
+                p.env_pending = 1;
+                p.shadow_t = -1.0;
+                p.shadow_transmittance = 1.0;
+            }
+        } else
+#endif
         if (env_pdf > 0.0) {
             float phase = phase_hg(dot(env_w, p.w), anisotropy);
             vec3 le = environment_radiance(env_w);
@@ -310,7 +381,11 @@ int path_flight(inout PathState p, inout int steps_left)
         float sun_phase = phase_hg(dot(sun_direction, p.w), anisotropy);
         float tau = light_grid_optical_depth(p.x);
         float grid = exp(-tau);
+#if defined(HYBRID_SCATTERING)
+        vec3 c = p.throughput * sun_irradiance * path_event_kernel(p, sun_direction);
+#else
         vec3 c = p.throughput * sun_irradiance * sun_phase;
+#endif
         p.radiance += c * grid;
         if (walk_sun_correction > 0.0) {
             float change = tau - light_grid_optical_depth(p.x + light_grid_texel * sun_direction);
@@ -357,9 +432,15 @@ int path_step(inout PathState p, inout int steps_left)
                                         steps_left))
             return STEP_SHADOW_CUT;
         p.shadow_pending -= 1;
+#if defined(HYBRID_SCATTERING)
+        p.radiance += p.throughput * sun_irradiance
+                      * (p.shadow_transmittance * path_event_kernel(p, sun_direction)
+                         / float(SUN_SHADOW_RAYS));
+#else
         p.radiance += p.throughput * sun_irradiance
                       * (p.shadow_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy)
                          / float(SUN_SHADOW_RAYS));
+#endif
         p.shadow_t = -1.0;          // the next ray (or the map sample's) starts afresh
         p.shadow_transmittance = 1.0;
     }
@@ -379,6 +460,35 @@ int path_step(inout PathState p, inout int steps_left)
 #endif
     vec3 w_in = p.w;
     float phase_over_pdf = 1.0;   // the direction's weight: 1 where drawn from the phase function
+#if defined(HYBRID_SCATTERING)
+    if (p.status == PATH_ACTIVE_SURFACE) {
+        // A surface's event: the next direction from the BRDF (never guided), weighted K / pdf.
+        p.status = PATH_ACTIVE;
+        vec3 n = surface_normal(opacity_gradient(p.x), -w_in);
+        vec3 surface_weight;
+        float surface_direction_pdf;
+        float u0 = rng_next(p.rng), u1 = rng_next(p.rng), u2 = rng_next(p.rng);
+        p.w = surface_sample(n, -w_in, surface_roughness, surface_specular, u0, u1, u2,
+                             surface_weight, surface_direction_pdf);
+        p.throughput *= surface_weight;
+        if (all(equal(p.throughput, vec3(0.0))))
+            return STEP_DONE;   // below the surface: the BRDF sends no light that way
+#if defined(ENVIRONMENT_MAP) && defined(PROBE_LIGHTING)
+        p.phase_pdf = 0.0;
+#elif defined(ENVIRONMENT_MAP)
+        p.phase_pdf = surface_direction_pdf;
+#endif
+        if (p.bounce >= RR_START_BOUNCE) {
+            float q = max(p.throughput.r, max(p.throughput.g, p.throughput.b));
+            if (q < 1.0) {
+                if (rng_next(p.rng) >= q)
+                    return STEP_DONE;
+                p.throughput /= q;
+            }
+        }
+        return STEP_CONTINUE;
+    }
+#endif
 #if defined(GUIDED_RESIDUAL) && (GUIDED_DIRECTIONS || GUIDED_DIRECTION_CONTROL)
     // Both read the probes at the event; neither at the last event the path may scatter at (what
     // follows it is an escape alone, which the probes' radiance does not track).

@@ -9,6 +9,16 @@
 // majorant grid (lib/cell_walk.glsl), and where that bounds sigma_t by 0 every sample before the
 // cell's exit is empty too, so the march goes on from the last sample before the exit. The same
 // samples contribute as without skipping (test_raymarch_skipping_empty_space_changes_nothing).
+//
+// HYBRID_SCATTERING (the scene's surface.gradient_factor k > 0; lib/hybrid_scattering.glsl): a
+// sample is a surface's with probability P = 1 - exp(-k |grad A|), and the march adds the mean of
+// both: (1 - P) times the phase function's light and P times the surface's, which reflects the
+// probes' light by surface_probe_radiance (the diffuse irradiance from the SH in closed form and a
+// specular term from the mirror direction) and the sun by the BRDF times the cosine. Without it
+// the code is as it was.
+#if defined(HYBRID_SCATTERING)
+#include "lib/hybrid_scattering.glsl"
+#endif
 uniform float raymarch_step;            // world units
 uniform uint frame_index;               // keys the jitter; frames accumulate into a running mean
 uniform uint seed;
@@ -63,15 +73,37 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
             continue;
         }
         float opacity = 1.0 - exp(-sigma_t * dt);
+#if defined(HYBRID_SCATTERING)
+        vec3 coeffs[SH_COUNT];
+        float probe_sun;
+        probe_fetch(x, coeffs, probe_sun);
+        vec3 inscattered = probe_inscattered_from(coeffs, d);
+        vec3 sun_kernel = vec3(sun_phase);
+        vec3 gradient = opacity_gradient(x);
+        float surface_share = surface_probability(gradient, surface_gradient_factor);
+        if (surface_share > 0.0) {
+            vec3 n = surface_normal(gradient, -d);
+            inscattered = mix(inscattered, surface_probe_radiance(coeffs, n, -d, surface_specular),
+                              surface_share);
+            sun_kernel = mix(sun_kernel, surface_kernel(n, -d, sun_direction, surface_roughness,
+                                                        surface_specular), vec3(surface_share));
+        }
+#else
         float probe_sun;
         vec3 inscattered = probe_inscattered(x, d, probe_sun);
+#endif
         if (tau_start < 0.0)
             tau_start = light_grid_optical_depth(origin + (t0 + float(i) * dt) * d);
         float tau_end = light_grid_optical_depth(origin + (t0 + float(i + 1) * dt) * d);
         float sun_weight = segment_sun_weight(sigma_t, dt, tau_start, tau_end);
         tau_start = tau_end;
+#if defined(HYBRID_SCATTERING)
+        vec3 source = albedo * tf.rgb * (opacity * inscattered
+                                         + sun_irradiance * (sun_weight * sun_kernel));
+#else
         vec3 source = albedo * tf.rgb * (opacity * inscattered
                                          + sun_irradiance * (sun_weight * sun_phase));
+#endif
         radiance += transmittance * scatter_allowed * source;
         transmittance *= 1.0 - opacity;
     }
