@@ -158,6 +158,24 @@ def scene_from_arg(arg: str | None) -> Scene:
     return parse_scene({"volume": {"path": str(p)}})
 
 
+def surface_arg(text: str) -> dict:
+    """--surface K[,ROUGHNESS[,SPECULAR]]: the scene's surface key (checked as the scene's is)."""
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if not 1 <= len(values) <= 3 or len(values) != len(parts):
+        raise argparse.ArgumentTypeError(f"expected K, K,ROUGHNESS or K,ROUGHNESS,SPECULAR (numbers), "
+                                         f"got {text!r}")
+    out: dict = {"gradient_factor": values[0]}
+    if len(values) > 1:
+        out["roughness"] = values[1]
+    if len(values) > 2:
+        out["specular"] = [values[2]] * 3
+    return out
+
+
 def add_scene_edit_options(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """The options `render`, `view` and `animate` share that edit the scene: the crop box, the
     clip plane and a transfer function kept in a file (docs/crop-and-movies.md)."""
@@ -176,6 +194,12 @@ def add_scene_edit_options(parser: argparse.ArgumentParser) -> argparse.Argument
     parser.add_argument("--transfer-function", metavar="JSON",
                         help="a transfer function saved on its own (the scene's transfer_function "
                              "key as a file) instead of the scene's")
+    parser.add_argument("--surface", type=surface_arg, metavar="K[,ROUGHNESS[,SPECULAR]]",
+                        help="surfaces inside the volume (the scene's surface key): at each "
+                             "scattering event a BRDF scatters with probability 1 - exp(-K "
+                             "|grad A|), A the transfer function's opacity; K = 0: the phase "
+                             "function alone. ROUGHNESS: GGX alpha (0.02 to 1), SPECULAR: a grey "
+                             "Fresnel F0 (0 to 1)")
     from .clinical_presets import CLINICAL_PRESETS
     parser.add_argument("--clinical-preset", metavar="NAME", choices=tuple(CLINICAL_PRESETS),
                         help="a CT transfer function on Hounsfield units, coloured like an "
@@ -233,6 +257,9 @@ def _scene_edits(args: argparse.Namespace) -> dict:
     plane = getattr(args, "clip_plane", None)
     if plane is not None:
         edits["clip_plane"] = {"normal": list(plane[:3]), "distance": plane[3]}
+    surface = getattr(args, "surface", None)
+    if surface is not None:
+        edits["surface"] = surface   # merged with the scene's own in apply_options
     return edits
 
 
@@ -245,7 +272,7 @@ _OPTION_FIELDS = {"crop.": "--crop", "clip_plane.": "--clip-plane",
                   "probes.adaptive_indicator": "--adaptive-indicator",
                   "probes.interpolation": "--probe-interpolation", "volume.series": "--series",
                   "volume.orientation": "--orientation", "volume.window": "--data-window",
-                  "transfer_function.preset": "--clinical-preset"}
+                  "transfer_function.preset": "--clinical-preset", "surface.": "--surface"}
 
 
 def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
@@ -298,6 +325,12 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
     if "window" in volume:
         data["volume"].pop("value_range", None)   # the window given replaces the scene's range
     data["volume"].update(volume)
+    if "surface" in edits:   # the keys given replace the scene's (or the preset's), the rest kept
+        base = data.get("surface")
+        if base is None and clinical is not None:
+            from .scene import preset_surface
+            base = scene_to_dict(scene.replace(surface=preset_surface(clinical)))["surface"]
+        edits = {**edits, "surface": {**(base or {}), **edits["surface"]}}
     data.update(edits)
     try:
         return parse_scene(data, base_dir=scene.base_dir)
@@ -391,7 +424,7 @@ def render_defaults() -> dict:
                 height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True,
                 gather_event=None, series=None, orientation=None, data_window=None, crop=None,
                 crop_voxels=None, clip_plane=None, no_crop=False, no_clip_plane=False,
-                transfer_function=None, clinical_preset=None, colorbar=None, colorbar_title="value",
+                transfer_function=None, clinical_preset=None, surface=None, colorbar=None, colorbar_title="value",
                 volume_memory=None)
 
 

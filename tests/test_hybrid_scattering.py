@@ -331,3 +331,38 @@ def test_the_twin_of_the_probes_surface_radiance_is_the_cosine_integral():
     irradiance = (sh_evaluate(coeffs, q) * cos[:, None]).sum(0) * 4 * np.pi / len(q)
     got = hs.surface_probe_radiance(coeffs, n, v, (0.0, 0.0, 0.0))
     np.testing.assert_allclose(got, irradiance / np.pi, rtol=2e-3)
+
+
+def test_furnace_under_a_constant_map_with_surfaces(ctx, tmp_path):
+    """Albedo 1, a diffuse BRDF at every edge of the cloud, a constant environment map: each path
+    mixes the map's samples (weighted against the BRDF's pdf at surface events) and its escapes,
+    so the image is the environment within its noise only if the MIS weights of both sides use
+    the same pdfs."""
+    env = np.array([0.25, 0.5, 1.0])
+    path = tmp_path / "constant.npy"
+    np.save(path, np.broadcast_to(env, (16, 32, 3)).astype(np.float32))
+    scene = parse_scene({"volume": {"builtin": "cloud", "size": [8, 8, 8]},
+                         "transfer_function": {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]},
+                         "albedo": 1.0, "density_scale": 30.0, "environment": {"map": str(path)},
+                         "light": {"irradiance": [0, 0, 0]}, "max_bounces": 1_000_000,
+                         "surface": {"gradient_factor": 5.0, "specular": [0, 0, 0]},
+                         "camera": {"eye": [0.0, 0.1, 1.2], "fov_y": 20.0, "width": 10,
+                                    "height": 10}})
+    img, hybrid = _render(ctx, scene, spp=64)
+    assert hybrid == 1
+    se = img.std(axis=(0, 1)) / np.sqrt(img.shape[0] * img.shape[1])
+    assert (np.abs(img.mean(axis=(0, 1)) - env) < 4 * se + 1e-6).all(), (img.mean(axis=(0, 1)), se)
+    assert (np.abs(img.mean(axis=(0, 1)) / env - 1) < 0.03).all()
+
+
+def test_the_surface_option_merges_into_the_scene():
+    import argparse
+    from radiance_probes.frontend import OptionError, apply_options, scene_from_arg, surface_arg
+    scene = scene_from_arg(None)
+    out = apply_options(scene, argparse.Namespace(surface=surface_arg("2,0.3,0.1")))
+    assert (out.surface.gradient_factor, out.surface.roughness, out.surface.specular) == (
+        2.0, 0.3, (0.1, 0.1, 0.1))
+    with pytest.raises(OptionError, match="--surface: surface.gradient_factor: must be >= 0.0"):
+        apply_options(scene, argparse.Namespace(surface=surface_arg("-1")))
+    with pytest.raises(argparse.ArgumentTypeError, match="K,ROUGHNESS"):
+        surface_arg("shiny")

@@ -162,8 +162,9 @@ class SceneResources:
                 self.transfer_gpu.release()
             self.transfer_gpu = TransferTable(self.ctx, self.medium_table)
             changed.add("transfer")
-        if old is None or (scene.density_scale, scene.albedo, scene.anisotropy, scene.max_bounces) != (
-                old.density_scale, old.albedo, old.anisotropy, old.max_bounces):
+        if old is None or (scene.density_scale, scene.albedo, scene.anisotropy, scene.max_bounces,
+                           scene.surface) != (old.density_scale, old.albedo, old.anisotropy,
+                                              old.max_bounces, old.surface):
             changed.add("medium")
         if old is None or scene.light != old.light or scene.environment != old.environment or (
                 scene.environment_map != old.environment_map):

@@ -160,7 +160,7 @@ def _clinical_presets(v) -> None:
 
 
 def medium_sliders(v) -> None:
-    """density_scale, albedo and anisotropy (one each, whatever the channels)."""
+    """density_scale, albedo and anisotropy (one each, whatever the channels), and the surface."""
     state, ui = v.state, v.widgets
     changed, value = imgui.slider_float("Density scale", state.scene.density_scale, 0.1, 10000.0, "%.1f",
                                         imgui.SliderFlags_.logarithmic)
@@ -175,6 +175,30 @@ def medium_sliders(v) -> None:
     ui.note("Anisotropy g")
     if changed:
         state.edit(anisotropy=float(value))
+    surface_sliders(v)
+
+
+def surface_sliders(v) -> None:
+    """The surfaces inside the volume (the scene's surface; glsl/lib/hybrid_scattering.glsl):
+    gradient factor k (0: the phase function alone), roughness and a grey specular colour."""
+    from ..scene_types import MAX_GRADIENT_FACTOR, MIN_ROUGHNESS
+    state, ui = v.state, v.widgets
+    surface = state.scene.surface
+    changed, value = imgui.slider_float("Surface k", surface.gradient_factor, 0.0,
+                                        min(100.0, MAX_GRADIENT_FACTOR), "%.3f",
+                                        imgui.SliderFlags_.logarithmic)
+    ui.note("Surface k")
+    if changed:
+        state.edit(surface=replace(surface, gradient_factor=max(float(value), 0.0)))
+    if surface.gradient_factor > 0.0:
+        changed, value = imgui.slider_float("Roughness", surface.roughness, MIN_ROUGHNESS, 1.0)
+        ui.note("Roughness")
+        if changed:
+            state.edit(surface=replace(surface, roughness=float(value)))
+        changed, value = imgui.slider_float("Specular", max(surface.specular), 0.0, 1.0)
+        ui.note("Specular")
+        if changed:
+            state.edit(surface=replace(surface, specular=(float(value),) * 3))
 
 
 def _transfer_file(v) -> None:
