@@ -86,6 +86,18 @@ def render_section(v) -> None:
     chosen = _radio_row(v, "Probe grid", PROBE_VIEWS, state.probe_view, "probes ")
     if chosen:
         state.probe_view = chosen
+    if state.probe_view != "off":
+        from .probe_view import PROBE_SLAB_AXES
+        chosen = _radio_row(v, "Probe slab", PROBE_SLAB_AXES, state.probe_slab_axis, "slab ")
+        if chosen:
+            state.probe_slab_axis = chosen
+        slab = v.probe_slab()
+        if slab is not None:
+            changed, value = imgui.slider_float("Slab position", state.probe_slab, 0.0, 1.0,
+                                                f"plane {slab[1]}")
+            ui.note("Slab position")
+            if changed:
+                state.probe_slab = float(value)
     drawn = v.probes_drawn()
     if drawn is not None:
         stride = f", every {drawn['stride']}th per axis" if drawn["stride"] > 1 else ""

@@ -24,6 +24,8 @@ class ViewerState:
     display: str = "image"
     split_position: float = 0.5            # divider, as a fraction of the view's width
     probe_view: str = "off"
+    probe_slab_axis: str = "all"           # the probe view's slab: all, or one plane across x/y/z
+    probe_slab: float = 0.5                # where that plane is, 0 to 1 across the probe box
     show_box: bool = False
     exposure: float = 1.0
     max_samples: int = 1024                # accumulation stops here (per pixel)
