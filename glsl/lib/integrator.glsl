@@ -180,10 +180,20 @@ void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
 }
 
 #if defined(HYBRID_SCATTERING)
+// The opacity gradient at the path's event, kept from its flight for the rest of the step (the
+// event's choice, the normal for its lights and its next direction: 6 fetches an event, not 18);
+// a step that resumes a shadow ray cut in an earlier dispatch computes it again.
+vec3 path_event_gradient = vec3(0.0);
+bool path_event_gradient_known = false;
+
 // The surface normal at the path's event, facing back along its arriving direction p.w.
 vec3 path_surface_normal(PathState p)
 {
-    return surface_normal(opacity_gradient(p.x), -p.w);
+    if (!path_event_gradient_known) {
+        path_event_gradient = opacity_gradient(p.x);
+        path_event_gradient_known = true;
+    }
+    return surface_normal(path_event_gradient, -p.w);
 }
 
 // The event's kernel towards the light direction l (unit, towards the light): the phase function,
@@ -273,7 +283,9 @@ int path_flight(inout PathState p, inout int steps_left)
 #if defined(HYBRID_SCATTERING)
     // A surface's event with probability 1 - exp(-k |grad A|) (lib/hybrid_scattering.glsl).
     p.status = PATH_ACTIVE;
-    if (rng_next(p.rng) < surface_probability(opacity_gradient(p.x), surface_gradient_factor))
+    path_event_gradient = opacity_gradient(p.x);
+    path_event_gradient_known = true;
+    if (rng_next(p.rng) < surface_probability(path_event_gradient, surface_gradient_factor))
         p.status = PATH_ACTIVE_SURFACE;
 #endif
 #if defined(GUIDED_RESIDUAL)
@@ -416,6 +428,9 @@ int path_flight(inout PathState p, inout int steps_left)
 // After STEP_SHADOW_CUT the next call resumes the shadow ray where it stopped, then goes on.
 int path_step(inout PathState p, inout int steps_left)
 {
+#if defined(HYBRID_SCATTERING)
+    path_event_gradient_known = false;   // this step's flight (if it flies) computes it
+#endif
 #if defined(ENVIRONMENT_MAP)
     if (p.shadow_pending == 0 && p.env_pending == 0) {
 #else
@@ -463,8 +478,8 @@ int path_step(inout PathState p, inout int steps_left)
 #if defined(HYBRID_SCATTERING)
     if (p.status == PATH_ACTIVE_SURFACE) {
         // A surface's event: the next direction from the BRDF (never guided), weighted K / pdf.
+        vec3 n = path_surface_normal(p);   // (p.w is still w_in)
         p.status = PATH_ACTIVE;
-        vec3 n = surface_normal(opacity_gradient(p.x), -w_in);
         vec3 surface_weight;
         float surface_direction_pdf;
         float u0 = rng_next(p.rng), u1 = rng_next(p.rng), u2 = rng_next(p.rng);
