@@ -352,10 +352,13 @@ class Renderer:
 
     def _sh_order(self) -> int:
         """The SH order the current scene's probes are baked with (probe_layout.resolve_sh_order;
-        guided directions need directions: "auto" gives no order 0 while they are on)."""
+        guided directions need directions, and so do surfaces (their irradiance is the clamped
+        cosine's bands 0 to 2 of the probes' light): "auto" gives no order 0 while either is
+        on)."""
         spec = self.scene.probes
         return resolve_sh_order(spec.sh_order, self.scene.anisotropy, spec.samples,
-                                directions=self._settings.guided_directions > 0.0)
+                                directions=(self._settings.guided_directions > 0.0
+                                            or self.scene.surface.gradient_factor > 0.0))
 
     def adaptive_planes(self, grid: tuple[int, int, int], box) -> tuple | None:
         """The adaptive layout's probe planes for this grid and box (cached; None: it came out
