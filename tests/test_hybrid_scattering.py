@@ -234,6 +234,36 @@ def test_white_furnace_with_a_non_absorbing_brdf(ctx):
     np.testing.assert_allclose(img, np.broadcast_to(env, img.shape), rtol=2e-6)
 
 
+def test_the_probes_walks_in_a_furnace_with_surfaces(ctx):
+    """The probes' walks run the same integrator: in the furnace with a non-absorbing BRDF every
+    walk brings back the environment exactly, so every probe's L00 is env sqrt(4 pi) to float
+    rounding; and the raymarcher and `probes` reading them through the surfaces' SH irradiance
+    show the environment within a few percent (the clamped cosine of a constant is exact, the
+    order-2 SH of the probes' constant radiance too)."""
+    env = np.array([0.25, 0.5, 1.0])
+    scene = parse_scene({"volume": {"builtin": "cloud", "size": [8, 8, 8]},
+                         "transfer_function": {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]},
+                         "albedo": 1.0, "density_scale": 10.0, "environment": list(env),
+                         "light": {"irradiance": [0, 0, 0]}, "max_bounces": 1_000_000,
+                         "surface": {"gradient_factor": 5.0, "specular": [0, 0, 0]},
+                         "probes": {"grid": [2, 2, 2], "samples": 8},
+                         "camera": {"eye": [0.0, 0.1, 1.2], "fov_y": 20.0, "width": 8,
+                                    "height": 8}})
+    r = Renderer(ctx, scene)
+    try:
+        r.configure(walk_adaptive=0.0)
+        r.bake()
+        assert r.resources.defines().get("HYBRID_SCATTERING") == 1
+        assert r.probe_grid.sh_order == 2          # surfaces keep the probes' directions
+        l00 = r.probe_grid.coefficients()[..., 0:3] / np.sqrt(4 * np.pi)
+        np.testing.assert_allclose(l00, np.broadcast_to(env, l00.shape), rtol=2e-5)
+        for method in ("raymarch", "probes"):
+            image = r.render(method, spp=2).image
+            np.testing.assert_allclose(image.mean(axis=(0, 1)), env, rtol=0.03)
+    finally:
+        r.release()
+
+
 def _hybrid_single_scatter(scene, volume, sub=3, steps=160, shadow_steps=48):
     """Per-pixel single-scattered sun (RGB) by nested quadrature, each point's kernel the mean
     of the phase function and the surface BRDF's K by their chances (1 - P, P): the answer the
