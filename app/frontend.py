@@ -477,6 +477,8 @@ def render_to_files(args: argparse.Namespace) -> int:
                           f"{volume.channel_count} channels, each with its own")
     load_scene_environment(scene)          # so does an environment map (kept in its cache)
     check_clip(scene, volume, args)        # and a crop that does not fit the volume
+    from .area_lights import check_area_lights
+    check_area_lights(scene, volume.half_extent)   # and an area light in the volume box
     if args.method == "raymarch" and args.raymarch_step is not None:
         try:
             check_step(args.raymarch_step, volume)   # a step asked for is taken, or refused

@@ -20,7 +20,8 @@ from .scene_types import (AXIS_LETTERS, CROP_UNITS, MAX_CHANNELS, ChannelSpec,
                           VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
                           ClipPlaneSpec, CropSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene,
                           SceneError, SurfaceSpec, TransferFunctionSpec, ViewerSpec, VolumeSpec,
-                          scene_to_dict, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS,
+                          scene_to_dict, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS, AREA_LIGHT_SHAPES,
+                          MAX_AREA_LIGHTS, AreaLightSpec,
                           transfer_to_dict, window_range)
 from .clinical_presets import CLINICAL_PRESETS, expand as expand_clinical, preset as clinical_preset
 from .transfer import COLORMAPS
@@ -33,7 +34,8 @@ __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_S
            "BookmarkSpec", "CameraSpec", "ChannelSpec", "MAX_CHANNELS", "ClipPlaneSpec", "CropSpec", "EnvironmentMapSpec",
            "ViewerSpec", "load_transfer_function", "parse_transfer_function",
            "save_transfer_function", "transfer_to_dict",
-           "LightSpec", "ProbeSpec", "Scene", "SceneError", "SurfaceSpec", "TransferFunctionSpec",
+           "AreaLightSpec", "LightSpec", "ProbeSpec", "Scene", "SceneError", "SurfaceSpec",
+           "TransferFunctionSpec",
            "VolumeSpec",
            "default_scene", "load_scene", "parse_scene", "scene_to_dict"]
 
@@ -536,6 +538,44 @@ def _parse_surface(d: Any) -> SurfaceSpec:
     return SurfaceSpec(**kw)
 
 
+def _parse_area_lights(d: Any) -> tuple[AreaLightSpec, ...]:
+    """[{"shape": "sphere" | "rectangle", "position": [x, y, z], "size": r | [w, h],
+    "colour": [r, g, b], "strength": s, "normal": [nx, ny, nz], "enabled": true}, ...]. Whether a
+    light stays outside the volume box is checked against the volume (app/area_lights.py)."""
+    if not isinstance(d, (list, tuple)):
+        raise SceneError(f"area_lights: expected a list of lights, got {d!r}")
+    if len(d) > MAX_AREA_LIGHTS:
+        raise SceneError(f"area_lights: {len(d)} lights, at most {MAX_AREA_LIGHTS}")
+    out = []
+    for i, light in enumerate(d):
+        name = f"area_lights[{i}]"
+        light = _object(light, name, _fields(AreaLightSpec))
+        for key in ("shape", "position", "size"):
+            if key not in light:
+                raise SceneError(f"{name}.{key}: missing (a light needs its shape, position and "
+                                 "size)")
+        kw: dict[str, Any] = {"shape": _choice(light["shape"], f"{name}.shape",
+                                               AREA_LIGHT_SHAPES)}
+        kw["position"] = _vector(light["position"], f"{name}.position", 3)
+        if kw["shape"] == "sphere":
+            kw["size"] = _number(light["size"], f"{name}.size", 0.0, 1e6, lo_open=True)
+        else:
+            kw["size"] = _vector(light["size"], f"{name}.size", 2, lo=0.0, hi=1e6, lo_open=True)
+        if "colour" in light:
+            kw["colour"] = _vector(light["colour"], f"{name}.colour", 3, lo=0.0, hi=1.0)
+        if "strength" in light:
+            kw["strength"] = _number(light["strength"], f"{name}.strength", 0.0, 1e9)
+        if "normal" in light:
+            normal = _vector(light["normal"], f"{name}.normal", 3)
+            if math.sqrt(sum(c * c for c in normal)) < 1e-9:
+                raise SceneError(f"{name}.normal: must not be the zero vector")
+            kw["normal"] = normal
+        if "enabled" in light:
+            kw["enabled"] = _boolean(light["enabled"], f"{name}.enabled")
+        out.append(AreaLightSpec(**kw))
+    return tuple(out)
+
+
 def preset_surface(name: str) -> SurfaceSpec:
     """The surface a clinical preset shades with."""
     p = clinical_preset(name)
@@ -606,6 +646,8 @@ def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
     kw["camera"] = _parse_camera(d.get("camera", {}))
     if "probes" in d:
         kw["probes"] = _parse_probes(d["probes"])
+    if d.get("area_lights") is not None:
+        kw["area_lights"] = _parse_area_lights(d["area_lights"])
     if d.get("surface") is not None:
         kw["surface"] = _parse_surface(d["surface"])
     elif kw.get("transfer_function") is not None and kw["transfer_function"].preset is not None:

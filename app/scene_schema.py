@@ -25,7 +25,8 @@ from .scene_types import (AXIS_LETTERS, CHANNEL_COLOURS, CROP_UNITS, MAX_CHANNEL
                           SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
                           VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
                           ChannelSpec, ClipPlaneSpec, CropSpec, LightSpec, ProbeSpec, Scene,
-                          SurfaceSpec, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS,
+                          SurfaceSpec, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS, AREA_LIGHT_SHAPES,
+                          MAX_AREA_LIGHTS, AreaLightSpec,
                           TransferFunctionSpec, ViewerSpec, VolumeSpec)
 
 SCHEMA_ID = "https://radiance-probes.invalid/scene.schema.json"
@@ -36,13 +37,15 @@ NESTED = {"volume": VolumeSpec, "transfer_function": TransferFunctionSpec, "ligh
           "camera": CameraSpec, "probes": ProbeSpec, "surface": SurfaceSpec, "crop": CropSpec,
           "clip_plane": ClipPlaneSpec, "viewer": ViewerSpec}
 # Scene fields that are lists of objects (each item's keys are named "bookmarks[].name", ...).
-LISTS = {"bookmarks": BookmarkSpec, "channels": ChannelSpec}
+LISTS = {"bookmarks": BookmarkSpec, "channels": ChannelSpec, "area_lights": AreaLightSpec}
 # What a nested object's key takes besides the object: a transfer-function file's name in place of
 # the transfer function; null for the optional ones (as if absent).
 ALSO = {"transfer_function": ("string",), "crop": ("null",), "clip_plane": ("null",),
-        "viewer": ("null",), "bookmarks": ("null",), "channels": ("null",)}
+        "viewer": ("null",), "bookmarks": ("null",), "channels": ("null",),
+        "area_lights": ("null",)}
 # Keys an object must hold (the loader names the one missing), and a voxel crop's integer corners.
-REQUIRED = {"crop": ["min", "max"], "clip_plane": ["normal"], "bookmarks[]": ["name", "eye"]}
+REQUIRED = {"crop": ["min", "max"], "clip_plane": ["normal"], "bookmarks[]": ["name", "eye"],
+            "area_lights[]": ["shape", "position", "size"]}
 
 
 @dataclass(frozen=True)
@@ -210,6 +213,30 @@ def keys() -> dict[str, Key]:
             "The specular lobe's Fresnel colour F0 (constant); the diffuse lobe is the "
             "transfer function's colour times albedo times 1 - max(F0). [0, 0, 0]: diffuse "
             "alone, which absorbs nothing.", vector(3, unit)),
+        "area_lights": Key(
+            f"Area lights, at most {MAX_AREA_LIGHTS}, each wholly outside the volume box (checked "
+            "against the volume: a light that reaches into it is refused). The path tracer samples "
+            "them at every scattering event (next-event estimation, MIS against the phase "
+            "function's or the BRDF's sampling) and sees them where a ray meets one; the probes' "
+            "walks too; the raymarcher's light from them comes through the probes alone.", {},
+            default="none", values="a list of lights"),
+        "area_lights[].shape": Key("sphere, or rectangle (one-sided: it emits towards its "
+                                   "normal).", choice(AREA_LIGHT_SHAPES), default="required"),
+        "area_lights[].position": Key("The light's centre (world units).", vector(3),
+                                      default="required"),
+        "area_lights[].size": Key(
+            "A sphere's radius, or a rectangle's [width, height] (world units, > 0); the "
+            "rectangle's edges lie along the orthonormal basis of its normal.",
+            {"oneOf": [number(0.0, 1e6, lo_open=True),
+                       vector(2, number(0.0, 1e6, lo_open=True))]},
+            default="required", values="r > 0, or [w, h] > 0"),
+        "area_lights[].colour": Key("Its colour; the radiance is colour x strength.",
+                                    vector(3, unit)),
+        "area_lights[].strength": Key("Radiance scale (the radiance is colour x strength, "
+                                      "uniform over the light's surface).", number(0.0, 1e9)),
+        "area_lights[].normal": Key("A rectangle's facing direction (not zero; normalised).",
+                                    vector(3)),
+        "area_lights[].enabled": Key("false: the light is off (as if absent).", BOOLEAN),
         "light": Key("The sun: a directional light.", {}),
         "light.direction": Key("Towards the light, from the scene (normalised; not zero).",
                                vector(3)),

@@ -229,6 +229,26 @@ class SurfaceSpec:
     specular: tuple[float, float, float] = (0.04, 0.04, 0.04)
 
 
+# Area lights (glsl/lib/area_lights.glsl): their shapes, and how many a scene may have on.
+AREA_LIGHT_SHAPES = ("sphere", "rectangle")
+MAX_AREA_LIGHTS = 8
+
+
+@dataclass(frozen=True)
+class AreaLightSpec:
+    """An area light outside the volume box (docs/scene-format.md, Area lights): a sphere of radius
+    `size` or a rectangle of `size` [width, height] centred at `position`, facing `normal` (a
+    rectangle emits from its front face only; its edges lie along an orthonormal basis of the
+    normal, app/area_lights.py), of radiance colour x strength, uniform over its surface."""
+    shape: str
+    position: tuple[float, float, float]
+    size: float | tuple[float, float]
+    colour: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    strength: float = 1.0
+    normal: tuple[float, float, float] = (0.0, -1.0, 0.0)
+    enabled: bool = True
+
+
 # Crop boxes are given in world units or in voxel indices (docs/crop-and-movies.md).
 CROP_UNITS = ("world", "voxels")
 
@@ -307,6 +327,7 @@ class Scene:
     camera: CameraSpec = field(default_factory=CameraSpec)
     probes: ProbeSpec = field(default_factory=ProbeSpec)
     surface: SurfaceSpec = field(default_factory=SurfaceSpec)
+    area_lights: tuple[AreaLightSpec, ...] = ()
     crop: CropSpec | None = None
     clip_plane: ClipPlaneSpec | None = None
     bookmarks: tuple[BookmarkSpec, ...] = ()
@@ -342,7 +363,7 @@ def scene_to_dict(scene: Scene) -> dict:
         v = getattr(scene, f.name)
         if f.name in OPTIONAL_FIELDS:
             if v:   # written only where the scene has them, so older scenes stay as they were
-                out[f.name] = ([_plain(b) for b in v] if f.name == "bookmarks" else
+                out[f.name] = ([_plain(b) for b in v] if f.name in ("bookmarks", "area_lights") else
                                [channel_to_dict(c) for c in v] if f.name == "channels" else
                                v if f.name == "time" else _plain(v))
             continue
@@ -372,7 +393,7 @@ def scene_to_dict(scene: Scene) -> dict:
 
 
 # Scene fields written only where the scene has them (None or empty: left out).
-OPTIONAL_FIELDS = ("crop", "clip_plane", "bookmarks", "viewer", "channels", "time")
+OPTIONAL_FIELDS = ("crop", "clip_plane", "bookmarks", "viewer", "channels", "time", "area_lights")
 
 
 def _plain(spec) -> dict:

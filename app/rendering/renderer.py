@@ -421,7 +421,8 @@ class Renderer:
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
                 st.walk_sun, st.walk_adaptive, env_map, plan.planes, lobe) or (
                 g.sun_correction != st.walk_sun_correction) or g.medium != medium or (
-                g.shadow_tracking != st.shadow_tracking):
+                g.shadow_tracking != st.shadow_tracking) or (
+                g.area_lights != self.resources.area_lights_on):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
@@ -430,7 +431,8 @@ class Renderer:
                                         sun_correction=st.walk_sun_correction,
                                         environment_map=env_map, planes=plan.planes,
                                         sun_lobe=lobe, medium=medium,
-                                        shadow_tracking=st.shadow_tracking)
+                                        shadow_tracking=st.shadow_tracking,
+                                        area_lights=self.resources.area_lights_on)
         self.probe_grid.dispatch_target_ms = dispatch_target_ms(self)
         self.baked_level = self.bake_level()
         self.probe_grid.restart(seed, warm=warm)

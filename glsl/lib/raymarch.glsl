@@ -19,6 +19,13 @@
 #if defined(HYBRID_SCATTERING)
 #include "lib/hybrid_scattering.glsl"
 #endif
+// AREA_LIGHTS (lib/area_lights.glsl): a light the camera ray meets is seen, in front of the
+// volume or behind it (in place of the environment); the light they shed reaches the march only
+// through the probes (the walks meet and sample the lights), smoothed by their SH, and not through
+// the light grid, which holds the sun alone.
+#if defined(AREA_LIGHTS)
+#include "lib/area_lights.glsl"
+#endif
 uniform float raymarch_step;            // world units
 uniform uint frame_index;               // keys the jitter; frames accumulate into a running mean
 uniform uint seed;
@@ -47,9 +54,18 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
 #if defined(ENVIRONMENT_MAP)
     vec3 environment = environment_radiance(d);   // the background this ray sees
 #endif
+#if defined(AREA_LIGHTS)
+    float t_light;
+    int light = area_light_first_hit(origin, d, t_light);
+    vec3 background = light >= 0 ? area_light_emitted(light, d) : environment;
+    float t0, t1;
+    if (!box_intersect(origin, d, t0, t1) || (light >= 0 && t_light < t0))
+        return background;
+#else
     float t0, t1;
     if (!box_intersect(origin, d, t0, t1))
         return environment;
+#endif
     int n = clamp(int(ceil((t1 - t0) / raymarch_step)), 1, 8192);
     float dt = (t1 - t0) / float(n);
     float transmittance = 1.0;
@@ -107,7 +123,11 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
         radiance += transmittance * scatter_allowed * source;
         transmittance *= 1.0 - opacity;
     }
+#if defined(AREA_LIGHTS)
+    return radiance + transmittance * background;
+#else
     return radiance + transmittance * environment;
+#endif
 }
 
 #if defined(GUIDED_LEVEL0)
