@@ -23,6 +23,7 @@ import numpy as np
 from radiance_probes.scene import Scene, SceneError, load_scene, parse_scene, scene_to_dict
 from radiance_probes.scene_types import CameraSpec, VolumeError, VolumeSpec
 from radiance_probes.scene_flags import COLOUR_SOURCES
+from radiance_probes.clinical_presets import opening_scene
 from radiance_probes.volume import Volume, load_scene_volume, normalise
 
 from ._image import Image
@@ -193,6 +194,7 @@ def build_scene(data: Any = None, scene: Any = None, options: dict | None = None
                                parsed.channels or None, parsed.time)
     else:
         volume = load_scene_volume(parsed)
+        parsed = opening_scene(parsed, volume)   # a CT with no transfer function: its preset
     if volume.channel_count > 1 or volume.time_steps > 1:
         window = None   # each channel, and a series as a whole, by its own range (or the scene's)
     if window == "auto" and parsed.volume.domain is None and (array is not None or from_file):

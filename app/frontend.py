@@ -414,6 +414,22 @@ def scene_key_edits(data: dict, args: argparse.Namespace) -> dict[str, str]:
         _set_key(data, key, value, option)
         options[key] = option
     return options
+def surface_arg(text: str) -> dict:
+    """--surface K[,ROUGHNESS[,SPECULAR]]: the scene's surface key (checked as the scene's is)."""
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if not 1 <= len(values) <= 3 or len(values) != len(parts):
+        raise argparse.ArgumentTypeError(f"expected K, K,ROUGHNESS or K,ROUGHNESS,SPECULAR (numbers), "
+                                         f"got {text!r}")
+    out: dict = {"gradient_factor": values[0]}
+    if len(values) > 1:
+        out["roughness"] = values[1]
+    if len(values) > 2:
+        out["specular"] = [values[2]] * 3
+    return out
 
 
 def add_scene_edit_options(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -436,6 +452,21 @@ def add_scene_edit_options(parser: argparse.ArgumentParser) -> argparse.Argument
     parser.add_argument("--transfer-function", metavar="JSON",
                         help="a transfer function saved on its own (the scene's transfer_function "
                              "key as a file) instead of the scene's")
+    parser.add_argument("--surface", type=surface_arg, metavar="K[,ROUGHNESS[,SPECULAR]]",
+                        help="surfaces inside the volume (the scene's surface key): at each "
+                             "scattering event a BRDF scatters with probability 1 - exp(-K "
+                             "|grad A|), A the transfer function's opacity; K = 0: the phase "
+                             "function alone. ROUGHNESS: GGX alpha (0.02 to 1), SPECULAR: a grey "
+                             "Fresnel F0 (0 to 1)")
+    from .clinical_presets import CLINICAL_PRESETS
+    parser.add_argument("--clinical-preset", metavar="NAME", choices=tuple(CLINICAL_PRESETS),
+                        help="a CT transfer function on Hounsfield units, coloured like an "
+                             "anatomy atlas, with its surface shading: "
+                             + "; ".join(f"{k}: {v.description}" for k, v in
+                                         CLINICAL_PRESETS.items())
+                             + ". Without --data-window it sets its own window. A CT opens with "
+                               "ct_bone (or its --data-window's preset) unless the scene has a "
+                               "transfer function")
     return parser
 
 
@@ -484,6 +515,9 @@ def _scene_edits(args: argparse.Namespace) -> dict:
     plane = getattr(args, "clip_plane", None)
     if plane is not None:
         edits["clip_plane"] = {"normal": list(plane[:3]), "distance": plane[3]}
+    surface = getattr(args, "surface", None)
+    if surface is not None:
+        edits["surface"] = surface   # merged with the scene's own in apply_options
     return edits
 
 
@@ -495,7 +529,8 @@ _OPTION_FIELDS = {"crop.": "--crop", "clip_plane.": "--clip-plane",
                   "probes.layout": "--probe-layout", "probes.adaptive_strength": "--adaptive-strength",
                   "probes.adaptive_indicator": "--adaptive-indicator",
                   "probes.interpolation": "--probe-interpolation", "volume.series": "--series",
-                  "volume.orientation": "--orientation", "volume.window": "--data-window"}
+                  "volume.orientation": "--orientation", "volume.window": "--data-window",
+                  "transfer_function.preset": "--clinical-preset", "surface.": "--surface"}
 
 
 def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
@@ -517,6 +552,13 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
                                             ("window", getattr(args, "data_window", None)))
               if value is not None}
     edits = _scene_edits(args)
+    clinical = getattr(args, "clinical_preset", None)
+    if clinical is not None:
+        if getattr(args, "transfer_function", None):
+            raise OptionError("--clinical-preset and --transfer-function: give one of them")
+        if scene.channels:
+            raise OptionError("--clinical-preset: the scene has channels, each with its own "
+                              "transfer function; clinical presets are for one-channel CT")
     if getattr(args, "transfer_function", None):
         from .scene import load_transfer_function
         if scene.channels:
@@ -531,14 +573,24 @@ def apply_options(scene: Scene, args: argparse.Namespace) -> Scene:
     if getattr(args, "no_clip_plane", False) and scene.clip_plane is not None:
         scene = scene.replace(clip_plane=replace(scene.clip_plane, enabled=False))
     keys_given = any(getattr(args, dest, None) is not None for dest in SCENE_KEY_DESTS)
-    if not probes and not camera and not volume and not edits and not keys_given:
+    if (not probes and not camera and not volume and not edits and not keys_given
+            and clinical is None):
         return scene
     data = scene_to_dict(scene)
+    if clinical is not None:
+        data["transfer_function"] = {"preset": clinical,
+                                     "resolution": scene.transfer_function.resolution}
     data["probes"].update(probes)
     data["camera"].update(camera)
     if "window" in volume:
         data["volume"].pop("value_range", None)   # the window given replaces the scene's range
     data["volume"].update(volume)
+    if "surface" in edits:   # the keys given replace the scene's (or the preset's), the rest kept
+        base = data.get("surface")
+        if base is None and clinical is not None:
+            from .scene import preset_surface
+            base = scene_to_dict(scene.replace(surface=preset_surface(clinical)))["surface"]
+        edits = {**edits, "surface": {**(base or {}), **edits["surface"]}}
     data.update(edits)
     key_options = scene_key_edits(data, args)
     try:
@@ -637,8 +689,8 @@ def render_defaults() -> dict:
                 height=None, exposure=1.0, gl_backend=None, empty_space_skipping=True,
                 gather_event=None, series=None, orientation=None, data_window=None, crop=None,
                 crop_voxels=None, clip_plane=None, no_crop=False, no_clip_plane=False,
-                transfer_function=None, colorbar=None, colorbar_title="value",
-                volume_memory=None, **dict.fromkeys(SCENE_KEY_DESTS))
+                transfer_function=None, clinical_preset=None, surface=None, colorbar=None,
+                colorbar_title="value", volume_memory=None, **dict.fromkeys(SCENE_KEY_DESTS))
 
 
 def render_to_files(args: argparse.Namespace) -> int:
@@ -652,6 +704,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     from .environment_map import load_scene_environment
     from .framing import frame_default_camera
     from .volume import load_scene_volume
+    from .clinical_presets import opening_scene
 
     auto = getattr(args, "auto", None)
     if auto is not None:
@@ -682,11 +735,17 @@ def render_to_files(args: argparse.Namespace) -> int:
     scene = frame_default_camera(scene, volume.half_extent)   # a default view sees the whole box
     for note in volume.notes:
         print(f"note: {note}", file=sys.stderr)
+    scene = opening_scene(scene, volume)   # a CT with no transfer function: its clinical preset
+    if scene.transfer_function.preset is not None:
+        print(f"note: transfer function: the clinical preset {scene.transfer_function.preset} "
+              f"(--clinical-preset)", file=sys.stderr)
     if getattr(args, "colorbar", None) and volume.channel_count > 1:
         raise OptionError(f"--colorbar: a colour bar shows one transfer function; this volume has "
                           f"{volume.channel_count} channels, each with its own")
     load_scene_environment(scene)          # so does an environment map (kept in its cache)
     check_clip(scene, volume, args)        # and a crop that does not fit the volume
+    from .area_lights import check_area_lights
+    check_area_lights(scene, volume.half_extent)   # and an area light in the volume box
     if args.method == "raymarch" and args.raymarch_step is not None:
         try:
             check_step(args.raymarch_step, volume)   # a step asked for is taken, or refused

@@ -21,8 +21,11 @@ from .scene_types import (AXIS_LETTERS, CROP_UNITS, MAX_CHANNELS, ChannelSpec,
                           SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
                           VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
                           ClipPlaneSpec, CropSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene,
-                          SceneError, TransferFunctionSpec, ViewerSpec, VolumeSpec, scene_to_dict,
+                          SceneError, SurfaceSpec, TransferFunctionSpec, ViewerSpec, VolumeSpec,
+                          scene_to_dict, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS, AREA_LIGHT_SHAPES,
+                          MAX_AREA_LIGHTS, AreaLightSpec,
                           transfer_to_dict, window_range)
+from .clinical_presets import CLINICAL_PRESETS, expand as expand_clinical, preset as clinical_preset
 from .transfer import COLORMAPS
 from .volume import BUILTIN_VOLUMES, RAW_DTYPES
 
@@ -33,7 +36,9 @@ __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_S
            "BookmarkSpec", "CameraSpec", "ChannelSpec", "MAX_CHANNELS", "ClipPlaneSpec", "CropSpec", "EnvironmentMapSpec",
            "ViewerSpec", "load_transfer_function", "parse_transfer_function",
            "save_transfer_function", "transfer_to_dict",
-           "LightSpec", "ProbeSpec", "Scene", "SceneError", "TransferFunctionSpec", "VolumeSpec",
+           "AreaLightSpec", "LightSpec", "ProbeSpec", "Scene", "SceneError", "SurfaceSpec",
+           "TransferFunctionSpec",
+           "VolumeSpec",
            "default_scene", "load_scene", "parse_scene", "scene_to_dict"]
 
 # --------------------------------------------------------------------------------------------
@@ -254,9 +259,24 @@ def _parse_channels(d: Any, has_transfer_function: bool,
     return tuple(out)
 
 
-def _parse_transfer(d: Any, name: str = "transfer_function") -> TransferFunctionSpec:
+def _parse_transfer(d: Any, name: str = "transfer_function",
+                    preset_domain: tuple[float, float] | None = None) -> TransferFunctionSpec:
+    """`preset_domain`: the data values the volume maps to densities 0 and 1, which a clinical
+    preset's Hounsfield units are placed by (None: no preset may be given here)."""
     d = _object(d, name, _fields(TransferFunctionSpec))
     kw: dict[str, Any] = {}
+    if "preset" in d:
+        others = sorted(set(d) & {"colormap", "colors", "opacity", "rgba"})
+        if others:
+            raise SceneError(f"{name}.preset: a clinical preset gives the colours and opacity; "
+                             f"give it or {name}.{others[0]}, not both")
+        if preset_domain is None:
+            raise SceneError(f"{name}.preset: clinical presets are for the scene's one "
+                             "transfer_function of a one-channel volume (not a channel's, not a "
+                             "transfer-function file)")
+        label = _choice(d["preset"], f"{name}.preset", tuple(CLINICAL_PRESETS))
+        colors, opacity = expand_clinical(label, preset_domain)
+        kw.update(colors=colors, opacity=opacity, preset=label)
     if "rgba" in d and ("colormap" in d or "opacity" in d or "colors" in d):
         raise SceneError(f"{name}: give either rgba rows or colormap/colors and opacity, not both")
     if "colormap" in d and "colors" in d:
@@ -516,6 +536,65 @@ def _parse_probes(d: Any) -> ProbeSpec:
     return ProbeSpec(**kw)
 
 
+def _parse_surface(d: Any) -> SurfaceSpec:
+    """{"gradient_factor": k, "roughness": alpha, "specular": [r, g, b]} (SurfaceSpec)."""
+    d = _object(d, "surface", _fields(SurfaceSpec))
+    kw: dict[str, Any] = {}
+    if "gradient_factor" in d:
+        kw["gradient_factor"] = _number(d["gradient_factor"], "surface.gradient_factor", 0.0,
+                                        MAX_GRADIENT_FACTOR)
+    if "roughness" in d:
+        kw["roughness"] = _number(d["roughness"], "surface.roughness", MIN_ROUGHNESS, 1.0)
+    if "specular" in d:
+        kw["specular"] = _vector(d["specular"], "surface.specular", 3, lo=0.0, hi=1.0)
+    return SurfaceSpec(**kw)
+
+
+def _parse_area_lights(d: Any) -> tuple[AreaLightSpec, ...]:
+    """[{"shape": "sphere" | "rectangle", "position": [x, y, z], "size": r | [w, h],
+    "colour": [r, g, b], "strength": s, "normal": [nx, ny, nz], "enabled": true}, ...]. Whether a
+    light stays outside the volume box is checked against the volume (app/area_lights.py)."""
+    if not isinstance(d, (list, tuple)):
+        raise SceneError(f"area_lights: expected a list of lights, got {d!r}")
+    if len(d) > MAX_AREA_LIGHTS:
+        raise SceneError(f"area_lights: {len(d)} lights, at most {MAX_AREA_LIGHTS}")
+    out = []
+    for i, light in enumerate(d):
+        name = f"area_lights[{i}]"
+        light = _object(light, name, _fields(AreaLightSpec))
+        for key in ("shape", "position", "size"):
+            if key not in light:
+                raise SceneError(f"{name}.{key}: missing (a light needs its shape, position and "
+                                 "size)")
+        kw: dict[str, Any] = {"shape": _choice(light["shape"], f"{name}.shape",
+                                               AREA_LIGHT_SHAPES)}
+        kw["position"] = _vector(light["position"], f"{name}.position", 3)
+        if kw["shape"] == "sphere":
+            kw["size"] = _number(light["size"], f"{name}.size", 0.0, 1e6, lo_open=True)
+        else:
+            kw["size"] = _vector(light["size"], f"{name}.size", 2, lo=0.0, hi=1e6, lo_open=True)
+        if "colour" in light:
+            kw["colour"] = _vector(light["colour"], f"{name}.colour", 3, lo=0.0, hi=1.0)
+        if "strength" in light:
+            kw["strength"] = _number(light["strength"], f"{name}.strength", 0.0, 1e9)
+        if "normal" in light:
+            normal = _vector(light["normal"], f"{name}.normal", 3)
+            if math.sqrt(sum(c * c for c in normal)) < 1e-9:
+                raise SceneError(f"{name}.normal: must not be the zero vector")
+            kw["normal"] = normal
+        if "enabled" in light:
+            kw["enabled"] = _boolean(light["enabled"], f"{name}.enabled")
+        out.append(AreaLightSpec(**kw))
+    return tuple(out)
+
+
+def preset_surface(name: str) -> SurfaceSpec:
+    """The surface a clinical preset shades with."""
+    p = clinical_preset(name)
+    return SurfaceSpec(gradient_factor=p.gradient_factor, roughness=p.roughness,
+                       specular=tuple(p.specular))
+
+
 def _transfer_file(path: str, base_dir: str | Path | None, name: str) -> TransferFunctionSpec:
     p = Path(path).expanduser()
     if not p.is_absolute() and base_dir is not None:
@@ -553,6 +632,16 @@ def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
         tf = d["transfer_function"]
         if isinstance(tf, str):   # a transfer-function file, relative to the scene's folder
             kw["transfer_function"] = _transfer_file(tf, base_dir, "transfer_function")
+        elif isinstance(tf, Mapping) and "preset" in tf and d.get("channels") is None:
+            # A clinical preset is placed by the volume's window; with none given, the preset's
+            # own window becomes the volume's.
+            volume = kw.get("volume", VolumeSpec())
+            if volume.domain is None:
+                name = _choice(tf["preset"], "transfer_function.preset", tuple(CLINICAL_PRESETS))
+                lo, hi = clinical_preset(name).window
+                volume = dataclasses.replace(volume, window=(0.5 * (lo + hi), hi - lo))
+                kw["volume"] = volume
+            kw["transfer_function"] = _parse_transfer(tf, preset_domain=volume.domain)
         else:
             kw["transfer_function"] = _parse_transfer(tf)
     if "density_scale" in d:
@@ -569,6 +658,12 @@ def parse_scene(data: Any, base_dir: str | Path | None = None) -> Scene:
     kw["camera"] = _parse_camera(d.get("camera", {}))
     if "probes" in d:
         kw["probes"] = _parse_probes(d["probes"])
+    if d.get("area_lights") is not None:
+        kw["area_lights"] = _parse_area_lights(d["area_lights"])
+    if d.get("surface") is not None:
+        kw["surface"] = _parse_surface(d["surface"])
+    elif kw.get("transfer_function") is not None and kw["transfer_function"].preset is not None:
+        kw["surface"] = preset_surface(kw["transfer_function"].preset)   # the preset's shading
     if d.get("crop") is not None:
         kw["crop"] = _parse_crop(d["crop"])
     if d.get("clip_plane") is not None:

@@ -25,6 +25,8 @@ from .scene_types import (AXIS_LETTERS, CHANNEL_COLOURS, CROP_UNITS, MAX_CHANNEL
                           SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
                           VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
                           ChannelSpec, ClipPlaneSpec, CropSpec, LightSpec, ProbeSpec, Scene,
+                          SurfaceSpec, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS, AREA_LIGHT_SHAPES,
+                          MAX_AREA_LIGHTS, AreaLightSpec,
                           TransferFunctionSpec, ViewerSpec, VolumeSpec)
 
 SCHEMA_ID = "https://radiance-probes.invalid/scene.schema.json"
@@ -32,16 +34,18 @@ SCHEMA_ID = "https://radiance-probes.invalid/scene.schema.json"
 # (written as "environment": {"map": ...}).
 NOT_KEYS = {"base_dir", "environment_map"}
 NESTED = {"volume": VolumeSpec, "transfer_function": TransferFunctionSpec, "light": LightSpec,
-          "camera": CameraSpec, "probes": ProbeSpec, "crop": CropSpec,
+          "camera": CameraSpec, "probes": ProbeSpec, "surface": SurfaceSpec, "crop": CropSpec,
           "clip_plane": ClipPlaneSpec, "viewer": ViewerSpec}
 # Scene fields that are lists of objects (each item's keys are named "bookmarks[].name", ...).
-LISTS = {"bookmarks": BookmarkSpec, "channels": ChannelSpec}
+LISTS = {"bookmarks": BookmarkSpec, "channels": ChannelSpec, "area_lights": AreaLightSpec}
 # What a nested object's key takes besides the object: a transfer-function file's name in place of
 # the transfer function; null for the optional ones (as if absent).
 ALSO = {"transfer_function": ("string",), "crop": ("null",), "clip_plane": ("null",),
-        "viewer": ("null",), "bookmarks": ("null",), "channels": ("null",)}
+        "viewer": ("null",), "bookmarks": ("null",), "channels": ("null",),
+        "area_lights": ("null",)}
 # Keys an object must hold (the loader names the one missing), and a voxel crop's integer corners.
-REQUIRED = {"crop": ["min", "max"], "clip_plane": ["normal"], "bookmarks[]": ["name", "eye"]}
+REQUIRED = {"crop": ["min", "max"], "clip_plane": ["normal"], "bookmarks[]": ["name", "eye"],
+            "area_lights[]": ["shape", "position", "size"]}
 
 
 @dataclass(frozen=True)
@@ -79,6 +83,11 @@ VOXEL_CROP = {"if": {"required": ["units"], "properties": {"units": {"const": "v
 def _colormaps() -> tuple[str, ...]:
     from .transfer import COLORMAPS
     return tuple(COLORMAPS)
+
+
+def _clinical() -> dict:
+    from .clinical_presets import CLINICAL_PRESETS
+    return CLINICAL_PRESETS
 
 
 def _builtins() -> tuple[str, ...]:
@@ -176,6 +185,14 @@ def keys() -> dict[str, Key]:
             f"{MAX_TRANSFER_ROWS} rows). Excludes colormap, colors and opacity.",
             {"type": "array", "minItems": 2, "maxItems": MAX_TRANSFER_ROWS,
              "items": vector(4, unit)}, default="none (colormap and opacity)"),
+        "transfer_function.preset": Key(
+            "A clinical CT preset on Hounsfield units (app/clinical_presets.py): "
+            + "; ".join(f"{k}: {v.description}" for k, v in _clinical().items())
+            + ". It gives the colours and opacity, placed by the volume's window (with none given "
+            "it sets its own, volume.window), and the surface's shading where the scene gives no "
+            "surface. Data not in Hounsfield units (8-bit, or no value below 0) is refused. A "
+            "saved scene holds the colours and opacity it made. Excludes colormap, colors, "
+            "opacity and rgba.", choice(_clinical()), default="none"),
         "transfer_function.resolution": Key("Rows of the table the colormap and opacity make.",
                                             number(2, MAX_TRANSFER_ROWS, integer=True)),
         "density_scale": Key("Extinction sigma_t per unit of world length at opacity 1 (the "
@@ -183,6 +200,46 @@ def keys() -> dict[str, Key]:
         "albedo": Key("Single-scattering albedo, times the colormap's colour.", unit),
         "anisotropy": Key("Henyey-Greenstein g: > 0 forward, 0 isotropic, < 0 backward.",
                           number(-1.0, 1.0, lo_open=True, hi_open=True)),
+        "surface": Key(
+            "Hybrid scattering: surfaces inside the volume (glsl/lib/hybrid_scattering.glsl). At "
+            "each scattering event a surface BRDF scatters with probability 1 - exp(-k length(grad A)), "
+            "A = sigma_t / density_scale (the transfer function's opacity) and its gradient in "
+            "world units, the phase function otherwise. A clinical preset sets it where the "
+            "scene does not.", {}),
+        "surface.gradient_factor": Key(
+            "k: 0 scatters by the phase function alone (the images without surfaces, bit for "
+            "bit); larger makes weaker edges surfaces (a jump of A from 0 to 1 over one voxel "
+            "of a 256-voxel side is a gradient of length ~128).", number(0.0, MAX_GRADIENT_FACTOR)),
+        "surface.roughness": Key("GGX alpha of the specular lobe (0.02: nearly a mirror, 1: "
+                                 "rough).", number(MIN_ROUGHNESS, 1.0)),
+        "surface.specular": Key(
+            "The specular lobe's Fresnel colour F0 (constant); the diffuse lobe is the "
+            "transfer function's colour times albedo times 1 - max(F0). [0, 0, 0]: diffuse "
+            "alone, which absorbs nothing.", vector(3, unit)),
+        "area_lights": Key(
+            f"Area lights, at most {MAX_AREA_LIGHTS}, each wholly outside the volume box (checked "
+            "against the volume: a light that reaches into it is refused). The path tracer samples "
+            "them at every scattering event (next-event estimation, MIS against the phase "
+            "function's or the BRDF's sampling) and sees them where a ray meets one; the probes' "
+            "walks too; the raymarcher's light from them comes through the probes alone.", {},
+            default="none", values="a list of lights"),
+        "area_lights[].shape": Key("sphere, or rectangle (one-sided: it emits towards its "
+                                   "normal).", choice(AREA_LIGHT_SHAPES), default="required"),
+        "area_lights[].position": Key("The light's centre (world units).", vector(3),
+                                      default="required"),
+        "area_lights[].size": Key(
+            "A sphere's radius, or a rectangle's [width, height] (world units, > 0); the "
+            "rectangle's edges lie along the orthonormal basis of its normal.",
+            {"oneOf": [number(0.0, 1e6, lo_open=True),
+                       vector(2, number(0.0, 1e6, lo_open=True))]},
+            default="required", values="r > 0, or [w, h] > 0"),
+        "area_lights[].colour": Key("Its colour; the radiance is colour x strength.",
+                                    vector(3, unit)),
+        "area_lights[].strength": Key("Radiance scale (the radiance is colour x strength, "
+                                      "uniform over the light's surface).", number(0.0, 1e9)),
+        "area_lights[].normal": Key("A rectangle's facing direction (not zero; normalised).",
+                                    vector(3)),
+        "area_lights[].enabled": Key("false: the light is off (as if absent).", BOOLEAN),
         "light": Key("The sun: a directional light.", {}),
         "light.direction": Key("Towards the light, from the scene (normalised; not zero).",
                                vector(3)),

@@ -104,6 +104,10 @@ class TransferFunctionSpec:
     # Colour control points (density, r, g, b), linearly interpolated and constant beyond the
     # first and last: they replace the colormap's colours (JSON "colors"; excludes "colormap").
     colors: tuple[tuple[float, float, float, float], ...] | None = None
+    # The clinical preset (app/clinical_presets.py) the colours and opacity were expanded from
+    # (JSON "preset": NAME, in place of colormap, colors, opacity and rgba): a label for the
+    # viewer; the colours and opacity are what renders, and what a saved scene holds.
+    preset: str | None = field(default=None, compare=False)
 
 
 # The letters of volume.axes: time, channel and the three space axes.
@@ -206,6 +210,45 @@ class ProbeSpec:
     interpolation: str = "trilinear"
 
 
+# The surface's bounds (glsl/lib/hybrid_scattering.glsl): k beyond this makes every point with any
+# gradient a surface (P = 1 - exp(-k |grad A|) rounds to 1 for |grad A| > 4e-3); GGX alpha below
+# MIN_ROUGHNESS is a mirror the float pdf cannot hold.
+MAX_GRADIENT_FACTOR = 1e4
+MIN_ROUGHNESS = 0.02
+
+
+@dataclass(frozen=True)
+class SurfaceSpec:
+    """Hybrid scattering (docs/scene-format.md, Surfaces): at each scattering event a surface BRDF
+    scatters with probability 1 - exp(-gradient_factor |grad A|) (A = sigma_t / density_scale, in
+    world units), the phase function otherwise. 0: the phase function alone (today's images, bit
+    for bit). The BRDF: Lambertian diffuse (1 - max(specular)) / pi plus GGX of `roughness`
+    (alpha) with the constant Fresnel colour `specular`."""
+    gradient_factor: float = 0.0
+    roughness: float = 0.5
+    specular: tuple[float, float, float] = (0.04, 0.04, 0.04)
+
+
+# Area lights (glsl/lib/area_lights.glsl): their shapes, and how many a scene may have on.
+AREA_LIGHT_SHAPES = ("sphere", "rectangle")
+MAX_AREA_LIGHTS = 8
+
+
+@dataclass(frozen=True)
+class AreaLightSpec:
+    """An area light outside the volume box (docs/scene-format.md, Area lights): a sphere of radius
+    `size` or a rectangle of `size` [width, height] centred at `position`, facing `normal` (a
+    rectangle emits from its front face only; its edges lie along an orthonormal basis of the
+    normal, app/area_lights.py), of radiance colour x strength, uniform over its surface."""
+    shape: str
+    position: tuple[float, float, float]
+    size: float | tuple[float, float]
+    colour: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    strength: float = 1.0
+    normal: tuple[float, float, float] = (0.0, -1.0, 0.0)
+    enabled: bool = True
+
+
 # Crop boxes are given in world units or in voxel indices (docs/crop-and-movies.md).
 CROP_UNITS = ("world", "voxels")
 
@@ -283,6 +326,8 @@ class Scene:
     max_bounces: int = 64
     camera: CameraSpec = field(default_factory=CameraSpec)
     probes: ProbeSpec = field(default_factory=ProbeSpec)
+    surface: SurfaceSpec = field(default_factory=SurfaceSpec)
+    area_lights: tuple[AreaLightSpec, ...] = ()
     crop: CropSpec | None = None
     clip_plane: ClipPlaneSpec | None = None
     bookmarks: tuple[BookmarkSpec, ...] = ()
@@ -318,10 +363,12 @@ def scene_to_dict(scene: Scene) -> dict:
         v = getattr(scene, f.name)
         if f.name in OPTIONAL_FIELDS:
             if v:   # written only where the scene has them, so older scenes stay as they were
-                out[f.name] = ([_plain(b) for b in v] if f.name == "bookmarks" else
+                out[f.name] = ([_plain(b) for b in v] if f.name in ("bookmarks", "area_lights") else
                                [channel_to_dict(c) for c in v] if f.name == "channels" else
                                v if f.name == "time" else _plain(v))
             continue
+        if f.name == "surface" and v == SurfaceSpec():
+            continue   # k = 0: written only where the scene has surfaces
         if f.name == "environment" and scene.environment_map is not None:
             m = scene.environment_map
             out[f.name] = {"map": m.path, "scale": m.scale, "rotation": m.rotation}
@@ -346,7 +393,7 @@ def scene_to_dict(scene: Scene) -> dict:
 
 
 # Scene fields written only where the scene has them (None or empty: left out).
-OPTIONAL_FIELDS = ("crop", "clip_plane", "bookmarks", "viewer", "channels", "time")
+OPTIONAL_FIELDS = ("crop", "clip_plane", "bookmarks", "viewer", "channels", "time", "area_lights")
 
 
 def _plain(spec) -> dict:
@@ -376,6 +423,7 @@ def transfer_to_dict(tf: TransferFunctionSpec) -> dict:
     """The transfer function as the JSON the scene's transfer_function key (and a transfer-function
     file) holds: rgba rows, or colour points or a colormap with the opacity curve."""
     sub = _plain(tf)
+    sub.pop("preset")   # the expanded colours and opacity are written
     if tf.rgba is not None:
         for key in ("colormap", "opacity", "colors"):
             sub.pop(key)

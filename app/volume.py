@@ -893,7 +893,12 @@ def _finite_min_max(raw: np.ndarray) -> tuple[float, float]:
 
 def load_scene_volume(scene: Scene, brick: int | None = None) -> Volume:
     from .channels import scene_channels
-    return load_volume(scene.volume, scene.base_dir, scene_channels(scene), scene.time, brick)
+    from .clinical_presets import check_hounsfield
+    volume = load_volume(scene.volume, scene.base_dir, scene_channels(scene), scene.time, brick)
+    if not scene.channels:
+        # a CT window or clinical preset on data not in Hounsfield units: refused, naming both
+        check_hounsfield(scene.volume, scene.transfer_function.preset, volume)
+    return volume
 
 
 # A preview of a Zarr store read brick by brick (app/rendering/progressive_open.py): its finest level

@@ -34,6 +34,9 @@ layout(local_size_x = 64) in;
 #endif
 #include "lib/light_grid.glsl"
 #include "lib/sun_shadow.glsl"
+// the integrator's walks: a walk adds no light it meets before scattering from the area lights
+// (lib/integrator.glsl AREA_LIGHTS), as it adds no direct sun
+#define PROBE_WALKS
 #include "lib/integrator.glsl"
 #include "lib/walk_profile.glsl"
 #include "lib/probe_accum.glsl"

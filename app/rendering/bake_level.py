@@ -188,6 +188,9 @@ class BakeMedium:
                 u.pop(name, None)
         u["volume_density"] = VOLUME_UNIT
         u["majorant_grid_bound"] = float(self.majorant_grid.bound)
+        if "surface_gradient_step" in u:   # the gradient over the coarse level's voxels
+            he, dims = self.volume.half_extent, self.volume.dims
+            u["surface_gradient_step"] = tuple(float(2.0 * he[i] / dims[i]) for i in range(3))
         return u
 
     def bind(self) -> None:

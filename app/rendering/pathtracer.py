@@ -14,6 +14,7 @@ from .resources import SceneResources
 LOCAL_SIZE = 8
 PIXEL_STATE_BYTES = 96  # PathState (80) + next_sample and padding, std430
 PIXEL_STATE_BYTES_ENVIRONMENT_MAP = 128  # the same with ENVIRONMENT_MAP (PathState 112)
+PATH_STATE_BYTES_AREA_LIGHTS = 32        # and AREA_LIGHTS' light sample (lib/integrator.glsl)
 
 
 def groups(width: int, height: int) -> tuple[int, int]:
@@ -31,6 +32,8 @@ class PathTracer:
             else share.program
         self.state_bytes = (PIXEL_STATE_BYTES_ENVIRONMENT_MAP if (defines or {}).get("ENVIRONMENT_MAP")
                             else PIXEL_STATE_BYTES)
+        if (defines or {}).get("AREA_LIGHTS"):
+            self.state_bytes += PATH_STATE_BYTES_AREA_LIGHTS
         self.loop_budget, self.loop_reserve = loop_budget(ctx)
         self.states: moderngl.Buffer | None = None
         self.progress = ctx.buffer(reserve=4)

@@ -49,6 +49,7 @@ FIRST_CHUNK_WALKS = 1 << 14
 PATH_STATE_BYTES = 80       # PathState of glsl/lib/integrator.glsl, std430
 PATH_STATE_BYTES_ENVIRONMENT_MAP = 112   # the same with ENVIRONMENT_MAP
 PATH_STATE_BYTES_SUN_CORRECTION = 32     # and the walks' sun correction (WALK_SUN_GRID)
+PATH_STATE_BYTES_AREA_LIGHTS = 32        # and an area light's sample (AREA_LIGHTS)
 WALK_SUN_MODES = ("ray", "grid")
 WALK_PROFILE_SLOTS = 1024   # rows of 8 counters in glsl/lib/walk_profile.glsl
 WALK_PROFILE_FIELDS = ("walks", "events", "flight_steps", "shadow_steps", "cell_steps",
@@ -67,12 +68,27 @@ def radiance_scale(scene, environment=None) -> float:
     lights' units: unscaled, a sun and environment of 1e6 overflow them and ones of 1e-7 fall to
     their subnormals (tests/test_hard_cases.py). 1 when the scene has no light."""
     levels = [max(scene.light.irradiance)]
+    for light in scene.area_lights:   # an area light: its radiance times its share of the sky
+        if light.enabled:
+            levels.append(float(max(light.colour)) * float(light.strength)
+                          * _area_light_share(light))
     if environment is not None and scene.environment_map is not None:
         levels.append(float(np.max(environment.image)) * float(scene.environment_map.scale))
     else:
         levels.append(max(scene.environment))
     level = max(levels)
     return float(level) if math.isfinite(level) and level > 0.0 else 1.0
+
+
+def _area_light_share(light) -> float:
+    """The solid angle an area light fills seen from the box's centre, over pi: its irradiance
+    there per unit of its radiance (radiance_scale's level for it)."""
+    d = max(math.sqrt(sum(float(c) ** 2 for c in light.position)), 1e-6)
+    if light.shape == "sphere":
+        sin2 = min((float(light.size) / d) ** 2, 1.0)
+        return sin2
+    w, h = (float(v) for v in light.size)
+    return min(w * h / (math.pi * d * d), 1.0)
 
 
 def probe_unit(texture_number: int) -> int:
@@ -113,7 +129,7 @@ class ProbeGrid:
                  sun: str = "ray", adaptive: float = 0.0, environment_map: bool = False,
                  planes: tuple | None = None, sun_lobe: float = 0.0,
                  sun_correction: float = 0.0, medium: dict | None = None,
-                 shadow_tracking: str = "ratio"):
+                 shadow_tracking: str = "ratio", area_lights: bool = False):
         """`box`: world (low, high) corners the probes cover (default: the volume box, given at
         bake time); `sh_order` 0 to 4 decides which textures exist (lib/probe_packing.glsl).
         `resumable`: walks that suspend and resume across dispatches (default: where the driver limits loops;
@@ -140,6 +156,7 @@ class ProbeGrid:
                              f"{', '.join(SHADOW_TRACKINGS)}")
         self.shadow_tracking = shadow_tracking
         self.environment_map = bool(environment_map)
+        self.area_lights = bool(area_lights)   # the walks meet and sample area lights
         self.medium = dict(medium or {})
         if not (math.isfinite(sun_lobe) and 0.0 <= sun_lobe < 1.0):
             raise ValueError(f"sun lobe g {sun_lobe!r}: expected a number in [0, 1)")
@@ -195,6 +212,8 @@ class ProbeGrid:
         state_bytes = PATH_STATE_BYTES_ENVIRONMENT_MAP if self.environment_map else PATH_STATE_BYTES
         if sun == "grid":   # the sun correction's reservoir (lib/integrator.glsl)
             state_bytes += PATH_STATE_BYTES_SUN_CORRECTION
+        if self.area_lights:   # the light sample (lib/integrator.glsl AREA_LIGHTS)
+            state_bytes += PATH_STATE_BYTES_AREA_LIGHTS
         self.walk_states = ctx.buffer(reserve=walks * state_bytes) if self.resumable else None
         # sun "grid": two more entries a walk, its sun correction (glsl/probe_sun_correction.comp)
         self.walk_radiance = ctx.buffer(reserve=walks * 16 * (3 if sun == "grid" else 1))
@@ -214,6 +233,8 @@ class ProbeGrid:
             self._walk_defines["WALK_SUN_GRID"] = 1
         if self.environment_map:
             self._walk_defines["ENVIRONMENT_MAP"] = 1
+        if self.area_lights:
+            self._walk_defines["AREA_LIGHTS"] = 1
         self.walk_program = compute_program(ctx, "probe_walks.comp", self._walk_defines)
         # sun "grid": each walk's correction of the grid's sun, traced after the walks
         self.correction_program = (compute_program(ctx, "probe_sun_correction.comp",

@@ -366,10 +366,13 @@ class Renderer:
 
     def _sh_order(self) -> int:
         """The SH order the current scene's probes are baked with (probe_layout.resolve_sh_order;
-        guided directions need directions: "auto" gives no order 0 while they are on)."""
+        guided directions need directions, and so do surfaces (their irradiance is the clamped
+        cosine's bands 0 to 2 of the probes' light): "auto" gives no order 0 while either is
+        on)."""
         spec = self.scene.probes
         return resolve_sh_order(spec.sh_order, self.scene.anisotropy, spec.samples,
-                                directions=self._settings.guided_directions > 0.0)
+                                directions=(self._settings.guided_directions > 0.0
+                                            or self.scene.surface.gradient_factor > 0.0))
 
     def adaptive_planes(self, grid: tuple[int, int, int], box) -> tuple | None:
         """The adaptive layout's probe planes for this grid and box (cached; None: it came out
@@ -432,7 +435,8 @@ class Renderer:
                 plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
                 st.walk_sun, st.walk_adaptive, env_map, plan.planes, lobe) or (
                 g.sun_correction != st.walk_sun_correction) or g.medium != medium or (
-                g.shadow_tracking != st.shadow_tracking):
+                g.shadow_tracking != st.shadow_tracking) or (
+                g.area_lights != self.resources.area_lights_on):
             if g is not None:
                 g.release()
             self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
@@ -441,7 +445,8 @@ class Renderer:
                                         sun_correction=st.walk_sun_correction,
                                         environment_map=env_map, planes=plan.planes,
                                         sun_lobe=lobe, medium=medium,
-                                        shadow_tracking=st.shadow_tracking)
+                                        shadow_tracking=st.shadow_tracking,
+                                        area_lights=self.resources.area_lights_on)
         self.probe_grid.dispatch_target_ms = dispatch_target_ms(self)
         self.baked_level = self.bake_level()
         self.probe_grid.restart(seed, warm=warm)

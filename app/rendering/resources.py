@@ -9,6 +9,7 @@ from collections import OrderedDict
 import moderngl
 import numpy as np
 
+from ..area_lights import area_light_uniforms, check_area_lights
 from ..channels import ChannelTables, channel_uniforms, effective_channels, volume_inputs
 from ..clip_region import ClipRegion, clip_region, region_uniforms
 from ..environment_map import EnvironmentMap, load_scene_environment
@@ -134,6 +135,7 @@ class SceneResources:
         try:
             clip = clip_region(scene, new_volume.dims, new_volume.half_extent)
             channels = effective_channels(scene, new_volume.channel_count)
+            check_area_lights(scene, new_volume.half_extent)   # each light outside the box
         except BaseException:
             if fresh_texture is not None:
                 fresh_texture.release()
@@ -162,11 +164,13 @@ class SceneResources:
                 self.transfer_gpu.release()
             self.transfer_gpu = TransferTable(self.ctx, self.medium_table)
             changed.add("transfer")
-        if old is None or (scene.density_scale, scene.albedo, scene.anisotropy, scene.max_bounces) != (
-                old.density_scale, old.albedo, old.anisotropy, old.max_bounces):
+        if old is None or (scene.density_scale, scene.albedo, scene.anisotropy, scene.max_bounces,
+                           scene.surface) != (old.density_scale, old.albedo, old.anisotropy,
+                                              old.max_bounces, old.surface):
             changed.add("medium")
         if old is None or scene.light != old.light or scene.environment != old.environment or (
-                scene.environment_map != old.environment_map):
+                scene.environment_map != old.environment_map) or (
+                scene.area_lights != old.area_lights):
             changed.add("light")
         self._set_environment(environment)
         if old is None or scene.camera != old.camera:
@@ -236,6 +240,8 @@ class SceneResources:
         pass that includes lib/medium.glsl; medium_defines) and what its lights need in every
         pass that includes lib/lights.glsl."""
         defines = self.medium_defines()
+        if self.area_lights_on:
+            defines = {**defines, "AREA_LIGHTS": 1}   # lib/area_lights.glsl
         if self.environment is None:
             return defines
         return {**defines, "ENVIRONMENT_MAP": 1} if self.environment_sampling else {
@@ -243,8 +249,13 @@ class SceneResources:
 
     def medium_defines(self) -> dict:
         """What every pass that includes lib/medium.glsl is compiled with for this scene: nothing
-        for one channel (the one-channel code, unchanged), else MEDIUM_CHANNELS."""
+        for one channel (the one-channel code, unchanged), else MEDIUM_CHANNELS; and
+        HYBRID_SCATTERING where the scene's surface.gradient_factor is above 0."""
         defines = {} if self.tables is None else {"MEDIUM_CHANNELS": self.tables.count}
+        if self.scene.surface.gradient_factor > 0.0:
+            # hybrid scattering (glsl/lib/hybrid_scattering.glsl: the medium scatters by a
+            # surface BRDF too); k = 0 compiles every pass without it, as it was
+            defines = {**defines, "HYBRID_SCATTERING": 1}
         return {**defines, **self.volume_tex.defines()} if self.bricked else defines
 
     @property
@@ -335,7 +346,9 @@ class SceneResources:
         s = self.scene
         return (self.volume_version, s.transfer_function, s.channels, s.density_scale, s.albedo,
                 s.anisotropy,
-                s.light, s.environment, s.environment_map, s.max_bounces, s.probes.grid, s.probes.samples,
+                s.light, s.environment, s.environment_map, s.max_bounces, s.surface,
+                tuple(light for light in s.area_lights if light.enabled),
+                s.probes.grid, s.probes.samples,
                 s.probes.precision, self.clip)
 
     def uniforms(self) -> dict:
@@ -359,9 +372,28 @@ class SceneResources:
             "anisotropy": float(s.anisotropy),
             "max_path_steps": int(self.max_path_steps),
             **self.environment_uniforms(),
+            **self.surface_uniforms(),
+            **(area_light_uniforms(s) if self.area_lights_on else {}),
             **region_uniforms(self.clip),
             **(self.volume_tex.uniforms() if self.bricked else {}),
         }
+
+    @property
+    def area_lights_on(self) -> bool:
+        """Whether the scene has an area light on (AREA_LIGHTS)."""
+        return any(light.enabled for light in self.scene.area_lights)
+
+    def surface_uniforms(self) -> dict:
+        """glsl/lib/hybrid_scattering.glsl's uniforms (where k > 0; the passes without it have no
+        such uniforms): k, roughness, F0 and the gradient's step, one voxel per axis."""
+        surface = self.scene.surface
+        if not surface.gradient_factor > 0.0:
+            return {}
+        he, dims = self.volume.half_extent, self.volume.dims
+        return {"surface_gradient_factor": float(surface.gradient_factor),
+                "surface_roughness": float(surface.roughness),
+                "surface_specular": tuple(float(c) for c in surface.specular),
+                "surface_gradient_step": tuple(float(2.0 * he[i] / dims[i]) for i in range(3))}
 
     def environment_uniforms(self) -> dict:
         if self.environment is None:

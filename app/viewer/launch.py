@@ -59,6 +59,7 @@ def view_aspect(window: tuple[int, int]) -> float:
 def run_view(args: argparse.Namespace) -> int:
     from ..environment_map import load_scene_environment
     from ..framing import frame_default_camera
+    from ..clinical_presets import opening_scene
     from ..volume import load_scene_volume, reads_lazily, zarr_preview
     scene = scene_from_args(args)
     progressive = False
@@ -82,6 +83,7 @@ def run_view(args: argparse.Namespace) -> int:
         progressive = volume is not None
         if volume is None:
             volume = load_scene_volume(scene)
+            scene = opening_scene(scene, volume)   # a CT opens with its clinical preset
         scene = frame_default_camera(scene, volume.half_extent, view_aspect(args.window))
         load_scene_environment(scene)   # and an environment map (kept in its cache)
         for note in volume.notes:

@@ -161,3 +161,19 @@ def crop_overlay(v) -> None:
                         0, 1.5 * scale)
         v.widgets.note_point(f"handle {mark.name}", hx, hy)
     draw.pop_clip_rect()
+
+
+def probe_tooltip(v) -> None:
+    """The probe view's probe under the mouse: which it is and what it holds (viewer.py
+    hovered_probe), in a tooltip by the cursor."""
+    if v.state.probe_view == "off" or imgui.get_io().want_capture_mouse:
+        return
+    mouse = imgui.get_io().mouse_pos
+    hovered = v.hovered_probe((mouse.x, mouse.y))
+    v.last_hovered_probe = hovered
+    if hovered is None:
+        return
+    imgui.begin_tooltip()
+    for line in hovered["lines"]:
+        imgui.text(line)
+    imgui.end_tooltip()

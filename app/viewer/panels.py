@@ -97,6 +97,18 @@ def render_section(v) -> None:
     chosen = _radio_row(v, "Probe grid", PROBE_VIEWS, state.probe_view, "probes ")
     if chosen:
         state.probe_view = chosen
+    if state.probe_view != "off":
+        from .probe_view import PROBE_SLAB_AXES
+        chosen = _radio_row(v, "Probe slab", PROBE_SLAB_AXES, state.probe_slab_axis, "slab ")
+        if chosen:
+            state.probe_slab_axis = chosen
+        slab = v.probe_slab()
+        if slab is not None:
+            changed, value = imgui.slider_float("Slab position", state.probe_slab, 0.0, 1.0,
+                                                f"plane {slab[1]}")
+            ui.note("Slab position")
+            if changed:
+                state.probe_slab = float(value)
     drawn = v.probes_drawn()
     if drawn is not None:
         stride = f", every {drawn['stride']}th per axis" if drawn["stride"] > 1 else ""
@@ -273,7 +285,53 @@ def light_section(v) -> None:
     imgui.text_disabled(f"towards the sun: ({d[0]:.2f}, {d[1]:.2f}, {d[2]:.2f})")
     _colour_strength(v, "Sun", state.scene.light.irradiance, 100.0,
                      lambda rgb: state.edit(light=replace(state.scene.light, irradiance=rgb)))
+    area_light_section(v)
     environment_section(v)
+
+
+def area_light_section(v) -> None:
+    """The scene's area lights (docs/scene-format.md): each switched on or off, moved, resized,
+    its strength set; a sphere light added above the volume. A light that would reach into the
+    volume box is not moved there (the error panel says why)."""
+    from ..area_lights import check_area_lights
+    from ..scene_types import MAX_AREA_LIGHTS, AreaLightSpec, SceneError
+    state, ui = v.state, v.widgets
+    lights = list(state.scene.area_lights)
+
+    def apply(index: int, light) -> None:
+        edited = tuple(light if i == index else l for i, l in enumerate(lights)) \
+            if index < len(lights) else (*lights, light)
+        try:
+            check_area_lights(state.scene.replace(area_lights=edited), v.session.volume.half_extent)
+        except SceneError as exc:
+            state.error(str(exc))
+            return
+        state.edit(area_lights=edited)
+
+    for i, light in enumerate(lights):
+        label = f"{light.shape} light {i + 1}"
+        changed, on = imgui.checkbox(f"{label}##on{i}", light.enabled)
+        ui.note(f"{label} on")
+        if changed:
+            apply(i, replace(light, enabled=bool(on)))
+        changed, pos = imgui.drag_float3(f"Position##light{i}", list(light.position), 0.01)
+        ui.note(f"{label} position")
+        if changed:
+            apply(i, replace(light, position=tuple(float(c) for c in pos)))
+        if light.shape == "sphere":
+            changed, size = imgui.slider_float(f"Radius##light{i}", float(light.size), 0.01, 2.0)
+            if changed:
+                apply(i, replace(light, size=float(size)))
+        changed, strength = imgui.slider_float(f"Strength##light{i}", float(light.strength), 0.0,
+                                               1000.0, "%.2f", imgui.SliderFlags_.logarithmic)
+        ui.note(f"{label} strength")
+        if changed:
+            apply(i, replace(light, strength=float(strength)))
+    if len(lights) < MAX_AREA_LIGHTS and imgui.button("Add a sphere light"):
+        sun = np.asarray(state.scene.light.direction, np.float64)
+        apply(len(lights), AreaLightSpec(shape="sphere", position=tuple(float(c) for c in 1.2 * sun),
+                                         size=0.15, strength=20.0))
+    ui.note("Add a sphere light")
 
 
 def environment_section(v) -> None:

@@ -5,7 +5,12 @@ probe_sphere.frag), instanced; and the volume box's outline.
 Readable at any grid: only probes whose cell holds visible medium are drawn (what the transfer
 function makes visible; all of them when nothing is), and on grids with more of those than
 MAX_SPHERES every stride-th probe along each axis, the spheres growing with the stride, so a
-32^3 grid over an unseen volume is a lattice through the visible part, not a wall."""
+32^3 grid over an unseen volume is a lattice through the visible part, not a wall.
+
+A slab (the viewer's Probe slab: an axis and a plane the user moves) draws one plane of probes,
+the visible ones, each sphere sized by the probe spacing (RADIUS_PER_SPACING of it): a 64^3 or
+128^3 grid reads as a sheet of probes through the volume, one plane at a time. The probe under
+the mouse (probe_under) is named with what it holds (describe_probe)."""
 from __future__ import annotations
 
 import itertools
@@ -79,22 +84,92 @@ def visible_cells(grid: tuple[int, int, int], box, volume, alpha: np.ndarray,
     return out
 
 
+# The probe view's slab: "all" draws the whole grid (as a lattice), "x", "y" or "z" one plane of
+# probes across that axis.
+PROBE_SLAB_AXES = ("all", "x", "y", "z")
+
+
+def slab_plane(grid: tuple[int, int, int], axis: str, fraction: float) -> int:
+    """The plane of probes across `axis` at `fraction` (0 to 1) of the probe box: its index."""
+    n = grid["xyz".index(axis)]
+    return int(min(max(int(float(fraction) * n), 0), n - 1))
+
+
 def select_probes(grid: tuple[int, int, int], visible: np.ndarray,
-                  max_spheres: int = MAX_SPHERES) -> ProbeSelection:
+                  max_spheres: int = MAX_SPHERES,
+                  slab: tuple[str, int] | None = None) -> ProbeSelection:
     """The probes to draw: the visible ones (all when none is), every stride-th per axis with the
-    smallest stride that leaves at most max_spheres."""
+    smallest stride that leaves at most max_spheres. `slab` (axis, plane index): only the probes of
+    that plane (its visible ones; none where the plane holds no visible medium)."""
     nx, ny, nz = grid
     total = nx * ny * nz
     shown = visible if visible.any() else np.ones_like(visible)
     k, j, i = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    if slab is not None:
+        axis, plane = slab
+        shown = shown & ({"x": i, "y": j, "z": k}[axis] == int(plane))
     stride = 1
     while True:
         o = stride // 2
-        keep = shown & (i % stride == o) & (j % stride == o) & (k % stride == o)
+        along = [(i, 0), (j, 1), (k, 2)]
+        keep = shown.copy()
+        for index, a in along:
+            if slab is None or "xyz"[a] != slab[0]:   # a slab's own axis is not thinned
+                keep &= index % stride == o
         if keep.sum() <= max_spheres or stride >= max(grid):
             break
         stride += 1
     return ProbeSelection(np.flatnonzero(keep.ravel()), stride, int(visible.sum()), total)
+
+
+def probe_under(pixel, centres: np.ndarray, matrix: np.ndarray, width: int, height: int,
+                radius: float, eye) -> int | None:
+    """Of the probes at world `centres` (n, 3) drawn as spheres of world `radius`, the one under
+    image point `pixel` (x, y in the render's pixels, top-left origin): the nearest to the eye of
+    those whose sphere's image disk holds the point; None where none does."""
+    from .orbit import project
+    if len(centres) == 0:
+        return None
+    centres = np.asarray(centres, np.float64)
+    at = project(matrix, centres, width, height)
+    distance = np.linalg.norm(centres - np.asarray(eye, np.float64), axis=1)
+    # each sphere's image disk: its centre moved by the radius along the view's up axis (row 1
+    # of the view-projection matrix is the projection's scale times the camera's up)
+    up = np.asarray(matrix, np.float64)[1, :3]
+    up = up / max(np.linalg.norm(up), 1e-30)
+    edge = project(matrix, centres + radius * up, width, height)
+    with np.errstate(invalid="ignore"):
+        disk = np.hypot(*(edge - at).T)
+        off = np.hypot(at[:, 0] - pixel[0], at[:, 1] - pixel[1])
+        hits = np.flatnonzero(np.isfinite(off) & (off <= np.maximum(disk, 2.0)))
+    if len(hits) == 0:
+        return None
+    return int(hits[np.argmin(distance[hits])])
+
+
+def describe_probe(index: int, grid: tuple[int, int, int], centre, channels: np.ndarray,
+                   sh_order: int) -> list[str]:
+    """What a probe holds, in words: its place, the mean radiance arriving (L00 / sqrt(4 pi)), the
+    direction most light arrives from (band 1, where the order keeps it) and the sun's
+    transmittance to it. `channels`: its row of ProbeGrid.coefficients() (colour packing)."""
+    from ..rendering.probe_layout import unpack_coefficients
+    nx, ny, nz = grid
+    i, j, k = index % nx, (index // nx) % ny, index // (nx * ny)
+    coeffs, sun = unpack_coefficients(np.asarray(channels, np.float64), sh_order)
+    mean = coeffs[0] / np.sqrt(4.0 * np.pi)
+    lines = [f"probe ({i}, {j}, {k}) of {nx} x {ny} x {nz} at "
+             f"({', '.join(f'{c:.3f}' for c in np.asarray(centre, np.float64))})",
+             "mean radiance arriving: " + " ".join(f"{c:.4g}" for c in mean)]
+    if sh_order >= 1 and len(coeffs) >= 4:
+        lum = coeffs[:4] @ np.array([0.2126, 0.7152, 0.0722])
+        d = np.array([lum[3], lum[1], lum[2]])   # Y11 ~ x, Y1-1 ~ y, Y10 ~ z
+        n = np.linalg.norm(d)
+        if n > 0:
+            d = d / n
+            lines.append(f"most light from ({d[0]:.2f}, {d[1]:.2f}, {d[2]:.2f}), "
+                         f"{n / max(abs(lum[0]), 1e-30) * np.sqrt(3.0):.0%} of the mean")
+    lines.append(f"sun transmittance: {float(sun):.4g}")
+    return lines
 
 
 def uv_sphere(stacks: int = SPHERE_STACKS, slices: int = SPHERE_SLICES) -> tuple[np.ndarray, np.ndarray]:
@@ -154,7 +229,10 @@ class ProbeSpheres:
         self.defines = None
         self.program = self.vao = None
         self.selection: ProbeSelection | None = None
+        self.centres_drawn = np.zeros((0, 3))   # world centres of the probes drawn
+        self.radius = 0.0                       # the spheres' world radius as last drawn
         self._key = None
+        self._visible_key, self._visible = None, None
         self._build(defines or {"PROBE_SH_ORDER": 2})
 
     def _build(self, defines: dict) -> None:
@@ -175,19 +253,24 @@ class ProbeSpheres:
                                                         (self.centres, "3f/i", "instance_centre")],
                                          index_buffer=self.ibo, index_element_size=4)
 
-    def select(self, grid: ProbeGrid, resources: SceneResources) -> ProbeSelection:
-        """The probes drawn (cached until the grid, the volume or the transfer function changes)."""
+    def select(self, grid: ProbeGrid, resources: SceneResources,
+               slab: tuple[str, int] | None = None) -> ProbeSelection:
+        """The probes drawn (cached until the grid, the volume, the transfer function or the
+        slab changes); `slab` (axis, plane index): one plane of them."""
         scene = resources.scene
         key = (grid.grid, grid.box, grid.planes, resources.volume_version,
-               scene.transfer_function, scene.channels, scene.density_scale > 0)
+               scene.transfer_function, scene.channels, scene.density_scale > 0, slab)
         if key != self._key:
-            alpha = resources.table[:, 3] if resources.tables is None else resources.tables
-            visible = visible_cells(grid.grid, grid.box, resources.volume, alpha,
-                                    scene.density_scale, grid.planes)
-            self.selection = select_probes(grid.grid, visible)
+            if self._visible_key != key[:-1]:
+                alpha = resources.table[:, 3] if resources.tables is None else resources.tables
+                self._visible = visible_cells(grid.grid, grid.box, resources.volume, alpha,
+                                              scene.density_scale, grid.planes)
+                self._visible_key = key[:-1]
+            self.selection = select_probes(grid.grid, self._visible, slab=slab)
             centres = probe_centres(grid.grid, resources.volume.half_extent, grid.box,
                                     grid.planes)
-            data = centres[self.selection.indices].astype(np.float32).tobytes()
+            self.centres_drawn = centres[self.selection.indices]
+            data = self.centres_drawn.astype(np.float32).tobytes()
             if len(data) > self.centres.size:
                 self.centres.release()
                 self.centres = self.ctx.buffer(data, dynamic=True)
@@ -198,11 +281,11 @@ class ProbeSpheres:
         return self.selection
 
     def draw(self, matrix: np.ndarray, grid: ProbeGrid, resources: SceneResources,
-             exposure: float) -> None:
+             exposure: float, slab: tuple[str, int] | None = None) -> None:
         """Draws the spheres into the bound framebuffer and viewport, depth-tested among
         themselves (the caller clears depth)."""
         self._build(grid.defines())
-        selection = self.select(grid, resources)
+        selection = self.select(grid, resources, slab)
         if len(selection.indices) == 0:
             return
         resources.bind()
@@ -211,6 +294,7 @@ class ProbeSpheres:
                                       resources))
         he = 0.5 * np.asarray(uniforms["probe_box_size"])   # the probe box's half size
         radius = sphere_radius(grid.grid, he, grid.planes) * selection.stride
+        self.radius = radius
         uniforms.update({"sphere_radius": radius, "exposure": float(exposure)})
         grid.bind()
         set_uniforms(self.program, uniforms)

@@ -24,6 +24,8 @@ class ViewerState:
     display: str = "image"
     split_position: float = 0.5            # divider, as a fraction of the view's width
     probe_view: str = "off"
+    probe_slab_axis: str = "all"           # the probe view's slab: all, or one plane across x/y/z
+    probe_slab: float = 0.5                # where that plane is, 0 to 1 across the probe box
     show_box: bool = False
     exposure: float = 1.0
     max_samples: int = 1024                # accumulation stops here (per pixel)
@@ -299,7 +301,16 @@ class ViewerState:
                 changes["rgba"] = rgba_with_opacity(tf, changes.pop("opacity"))
         if "colormap" in changes:      # a colormap replaces colour points
             changes.setdefault("colors", None)
+        changes.setdefault("preset", None)   # an edited preset is a preset no longer
         self.set_edited_transfer(replace(tf, **changes))
+
+    def set_clinical_preset(self, name: str, domain: tuple[float, float]) -> None:
+        """The scene's transfer function becomes the clinical preset `name` (app/clinical_presets.py),
+        placed by `domain`, the data values the volume maps to densities 0 and 1."""
+        from ..clinical_presets import with_preset
+        if self.scene.channels:
+            raise ValueError("clinical presets are for one-channel CT volumes")
+        self.scene = with_preset(self.scene, name, domain)
 
     def cycle_colormap(self, step: int = 1) -> None:
         from ..transfer import COLORMAPS, ALIASES

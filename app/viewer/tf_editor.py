@@ -117,6 +117,8 @@ def transfer_editor(v) -> None:
         imgui.text_wrapped(f"The scene gives an explicit RGBA table ({len(tf.rgba)} rows): editing the "
                            "curve rewrites its opacity and keeps its colours; choosing a colormap "
                            "replaces its colours and keeps the curve.")
+    if not state.scene.channels:
+        _clinical_presets(v)
     current = ALIASES.get(tf.colormap, tf.colormap)
     names = list(PRESETS) if tf.colors is None else ["colour points", *PRESETS]
     shown = current if tf.colors is None else "colour points"
@@ -137,8 +139,28 @@ def transfer_editor(v) -> None:
     _opacity_editor(v, width)
 
 
+def _clinical_presets(v) -> None:
+    """The clinical CT presets (app/clinical_presets.py): picking one replaces the colours and
+    opacity, placed by the volume's window; data not in Hounsfield units says so instead."""
+    from ..clinical_presets import CLINICAL_PRESETS, hounsfield_problem
+    state, ui = v.state, v.widgets
+    names = ["(none)", *CLINICAL_PRESETS]
+    current = state.transfer_function.preset
+    changed, index = imgui.combo("CT preset", names.index(current) if current in names else 0,
+                                 names)
+    ui.note("CT preset")
+    if changed and index > 0:
+        volume = v.session.volume
+        problem = hounsfield_problem(volume)
+        if problem is not None:
+            state.error(f"the clinical preset {names[index]} is meant for Hounsfield units, but "
+                        f"{problem}")
+            return
+        state.set_clinical_preset(names[index], state.scene.volume.domain or volume.value_range)
+
+
 def medium_sliders(v) -> None:
-    """density_scale, albedo and anisotropy (one each, whatever the channels)."""
+    """density_scale, albedo and anisotropy (one each, whatever the channels), and the surface."""
     state, ui = v.state, v.widgets
     changed, value = imgui.slider_float("Density scale", state.scene.density_scale, 0.1, 10000.0, "%.1f",
                                         imgui.SliderFlags_.logarithmic)
@@ -153,6 +175,30 @@ def medium_sliders(v) -> None:
     ui.note("Anisotropy g")
     if changed:
         state.edit(anisotropy=float(value))
+    surface_sliders(v)
+
+
+def surface_sliders(v) -> None:
+    """The surfaces inside the volume (the scene's surface; glsl/lib/hybrid_scattering.glsl):
+    gradient factor k (0: the phase function alone), roughness and a grey specular colour."""
+    from ..scene_types import MAX_GRADIENT_FACTOR, MIN_ROUGHNESS
+    state, ui = v.state, v.widgets
+    surface = state.scene.surface
+    changed, value = imgui.slider_float("Surface k", surface.gradient_factor, 0.0,
+                                        min(100.0, MAX_GRADIENT_FACTOR), "%.3f",
+                                        imgui.SliderFlags_.logarithmic)
+    ui.note("Surface k")
+    if changed:
+        state.edit(surface=replace(surface, gradient_factor=max(float(value), 0.0)))
+    if surface.gradient_factor > 0.0:
+        changed, value = imgui.slider_float("Roughness", surface.roughness, MIN_ROUGHNESS, 1.0)
+        ui.note("Roughness")
+        if changed:
+            state.edit(surface=replace(surface, roughness=float(value)))
+        changed, value = imgui.slider_float("Specular", max(surface.specular), 0.0, 1.0)
+        ui.note("Specular")
+        if changed:
+            state.edit(surface=replace(surface, specular=(float(value),) * 3))
 
 
 def _transfer_file(v) -> None:

@@ -19,12 +19,14 @@ from ..scene import SceneError, scene_to_dict
 from ..environment_map import load_scene_environment
 from ..channels import volume_inputs
 from ..rendering.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
+from ..clinical_presets import opening_scene
 from ..volume import VolumeError, load_scene_volume, reads_lazily, zarr_preview
 from . import layout, orbit, overlays, panels
 from .display import BACKGROUND, DisplayPass, ErrorMeter
 from .files import FileDialogs, builtin_scene, datasets, scene_for_path
 from . import crop_handles
-from .probe_view import BoxOutline, ProbeSpheres, probe_centres
+from .probe_view import (BoxOutline, ProbeSpheres, describe_probe, probe_centres, probe_under,
+                         slab_plane)
 from .recorder import MovieRecorder
 from .session import FrameTimes, RenderSession
 from .state import ViewerState
@@ -69,6 +71,9 @@ class Viewer:
         self.timer = GpuTimer(ctx)
         self._passes: dict[str, object] = {}     # display, spheres, box: built on first use
         self._broken: set[str] = set()           # passes whose shaders failed (errors shown)
+        # the probes' values the hovered probe's description reads (once per bake pass)
+        self._probe_values, self._probe_values_key = None, None
+        self.last_hovered_probe: dict | None = None   # the probe under the mouse last frame
         self._halted_scene = None                # the scene whose rendering raised, until it changes
         self._pending_volume = None
         self._pending_placed = None              # (shown, texture or pool) of _pending_volume
@@ -228,6 +233,8 @@ class Viewer:
             preview = (zarr_preview(scene, memory_bytes=self.volume_memory_bytes)
                        if reads_lazily(scene) else None)
             volume = preview if preview is not None else load_scene_volume(scene)
+            if preview is None:
+                scene = opening_scene(scene, volume)   # a CT opens with its clinical preset
         except RECOVERABLE as exc:
             self.state.error(could_not_open(path, exc))
             return False
@@ -507,7 +514,8 @@ class Viewer:
             spheres = self._pass("spheres", ProbeSpheres)
             if spheres is not None:
                 self.ctx.viewport = rect
-                spheres.draw(matrix, grid, session.renderer.resources, state.exposure)
+                spheres.draw(matrix, grid, session.renderer.resources, state.exposure,
+                             self.probe_slab())
         if state.show_box:
             box = self._pass("box", BoxOutline)
             if box is not None:
@@ -549,6 +557,7 @@ class Viewer:
             panels.sidebar(self)
         overlays.view_labels(self)
         overlays.crop_overlay(self)
+        overlays.probe_tooltip(self)
         overlays.help_window(self)
         overlays.file_browser(self)
         overlays.error_window(self)
@@ -567,6 +576,41 @@ class Viewer:
         top = self.framebuffer_size[1] - rh
         return [[x0 + px / w * rw, top + py / h * rh] for px, py in pixels.tolist()]
 
+    def probe_slab(self) -> tuple[str, int] | None:
+        """The probe view's slab (axis, plane index), None for the whole grid."""
+        grid = self.session.probe_grid
+        if self.state.probe_slab_axis == "all" or grid is None:
+            return None
+        axis = self.state.probe_slab_axis
+        return axis, slab_plane(grid.grid, axis, self.state.probe_slab)
+
+    def hovered_probe(self, mouse) -> dict | None:
+        """The probe drawn under the mouse (window coordinates) and what it holds: its index and
+        describe_probe's lines; None where no drawn probe is there. The probes' values are read
+        back once per bake pass."""
+        spheres = self._passes.get("spheres")
+        grid = self.session.probe_grid
+        if (self.state.probe_view == "off" or spheres is None or spheres.selection is None
+                or grid is None or len(spheres.centres_drawn) == 0):
+            return None
+        x, y, rw, rh = self.view_rect_window()
+        if not (x <= mouse[0] < x + rw and y <= mouse[1] < y + rh):
+            return None
+        w, h = self.session.size
+        pixel = ((mouse[0] - x) / rw * w, (mouse[1] - y) / rh * h)
+        hit = probe_under(pixel, spheres.centres_drawn, self.view_projection(), w, h,
+                          spheres.radius, self.state.scene.camera.eye)
+        if hit is None:
+            return None
+        index = int(spheres.selection.indices[hit])
+        key = (id(grid), grid.passes_done)
+        if self._probe_values_key != key:
+            self._probe_values = grid.coefficients().reshape(grid.count, -1)
+            self._probe_values_key = key
+        return {"index": index,
+                "lines": describe_probe(index, grid.grid, spheres.centres_drawn[hit],
+                                        self._probe_values[index], grid.sh_order)}
+
     def probes_drawn(self) -> dict | None:
         """Which probes the probe-grid view draws (ProbeSelection), None while it draws none."""
         spheres = self._passes.get("spheres")
@@ -574,7 +618,8 @@ class Viewer:
         if self.state.probe_view == "off" or selection is None:
             return None
         return {"indices": selection.indices.tolist(), "stride": selection.stride,
-                "visible": selection.visible, "total": selection.total}
+                "visible": selection.visible, "total": selection.total,
+                "slab": list(self.probe_slab()) if self.probe_slab() is not None else None}
 
     def snapshot(self) -> dict:
         """The state a test asserts on, JSON-ready."""
@@ -608,6 +653,7 @@ class Viewer:
             "rel_rmse": self.error_meter.value if s.display == "error" else None,
             "probe_pixels": self.probe_pixels() if s.probe_view != "off" else [],
             "probes_drawn": self.probes_drawn(),
+            "probe_hovered": self.last_hovered_probe,
             "probe_coefficients": (grid.coefficients().reshape(grid.count, -1).tolist()
                                    if grid is not None and grid.count <= SNAPSHOT_MAX_PROBES
                                    and s.probe_view != "off" else None),

@@ -32,8 +32,30 @@
 // (lib/guided_directions.glsl) and the throughput takes its weight phase / pdf. With a map, "the
 // phase function's pdf" of the MIS above is then that mixture's pdf, on both sides: p.phase_pdf
 // of the direction drawn (escapes) and the mixture evaluated at the map sample's direction.
+//
+// HYBRID_SCATTERING (the scene's surface.gradient_factor k > 0; lib/hybrid_scattering.glsl): each
+// real scattering event is a surface's with probability 1 - exp(-k |grad A|) (the path's status is
+// then PATH_ACTIVE_SURFACE until its next direction is drawn), and the event's kernel is the
+// surface BRDF times the cosine instead of the phase function, in the sun's estimate, the map's
+// sample and its MIS, the next direction (drawn from the BRDF, weighted K / pdf; never guided) and,
+// at a probe renderer's gather event, the probes' radiance (diffuse irradiance from the SH and a
+// specular term). Without it the code below is as it was, unchanged.
 // the sun's shadow ray (ratio or residual ratio tracking)
 #include "lib/sun_shadow.glsl"
+#if defined(HYBRID_SCATTERING)
+#include "lib/hybrid_scattering.glsl"
+#endif
+//
+// AREA_LIGHTS (the scene has area lights on; lib/area_lights.glsl): each scattering event also
+// samples a point on a light (a shadow ray to the box's boundary after the sun's and the map's:
+// the lights lie outside the box), weighted by the power heuristic against the event's own
+// sampling's pdf (phase, BRDF or guided mixture); a path that leaves the box and meets a light adds
+// its radiance weighted the other way (and not the environment behind it); a camera ray that meets
+// a light before the box sees the light. The probe renderers take no light samples before their
+// gather (a light a path meets counts in full), as with the map. Without it the code is as it was.
+#if defined(AREA_LIGHTS)
+#include "lib/area_lights.glsl"
+#endif
 
 uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
@@ -70,10 +92,23 @@ float mis_power(float a, float b)
 }
 #endif
 
+#if defined(AREA_LIGHTS) && !defined(ENVIRONMENT_MAP)
+// The power heuristic's weight of a strategy with pdf a against one with pdf b.
+float mis_power(float a, float b)
+{
+    float a2 = a * a, b2 = b * b;
+    return a2 + b2 > 0.0 ? a2 / (a2 + b2) : 0.0;
+}
+#endif
+
 // Steps a path step keeps back from its tracking for the work after it that loops: guided
 // directions' tables (lib/guided_directions.glsl), one at the event's map sample and one for its
 // next direction; charged as they run.
-#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS && defined(ENVIRONMENT_MAP)
+#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS && defined(ENVIRONMENT_MAP) && defined(AREA_LIGHTS)
+const int PATH_STEP_KEPT_BACK = 3 * GUIDED_DIRECTION_TABLE_STEPS;
+#elif defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS && defined(AREA_LIGHTS)
+const int PATH_STEP_KEPT_BACK = 2 * GUIDED_DIRECTION_TABLE_STEPS;
+#elif defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS && defined(ENVIRONMENT_MAP)
 const int PATH_STEP_KEPT_BACK = 2 * GUIDED_DIRECTION_TABLE_STEPS;
 #elif defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS
 const int PATH_STEP_KEPT_BACK = GUIDED_DIRECTION_TABLE_STEPS;
@@ -95,6 +130,9 @@ const int PATH_STEP_KEPT_BACK = 0;
 
 const int PATH_IDLE = 0;
 const int PATH_ACTIVE = 1;
+#if defined(HYBRID_SCATTERING)
+const int PATH_ACTIVE_SURFACE = 2;   // active, at an event the surface BRDF scatters (p.x, p.w)
+#endif
 
 const int PATH_DONE = 0;
 const int PATH_SUSPENDED = 1;
@@ -133,6 +171,12 @@ struct PathState {
     vec3 env_weight;    // its radiance x phase x MIS weight / pdf, to be times its transmittance
     int env_pending;    // 1 while the map sample's shadow ray at x is unfinished
 #endif
+#if defined(AREA_LIGHTS)   // 32 bytes more
+    vec3 light_w;       // the area light sample's direction at x
+    int light_pending;  // its shadow ray: 2 not begun, 1 under way, 0 none
+    vec3 light_weight;  // its radiance x kernel x MIS weight / pdf, to be times its transmittance
+    float light_direction_pdf;  // pdf of the sampling that chose w (0: a light met counts in full)
+#endif
 };
 
 void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
@@ -163,7 +207,41 @@ void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
     p.env_weight = vec3(0.0);
     p.env_pending = 0;
 #endif
+#if defined(AREA_LIGHTS)
+    p.light_w = vec3(0.0);
+    p.light_pending = 0;
+    p.light_weight = vec3(0.0);
+    p.light_direction_pdf = 0.0;
+#endif
 }
+
+#if defined(HYBRID_SCATTERING)
+// The opacity gradient at the path's event, kept from its flight for the rest of the step (the
+// event's choice, the normal for its lights and its next direction: 6 fetches an event, not 18);
+// a step that resumes a shadow ray cut in an earlier dispatch computes it again.
+vec3 path_event_gradient = vec3(0.0);
+bool path_event_gradient_known = false;
+
+// The surface normal at the path's event, facing back along its arriving direction p.w.
+vec3 path_surface_normal(PathState p)
+{
+    if (!path_event_gradient_known) {
+        path_event_gradient = opacity_gradient(p.x);
+        path_event_gradient_known = true;
+    }
+    return surface_normal(path_event_gradient, -p.w);
+}
+
+// The event's kernel towards the light direction l (unit, towards the light): the phase function,
+// or at a surface event the BRDF times the cosine (lib/hybrid_scattering.glsl).
+vec3 path_event_kernel(PathState p, vec3 l)
+{
+    if (p.status == PATH_ACTIVE_SURFACE)
+        return surface_kernel(path_surface_normal(p), -p.w, l, surface_roughness,
+                              surface_specular);
+    return vec3(phase_hg(dot(l, p.w), anisotropy));
+}
+#endif
 
 #if defined(ENVIRONMENT_MAP)
 // The map's radiance for a path that leaves the box along p.w: weighted against the map's own
@@ -188,6 +266,33 @@ const int STEP_SHADOW_CUT = 3;     // steps ran out in a shadow ray; its progres
 // ray's transmittance).
 vec3 path_escape(PathState p)
 {
+#if defined(AREA_LIGHTS)
+    // A light met on the way out hides the environment behind it.
+    float t_light;
+    int light = area_light_first_hit(p.x, p.w, t_light);
+    if (light >= 0) {
+#if defined(PROBE_WALKS)
+        // A walk that meets a light before it scatters adds nothing, as it adds no direct sun:
+        // the probes hold the light that scattered on its way, and their readers add the direct
+        // part themselves (`probes`: a light sample at its gather event).
+        if (p.bounce == 0)
+            return vec3(0.0);
+#endif
+        vec3 le = area_light_emitted(light, p.w);
+#if defined(GUIDED_RESIDUAL)
+        if (p.bounce == 0) {   // level 0 holds the environment through this ray: taken back out
+#if defined(ENVIRONMENT_MAP)
+            return p.throughput * (le - environment_radiance(p.w));
+#else
+            return p.throughput * (le - environment);
+#endif
+        }
+#endif
+        float weight = p.light_direction_pdf > 0.0
+            ? mis_power(p.light_direction_pdf, area_light_pdf(light, p.x, p.w, t_light)) : 1.0;
+        return p.throughput * le * weight;
+    }
+#endif
 #if defined(GUIDED_RESIDUAL)
     if (p.bounce == 0)
         return vec3(0.0);
@@ -209,6 +314,16 @@ int path_flight(inout PathState p, inout int steps_left)
         p.radiance += path_escape(p);
         return STEP_DONE;
     }
+#if defined(AREA_LIGHTS)
+    if (p.bounce == 0 && t0 > 0.0) {   // a camera ray meets a light before it reaches the box
+        float t_light;
+        int light = area_light_first_hit(p.x, p.w, t_light);
+        if (light >= 0 && t_light < t0) {
+            p.radiance += p.throughput * area_light_emitted(light, p.w);
+            return STEP_DONE;
+        }
+    }
+#endif
     float t;
 #if defined(GUIDED_RESIDUAL) && GUIDED_DISTANCES
     // `guided`'s free-flight decisions (lib/guided_distances.glsl) on flights after a scattering
@@ -238,6 +353,14 @@ int path_flight(inout PathState p, inout int steps_left)
     p.throughput *= albedo_at(p.x);
     if (all(equal(p.throughput, vec3(0.0))))
         return STEP_DONE;
+#if defined(HYBRID_SCATTERING)
+    // A surface's event with probability 1 - exp(-k |grad A|) (lib/hybrid_scattering.glsl).
+    p.status = PATH_ACTIVE;
+    path_event_gradient = opacity_gradient(p.x);
+    path_event_gradient_known = true;
+    if (rng_next(p.rng) < surface_probability(path_event_gradient, surface_gradient_factor))
+        p.status = PATH_ACTIVE_SURFACE;
+#endif
 #if defined(GUIDED_RESIDUAL)
     // `guided`'s level 1: minus the single-collision estimate of level 0's F at this first event
     // (the same random numbers: the same collision), so the sample is the path's estimate minus
@@ -253,10 +376,47 @@ int path_flight(inout PathState p, inout int steps_left)
     // transmittance (probes-only). The path ends there.
     if (p.bounce >= probe_gather_event) {
         float probe_sun_transmittance;
+#if defined(HYBRID_SCATTERING)
+        if (p.status == PATH_ACTIVE_SURFACE) {
+            vec3 coeffs[SH_COUNT];
+            probe_fetch(p.x, coeffs, probe_sun_transmittance);
+            p.radiance += p.throughput * surface_probe_radiance(coeffs, path_surface_normal(p),
+                                                                -p.w, surface_specular);
+        } else {
+#endif
         p.radiance += p.throughput * probe_inscattered(p.x, p.w, probe_sun_transmittance);
+#if defined(HYBRID_SCATTERING)
+        }
+#endif
+#if defined(AREA_LIGHTS) && PROBE_LIGHTING == 1
+        // The probes hold no direct light from the area lights (PROBE_WALKS): a light sample
+        // here adds it, in full (the path ends here, so no path of its own meets the light).
+        {
+            float light_pdf;
+            vec3 light_le;
+            float u0 = rng_next(p.rng), u1 = rng_next(p.rng), u2 = rng_next(p.rng);
+            vec3 light_w = area_light_sample(p.x, u0, u1, u2, light_le, light_pdf);
+            p.light_pending = 0;
+            if (light_pdf > 0.0 && any(greaterThan(light_le, vec3(0.0)))) {
+#if defined(HYBRID_SCATTERING)
+                vec3 kernel = path_event_kernel(p, light_w);
+#else
+                vec3 kernel = vec3(phase_hg(dot(light_w, p.w), anisotropy));
+#endif
+                p.light_w = light_w;
+                p.light_weight = light_le * kernel / light_pdf;
+                p.light_pending = 2;
+            }
+        }
+#endif
 #if PROBE_LIGHTING == 2
+#if defined(HYBRID_SCATTERING)
+        p.radiance += p.throughput * sun_irradiance
+                      * (probe_sun_transmittance * path_event_kernel(p, sun_direction));
+#else
         p.radiance += p.throughput * sun_irradiance
                       * (probe_sun_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy));
+#endif
         return STEP_DONE;
 #endif
     }
@@ -268,6 +428,23 @@ int path_flight(inout PathState p, inout int steps_left)
         vec3 env_w = environment_sample(rng_next(p.rng), rng_next(p.rng), env_pdf);
         steps_left -= ENVIRONMENT_SAMPLE_STEPS;
         p.env_pending = 0;
+#if defined(HYBRID_SCATTERING)
+        if (env_pdf > 0.0 && p.status == PATH_ACTIVE_SURFACE) {
+            // a surface's event: the BRDF's kernel, weighted against its own sampling's pdf
+            vec3 n = path_surface_normal(p);
+            vec3 le = environment_radiance(env_w)
+                      * surface_kernel(n, -p.w, env_w, surface_roughness, surface_specular);
+            if (any(greaterThan(le, vec3(0.0)))) {
+                float direction_pdf = surface_pdf(n, -p.w, env_w, surface_roughness,
+                                                  surface_specular);
+                p.env_w = env_w;
+                p.env_weight = le * (mis_power(env_pdf, direction_pdf) / env_pdf);
+                p.env_pending = 1;
+                p.shadow_t = -1.0;
+                p.shadow_transmittance = 1.0;
+            }
+        } else
+#endif
         if (env_pdf > 0.0) {
             float phase = phase_hg(dot(env_w, p.w), anisotropy);
             vec3 le = environment_radiance(env_w);
@@ -292,6 +469,50 @@ int path_flight(inout PathState p, inout int steps_left)
         }
     }
 #endif
+#if defined(AREA_LIGHTS) && !defined(PROBE_LIGHTING)
+    // A direction towards an area light (lib/area_lights.glsl); its shadow ray runs after the
+    // sun's and the map's, weighted against the pdf with which path_step would draw it.
+    {
+        float light_pdf;
+        vec3 light_le;
+        float u0 = rng_next(p.rng), u1 = rng_next(p.rng), u2 = rng_next(p.rng);
+        vec3 light_w = area_light_sample(p.x, u0, u1, u2, light_le, light_pdf);
+        p.light_pending = 0;
+        if (light_pdf > 0.0 && any(greaterThan(light_le, vec3(0.0)))) {
+            vec3 kernel;
+            float direction_pdf;
+#if defined(HYBRID_SCATTERING)
+            if (p.status == PATH_ACTIVE_SURFACE) {
+                vec3 n = path_surface_normal(p);
+                kernel = surface_kernel(n, -p.w, light_w, surface_roughness, surface_specular);
+                direction_pdf = surface_pdf(n, -p.w, light_w, surface_roughness,
+                                            surface_specular);
+            } else
+#endif
+            {
+                float phase = phase_hg(dot(light_w, p.w), anisotropy);
+                kernel = vec3(phase);
+                direction_pdf = phase;
+#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS
+                if (p.bounce < max_bounces) {   // (path_step's condition for guiding)
+                    vec3 coeffs[SH_COUNT];
+                    float probe_sun;
+                    probe_fetch(p.x, coeffs, probe_sun);
+                    direction_pdf *= guided_direction_density_at(coeffs, p.w, anisotropy,
+                                                                 light_w);
+                    steps_left -= GUIDED_DIRECTION_TABLE_STEPS;
+                }
+#endif
+            }
+            if (any(greaterThan(kernel, vec3(0.0)))) {
+                p.light_w = light_w;
+                p.light_weight = light_le * kernel
+                                 * (mis_power(light_pdf, direction_pdf) / light_pdf);
+                p.light_pending = 2;
+            }
+        }
+    }
+#endif
 #if defined(WALK_SUN_GRID)
     // The sun's transmittance from the baked light grid (lib/light_grid.glsl), corrected without
     // bias by a shadow ray traced after the walk (glsl/probe_sun_correction.comp). The grid's
@@ -310,7 +531,11 @@ int path_flight(inout PathState p, inout int steps_left)
         float sun_phase = phase_hg(dot(sun_direction, p.w), anisotropy);
         float tau = light_grid_optical_depth(p.x);
         float grid = exp(-tau);
+#if defined(HYBRID_SCATTERING)
+        vec3 c = p.throughput * sun_irradiance * path_event_kernel(p, sun_direction);
+#else
         vec3 c = p.throughput * sun_irradiance * sun_phase;
+#endif
         p.radiance += c * grid;
         if (walk_sun_correction > 0.0) {
             float change = tau - light_grid_optical_depth(p.x + light_grid_texel * sun_direction);
@@ -341,7 +566,14 @@ int path_flight(inout PathState p, inout int steps_left)
 // After STEP_SHADOW_CUT the next call resumes the shadow ray where it stopped, then goes on.
 int path_step(inout PathState p, inout int steps_left)
 {
-#if defined(ENVIRONMENT_MAP)
+#if defined(HYBRID_SCATTERING)
+    path_event_gradient_known = false;   // this step's flight (if it flies) computes it
+#endif
+#if defined(ENVIRONMENT_MAP) && defined(AREA_LIGHTS)
+    if (p.shadow_pending == 0 && p.env_pending == 0 && p.light_pending == 0) {
+#elif defined(AREA_LIGHTS)
+    if (p.shadow_pending == 0 && p.light_pending == 0) {
+#elif defined(ENVIRONMENT_MAP)
     if (p.shadow_pending == 0 && p.env_pending == 0) {
 #else
     if (p.shadow_pending == 0) {
@@ -357,9 +589,15 @@ int path_step(inout PathState p, inout int steps_left)
                                         steps_left))
             return STEP_SHADOW_CUT;
         p.shadow_pending -= 1;
+#if defined(HYBRID_SCATTERING)
+        p.radiance += p.throughput * sun_irradiance
+                      * (p.shadow_transmittance * path_event_kernel(p, sun_direction)
+                         / float(SUN_SHADOW_RAYS));
+#else
         p.radiance += p.throughput * sun_irradiance
                       * (p.shadow_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy)
                          / float(SUN_SHADOW_RAYS));
+#endif
         p.shadow_t = -1.0;          // the next ray (or the map sample's) starts afresh
         p.shadow_transmittance = 1.0;
     }
@@ -373,12 +611,60 @@ int path_step(inout PathState p, inout int steps_left)
         p.radiance += p.throughput * p.env_weight * p.shadow_transmittance;
     }
 #endif
+#if defined(AREA_LIGHTS)
+    if (p.light_pending != 0) {
+        if (p.light_pending == 2) {   // its shadow ray starts afresh
+            p.shadow_t = -1.0;
+            p.shadow_transmittance = 1.0;
+            p.light_pending = 1;
+        }
+        if (!transmittance_to_boundary_continue(p.x, p.light_w, p.shadow_t,
+                                                p.shadow_transmittance, p.rng, steps_left))
+            return STEP_SHADOW_CUT;
+        p.light_pending = 0;
+        p.radiance += p.throughput * p.light_weight * p.shadow_transmittance;
+    }
+#endif
 #if defined(PROBE_LIGHTING)
     if (p.bounce >= probe_gather_event)
         return STEP_DONE;
 #endif
     vec3 w_in = p.w;
     float phase_over_pdf = 1.0;   // the direction's weight: 1 where drawn from the phase function
+#if defined(HYBRID_SCATTERING)
+    if (p.status == PATH_ACTIVE_SURFACE) {
+        // A surface's event: the next direction from the BRDF (never guided), weighted K / pdf.
+        vec3 n = path_surface_normal(p);   // (p.w is still w_in)
+        p.status = PATH_ACTIVE;
+        vec3 surface_weight;
+        float surface_direction_pdf;
+        float u0 = rng_next(p.rng), u1 = rng_next(p.rng), u2 = rng_next(p.rng);
+        p.w = surface_sample(n, -w_in, surface_roughness, surface_specular, u0, u1, u2,
+                             surface_weight, surface_direction_pdf);
+        p.throughput *= surface_weight;
+        if (all(equal(p.throughput, vec3(0.0))))
+            return STEP_DONE;   // below the surface: the BRDF sends no light that way
+#if defined(ENVIRONMENT_MAP) && defined(PROBE_LIGHTING)
+        p.phase_pdf = 0.0;
+#elif defined(ENVIRONMENT_MAP)
+        p.phase_pdf = surface_direction_pdf;
+#endif
+#if defined(AREA_LIGHTS) && defined(PROBE_LIGHTING)
+        p.light_direction_pdf = 0.0;
+#elif defined(AREA_LIGHTS)
+        p.light_direction_pdf = surface_direction_pdf;
+#endif
+        if (p.bounce >= RR_START_BOUNCE) {
+            float q = max(p.throughput.r, max(p.throughput.g, p.throughput.b));
+            if (q < 1.0) {
+                if (rng_next(p.rng) >= q)
+                    return STEP_DONE;
+                p.throughput /= q;
+            }
+        }
+        return STEP_CONTINUE;
+    }
+#endif
 #if defined(GUIDED_RESIDUAL) && (GUIDED_DIRECTIONS || GUIDED_DIRECTION_CONTROL)
     // Both read the probes at the event; neither at the last event the path may scatter at (what
     // follows it is an escape alone, which the probes' radiance does not track).
@@ -422,6 +708,11 @@ int path_step(inout PathState p, inout int steps_left)
     p.phase_pdf = 0.0;
 #elif defined(ENVIRONMENT_MAP)
     p.phase_pdf = phase_hg(dot(w_in, p.w), anisotropy) / phase_over_pdf;
+#endif
+#if defined(AREA_LIGHTS) && defined(PROBE_LIGHTING)
+    p.light_direction_pdf = 0.0;   // the probe renderers take no light samples before the gather
+#elif defined(AREA_LIGHTS)
+    p.light_direction_pdf = phase_hg(dot(w_in, p.w), anisotropy) / phase_over_pdf;
 #endif
     if (p.bounce >= RR_START_BOUNCE) {
         float q = max(p.throughput.r, max(p.throughput.g, p.throughput.b));

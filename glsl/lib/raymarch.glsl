@@ -9,6 +9,23 @@
 // majorant grid (lib/cell_walk.glsl), and where that bounds sigma_t by 0 every sample before the
 // cell's exit is empty too, so the march goes on from the last sample before the exit. The same
 // samples contribute as without skipping (test_raymarch_skipping_empty_space_changes_nothing).
+//
+// HYBRID_SCATTERING (the scene's surface.gradient_factor k > 0; lib/hybrid_scattering.glsl): a
+// sample is a surface's with probability P = 1 - exp(-k |grad A|), and the march adds the mean of
+// both: (1 - P) times the phase function's light and P times the surface's, which reflects the
+// probes' light by surface_probe_radiance (the diffuse irradiance from the SH in closed form and a
+// specular term from the mirror direction) and the sun by the BRDF times the cosine. Without it
+// the code is as it was.
+#if defined(HYBRID_SCATTERING)
+#include "lib/hybrid_scattering.glsl"
+#endif
+// AREA_LIGHTS (lib/area_lights.glsl): a light the camera ray meets is seen, in front of the
+// volume or behind it (in place of the environment); the light they shed reaches the march only
+// through the probes (the walks meet and sample the lights), smoothed by their SH, and not through
+// the light grid, which holds the sun alone.
+#if defined(AREA_LIGHTS)
+#include "lib/area_lights.glsl"
+#endif
 uniform float raymarch_step;            // world units
 uniform uint frame_index;               // keys the jitter; frames accumulate into a running mean
 uniform uint seed;
@@ -37,9 +54,18 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
 #if defined(ENVIRONMENT_MAP)
     vec3 environment = environment_radiance(d);   // the background this ray sees
 #endif
+#if defined(AREA_LIGHTS)
+    float t_light;
+    int light = area_light_first_hit(origin, d, t_light);
+    vec3 background = light >= 0 ? area_light_emitted(light, d) : environment;
+    float t0, t1;
+    if (!box_intersect(origin, d, t0, t1) || (light >= 0 && t_light < t0))
+        return background;
+#else
     float t0, t1;
     if (!box_intersect(origin, d, t0, t1))
         return environment;
+#endif
     int n = clamp(int(ceil((t1 - t0) / raymarch_step)), 1, 8192);
     float dt = (t1 - t0) / float(n);
     float transmittance = 1.0;
@@ -63,19 +89,45 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
             continue;
         }
         float opacity = 1.0 - exp(-sigma_t * dt);
+#if defined(HYBRID_SCATTERING)
+        vec3 coeffs[SH_COUNT];
+        float probe_sun;
+        probe_fetch(x, coeffs, probe_sun);
+        vec3 inscattered = probe_inscattered_from(coeffs, d);
+        vec3 sun_kernel = vec3(sun_phase);
+        vec3 gradient = opacity_gradient(x);
+        float surface_share = surface_probability(gradient, surface_gradient_factor);
+        if (surface_share > 0.0) {
+            vec3 n = surface_normal(gradient, -d);
+            inscattered = mix(inscattered, surface_probe_radiance(coeffs, n, -d, surface_specular),
+                              surface_share);
+            sun_kernel = mix(sun_kernel, surface_kernel(n, -d, sun_direction, surface_roughness,
+                                                        surface_specular), vec3(surface_share));
+        }
+#else
         float probe_sun;
         vec3 inscattered = probe_inscattered(x, d, probe_sun);
+#endif
         if (tau_start < 0.0)
             tau_start = light_grid_optical_depth(origin + (t0 + float(i) * dt) * d);
         float tau_end = light_grid_optical_depth(origin + (t0 + float(i + 1) * dt) * d);
         float sun_weight = segment_sun_weight(sigma_t, dt, tau_start, tau_end);
         tau_start = tau_end;
+#if defined(HYBRID_SCATTERING)
+        vec3 source = albedo * tf.rgb * (opacity * inscattered
+                                         + sun_irradiance * (sun_weight * sun_kernel));
+#else
         vec3 source = albedo * tf.rgb * (opacity * inscattered
                                          + sun_irradiance * (sun_weight * sun_phase));
+#endif
         radiance += transmittance * scatter_allowed * source;
         transmittance *= 1.0 - opacity;
     }
+#if defined(AREA_LIGHTS)
+    return radiance + transmittance * background;
+#else
     return radiance + transmittance * environment;
+#endif
 }
 
 #if defined(GUIDED_LEVEL0)

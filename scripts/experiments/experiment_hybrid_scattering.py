@@ -1,0 +1,80 @@
+"""What do surfaces inside the volume (hybrid scattering, the scene's `surface`) cost, and how far
+is the raymarcher from the path tracer with them? For each scene and each gradient factor k (0 is
+the phase function alone, the code as it was): a path-traced reference (two independent halves),
+the raymarcher and `probes` at the same probes, their errors corrected for the reference's noise,
+the path tracer's GPU ms per sample and the raymarcher's ms per frame. The issue's targets: the
+hybrid path-traced sample at most 1.2x k = 0's, the raymarch frame at most 2.5 ms at 1080p, the
+raymarcher's error with k > 0 at most 1.5x its error with k = 0.
+Run on the GPU (bench scenes, 1080p):
+    python scripts/experiments/experiment_hybrid_scattering.py OUT_DIR [--scenes foot,bonsai]
+        [--k 0,0.05,0.2] [--size 1920x1080] [--ref-spp 1024] [--roughness 0.4] [--specular 0.04]
+On llvmpipe: --quick (the built-in head at 32^3, 24 x 24 pixels)."""
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, ".")
+from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.gl.context import create_headless_context, describe
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.scene import SurfaceSpec, parse_scene
+
+parser = argparse.ArgumentParser()
+parser.add_argument("out")
+parser.add_argument("--scenes", default="foot,bonsai")
+parser.add_argument("--k", default="0,0.05,0.2")
+parser.add_argument("--size", default="1920x1080")
+parser.add_argument("--ref-spp", type=int, default=1024, help="samples per reference half")
+parser.add_argument("--probe-spp", type=int, default=64, help="`probes` samples per pixel")
+parser.add_argument("--frames", type=int, default=16, help="raymarch frames")
+parser.add_argument("--roughness", type=float, default=0.4)
+parser.add_argument("--specular", type=float, default=0.04)
+parser.add_argument("--quick", action="store_true")
+args = parser.parse_args()
+out = Path(args.out)
+out.mkdir(parents=True, exist_ok=True)
+ctx = create_headless_context()
+width, height = (int(v) for v in args.size.split("x"))
+if args.quick:
+    scenes = {"head": parse_scene({
+        "volume": {"builtin": "head", "size": [32, 32, 32]}, "density_scale": 40.0,
+        "camera": {"width": 24, "height": 24, "eye": [0.3, 0.4, 1.6]},
+        "transfer_function": {"colormap": "grey", "opacity": [[0, 0], [0.3, 0], [1, 1]]},
+        "probes": {"grid": 8, "samples": 128}})}
+else:
+    scenes = {name: bench_scene(name, width, height) for name in args.scenes.split(",")}
+records = []
+for name, scene in scenes.items():
+    if scene is None:
+        print(f"{name}: its dataset is absent, skipped", flush=True)
+        continue
+    for k in (float(v) for v in args.k.split(",")):
+        s = scene.replace(surface=SurfaceSpec(gradient_factor=k, roughness=args.roughness,
+                                              specular=(args.specular,) * 3))
+        r = Renderer(ctx, s)
+        try:
+            a = r.render("pt", spp=args.ref_spp, seed=1, samples_per_pass=16)
+            b = r.render("pt", spp=args.ref_spp, seed=2, samples_per_pass=16)
+            ref = 0.5 * (a.image + b.image)
+            noise = reference_noise(a.image, b.image)
+            t = time.time()
+            rm = r.render("raymarch", spp=args.frames, seed=3)
+            pr = r.render("probes", spp=args.probe_spp, seed=3)
+            row = {"scene": name, "k": k, "roughness": args.roughness,
+                   "specular": args.specular, "width": s.camera.width,
+                   "height": s.camera.height,
+                   "pt_ms_per_sample": 0.5 * (a.ms_per_sample + b.ms_per_sample),
+                   "raymarch_ms_per_frame": rm.ms_per_sample, "bake_ms": rm.bake_ms,
+                   "reference_noise": noise,
+                   "raymarch_error": corrected_rrmse(rrmse(rm.image, ref), noise),
+                   "probes_error": corrected_rrmse(rrmse(pr.image, ref), noise),
+                   "wall_s": time.time() - t}
+        finally:
+            r.release()
+        records.append(row)
+        print(json.dumps(row), flush=True)
+(out / "hybrid_scattering.json").write_text(json.dumps({"device": describe(ctx),
+                                                        "records": records}, indent=1) + "\n")
