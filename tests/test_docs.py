@@ -17,7 +17,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = sorted((ROOT / "docs").glob("*.md"))
 PAGES = [ROOT / "README.md", *DOCS, ROOT / "bench" / "archive" / "README.md",
-         ROOT / "scripts" / "experiments" / "README.md"]
+         ROOT / "lab" / "experiments" / "README.md"]
 LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
 PYTHON_BLOCK = re.compile(r"```python\n(.*?)```", re.S)
 
@@ -147,7 +147,7 @@ def test_the_example_script_runs(tmp_path):
 def test_the_experiments_index_names_every_script_and_record():
     page = (ROOT / "docs" / "experiments.md").read_text()
     index = page[page.index("## Index"):page.index("## Tried and not kept")]
-    scripts = sorted(p.name for p in (ROOT / "scripts" / "experiments").glob("*.py"))
+    scripts = sorted(p.name for p in (ROOT / "lab" / "experiments").glob("*.py"))
     assert len(scripts) >= 19 and not list((ROOT / "scripts").glob("experiment_*.py"))
     rows = [line for line in index.splitlines() if line.startswith("| `")]
     assert sorted(re.match(r"\| `([^`]+)`", r).group(1) for r in rows) == scripts

@@ -348,7 +348,7 @@ def test_adaptive_layout_lowers_the_error_on_a_thin_dense_slab(ctx, tmp_path):
     """A thin dense slab in a thin medium, lit by the sun: the light steps at the slab. At 4 probes
     per axis the adaptive layout (extinction, strength 0.8) puts two y planes at the slab's faces
     and the probes image's relative RMSE against a converged path tracer falls from about 0.25 to
-    0.07 (32 x 32, 16384 spp reference; scripts/experiments/experiment_adaptive_layout.py has the sweep);
+    0.07 (32 x 32, 16384 spp reference; lab/experiments/experiment_adaptive_layout.py has the sweep);
     here, smaller, it must at least fall by a third."""
     d = np.full((16, 16, 16), 0.1, np.float32)
     d[:, 7:9, :] = 1.0

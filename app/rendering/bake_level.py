@@ -8,7 +8,7 @@ shadow rays of walk_sun "ray" and of the grid's correction) and the probes' own 
 What the image reads directly stays on the level shown: camera rays, the sun at the image's points
 (the raymarcher's light grid, the shadow rays of `probes`), the path tracer, and where the probes
 sit (the visible region, an adaptive layout's planes). A shortcut with a bias: docs/bricking.md
-states it, measured against the path tracer (scripts/experiments/experiment_bake_level.py).
+states it, measured against the path tracer (lab/experiments/experiment_bake_level.py).
 
 The coarser level must fit one 3D texture (of a 2048^3 store, level 1 is 1024^3): where it does
 not, bake_level is refused with the sizes, never half built. It is not counted against

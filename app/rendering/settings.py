@@ -127,7 +127,7 @@ class RenderSettings:
     # Independent ratio-tracked shadow rays towards the sun a scattering event averages, in the
     # render passes (lib/integrator.glsl SUN_SHADOW_RAYS): 1, the default; more only measures how
     # much of a path's variance the shadow ray's own noise holds (the mean is the same;
-    # scripts/experiments/experiment_shadow_variance.py).
+    # lab/experiments/experiment_shadow_variance.py).
     sun_shadow_rays: int = 1
     # How every shadow ray towards the sun is tracked, in the renderers and the bake: "ratio"
     # (ratio tracking against the macrocell majorants) or "residual" (residual ratio tracking with

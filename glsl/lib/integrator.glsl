@@ -122,7 +122,7 @@ const int PATH_STEP_KEPT_BACK = 0;
 
 // Independent shadow rays towards the sun per scattering event, averaged (1: the renderers'; more:
 // an experiment's near-noiseless shadow ray, measuring how much of a path's variance the shadow
-// ray's own noise holds: scripts/experiments/experiment_shadow_variance.py,
+// ray's own noise holds: lab/experiments/experiment_shadow_variance.py,
 // RenderSettings.sun_shadow_rays). The mean is the same for any count.
 #ifndef SUN_SHADOW_RAYS
 #define SUN_SHADOW_RAYS 1

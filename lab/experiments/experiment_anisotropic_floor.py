@@ -6,7 +6,7 @@ through the probes) against a single-scattering path trace. Errors are rRMSE aga
 halves, measured and corrected for the reference's noise (app/rendering/metrics.py); `rim_*` are over
 the brightest tenth of the reference's pixels: mean of image / mean of reference, and that tenth's
 share of the squared error.
-Usage (GPU): python scripts/experiments/experiment_anisotropic_floor.py OUT.json [REFERENCE_SPP_PER_HALF]"""
+Usage (GPU): python lab/experiments/experiment_anisotropic_floor.py OUT.json [REFERENCE_SPP_PER_HALF]"""
 import json
 import sys
 from dataclasses import replace

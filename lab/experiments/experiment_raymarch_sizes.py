@@ -3,7 +3,7 @@ sample at 1920x1080 against 1.05 ms at 1280x720, more than the pixel count expla
 benchmark's speed check (app/rendering/ceiling.py) before and after each size, so that a GPU shared or
 clocked down at the time shows as such. Sizes are visited twice in different orders.
 Usage:
-    python scripts/experiments/experiment_raymarch_sizes.py OUT.json [--scenes bonsai,foot] [--grids 128x64,64x256] [--sizes WxH,...]"""
+    python lab/experiments/experiment_raymarch_sizes.py OUT.json [--scenes bonsai,foot] [--grids 128x64,64x256] [--sizes WxH,...]"""
 import argparse, json, statistics
 from dataclasses import replace
 from radiance_probes.gl.context import create_headless_context, describe

@@ -5,13 +5,13 @@ corrected for their noise), and everything it cost (GPU ms: path-traced samples,
 light grid and raymarched frames; and wall seconds). The best fixed setting and the path tracer's
 own time to each target are in bench/h100/report.md (the same scenes, size and device kind).
 Run on the GPU:
-    python scripts/experiments/experiment_auto_progressive.py OUT_DIR
+    python lab/experiments/experiment_auto_progressive.py OUT_DIR
         [--scenes fuel,hydrogen,foot,bonsai,thick,anisotropic,grey] [--targets 0.05,0.02,0.01]
         [--ref-spp 4096] [--size 512]
 On llvmpipe, in seconds: --quick (a 20^3 cloud at 48^2, targets 0.2,0.1).
 The table against a benchmark run (its path tracer's and its fastest setting's time to each target,
 app/bench/report.py time_to_error), from the records alone:
-    python scripts/experiments/experiment_auto_progressive.py OUT_DIR --compare bench/h100"""
+    python lab/experiments/experiment_auto_progressive.py OUT_DIR --compare bench/h100"""
 import argparse
 import json
 import sys

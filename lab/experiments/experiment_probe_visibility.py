@@ -2,7 +2,7 @@
 the raymarcher's error and frame time with trilinear interpolation and with visibility weights, on
 the same baked probes, against a path-traced reference (two halves of 4096 spp, noise-corrected).
 Run on the GPU:
-    python scripts/experiments/experiment_probe_visibility.py OUT.json [--scenes foot,bonsai] [--settings 32x256,64x128]
+    python lab/experiments/experiment_probe_visibility.py OUT.json [--scenes foot,bonsai] [--settings 32x256,64x128]
 Variants: "trilinear" and "visibility". The committed records (bench/h100-visibility) also hold
 variants measured and dropped: results.json "symmetric" and "visibility4" (commit bfa4b31: any
 difference from the point's extinction counted; 4 samples a way), variants.json "k1", "offset" and

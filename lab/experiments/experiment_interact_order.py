@@ -2,7 +2,7 @@
 run (the one that renders the references)? Two interact runs on bonsai at 1920x1080 (raymarch only):
 A) 128^3x64 first, then 64^3x256, rendering references; B) 64^3x256 first, then 128^3x64, with
 A's references (--ref-dir: nothing rendered during the sessions). Run on the GPU:
-    python scripts/experiments/experiment_interact_order.py OUT.json
+    python lab/experiments/experiment_interact_order.py OUT.json
 (committed: bench/h100-interact-order: the summary per event, min / median / max GPU ms per
 sample and the frame p99, and both runs' results.json)."""
 import json

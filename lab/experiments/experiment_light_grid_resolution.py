@@ -1,7 +1,7 @@
 """Light grid resolution against the probe grid: raymarch rRMSE (16 frames, 512^2) and the light
 grid's GPU time for bonsai/foot at 32^3, 64^3 and 128^3 probes x 64 walks with the light grid's box
 side at 256 / 384 / 512 texels (the walks' sun from the grid), its texels 16- and 32-bit. Usage:
-    python scripts/experiments/experiment_light_grid_resolution.py OUT.json NAME=REFDIR [NAME=REFDIR ...]
+    python lab/experiments/experiment_light_grid_resolution.py OUT.json NAME=REFDIR [NAME=REFDIR ...]
 where REFDIR holds an earlier bench run's refs/NAME.npy and results.json. The H100 runs are
 bench/h100-light (per-texel march) and bench/h100-light-sheared (the sheared column march)."""
 import json, statistics, sys

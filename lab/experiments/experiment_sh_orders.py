@@ -2,7 +2,7 @@
 at 512^2 against a path-traced reference (two halves of 4096 spp) with probes of each asked-for SH
 order at a few probe settings: the raymarcher (16 frames) and `probes` (256 frames), error and GPU
 time. Run on the GPU:
-    python scripts/experiments/experiment_sh_orders.py OUT_DIR [--orders 0,1,2] [--scene anisotropic] [--windows none,hann]
+    python lab/experiments/experiment_sh_orders.py OUT_DIR [--orders 0,1,2] [--scene anisotropic] [--windows none,hann]
 (committed: bench/h100-sh-orders/orders_0_2.json, orders_2_4.json; the first with the settings
 128^3 x 256 and 64^3 x 512, the second also 192^3 x 64; windows.json: --windows none,hann,lanczos)."""
 import argparse

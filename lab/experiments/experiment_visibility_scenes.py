@@ -3,7 +3,7 @@ thin medium (sigma_t 2) with an opaque block (a third of the box along x, full h
 voxels of 24, across x) or a dense cube in the middle (sigma_t 200), under a few suns, albedo 0.9 and
 0.99, 4^3 and 8^3 probes over the box; rRMSE (%) of `raymarch` (ra) and `probes-only` (pr) with
 trilinear (tri) and visibility-weighted (vis) interpolation against a 1024-spp path trace, 40 x 40.
-    python scripts/experiments/experiment_visibility_scenes.py    (bench/llvmpipe-visibility/scenes.txt, ~4 min)"""
+    python lab/experiments/experiment_visibility_scenes.py    (bench/llvmpipe-visibility/scenes.txt, ~4 min)"""
 import sys
 
 import numpy as np

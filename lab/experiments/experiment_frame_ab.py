@@ -2,7 +2,7 @@
 cloud at SH order 0, the anisotropic cloud at order 2) with the code of the tree given, so that two
 checkouts can be timed alternately on one GPU:
     git archive COMMIT app glsl assets | tar -x -C OLD
-    for i in 1 2 3; do python scripts/experiments/experiment_frame_ab.py OLD; python scripts/experiments/experiment_frame_ab.py .; done
+    for i in 1 2 3; do python lab/experiments/experiment_frame_ab.py OLD; python lab/experiments/experiment_frame_ab.py .; done
 (committed: bench/h100-sh-orders/ab_probe_frames.txt, 041d2bb against the SH-order code)."""
 import sys, os, json
 tree = sys.argv[1]

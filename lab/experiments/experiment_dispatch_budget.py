@@ -8,7 +8,7 @@ max) and the samples per pixel it added (mean, min over pixels, from the accumul
 so ms per sample against the unbounded dispatch's. With the speed check (app/rendering/ceiling.py)
 before and after.
 Usage:
-    python scripts/experiments/experiment_dispatch_budget.py OUT.json [--scene bonsai] [--size 1920x1080]
+    python lab/experiments/experiment_dispatch_budget.py OUT.json [--scene bonsai] [--size 1920x1080]
         [--budgets 0,4096,1024,512,256,128] [--methods probes,pt] [--compare-renderer]
         (budget 0: unbounded)"""
 import argparse, json, statistics

@@ -3,7 +3,7 @@ the scene's sun and for a sun 45 degrees off two axes (the widest sheared grid),
 per-texel march it replaced (bench/h100-light-time, where that run measured the same box grid),
 for 16- and 32-bit texels.
 Usage:
-    python scripts/experiments/experiment_light_grid_time.py OUT.json [scene ...]"""
+    python lab/experiments/experiment_light_grid_time.py OUT.json [scene ...]"""
 import dataclasses, json, statistics, sys
 from pathlib import Path
 from radiance_probes.gl.context import create_headless_context, describe

@@ -1,6 +1,6 @@
 """The bake's GPU time per section (sun, walks, projection) at SH orders 2, 3 and 4 on the bench's
 anisotropic cloud, 128^3 x 256 and 64^3 x 512 probes, two profiled bakes each. Run on the GPU:
-    python scripts/experiments/experiment_sh_order_bake.py OUT.json
+    python lab/experiments/experiment_sh_order_bake.py OUT.json
 (committed: bench/h100-sh-orders/bake_profile_before.json, with the projection of commit 31db697,
 and bake_profile_after.json, with today's)."""
 import sys, json

@@ -4,7 +4,7 @@ bake costs 1.2 ms more. Each of the issue-30 changes that touch the walks is swi
 (RenderSettings), and the bake is timed per section on the GPU (GpuProfile: the sun, the walks, the
 projection and publishing), with its dispatch count.
 
-    python scripts/experiments/experiment_bake_cost_split.py OUT_DIR [--quick]
+    python lab/experiments/experiment_bake_cost_split.py OUT_DIR [--quick]
 
 Variants: the defaults; walk_sun_correction 0 (the light grid's sun alone, biased); walk_adaptive
 0 (every probe takes all its walks); both; walk_sun "ray" (a shadow ray at every event). Each

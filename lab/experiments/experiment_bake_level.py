@@ -1,7 +1,7 @@
 """What does the probes' bake save by walking a coarser level than the image
 (RenderSettings.bake_level), and what does it cost in error against the path tracer?
 
-    python scripts/experiments/experiment_bake_level.py OUT_DIR [--quick] [--scenes a,b,...]
+    python lab/experiments/experiment_bake_level.py OUT_DIR [--quick] [--scenes a,b,...]
         [--levels 0,1,2,-1] [--size 512] [--side N] [--grid 32] [--walks 256] [--frames 16]
         [--ref-spp 4096] [--seeds 2] [--max-bounces N]
 

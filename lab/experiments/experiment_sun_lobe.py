@@ -3,7 +3,7 @@ the same probes without it (bench/h100-sun-lobe): the bench's g = 0.8 cloud at 5
 same with other phase functions, lights and albedos; order 3, raymarched 16 frames, against two
 path-traced halves; error corrected for the reference's noise, rim = the brightest tenth of the
 reference's pixels (image / reference there, its share of the squared error), bake and frame ms.
-Usage (GPU): python scripts/experiments/experiment_sun_lobe.py OUT.json SETTINGS REFERENCE_SPP_PER_HALF LOBES
+Usage (GPU): python lab/experiments/experiment_sun_lobe.py OUT.json SETTINGS REFERENCE_SPP_PER_HALF LOBES
 [CHANGES ...]
   SETTINGS  GRIDxWALKS,...   e.g. 128x256,64x512
   LOBES     lobe g = (scene's g)^p for each p, 0 for none, "auto" for the shape the pilot chooses

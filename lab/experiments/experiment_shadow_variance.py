@@ -2,7 +2,7 @@
 noise, and (step 6) what residual ratio tracking of the shadow ray with the light grid as its
 control takes away.
 
-    python scripts/experiments/experiment_shadow_variance.py OUT_DIR [--side 32] [--width 48]
+    python lab/experiments/experiment_shadow_variance.py OUT_DIR [--side 32] [--width 48]
         [--height 48] [--spp 16] [--images 8] [--scenes fuel,hydrogen,...] [--rays 1,16]
         [--tracking ratio,residual] [--bounces 1,own]
 
@@ -30,7 +30,7 @@ present) and `cloud`, the built-in default scene (parse_scene({})).
 
 Writes OUT_DIR/results.json (every row) and OUT_DIR/log.txt; the record's README says what ran.
 Full size on a GPU (the bench's scenes at 512^2 with their own volumes):
-    python scripts/experiments/experiment_shadow_variance.py bench/h100-shadow-variance \\
+    python lab/experiments/experiment_shadow_variance.py bench/h100-shadow-variance \\
         --side 0 --width 512 --height 512 --spp 64 --images 4
 """
 from __future__ import annotations

@@ -6,7 +6,7 @@ scattering events and tracking steps); and that walk's latency floor: as many in
 bake has walks, each a chain of as many dependent trilinear sigma_t fetches as the longest walk
 took tracking steps (glsl/ceiling_march.comp DEPENDENT_CHAIN), which no exact walk of that length
 can beat. Run on the GPU:
-    python scripts/experiments/experiment_walk_floor.py OUT_DIR [--scenes thick,grey,hydrogen]
+    python lab/experiments/experiment_walk_floor.py OUT_DIR [--scenes thick,grey,hydrogen]
         [--settings 8x16,8x4,16x16]
 (committed: bench/h100-walk-floor/walk_floor.json)."""
 import argparse

@@ -5,7 +5,7 @@ first a path-traced reference's worth of work (as the benchmark does before a sc
 Written to explain the anisotropic cloud's 2-3x slower walks and frames in bench/h100 against
 bench/archive/h100-v3 (the bench runs use 16-bit texels; the A/B that found no difference used 32-bit).
 Usage:
-    python scripts/experiments/experiment_light_grid_reads.py OUT.json [--size N] [--grids 8,64] [--after-reference]
+    python lab/experiments/experiment_light_grid_reads.py OUT.json [--size N] [--grids 8,64] [--after-reference]
         [--scenes anisotropic,bonsai,thick,foot]"""
 import argparse, json, statistics
 from dataclasses import replace

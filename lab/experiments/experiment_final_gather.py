@@ -6,7 +6,7 @@ against a path-traced reference (two independent halves) with `probes` at each g
 few probe settings, progressively (16 samples a dispatch), and the raymarcher at 16 frames for
 comparison: errors corrected for the reference's noise, GPU times (bake, light grid, frames).
 Run on the GPU:
-    python scripts/experiments/experiment_final_gather.py OUT_DIR [--scenes anisotropic,bonsai,foot]
+    python lab/experiments/experiment_final_gather.py OUT_DIR [--scenes anisotropic,bonsai,foot]
         [--events 1,2,3] [--spp 16,64,256,1024,4096] [--ref-spp 8192]"""
 import argparse
 import json

@@ -2,7 +2,7 @@
 interact replay with 64^3 x 256 probes (steady 1.4 ms with 128^3 x 64)? Times the raymarcher alone
 (8 samples, one per dispatch, three repeats) on bonsai over three sun directions and three camera
 orbits for both probe settings, and prints the light grid each uses. Run on the GPU:
-    python scripts/experiments/experiment_raymarch_variability.py OUT.json
+    python lab/experiments/experiment_raymarch_variability.py OUT.json
 (committed: bench/h100-interact/raymarch_isolated.json)."""
 import json
 import sys

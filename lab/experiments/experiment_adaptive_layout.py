@@ -2,7 +2,7 @@
 dense slab (sigma_t 40 in 2 of 16 voxels along y, 4 elsewhere) lit by the sun, 32 x 32 pixels,
 a 2 x 8192 spp path-traced reference; relative RMSE of `probes` (256 frames) and `raymarch`
 (4 frames) per grid, layout, indicator and strength. Usage (from the repository root):
-    PYTHONPATH=. python scripts/experiments/experiment_adaptive_layout.py [OUT.json]
+    PYTHONPATH=. python lab/experiments/experiment_adaptive_layout.py [OUT.json]
 The README's table (Radiance probes, adaptive probe density) is this script's output."""
 import json
 import sys

@@ -6,7 +6,7 @@ the path tracer's GPU ms per sample and the raymarcher's ms per frame. The issue
 hybrid path-traced sample at most 1.2x k = 0's, the raymarch frame at most 2.5 ms at 1080p, the
 raymarcher's error with k > 0 at most 1.5x its error with k = 0.
 Run on the GPU (bench scenes, 1080p):
-    python scripts/experiments/experiment_hybrid_scattering.py OUT_DIR [--scenes foot,bonsai]
+    python lab/experiments/experiment_hybrid_scattering.py OUT_DIR [--scenes foot,bonsai]
         [--k 0,0.05,0.2] [--size 1920x1080] [--ref-spp 1024] [--roughness 0.4] [--specular 0.04]
 On llvmpipe: --quick (the built-in head at 32^3, 24 x 24 pixels)."""
 import argparse

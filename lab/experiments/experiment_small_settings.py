@@ -1,6 +1,6 @@
 """Where the smallest probe settings' time goes (bench/h100-small): the light grid (and its time at
 several segment targets), the bake's sections, the walk counters, the raymarched frame per step.
-Usage: python scripts/experiments/experiment_small_settings.py OUT.json SCENE[,SCENE...]"""
+Usage: python lab/experiments/experiment_small_settings.py OUT.json SCENE[,SCENE...]"""
 import sys, json, statistics, time
 from dataclasses import replace
 sys.path.insert(0, ".")

@@ -1,6 +1,6 @@
 """Probe dilation against leaks: probes whose cell is optically thick (sigma_t at the probe x the
 probe spacing > T) take the mean of their thin neighbours (26-neighbourhood, repeated), in NumPy
-on the read-back textures; raymarch rRMSE (corrected) per T. Usage: python scripts/experiments/experiment_probe_dilation.py OUT.json [NAME=REFDIR ...]
+on the read-back textures; raymarch rRMSE (corrected) per T. Usage: python lab/experiments/experiment_probe_dilation.py OUT.json [NAME=REFDIR ...]
 (the H100 run is bench/h100-leaks/results.json: it made images worse, so nothing was built)."""
 import json, sys
 from dataclasses import replace
