@@ -23,8 +23,8 @@ import numpy as np
 
 from ..imageio import save_png
 from ..rendering.denoise import QUALITIES, shared_denoiser
-from ..rendering.metrics import corrected_floor, corrected_rrmse
-from .records import caveat, log, make_record, progressive
+from .records import (error_of, floor, header as _header, log, make_record, ms_text as _ms,
+                      progressive)
 
 NOISY = ("pt", "probes", "guided")
 COST_SIZES = ((512, 512), (1920, 1080), (3840, 2160))
@@ -243,29 +243,6 @@ def variant(r: dict) -> str:
     if r["method"] in ("probes", "guided", "raymarch") and r.get("probe_grid"):
         name += f" {r['probe_grid']}^3x{r['probe_samples']}"
     return name + (f" + OIDN({r['denoise']})" if r.get("denoise") else "")
-
-
-def _ms(v: float) -> str:
-    return f"{v / 1000:.3g} s" if v >= 1000 else f"{v:.3g} ms"
-
-
-def error_of(data: dict, record: dict) -> float:
-    """A record's rRMSE corrected for its reference's noise (report.error_of's rule)."""
-    noise = record.get("reference_noise")
-    if noise is None:
-        noise = data["references"].get(record["scene"], {}).get("noise_rrmse", 0.0)
-    return corrected_rrmse(record["rrmse"], float(noise or 0.0))
-
-
-def floor(data: dict, scene: str) -> float:
-    config = data["meta"].get("config", {})
-    noise = data["references"].get(scene, {}).get("noise_rrmse", 0.0)
-    return corrected_floor(float(noise), int(config.get("width", 512)) * int(config.get("height", 512)))
-
-
-def _header(title: str, meta: dict) -> list[str]:
-    return [title, "", f"Device: **{meta['device']}**. Command: `{meta.get('command', '')}`.", "",
-            *caveat(meta)]
 
 
 def write_denoise_report(data: dict, out):

@@ -15,7 +15,7 @@ from ..rendering.pathtracer import PIXEL_STATE_BYTES
 from ..rendering.ceiling import SPEED_CHECK_SLOWER
 from .clock_log import report_lines as clock_report_lines
 from .config import BenchConfig
-from ..rendering.metrics import rrmse
+from ..rendering.metrics import corrected_floor, corrected_rrmse, rrmse
 
 ACCUMULATION_BYTES = 16   # RGBA32F running mean per pixel
 
@@ -106,6 +106,43 @@ def make_record(base: dict, config: BenchConfig, method: str, frames: int, image
     if log is not None:   # the longest dispatch since the last record (run_bench keeps a log)
         rec["longest_dispatch_ms"], rec["longest_dispatch"] = log.take()
     return rec
+
+
+def reference_noise_of(data: dict, scene: str, record: dict | None = None) -> float:
+    """The relative noise of the reference a record was measured against (its own field; older
+    records: the scene's reference in this file)."""
+    if record is not None and record.get("reference_noise") is not None:
+        return float(record["reference_noise"])
+    return float(data["references"].get(scene, {}).get("noise_rrmse", 0.0))
+
+
+def run_pixels(data: dict) -> int:
+    config = data["meta"].get("config", {})
+    return int(config.get("width", 512)) * int(config.get("height", 512))
+
+
+def floor(data: dict, scene: str) -> float:
+    """The smallest error a report states for the scene: the resolution of the error corrected
+    for the reference's noise (metrics.corrected_floor, 3 standard errors; about a tenth of the
+    reference's own noise at 512^2). Smaller errors are reported only as "below" it."""
+    return corrected_floor(reference_noise_of(data, scene), run_pixels(data))
+
+
+def error_of(data: dict, record: dict) -> float:
+    """A record's relative RMSE against the true image: its measured rRMSE corrected for the noise
+    of the reference it was measured against (metrics.corrected_rrmse)."""
+    return corrected_rrmse(record["rrmse"], reference_noise_of(data, record["scene"], record))
+
+
+def ms_text(v: float) -> str:
+    """Milliseconds to three significant digits (seconds from 1 s)."""
+    return f"{v:.3g} ms" if v < 1000 else f"{v / 1000:.3g} s"
+
+
+def header(title: str, meta: dict) -> list[str]:
+    """A mode report's title, device, command and caveat."""
+    return [title, "", f"Device: **{meta['device']}**. Command: `{meta.get('command', '')}`.", "",
+            *caveat(meta)]
 
 
 def caveat(meta: dict) -> list[str]:

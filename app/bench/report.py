@@ -8,8 +8,8 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
-from ..rendering.metrics import corrected_floor, corrected_rrmse
-from .records import caveat, speed_checks
+from .records import (caveat, error_of, floor, header as _header, ms_text as _ms,  # noqa: F401
+                      reference_noise_of as _noise, run_pixels as _pixels, speed_checks)
 
 METHOD_ORDER = ("pt", "probes", "probes-only", "raymarch", "guided")
 COLOURS = {"pt": "#222222", "probes": "#1f77b4", "probes-only": "#2ca02c", "raymarch": "#d62728",
@@ -65,40 +65,6 @@ def merge(paths: list[str | Path], out: str | Path) -> Path:
             merged["meta"]["gpu_clock"] = clock
     path.write_text(json.dumps(merged, indent=1))
     return path
-
-
-def _noise(data: dict, scene: str, record: dict | None = None) -> float:
-    """The relative noise of the reference a record was measured against (its own field; older
-    records: the scene's reference in this file)."""
-    if record is not None and record.get("reference_noise") is not None:
-        return float(record["reference_noise"])
-    return float(data["references"].get(scene, {}).get("noise_rrmse", 0.0))
-
-
-def _pixels(data: dict) -> int:
-    config = data["meta"].get("config", {})
-    return int(config.get("width", 512)) * int(config.get("height", 512))
-
-
-
-
-def _header(title: str, meta: dict) -> list[str]:
-    """A mode report's title, device, command and caveat."""
-    return [title, "", f"Device: **{meta['device']}**. Command: `{meta.get('command', '')}`.", "",
-            *caveat(meta)]
-
-
-def floor(data: dict, scene: str) -> float:
-    """The smallest error the report states for the scene: the resolution of the error corrected
-    for the reference's noise (metrics.corrected_floor, 3 standard errors; about a tenth of the
-    reference's own noise at 512^2). Smaller errors are reported only as "below" it."""
-    return corrected_floor(_noise(data, scene), _pixels(data))
-
-
-def error_of(data: dict, record: dict) -> float:
-    """A record's relative RMSE against the true image: its measured rRMSE corrected for the noise
-    of the reference it was measured against (metrics.corrected_rrmse)."""
-    return corrected_rrmse(record["rrmse"], _noise(data, record["scene"], record))
 
 
 def sweep_precision(data: dict) -> str:
@@ -177,10 +143,6 @@ def time_to_error(records: list[dict], target: float) -> dict | None:
 def equal_time(records: list[dict], budget_ms: float) -> dict | None:
     ok = [r for r in records if r["total_ms"] <= budget_ms]
     return min(ok, key=lambda r: (r["error"], r["total_ms"])) if ok else None
-
-
-def _ms(v: float) -> str:
-    return f"{v:.3g} ms" if v < 1000 else f"{v / 1000:.3g} s"
 
 
 def _fmt(v, digits=4) -> str:
