@@ -794,16 +794,11 @@ def render_to_files(args: argparse.Namespace) -> int:
                                  denoise_guides=getattr(args, "denoise_guides", "auto"))
     if getattr(args, "denoise", False):
         if auto is not None:   # auto_render returned its image: denoise that one
-            from .rendering.denoise import choose_guides, shared_denoiser
+            from .rendering.denoise import choose_guides
             renderer.begin(args.method)
             guides = choose_guides(args.denoise_guides, result.spp,
                                    renderer.needs_probes(args.method) and renderer.probes_shown())
-            albedo, normal, _ = renderer.denoise_guides(guides)
-            if shared_denoiser().available:
-                d = shared_denoiser()(result.image, albedo, normal)
-            else:
-                from .rendering.denoise import Denoised, sanitize
-                d = Denoised(sanitize(result.image), None, shared_denoiser().failure)
+            d, _ = renderer.denoise(result.image, guides)
             result.image, result.denoised = d.image, d
         d = result.denoised
         if d is not None and d.denoised:
