@@ -178,3 +178,93 @@ def test_row_costs_spread_a_band_by_what_its_groups_were_predicted_to_cost():
     assert costs.ms == pytest.approx([1.5, 9.0, 3.0])
     assert costs.plan(0, 10.5) == 16 and costs.plan(8, 1.0) == 16 and costs.plan(16, 99) == 20
     assert costs.plan(0, 10.4) == 8 and costs.sample_ms() == pytest.approx(13.5)
+
+
+# ---- on llvmpipe --------------------------------------------------------------------------------
+SCENE = {"volume": {"builtin": "cloud", "size": [12, 12, 12]}, "density_scale": 25.0,
+         "albedo": 0.9, "camera": {"width": 24, "height": 21}}
+
+
+@pytest.fixture
+def renderer(ctx):
+    from radiance_probes.rendering.renderer import Renderer
+    from radiance_probes.scene import parse_scene
+    r = Renderer(ctx, parse_scene(SCENE))
+    yield r
+    r.release()
+
+
+def _whole(r, method: str, samples: int, seed: int = 7) -> np.ndarray:
+    with r.lend(None):
+        acc = r.begin(method, 24, 21, seed=seed)
+        r.add_samples(samples)
+        return acc.read_rgba()
+
+
+def test_bands_of_rows_give_the_whole_samples_image_bit_for_bit(renderer):
+    r = renderer
+    whole = _whole(r, "pt", 3)
+    assert np.all(whole[..., 3] == 3) and whole[..., :3].max() > 0
+    with r.lend(None):
+        acc = r.begin("pt", 24, 21, seed=7)
+        ends = [[8, 16, 21], [21], [16, 21]]            # three samples, cut three ways
+        for sample, cut in enumerate(ends):
+            for end in cut:
+                assert acc.samples == sample
+                r.add_rows(end)
+                assert acc.rows_done == (0 if end == 21 else end)
+                if end != 21:   # a part-done sample: its rows hold one sample more, no pixel twice
+                    counts = acc.read_rgba()[..., 3]
+                    assert np.all(counts[:end] == sample + 1) and np.all(counts[end:] == sample)
+        banded = acc.read_rgba()
+    assert acc.samples == 3
+    np.testing.assert_array_equal(banded, whole)
+    # a sample part done and then whole samples: the rows done are not begun again
+    with r.lend(None):
+        acc = r.begin("pt", 24, 21, seed=7)
+        r.add_rows(8)
+        r.add_samples(3)
+        mixed = acc.read_rgba()
+    np.testing.assert_array_equal(mixed, whole)
+    with pytest.raises(ValueError, match="multiple of 8"):
+        with r.lend(None):
+            r.begin("pt", 24, 21)
+            r.add_rows(12)
+
+
+def test_the_probe_renderers_in_bands_give_their_whole_samples_image(ctx):
+    from radiance_probes.rendering.renderer import Renderer
+    from radiance_probes.scene import parse_scene
+    r = Renderer(ctx, parse_scene({**SCENE, "probes": {"grid": [4, 4, 4], "samples": 32}}))
+    try:
+        r.bake(0)
+        for method in ("probes", "probes-only"):
+            whole = _whole(r, method, 2)
+            with r.lend(None):
+                acc = r.begin(method, 24, 21, seed=7)
+                for end in (8, 21, 16, 21):
+                    r.add_rows(end)
+                banded = acc.read_rgba()
+            assert acc.samples == 2 and whole[..., :3].max() > 0
+            np.testing.assert_array_equal(banded, whole)
+        with r.lend(None):   # guided's two levels and the raymarcher's frames stay whole
+            r.begin("raymarch", 24, 21)
+            with pytest.raises(ValueError, match="bands of rows"):
+                r.add_rows(8)
+    finally:
+        r.release()
+
+
+def test_a_pass_cut_into_bands_counts_every_pixel_once(renderer):
+    """PathTracer.run's bands (a GPU's long samples): a band ending inside a group of 8 rows also
+    ran the next band's first rows, whose fresh start then counted their first samples twice."""
+    from radiance_probes.rendering.pathtracer import band_edges
+    r = renderer
+    whole = _whole(r, "pt", 2)
+    for bands in (2, 3):
+        with r.lend(None):
+            acc = r.begin("pt", 24, 21, seed=7)
+            r.pass_for("pt").run(r.resources, r.camera, acc, 2, 7, None, bands)
+            np.testing.assert_array_equal(acc.read_rgba(), whole)
+    assert band_edges(21, 2) == [0, 8, 21] and band_edges(20, 3) == [0, 8, 16, 20]
+    assert band_edges(21, 99) == [0, 8, 16, 21] and band_edges(5, 3) == [0, 5]

@@ -10,8 +10,9 @@ from ..gl.context import loop_budget, loop_budget_unbounded
 from ..gl.shaders import compute_program, set_uniforms
 from .accumulation import Accumulation
 from .resources import SceneResources
+from .sample_bands import ROW_GROUP
 
-LOCAL_SIZE = 8
+LOCAL_SIZE = ROW_GROUP   # a work group's side: bands of rows start at multiples of it
 PIXEL_STATE_BYTES = 96  # PathState (80) + next_sample and padding, std430
 PIXEL_STATE_BYTES_ENVIRONMENT_MAP = 128  # the same with ENVIRONMENT_MAP (PathState 112)
 PATH_STATE_BYTES_AREA_LIGHTS = 32        # and AREA_LIGHTS' light sample (lib/integrator.glsl)
@@ -19,6 +20,17 @@ PATH_STATE_BYTES_AREA_LIGHTS = 32        # and AREA_LIGHTS' light sample (lib/in
 
 def groups(width: int, height: int) -> tuple[int, int]:
     return (width + LOCAL_SIZE - 1) // LOCAL_SIZE, (height + LOCAL_SIZE - 1) // LOCAL_SIZE
+
+
+def band_edges(height: int, bands: int) -> list[int]:
+    """The first rows of `bands` bands of about equal height and the image's height after them,
+    every band starting at a multiple of LOCAL_SIZE. A dispatch runs whole groups of LOCAL_SIZE
+    rows from its first row and the shader stops only at the image's edge, so a band that ended
+    inside a group also ran the next band's first rows: at a fresh start that band's restart then
+    began those pixels again and counted their first samples twice (count 4 for 2 samples)."""
+    rows = (height + LOCAL_SIZE - 1) // LOCAL_SIZE
+    bands = max(1, min(int(bands), rows))
+    return [min(height, LOCAL_SIZE * (rows * b // bands)) for b in range(bands + 1)]
 
 
 class PathTracer:
@@ -83,29 +95,45 @@ class PathTracer:
             target_samples: int, seed: int = 0, extra_uniforms: dict | None = None,
             bands: int = 1) -> None:
         """Dispatches until every pixel holds `target_samples` samples: per band of rows (the
-        image cut into `bands` of about equal height), one dispatch where the driver has no loop
-        limit; more on llvmpipe, where long paths resume across dispatches."""
+        image cut into `bands` of about equal height, band_edges), one dispatch where the driver
+        has no loop limit; more on llvmpipe, where long paths resume across dispatches. A sample
+        left part done by run_rows (acc.rows_done) is finished too: its rows are not begun again."""
+        edges = sorted(set(band_edges(acc.height, bands)) | {acc.rows_done})
+        for rows in zip(edges[:-1], edges[1:]):
+            # a fresh accumulation's band starts every pixel afresh, but for rows run_rows did
+            self.run_rows(resources, camera, acc, rows, target_samples, seed, extra_uniforms,
+                          fresh=acc.samples == 0 and rows[0] >= acc.rows_done)
+        acc.samples = target_samples
+        acc.rows_done = 0
+
+    def run_rows(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
+                 rows: tuple[int, int], target_samples: int, seed: int = 0,
+                 extra_uniforms: dict | None = None, fresh: bool | None = None) -> None:
+        """Dispatches image rows [first, last) until each of their pixels holds `target_samples`
+        samples (first a multiple of LOCAL_SIZE, last one too or the image's height: a dispatch
+        runs whole groups of rows). `fresh` (default: acc.samples == 0) begins their pixels afresh
+        in the first dispatch. acc.samples and acc.rows_done are the caller's to advance."""
+        first, last = rows
+        if not (0 <= first < last <= acc.height and first % LOCAL_SIZE == 0
+                and (last % LOCAL_SIZE == 0 or last == acc.height)):
+            raise ValueError(f"rows {first}..{last} of {acc.height}: a band starts at a multiple "
+                             f"of {LOCAL_SIZE} rows and ends at one or at the image's height")
         # No driver loop limit: every pixel finishes in one dispatch, and the pending count is
         # neither reset nor read (a write to a buffer the last dispatch used can make the driver
         # wait for that dispatch).
         unbounded = loop_budget_unbounded(self.loop_budget)
-        bands = max(1, min(int(bands), acc.height))
-        edges = [acc.height * b // bands for b in range(bands + 1)]
-        fresh = acc.samples == 0
-        for rows in zip(edges[:-1], edges[1:]):
-            restart = fresh   # a band's first dispatch only; resumed dispatches continue
-            while True:
-                if not unbounded:
-                    self.progress.write(bytes(4))
-                self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms, rows,
-                              restart)
-                restart = False
-                if unbounded:
-                    break
-                (pending,) = struct.unpack("I", self.progress.read())
-                if pending == 0:
-                    break
-        acc.samples = target_samples
+        restart = acc.samples == 0 if fresh is None else fresh  # resumed dispatches continue
+        while True:
+            if not unbounded:
+                self.progress.write(bytes(4))
+            self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms, rows,
+                          restart)
+            restart = False
+            if unbounded:
+                break
+            (pending,) = struct.unpack("I", self.progress.read())
+            if pending == 0:
+                break
 
     def release(self) -> None:
         if self._owns_program:

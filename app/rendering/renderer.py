@@ -36,6 +36,10 @@ from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noq
                        check_gather_event)
 
 METHODS = ("pt", "probes", "probes-only", "raymarch", "guided")
+# The methods whose sample may be split into bands of rows over several calls (add_rows): one
+# path-state pass whose every pixel is its own running mean (guided's two levels and the
+# raymarcher's frames are whole).
+BANDED_METHODS = ("pt", "probes", "probes-only")
 # Variants of glsl/pathtrace.comp: the probe renderers stop at the first scattering event.
 PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
 # The probes hold max_bounces - 1 events whatever the gather event, so a gather at event k lets a
@@ -792,18 +796,7 @@ class Renderer:
         """Adds n samples per pixel to the accumulation begun by begin(); returns GPU ms.
         Probe methods use the probes as they are now (bake them first for a final image)."""
         method, acc = self.method, self._acc
-        extra = None
-        if self.needs_probes(method):
-            if self.probe_grid is None:
-                raise RuntimeError("probe methods need a bake first (bake() or bake_step())")
-            extra = self.probe_uniforms()
-            # probes-only traces no shadow rays, which the events before a later gather need
-            extra["probe_gather_event"] = (self._settings.gather_event if method == "probes"
-                                           else 1)
-        # a sliced light-grid bake under way (bake_step) is read as it is, not finished here
-        light_ms = (self.bake_light() if self.needs_light(method)
-                    and not self.light_baking() else 0.0)
-        self.last_light_ms = light_ms
+        extra, _ = self._sample_inputs(method)
         level0_ms = 0.0
         if method == "guided":
             # level 0's frames, guided_level0_ratio of them per sample of level 1 (at least one
@@ -830,12 +823,7 @@ class Renderer:
                                   {**extra, **self._light.uniforms()})
             self.timer.stop()
             return self.timer.elapsed_ms
-        defines = (self._read_defines(self.probe_grid.defines())
-                   if method in (*PROBE_LIGHTING, "guided") else None)
-        tracer = self.pass_for(method, defines)
-        if self._settings.shadow_tracking == "residual":   # the shadow rays' control
-            self._light.bind()
-            extra = {**(extra or {}), **self._light.uniforms()}
+        tracer, extra = self._traced_pass(method, extra)
         # Cut into dispatches of at most the device's target (dispatch_budget.py) by the GPU ms
         # per sample this pass took at this size last time: several samples a dispatch where they
         # fit, bands of rows where one sample of the whole image would not. Unknown yet: one
@@ -858,6 +846,60 @@ class Renderer:
             total += ms
             n -= k
         return total + level0_ms
+
+    def _sample_inputs(self, method: str) -> tuple[dict | None, float]:
+        """What a sample of `method` reads besides the scene: the probes' uniforms (methods
+        that read probes), and the light grid baked first where it is stale (its ms)."""
+        extra = None
+        if self.needs_probes(method):
+            if self.probe_grid is None:
+                raise RuntimeError("probe methods need a bake first (bake() or bake_step())")
+            extra = self.probe_uniforms()
+            # probes-only traces no shadow rays, which the events before a later gather need
+            extra["probe_gather_event"] = (self._settings.gather_event if method == "probes"
+                                           else 1)
+        # a sliced light-grid bake under way (bake_step) is read as it is, not finished here
+        light_ms = (self.bake_light() if self.needs_light(method)
+                    and not self.light_baking() else 0.0)
+        self.last_light_ms = light_ms
+        return extra, light_ms
+
+    def _traced_pass(self, method: str, extra: dict | None) -> tuple[PathTracer, dict | None]:
+        """The path-state pass of `method` (pt, the probe renderers, guided's level 1) and its
+        uniforms."""
+        defines = (self._read_defines(self.probe_grid.defines())
+                   if method in (*PROBE_LIGHTING, "guided") else None)
+        tracer = self.pass_for(method, defines)
+        if self._settings.shadow_tracking == "residual":   # the shadow rays' control
+            self._light.bind()
+            extra = {**(extra or {}), **self._light.uniforms()}
+        return tracer, extra
+
+    def add_rows(self, last_row: int) -> float:
+        """Goes on with the sample in progress of the accumulation begun (sample acc.samples + 1;
+        BANDED_METHODS only): its rows from acc.rows_done to `last_row` (a multiple of
+        sample_bands.ROW_GROUP or the image's height). At the image's height the sample is
+        whole: acc.samples grows by one and rows_done is 0 again; until then the rows done hold
+        one sample more than the others, each pixel its own running mean. The pixels get exactly
+        what whole samples give them: a pixel's random numbers follow its index and sample alone
+        (app/rendering/sample_bands.py plans the bands). Returns the timer's ms of the rows (as
+        in add_samples, a stale light grid's bake before them is in last_light_ms)."""
+        method, acc = self.method, self._acc
+        if method not in BANDED_METHODS:
+            raise ValueError(f"{method}: a sample in bands of rows is for "
+                             f"{', '.join(BANDED_METHODS)}")
+        first, last = acc.rows_done, min(int(last_row), acc.height)
+        extra, _ = self._sample_inputs(method)
+        tracer, extra = self._traced_pass(method, extra)
+        self.timer.start()
+        tracer.run_rows(self.resources, self.camera, acc, (first, last), acc.samples + 1,
+                        self.seed, extra)
+        self.timer.stop()
+        if last >= acc.height:
+            acc.samples, acc.rows_done = acc.samples + 1, 0
+        else:
+            acc.rows_done = last
+        return self.timer.elapsed_ms
 
     def image(self) -> np.ndarray:
         """The current accumulated linear RGB image (H, W, 3), row 0 at the top."""
