@@ -143,7 +143,9 @@ def test_whole_samples_where_they_fit_and_no_more_than_asked():
         done = fill_frame(device, costs, 60.0, 50)
         per_frame.append((done, device.calls[before:]))
     first, calls = per_frame[0]
-    assert calls[:3] == [("rows", 0, 8), ("rows", 8, 40), ("samples", 13)]   # timed, then whole
+    # the first sample a group at a time (each timed alone), then whole samples
+    assert calls[:5] == [("rows", r, r + 8) for r in range(0, 40, 8)]
+    assert calls[5][0] == "samples" and calls[5][1] >= 13
     for done, calls in per_frame[:3]:
         # whole samples as many as fit (15 of 4 ms in 60), the rest of the budget a band
         assert done.ms <= 60.0 + 1e-9 and done.samples >= 13, calls
@@ -159,7 +161,10 @@ def test_a_frame_always_does_one_group_and_stops_after_the_budget():
     assert device.calls[1:] == [("rows", 8, 16), ("rows", 16, 24)]
     assert next_work(costs, 24, 1.0, started=True, samples_left=5) is None
     assert next_work(costs, 24, 1.0, started=False, samples_left=5) == ("rows", 32)
+    assert next_work(costs, 24, 30.0, started=True, samples_left=5) == ("rows", 32)  # untimed
+    costs.ms[3:6] = [8.0, 8.0, 8.0]                     # timed: three of them fit in 30 ms
     assert next_work(costs, 24, 30.0, started=True, samples_left=5) == ("rows", 48)
+    assert costs.plan(24, 1000.0) == 48                 # and group 6 is not timed yet
     assert next_work(costs, 0, 70.0, started=True, samples_left=5) == ("samples", 1)
     assert next_work(costs, 0, 70.0, started=True, samples_left=0) is None
 

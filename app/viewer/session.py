@@ -38,7 +38,8 @@ from ..rendering.accumulation import Accumulation
 from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from ..rendering.probes import BakeProgress
 from ..rendering.refine import HalfBuffers, RefineEstimate
-from ..rendering.renderer import PROBE_LIGHTING, Renderer
+from ..rendering.renderer import BANDED_METHODS, PROBE_LIGHTING, Renderer
+from ..rendering.sample_bands import RowCosts, fill_frame
 from ..scene import Scene
 from ..volume import Volume
 from .denoise_view import ViewDenoise
@@ -71,10 +72,24 @@ class MethodView:
     shown: str = ""               # what the accumulation holds: method, or the bake's preview
     # the last RECENT_DISPATCHES dispatches per method shown: {method: [(samples, GPU ms), ...]}
     dispatch_ms: dict = None
+    # Paced by the wall clock, a sample may take several frames in bands of rows
+    # (sample_bands.py): the wall ms of the rows per method shown ({method: RowCosts}); the last
+    # whole image (the accumulation before the last restart, with a sample at least), shown while
+    # the new accumulation's first sample is part done; and a camera move that waits for that
+    # first sample to be whole (a drag then shows whole images of the cameras it passes).
+    row_costs: dict = None
+    held: Accumulation | None = None
+    restart_pending: bool = False
 
     def __post_init__(self):
         self.shown = self.shown or self.method
         self.dispatch_ms = {} if self.dispatch_ms is None else self.dispatch_ms
+        self.row_costs = {} if self.row_costs is None else self.row_costs
+
+    @property
+    def shows_held(self) -> bool:
+        """Whether the display shows the last whole image (the first sample is part done)."""
+        return self.held is not None and self.acc is not None and self.acc.samples == 0
 
     @property
     def samples(self) -> int:
@@ -130,6 +145,8 @@ class FrameTimes:
     render_ms: float = 0.0
     display_ms: float = 0.0
     samples: int = 0          # samples per pixel dispatched in the frame, over its views
+    rows: int = 0             # rows of samples split into bands (the wall clock's pacing), and
+    bands: int = 0            # how many bands they were (sample_bands.py)
     denoise_ms: float = 0.0   # wall ms the Denoise switch's filtering took (not GPU time)
     clock: str = "gpu"        # what bake_ms and render_ms are: GPU time, or "wall" clock time
     frame_wall_ms: float | None = None   # the whole frame's wall time (its display and panels too)
@@ -141,6 +158,31 @@ class FrameTimes:
     @property
     def work_ms(self) -> float:
         return self.bake_ms + self.render_ms
+
+
+class _PacedView:
+    """A banded view as sample_bands.fill_frame drives it: its accumulation's counts, whole
+    samples through the session, bands of rows through Renderer.add_rows (with the view's own
+    method, camera and seed)."""
+
+    def __init__(self, session: "RenderSession", view: MethodView):
+        self.session, self.view = session, view
+
+    @property
+    def samples(self) -> int:
+        return self.view.acc.samples
+
+    @property
+    def rows_done(self) -> int:
+        return self.view.acc.rows_done
+
+    def add_samples(self, n: int) -> float:
+        return self.session._add_samples(self.view, n)
+
+    def add_rows(self, end: int) -> float:
+        s, v = self.session, self.view
+        with s.renderer.lend(v.acc, v.shown, v.camera, s.seed) as r:
+            return r.add_rows(end)
 
 
 class RenderSession:
@@ -201,7 +243,7 @@ class RenderSession:
             return set()
         changed = self.renderer.set_scene(scene, volume, placed)
         if changed:
-            self.restart()
+            self.restart(camera_only=changed == {"camera"})
         return changed
 
     def restream(self, camera, budget_s: float | None = None) -> bool:
@@ -226,20 +268,40 @@ class RenderSession:
             self.size = size
             self.restart()
 
-    def restart(self, methods=None) -> None:
+    def restart(self, methods=None, camera_only: bool = False) -> None:
+        """Begins the views (of `methods`; None: all) afresh. `camera_only`: only the camera
+        moved, so a view whose first sample is part done in bands finishes it first (_begin)."""
         for view in self.views.values():
             if methods is None or view.method in methods:
-                self._begin(view)
+                self._begin(view, camera_only)
         self.restarts += 1
 
-    def _begin(self, view: MethodView) -> None:
+    def _begin(self, view: MethodView, camera_only: bool = False) -> None:
+        """The view's accumulation afresh, with the scene's camera. Paced by the wall clock, the
+        image it held with a sample at least is kept to show until the new first sample is whole
+        (two accumulations swap, nothing is copied); and after a camera move alone, a first
+        sample part done finishes first with its own camera (restart_pending: step() begins the
+        view again once it is whole): otherwise a drag, which moves the camera every frame,
+        would never see a sample of the picture whole."""
         if self.size == (0, 0):
             return
         if isinstance(view, RefineView):
             return self._begin_refine(view)
         r = self.renderer
+        acc = view.acc
+        view.restart_pending = False
+        if self.pacer.wall and acc is not None and (acc.width, acc.height) == self.size:
+            if (camera_only and acc.samples == 0 and acc.rows_done > 0
+                    and view.shown == self.shown_method(view.method)):
+                view.restart_pending = True
+                return
+            if acc.samples > 0:
+                view.held, acc = acc, view.held   # the whole image shows; the other is begun
+        elif view.held is not None:
+            view.held.release()
+            view.held = None
         view.shown = self.shown_method(view.method)
-        with r.lend(view.acc):   # the Renderer keeps one accumulation; each view lends it its own
+        with r.lend(acc):   # the Renderer keeps one accumulation; each view lends it its own
             view.acc = r.begin(view.shown, *self.size, seed=self.seed)
             view.camera = r.camera
         view.acc.texture.filter = (self.filter, self.filter)
@@ -267,8 +329,10 @@ class RenderSession:
         view = self.views.pop(name)
         if isinstance(view, RefineView):
             view.release()
-        elif view.acc is not None:
-            view.acc.release()
+            return
+        for acc in (view.acc, view.held):
+            if acc is not None:
+                acc.release()
 
     # ---- one frame -----------------------------------------------------------------------------
     def probes_ready(self) -> bool:
@@ -323,6 +387,13 @@ class RenderSession:
                 times.render_ms += ms
                 times.samples += n
                 continue
+            if self.banded(view):
+                ms, n, rows, bands = self._add_paced(view, share, max_samples)
+                times.render_ms += ms
+                times.samples += n
+                times.rows += rows
+                times.bands += bands
+                continue
             n = min(self.samples_per_frame(view, share), max_samples - view.acc.samples)
             ms = self._add_samples(view, n)
             recent = view.dispatch_ms.setdefault(view.shown, [])
@@ -333,6 +404,30 @@ class RenderSession:
         times.denoise_ms = self.denoise.update(self)
         self.last = times
         return times
+
+    def banded(self, view: MethodView) -> bool:
+        """Whether the view's samples may be split into bands of rows over frames: paced by the
+        wall clock (where a GPU's timestamps are believed, whole samples as before), and a
+        method with one path-state pass (Renderer.add_rows)."""
+        return self.pacer.wall and view.shown in BANDED_METHODS
+
+    def _add_paced(self, view: MethodView, budget_ms: float,
+                   max_samples: int) -> tuple[float, int, int, int]:
+        """A frame's work for a banded view within `budget_ms` of wall time: whole samples where
+        they fit, else bands of the sample in progress, as sample_bands.next_work says from the
+        rows' times so far. Where a camera move waits for the first sample (restart_pending),
+        the view is begun again as soon as that sample is whole. Returns (ms, whole samples
+        finished, rows dispatched in bands, bands)."""
+        acc = view.acc
+        costs = view.row_costs.get(view.shown)
+        if costs is None or costs.height != acc.height:
+            costs = view.row_costs[view.shown] = RowCosts(acc.height)
+        done = fill_frame(_PacedView(self, view), costs, budget_ms, max_samples,
+                          MAX_SAMPLES_PER_FRAME, stop=lambda: view.restart_pending
+                          and acc.samples > 0)
+        if view.restart_pending and acc.samples > 0:
+            self._begin(view)
+        return done.ms, done.samples, done.rows, done.bands
 
     @staticmethod
     def samples_per_frame(view: MethodView, budget_ms: float, shown: str | None = None) -> int:
@@ -449,7 +544,7 @@ class RenderSession:
         which may stop believing the GPU's timestamps (the renderer's timer then becomes the wall
         clock)."""
         now = time.perf_counter()
-        working = times.samples > 0 or times.bake_ms > 0
+        working = times.samples > 0 or times.rows > 0 or times.bake_ms > 0
         if working and self._frame_began is not None:
             wall = 1000.0 * (now - self._frame_began)
             self.pacer.observe(wall, times.total_ms,
@@ -491,6 +586,8 @@ class RenderSession:
         view = self.views.get(method)
         if view is None or view.acc is None:
             return None
+        if getattr(view, "shows_held", False):   # a first sample part done: the last whole image
+            return view.held.texture
         return self.denoise.texture(method, view, self.restarts) or view.acc.texture
 
     def samples(self, method: str) -> int:
@@ -504,6 +601,11 @@ class RenderSession:
             return self._refine_label(view)
         shown = method if view is None else view.shown
         extra = "" if shown == method else f" (bake {self._bake_percent()}%: {shown} meanwhile)"
+        acc = None if view is None else view.acc
+        if acc is not None and acc.rows_done:   # a sample in bands of rows over frames
+            part = f"{100 * acc.rows_done // acc.height}% of sample {acc.samples + 1}"
+            extra += (f" ({part}; the last whole image meanwhile)" if view.shows_held
+                      else f" ({part})")
         return f"{method}  {self.samples(method)} spp{extra}"
 
     def _refine_label(self, view: RefineView) -> str:
@@ -554,6 +656,8 @@ class RenderSession:
         view = self.views.get(method)
         if view is None or view.acc is None:
             return None
+        if getattr(view, "shows_held", False):
+            return view.held.read()
         texture = self.denoise.texture(method, view, self.restarts)
         if texture is None:
             return view.acc.read()
@@ -564,7 +668,7 @@ class RenderSession:
         self.filter = moderngl.LINEAR if linear else moderngl.NEAREST
         for view in self.views.values():
             accs = ([view.ray, view.halves and view.halves.combined]
-                    if isinstance(view, RefineView) else [view.acc])
+                    if isinstance(view, RefineView) else [view.acc, view.held])
             for acc in accs:
                 if acc is not None:
                     acc.texture.filter = (self.filter, self.filter)
