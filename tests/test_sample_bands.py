@@ -237,25 +237,30 @@ def test_bands_of_rows_give_the_whole_samples_image_bit_for_bit(renderer):
             r.add_rows(12)
 
 
-def test_the_probe_renderers_in_bands_give_their_whole_samples_image(ctx):
+def test_the_probe_renderers_and_the_raymarcher_in_bands_give_their_whole_image(ctx):
     from radiance_probes.rendering.renderer import Renderer
     from radiance_probes.scene import parse_scene
     r = Renderer(ctx, parse_scene({**SCENE, "probes": {"grid": [4, 4, 4], "samples": 32}}))
     try:
         r.bake(0)
-        for method in ("probes", "probes-only"):
-            whole = _whole(r, method, 2)
+        for method in ("probes", "probes-only", "raymarch"):
+            whole = _whole(r, method, 3)
             with r.lend(None):
                 acc = r.begin(method, 24, 21, seed=7)
                 for end in (8, 21, 16, 21):
                     r.add_rows(end)
+                assert acc.samples == 2 and acc.rows_done == 0
+                r.add_rows(8)            # a third part done, then made whole by add_samples
+                r.add_samples(1)
                 banded = acc.read_rgba()
-            assert acc.samples == 2 and whole[..., :3].max() > 0
-            np.testing.assert_array_equal(banded, whole)
-        with r.lend(None):   # guided's two levels and the raymarcher's frames stay whole
-            r.begin("raymarch", 24, 21)
+            assert acc.samples == 3 and whole[..., :3].max() > 0
+            np.testing.assert_array_equal(banded, whole, err_msg=method)
+        with r.lend(None):   # guided's two levels stay whole, and the raymarcher's fragment pass
+            r.begin("guided", 24, 21)
             with pytest.raises(ValueError, match="bands of rows"):
                 r.add_rows(8)
+        r.configure(raymarch_stage="fragment")
+        assert not r.can_band("raymarch") and r.can_band("pt")
     finally:
         r.release()
 

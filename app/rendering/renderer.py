@@ -37,9 +37,9 @@ from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noq
 
 METHODS = ("pt", "probes", "probes-only", "raymarch", "guided")
 # The methods whose sample may be split into bands of rows over several calls (add_rows): one
-# path-state pass whose every pixel is its own running mean (guided's two levels and the
-# raymarcher's frames are whole).
-BANDED_METHODS = ("pt", "probes", "probes-only")
+# pass whose every pixel is its own running mean (the raymarcher as a compute pass only; guided's
+# two levels stay whole).
+BANDED_METHODS = ("pt", "probes", "probes-only", "raymarch")
 # Variants of glsl/pathtrace.comp: the probe renderers stop at the first scattering event.
 PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
 # The probes hold max_bounces - 1 events whatever the gather event, so a gather at event k lets a
@@ -817,10 +817,16 @@ class Renderer:
                      "guided_direction_probability": float(self._settings.guided_directions),
                      "guided_distance_probability": float(self._settings.guided_distances)}
         if method == "raymarch":
+            marcher = self.raymarcher()
+            step = self.raymarch_step_voxels * 2 * self.resources.march_step
+            uniforms = {**extra, **self._light.uniforms()}
             self.timer.start()
-            self.raymarcher().run(self.resources, self.camera, acc, n, self.seed,
-                                  self.raymarch_step_voxels * 2 * self.resources.march_step,
-                                  {**extra, **self._light.uniforms()})
+            if acc.rows_done:   # a frame part marched in bands (add_rows): its other rows first
+                marcher.run_rows(self.resources, self.camera, acc, (acc.rows_done, acc.height),
+                                 self.seed, step, uniforms)
+                acc.samples, acc.rows_done, n = acc.samples + 1, 0, n - 1
+            if n > 0:
+                marcher.run(self.resources, self.camera, acc, n, self.seed, step, uniforms)
             self.timer.stop()
             return self.timer.elapsed_ms
         tracer, extra = self._traced_pass(method, extra)
@@ -875,6 +881,11 @@ class Renderer:
             extra = {**(extra or {}), **self._light.uniforms()}
         return tracer, extra
 
+    def can_band(self, method: str) -> bool:
+        """Whether add_rows can split a sample of `method` into bands of rows."""
+        return method in BANDED_METHODS and (method != "raymarch"
+                                             or self.raymarch_stage == "compute")
+
     def add_rows(self, last_row: int) -> float:
         """Goes on with the sample in progress of the accumulation begun (sample acc.samples + 1;
         BANDED_METHODS only): its rows from acc.rows_done to `last_row` (a multiple of
@@ -885,15 +896,22 @@ class Renderer:
         (app/rendering/sample_bands.py plans the bands). Returns the timer's ms of the rows (as
         in add_samples, a stale light grid's bake before them is in last_light_ms)."""
         method, acc = self.method, self._acc
-        if method not in BANDED_METHODS:
+        if not self.can_band(method):
             raise ValueError(f"{method}: a sample in bands of rows is for "
-                             f"{', '.join(BANDED_METHODS)}")
+                             f"{', '.join(BANDED_METHODS)} (the raymarcher as a compute pass)")
         first, last = acc.rows_done, min(int(last_row), acc.height)
         extra, _ = self._sample_inputs(method)
-        tracer, extra = self._traced_pass(method, extra)
-        self.timer.start()
-        tracer.run_rows(self.resources, self.camera, acc, (first, last), acc.samples + 1,
-                        self.seed, extra)
+        if method == "raymarch":
+            marcher = self.raymarcher()
+            self.timer.start()
+            marcher.run_rows(self.resources, self.camera, acc, (first, last), self.seed,
+                             self.raymarch_step_voxels * 2 * self.resources.march_step,
+                             {**extra, **self._light.uniforms()})
+        else:
+            tracer, extra = self._traced_pass(method, extra)
+            self.timer.start()
+            tracer.run_rows(self.resources, self.camera, acc, (first, last), acc.samples + 1,
+                            self.seed, extra)
         self.timer.stop()
         if last >= acc.height:
             acc.samples, acc.rows_done = acc.samples + 1, 0

@@ -38,7 +38,7 @@ from ..rendering.accumulation import Accumulation
 from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from ..rendering.probes import BakeProgress
 from ..rendering.refine import HalfBuffers, RefineEstimate
-from ..rendering.renderer import BANDED_METHODS, PROBE_LIGHTING, Renderer
+from ..rendering.renderer import PROBE_LIGHTING, Renderer
 from ..rendering.sample_bands import RowCosts, fill_frame
 from ..scene import Scene
 from ..volume import Volume
@@ -408,8 +408,8 @@ class RenderSession:
     def banded(self, view: MethodView) -> bool:
         """Whether the view's samples may be split into bands of rows over frames: paced by the
         wall clock (where a GPU's timestamps are believed, whole samples as before), and a
-        method with one path-state pass (Renderer.add_rows)."""
-        return self.pacer.wall and view.shown in BANDED_METHODS
+        method whose pixels are each its own running mean (Renderer.can_band)."""
+        return self.pacer.wall and self.renderer.can_band(view.shown)
 
     def _add_paced(self, view: MethodView, budget_ms: float,
                    max_samples: int) -> tuple[float, int, int, int]:
