@@ -243,7 +243,7 @@ class RenderSession:
             return set()
         changed = self.renderer.set_scene(scene, volume, placed)
         if changed:
-            self.restart(camera_only=changed == {"camera"})
+            self.restart(wait=changed == {"camera"})
         return changed
 
     def restream(self, camera, budget_s: float | None = None) -> bool:
@@ -268,21 +268,24 @@ class RenderSession:
             self.size = size
             self.restart()
 
-    def restart(self, methods=None, camera_only: bool = False) -> None:
-        """Begins the views (of `methods`; None: all) afresh. `camera_only`: only the camera
-        moved, so a view whose first sample is part done in bands finishes it first (_begin)."""
+    def restart(self, methods=None, wait: bool = False) -> None:
+        """Begins the views (of `methods`; None: all) afresh. `wait`: a restart that may wait
+        for a first sample part done in bands (_begin): a camera move, a bake slice's probes."""
         for view in self.views.values():
             if methods is None or view.method in methods:
-                self._begin(view, camera_only)
+                self._begin(view, wait)
         self.restarts += 1
 
-    def _begin(self, view: MethodView, camera_only: bool = False) -> None:
+    def _begin(self, view: MethodView, wait: bool = False) -> None:
         """The view's accumulation afresh, with the scene's camera. Paced by the wall clock, the
         image it held with a sample at least is kept to show until the new first sample is whole
-        (two accumulations swap, nothing is copied); and after a camera move alone, a first
-        sample part done finishes first with its own camera (restart_pending: step() begins the
-        view again once it is whole): otherwise a drag, which moves the camera every frame,
-        would never see a sample of the picture whole."""
+        (two accumulations swap, nothing is copied); and where the restart may `wait` (a camera
+        move, the probes of another bake slice), a first sample part done finishes first
+        (restart_pending: step() begins the view again once it is whole), with its own camera
+        and the probes as they come: otherwise a drag, which moves the camera every frame, or a
+        bake, which restarts the views that read probes every frame, would never see a sample
+        of the picture whole. (The bands of such a sample may read the probes of different
+        slices: a preview of probes still baking either way.)"""
         if self.size == (0, 0):
             return
         if isinstance(view, RefineView):
@@ -291,7 +294,7 @@ class RenderSession:
         acc = view.acc
         view.restart_pending = False
         if self.pacer.wall and acc is not None and (acc.width, acc.height) == self.size:
-            if (camera_only and acc.samples == 0 and acc.rows_done > 0
+            if (wait and acc.samples == 0 and acc.rows_done > 0
                     and view.shown == self.shown_method(view.method)):
                 view.restart_pending = True
                 return
@@ -370,7 +373,7 @@ class RenderSession:
             self.bake_passes_run += 1
             if r.probe_grid.passes_done not in (0, passes):   # a pass ended: its progress
                 self.bake_report = r.probe_grid.progress_report()
-            self.restart([m for m in self.views if self.needs_probes(m)])
+            self.restart([m for m in self.views if self.needs_probes(m)], wait=True)
         # a view whose preview is over (the bake ended, or was never needed) starts its own method
         stale = [v.method for v in self.views.values() if not isinstance(v, RefineView)
                  and v.shown != self.shown_method(v.method)]
