@@ -297,9 +297,11 @@ def test_the_viewer_session_bakes_in_slices_and_shows_probes_after_each(ctx):
 def test_probe_methods_show_the_raymarcher_while_baking_then_their_own(ctx):
     """While the probes bake, a `probes` view accumulates the raymarcher over the probes as they
     are (and says so in its caption); when the bake ends it restarts as `probes` and converges
-    to the image of a finished bake. The frame's budget left after the slice sets the samples."""
+    to the image of a finished bake. The frame's budget left after the slice sets the samples.
+    Paced by GPU time, as on a GPU (paced by the wall clock, as llvmpipe is, a sample may be cut
+    into bands of rows: tests/test_sample_bands.py)."""
     from radiance_probes.viewer.session import RenderSession
-    s = RenderSession(ctx, parse_scene(SCENE))
+    s = RenderSession(ctx, parse_scene(SCENE), clock="gpu")
     try:
         s.resize(24, 16)
         s.set_methods(["probes"])
