@@ -63,13 +63,14 @@ uniform int loop_reserve;      // suspend a path when the budget falls to this
 // stored state holds (the host used to clear the states buffer instead: at 1920x1080 a 199 MB
 // memset and upload on every restart, that is every camera move in the viewer).
 uniform int restart;
-// The first image row of this dispatch: a large image is dispatched in bands of rows, so that no
-// dispatch runs long (app/rendering/renderer.py DISPATCH_TARGET_MS).
-uniform int row_offset;
+// The first pixel (column, row) of this dispatch: a large image is dispatched in bands of rows,
+// so that no dispatch runs long (app/rendering/dispatch_budget.py), and a sample longer than a
+// viewer's frame in bands of work groups over frames (app/rendering/sample_bands.py).
+uniform ivec2 tile_offset;
 
 void main()
 {
-    ivec2 pixel = ivec2(gl_GlobalInvocationID.xy) + ivec2(0, row_offset);
+    ivec2 pixel = ivec2(gl_GlobalInvocationID.xy) + tile_offset;
     if (any(greaterThanEqual(pixel, image_size)))
         return;
     uint key = uint(pixel.y * image_size.x + pixel.x);

@@ -9,15 +9,15 @@ layout(local_size_x = 8, local_size_y = 8) in;
 
 uniform int frame_layers;
 layout(rgba32f, binding = 1) uniform writeonly image2DArray frame_values;
-// The first image row of a frame_layers 0 dispatch: a frame that takes longer than a viewer's
-// frame may is marched in bands of rows over several (app/rendering/sample_bands.py).
-uniform int row_offset;
+// The first pixel (column, row) of a frame_layers 0 dispatch: a frame that takes longer than a
+// viewer's frame may is marched in bands of work groups over several (app/rendering/sample_bands.py).
+uniform ivec2 tile_offset;
 
 void main()
 {
     ivec2 pixel = ivec2(gl_GlobalInvocationID.xy);
     if (frame_layers == 0) {
-        raymarch_pixel(pixel + ivec2(0, row_offset));
+        raymarch_pixel(pixel + tile_offset);
         return;
     }
     if (any(greaterThanEqual(pixel, image_size)))

@@ -281,7 +281,9 @@ def test_the_viewer_session_bakes_in_slices_and_shows_probes_after_each(ctx):
         s.bake_budget_ms = per_probe * 10.5          # about 10 probes a frame
         s.step(64, True)
         assert grid.passes_done == 1 and 5 <= grid.next_probe <= 20   # a budget, not a pass
-        assert s.samples("raymarch") > 0            # the picture from the probes it has
+        # the picture from the probes it has (paced by the wall clock, as on llvmpipe, a sample
+        # may be part done in bands: tests/test_sample_bands.py)
+        assert s.samples("raymarch") > 0 or s.views["raymarch"].acc.groups_done > 0
         frames = 1
         while not s.probes_ready():
             s.step(64, True)

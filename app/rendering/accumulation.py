@@ -16,14 +16,15 @@ class Accumulation:
         # per restart at 1080p, and the viewer restarts after every bake slice
         self._framebuffer = ctx.framebuffer(color_attachments=[self.texture])
         self.samples = 0  # samples per pixel asked for so far (whole samples: every row's)
-        # rows [0, rows_done) of sample samples + 1 are done (Renderer.add_rows: a sample split
-        # into bands of rows over frames); 0 when no sample is part done
-        self.rows_done = 0
+        # work groups (tiles of 8 x 8 pixels, raster order) [0, groups_done) of sample
+        # samples + 1 are done (Renderer.add_groups: a sample split into bands over frames); 0
+        # when no sample is part done
+        self.groups_done = 0
 
     def reset(self) -> None:
         self._framebuffer.clear(0.0, 0.0, 0.0, 0.0)
         self.samples = 0
-        self.rows_done = 0
+        self.groups_done = 0
 
     def bind_image(self, unit: int = 0, read: bool = True) -> None:
         self.texture.bind_to_image(unit, read=read, write=True)
@@ -36,7 +37,7 @@ class Accumulation:
         # the passes wrote this accumulation through image stores: make them visible to the copy
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
         self.ctx.copy_framebuffer(copy._framebuffer, self._framebuffer)
-        copy.samples, copy.rows_done = self.samples, self.rows_done
+        copy.samples, copy.groups_done = self.samples, self.groups_done
         return copy
 
     def read_rgba(self) -> np.ndarray:

@@ -10,9 +10,9 @@ from ..gl.context import loop_budget, loop_budget_unbounded
 from ..gl.shaders import compute_program, set_uniforms
 from .accumulation import Accumulation
 from .resources import SceneResources
-from .sample_bands import ROW_GROUP
+from .sample_bands import TILE, tile_grid, tile_rects
 
-LOCAL_SIZE = ROW_GROUP   # a work group's side: bands of rows start at multiples of it
+LOCAL_SIZE = TILE   # a work group's side: bands start at whole groups (sample_bands.py)
 PIXEL_STATE_BYTES = 96  # PathState (80) + next_sample and padding, std430
 PIXEL_STATE_BYTES_ENVIRONMENT_MAP = 128  # the same with ENVIRONMENT_MAP (PathState 112)
 PATH_STATE_BYTES_AREA_LIGHTS = 32        # and AREA_LIGHTS' light sample (lib/integrator.glsl)
@@ -66,12 +66,14 @@ class PathTracer:
 
     def dispatch(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
                  target_samples: int, seed: int = 0, extra_uniforms: dict | None = None,
-                 rows: tuple[int, int] | None = None, restart: bool | None = None) -> None:
-        """One dispatch towards `target_samples` per pixel of image rows [rows) (None: all);
-        `restart` (default: acc was reset, acc.samples == 0) starts every pixel afresh (the
-        shader then ignores the stored path states: nothing is cleared or uploaded by the host).
-        acc.samples is the caller's to advance."""
-        first, last = rows if rows is not None else (0, acc.height)
+                 tiles: tuple[int, int, int, int] | None = None,
+                 restart: bool | None = None) -> None:
+        """One dispatch towards `target_samples` per pixel of a rectangle of work groups
+        (x0, y0, columns, rows of LOCAL_SIZE pixels; None: the whole image); `restart` (default:
+        acc was reset, acc.samples == 0) starts every pixel afresh (the shader then ignores the
+        stored path states: nothing is cleared or uploaded by the host). acc.samples is the
+        caller's to advance."""
+        x0, y0, nx, ny = tiles if tiles is not None else (0, 0, *groups(acc.width, acc.height))
         states = self._states_for(acc)
         resources.bind()
         set_uniforms(self.program, resources.uniforms())
@@ -82,11 +84,11 @@ class PathTracer:
                                     # the shader starts every pixel afresh (no host-side clear)
                                     "restart": int(acc.samples == 0 if restart is None
                                                    else restart),
-                                    "row_offset": first})
+                                    "tile_offset": (x0 * LOCAL_SIZE, y0 * LOCAL_SIZE)})
         acc.bind_image(0)
         states.bind_to_storage_buffer(1)
         self.progress.bind_to_storage_buffer(2)
-        self.program.run(*groups(acc.width, last - first))
+        self.program.run(nx, ny)
         self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT
                                 | moderngl.SHADER_STORAGE_BARRIER_BIT)
         self.dispatches += 1
@@ -97,43 +99,46 @@ class PathTracer:
         """Dispatches until every pixel holds `target_samples` samples: per band of rows (the
         image cut into `bands` of about equal height, band_edges), one dispatch where the driver
         has no loop limit; more on llvmpipe, where long paths resume across dispatches. A sample
-        left part done by run_rows (acc.rows_done) is finished too: its rows are not begun again."""
-        edges = sorted(set(band_edges(acc.height, bands)) | {acc.rows_done})
-        for rows in zip(edges[:-1], edges[1:]):
-            # a fresh accumulation's band starts every pixel afresh, but for rows run_rows did
-            self.run_rows(resources, camera, acc, rows, target_samples, seed, extra_uniforms,
-                          fresh=acc.samples == 0 and rows[0] >= acc.rows_done)
+        left part done by run_groups (acc.groups_done) is finished too: its groups are not begun
+        again."""
+        tiles_x, _ = tile_grid(acc.width, acc.height)
+        edges = {tiles_x * -(-row // LOCAL_SIZE) for row in band_edges(acc.height, bands)}
+        edges = sorted(edges | {acc.groups_done})
+        for first, end in zip(edges[:-1], edges[1:]):
+            # a fresh accumulation's band starts every pixel afresh, but for groups done before
+            self.run_groups(resources, camera, acc, (first, end), target_samples, seed,
+                            extra_uniforms, fresh=acc.samples == 0 and first >= acc.groups_done)
         acc.samples = target_samples
-        acc.rows_done = 0
+        acc.groups_done = 0
 
-    def run_rows(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
-                 rows: tuple[int, int], target_samples: int, seed: int = 0,
-                 extra_uniforms: dict | None = None, fresh: bool | None = None) -> None:
-        """Dispatches image rows [first, last) until each of their pixels holds `target_samples`
-        samples (first a multiple of LOCAL_SIZE, last one too or the image's height: a dispatch
-        runs whole groups of rows). `fresh` (default: acc.samples == 0) begins their pixels afresh
-        in the first dispatch. acc.samples and acc.rows_done are the caller's to advance."""
-        first, last = rows
-        if not (0 <= first < last <= acc.height and first % LOCAL_SIZE == 0
-                and (last % LOCAL_SIZE == 0 or last == acc.height)):
-            raise ValueError(f"rows {first}..{last} of {acc.height}: a band starts at a multiple "
-                             f"of {LOCAL_SIZE} rows and ends at one or at the image's height")
+    def run_groups(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
+                   groups_range: tuple[int, int], target_samples: int, seed: int = 0,
+                   extra_uniforms: dict | None = None, fresh: bool | None = None) -> None:
+        """Dispatches work groups [first, end) in raster order (sample_bands.tile_rects: three
+        rectangles at most) until each of their pixels holds `target_samples` samples. `fresh`
+        (default: acc.samples == 0) begins their pixels afresh in each rectangle's first
+        dispatch. acc.samples and acc.groups_done are the caller's to advance."""
+        first, end = groups_range
+        tiles_x, tiles_y = tile_grid(acc.width, acc.height)
+        if not 0 <= first < end <= tiles_x * tiles_y:
+            raise ValueError(f"work groups {first}..{end} of {tiles_x * tiles_y}")
         # No driver loop limit: every pixel finishes in one dispatch, and the pending count is
         # neither reset nor read (a write to a buffer the last dispatch used can make the driver
         # wait for that dispatch).
         unbounded = loop_budget_unbounded(self.loop_budget)
-        restart = acc.samples == 0 if fresh is None else fresh  # resumed dispatches continue
-        while True:
-            if not unbounded:
-                self.progress.write(bytes(4))
-            self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms, rows,
-                          restart)
-            restart = False
-            if unbounded:
-                break
-            (pending,) = struct.unpack("I", self.progress.read())
-            if pending == 0:
-                break
+        for rect in tile_rects(tiles_x, first, end):
+            restart = acc.samples == 0 if fresh is None else fresh  # resumed ones continue
+            while True:
+                if not unbounded:
+                    self.progress.write(bytes(4))
+                self.dispatch(resources, camera, acc, target_samples, seed, extra_uniforms,
+                              rect, restart)
+                restart = False
+                if unbounded:
+                    break
+                (pending,) = struct.unpack("I", self.progress.read())
+                if pending == 0:
+                    break
 
     def release(self) -> None:
         if self._owns_program:

@@ -8,6 +8,7 @@ from ..twins.camera import CameraFrame
 from ..gl.shaders import compute_program, render_program, set_uniforms
 from .accumulation import Accumulation
 from .pathtracer import LOCAL_SIZE, groups
+from .sample_bands import tile_grid, tile_rects
 from .resources import SceneResources
 
 STAGES = ("compute", "fragment")
@@ -98,7 +99,8 @@ class Raymarcher:
         set_uniforms(self.program, uniforms)
         set_uniforms(self.program, {"raymarch_step": step, "seed": seed & 0xFFFFFFFF,
                                     "frame_layers": 0,
-                                    **({"row_offset": 0} if self.stage == "compute" else {})})
+                                    **({"tile_offset": (0, 0)} if self.stage == "compute"
+                                       else {})})
         acc.bind_image(0)
         if layers > 1:
             self._frame_values_for(acc.width, acc.height).bind_to_image(1, read=True, write=True)
@@ -126,28 +128,29 @@ class Raymarcher:
             self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
             acc.samples += 1
 
-    def run_rows(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
-                 rows: tuple[int, int], seed: int, step: float, uniforms: dict) -> None:
-        """Marches image rows [first, last) of frame acc.samples + 1 into acc's running mean
-        (compute only; first a multiple of LOCAL_SIZE, last one too or the image's height: a
-        dispatch runs whole groups of rows, and a row run twice would count its frame twice).
-        acc.samples and acc.rows_done are the caller's to advance."""
-        first, last = rows
+    def run_groups(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
+                   groups_range: tuple[int, int], seed: int, step: float,
+                   uniforms: dict) -> None:
+        """Marches work groups [first, end) in raster order (sample_bands.tile_rects: three
+        rectangles at most) of frame acc.samples + 1 into acc's running mean (compute only: a
+        pixel marched twice would count its frame twice, and a dispatch runs whole groups).
+        acc.samples and acc.groups_done are the caller's to advance."""
+        first, end = groups_range
+        tiles_x, tiles_y = tile_grid(acc.width, acc.height)
         if self.stage != "compute":
-            raise ValueError("the raymarcher marches bands of rows as a compute pass only")
-        if not (0 <= first < last <= acc.height and first % LOCAL_SIZE == 0
-                and (last % LOCAL_SIZE == 0 or last == acc.height)):
-            raise ValueError(f"rows {first}..{last} of {acc.height}: a band starts at a multiple "
-                             f"of {LOCAL_SIZE} rows and ends at one or at the image's height")
+            raise ValueError("the raymarcher marches bands of work groups as a compute pass only")
+        if not 0 <= first < end <= tiles_x * tiles_y:
+            raise ValueError(f"work groups {first}..{end} of {tiles_x * tiles_y}")
         resources.bind()
         set_uniforms(self.program, resources.uniforms())
         set_uniforms(self.program, camera.uniforms())
         set_uniforms(self.program, uniforms)
         set_uniforms(self.program, {"raymarch_step": step, "seed": seed & 0xFFFFFFFF,
-                                    "frame_layers": 0, "frame_index": acc.samples,
-                                    "row_offset": first})
+                                    "frame_layers": 0, "frame_index": acc.samples})
         acc.bind_image(0)
-        self.program.run(*groups(acc.width, last - first))
+        for x0, y0, nx, ny in tile_rects(tiles_x, first, end):
+            set_uniforms(self.program, {"tile_offset": (x0 * LOCAL_SIZE, y0 * LOCAL_SIZE)})
+            self.program.run(nx, ny)
         self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
 
     def release(self) -> None:

@@ -27,6 +27,7 @@ from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extincti
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
 from .dispatch_budget import dispatch_target_ms
+from .sample_bands import tile_grid
 from .denoise import (GUIDE_SETS, Denoised, choose_guides, radiance_as_albedo, sanitize,
                       shared_denoiser)
 from .denoise_guides import GUIDE_FRAMES, DenoiseGuides
@@ -36,7 +37,8 @@ from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noq
                        check_gather_event)
 
 METHODS = ("pt", "probes", "probes-only", "raymarch", "guided")
-# The methods whose sample may be split into bands of rows over several calls (add_rows): one
+# The methods whose sample may be split into bands of work groups over several calls
+# (add_groups): one
 # pass whose every pixel is its own running mean (the raymarcher as a compute pass only; guided's
 # two levels stay whole).
 BANDED_METHODS = ("pt", "probes", "probes-only", "raymarch")
@@ -821,10 +823,11 @@ class Renderer:
             step = self.raymarch_step_voxels * 2 * self.resources.march_step
             uniforms = {**extra, **self._light.uniforms()}
             self.timer.start()
-            if acc.rows_done:   # a frame part marched in bands (add_rows): its other rows first
-                marcher.run_rows(self.resources, self.camera, acc, (acc.rows_done, acc.height),
+            if acc.groups_done:   # a frame part marched in bands (add_groups): the rest first
+                marcher.run_groups(self.resources, self.camera, acc,
+                                   (acc.groups_done, math.prod(tile_grid(acc.width, acc.height))),
                                  self.seed, step, uniforms)
-                acc.samples, acc.rows_done, n = acc.samples + 1, 0, n - 1
+                acc.samples, acc.groups_done, n = acc.samples + 1, 0, n - 1
             if n > 0:
                 marcher.run(self.resources, self.camera, acc, n, self.seed, step, uniforms)
             self.timer.stop()
@@ -882,41 +885,43 @@ class Renderer:
         return tracer, extra
 
     def can_band(self, method: str) -> bool:
-        """Whether add_rows can split a sample of `method` into bands of rows."""
+        """Whether add_groups can split a sample of `method` into bands."""
         return method in BANDED_METHODS and (method != "raymarch"
                                              or self.raymarch_stage == "compute")
 
-    def add_rows(self, last_row: int) -> float:
+    def add_groups(self, end: int) -> float:
         """Goes on with the sample in progress of the accumulation begun (sample acc.samples + 1;
-        BANDED_METHODS only): its rows from acc.rows_done to `last_row` (a multiple of
-        sample_bands.ROW_GROUP or the image's height). At the image's height the sample is
-        whole: acc.samples grows by one and rows_done is 0 again; until then the rows done hold
-        one sample more than the others, each pixel its own running mean. The pixels get exactly
-        what whole samples give them: a pixel's random numbers follow its index and sample alone
-        (app/rendering/sample_bands.py plans the bands). Returns the timer's ms of the rows (as
-        in add_samples, a stale light grid's bake before them is in last_light_ms)."""
+        can_band methods only): its work groups (tiles of 8 x 8 pixels in raster order,
+        sample_bands.tile_grid) from acc.groups_done to `end`. At the last group the sample is
+        whole: acc.samples grows by one and groups_done is 0 again; until then the pixels done
+        hold one sample more than the others, each pixel its own running mean. The pixels get
+        exactly what whole samples give them: a pixel's random numbers follow its index and
+        sample alone (app/rendering/sample_bands.py plans the bands). Returns the timer's ms of
+        the groups (as in add_samples, a stale light grid's bake before them is in
+        last_light_ms)."""
         method, acc = self.method, self._acc
         if not self.can_band(method):
-            raise ValueError(f"{method}: a sample in bands of rows is for "
+            raise ValueError(f"{method}: a sample in bands of work groups is for "
                              f"{', '.join(BANDED_METHODS)} (the raymarcher as a compute pass)")
-        first, last = acc.rows_done, min(int(last_row), acc.height)
+        total = math.prod(tile_grid(acc.width, acc.height))
+        first, end = acc.groups_done, min(int(end), total)
         extra, _ = self._sample_inputs(method)
         if method == "raymarch":
             marcher = self.raymarcher()
             self.timer.start()
-            marcher.run_rows(self.resources, self.camera, acc, (first, last), self.seed,
-                             self.raymarch_step_voxels * 2 * self.resources.march_step,
-                             {**extra, **self._light.uniforms()})
+            marcher.run_groups(self.resources, self.camera, acc, (first, end), self.seed,
+                               self.raymarch_step_voxels * 2 * self.resources.march_step,
+                               {**extra, **self._light.uniforms()})
         else:
             tracer, extra = self._traced_pass(method, extra)
             self.timer.start()
-            tracer.run_rows(self.resources, self.camera, acc, (first, last), acc.samples + 1,
-                            self.seed, extra)
+            tracer.run_groups(self.resources, self.camera, acc, (first, end), acc.samples + 1,
+                              self.seed, extra)
         self.timer.stop()
-        if last >= acc.height:
-            acc.samples, acc.rows_done = acc.samples + 1, 0
+        if end >= total:
+            acc.samples, acc.groups_done = acc.samples + 1, 0
         else:
-            acc.rows_done = last
+            acc.groups_done = end
         return self.timer.elapsed_ms
 
     def image(self) -> np.ndarray:

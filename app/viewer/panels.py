@@ -506,9 +506,9 @@ def stats_section(v) -> None:
         frame = session.pacer.frame_ms
         imgui.text(f"frame {'?' if frame is None else f'{frame:.0f}'} ms wall clock (render "
                    f"{t.render_ms:.0f}, bake {t.bake_ms:.0f})")
-        if t.bands:   # a sample longer than a frame, split into bands of rows over frames
-            imgui.text_wrapped(f"a sample over several frames: {t.rows} rows in {t.bands} "
-                               f"band{'s' if t.bands > 1 else ''} this frame")
+        if t.bands:   # a sample longer than a frame, split into bands over frames
+            imgui.text_wrapped(f"a sample over several frames: {t.tiles} tiles of 8 x 8 pixels "
+                               f"in {t.bands} band{'s' if t.bands > 1 else ''} this frame")
     else:
         imgui.text(f"GPU frame {t.total_ms:.2f} ms (render {t.render_ms:.2f}, bake "
                    f"{t.bake_ms:.2f}, display {t.display_ms:.2f})")

@@ -39,7 +39,7 @@ from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from ..rendering.probes import BakeProgress
 from ..rendering.refine import HalfBuffers, RefineEstimate
 from ..rendering.renderer import PROBE_LIGHTING, Renderer
-from ..rendering.sample_bands import RowCosts, fill_frame
+from ..rendering.sample_bands import TileCosts, fill_frame, tile_grid
 from ..scene import Scene
 from ..volume import Volume
 from .denoise_view import ViewDenoise
@@ -72,19 +72,19 @@ class MethodView:
     shown: str = ""               # what the accumulation holds: method, or the bake's preview
     # the last RECENT_DISPATCHES dispatches per method shown: {method: [(samples, GPU ms), ...]}
     dispatch_ms: dict = None
-    # Paced by the wall clock, a sample may take several frames in bands of rows
-    # (sample_bands.py): the wall ms of the rows per method shown ({method: RowCosts}); the last
+    # Paced by the wall clock, a sample may take several frames in bands of work groups
+    # (sample_bands.py): the wall ms of its tiles per method shown ({method: TileCosts}); the last
     # whole image (the accumulation before the last restart, with a sample at least), shown while
     # the new accumulation's first sample is part done; and a camera move that waits for that
     # first sample to be whole (a drag then shows whole images of the cameras it passes).
-    row_costs: dict = None
+    tile_costs: dict = None
     held: Accumulation | None = None
     restart_pending: bool = False
 
     def __post_init__(self):
         self.shown = self.shown or self.method
         self.dispatch_ms = {} if self.dispatch_ms is None else self.dispatch_ms
-        self.row_costs = {} if self.row_costs is None else self.row_costs
+        self.tile_costs = {} if self.tile_costs is None else self.tile_costs
 
     @property
     def shows_held(self) -> bool:
@@ -145,8 +145,8 @@ class FrameTimes:
     render_ms: float = 0.0
     display_ms: float = 0.0
     samples: int = 0          # samples per pixel dispatched in the frame, over its views
-    rows: int = 0             # rows of samples split into bands (the wall clock's pacing), and
-    bands: int = 0            # how many bands they were (sample_bands.py)
+    tiles: int = 0            # 8x8 tiles of samples split into bands (the wall clock's pacing),
+    bands: int = 0            # and how many bands they were (sample_bands.py)
     denoise_ms: float = 0.0   # wall ms the Denoise switch's filtering took (not GPU time)
     clock: str = "gpu"        # what bake_ms and render_ms are: GPU time, or "wall" clock time
     frame_wall_ms: float | None = None   # the whole frame's wall time (its display and panels too)
@@ -162,7 +162,7 @@ class FrameTimes:
 
 class _PacedView:
     """A banded view as sample_bands.fill_frame drives it: its accumulation's counts, whole
-    samples through the session, bands of rows through Renderer.add_rows (with the view's own
+    samples through the session, bands through Renderer.add_groups (with the view's own
     method, camera and seed)."""
 
     def __init__(self, session: "RenderSession", view: MethodView):
@@ -173,16 +173,16 @@ class _PacedView:
         return self.view.acc.samples
 
     @property
-    def rows_done(self) -> int:
-        return self.view.acc.rows_done
+    def groups_done(self) -> int:
+        return self.view.acc.groups_done
 
     def add_samples(self, n: int) -> float:
         return self.session._add_samples(self.view, n)
 
-    def add_rows(self, end: int) -> float:
+    def add_groups(self, end: int) -> float:
         s, v = self.session, self.view
         with s.renderer.lend(v.acc, v.shown, v.camera, s.seed) as r:
-            return r.add_rows(end)
+            return r.add_groups(end)
 
 
 class RenderSession:
@@ -294,7 +294,7 @@ class RenderSession:
         acc = view.acc
         view.restart_pending = False
         if self.pacer.wall and acc is not None and (acc.width, acc.height) == self.size:
-            if (wait and acc.samples == 0 and acc.rows_done > 0
+            if (wait and acc.samples == 0 and acc.groups_done > 0
                     and view.shown == self.shown_method(view.method)):
                 view.restart_pending = True
                 return
@@ -391,10 +391,10 @@ class RenderSession:
                 times.samples += n
                 continue
             if self.banded(view):
-                ms, n, rows, bands = self._add_paced(view, share, max_samples)
+                ms, n, tiles, bands = self._add_paced(view, share, max_samples)
                 times.render_ms += ms
                 times.samples += n
-                times.rows += rows
+                times.tiles += tiles
                 times.bands += bands
                 continue
             n = min(self.samples_per_frame(view, share), max_samples - view.acc.samples)
@@ -409,7 +409,7 @@ class RenderSession:
         return times
 
     def banded(self, view: MethodView) -> bool:
-        """Whether the view's samples may be split into bands of rows over frames: paced by the
+        """Whether the view's samples may be split into bands over frames: paced by the
         wall clock (where a GPU's timestamps are believed, whole samples as before), and a
         method whose pixels are each its own running mean (Renderer.can_band)."""
         return self.pacer.wall and self.renderer.can_band(view.shown)
@@ -418,19 +418,20 @@ class RenderSession:
                    max_samples: int) -> tuple[float, int, int, int]:
         """A frame's work for a banded view within `budget_ms` of wall time: whole samples where
         they fit, else bands of the sample in progress, as sample_bands.next_work says from the
-        rows' times so far. Where a camera move waits for the first sample (restart_pending),
-        the view is begun again as soon as that sample is whole. Returns (ms, whole samples
-        finished, rows dispatched in bands, bands)."""
+        tiles' times so far. Where a restart waits for the first sample (restart_pending), the
+        view is begun again as soon as that sample is whole. Returns (ms, whole samples
+        finished, tiles dispatched in bands, bands)."""
         acc = view.acc
-        costs = view.row_costs.get(view.shown)
-        if costs is None or costs.height != acc.height:
-            costs = view.row_costs[view.shown] = RowCosts(acc.height)
+        grid = tile_grid(acc.width, acc.height)
+        costs = view.tile_costs.get(view.shown)
+        if costs is None or (costs.tiles_x, costs.tiles_y) != grid:
+            costs = view.tile_costs[view.shown] = TileCosts(*grid)
         done = fill_frame(_PacedView(self, view), costs, budget_ms, max_samples,
                           MAX_SAMPLES_PER_FRAME, stop=lambda: view.restart_pending
                           and acc.samples > 0)
         if view.restart_pending and acc.samples > 0:
             self._begin(view)
-        return done.ms, done.samples, done.rows, done.bands
+        return done.ms, done.samples, done.tiles, done.bands
 
     @staticmethod
     def samples_per_frame(view: MethodView, budget_ms: float, shown: str | None = None) -> int:
@@ -547,7 +548,7 @@ class RenderSession:
         which may stop believing the GPU's timestamps (the renderer's timer then becomes the wall
         clock)."""
         now = time.perf_counter()
-        working = times.samples > 0 or times.rows > 0 or times.bake_ms > 0
+        working = times.samples > 0 or times.tiles > 0 or times.bake_ms > 0
         if working and self._frame_began is not None:
             wall = 1000.0 * (now - self._frame_began)
             self.pacer.observe(wall, times.total_ms,
@@ -605,8 +606,9 @@ class RenderSession:
         shown = method if view is None else view.shown
         extra = "" if shown == method else f" (bake {self._bake_percent()}%: {shown} meanwhile)"
         acc = None if view is None else view.acc
-        if acc is not None and acc.rows_done:   # a sample in bands of rows over frames
-            part = f"{100 * acc.rows_done // acc.height}% of sample {acc.samples + 1}"
+        if acc is not None and acc.groups_done:   # a sample in bands over frames
+            total = math.prod(tile_grid(acc.width, acc.height))
+            part = f"{100 * acc.groups_done // total}% of sample {acc.samples + 1}"
             extra += (f" ({part}; the last whole image meanwhile)" if view.shows_held
                       else f" ({part})")
         return f"{method}  {self.samples(method)} spp{extra}"
