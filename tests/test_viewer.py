@@ -829,3 +829,31 @@ def test_large_zarr_store_opens_on_a_thread_behind_its_preview(display, tmp_path
     assert any(m.startswith("loaded big.zarr in") for m in loaded["messages"])
     np.testing.assert_allclose(loaded["half_extent"], start["half_extent"])
     assert loaded["settings"]["volume_memory_bytes"] == 64 << 20      # view --volume-memory
+
+
+def test_a_file_opened_is_read_on_a_thread_while_the_window_draws(display, tmp_path):
+    """Opening a file in the window (a drop, the file dialogs, the Data panel): it is read and
+    made ready for the GPU on a thread (app/viewer/opening.py; the harness holds it back until
+    the first dump is written) while
+    the scene shown keeps drawing and the Data panel says how far; the volume shows once read,
+    and a file that cannot be read says why, the scene shown kept."""
+    z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in (12, 16, 20)), indexing="ij")
+    np.save(tmp_path / "blob.npy", np.clip(1.2 - 2 * np.sqrt(x * x + y * y + z * z), 0, 1))
+    (tmp_path / "bad.npy").write_text("not an array")
+    script = write_script(tmp_path / "s.json", [
+        {"frames": 1}, {"drop": ["blob.npy"], "wait": False}, {"frames": 3},
+        {"dump": "loading.json"}, {"until": "loaded", "max_frames": 5000}, {"frames": 1},
+        {"dump": "loaded.json"}, {"drop": ["bad.npy"]}, {"frames": 1}, {"dump": "bad.json"},
+        {"close": True}])
+    view(["--script", str(script), "--window", "640x480", "--render-scale", "0.25",
+          "--spp", "4"], tmp_path, display,
+         harness=["--load-after", str(tmp_path / "loading.json")])
+    loading, loaded, bad = (dump(tmp_path / f"{n}.json") for n in ("loading", "loaded", "bad"))
+    assert loading["loading"].startswith("opening ") and "blob.npy" in loading["loading"]
+    assert loading["volume"]["name"].startswith("builtin") and loading["errors"] == []
+    assert loaded["loading"] is None and loaded["errors"] == []
+    assert loaded["volume"] == {"name": "blob.npy", "dims": [20, 16, 12]}
+    assert loading["frame"] >= 5 and loaded["frame"] > loading["frame"]   # drawn while read
+    assert any(m.startswith("opened ") and "blob.npy" in m for m in loaded["messages"])
+    assert bad["volume"]["name"] == "blob.npy" and bad["loading"] is None
+    assert any("could not open" in e and "bad.npy" in e for e in bad["errors"]), bad["errors"]

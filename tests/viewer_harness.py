@@ -7,6 +7,7 @@ Run as a script it is the viewer with test hooks:
                                     the viewer made must have been released when it closed
   --lazy-bytes N                    Zarr stores larger than N bytes are read brick by brick
   --open-delay S                    a volume opening on a thread starts S seconds late
+  --load-after PATH                 a file opened in the window is read once PATH exists (a dump)
 """
 from __future__ import annotations
 
@@ -118,6 +119,17 @@ if __name__ == "__main__":
         from radiance_probes.rendering.progressive_open import ProgressiveOpen
         delay, work = float(hooks[hooks.index("--open-delay") + 1]), ProgressiveOpen._work
         ProgressiveOpen._work = lambda self: (_time.sleep(delay), work(self))[1]
+    if "--load-after" in hooks:   # a file opened in the window is read once this file exists
+        import time as _time
+        from radiance_probes.viewer.opening import VolumeLoading
+        gate, read = Path(hooks[hooks.index("--load-after") + 1]), VolumeLoading._work
+
+        def gated(self):
+            deadline = _time.monotonic() + 120.0
+            while not gate.exists() and _time.monotonic() < deadline:
+                _time.sleep(0.01)
+            read(self)
+        VolumeLoading._work = gated
     if "--release-check" in hooks:
         sys.exit(_release_check(view_argv))
     from radiance_probes.cli import main

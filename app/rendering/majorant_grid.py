@@ -40,6 +40,23 @@ def _program(ctx: moderngl.Context, channels: int = 1) -> ComputeProgram:
     return program
 
 
+def density_ranges(volume: Volume, cells: tuple[int, int, int] | None = None):
+    """(cells, (least, largest) density per macrocell) of a volume: NumPy, no GL (a volume
+    opening in the viewer has them made on its loading thread: 0.8 s for the foot), kept in
+    volume.derived (a step of a series seen before costs nothing)."""
+    cells = macrocell_counts(volume.dims) if cells is None else tuple(int(c) for c in cells)
+    ranges = volume.derived.get(("density ranges", cells))
+    if ranges is None:
+        if not isinstance(volume.data, np.ndarray):   # read brick by brick: its ranges
+            store = volume.bricks
+            ranges = brick_density_range_grid(*store.ranges(), store.dims, store.brick, cells)
+        else:
+            ranges = (channel_density_ranges(volume, cells) if volume.channel_count > 1
+                      else density_range_grid(volume.data, cells))
+        volume.derived[("density ranges", cells)] = ranges
+    return cells, ranges
+
+
 class MajorantGrid:
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
@@ -54,21 +71,12 @@ class MajorantGrid:
         self.builds = 0       # how many times the grid was built on the GPU (tests count them)
 
     def set_volume(self, volume: Volume, cells: tuple[int, int, int] | None = None) -> None:
-        """The density range per macrocell of a new volume (NumPy, once per volume); of several
+        """The density range per macrocell of a new volume (density_ranges); of several
         channels, each channel's ([C, cz, cy, cx]; on the GPU one texture of the least and one
         of the largest, a component a channel). `cells`: macrocells per axis (None: the volume's
         own, macrocell_counts; the bake's coarser level takes the level shown's, bake_level.py)."""
-        cells = macrocell_counts(volume.dims) if cells is None else tuple(int(c) for c in cells)
+        cells, ranges = density_ranges(volume, cells)
         channels = volume.channel_count
-        ranges = volume.derived.get(("density ranges", cells))   # a step of a series seen before
-        if ranges is None:
-            if not isinstance(volume.data, np.ndarray):   # read brick by brick: its ranges
-                store = volume.bricks
-                ranges = brick_density_range_grid(*store.ranges(), store.dims, store.brick, cells)
-            else:
-                ranges = (channel_density_ranges(volume, cells) if channels > 1
-                          else density_range_grid(volume.data, cells))
-            volume.derived[("density ranges", cells)] = ranges
         self.d_min, self.d_max = ranges
         if channels > 1:
             payloads = [np.ascontiguousarray(np.moveaxis(r, 0, -1), np.float32)

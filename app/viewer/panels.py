@@ -221,6 +221,8 @@ def data_section(v) -> None:
         if chosen and chosen != state.scene.volume.orientation:
             state.set_volume(orientation=chosen)
         imgui.text_disabled("patient: +x left, +y superior, +z anterior, where the file says")
+    if v.loading is not None:   # a file opened, read on a thread
+        imgui.text_wrapped(v.loading.progress())
     if v.opening is not None:
         imgui.text_wrapped(v.opening.progress())
     stream = v.session.renderer.resources.stream

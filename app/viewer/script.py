@@ -18,6 +18,8 @@ fractions of the picture's rectangle):
   {"screenshot": PATH}               save the window's image (panels included) after one frame
   {"dump": PATH}                     write the viewer's state as JSON (Viewer.snapshot)
   {"close": true}                    close the window as its close button does
+A step that opened a file (read on a thread, app/viewer/opening.py) waits for it and draws one
+frame more, which shows it, unless it says "wait": false (then {"until": "loaded"} waits).
 """
 from __future__ import annotations
 
@@ -71,10 +73,15 @@ class ScriptRunner:
         for i, step in enumerate(steps):
             if self.window.should_close():
                 break
+            loading = self.viewer.loading
             try:
                 self.step(step)
             except (KeyError, ValueError, TypeError) as exc:
                 raise ScriptError(f"step {i} {json.dumps(step)}: {exc}") from None
+            opened = self.viewer.loading is not None and self.viewer.loading is not loading
+            if opened and step.get("wait", True):
+                self.viewer.finish_loading()   # a file the step opened: shown from this frame
+                self.frame()
 
     def _path(self, p: str) -> Path:
         path = Path(p)
@@ -120,7 +127,7 @@ class ScriptRunner:
         v = self.viewer
         checks = {"baked": lambda: v.session.probes_ready(),
                   "done": lambda: v.session.finished(v.state.max_samples, v.state.wants_probes()),
-                  "loaded": lambda: v.opening is None,
+                  "loaded": lambda: v.opening is None and v.loading is None,
                   "streamed": lambda: not v.stream_wanted()}
         if condition not in checks:
             raise ValueError(f"unknown condition {condition!r} (known: {', '.join(checks)})")

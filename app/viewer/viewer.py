@@ -20,9 +20,10 @@ from ..environment_map import load_scene_environment
 from ..channels import volume_inputs
 from ..rendering.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
 from ..clinical_presets import opening_scene
-from ..volume import VolumeError, load_scene_volume, reads_lazily, zarr_preview
+from ..volume import VolumeError, reads_lazily, zarr_preview
 from . import layout, orbit, overlays, panels
 from .display import BACKGROUND, DisplayPass, ErrorMeter
+from .opening import VolumeLoading
 from .files import FileDialogs, builtin_scene, datasets, scene_for_path
 from . import crop_handles
 from .probe_view import (BoxOutline, ProbeSpheres, describe_probe, probe_centres, probe_under,
@@ -78,6 +79,7 @@ class Viewer:
         self._pending_volume = None
         self._pending_placed = None              # (shown, texture or pool) of _pending_volume
         self.opening: ProgressiveOpen | None = None   # a volume loading on a thread
+        self.loading: VolumeLoading | None = None     # a file opened, read on a thread
         # a mixed pool streamed once the camera has settled (_restream)
         self._camera_seen = None
         self._camera_moved_at = 0.0
@@ -224,20 +226,45 @@ class Viewer:
         return target
 
     def open_path(self, path: str) -> bool:
-        """Opens a scene (.json) or a volume file; on failure the error panel says why. A Zarr
-        store read brick by brick loads on a thread (open_in_background), its preview shown."""
-        preview = None
+        """Opens a scene (.json) or a volume file; on failure the error panel says why. The file
+        is read on a thread (VolumeLoading: the scene shown stays, the Data panel says how far),
+        and shown once read (_poll_loading); a Zarr store read brick by brick loads on a thread
+        too (open_in_background), its preview shown meanwhile."""
         try:
             scene, scene_path = scene_for_path(path, self.state.scene)
             load_scene_environment(scene)
-            preview = (zarr_preview(scene, memory_bytes=self.volume_memory_bytes)
-                       if reads_lazily(scene) else None)
-            volume = preview if preview is not None else load_scene_volume(scene)
-            if preview is None:
-                scene = opening_scene(scene, volume)   # a CT opens with its clinical preset
+            lazy = reads_lazily(scene)
+            preview = zarr_preview(scene, memory_bytes=self.volume_memory_bytes) if lazy else None
         except RECOVERABLE as exc:
             self.state.error(could_not_open(path, exc))
             return False
+        if preview is None:
+            self.loading = VolumeLoading(scene, scene_path, path)   # (one opened before: dropped)
+            return True
+        return self._show_opened(path, scene, scene_path, preview, preview=True)
+
+    def _poll_loading(self) -> None:
+        """Shows a file read on a thread once it is read, or says why it could not be."""
+        loading = self.loading
+        if loading is None or not loading.done:
+            return
+        self.loading = None
+        try:
+            volume = loading.result()
+            scene = opening_scene(loading.scene, volume)   # a CT opens with its clinical preset
+        except RECOVERABLE as exc:
+            self.state.error(could_not_open(loading.path, exc))
+            return
+        self._show_opened(loading.path, scene, loading.scene_path, volume)
+
+    def finish_loading(self) -> None:
+        """Waits for a file read on a thread and shows it (scripts)."""
+        if self.loading is not None:
+            self.loading.wait()
+            self._poll_loading()
+
+    def _show_opened(self, path: str, scene, scene_path, volume, preview: bool = False) -> bool:
+        """The scene of a file opened, framed for the view, with its volume to show."""
         _, _, w, h = self.view_rect_window()
         scene = frame_default_camera(scene, volume.half_extent, w / max(h, 1.0))
         self.state.load_scene(scene, scene_path)
@@ -247,7 +274,7 @@ class Viewer:
         self.state.note(f"opened {path}")
         for note in volume.notes:
             self.state.note(note)
-        if preview is not None:
+        if preview:
             self.open_in_background(scene)
         return True
 
@@ -461,6 +488,7 @@ class Viewer:
         state = self.state
         self.advance_playback()
         state.history.observe(state.scene, busy=self._mouse_held())
+        self._poll_loading()
         self._poll_opening()
         self._sync()
         self._restream()
@@ -668,6 +696,7 @@ class Viewer:
                              if session.volume.dicom_series is not None else None),
             "volume_notes": list(session.volume.notes),
             "opening": None if self.opening is None else self.opening.progress(),
+            "loading": None if self.loading is None else self.loading.progress(),
             "streaming": self._stream_snapshot(),
             "playing": s.playing,
             "opacity_points": [list(p) for p in self.opacity_points()[0]],
