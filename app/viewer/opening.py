@@ -4,7 +4,7 @@ NumPy and IO, about 2 s for the foot on the shared two-core machine) runs while 
 drawing the scene shown, and the GL thread then only uploads (issue 44: no frame of seconds).
 The GL context belongs to its thread; nothing here touches it.
 
-    loading = VolumeLoading(scene, scene_path, path)
+    loading = VolumeLoading(scene, scene_path, path, device_limits(ctx), memory_bytes, brick_size)
     each frame: if loading.done: volume = loading.result()   # raises what the thread raised
 """
 from __future__ import annotations
@@ -14,23 +14,32 @@ import time
 
 from ..gl.textures import texture_payload
 from ..rendering.majorant_grid import density_ranges
+from ..rendering.volume_placement import plan_placement
 from ..volume import Volume, load_scene_volume
 from .tf_editor import HISTOGRAM_BINS
 
 
-def prepare_volume(volume: Volume) -> None:
+def prepare_volume(volume: Volume, limits=None, memory_bytes: int | None = None,
+                   brick_size: int | None = None) -> None:
     """What the GL thread would otherwise compute from the volume when it is shown, made now and
-    kept in volume.derived: the majorant grid's density ranges, the texture's texels (a volume
-    in memory that fits one texture), the first channel's histogram."""
+    kept in volume.derived: the majorant grid's density ranges, the texture's texels (where
+    plan_placement under `limits`, the context's device_limits, puts it in one texture), the
+    first channel's histogram."""
     if volume.bricks is None:
         density_ranges(volume)
-        texture_payload(volume)
+        if (limits is not None
+                and plan_placement(volume, limits, memory_bytes, brick_size).plan is None):
+            texture_payload(volume)
     volume.histogram(HISTOGRAM_BINS, 0)
 
 
 class VolumeLoading:
-    def __init__(self, scene, scene_path, path: str):
+    def __init__(self, scene, scene_path, path: str, limits=None,
+                 memory_bytes: int | None = None, brick_size: int | None = None):
+        """`limits`: the context's device_limits (taken on its thread), with the volume memory
+        cap and brick size: where the volume will go (prepare_volume)."""
         self.scene, self.scene_path, self.path = scene, scene_path, path
+        self._placement = (limits, memory_bytes, brick_size)
         self.started = time.perf_counter()
         self.stage = "reading the file"
         self._volume: Volume | None = None
@@ -43,7 +52,7 @@ class VolumeLoading:
         try:
             volume = load_scene_volume(self.scene)
             self.stage = "preparing it for the GPU"
-            prepare_volume(volume)
+            prepare_volume(volume, *self._placement)
             self._volume = volume
         except BaseException as exc:   # reported by result() on the GL thread
             self._error = exc

@@ -19,6 +19,7 @@ from ..scene import SceneError, scene_to_dict
 from ..environment_map import load_scene_environment
 from ..channels import volume_inputs
 from ..rendering.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
+from ..rendering.volume_placement import device_limits
 from ..clinical_presets import opening_scene
 from ..volume import VolumeError, reads_lazily, zarr_preview
 from . import layout, orbit, overlays, panels
@@ -239,7 +240,9 @@ class Viewer:
             self.state.error(could_not_open(path, exc))
             return False
         if preview is None:
-            self.loading = VolumeLoading(scene, scene_path, path)   # (one opened before: dropped)
+            res = self.session.renderer.resources   # (a file opened before: dropped)
+            self.loading = VolumeLoading(scene, scene_path, path, device_limits(self.ctx),
+                                         res.volume_memory_bytes, res.brick_size)
             return True
         return self._show_opened(path, scene, scene_path, preview, preview=True)
 
