@@ -12,8 +12,8 @@ stage remembers the failure so that a viewer does not try again every frame.
 
 Cost (`Denoised.ms`, wall time; OIDN's execute is synchronous): prepare_ms (the colour's copy into
 the filter's memory where the caller did not read GL straight into it, a pass that finds
-non-finite values, the raw image's tile means, and a new guide's upload), filter_ms, check_ms (a
-pass over the output, the tile means kept, and its copy where asked). The read-back from GL and
+non-finite values, and a new guide's upload), filter_ms, check_ms (a pass over the output and its
+copy where asked), means_ms (the raw image's tile means and their restoring, keep_block_means). The read-back from GL and
 the upload of the result are the caller's (Renderer.denoise, the viewer), and records add them.
 """
 from __future__ import annotations
@@ -374,7 +374,9 @@ class Denoiser:
             if not np.isfinite(staged[..., :3].sum(dtype=np.float64)):
                 _make_usable(staged) if not signed else np.nan_to_num(
                     staged, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+            t_means = time.perf_counter()
             raw_means = _block_means(staged[..., :3], KEEP_MEANS_BLOCK) if keep_means else None
+            raw_means_ms, keep_ms = 1e3 * (time.perf_counter() - t_means), 0.0
             negative = None
             if signed and staged[..., :3].min() < 0.0:
                 negative = np.maximum(-staged[..., :3], 0.0)
@@ -390,7 +392,9 @@ class Denoiser:
             if not np.isfinite(out.sum(dtype=np.float64)):   # (never seen) a filter's overflow
                 _make_usable(out)
             if raw_means is not None:
+                t_keep = time.perf_counter()
                 keep_block_means(raw_means, out, signed=negative is not None)
+                keep_ms = 1e3 * (time.perf_counter() - t_keep)
             if copy:
                 out = out.copy()
             t3 = time.perf_counter()
@@ -399,8 +403,9 @@ class Denoiser:
             self.close()
             return Denoised(sanitize(color[..., :3]), None, self.failure)
         return Denoised(out, self.device, None,
-                        {"prepare_ms": 1e3 * (t1 - t0), "filter_ms": 1e3 * (t2 - t1),
-                         "check_ms": 1e3 * (t3 - t2)})
+                        {"prepare_ms": 1e3 * (t1 - t0) - raw_means_ms,
+                         "filter_ms": 1e3 * (t2 - t1), "check_ms": 1e3 * (t3 - t2) - keep_ms,
+                         "means_ms": raw_means_ms + keep_ms})
 
     def _execute(self, entry) -> None:
         entry["filter"].execute()
