@@ -664,9 +664,10 @@ class Renderer:
         return self._light
 
     def invalidate(self) -> None:
-        """Forgets the baked probes and light grid, so the next image pays for both again (the
-        benchmark charges every record what its image cost)."""
+        """Forgets the baked probes, the light grid and the denoiser's guides, so the next image
+        pays for them again (the benchmark charges every record what its image cost)."""
         self._baked_key = None
+        self._guides_key = None
         for slot in (self._image_light, self._walk_light):
             slot.key = slot.pending = None
 
@@ -948,8 +949,11 @@ class Renderer:
             self.timer.stop()
             albedo, normal, ms = radiance_as_albedo(acc.read()), None, light_ms + self.timer.elapsed_ms
         else:
-            if self._guides is None:
-                self._guides = DenoiseGuides(self.ctx, self.resources.medium_defines())
+            medium = self.resources.medium_defines()
+            if self._guides is None or self._guides.defines != medium:
+                if self._guides is not None:   # a crop, channels or surfaces changed the build
+                    self._guides.release()
+                self._guides = DenoiseGuides(self.ctx, medium)
             self.timer.start()
             self._guides.run(self.resources, camera, step, frames, self.seed)
             self.timer.stop()
