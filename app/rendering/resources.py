@@ -249,9 +249,14 @@ class SceneResources:
 
     def medium_defines(self) -> dict:
         """What every pass that includes lib/medium.glsl is compiled with for this scene: nothing
-        for one channel (the one-channel code, unchanged), else MEDIUM_CHANNELS; and
-        HYBRID_SCATTERING where the scene's surface.gradient_factor is above 0."""
+        for one channel (the one-channel code, unchanged), else MEDIUM_CHANNELS; NO_CLIP_REGION
+        where no crop or clip plane is set; and HYBRID_SCATTERING where the scene's
+        surface.gradient_factor is above 0. A pass built with them is rebuilt when they change."""
         defines = {} if self.tables is None else {"MEDIUM_CHANNELS": self.tables.count}
+        if self.clip is None:
+            # no crop or clip plane: lib/clip_region.glsl's tests fold away (a uniform test cost
+            # the walks 7%); a crop set later changes these defines, so every pass is rebuilt
+            defines = {**defines, "NO_CLIP_REGION": 1}
         if self.scene.surface.gradient_factor > 0.0:
             # hybrid scattering (glsl/lib/hybrid_scattering.glsl: the medium scatters by a
             # surface BRDF too); k = 0 compiles every pass without it, as it was
