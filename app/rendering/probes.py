@@ -231,6 +231,8 @@ class ProbeGrid:
                               **tracking}
         if sun == "grid":
             self._walk_defines["WALK_SUN_GRID"] = 1
+            if self.sun_correction > 0.0:   # the correction's reservoir (lib/integrator.glsl)
+                self._walk_defines["WALK_SUN_CORRECTION"] = 1
         if self.environment_map:
             self._walk_defines["ENVIRONMENT_MAP"] = 1
         if self.area_lights:

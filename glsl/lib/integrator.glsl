@@ -63,6 +63,11 @@ uniform int max_path_steps;   // hang guard: tracking steps one path may take in
 #if defined(WALK_SUN_GRID)
 uniform float walk_sun_correction;   // least rate at which a shadow ray corrects the grid's sun
 #endif
+#if defined(WALK_SUN_GRID) && defined(WALK_SUN_CORRECTION)
+// The walk's reservoir chose the event at x (grid transmittance `grid`, weight c / w) for the sun's
+// correction, replacing any earlier choice: defined by the walk shader (glsl/probe_walks.comp).
+void walk_correction_choose(vec3 x, float grid, vec3 weight_per_w);
+#endif
 #if defined(PROBE_LIGHTING)
 // The scattering event at which a probe renderer reads the probes and ends the path (>= 1). 1 is
 // the paper's renderer: the probes stand in for all light arriving at the first event but the
@@ -154,13 +159,13 @@ struct PathState {
     int shadow_pending; // the sun's shadow rays of the event at x still to finish (0: none)
 #if defined(WALK_SUN_GRID)
     float correction_rate_sum;   // the walk's events' correction rates summed (see path_flight)
-    // The walk's one candidate for the sun's correction: where, its weight W c / w (the
-    // estimate's factor on T_ray - T_grid), the grid's transmittance there; the reservoir's
-    // weight sum W.
-    vec3 correction_x;
+    // The reservoir's weight sum W. Its candidate (where, c / w, the grid's transmittance there)
+    // goes straight to the walk's buffer entries (walk_correction_choose, glsl/probe_walks.comp):
+    // held here, in registers through every tracking step, it made the walks 18% slower on an
+    // H200 (bench/h200-bake-speed). The pads keep the resumable state's layout.
+    vec3 correction_pad0;
     float correction_w_sum;
-    vec3 correction_weight;
-    float correction_grid;
+    vec4 correction_pad1;
 #else
     int pad;
 #endif
@@ -194,10 +199,9 @@ void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
     p.shadow_pending = 0;
 #if defined(WALK_SUN_GRID)
     p.correction_rate_sum = 0.0;
-    p.correction_x = origin;
+    p.correction_pad0 = vec3(0.0);
     p.correction_w_sum = 0.0;
-    p.correction_weight = vec3(0.0);
-    p.correction_grid = 0.0;
+    p.correction_pad1 = vec4(0.0);
 #else
     p.pad = 0;
 #endif
@@ -537,20 +541,20 @@ int path_flight(inout PathState p, inout int steps_left)
         vec3 c = p.throughput * sun_irradiance * sun_phase;
 #endif
         p.radiance += c * grid;
+#if defined(WALK_SUN_CORRECTION)   // compiled where the rate is above 0 (its code alone made the
+                                   // walks 18% slower on an H200: bench/h200-bake-speed)
         if (walk_sun_correction > 0.0) {
             float change = tau - light_grid_optical_depth(p.x + light_grid_texel * sun_direction);
             float q = clamp(walk_sun_correction * (1.0 + 8.0 * change), walk_sun_correction, 0.5);
             float w = max(c.r, max(c.g, c.b)) * q;
             if (w > 0.0) {
                 p.correction_w_sum += w;
-                if (rng_next(p.rng) * p.correction_w_sum < w) {
-                    p.correction_x = p.x;
-                    p.correction_weight = c / w;
-                    p.correction_grid = grid;
-                }
+                if (rng_next(p.rng) * p.correction_w_sum < w)
+                    walk_correction_choose(p.x, grid, c / w);
                 p.correction_rate_sum += q;
             }
         }
+#endif
     }
     return STEP_CONTINUE;
 #endif
