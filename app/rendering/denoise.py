@@ -410,14 +410,23 @@ class Denoiser:
                 np.subtract(positive, entry["output"], out=entry["output"])
             t2 = time.perf_counter()
             out = entry["output"]
-            if not np.isfinite(out.sum(dtype=np.float64)):   # (never seen) a filter's overflow
+            if raw_means is not None or copy:
+                # one read of the filter's output buffer (host memory the device writes: reading
+                # it is slow, and keeping the means reads and writes it three times) into memory
+                # of our own; handed out where `copy` asks, made anew next call
+                scratch = entry.pop("scratch", None) if copy else entry.get("scratch")
+                if scratch is None:
+                    scratch = np.empty_like(out)
+                    if not copy:
+                        entry["scratch"] = scratch
+                np.copyto(scratch, out)
+                out = scratch
+            if not _all_finite(out):   # (never seen) a filter's overflow
                 _make_usable(out)
             if raw_means is not None:
                 t_keep = time.perf_counter()
                 keep_block_means(raw_means, out, signed=negative is not None)
                 keep_ms = 1e3 * (time.perf_counter() - t_keep)
-            if copy:
-                out = out.copy()
             t3 = time.perf_counter()
         except Exception as exc:
             self.failure = f"the denoiser failed ({exc}). Showing the image as rendered."
