@@ -132,6 +132,12 @@ def _parse_volume(d: Any) -> VolumeSpec:
         kw["dtype"] = _choice(d["dtype"], "volume.dtype", tuple(RAW_DTYPES))
     if d.get("replace_nonfinite") is not None:
         kw["replace_nonfinite"] = _number(d["replace_nonfinite"], "volume.replace_nonfinite")
+    if d.get("rescale") is not None:
+        slope, intercept = _vector(d["rescale"], "volume.rescale", 2)
+        if slope == 0.0:
+            raise SceneError("volume.rescale: the slope must not be 0 (stored values to data units "
+                             "as value * slope + intercept)")
+        kw["rescale"] = (slope, intercept)
     if d.get("series") is not None:
         if not kw.get("path"):
             raise SceneError("volume.series: only for a DICOM folder or DICOMDIR "

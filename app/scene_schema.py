@@ -139,6 +139,12 @@ def keys() -> dict[str, Key]:
                            vector(3, number(1, 1 << 20, integer=True)), default="from the name"),
         "volume.dtype": Key("The sample type of such a .raw file.", choice(_dtypes()),
                             default="from the name"),
+        "volume.rescale": Key(
+            "[slope, intercept]: the file's stored values to data units (value * slope + "
+            "intercept), as DICOM's RescaleSlope and RescaleIntercept, for data exported without "
+            "them (an 8-bit CT windowed from Hounsfield units). volume.value_range, volume.window "
+            "and the CT presets are then in data units. Not for DICOM (it carries its own).",
+            vector(2), default="none: the stored values are the data"),
         "volume.replace_nonfinite": Key(
             "The value NaN and Inf voxels get; without it they are an error.", {"type": "number"},
             default="none (an error)"),

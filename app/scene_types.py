@@ -72,6 +72,10 @@ class VolumeSpec:
     dims: tuple[int, int, int] | None = None  # for .raw files not in the Open SciVis naming
     dtype: str | None = None
     replace_nonfinite: float | None = None  # None: NaN/Inf in the data are an error
+    # (slope, intercept): the file's stored values to data units (value * slope + intercept), as
+    # DICOM's RescaleSlope/RescaleIntercept do, for data exported without them (an 8-bit CT
+    # windowed from Hounsfield units); value_range, window and CT presets are then in data units.
+    rescale: tuple[float, float] | None = None
     # (level, width) in data units (Hounsfield units for CT), or a WINDOW_PRESETS name in the JSON:
     # another way to give value_range (level -/+ width / 2), which it excludes.
     window: tuple[float, float] | None = None
