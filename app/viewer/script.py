@@ -13,6 +13,7 @@ fractions of the picture's rectangle):
   {"double_click": TARGET}
   {"drag": TARGET, "to": TARGET | "by": [dx, dy], "button": "left", "steps": 6}
   {"scroll": TARGET, "steps": 1}     mouse wheel notches (positive zooms in)
+  {"move": TARGET}                   move the mouse there (hover), then one frame
   {"resize": [W, H]}                 resize the window
   {"drop": [PATH, ...]}              drop files on the window
   {"screenshot": PATH}               save the window's image (panels included) after one frame
@@ -95,6 +96,8 @@ class ScriptRunner:
         elif "drag" in s:
             self.drag(s["drag"], s.get("to"), s.get("by"), BUTTONS[s.get("button", "left")],
                       int(s.get("steps", 6)))
+        elif "move" in s:
+            self.move(self.position(s["move"]))
         elif "scroll" in s:
             self.move(self.position(s["scroll"]))
             self.input.on_scroll(self.handle, 0.0, float(s.get("steps", 1)))
