@@ -2,8 +2,9 @@
 ones GLFW calls), frame by frame, and save screenshots and state dumps. Tests and the screenshot
 script use them; a person can too (``view SCENE --script steps.json``).
 
-Steps (one key each; positions are window coordinates, a widget's name, or {"view": [fx, fy]},
-fractions of the picture's rectangle):
+Steps (one key each; positions are window coordinates, a widget's name, {"view": [fx, fy]},
+fractions of the picture's rectangle, or {"slice": "x" | "y" | "z", "at": [fx, fy]}, fractions of
+that slice's image in the slice view):
   {"frames": N}                      render N frames
   {"until": "baked" | "done" | "loaded", "max_frames": M}   frames until the probes are baked /
                                      nothing is left to render (the scripted --spp cap reached) /
@@ -146,6 +147,10 @@ class ScriptRunner:
         if isinstance(target, str):
             self._scroll_into_view(target)
             return self.viewer.widgets.centre(target)
+        if isinstance(target, dict) and "slice" in target:
+            x, y, w, h = self.viewer.slices.image_rect(target["slice"])
+            fx, fy = target.get("at", (0.5, 0.5))
+            return x + fx * w, y + fy * h
         if isinstance(target, dict) and "view" in target:
             x, y, w, h = self.viewer.view_rect_window()
             fx, fy = target["view"]

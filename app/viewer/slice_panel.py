@@ -97,6 +97,14 @@ class SlicePanel:
             out.append((axis, box, fit_rect(area, plane_extent(axis, volume.half_extent))))
         return out
 
+    def image_rect(self, axis: str) -> tuple[float, float, float, float]:
+        """Where the slice across `axis` ("x", "y" or "z") is drawn; KeyError where it is not."""
+        volume = self.volume()
+        rects = {} if volume is None else {AXES[a]: r for a, _, r in self.layout(volume)}
+        if axis not in rects:
+            raise KeyError(f"no slice {axis!r} is shown (shown: {', '.join(rects) or 'none'})")
+        return rects[axis]
+
     # ---- the mouse -----------------------------------------------------------------------------
     def at(self, x: float, y: float) -> tuple[int, tuple[int, int, int]] | None:
         """(axis, voxel) under a window point, None where no slice is."""
