@@ -4,7 +4,6 @@ on a private Xvfb with the slices on: the value under the mouse, the crop drawn 
 is, a click moving the slices and the orbit's centre, the wheel stepping a slice."""
 from __future__ import annotations
 
-import json
 import os
 import shutil
 from dataclasses import replace

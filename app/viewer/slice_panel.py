@@ -163,7 +163,7 @@ class SlicePanel:
         mode = v.state.slice_colours
         table = res.table if res.tables is None else res.tables
         channel = v.edited_channel()
-        key = (id(volume), volume.time, axis, index, mode, channel, scene.transfer_function,
+        key = (volume, volume.time, axis, index, mode, channel, scene.transfer_function,
                scene.channels, scene.crop, scene.clip_plane, id(table))
         kept_tex = self._textures.get(axis)
         if kept_tex is not None and kept_tex[0] == key:
