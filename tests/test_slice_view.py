@@ -178,6 +178,15 @@ def test_values_beyond_the_window_and_units():
                                value_range=(0.0, 3.3))
     assert sv.data_value(floats, (1, 1, 1))[0] == pytest.approx(3.3, rel=1e-6)
     assert sv.value_text(1.23456, 0, "Gy") == "1.235 Gy"
+    # a DICOM CT's HU arrive as float32 (its rescale applied): whole numbers read as such, through
+    # the float32 density; a value between them keeps its fraction
+    hu = np.array([-1024.0, -24.0, 0.0, 1234.0, 12.5, 3071.0], np.float32).reshape(1, 2, 3)
+    ct_float = volume_from_array(hu, value_range=(-1024.0, 3071.0))
+    assert ct_float.raw_dtype == "float32"
+    read = [sv.data_value(ct_float, (i, j, 0))[0] for j in range(2) for i in range(3)]
+    assert read[:4] == [-1024.0, -24.0, 0.0, 1234.0] and read[5] == 3071.0
+    assert [sv.value_text(v, 0) for v in read[1:3]] == ["-24", "0"]
+    assert read[4] == pytest.approx(12.5, abs=1e-3) and read[4] != 12.0
 
 
 # ---- the crop box and the clip plane on a slice ---------------------------------------------------

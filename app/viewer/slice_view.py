@@ -32,6 +32,9 @@ SLICE_VIEWS = ("off", "three", "x", "y", "z")
 SLICE_COLOURS = ("window", "transfer function")
 # For the slice across each axis: (world axis, sign) along the image's right, and along its top.
 SCREEN_AXES = {0: ((2, -1), (1, +1)), 1: ((0, +1), (2, +1)), 2: ((0, +1), (1, +1))}
+# A value within this fraction of the value range of an integer reads as that integer: the
+# float32 density keeps about 6e-8 of the range (16 times that, for the arithmetic around it).
+FLOAT32_DENSITY_STEP = 1e-6
 CUT_AWAY_SHADE = 0.3          # what is cut away (crop, clip plane) is drawn this bright
 AXIS_COLOURS = {0: (0.95, 0.35, 0.35, 1.0), 1: (0.4, 0.9, 0.4, 1.0), 2: (0.45, 0.6, 1.0, 1.0)}
 # The slice column: three slices stacked take at most this much of the view's width, one slice
@@ -240,9 +243,10 @@ def value_unit(volume, scene=None) -> str:
 def data_value(volume, voxel, channel: int = 0) -> tuple[float, int]:
     """The data value of a voxel (i, j, k) of one channel: the density mapped back through the
     value range (value_range, or channel_ranges) it was normalised by; integer data rounded to
-    its integer. The volume keeps densities clamped to [0, 1], so a voxel beyond the range reads
-    as its end: the second number says so (-1 below the range, +1 above, 0 within). Returns
-    (value, clamp)."""
+    its integer, and so is float data within the float32 density's precision of one (a DICOM
+    CT's rescaled HU are float32 integers). The volume keeps densities clamped to [0, 1], so a
+    voxel beyond the range reads as its end: the second number says so (-1 below the range, +1
+    above, 0 within). Returns (value, clamp)."""
     i, j, k = voxel
     d = float(volume.channel(channel)[k, j, i])
     ranges = volume.channel_ranges or (volume.value_range,)
@@ -250,7 +254,8 @@ def data_value(volume, voxel, channel: int = 0) -> tuple[float, int]:
     lo, hi = ranges[channel]
     raw_lo, raw_hi = raws[channel]
     value = lo + d * (hi - lo)
-    if np.dtype(volume.raw_dtype).kind in "iu":
+    if (np.dtype(volume.raw_dtype).kind in "iu"
+            or abs(value - round(value)) <= FLOAT32_DENSITY_STEP * (hi - lo)):
         value = float(round(value))
     clamp = -1 if d <= 0.0 and raw_lo < lo else (+1 if d >= 1.0 and raw_hi > hi else 0)
     return value, clamp
