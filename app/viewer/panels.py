@@ -556,10 +556,14 @@ def help_section(v) -> None:
     shortcut_table()
 
 
-SECTIONS = (("Render", render_section), ("Data", data_section), ("Time", time_section),
+def slices_section(v) -> None:
+    v.slices.section()
+
+
+SECTIONS = (("Render", render_section), ("Slices", slices_section), ("Data", data_section), ("Time", time_section),
             ("Transfer function", transfer_panel),
             ("Crop and clip", crop_section), ("Light", light_section), ("Probes", probes_section),
             ("Bookmarks and movie", movie_section), ("Stats", stats_section),
             ("Camera and files", camera_section), ("Help (F1)", help_section))
-CLOSED_AT_START = ("Help (F1)", "Data", "Camera and files", "Crop and clip",
+CLOSED_AT_START = ("Help (F1)", "Slices", "Data", "Camera and files", "Crop and clip",
                    "Bookmarks and movie")

@@ -27,6 +27,11 @@ class ViewerState:
     probe_slab_axis: str = "all"           # the probe view's slab: all, or one plane across x/y/z
     probe_slab: float = 0.5                # where that plane is, 0 to 1 across the probe box
     show_box: bool = False
+    # The slice view (app/viewer/slice_view.py): off, three slices or one beside the 3D view,
+    # coloured by the window or the transfer function, through this world point.
+    slice_view: str = "off"
+    slice_colours: str = "window"
+    slice_point: tuple[float, float, float] = (0.0, 0.0, 0.0)
     exposure: float = 1.0
     max_samples: int = 1024                # accumulation stops here (per pixel)
     render_scale: float = 1.0              # render pixels per window pixel

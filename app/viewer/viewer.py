@@ -29,6 +29,7 @@ from .probe_view import (BoxOutline, ProbeSpheres, describe_probe, probe_centres
                          slab_plane)
 from .recorder import MovieRecorder
 from .session import FrameTimes, RenderSession
+from .slice_panel import SliceImages, SlicePanel
 from .state import ViewerState
 from ..transfer import opacity_points
 from .tf_editor import histogram_curve
@@ -103,6 +104,7 @@ class Viewer:
         self.recorder: MovieRecorder | None = None   # the movie being recorded, one frame a frame
         self.movie = MovieRecorder.default_settings()  # the panel's movie settings
         self.transfer_file = "transfer_function.json"  # the transfer-function panel's file field
+        self.slices = SlicePanel(self)           # the slice view, at the window's right when on
 
     # ---- geometry ------------------------------------------------------------------------------
     def sidebar_width(self) -> float:
@@ -110,11 +112,12 @@ class Viewer:
 
     def view_rect_window(self) -> tuple[float, float, float, float]:
         """The picture's rectangle in window coordinates (what the cursor reports), top-left origin."""
-        return layout.view_rect_window(self.window_size, self.sidebar_width())
+        return layout.view_rect_window(self.window_size, self.sidebar_width(), self.slices.width())
 
     def view_rect_framebuffer(self) -> tuple[int, int, int, int]:
         """The same rectangle in framebuffer pixels with GL's bottom-left origin (HiDPI aware)."""
-        return layout.view_rect_framebuffer(self.window_size, self.framebuffer_size, self.sidebar_width())
+        return layout.view_rect_framebuffer(self.window_size, self.framebuffer_size,
+                                            self.sidebar_width(), self.slices.width())
 
     def divider_x_window(self) -> float | None:
         """The split view's divider in window coordinates, None when there is no split view."""
@@ -521,6 +524,10 @@ class Viewer:
             if box is not None:
                 self.ctx.viewport = rect
                 box.draw(matrix, session.volume.half_extent)
+        if state.slice_view != "off":
+            images = self._pass("slices", SliceImages)
+            if images is not None:
+                self.slices.render(images)
 
     def _mouse_held(self) -> bool:
         """A mouse button down (a drag under way: a slider, a curve point, a handle)."""
@@ -556,6 +563,7 @@ class Viewer:
         if self.state.show_ui:
             panels.sidebar(self)
         overlays.view_labels(self)
+        self.slices.draw()
         overlays.crop_overlay(self)
         overlays.probe_tooltip(self)
         overlays.help_window(self)
@@ -676,6 +684,7 @@ class Viewer:
                              "box_max": list(session.renderer.resources.clip.box_max),
                              "plane": list(session.renderer.resources.clip.plane)}),
             "handles": {m.name: list(p) for m, p in self.handle_points()},
+            "slices": self.slices.snapshot(),
             "undo_steps": len(s.history.undo_steps), "redo_steps": len(s.history.redo_steps),
             "recording": None if self.recorder is None else self.recorder.progress(),
             "errors": list(s.errors), "messages": list(s.messages),
@@ -697,6 +706,7 @@ class Viewer:
         for p in self._passes.values():
             p.release()
         self._passes.clear()
+        self.slices.release()
         self.timer.release()
         self.session.release()
 
