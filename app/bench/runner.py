@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..imageio import save_png
+from ..methods import PROBE_LIT
 from ..rendering.ceiling import speed_check_ms
 from .clock_log import ClockLog
 from .config import BenchConfig
@@ -26,7 +27,7 @@ from .report import load as load_results
 from ..rendering.probe_layout import resolve_sh_order
 from .scenes import bench_scene
 
-PROBE_METHODS = ("probes", "probes-only")
+PROBE_METHODS = PROBE_LIT   # the path tracer's probe-lit variants (app/methods.py)
 
 
 # Seconds between two writes of results.json while records come in. Writing it after every record

@@ -10,6 +10,7 @@ from typing import Callable
 import moderngl
 import numpy as np
 
+from ..methods import ACCUMULATED, METHODS as REGISTRY, method as registered
 from ..twins.camera import camera_frame
 from ..twins.light_grid import light_grid_lookup
 from ..gl.context import is_software
@@ -31,13 +32,13 @@ from .denoise import (GUIDE_SETS, Denoised, choose_guides, radiance_as_albedo, s
                       shared_denoiser)
 from .denoise_guides import GUIDE_FRAMES, DenoiseGuides
 from .raymarch import Raymarcher, min_step_voxels
+from .refine import render_refine
 from .resources import SceneResources
 from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noqa: F401 (re-exported)
                        check_gather_event)
 
-METHODS = ("pt", "probes", "probes-only", "raymarch", "guided")
-# Variants of glsl/pathtrace.comp: the probe renderers stop at the first scattering event.
-PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
+# The methods one accumulation holds (app/methods.py, the registry: every method's properties).
+METHODS = ACCUMULATED
 # The probes hold max_bounces - 1 events whatever the gather event, so a gather at event k lets a
 # path scatter up to max_bounces + k - 1 times. Up to this max_bounces the CLI and the viewer say
 # so: measured on llvmpipe (a cloud of albedo 0.95, 8^3 probes), gather 2 at max_bounces 2 came out
@@ -242,9 +243,9 @@ class Renderer:
         """The compiled pass of a method (compiled once per probe layout, on first use); the
         layout is the given probe grid's, else the one the current scene will bake."""
         defines = None
-        if method in PROBE_LIGHTING:
-            defines = {"PROBE_LIGHTING": PROBE_LIGHTING[method],
-                       **(probe_defines or self._probe_defines())}
+        lighting = REGISTRY[method].probe_lighting
+        if lighting:   # a variant of glsl/pathtrace.comp that reads the probes at its gather event
+            defines = {"PROBE_LIGHTING": lighting, **(probe_defines or self._probe_defines())}
         elif method == "guided":   # level 1: a path-traced sample minus level 0's prediction
             defines = {"GUIDED_RESIDUAL": 1,
                        "GUIDED_DIRECTION_CONTROL": int(self._settings.guided_direction_control),
@@ -707,8 +708,10 @@ class Renderer:
     def begin(self, method: str = "pt", width: int | None = None, height: int | None = None,
               seed: int = 0) -> Accumulation:
         """Starts a fresh accumulation for `method` with the scene's current camera."""
-        if method not in METHODS:
-            raise ValueError(f"unknown method '{method}' (known: {', '.join(METHODS)})")
+        if registered(method).composite:
+            raise ValueError(f"{method} is made of {' and '.join(REGISTRY[method].parts)}'s "
+                             f"images, which no one accumulation holds: render() it (or the "
+                             f"viewer) (one accumulation: {', '.join(METHODS)})")
         self.camera = camera_frame(self.scene.camera, width, height)
         check_image_size(self.ctx, self.camera.width, self.camera.height)
         self.method = method
@@ -730,7 +733,7 @@ class Renderer:
         return self._acc0
 
     def needs_probes(self, method: str | None = None) -> bool:
-        return (method or self.method) in (*PROBE_LIGHTING, "raymarch", "guided")
+        return registered(method or self.method).needs_probes
 
     def bake_step(self, seed: int = 0, budget_ms: float | None = None) -> float:
         """One slice of a progressive bake if the probes are stale or unfinished (GPU ms; 0 when
@@ -786,7 +789,8 @@ class Renderer:
     def needs_light(self, method: str) -> bool:
         """Whether rendering `method` reads the light grid: the raymarcher and `guided` always,
         every path-traced method where the shadow rays are residual-tracked against it."""
-        return method in ("raymarch", "guided") or self._settings.shadow_tracking == "residual"
+        return (REGISTRY[method].needs_light_grid
+                or self._settings.shadow_tracking == "residual")
 
     def add_samples(self, n: int = 1) -> float:
         """Adds n samples per pixel to the accumulation begun by begin(); returns GPU ms.
@@ -798,8 +802,8 @@ class Renderer:
                 raise RuntimeError("probe methods need a bake first (bake() or bake_step())")
             extra = self.probe_uniforms()
             # probes-only traces no shadow rays, which the events before a later gather need
-            extra["probe_gather_event"] = (self._settings.gather_event if method == "probes"
-                                           else 1)
+            extra["probe_gather_event"] = (self._settings.gather_event
+                                           if "gather_event" in REGISTRY[method].options else 1)
         # a sliced light-grid bake under way (bake_step) is read as it is, not finished here
         light_ms = (self.bake_light() if self.needs_light(method)
                     and not self.light_baking() else 0.0)
@@ -831,7 +835,7 @@ class Renderer:
             self.timer.stop()
             return self.timer.elapsed_ms
         defines = (self._read_defines(self.probe_grid.defines())
-                   if method in (*PROBE_LIGHTING, "guided") else None)
+                   if REGISTRY[method].needs_probes else None)
         tracer = self.pass_for(method, defines)
         if self._settings.shadow_tracking == "residual":   # the shadow rays' control
             self._light.bind()
@@ -883,6 +887,9 @@ class Renderer:
         if self.resources.stream is not None:
             cam = self.scene.camera
             self.restream(replace(cam, width=width or cam.width, height=height or cam.height))
+        if registered(method).composite:
+            return self._render_composite(method, spp, seed, width, height, bake_progress,
+                                          denoise, denoise_guides)
         acc = self.begin(method, width, height, seed)
         bake_ms = 0.0
         if self.needs_probes(method):
@@ -905,6 +912,31 @@ class Renderer:
         denoised, guides_ms = self.denoise(None, guides)
         return RenderResult(denoised.image, method, spp, render_ms, bake_ms, stats=stats,
                             raw_image=image, denoised=denoised, guides_ms=guides_ms)
+
+    def _render_composite(self, method: str, spp: int, seed: int, width: int | None,
+                          height: int | None, bake_progress: Callable | None, denoise: bool,
+                          denoise_guides: str) -> RenderResult:
+        """render() of a method made of others' images (the registry's `parts`): `refine`, as
+        its view in the viewer ends (refine.render_refine). stats["shown"] names the part shown
+        and stats["refine_estimate"] the estimated errors that chose it."""
+        if method != "refine":
+            raise NotImplementedError(f"render(): no still image of {method} yet")
+        bake_ms = self.bake(seed, progress=bake_progress) + self.bake_light()
+        self.resources.reset_stats()
+        done = render_refine(self, spp, seed, width, height)
+        self.camera = camera_frame(self.scene.camera, width, height)   # the guides' camera
+        stats = self.resources.read_stats()
+        stats["shown"] = done.shown
+        stats["refine_estimate"] = {"guided": done.estimate.guided,
+                                    "raymarch": done.estimate.raymarch,
+                                    "samples": done.estimate.samples}
+        render_ms = done.raymarch_ms + done.guided_ms
+        if not denoise:
+            return RenderResult(done.image, method, spp, render_ms, bake_ms, stats=stats)
+        guides = choose_guides(denoise_guides, spp, self.probes_shown())
+        denoised, guides_ms = self.denoise(done.image, guides, signed=REGISTRY[done.shown].signed)
+        return RenderResult(denoised.image, method, spp, render_ms, bake_ms, stats=stats,
+                            raw_image=done.image, denoised=denoised, guides_ms=guides_ms)
 
     # ---- the denoiser's guides (denoise_guides.py) and the denoiser (denoise.py) ----------------
     def denoise_guides(self, guides: str = "albedo-normal", frames: int = GUIDE_FRAMES,
@@ -960,10 +992,12 @@ class Renderer:
         return albedo, normal, ms
 
     def denoise(self, image: np.ndarray | None = None, guides: str = "albedo-normal",
-                quality: str = "high", copy: bool = True) -> tuple[Denoised, float]:
+                quality: str = "high", copy: bool = True,
+                signed: bool | None = None) -> tuple[Denoised, float]:
         """The image of the camera begun (None: the accumulation in hand, read from GL straight
         into the denoiser's memory) through the denoiser with `guides`: (Denoised, the guides'
-        GPU ms). Where the denoiser cannot run, Denoised holds the raw image and a note."""
+        GPU ms). Where the denoiser cannot run, Denoised holds the raw image and a note.
+        `signed`: whether the image may dip below zero (None: the method begun's, app/methods.py)."""
         denoiser = shared_denoiser("auto", quality)
         if not denoiser.available:
             raw = self.image() if image is None else image
@@ -980,7 +1014,8 @@ class Renderer:
                 image = staged
             else:
                 image = self.image()
-        return denoiser(image, albedo, normal, copy=copy, signed=self.method == "guided"), guides_ms
+        signed = REGISTRY[self.method].signed if signed is None else signed
+        return denoiser(image, albedo, normal, copy=copy, signed=signed), guides_ms
 
     def release(self) -> None:
         if self._guides is not None:

@@ -12,6 +12,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from ..methods import REFERENCE
 from ..twins.camera import camera_frame
 from ..gl.shaders import ShaderError
 from ..gl.timer import GpuTimer
@@ -474,7 +475,7 @@ class Viewer:
             except RECOVERABLE as exc:
                 state.error(f"rendering stopped: {exc}")
                 self._halted_scene = state.scene
-        if state.display == "error" and state.method != "pt":
+        if state.display == "error" and state.method != REFERENCE:
             self.error_meter.update(self.session, state.method, state.max_samples)
         self.ctx.screen.use()
         self.ctx.viewport = (0, 0, *self.framebuffer_size)
@@ -500,9 +501,10 @@ class Viewer:
             other = None
             if state.display == "split":
                 other = session.texture(state.split_method)
-            elif state.display == "error" and state.method != "pt":
-                other = session.texture("pt")
-            mode = state.display if (state.display != "error" or state.method != "pt") else "image"
+            elif state.display == "error" and state.method != REFERENCE:
+                other = session.texture(REFERENCE)
+            mode = (state.display if (state.display != "error" or state.method != REFERENCE)
+                    else "image")
             if state.probe_view == "alone":
                 mode = "image"
             rms = self.error_meter.reference_rms
