@@ -23,7 +23,6 @@ from .limits import check_image_size
 from .pathtracer import PathTracer
 from .light_transmittance import LightTransmittance, min_side_for_probes
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, sun_lobe_g
-from .sun_lobe_fit import SunLobeFit, SunLobeFitter
 from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
@@ -33,6 +32,7 @@ from .denoise import (GUIDE_SETS, Denoised, choose_guides, radiance_as_albedo, s
 from .denoise_guides import GUIDE_FRAMES, DenoiseGuides
 from .raymarch import Raymarcher, min_step_voxels
 from .refine import render_refine
+from .lab_options import LabOptions
 from .resources import SceneResources
 from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noqa: F401 (re-exported)
                        check_gather_event)
@@ -122,18 +122,24 @@ class _LightSlot:
 
 class Renderer:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
-                 settings: RenderSettings | None = None):
+                 settings: RenderSettings | None = None, lab: LabOptions | None = None):
         """`settings`: how it renders and bakes (RenderSettings; None: the defaults), resolved
-        for this device (RenderSettings.resolved)."""
+        for this device (RenderSettings.resolved). `lab`: the bench's and the experiments'
+        comparison switches (LabOptions; None: the product's), never a user's."""
         self.ctx = ctx
         self._software = is_software(ctx)
         settings = (settings or RenderSettings()).resolved(self._software)  # checked first
+        lab = lab or LabOptions()
+        if not isinstance(lab, LabOptions):
+            raise TypeError(f"lab: expected a LabOptions, got {type(lab).__name__}")
         self.resources = SceneResources(ctx, scene, volume,
                                         use_majorant_grid=settings.empty_space_skipping,
                                         volume_memory_bytes=settings.volume_memory_bytes,
                                         brick_size=settings.brick_size,
-                                        mixed_levels=settings.mixed_levels)
+                                        mixed_levels=lab.mixed_levels)
+        self.resources.environment_sampling = lab.environment_sampling
         self._settings = settings
+        self._lab = lab
         self._passes: dict[tuple, PathTracer] = {}
         # Which path states a pass uses (pass_for): a PathTracer keeps one per pixel between
         # dispatches, so two accumulations of one method advanced in turn (the viewer's `refine`
@@ -149,9 +155,6 @@ class Renderer:
         self._walk_light = _LightSlot()    # the bake's own at bake_level > 0 (the coarse level)
         self._bake_medium: BakeMedium | None = None   # the coarse level, made when first needed
         self.baked_level = 0   # the bake level of the probes in hand (start_bake)
-        self.last_sun_lobe_fit: SunLobeFit | None = None   # the last bake start's choice
-        self._sun_lobe_fitter: SunLobeFitter | None = None   # made when first asked for
-        self._fit_ms = 0.0   # GPU ms of the last bake start's pilot, not yet counted in a bake's time
         self._probe_ms: dict[tuple, float] = {}   # measured GPU ms per probe walked, per layout
         self._sample_ms: dict[tuple, float] = {}  # GPU ms per sample of a path-state pass, per size
         self.last_slice_ms = 0.0
@@ -197,6 +200,21 @@ class Renderer:
         self._settings = settings.resolved(self._software)
         self.resources.use_majorant_grid = self._settings.empty_space_skipping
         self.resources.set_bricking(self._settings.volume_memory_bytes, self._settings.brick_size)
+
+    @property
+    def lab(self) -> LabOptions:
+        """The comparison switches this renderer runs with (lab_options.py; not for users).
+        Assign a new LabOptions to change them: passes compile anew where they differ; a change
+        of mixed_levels applies where the volume is next placed."""
+        return self._lab
+
+    @lab.setter
+    def lab(self, lab: LabOptions) -> None:
+        if not isinstance(lab, LabOptions):
+            raise TypeError(f"lab: expected a LabOptions, got {type(lab).__name__}")
+        self._lab = lab
+        self.resources.mixed_levels = lab.mixed_levels
+        self.resources.environment_sampling = lab.environment_sampling
 
     def configure(self, **changes) -> RenderSettings:
         """Replaces the named settings (RenderSettings' fields; checked); returns the new ones."""
@@ -249,13 +267,11 @@ class Renderer:
         elif method == "guided":   # level 1: a path-traced sample minus level 0's prediction
             defines = {"GUIDED_RESIDUAL": 1,
                        "GUIDED_DIRECTION_CONTROL": int(self._settings.guided_direction_control),
-                       "GUIDED_DIRECTIONS": int(self._settings.guided_directions > 0.0),
-                       "GUIDED_DISTANCES": int(self._settings.guided_distances > 0.0),
                        **(probe_defines or self._probe_defines())}
         if self.resources.defines():
             defines = {**(defines or {}), **self.resources.defines()}
-        if self._settings.sun_shadow_rays != 1:
-            defines = {**(defines or {}), "SUN_SHADOW_RAYS": self._settings.sun_shadow_rays}
+        if self._lab.sun_shadow_rays != 1:
+            defines = {**(defines or {}), "SUN_SHADOW_RAYS": self._lab.sun_shadow_rays}
         if self._settings.shadow_tracking == "residual":
             defines = {**(defines or {}), "SHADOW_TRACKING_RESIDUAL": 1}
         key = (method, tuple(sorted((defines or {}).items())))
@@ -367,13 +383,11 @@ class Renderer:
 
     def _sh_order(self) -> int:
         """The SH order the current scene's probes are baked with (probe_layout.resolve_sh_order;
-        guided directions need directions, and so do surfaces (their irradiance is the clamped
-        cosine's bands 0 to 2 of the probes' light): "auto" gives no order 0 while either is
-        on)."""
+        surfaces need directions (their irradiance is the clamped cosine's bands 0 to 2 of the
+        probes' light): "auto" gives no order 0 while they are on)."""
         spec = self.scene.probes
         return resolve_sh_order(spec.sh_order, self.scene.anisotropy, spec.samples,
-                                directions=(self._settings.guided_directions > 0.0
-                                            or self.scene.surface.gradient_factor > 0.0))
+                                directions=self.scene.surface.gradient_factor > 0.0)
 
     def adaptive_planes(self, grid: tuple[int, int, int], box) -> tuple | None:
         """The adaptive layout's probe planes for this grid and box (cached; None: it came out
@@ -421,15 +435,6 @@ class Renderer:
         env_map = self.resources.environment is not None
         st = self._settings
         lobe = sun_lobe_g(self.scene.anisotropy, plan.sh_order) if st.sun_lobe else 0.0
-        self.last_sun_lobe_fit = None
-        if lobe > 0.0 and st.sun_lobe_fit:
-            if self._sun_lobe_fitter is None:
-                self._sun_lobe_fitter = SunLobeFitter(self.ctx)
-            fit = self._sun_lobe_fitter.fit(self.bake_resources(), plan.box, plan.grid, spec.samples,
-                                            plan.grey, env_map, seed)
-            lobe = fit.h
-            self.last_sun_lobe_fit = fit
-            self._fit_ms += fit.gpu_ms
         medium = self.bake_resources().medium_defines()
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
                          g.adaptive, g.environment_map, g.planes, g.sun_lobe) != (
@@ -473,7 +478,7 @@ class Renderer:
         if self.probes_current():
             return 0.0
         grid = self.start_bake(seed)
-        total = self._light_for_walks() + self._take_fit_ms()
+        total = self._light_for_walks()
         light = self.walk_light() if grid.needs_light else None
         resources = self.bake_resources()
         if progress is None:
@@ -491,11 +496,6 @@ class Renderer:
             progress(grid)
         self.last_bake_ms = total
         return total
-
-    def _take_fit_ms(self) -> float:
-        """The sun-lobe pilot's GPU ms since a bake's time last counted it (then 0)."""
-        ms, self._fit_ms = self._fit_ms, 0.0
-        return ms
 
     def _light_for_walks(self) -> float:
         """The light grid the walks read when walk_sun is "grid" (GPU ms if it was baked now; the
@@ -683,7 +683,7 @@ class Renderer:
             self._acc = Accumulation(self.ctx, width, height)
         return self._acc
 
-    # ---- streaming a mix of levels (RenderSettings.mixed_levels under a cap) -------------------
+    # ---- streaming a mix of levels (LabOptions.mixed_levels under a cap) -----------------------
     def restream(self, camera=None, budget_s: float | None = None) -> bool:
         """Moves a mixed pool towards the bricks `camera` (None: the scene's) deserves
         (app/rendering/level_stream.py); with `budget_s`, about that many seconds of writes, the
@@ -776,7 +776,6 @@ class Renderer:
                 seen = ms / ran
                 # (the first slice of a bake also runs the sun's pass)
                 self._probe_ms[key] = _slice_estimate(per_probe, seen)
-        ms += self._take_fit_ms()
         self.last_slice_ms = light_ms + ms
         return light_ms + ms
 
@@ -824,9 +823,7 @@ class Renderer:
                      "guided_level0_budget": GUIDED_LEVEL0_BUDGET})
                 self.timer.stop()
                 level0_ms = self.timer.elapsed_ms
-            extra = {**extra, **self._light.uniforms(),
-                     "guided_direction_probability": float(self._settings.guided_directions),
-                     "guided_distance_probability": float(self._settings.guided_distances)}
+            extra = {**extra, **self._light.uniforms()}
         if method == "raymarch":
             self.timer.start()
             self.raymarcher().run(self.resources, self.camera, acc, n, self.seed,
@@ -882,7 +879,7 @@ class Renderer:
         the image goes through the denoiser with `denoise_guides` (RenderResult.raw_image keeps
         the raw one; .denoised says what ran, or why not; "auto": denoise.choose_guides). A
         streamed mix
-        of levels (RenderSettings.mixed_levels under a cap) is first made the one this camera
+        of levels (LabOptions.mixed_levels under a cap) is first made the one this camera
         and image size deserve (restream, all of it)."""
         if self.resources.stream is not None:
             cam = self.scene.camera
@@ -1035,7 +1032,5 @@ class Renderer:
             if acc is not None:
                 acc.release()
         self._region_pass.release()
-        if self._sun_lobe_fitter is not None:
-            self._sun_lobe_fitter.release()
         self.resources.release()
         self.timer.release()

@@ -66,7 +66,7 @@ class SceneResources:
         self.environment: EnvironmentMap | None = None   # the scene's map, None: constant
         self.environment_tex = None
         self.environment_cdf_tex = None
-        # False: paths find the map by phase sampling alone (for measuring what sampling gains).
+        # False: paths find the map by phase sampling alone (LabOptions.environment_sampling).
         self.environment_sampling = True
         self.stats = ctx.buffer(reserve=16)
         self.max_path_steps = DEFAULT_MAX_PATH_STEPS

@@ -145,13 +145,14 @@ class FrameTimes:
 class RenderSession:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
                  seed: int = 0, renderer: Renderer | None = None, settings=None,
-                 clock: str | None = None):
+                 clock: str | None = None, lab=None):
         """`renderer`: one to drive instead of a new one (the interact benchmark's replay);
-        `settings`: the new one's RenderSettings (None: the defaults); `clock`: "gpu" or "wall"
-        to pace by that clock always (None: by the device, app/viewer/pacing.py)."""
+        `settings`: the new one's RenderSettings (None: the defaults); `lab`: its LabOptions
+        (tests and the bench only; None: the product's); `clock`: "gpu" or "wall" to pace by that
+        clock always (None: by the device, app/viewer/pacing.py)."""
         self.ctx = ctx
         self.renderer = (renderer if renderer is not None else
-                         Renderer(ctx, scene, volume, settings=settings))
+                         Renderer(ctx, scene, volume, settings=settings, lab=lab))
         self.seed = seed
         self.views: dict[str, MethodView] = {}
         self.size = (0, 0)

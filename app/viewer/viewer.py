@@ -59,11 +59,12 @@ def could_not_open(path, exc: BaseException) -> str:
 
 class Viewer:
     def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = "",
-                 file_dialog: str = "auto", volume=None, settings=None):
+                 file_dialog: str = "auto", volume=None, settings=None, lab=None):
         self.ctx = ctx
         self.state = state
         self.device = device
-        self.session = RenderSession(ctx, state.scene, volume, settings=settings)
+        # lab: LabOptions for tests (app/rendering/lab_options.py); the launch never sets it
+        self.session = RenderSession(ctx, state.scene, volume, settings=settings, lab=lab)
         state.show_channels(self.session.volume.channel_count)
         self.widgets = WidgetRects()
         self.error_meter = ErrorMeter()
@@ -297,7 +298,7 @@ class Viewer:
         return replace(cam, width=w, height=h) if w > 0 and h > 0 else cam
 
     def _restream(self) -> None:
-        """A mixed pool (RenderSettings.mixed_levels under a cap) follows the camera once it has
+        """A mixed pool (LabOptions.mixed_levels under a cap) follows the camera once it has
         settled (no camera change for RESTREAM_SETTLE_S, no button held): not on every frame of a
         drag. A restream under way goes on a budget of OPEN_WRITE_BUDGET_S a frame (the Volume
         panel shows it); a camera that settles elsewhere meanwhile starts it over."""
