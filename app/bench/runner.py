@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..imageio import save_png
-from ..methods import PROBE_LIT
+from ..methods import PROBE_LIT, REFERENCE
 from ..rendering.ceiling import speed_check_ms
 from .clock_log import ClockLog
 from .config import BenchConfig
@@ -235,7 +235,7 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
         changed = defaults.differences(renderer.settings)   # the run's defaults in meta.settings
         if changed:
             rec["settings"] = changed
-        results.add(rec, image if flip and (frames in config.flip_frames or method == "pt")
+        results.add(rec, image if flip and (frames in config.flip_frames or method == REFERENCE)
                     else None, reference)
 
     # Path tracer: one progressive run, snapshots at each spp.
