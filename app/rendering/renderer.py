@@ -18,6 +18,8 @@ from ..gl.timer import GpuTimer
 from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation, SumAccumulation
+from .cache_keys import (adaptive_planes_key, light_grid_key, probe_bake_key,
+                         visible_region_key)
 from .bake_level import SPACING_LEVEL, BakeMedium, spacing_level
 from .limits import check_image_size
 from .pathtracer import PathTracer
@@ -303,17 +305,11 @@ class Renderer:
 
     # ---- probes -------------------------------------------------------------------------------
     def bake_key(self) -> tuple:
-        spec, st = self.scene.probes, self._settings
-        return (*self.resources.bake_key(), spec.sh_order, self._sh_order(), spec.fit,
-                spec.channels,
-                spec.layout, spec.adaptive_strength, spec.adaptive_indicator,
-                self.resources.use_majorant_grid, st.walk_sun, st.walk_adaptive, st.sun_lobe,
-                st.walk_sun_correction if st.walk_sun == "grid" else None,
-                st.shadow_tracking,
-                (st.light_max_side, st.light_min_side, st.light_follows_probes,
-                 st.light_precision)
-                if st.walk_sun == "grid" or st.shadow_tracking == "residual" else None,
-                self.bake_level())
+        """What the probes in hand were baked for (a different key: a new bake): the volume's
+        version, the crop, the resolved SH order and bake level, and the Scene's and the
+        settings' fields the bake reads (cache_keys.probe_bake_key)."""
+        return (*self.resources.bake_key()[:2], self._sh_order(), self.bake_level(),
+                probe_bake_key(self.scene, self._settings))
 
     def bake_level(self) -> int:
         """The level the probes' bake walks, counted from the level shown (0: that level):
@@ -345,9 +341,8 @@ class Renderer:
         """World corners of what the transfer function makes visible (cached: one GPU pass over
         the volume, glsl/visible_region.comp, redone when the volume or the transfer function
         changes)."""
-        s = self.scene
-        key = (self.resources.volume_version, s.transfer_function, s.channels, s.density_scale > 0,
-               self.resources.clip)
+        key = (self.resources.volume_version, self.resources.clip,
+               visible_region_key(self.scene))
         if self._region_key != key:
             self._region = self._region_pass.region(self.resources)
             self._region_key = key
@@ -395,11 +390,8 @@ class Renderer:
         s = self.scene
         spec = s.probes
         sun = spec.adaptive_indicator == "sun"
-        key = (self.resources.volume_version, s.transfer_function, s.channels, s.density_scale,
-               grid, box,
-               spec.adaptive_strength, spec.adaptive_indicator,
-               (s.light.direction, self._settings.light_max_side, self._settings.light_min_side,
-                self._settings.light_follows_probes) if sun else None)
+        key = (self.resources.volume_version, self.resources.clip, grid, box,
+               adaptive_planes_key(s, self._settings))
         if key != self._planes_key:
             start = time.perf_counter()
             if sun:
@@ -524,9 +516,8 @@ class Renderer:
         s, st = self.scene, self._settings
         min_side = (min_side_for_probes(s.probes.grid, st.light_min_side)
                     if st.light_follows_probes else st.light_min_side)
-        key = (self.resources.volume_version, s.transfer_function, s.channels, s.density_scale,
-               s.light.direction, st.light_max_side, min_side, st.light_precision,
-               self.resources.clip)
+        key = (self.resources.volume_version, self.resources.clip, min_side,
+               light_grid_key(s, st))
         return key, min_side
 
     def light_current(self) -> bool:
