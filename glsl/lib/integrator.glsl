@@ -206,16 +206,21 @@ vec3 path_surface_normal(PathState p)
     return surface_normal(path_event_gradient, -p.w);
 }
 
-// The event's kernel towards the light direction l (unit, towards the light): the phase function,
-// or at a surface event the BRDF times the cosine (lib/hybrid_scattering.glsl).
+#endif
+
+// The event's kernel towards the light direction l (unit, towards the light): the phase function
+// (the same in every channel), or at a surface event the BRDF times the cosine
+// (lib/hybrid_scattering.glsl). Every light's estimate at an event (the sun's shadow ray or light
+// grid, the probes' stored sun, an area light's sample) weighs by it.
 vec3 path_event_kernel(PathState p, vec3 l)
 {
+#if defined(HYBRID_SCATTERING)
     if (p.status == PATH_ACTIVE_SURFACE)
         return surface_kernel(path_surface_normal(p), -p.w, l, surface_roughness,
                               surface_specular);
+#endif
     return vec3(phase_hg(dot(l, p.w), anisotropy));
 }
-#endif
 
 #if defined(ENVIRONMENT_MAP)
 // The map's radiance for a path that leaves the box along p.w: weighted against the map's own
@@ -360,11 +365,7 @@ int path_flight(inout PathState p, inout int steps_left)
             vec3 light_w = area_light_sample(p.x, u0, u1, u2, light_le, light_pdf);
             p.light_pending = 0;
             if (light_pdf > 0.0 && any(greaterThan(light_le, vec3(0.0)))) {
-#if defined(HYBRID_SCATTERING)
                 vec3 kernel = path_event_kernel(p, light_w);
-#else
-                vec3 kernel = vec3(phase_hg(dot(light_w, p.w), anisotropy));
-#endif
                 p.light_w = light_w;
                 p.light_weight = light_le * kernel / light_pdf;
                 p.light_pending = 2;
@@ -372,13 +373,8 @@ int path_flight(inout PathState p, inout int steps_left)
         }
 #endif
 #if PROBE_LIGHTING == 2
-#if defined(HYBRID_SCATTERING)
         p.radiance += p.throughput * sun_irradiance
                       * (probe_sun_transmittance * path_event_kernel(p, sun_direction));
-#else
-        p.radiance += p.throughput * sun_irradiance
-                      * (probe_sun_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy));
-#endif
         return STEP_DONE;
 #endif
     }
@@ -471,14 +467,9 @@ int path_flight(inout PathState p, inout int steps_left)
     // in the walk shader made every walk 2-2.5x slower on an H100 whether or not it ran
     // (bench/h100-bake-split). walk_sun_correction = 0: the grid alone (biased).
     if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
-        float sun_phase = phase_hg(dot(sun_direction, p.w), anisotropy);
         float tau = light_grid_optical_depth(p.x);
         float grid = exp(-tau);
-#if defined(HYBRID_SCATTERING)
         vec3 c = p.throughput * sun_irradiance * path_event_kernel(p, sun_direction);
-#else
-        vec3 c = p.throughput * sun_irradiance * sun_phase;
-#endif
         p.radiance += c * grid;
         if (walk_sun_correction > 0.0) {
             float change = tau - light_grid_optical_depth(p.x + light_grid_texel * sun_direction);
@@ -532,15 +523,9 @@ int path_step(inout PathState p, inout int steps_left)
                                         steps_left))
             return STEP_SHADOW_CUT;
         p.shadow_pending -= 1;
-#if defined(HYBRID_SCATTERING)
         p.radiance += p.throughput * sun_irradiance
                       * (p.shadow_transmittance * path_event_kernel(p, sun_direction)
                          / float(SUN_SHADOW_RAYS));
-#else
-        p.radiance += p.throughput * sun_irradiance
-                      * (p.shadow_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy)
-                         / float(SUN_SHADOW_RAYS));
-#endif
         p.shadow_t = -1.0;          // the next ray (or the map sample's) starts afresh
         p.shadow_transmittance = 1.0;
     }
