@@ -197,3 +197,14 @@ def test_the_gpu_layer_reads_shader_files_through_the_render_layer():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "refused: no shader source reader" in out.stdout and "True" in out.stdout
+
+
+def test_no_front_end_sets_lab_options():
+    """LabOptions (app/rendering/lab_options.py) are the bench's and the experiments' comparison
+    switches, not for users: nothing in the package outside the renderers makes one (scripts/,
+    lab/ and tests do)."""
+    found = [f"{p.relative_to(ROOT)}:{i}" for p in APP.rglob("*.py")
+             if p.relative_to(APP).parts[0] != "rendering"
+             for i, line in enumerate(p.read_text().splitlines(), 1)
+             if "LabOptions(" in line.split("#")[0]]
+    assert not found, found
