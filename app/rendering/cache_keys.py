@@ -40,7 +40,10 @@ SCENE_GROUPS: dict[str, tuple[str, ...]] = {
 SETTINGS_GROUPS: dict[str, tuple[str, ...]] = {
     # what the probes' bake stores
     "bake": ("walk_sun", "walk_sun_correction", "walk_adaptive", "sun_lobe", "shadow_tracking",
-             "bake_level", "empty_space_skipping"),
+             "empty_space_skipping"),
+    # what the bake reads once the renderer has resolved it: its keys hold the resolved value
+    # (Renderer.bake_level: -1, the level the probes' spacing allows, is that level)
+    "bake_resolved": ("bake_level",),
     # the light grid's texels (what it stores)
     "light_grid": ("light_max_side", "light_min_side", "light_follows_probes", "light_precision"),
     # how work is cut or restarted, the results the same (up to float rounding): no key
@@ -58,7 +61,8 @@ _NORMALISE = {
 }
 
 # Each cached product: the Scene groups and the RenderSettings groups its key reads (beyond what
-# the renderer derives). The probe bake's light_grid group counts where the walks read the grid.
+# the renderer derives: the probe bake's key also holds the resolved SH order and bake level).
+# The probe bake's light_grid group counts where the walks read the grid.
 KEYS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "majorant_grid": (("medium",), ()),
     "visible_region": (("medium",), ()),
