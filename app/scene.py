@@ -13,12 +13,13 @@ import re
 from pathlib import Path
 from typing import Any, Mapping
 
+from .methods import VIEWER_METHODS
 from .scene_flags import flag_for, with_flag
 from .scene_types import (AXIS_LETTERS, CROP_UNITS, MAX_CHANNELS, ChannelSpec,
                           channel_transfer_function, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
                           MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
                           PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
-                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
+                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS,
                           VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
                           ClipPlaneSpec, CropSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene,
                           SceneError, SurfaceSpec, TransferFunctionSpec, ViewerSpec, VolumeSpec,

@@ -19,10 +19,11 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
+from .methods import VIEWER_METHODS
 from .scene_types import (AXIS_LETTERS, CHANNEL_COLOURS, CROP_UNITS, MAX_CHANNELS, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
                           MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
                           PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
-                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
+                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS,
                           VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
                           ChannelSpec, ClipPlaneSpec, CropSpec, LightSpec, ProbeSpec, Scene,
                           SurfaceSpec, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS, AREA_LIGHT_SHAPES,

@@ -295,12 +295,8 @@ class BookmarkSpec:
                                    fov_y=self.fov_y)
 
 
-# The methods a movie renders (app/animate.py, the viewer's movie panel): app/rendering/renderer.py
-# METHODS but `guided`. The viewer's methods and display modes: those, and `refine` (the raymarcher
-# at once after an edit, then `guided` replacing it; app/viewer/session.py), and
-# app/viewer/state.py DISPLAY_MODES (a test keeps them so).
-MOVIE_METHODS = ("pt", "probes", "probes-only", "raymarch")
-VIEWER_METHODS = (*MOVIE_METHODS, "refine")
+# The viewer's display modes (app/viewer/state.py DISPLAY_MODES; a test keeps them so). Its
+# methods and a movie's are the registry's (app/methods.py).
 VIEWER_DISPLAYS = ("image", "split", "error")
 VIEWER_PROBE_VIEWS = ("off", "over", "alone")
 

@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from ..imageio import save_png
+from ..methods import METHODS
 from ..rendering.denoise import QUALITIES, shared_denoiser
 from .records import (error_of, floor, header as _header, log, make_record, ms_text as _ms,
                       progressive)
@@ -158,7 +159,7 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
         for g, (albedo, normal, guide_ms) in guides.items():
             # The image is copied into the filter's colour here (prepare_ms, not charged): in
             # Renderer.denoise, GL reads it straight there, which io_ms's read-back times.
-            d = denoiser(image, albedo, normal, copy=False, signed=method == "guided")
+            d = denoiser(image, albedo, normal, copy=False, signed=METHODS[method].signed)
             denoised = d.image.copy()
             charged = guide_ms + (0.0 if g not in guide_bake_ms or own_probes == g
                                   else guide_bake_ms[g])

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..scene import Scene
 from .auto_probes import PROBES_PER_VOXEL_LIMIT
+from ..methods import METHODS
 from .refine import weight
 
 # (probes per axis, walks per probe), in order of bake cost (probes x walks, then probes)
@@ -74,7 +75,7 @@ class AutoResult:
         """The outcome, then (log=True) every trial's line; a caller that printed the lines as
         they came (progress) leaves them out."""
         what = (f"raymarched over {self.scene.probes.grid[0]}^3 probes x "
-                f"{self.scene.probes.samples} walks" if self.method == "raymarch"
+                f"{self.scene.probes.samples} walks" if METHODS[self.method].needs_probes
                 else f"the path tracer at {self.pt_spp} spp")
         head = (f"auto: {what}: estimated rRMSE {self.estimate:.4f} (+- {self.standard_error:.4f})"
                 f", target {self.target:.4f} {'met' if self.met else 'NOT met'}; "

@@ -5,7 +5,7 @@ import argparse
 
 from ..frontend import (add_scene_edit_options, add_volume_options, grid_arg, memory_size,
                         positive_float, positive_int, render_scale, window_size)
-from ..scene_types import VIEWER_METHODS as METHODS
+from ..methods import VIEWER_METHODS as METHODS
 
 
 def add_view_parser(sub, func) -> argparse.ArgumentParser:

@@ -10,6 +10,7 @@ from typing import Callable
 
 from imgui_bundle import imgui
 
+from ..methods import METHODS
 from .glfw_lib import glfw
 
 from .slice_view import SLICE_VIEWS
@@ -29,12 +30,8 @@ def _method(name: str) -> Callable:
 
 
 SHORTCUTS = (
-    Shortcut("1", "method: path tracer (pt)", _method("pt")),
-    Shortcut("2", "method: probes", _method("probes")),
-    Shortcut("3", "method: probes-only", _method("probes-only")),
-    Shortcut("4", "method: raymarch", _method("raymarch")),
-    Shortcut("5", "method: refine (raymarch at once, then guided to the exact image)",
-             _method("refine")),
+    *(Shortcut(m.viewer_key, f"method: {m.name} ({m.doc})", _method(m.name))
+      for m in METHODS.values() if m.viewer_key is not None),   # the registry's keys
     Shortcut("s", "split view on/off (method | split method)", lambda v: v.state.toggle_display("split")),
     Shortcut("e", "error view on/off (heat map against pt)", lambda v: v.state.toggle_display("error")),
     Shortcut("g", "probe grid: off, over the volume, alone", lambda v: v.state.cycle("probe_view", PROBE_VIEWS)),

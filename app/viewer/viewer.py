@@ -12,6 +12,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from ..methods import REFERENCE
 from ..twins.camera import camera_frame
 from ..gl.shaders import ShaderError
 from ..gl.timer import GpuTimer
@@ -59,11 +60,12 @@ def could_not_open(path, exc: BaseException) -> str:
 
 class Viewer:
     def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = "",
-                 file_dialog: str = "auto", volume=None, settings=None):
+                 file_dialog: str = "auto", volume=None, settings=None, lab=None):
         self.ctx = ctx
         self.state = state
         self.device = device
-        self.session = RenderSession(ctx, state.scene, volume, settings=settings)
+        # lab: LabOptions for tests (app/rendering/lab_options.py); the launch never sets it
+        self.session = RenderSession(ctx, state.scene, volume, settings=settings, lab=lab)
         state.show_channels(self.session.volume.channel_count)
         self.widgets = WidgetRects()
         self.error_meter = ErrorMeter()
@@ -299,7 +301,7 @@ class Viewer:
         return replace(cam, width=w, height=h) if w > 0 and h > 0 else cam
 
     def _restream(self) -> None:
-        """A mixed pool (RenderSettings.mixed_levels under a cap) follows the camera once it has
+        """A mixed pool (LabOptions.mixed_levels under a cap) follows the camera once it has
         settled (no camera change for RESTREAM_SETTLE_S, no button held): not on every frame of a
         drag. A restream under way goes on a budget of OPEN_WRITE_BUDGET_S a frame (the Volume
         panel shows it); a camera that settles elsewhere meanwhile starts it over."""
@@ -477,7 +479,7 @@ class Viewer:
             except RECOVERABLE as exc:
                 state.error(f"rendering stopped: {exc}")
                 self._halted_scene = state.scene
-        if state.display == "error" and state.method != "pt":
+        if state.display == "error" and state.method != REFERENCE:
             self.error_meter.update(self.session, state.method, state.max_samples)
         self.ctx.screen.use()
         self.ctx.viewport = (0, 0, *self.framebuffer_size)
@@ -503,9 +505,10 @@ class Viewer:
             other = None
             if state.display == "split":
                 other = session.texture(state.split_method)
-            elif state.display == "error" and state.method != "pt":
-                other = session.texture("pt")
-            mode = state.display if (state.display != "error" or state.method != "pt") else "image"
+            elif state.display == "error" and state.method != REFERENCE:
+                other = session.texture(REFERENCE)
+            mode = (state.display if (state.display != "error" or state.method != REFERENCE)
+                    else "image")
             if state.probe_view == "alone":
                 mode = "image"
             rms = self.error_meter.reference_rms
