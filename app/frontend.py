@@ -780,7 +780,8 @@ def render_to_files(args: argparse.Namespace) -> int:
         from .rendering.auto_progressive import auto_render
         from .rendering.renderer import RenderResult
         got = auto_render(renderer, auto, seed=args.seed,
-                          progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
+                          progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True),
+                          denoise=getattr(args, "denoise", False))
         print(got.report(log=False))         # each trial was printed as it came
         scene, args.method = got.scene, got.method
         # the image's own render and bake: the rejected settings' are in the report's total
@@ -793,8 +794,11 @@ def render_to_files(args: argparse.Namespace) -> int:
                                  bake_progress=on_bake_pass,
                                  denoise=getattr(args, "denoise", False),
                                  denoise_guides=getattr(args, "denoise_guides", "auto"))
-    if getattr(args, "denoise", False):
-        if auto is not None:   # auto_render returned its image: denoise that one
+    if getattr(args, "denoise", False) and auto is not None and (
+            got.denoised or not METHODS[got.method].noisy):
+        pass   # auto chose the path tracer denoised, or a raymarched image (clean: not denoised)
+    elif getattr(args, "denoise", False):
+        if auto is not None:   # auto_render returned the path tracer's image: denoise that one
             from .rendering.denoise import choose_guides
             renderer.begin(args.method)
             guides = choose_guides(args.denoise_guides, result.spp,
