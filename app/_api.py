@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from radiance_probes.methods import METHODS as REGISTRY, NAMES
 from radiance_probes.scene import Scene, SceneError, load_scene, parse_scene, scene_to_dict
 from radiance_probes.scene_types import CameraSpec, VolumeError, VolumeSpec
 from radiance_probes.scene_flags import COLOUR_SOURCES
@@ -39,10 +40,10 @@ SHORTCUTS = {
 # base scene had (update(colormap="viridis") after colour points, update(rgba=...) after a colormap).
 SCENE_KEYS = tuple(f.name for f in dataclasses.fields(Scene)
                    if f.name not in ("base_dir", "environment_map"))
-METHODS = ("raymarch", "probes", "probes-only", "pt", "guided")
-# Samples per pixel a render takes unless told: the raymarcher's frames differ only by their
-# jittered start; the others are Monte Carlo.
-DEFAULT_SPP = {"raymarch": 4, "probes": 64, "probes-only": 64, "pt": 64, "guided": 64}
+# Every method (app/methods.py, the registry) and the samples per pixel a render takes unless
+# told: the raymarcher's frames differ only by their jittered start; the others are Monte Carlo.
+METHODS = NAMES
+DEFAULT_SPP = {name: m.default_spp for name, m in REGISTRY.items()}
 # window="auto": the values between these percentiles map to densities 0 and 1.
 AUTO_WINDOW_PERCENTILES = (0.5, 99.5)
 AUTO_WINDOW_SAMPLES = 1 << 21     # voxels the percentiles are taken over, at most (a regular subsample)
@@ -321,9 +322,9 @@ class Renderer:
                seed: int = 0, exposure: float = 1.0, denoise: bool = False,
                denoise_guides: str = "auto", **scene_options) -> Image:
         """One image of the current scene (with `camera` and any scene options changed first):
-        `method` raymarch (interactive, over the probes), probes, probes-only, or pt (the
-        reference path tracer) or guided (the path tracer with the probes as a control variate);
-        `spp` samples (raymarched frames) per pixel. `denoise`: through the denoiser (Open Image
+        `method` one of METHODS (radiance_probes.methods: raymarch, interactive, over the probes,
+        the default; pt, the reference path tracer; probes, probes-only, guided, refine);
+        `spp` samples (raymarched frames) per pixel (None: DEFAULT_SPP's). `denoise`: through the denoiser (Open Image
         Denoise), guided by `denoise_guides` (auto, none, albedo, albedo-normal, probes); where it
         cannot run, the raw image and a note (Image.notes)."""
         if method not in METHODS:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .methods import METHODS as REGISTRY
 from .frontend import (OptionError, add_colorbar_options, add_scene_edit_options,
                        add_volume_options, apply_options, check_clip, grid_arg, positive_float,
                        positive_int, scene_from_arg)
@@ -23,7 +24,7 @@ def bookmark_list(text: str) -> list[str]:
 def add_animate_parser(sub, func) -> argparse.ArgumentParser:
     from .movie_writer import DEFAULT_CRF
     from .rendering.renderer import RAYMARCH_STAGES
-    from .scene_types import MOVIE_METHODS as METHODS
+    from .methods import MOVIE_METHODS as METHODS
     a = sub.add_parser("animate", help="render a movie: a turntable, or a flight through the "
                                        "scene's bookmarks (MP4, GIF or numbered PNGs)")
     a.add_argument("scene", nargs="?", help="scene JSON, a volume file or a folder (TIFF, DICOM; "
@@ -130,7 +131,7 @@ def run_animate(args: argparse.Namespace) -> int:
         raise OptionError(f"--colorbar: a colour bar shows one transfer function; this volume has "
                           f"{volume.channel_count} channels, each with its own")
     check_clip(scene, volume, args)
-    if args.method == "raymarch" and args.raymarch_step is not None:
+    if "raymarch_step" in REGISTRY[args.method].options and args.raymarch_step is not None:
         try:
             check_step(args.raymarch_step, volume)
         except ValueError as exc:
@@ -140,7 +141,7 @@ def run_animate(args: argparse.Namespace) -> int:
     device = "software" if is_software(ctx) else "gpu"
     scene, said = with_device_probes(scene, device,
                                      probes_named(args.scene, args.probe_grid, args.probe_samples))
-    if said and args.method != "pt":
+    if said and REGISTRY[args.method].needs_probes:
         print(f"animate: {said}", file=sys.stderr)
     from .rendering.settings import RenderSettings
     renderer = Renderer(ctx, scene, volume, RenderSettings(

@@ -9,6 +9,7 @@ from .frontend import (ArgumentParser, OptionError, add_colorbar_options, add_sc
                        memory_size,
                        add_volume_options, fraction, grid_arg, positive_float, positive_int,
                        render_to_files)
+from .methods import VIEWER_METHODS
 from .scene import SceneError
 
 
@@ -125,7 +126,6 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def interact_methods_arg(text: str) -> tuple:
     """`bench --methods`: a comma-separated list of the viewer's methods."""
-    from .scene_types import VIEWER_METHODS
     return _comma_list(text, str, lambda m: m in VIEWER_METHODS,
                        f"one of {', '.join(VIEWER_METHODS)}")
 
@@ -171,13 +171,13 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     from .rendering.denoise import GUIDE_CHOICES
-    from .rendering.renderer import METHODS, RAYMARCH_STAGES
+    from .methods import NAMES, listing
+    from .rendering.renderer import RAYMARCH_STAGES
     from .scene_types import PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS
     r = sub.add_parser("render", help="render a scene headless to a PNG (and linear .npy/.exr)")
     r.add_argument("scene", nargs="?", help="scene JSON or a volume file (default: built-in scene)")
-    r.add_argument("--method", choices=METHODS, default="pt",
-                   help="render method (default pt, the path tracer; README's 'Which method "
-                        "when')")
+    r.add_argument("--method", choices=NAMES, default="pt",
+                   help="render method (default pt; README's 'Which method when'): " + listing())
     r.add_argument("--spp", type=positive_int, default=64, help="samples per pixel (default 64)")
     r.add_argument("--samples-per-pass", type=positive_int, default=1,
                    help="samples per pixel in one GPU dispatch (default 1)")
@@ -301,8 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "cost and auto presets (default 0.05,0.10)")
     b.add_argument("--methods", type=interact_methods_arg, metavar="M[,M...]",
                    help="the methods the interact presets replay the viewer's session with: "
-                        "pt, probes, probes-only, raymarch, refine (the viewer's raymarcher, then "
-                        "guided); default probes,raymarch (interact-refine: refine)")
+                        "any of the viewer's (" + ", ".join(VIEWER_METHODS) + "); default "
+                        "probes,raymarch (interact-refine: refine)")
     b.add_argument("--report-only", action="store_true",
                    help="rewrite report.md and plots from an existing results.json")
     b.set_defaults(func=cmd_bench)

@@ -161,7 +161,9 @@ def check_hounsfield(volume_spec, transfer_preset: str | None, volume) -> None:
     raise VolumeError(f"{volume.name}: {what} is meant for Hounsfield units, but {problem}. Give "
                       "the window in the data's own units (--data-window LEVEL,WIDTH, "
                       "volume.window {level, width} or volume.value_range) and a transfer "
-                      "function that is not a clinical preset")
+                      "function that is not a clinical preset; or, for a CT exported without "
+                      "its units (8-bit, windowed), the export's mapping to Hounsfield units "
+                      "(--set volume.rescale=SLOPE,INTERCEPT)")
 
 
 def opening_preset(scene, volume) -> str | None:

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .methods import METHODS
 from .scene import (Scene, SceneError, TransferFunctionSpec, default_scene, load_scene, parse_scene,
                     scene_to_dict, transfer_to_dict)
 
@@ -717,12 +718,12 @@ def render_to_files(args: argparse.Namespace) -> int:
         if args.method != "pt" or args.spp != 64:
             print("note: --auto chooses the method and the samples: --method and --spp are not "
                   "used", file=sys.stderr)
-    if args.auto_probes is not None and args.method == "pt":
+    if args.auto_probes is not None and not METHODS[args.method].needs_probes:
         raise OptionError("--auto-probes chooses probe settings: use it with a probe method")
     gather_event = getattr(args, "gather_event", None)
     if gather_event is not None:
         from .rendering.settings import check_gather_event
-        if args.method != "probes":
+        if "gather_event" not in METHODS[args.method].options:
             raise OptionError(f"--gather-event: the probes method's option (a final gather), "
                               f"not {args.method}'s")
         try:
@@ -746,7 +747,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     check_clip(scene, volume, args)        # and a crop that does not fit the volume
     from .area_lights import check_area_lights
     check_area_lights(scene, volume.half_extent)   # and an area light in the volume box
-    if args.method == "raymarch" and args.raymarch_step is not None:
+    if "raymarch_step" in METHODS[args.method].options and args.raymarch_step is not None:
         try:
             check_step(args.raymarch_step, volume)   # a step asked for is taken, or refused
         except ValueError as exc:
@@ -779,7 +780,8 @@ def render_to_files(args: argparse.Namespace) -> int:
         from .rendering.auto_progressive import auto_render
         from .rendering.renderer import RenderResult
         got = auto_render(renderer, auto, seed=args.seed,
-                          progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True))
+                          progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True),
+                          denoise=getattr(args, "denoise", False))
         print(got.report(log=False))         # each trial was printed as it came
         scene, args.method = got.scene, got.method
         # the image's own render and bake: the rejected settings' are in the report's total
@@ -792,8 +794,11 @@ def render_to_files(args: argparse.Namespace) -> int:
                                  bake_progress=on_bake_pass,
                                  denoise=getattr(args, "denoise", False),
                                  denoise_guides=getattr(args, "denoise_guides", "auto"))
-    if getattr(args, "denoise", False):
-        if auto is not None:   # auto_render returned its image: denoise that one
+    if getattr(args, "denoise", False) and auto is not None and (
+            got.denoised or not METHODS[got.method].noisy):
+        pass   # auto chose the path tracer denoised, or a raymarched image (clean: not denoised)
+    elif getattr(args, "denoise", False):
+        if auto is not None:   # auto_render returned the path tracer's image: denoise that one
             from .rendering.denoise import choose_guides
             renderer.begin(args.method)
             guides = choose_guides(args.denoise_guides, result.spp,
@@ -820,7 +825,12 @@ def render_to_files(args: argparse.Namespace) -> int:
     print(f"device: {describe(ctx)}")
     cam = scene.camera
     print(f"method: {result.method}  image: {cam.width}x{cam.height}  spp: {result.spp}")
-    if renderer.probe_grid is not None and args.method != "pt":
+    shown = result.stats.get("shown")   # a composite method's part shown (refine)
+    if shown is not None:
+        est = result.stats["refine_estimate"]
+        print(f"{result.method} shows {shown}'s image (estimated rRMSE: guided {est['guided']:.4f}, "
+              f"raymarch {est['raymarch']:.4f})")
+    if renderer.probe_grid is not None and METHODS[args.method].needs_probes:
         g = renderer.probe_grid
         rep = g.progress_report()
         print(f"probes: {g.grid[0]}x{g.grid[1]}x{g.grid[2]}, {g.samples} walks each, "
@@ -830,7 +840,7 @@ def render_to_files(args: argparse.Namespace) -> int:
               f"{'n/a, one pass' if rep.passes_done < 2 else f'{100 * rep.standard_error:.2f}%'})")
         if renderer.bake_note():
             print(f"note: {renderer.bake_note()}")
-        if args.method == "probes" and renderer.probe_gather_event > 1:
+        if "gather_event" in METHODS[args.method].options and renderer.probe_gather_event > 1:
             k = renderer.probe_gather_event
             print(f"final gather: the probes read at scattering event {k}, the events before it "
                   f"path traced" + (f" (past max_bounces {scene.max_bounces}: no path reaches "
@@ -851,8 +861,8 @@ def render_to_files(args: argparse.Namespace) -> int:
             print(f"probe layout: adaptive ({scene.probes.adaptive_indicator}, strength "
                   f"{scene.probes.adaptive_strength:g}): {spacing}; "
                   f"{renderer.last_layout_ms:.0f} ms on the host")
-    if args.method == "raymarch" and (renderer.effective_raymarch_step_voxels
-                                      > renderer.raymarch_step_voxels):
+    if "raymarch_step" in METHODS[args.method].options and (
+            renderer.effective_raymarch_step_voxels > renderer.raymarch_step_voxels):
         print(f"note: raymarch step {renderer.effective_raymarch_step_voxels:.3g} voxels, not the "
               f"default {renderer.raymarch_step_voxels:g}: the shader takes at most 8192 steps "
               "across this volume's box")

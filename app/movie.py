@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .camera_path import keyframes, turntable
+from .methods import METHODS
 from .scene_types import CameraSpec, Scene
 
 
@@ -35,7 +36,7 @@ class MovieResult:
 
     def summary(self) -> str:
         return (f"{self.frames} frames {self.width}x{self.height}, {self.method} at {self.spp} "
-                f"{'frames' if self.method == 'raymarch' else 'spp'} each: {self.wall_s:.2f} s in "
+                f"{'spp' if METHODS[self.method].noisy else 'frames'} each: {self.wall_s:.2f} s in "
                 f"all; probes baked {self.bakes}x ({self.bake_ms:.1f} ms GPU), frames "
                 f"{self.render_ms:.1f} ms GPU ({self.render_ms / max(self.frames, 1):.2f} ms a frame)")
 
@@ -90,7 +91,7 @@ class MovieFrames:
             raise ValueError(f"{len(times)} time steps for {len(self.cameras)} frames")
         self.times = None if times is None else [int(t) for t in times]
         self.scene_time = renderer.scene.time   # given back when the movie is done
-        self.denoise = denoise and method != "raymarch"   # the raymarcher's frames are not noisy
+        self.denoise = denoise and METHODS[method].noisy   # (the raymarcher's frames are not)
         self.denoise_note: str | None = None
 
     @property
@@ -108,7 +109,7 @@ class MovieFrames:
                 if r.needs_probes(self.method) and not r.probes_current():
                     self.bake_ms += r.bake(self.seed)     # before the first frame only (tests count)
                     self.bakes += 1
-                if self.method == "raymarch":
+                if r.needs_light(self.method):   # counted with the bake, not the frames
                     self.bake_ms += r.bake_light()
                 acc = r.begin(self.method, seed=self.seed)
                 while acc.samples < self.spp:

@@ -13,12 +13,13 @@ import re
 from pathlib import Path
 from typing import Any, Mapping
 
+from .methods import VIEWER_METHODS
 from .scene_flags import flag_for, with_flag
 from .scene_types import (AXIS_LETTERS, CROP_UNITS, MAX_CHANNELS, ChannelSpec,
                           channel_transfer_function, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
                           MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
                           PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
-                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
+                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS,
                           VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
                           ClipPlaneSpec, CropSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene,
                           SceneError, SurfaceSpec, TransferFunctionSpec, ViewerSpec, VolumeSpec,
@@ -132,6 +133,12 @@ def _parse_volume(d: Any) -> VolumeSpec:
         kw["dtype"] = _choice(d["dtype"], "volume.dtype", tuple(RAW_DTYPES))
     if d.get("replace_nonfinite") is not None:
         kw["replace_nonfinite"] = _number(d["replace_nonfinite"], "volume.replace_nonfinite")
+    if d.get("rescale") is not None:
+        slope, intercept = _vector(d["rescale"], "volume.rescale", 2)
+        if slope == 0.0:
+            raise SceneError("volume.rescale: the slope must not be 0 (stored values to data units "
+                             "as value * slope + intercept)")
+        kw["rescale"] = (slope, intercept)
     if d.get("series") is not None:
         if not kw.get("path"):
             raise SceneError("volume.series: only for a DICOM folder or DICOMDIR "

@@ -19,10 +19,11 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
+from .methods import VIEWER_METHODS
 from .scene_types import (AXIS_LETTERS, CHANNEL_COLOURS, CROP_UNITS, MAX_CHANNELS, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
                           MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
                           PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
-                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS, VIEWER_METHODS,
+                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS,
                           VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
                           ChannelSpec, ClipPlaneSpec, CropSpec, LightSpec, ProbeSpec, Scene,
                           SurfaceSpec, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS, AREA_LIGHT_SHAPES,
@@ -139,6 +140,12 @@ def keys() -> dict[str, Key]:
                            vector(3, number(1, 1 << 20, integer=True)), default="from the name"),
         "volume.dtype": Key("The sample type of such a .raw file.", choice(_dtypes()),
                             default="from the name"),
+        "volume.rescale": Key(
+            "[slope, intercept]: the file's stored values to data units (value * slope + "
+            "intercept), as DICOM's RescaleSlope and RescaleIntercept, for data exported without "
+            "them (an 8-bit CT windowed from Hounsfield units). volume.value_range, volume.window "
+            "and the CT presets are then in data units. Not for DICOM (it carries its own).",
+            vector(2), default="none: the stored values are the data"),
         "volume.replace_nonfinite": Key(
             "The value NaN and Inf voxels get; without it they are an error.", {"type": "number"},
             default="none (an error)"),

@@ -72,6 +72,10 @@ class VolumeSpec:
     dims: tuple[int, int, int] | None = None  # for .raw files not in the Open SciVis naming
     dtype: str | None = None
     replace_nonfinite: float | None = None  # None: NaN/Inf in the data are an error
+    # (slope, intercept): the file's stored values to data units (value * slope + intercept), as
+    # DICOM's RescaleSlope/RescaleIntercept do, for data exported without them (an 8-bit CT
+    # windowed from Hounsfield units); value_range, window and CT presets are then in data units.
+    rescale: tuple[float, float] | None = None
     # (level, width) in data units (Hounsfield units for CT), or a WINDOW_PRESETS name in the JSON:
     # another way to give value_range (level -/+ width / 2), which it excludes.
     window: tuple[float, float] | None = None
@@ -291,12 +295,8 @@ class BookmarkSpec:
                                    fov_y=self.fov_y)
 
 
-# The methods a movie renders (app/animate.py, the viewer's movie panel): app/rendering/renderer.py
-# METHODS but `guided`. The viewer's methods and display modes: those, and `refine` (the raymarcher
-# at once after an edit, then `guided` replacing it; app/viewer/session.py), and
-# app/viewer/state.py DISPLAY_MODES (a test keeps them so).
-MOVIE_METHODS = ("pt", "probes", "probes-only", "raymarch")
-VIEWER_METHODS = (*MOVIE_METHODS, "refine")
+# The viewer's display modes (app/viewer/state.py DISPLAY_MODES; a test keeps them so). Its
+# methods and a movie's are the registry's (app/methods.py).
 VIEWER_DISPLAYS = ("image", "split", "error")
 VIEWER_PROBE_VIEWS = ("off", "over", "alone")
 

@@ -615,6 +615,9 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
         if time != 0:
             raise VolumeError(f"built-in '{name}': time step {time} asked for, but the volume has "
                               "no time axis (one step); see the scene's time (--time STEP)")
+        if spec.rescale is not None:
+            raise VolumeError(f"built-in '{name}': {with_flag('volume.rescale')} applies to a "
+                              "file's stored values")
         data = BUILTIN_VOLUMES[name](tuple(spec.size))
         domain = spec.domain
         if channels is not None:
@@ -626,12 +629,23 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
         return Volume(norm, tuple(float(v) for v in spacing), f"builtin:{name}", vr, "float32",
                       float(data.min()), float(data.max()))
     p = _resolve(spec.path, base_dir)
+    if formats.is_zarr(p) and (brick is not None or _large_zarr(p)) and spec.rescale is not None:
+        raise VolumeError(f"{p}: {with_flag('volume.rescale')} is not applied to a Zarr store read "
+                          "brick by brick; give its range in stored values "
+                          f"({with_flag('volume.value_range')})")
     if formats.is_zarr(p) and (brick is not None or _large_zarr(p)):
         from .bricks import DEFAULT_BRICK_SIZE
         return lazy_zarr_volume(p, spec, time, channels, brick or DEFAULT_BRICK_SIZE)
     found = _read_series(spec, base_dir)
     raw, name, direction, notes = found.raw, found.name, found.direction, found.notes
     where = str(_resolve(spec.path, base_dir))
+    if spec.rescale is not None:
+        if found.series is not None:
+            raise VolumeError(f"{where}: {with_flag('volume.rescale')} is for data exported without "
+                              "its units; a DICOM series carries its own RescaleSlope and "
+                              "RescaleIntercept, which are applied")
+        slope, intercept = spec.rescale
+        raw = raw.astype(np.float32) * np.float32(slope) + np.float32(intercept)
     if found.spacing is not None:
         spacing = found.spacing  # the header's spacing unless the scene gives one (even 1, 1, 1)
     if any(not (s > 0 and np.isfinite(s)) for s in spacing):

@@ -19,9 +19,6 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #endif
 #if defined(GUIDED_RESIDUAL)
 #include "lib/guided_source.glsl"
-// here, outside the #if blocks below: the loader expands an include once, where first met, and
-// both guiding includes read it
-#include "lib/luminance.glsl"
 #if !defined(GUIDED_DIRECTION_CONTROL) || PROBE_SH_ORDER < 1
 #undef GUIDED_DIRECTION_CONTROL   // order 0 probes hold no direction: the control would be 0
 #define GUIDED_DIRECTION_CONTROL 0
@@ -29,19 +26,6 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #if GUIDED_DIRECTION_CONTROL
 #include "lib/guided_direction_control.glsl"
 #endif
-#if !defined(GUIDED_DIRECTIONS) || PROBE_SH_ORDER < 1
-#undef GUIDED_DIRECTIONS   // the same: order 0 holds no direction to guide by (the renderer bakes
-#define GUIDED_DIRECTIONS 0   // order 2 where `auto` would give 0: probe_layout.resolve_sh_order)
-#endif
-#if GUIDED_DIRECTIONS
-#include "lib/guided_directions.glsl"
-#endif
-#if defined(GUIDED_DISTANCES) && GUIDED_DISTANCES
-// defines tracking_collides, which lib/tracking.glsl declares
-#include "lib/guided_distances.glsl"
-#endif
-#elif defined(GUIDED_DISTANCES) && GUIDED_DISTANCES
-#error "GUIDED_DISTANCES guides `guided`'s level 1 (GUIDED_RESIDUAL) only"
 #endif
 #include "lib/integrator.glsl"
 

@@ -30,7 +30,10 @@ void main()
         return;
     uint base = uint(walk_radiance.length()) / 3u;
     CHECK_INDEX(base + 2u * local + 1u, walk_radiance.length(), CHECK_SITE_WALK_INDEX);
-    vec3 weight = walk_radiance[base + 2u * local + 1u].rgb;
+    vec4 chosen = walk_radiance[base + 2u * local + 1u];   // c / w and the factor W / Q
+    if (!(chosen.w > 0.0))
+        return;
+    vec3 weight = chosen.rgb * chosen.w;
     if (all(equal(weight, vec3(0.0))))
         return;
     vec4 at = walk_radiance[base + 2u * local];

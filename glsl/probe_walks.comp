@@ -49,6 +49,20 @@ uniform uint first_dispatch;  // 1: start every walk of the chunk afresh
 #endif
 layout(std430, binding = 3) buffer WalkRadiance { vec4 walk_radiance[]; };
 
+#if defined(WALK_SUN_GRID) && defined(WALK_SUN_CORRECTION)
+// The sun's correction a walk chose, for probe_sun_correction.comp, in the buffer's second region
+// (two entries a walk after the chunk's radiance): its point and grid transmittance, then its
+// c / w and (written as the walk ends) the factor W / Q that makes it unbiased, 0 where none.
+uint walk_slot;   // the running walk's index in the chunk
+
+void walk_correction_choose(vec3 x, float grid, vec3 weight_per_w)
+{
+    uint base = uint(walk_radiance.length()) / 3u;
+    walk_radiance[base + 2u * walk_slot] = vec4(x, grid);
+    walk_radiance[base + 2u * walk_slot + 1u] = vec4(weight_per_w, 0.0);
+}
+#endif
+
 uniform uint first_probe;     // chunk offset
 uniform uint chunk_probes;    // probes in this chunk
 uniform uint directions;      // walks per probe in this pass
@@ -92,6 +106,9 @@ void run_walk(uint local)
         path_begin(p, probe_position(probe), omega, rng_seed(key, pass_index, seed));
     }
     int budget = loop_budget;
+#if defined(WALK_SUN_GRID) && defined(WALK_SUN_CORRECTION)
+    walk_slot = local;
+#endif
     int result = path_continue(p, budget, loop_reserve);
     walk_profile_flush(result == PATH_SUSPENDED ? 0 : 1, p.bounce);
 #if RESUMABLE_WALKS
@@ -104,17 +121,14 @@ void run_walk(uint local)
 #endif
     bool valid = path_estimate_valid(p, result);
     walk_radiance[local] = valid ? vec4(p.radiance, 1.0) : vec4(0.0, 0.0, 0.0, 2.0);
-#if defined(WALK_SUN_GRID)
-    // The sun's correction the walk chose (lib/integrator.glsl path_flight), for
-    // probe_sun_correction.comp: its point and grid transmittance, then its weight (0: none),
-    // in the buffer's second region (two entries a walk after the chunk's radiance).
+#if defined(WALK_SUN_GRID) && defined(WALK_SUN_CORRECTION)
+    // Whether the correction the walk chose (walk_correction_choose) is traced, with probability
+    // Q = min(1, sum of its rates), and its factor W / Q; 0: none (no event chosen, or not drawn).
     if (valid) {
         uint base = uint(walk_radiance.length()) / 3u;
         float rate = min(1.0, p.correction_rate_sum);
         bool traced = p.correction_w_sum > 0.0 && rng_next(p.rng) < rate;
-        walk_radiance[base + 2u * local] = vec4(p.correction_x, p.correction_grid);
-        walk_radiance[base + 2u * local + 1u] =
-            vec4(traced ? p.correction_weight * (p.correction_w_sum / rate) : vec3(0.0), 0.0);
+        walk_radiance[base + 2u * local + 1u].w = traced ? p.correction_w_sum / rate : 0.0;
     }
 #endif
 }

@@ -21,7 +21,7 @@ GL_MAX_3D_TEXTURE_SIZE) rendered.
    not fit the device, both are rendered over a crop: the central eighth of the box (a quarter of
    each side... half of each side) read as in-memory volumes (level 0's voxels, and the capped
    level's over the same box), the same camera framing it.
-   The open again with RenderSettings.mixed_levels on (capped_mixed_levels).
+   The open again with LabOptions.mixed_levels on (capped_mixed_levels).
 4. progressive: the open as the viewer does it (the store's small level drawn as a preview while
    ProgressiveOpen loads the store on a thread; frames drawn meanwhile), timed from opening.
 5. zoomed: at a camera near the volume (ZOOMED_EYE), levels mixed by footprint against one whole
@@ -55,6 +55,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from radiance_probes.rendering.metrics import rrmse  # noqa: E402
 from radiance_probes.cli import memory_size  # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
+from radiance_probes.rendering.lab_options import LabOptions  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
 from radiance_probes.scene import parse_scene  # noqa: E402
@@ -273,11 +274,11 @@ def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
     return records
 
 
-def _open_capped(ctx, records, key, scene, settings, cap, s):
+def _open_capped(ctx, records, key, scene, settings, cap, s, mixed: bool = False):
     """Opens the store under the cap with `settings`: the time to the first image, the frame
     rate, bake and light grid; records[key]; returns the shown volume and a 4-spp image."""
     start = time.perf_counter()
-    r = Renderer(ctx, scene, settings=settings)
+    r = Renderer(ctx, scene, settings=settings, lab=LabOptions(mixed_levels=mixed))
     ctx.finish()
     opened = time.perf_counter() - start          # read, range pass, level chosen, uploaded
     first = r.render("raymarch", spp=1, seed=0).image
@@ -286,7 +287,7 @@ def _open_capped(ctx, records, key, scene, settings, cap, s):
     pool = r.resources.volume_tex if r.resources.bricked else None
     records[key] = {
         "cap_bytes": cap, "first_image_s": time.perf_counter() - start, "open_s": opened,
-        "mixed_levels": settings.mixed_levels,
+        "mixed_levels": mixed,
         "level_dims": list(shown.dims), "notes": list(shown.notes),
         "pool_bytes": int(pool.nbytes) if pool is not None else None,
         "pool_levels": pool.levels if pool is not None else None,
@@ -307,12 +308,12 @@ def _open_capped(ctx, records, key, scene, settings, cap, s):
 
 
 def _capped(ctx, records, scene, settings, cap, s, parts):
-    # the default settings, then with levels mixed by the camera (RenderSettings.mixed_levels
+    # the default settings, then with levels mixed by the camera (LabOptions.mixed_levels
     # on; one whole level where no brick is worth a slot of the finer level)
     from dataclasses import replace
     capped_volume, capped_image = _open_capped(ctx, records, "capped", scene, settings, cap, s)
-    _, mixed_image = _open_capped(ctx, records, "capped_mixed_levels", scene,
-                                  replace(settings, mixed_levels=True), cap, s)
+    _, mixed_image = _open_capped(ctx, records, "capped_mixed_levels", scene, settings, cap, s,
+                                  mixed=True)
     records["first_image_mean"] = records["capped"]["first_image_mean"]
     if "uncapped" not in parts:
         return
@@ -347,10 +348,8 @@ def _zoomed(ctx, records, scene, settings, cap, s):
     """The camera near the volume (ZOOMED_EYE): under the cap with levels mixed by footprint and
     with one whole level, each against level 0 uncapped at the same seeds."""
     from dataclasses import replace
-    _, mixed = _open_capped(ctx, records, "zoomed_mixed", scene,
-                            replace(settings, mixed_levels=True), cap, s)
-    _, whole = _open_capped(ctx, records, "zoomed_whole_level", scene,
-                            replace(settings, mixed_levels=False), cap, s)
+    _, mixed = _open_capped(ctx, records, "zoomed_mixed", scene, settings, cap, s, mixed=True)
+    _, whole = _open_capped(ctx, records, "zoomed_whole_level", scene, settings, cap, s)
     r0 = Renderer(ctx, scene, settings=RenderSettings(brick_size=s.brick or 64))
     full = r0.render("raymarch", spp=4, seed=7).image
     again = r0.render("raymarch", spp=4, seed=8).image
@@ -369,7 +368,7 @@ def _stream(ctx, records, scene, settings, cap, s):
     from dataclasses import replace
     from radiance_probes.rendering.progressive_open import OPEN_WRITE_BUDGET_S
     start = time.perf_counter()
-    r = Renderer(ctx, scene, settings=replace(settings, mixed_levels=True))
+    r = Renderer(ctx, scene, settings=settings, lab=LabOptions(mixed_levels=True))
     r.render("raymarch", spp=1, seed=0)
     ctx.finish()
     stream = r.resources.stream
@@ -465,7 +464,7 @@ def _progressive(ctx, records, scene, settings, cap):
     preview_read = time.perf_counter() - start
     r = Renderer(ctx, scene, preview, settings=settings)
     opening = ProgressiveOpen(ctx, scene, cap, settings.brick_size,
-                              scene.camera if settings.mixed_levels else None)
+                              None)   # one whole level (LabOptions.mixed_levels is off)
     frame(r, 0, bake=True)
     preview_image = time.perf_counter() - start
     walls = []

@@ -14,6 +14,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
+from radiance_probes.rendering.lab_options import LabOptions  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.scene import load_scene  # noqa: E402
 
@@ -26,7 +27,7 @@ print(f"device: {describe(ctx)}; {size} x {size}, {spp} spp per seed")
 r = Renderer(ctx, scene)
 results = {}
 for name, sampling in (("map sampling + MIS", True), ("phase sampling only", False)):
-    r.resources.environment_sampling = sampling
+    r.lab = LabOptions(environment_sampling=sampling)
     images, ms = [], 0.0
     for seed in (1, 2):
         res = r.render("pt", spp=spp, seed=seed, width=size, height=size, samples_per_pass=spp)

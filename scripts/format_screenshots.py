@@ -9,8 +9,16 @@
                                    (the CT series, a one-slice scout and a three-plane localiser in
                                    subfolders, a README.TXT), opened as the README says:
                                    `view FOLDER --data-window soft_tissue --orientation patient`
-                                   (raymarched), the Data panel open on the series list.
-Run: .venv/bin/python scripts/format_screenshots.py   (llvmpipe: about a minute each)"""
+                                   (raymarched), the Data panel open on the series list;
+  screenshots/viewer_slices.png    the same chest CT series (its rows flipped to run posterior, as
+                                   its anatomy says) with the slice view (issue 44): axial, coronal
+                                   and sagittal slices beside the 3D view in a wide window (-1000 to
+                                   800 HU: the 8-bit data's tissue is no real HU), a crop box (the
+                                   chest's front cut away) and a clip plane drawn on them, a click
+                                   in the axial slice having moved the slices and the orbit's
+                                   centre, the mouse over the coronal slice reading its value in HU.
+Run: .venv/bin/python scripts/format_screenshots.py [NAME ...]   (llvmpipe: about a minute each;
+NAME, e.g. viewer_slices, makes only those)"""
 from __future__ import annotations
 
 import json
@@ -70,7 +78,11 @@ def write_study(root: Path) -> None:
     (root / "README.TXT").write_text("exported by a scanner\n")
 
 
-def write_ct_series(folder: Path) -> None:
+def write_ct_series(folder: Path, rows_anterior: bool = False) -> None:
+    """The chest CT as a DICOM series. Its NRRD header says LPS, but its rows run anterior (the
+    table and the spine lie at low y): `rows_anterior` flips them so that the series' axial
+    orientation holds (anterior up in an axial slice); without it the series is written as the
+    header says, as the screenshots made before the slice view were."""
     import nrrd
     from pydicom.dataset import FileDataset, FileMetaDataset
     from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
@@ -95,7 +107,7 @@ def write_ct_series(folder: Path) -> None:
         ds.PixelSpacing = [float(spacing[1]), float(spacing[0])]
         ds.SliceThickness = float(spacing[2])
         ds.RescaleSlope, ds.RescaleIntercept = 8.0, -1024.0
-        sl = np.ascontiguousarray(stored[:, :, k].T)   # rows = y, columns = x
+        sl = np.ascontiguousarray(stored[:, ::-1 if rows_anterior else 1, k].T)   # rows y, columns x
         ds.Rows, ds.Columns = sl.shape
         ds.SamplesPerPixel, ds.PhotometricInterpretation = 1, "MONOCHROME2"
         ds.BitsAllocated = ds.BitsStored = 16
@@ -112,17 +124,39 @@ def shoot(scene: dict, out: Path, tmp: Path, name: str) -> None:
     subprocess.run(cmd, check=True)
 
 
-def main() -> int:
+def shoot_slices(series: Path, out: Path, tmp: Path) -> None:
+    """viewer_slices.png: the CT series in patient orientation with its three slices, a crop box
+    and a clip plane; a click in the axial slice, then the mouse resting on the coronal one."""
+    script = tmp / "slices.json"
+    script.write_text(json.dumps([
+        {"click": "Slices"}, {"frames": 2},
+        {"click": {"slice": "y", "at": [0.58, 0.45]}}, {"until": "done"},
+        {"move": {"slice": "z", "at": [0.56, 0.55]}}, {"frames": 2},
+        {"screenshot": str(out / "viewer_slices.png")}, {"close": True}]))
+    cmd = [str(ROOT / ".venv/bin/radiance-probes"), "view", str(series), "--data-window=-100,1800",
+           "--orientation", "patient", "--method", "raymarch", "--slices",
+           "--crop-voxels", "20", "0", "0", "236", "133", "200", "--clip-plane", "-1", "0", "0.6",
+           "0.25", "--spp", "4", "--script", str(script), "--window", "1280x800"]
+    print(" ".join(cmd), flush=True)
+    subprocess.run(cmd, check=True)
+
+
+def main(names: list[str]) -> int:
     import nibabel
     out = ROOT / "screenshots"
+    wanted = lambda name: not names or name in names   # noqa: E731
     with tempfile.TemporaryDirectory() as t:
         tmp = Path(t)
-        if CHEST.is_file():
+        if CHEST.is_file() and wanted("viewer_slices"):
+            write_ct_series(tmp / "ct_upright", rows_anterior=True)
+            shoot_slices(tmp / "ct_upright", out, tmp)
+        if CHEST.is_file() and wanted("viewer_dicom_ct"):
             write_ct_series(tmp / "ct_series")
             shoot({"volume": {"path": str(tmp / "ct_series"), "window": "soft_tissue"},
                    "transfer_function": {"colormap": "coolwarm"}, "density_scale": 40.0,
                    "camera": {"width": 256, "height": 256}},
                   out / "viewer_dicom_ct.png", tmp, "ct")
+        if CHEST.is_file() and wanted("viewer_dicom_study"):
             write_study(tmp / "study")
             script = tmp / "data_panel.json"
             script.write_text(json.dumps([{"click": "Data"}, {"frames": 12},
@@ -133,8 +167,10 @@ def main() -> int:
                    "raymarch", "--script", str(script), "--window", "1280x800"]
             print(" ".join(cmd), flush=True)
             subprocess.run(cmd, check=True)
-        else:
+        if not CHEST.is_file():
             print(f"{CHEST} is absent: no DICOM screenshots", file=sys.stderr)
+        if not wanted("viewer_nifti_mri"):
+            return 0
         mri = Path(nibabel.__file__).parent / "tests" / "data" / "anatomical.nii"
         # its brightest tissue (a window over the top 20% of its voxels): the rest is made clear
         shoot({"volume": {"path": str(mri), "window": {"level": 12000, "width": 4000}},
@@ -145,4 +181,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(sys.argv[1:]))

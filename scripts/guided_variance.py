@@ -2,7 +2,7 @@
 costs, measured from two independent images per estimator (no reference needed).
 
     python scripts/guided_variance.py OUT_DIR [--quick] [--scenes fuel,foot,...] [--spp 64]
-        [--probes 64,128] [--width 512 --height 512] [--distances 0.5] [--estimators ROWS]
+        [--probes 64,128] [--width 512 --height 512] [--estimators ROWS]
 
 Per scene the probes are baked once (GPU ms recorded), then each estimator renders two images of
 SPP samples per pixel with independent seeds:
@@ -13,16 +13,9 @@ SPP samples per pixel with independent seeds:
   RenderSettings.guided_direction_control False), with the direction control at every event
   (the default, lib/guided_direction_control.glsl), and that with one frame of level 0 a sample
   of level 1 instead of 0.25 (guided_level0_ratio); for `guided` each level's share of its
-  variance. These rows draw directions from the phase function alone (guided_directions 0), as
-  they did before guided directions, so that they stay comparable with earlier records;
-- `guided, guided directions`: the `guided` row with guided directions on
-  (RenderSettings.guided_directions 0.5, off by default: half the directions drawn from the phase function times
-  the probes' radiance, lib/guided_directions.glsl): against `guided`, what guiding removes and
-  what its table costs a sample;
-- `guided, guided distances`: the `guided` row with guided distances on
-  (RenderSettings.guided_distances, --distances, 0.5 here, off by default: half of each
-  tentative collision's real-or-null choice by what the probes predict each brings back,
-  lib/guided_distances.glsl): against `guided`, what guiding the flights removes and costs.
+  variance. (The rows `guided, guided directions` and `guided, guided distances` of
+  bench/h100-guided-directions and bench/h100-guided-distances measured two guiding schemes that
+  took no variance away; both were removed: docs/experiments.md.)
 
 For two independent images a, b of SPP samples, E[(a - b)^2] / 2 is one image's variance, so a
 sample's relative variance is  v = SPP * sum((a - b)^2) / 2 / sum(((a + b) / 2)^2)  (the image's
@@ -57,14 +50,8 @@ from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
 TARGETS = (0.05, 0.02, 0.01, 0.005)
 # `guided` first, right after the bake (a scene change for the pt rows would make the probes and
 # the light grid stale, and their re-bake would be counted in the next render)
-ESTIMATORS = ("guided, first event", "guided", "guided, level-0 ratio 1",
-              "guided, guided directions", "guided, guided distances", "pt", "pt, 1 bounce",
+ESTIMATORS = ("guided, first event", "guided", "guided, level-0 ratio 1", "pt", "pt, 1 bounce",
               "pt, 2 bounces")
-# guided directions' probability in the row that has them (the setting is off by default:
-# bench/h100-guided-directions measured this probability)
-GUIDED_DIRECTIONS = 0.5
-# guided distances' share in the row that has them (off by default; --distances sets it)
-GUIDED_DISTANCES = 0.5
 
 
 def relative_variance(a: np.ndarray, b: np.ndarray, spp: int) -> float:
@@ -93,22 +80,20 @@ def _estimate(renderer: Renderer, method: str, spp: int, per_dispatch: int, seed
 
 
 def measure_scene(ctx, name: str, width: int, height: int, grid: int, walks: int, spp: int,
-                  per_dispatch: int, log, distances: float = GUIDED_DISTANCES,
-                  estimators: tuple[str, ...] = ESTIMATORS) -> dict | None:
+                  per_dispatch: int, log, estimators: tuple[str, ...] = ESTIMATORS) -> dict | None:
     scene = bench_scene(name, width, height)
     if scene is None:
         log(f"{name}: dataset absent, skipped")
         return None
-    # One probe bake for every row: the order guided directions bake (where g = 0 "auto" gives 2
-    # rather than 0 while they are on), fixed, so that turning them off in the other rows does
-    # not re-bake (at g = 0 those rows then also have the direction control, which order 0
-    # compiles out).
+    # One probe bake for every row, of the order that holds directions (where g = 0 "auto" gives
+    # 2 rather than 0), as the earlier records' rows had it: at g = 0 the rows then have the
+    # direction control, which order 0 compiles out.
     order = resolve_sh_order(scene.probes.sh_order, scene.anisotropy, walks, directions=True)
     scene = scene.replace(probes=replace(scene.probes, grid=(grid, grid, grid), samples=walks,
                                          sh_order=order))
     out = {"scene": name, "width": width, "height": height, "probe_grid": grid,
            "probe_samples": walks, "sh_order": order, "spp": spp,
-           "max_bounces": scene.max_bounces, "guided_distances": distances, "estimators": {}}
+           "max_bounces": scene.max_bounces, "estimators": {}}
     renderer = Renderer(ctx, scene)
     try:
         bake_ms = renderer.bake(seed=1)
@@ -128,9 +113,7 @@ def measure_scene(ctx, name: str, width: int, height: int, grid: int, walks: int
                     raise RuntimeError("the probes went stale before a guided row")
             renderer.settings = replace(
                 renderer.settings, guided_direction_control=est != "guided, first event",
-                guided_level0_ratio=1.0 if est.endswith("ratio 1") else 0.25,
-                guided_directions=GUIDED_DIRECTIONS if est.endswith("guided directions") else 0.0,
-                guided_distances=distances if est.endswith("guided distances") else 0.0)
+                guided_level0_ratio=1.0 if est.endswith("ratio 1") else 0.25)
             a, b, ms, levels = _estimate(renderer, method, spp, per_dispatch, seed=1000)
             v = relative_variance(a, b, spp)
             level_share = None
@@ -234,8 +217,6 @@ def main(argv=None) -> int:
     p.add_argument("--width", type=int, default=512)
     p.add_argument("--height", type=int, default=512)
     p.add_argument("--per-dispatch", type=int, default=16)
-    p.add_argument("--distances", type=float, default=GUIDED_DISTANCES,
-                   help="guided distances' share P in the row that has them")
     p.add_argument("--estimators", default=",".join(ESTIMATORS).replace(", ", ": "),
                    help="the rows to run, ',' between rows and ': ' for ', ' in a row's name")
     args = p.parse_args(argv)
@@ -262,7 +243,7 @@ def main(argv=None) -> int:
     results = []
     for name in args.scenes.split(","):
         r = measure_scene(ctx, name, args.width, args.height, grid, walks, args.spp,
-                          args.per_dispatch, log, args.distances, estimators)
+                          args.per_dispatch, log, estimators)
         if r is not None:
             results.append(r)
     (args.out / "results.json").write_text(json.dumps({"device": device, "results": results},

@@ -70,6 +70,7 @@ _SESSION_CONTEXT: list = []   # the session's context, once a test has asked for
 
 @pytest.fixture(scope="session")
 def ctx():
+    import radiance_probes.rendering  # noqa: F401 (gives the GPU layer its shader files)
     from radiance_probes.gl.context import create_headless_context
     context = create_headless_context()
     _SESSION_CONTEXT.append(context)

@@ -8,7 +8,8 @@ import pytest
 
 from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.rendering.auto_progressive import (RAYMARCH_FRAMES, Halves, auto_render,
-                                                        estimate_image, estimate_pt)
+                                                        estimate_denoised, estimate_image,
+                                                        estimate_pt)
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.scene import parse_scene
 
@@ -45,6 +46,57 @@ def test_estimates_find_the_known_errors(noise, bias):
     true_r = rrmse(r, t)
     assert abs(est_r - true_r) <= 4 * se_r + 2e-3, (est_r, true_r, se_r)
     assert se_r < 0.5 * noise / math.sqrt(2 * spp)   # far finer than the halves' own noise
+
+
+@pytest.mark.parametrize("noise,blur", [(0.5, 3), (1.0, 5), (0.2, 3)])
+def test_the_denoised_estimate_finds_a_filtered_halfs_known_error(noise, blur):
+    """A stand-in denoiser (a box blur, biased at the image's slopes) on half a: its estimated
+    error from half b is its true error against the exact image, within a few standard errors,
+    though the blur's error is far below the halves' own noise."""
+    def uniform_filter(image, size):
+        k = size // 2
+        padded = np.pad(image, ((k, k), (k, k), (0, 0)), mode="edge")
+        h, w = image.shape[:2]
+        return sum(padded[dy:dy + h, dx:dx + w] for dy in range(size)
+                   for dx in range(size)) / size ** 2
+    t = _exact()
+    rng = np.random.default_rng(11)
+    halves = Halves(t.shape)
+    spp = 4
+    for half in (0, 1):
+        halves.add(half, t + rng.normal(size=t.shape) * noise * t / math.sqrt(spp), spp)
+    filtered = uniform_filter(halves.means()[0], blur)
+    est, se = estimate_denoised(filtered, halves)
+    true = rrmse(filtered, t)
+    assert abs(est - true) <= 4 * se + 2e-3, (est, true, se)
+    assert true < 0.8 * estimate_pt(halves)[0]   # the case is one the denoiser wins
+
+
+def test_auto_with_the_denoiser_returns_a_denoised_path_tracer_within_the_target(ctx):
+    """With denoise, the path tracer denoised is a candidate (OIDN on the CPU here): where no
+    probe setting reaches the target it wins with fewer samples than the raw path tracer needs, and its
+    image is within the target of a converged reference."""
+    from radiance_probes.rendering.denoise import shared_denoiser
+    if not shared_denoiser("auto").available:
+        pytest.fail(f"the denoiser should load in the test environment: "
+                    f"{shared_denoiser('auto').failure}")
+    # OIDN needs an image of some size to find structure in (at 32^2 it loses to the raw image)
+    r = Renderer(ctx, parse_scene({**SCENE, "camera": {**SCENE["camera"], "width": 96,
+                                                       "height": 96}}))
+    try:
+        reference = r.render("pt", spp=1024, seed=99, samples_per_pass=256).image
+        # a ladder whose one setting does not reach 5% (as in the fallback test below)
+        raw = auto_render(r, 0.05, ladder=((2, 16),), max_pt_spp=8192)
+        got = auto_render(r, 0.05, ladder=((2, 16),), max_pt_spp=8192, denoise=True)
+        assert raw.method == "pt" and not raw.denoised
+        assert got.met and got.denoised and got.method == "pt", got.report()
+        assert got.pt_spp < raw.pt_spp, (got.pt_spp, raw.pt_spp)
+        assert rrmse(got.image, reference) <= 0.05 + 0.015, got.report()   # the reference's noise
+        assert "denoised" in got.report() and any(t.get("method") == "pt+denoise"
+                                                  for t in got.trials)
+        assert got.gpu_ms > got.pt_ms   # the guides and filters are charged
+    finally:
+        r.release()
 
 
 def test_auto_returns_an_image_within_the_target(ctx):

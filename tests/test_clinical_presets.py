@@ -94,6 +94,38 @@ def test_hounsfield_windows_and_presets_on_other_data_are_refused(tmp_path):
     assert s.transfer_function.preset == "ct_bone"
 
 
+def test_a_rescale_gives_8_bit_data_its_units(tmp_path):
+    """volume.rescale maps stored values to data units (value * slope + intercept, DICOM's rule):
+    an 8-bit CT exported from the window [-1000, 1000] HU is Hounsfield units again, and the
+    presets take it; the refusal without it names the key; DICOM, which carries its own, and a
+    slope of 0 are refused."""
+    u8 = tmp_path / "ct_8x8x8_uint8.raw"
+    stored = (np.arange(512) % 256).astype(np.uint8)
+    stored.tofile(u8)
+    with pytest.raises(VolumeError) as err:
+        load_scene_volume(parse_scene({"volume": {"path": str(u8)},
+                                       "transfer_function": {"preset": "ct_bone"}}))
+    assert "volume.rescale=SLOPE,INTERCEPT" in str(err.value)
+    slope = 2000.0 / 255.0
+    scene = parse_scene({"volume": {"path": str(u8), "rescale": [slope, -1000]},
+                         "transfer_function": {"preset": "ct_bone"}})
+    v = load_scene_volume(scene)
+    assert hounsfield_problem(v) is None
+    assert v.raw_min == pytest.approx(-1000.0) and v.raw_max == pytest.approx(1000.0, rel=1e-6)
+    # a window in HU now lands where the stored values say: level 0, width 1000 -> stored 95.6..159.4
+    w = load_scene_volume(parse_scene({"volume": {"path": str(u8), "rescale": [slope, -1000],
+                                                  "window": {"level": 0, "width": 1000}}}))
+    hu = stored.astype(np.float64) * slope - 1000.0
+    want = np.clip((hu + 500.0) / 1000.0, 0.0, 1.0).reshape(8, 8, 8)
+    np.testing.assert_allclose(np.asarray(w.data), want, atol=1e-5)
+    with pytest.raises(SceneError, match="volume.rescale: the slope must not be 0"):
+        parse_scene({"volume": {"path": str(u8), "rescale": [0, 5]}})
+    folder = tmp_path / "dicom"
+    write_dicom_series(folder, np.zeros((4, 6, 5), np.int16))
+    with pytest.raises(VolumeError, match="carries its own RescaleSlope"):
+        load_scene_volume(parse_scene({"volume": {"path": str(folder), "rescale": [1, 0]}}))
+
+
 def test_a_dicom_ct_opens_with_a_ct_preset(tmp_path):
     folder = write_dicom_series(tmp_path / "ct", np.linspace(0, 3000, 3 * 6 * 6).astype(np.int16)
                                 .reshape(3, 6, 6), slope=1.0, intercept=-1024.0)

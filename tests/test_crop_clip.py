@@ -410,3 +410,29 @@ def test_crop_and_clip_options_refused_with_the_option_named(tmp_path, capsys, a
     err = capsys.readouterr().err
     assert rc == 2 and re.search(message, err), err
     assert err.count("\n") == 1                      # one line
+
+
+@pytest.mark.parametrize("method", ["pt", "raymarch"])
+def test_a_crop_set_after_the_first_image_is_honoured(ctx, crop_case, method):
+    """A scene without crop or clip compiles the tests out (NO_CLIP_REGION); a crop set later (the
+    viewer's edit) rebuilds every pass, so the image equals a renderer's that had the crop from
+    the start, bit for bit, and the denoiser's guides see the crop too."""
+    volume, crop_scene, *_ = crop_case
+    fresh = Renderer(ctx, parse_scene(crop_scene), volume)
+    edited = Renderer(ctx, parse_scene(SCENE), volume)
+    try:
+        whole = edited.render(method, spp=4, seed=5).image
+        albedo_whole = edited.denoise_guides("albedo")[0]
+        assert "NO_CLIP_REGION" in edited.resources.medium_defines()
+        edited.set_scene(parse_scene(crop_scene))
+        assert "NO_CLIP_REGION" not in edited.resources.medium_defines()
+        got = edited.render(method, spp=4, seed=5).image
+        want = fresh.render(method, spp=4, seed=5).image
+        assert not np.array_equal(got, whole)
+        np.testing.assert_array_equal(got, want)
+        albedo_got, albedo_want = edited.denoise_guides("albedo")[0], fresh.denoise_guides("albedo")[0]
+        assert not np.array_equal(albedo_got, albedo_whole)
+        np.testing.assert_array_equal(albedo_got, albedo_want)
+    finally:
+        fresh.release()
+        edited.release()

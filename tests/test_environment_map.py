@@ -359,7 +359,8 @@ def test_small_bright_patch_renders_like_a_sun(ctx, patch_scenes):
     r = Renderer(ctx, patch)
     a = r.render("pt", spp=256, seed=1, samples_per_pass=256).image
     b = r.render("pt", spp=256, seed=2, samples_per_pass=256).image
-    r.resources.environment_sampling = False
+    from radiance_probes.rendering.lab_options import LabOptions
+    r.lab = LabOptions(environment_sampling=False)
     c = r.render("pt", spp=128, seed=1, samples_per_pass=128).image
     d = r.render("pt", spp=128, seed=2, samples_per_pass=128).image
     r.release()

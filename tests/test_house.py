@@ -178,3 +178,33 @@ def test_the_layers_hold():
     out = subprocess.run([str(lint)], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-2000:]
     assert "0 broken" in out.stdout and out.stdout.count(" KEPT") >= 4
+
+
+def test_the_gpu_layer_reads_shader_files_through_the_render_layer():
+    """app/gl/ opens no file: its shaders' text comes from the reader app/rendering/ installs
+    (shader_files.py); without one, a compile names what is missing instead of reading a path."""
+    import subprocess
+    import sys
+    for path in (APP / "gl").rglob("*.py"):
+        text = path.read_text()
+        for word in ("GLSL_DIR", "paths import", ".glsl\").read", "glsl\" /"):
+            assert word not in text, f"{path.relative_to(ROOT)} reads a shader file ({word})"
+    code = ("import radiance_probes.gl.shaders as s\n"
+            "try:\n    s.load_source('pathtrace.comp')\nexcept s.ShaderError as e:\n"
+            "    print('refused:', e)\n"
+            "import radiance_probes.rendering\n"
+            "print(len(s.load_source('pathtrace.comp')[0]) > 1000)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "refused: no shader source reader" in out.stdout and "True" in out.stdout
+
+
+def test_no_front_end_sets_lab_options():
+    """LabOptions (app/rendering/lab_options.py) are the bench's and the experiments' comparison
+    switches, not for users: nothing in the package outside the renderers makes one (scripts/,
+    lab/ and tests do)."""
+    found = [f"{p.relative_to(ROOT)}:{i}" for p in APP.rglob("*.py")
+             if p.relative_to(APP).parts[0] != "rendering"
+             for i, line in enumerate(p.read_text().splitlines(), 1)
+             if "LabOptions(" in line.split("#")[0]]
+    assert not found, found

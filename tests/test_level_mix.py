@@ -13,6 +13,7 @@ from radiance_probes.bench.scenes import battery_scene
 from radiance_probes.bricks import box_filtered, slot_bytes
 from radiance_probes.rendering.level_mix import MIX_FOOTPRINT_PX, footprints
 from radiance_probes.rendering.renderer import METHODS, Renderer
+from radiance_probes.rendering.lab_options import LabOptions
 from radiance_probes.rendering.settings import RenderSettings
 from radiance_probes.twins.brick_pool import Packed, bricked_sample, mixed_reference
 from radiance_probes.twins.majorant_grid import macrocell_counts
@@ -32,11 +33,11 @@ def _cap(scene) -> int:
     return 24 * slot_bytes(BRICK, 1, False) + 4096
 
 
-def _renderer(ctx, scene, **settings):
-    settings = {"mixed_levels": True, **settings}
+def _renderer(ctx, scene, mixed_levels: bool = True, **settings):
     return Renderer(ctx, scene, settings=RenderSettings(brick_size=BRICK,
                                                         volume_memory_bytes=_cap(scene),
-                                                        **settings))
+                                                        **settings),
+                    lab=LabOptions(mixed_levels=mixed_levels))
 
 
 def _levels(r) -> list[np.ndarray]:
@@ -130,7 +131,7 @@ def test_every_method_reads_the_mixed_pool_with_no_page_miss(checked_ctx):
 def test_mixed_levels_are_nearer_the_uncapped_image_than_the_coarser_level(ctx):
     scene = _scene()
     images = {}
-    for name, settings in (("mixed", {}), ("coarse", {"mixed_levels": False})):
+    for name, settings in (("mixed", {}), ("coarse", {"mixed_levels": False})):   # (LabOptions)
         r = _renderer(ctx, scene, **settings)
         try:
             assert r.resources.volume_tex.levels == (2 if name == "mixed" else 1)

@@ -13,6 +13,7 @@ import pytest
 
 from radiance_probes.bricks import CONSTANT, REDIRECT, box_filtered
 from radiance_probes.rendering.level_mix import coarse_ranges_read, mixed_density_ranges
+from radiance_probes.rendering.lab_options import LabOptions
 from radiance_probes.rendering.renderer import METHODS
 from radiance_probes.twins.brick_pool import brick_block, bricked_sample, mixed_reference
 from radiance_probes.twins.majorant_grid import brick_density_range_grid, macrocell_counts
@@ -303,9 +304,9 @@ def test_a_store_placed_from_far_reads_level_0_when_the_camera_comes_near(ctx, t
     near = scene.replace(camera=replace(cam, eye=(0.0, 0.0, 0.9)))
     level1 = BrickStore(load_scene_volume(scene, brick=brick).levels[0], brick)
     cap = level_bytes(level1, 1, False, 2048) + 4 * slot_bytes(brick, 1, False)
-    settings = RenderSettings(brick_size=brick, volume_memory_bytes=cap, mixed_levels=True)
-    r = Renderer(ctx, far, settings=settings)
-    fresh = Renderer(ctx, near, settings=settings)
+    settings = RenderSettings(brick_size=brick, volume_memory_bytes=cap)
+    r = Renderer(ctx, far, settings=settings, lab=LabOptions(mixed_levels=True))
+    fresh = Renderer(ctx, near, settings=settings, lab=LabOptions(mixed_levels=True))
     try:
         stream = r.resources.stream
         assert stream.const_f is None and not stream.fine.ranges_read and stream.resident == 0
@@ -329,8 +330,9 @@ def test_the_viewer_restreams_once_the_camera_settles_a_budget_a_frame(ctx, monk
     from radiance_probes.viewer import viewer as viewer_module
     from radiance_probes.viewer.state import ViewerState
     scene = _at(_scene(32, 24), EYE_A)
-    settings = RenderSettings(brick_size=BRICK, volume_memory_bytes=_cap(scene), mixed_levels=True)
-    v = viewer_module.Viewer(ctx, ViewerState(scene, scene.camera), settings=settings)
+    settings = RenderSettings(brick_size=BRICK, volume_memory_bytes=_cap(scene))
+    v = viewer_module.Viewer(ctx, ViewerState(scene, scene.camera), settings=settings,
+                             lab=LabOptions(mixed_levels=True))
     clock = [100.0]
     monkeypatch.setattr(viewer_module.time, "perf_counter", lambda: clock[0])
     monkeypatch.setattr(viewer_module, "OPEN_WRITE_BUDGET_S", 0.0)   # one brick a frame

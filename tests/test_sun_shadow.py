@@ -230,6 +230,9 @@ def test_bake_takes_residual_shadow_rays(ctx, walk_sun):
 def test_shadow_tracking_setting_is_checked():
     with pytest.raises(ValueError, match="shadow tracking"):
         RenderSettings(shadow_tracking="delta")
+    from radiance_probes.rendering.lab_options import LabOptions
     with pytest.raises(ValueError, match="sun shadow rays"):
-        RenderSettings(sun_shadow_rays=0)
+        LabOptions(sun_shadow_rays=0)
+    with pytest.raises(TypeError):
+        RenderSettings(sun_shadow_rays=2)   # a lab option, not a product setting
     assert replace(RenderSettings(), shadow_tracking="residual").shadow_tracking == "residual"

@@ -108,9 +108,9 @@ if __name__ == "__main__":
     sys.path.insert(0, str(ROOT))
     split = sys.argv.index("--")
     hooks, view_argv = sys.argv[1:split], sys.argv[split + 1:]
-    if "--glsl" in hooks:
-        import radiance_probes.gl.shaders as shaders
-        shaders.GLSL_DIR = Path(hooks[hooks.index("--glsl") + 1])
+    if "--glsl" in hooks:   # the one place that reads shader files (the GPU layer is given it)
+        import radiance_probes.rendering.shader_files as shader_files
+        shader_files.GLSL_DIR = Path(hooks[hooks.index("--glsl") + 1])
     if "--lazy-bytes" in hooks:   # Zarr stores larger than this are read brick by brick
         import radiance_probes.volume
         radiance_probes.volume.LAZY_BYTES = int(hooks[hooks.index("--lazy-bytes") + 1])

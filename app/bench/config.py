@@ -84,7 +84,7 @@ class BenchConfig:
     # refine: guided's samples once it has replaced the raymarcher
     interact_target_spp: tuple = (("probes", 64), ("raymarch", 16), ("pt", 256), ("refine", 256))
     # the methods the session is replayed with (load, orbit, edits), each against the same
-    # references: the viewer's (app/scene_types.py VIEWER_METHODS), `refine` included
+    # references: the viewer's (app/methods.py VIEWER_METHODS), `refine` included
     # (`bench --methods`)
     interact_methods: tuple[str, ...] = ("probes", "raymarch")
     interact_max_frames: int = 300                   # frames an event may take to converge

@@ -17,6 +17,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..imageio import save_png
+from ..methods import METHODS
 from .records import log as _log, make_record, progressive as _progressive
 
 PROBE_VARIANTS = (
@@ -80,7 +81,9 @@ def cost_scene(renderer, name: str, config, results, out, device: str,
                         f"bake {bake_ms:.1f} ms, {g.gpu_bytes / 2**20:.1f} MiB"]
                 for method, frames in (("probes", config.cost_probe_frames),
                                        ("raymarch", config.cost_raymarch_frames)):
-                    extra_ms = light_ms - walk_light_ms if method == "raymarch" else 0.0
+                    # the image's own light grid, where the method reads it beyond the walks
+                    extra_ms = (light_ms - walk_light_ms if METHODS[method].needs_light_grid
+                                else 0.0)
                     for n, image, *timing in _progressive(renderer, method, (frames,), 13, k):
                         r = record(method, n, image, timing, bake_ms + extra_ms, **info)
                         if label == "all" and (grid, samples) == tuple(config.cost_settings[0]):

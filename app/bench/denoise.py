@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from ..imageio import save_png
+from ..methods import METHODS
 from ..rendering.denoise import QUALITIES, shared_denoiser
 from .records import (error_of, floor, header as _header, log, make_record, ms_text as _ms,
                       progressive)
@@ -158,7 +159,7 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
         for g, (albedo, normal, guide_ms) in guides.items():
             # The image is copied into the filter's colour here (prepare_ms, not charged): in
             # Renderer.denoise, GL reads it straight there, which io_ms's read-back times.
-            d = denoiser(image, albedo, normal, copy=False, signed=method == "guided")
+            d = denoiser(image, albedo, normal, copy=False, signed=METHODS[method].signed)
             denoised = d.image.copy()
             charged = guide_ms + (0.0 if g not in guide_bake_ms or own_probes == g
                                   else guide_bake_ms[g])
@@ -168,7 +169,7 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
                         filter_parts_ms=d.ms,
                         mean_ratio=float(denoised.mean() / max(image.mean(), 1e-30)))
             twin["total_ms"] = (rec["total_ms"] + charged + around_ms + d.ms["filter_ms"]
-                                + d.ms["check_ms"])
+                                + d.ms["check_ms"] + d.ms["means_ms"])
             results.add(twin, denoised if flip else None, reference)
             if frames == config.image_frames:
                 save_png(out / "images" / f"{name}_{method}_{frames}_{g.replace(' ', '_')}.png",
@@ -243,6 +244,11 @@ def variant(r: dict) -> str:
     if r["method"] in ("probes", "guided", "raymarch") and r.get("probe_grid"):
         name += f" {r['probe_grid']}^3x{r['probe_samples']}"
     return name + (f" + OIDN({r['denoise']})" if r.get("denoise") else "")
+
+
+def _ms_or_dash(ms) -> str:
+    """A cost part in ms; '-' where an older record did not time it apart."""
+    return "-" if ms is None else f"{ms:.2f}"
 
 
 def write_denoise_report(data: dict, out):
@@ -335,12 +341,13 @@ def write_denoise_report(data: dict, out):
         lines += ["## The denoiser's whole cost", "", "Wall ms, medians; guided by an albedo and a "
                   "normal. Read-back: an RGBA32F image from GL; upload: the result into a texture.",
                   "", "| size | quality | device | read-back into the filter's colour | "
-                  "prepare | filter | output check | upload | total |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+                  "prepare | filter | output check | tile means kept | upload | total |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
         for c in cost:
             lines.append(f"| {c['width']}x{c['height']} | {c['quality']} | {c['device']} | "
                          f"{c['readback_ms']:.2f} | {c.get('prepare_ms', c.get('upload_ms', 0)):.2f} | "
                          f"{c['filter_ms']:.2f} | {c.get('check_ms', c.get('download_ms', 0)):.2f} | "
+                         f"{_ms_or_dash(c.get('means_ms'))} | "
                          f"{c['upload_result_ms']:.2f} | {c['total_ms']:.2f} |")
     path = out / "report.md"
     path.write_text("\n".join(lines) + "\n")

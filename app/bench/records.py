@@ -10,6 +10,7 @@ import time
 import numpy as np
 
 from ..gl.dispatch_log import active_log
+from ..methods import METHODS
 
 from ..rendering.pathtracer import PIXEL_STATE_BYTES
 from ..rendering.ceiling import SPEED_CHECK_SLOWER
@@ -99,7 +100,7 @@ def make_record(base: dict, config: BenchConfig, method: str, frames: int, image
                probe_grid=None, probe_samples=None, gpu_bytes=0)
     rec.update(extra)
     # Per-pixel buffers: the accumulation image and, for the path-state passes, PathState.
-    per_pixel = ACCUMULATION_BYTES + (0 if method == "raymarch" else PIXEL_STATE_BYTES)
+    per_pixel = ACCUMULATION_BYTES + (PIXEL_STATE_BYTES if METHODS[method].path_states else 0)
     rec["image_bytes"] = config.width * config.height * per_pixel
     rec["gpu_bytes"] = rec["image_bytes"] + rec.get("probe_bytes", 0) + rec.get("light_bytes", 0)
     log = active_log()

@@ -8,10 +8,11 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
+from ..methods import ACCUMULATED
 from .records import (caveat, error_of, floor, header as _header, ms_text as _ms,  # noqa: F401
                       reference_noise_of as _noise, run_pixels as _pixels, speed_checks)
 
-METHOD_ORDER = ("pt", "probes", "probes-only", "raymarch", "guided")
+METHOD_ORDER = ACCUMULATED   # the registry's order (app/methods.py)
 COLOURS = {"pt": "#222222", "probes": "#1f77b4", "probes-only": "#2ca02c", "raymarch": "#d62728",
            "guided": "#9467bd"}
 TARGETS = (0.20, 0.10, 0.05, 0.02, 0.01, 0.005)

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..imageio import save_png
+from ..methods import PROBE_LIT, REFERENCE
 from ..rendering.ceiling import speed_check_ms
 from .clock_log import ClockLog
 from .config import BenchConfig
@@ -26,7 +27,7 @@ from .report import load as load_results
 from ..rendering.probe_layout import resolve_sh_order
 from .scenes import bench_scene
 
-PROBE_METHODS = ("probes", "probes-only")
+PROBE_METHODS = PROBE_LIT   # the path tracer's probe-lit variants (app/methods.py)
 
 
 # Seconds between two writes of results.json while records come in. Writing it after every record
@@ -234,7 +235,7 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
         changed = defaults.differences(renderer.settings)   # the run's defaults in meta.settings
         if changed:
             rec["settings"] = changed
-        results.add(rec, image if flip and (frames in config.flip_frames or method == "pt")
+        results.add(rec, image if flip and (frames in config.flip_frames or method == REFERENCE)
                     else None, reference)
 
     # Path tracer: one progressive run, snapshots at each spp.

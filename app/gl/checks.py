@@ -15,7 +15,7 @@ import re
 import moderngl
 import numpy as np
 
-from ..paths import GLSL_DIR
+from .sources import shader_source
 
 SHADER_CHECKS_BINDING = 9   # a storage binding no other pass uses (GL 4.3 promises 0-7; the
                             # checking build runs where there are more: llvmpipe 80, NVIDIA 96)
@@ -24,8 +24,9 @@ _SITE = re.compile(r"^#define CHECK_SITE_(\w+) (\d+)", re.M)
 
 
 def check_sites() -> tuple[dict[int, str], int]:
-    """Site number -> name (lower case) as glsl/lib/checks.glsl defines them, and the count."""
-    found = _SITE.findall((GLSL_DIR / "lib" / "checks.glsl").read_text())
+    """Site number -> name (lower case) as glsl/lib/checks.glsl defines them, and the count (the
+    file read through the render layer's reader, as every shader file is: shaders.py)."""
+    found = _SITE.findall(shader_source("lib/checks.glsl"))
     count = next(int(n) for name, n in found if name == "COUNT")
     return {int(n): name.lower() for name, n in found if name != "COUNT"}, count
 

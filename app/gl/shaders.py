@@ -1,5 +1,7 @@
-"""Shader sources from glsl/: ``#include "lib/x.glsl"`` (each file once), defines, and compile
-errors reported with the real file names and lines.
+"""Shader sources: ``#include "lib/x.glsl"`` (each file once), defines, and compile errors
+reported with the real file names and lines. The GPU layer reads no file: the render layer gives
+it the function that returns a shader file's text by name (set_source_reader;
+app/rendering/shader_files.py, installed when app/rendering is imported).
 
 Every included file gets its own GLSL source-string number through ``#line``; a compile log's
 ``0(12)`` is translated back to ``lib/medium.glsl:12``.
@@ -11,7 +13,7 @@ from typing import Mapping
 
 import moderngl
 
-from ..paths import GLSL_DIR
+from .sources import ShaderError, set_source_reader, shader_source  # noqa: F401 (re-exported)
 from .context import is_software
 from .dispatch_log import active_log
 from .textures import transfer_buffer_bindable
@@ -20,8 +22,6 @@ GLSL_VERSION = "#version 430 core"
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 
 
-class ShaderError(RuntimeError):
-    """A shader failed to compile or link; the message names the files and lines."""
 
 
 def _expand(name: str, files: list[str], seen: set[str], text: str | None = None) -> list[str]:
@@ -29,10 +29,7 @@ def _expand(name: str, files: list[str], seen: set[str], text: str | None = None
         return []
     seen.add(name)
     if text is None:
-        path = GLSL_DIR / name
-        if not path.is_file():
-            raise ShaderError(f"shader include not found: {name} (looked in {GLSL_DIR})")
-        text = path.read_text()
+        text = shader_source(name)
     index = len(files)
     files.append(name)
     out = [f"#line 1 {index}"]

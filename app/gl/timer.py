@@ -41,7 +41,43 @@ def _lib():
     return _gl or None
 
 
-class GpuTimer:
+def _span_ms(gl, start: int, end: int) -> float:
+    """GPU ms between two timestamp queries' results (waits for them)."""
+    a, b = ctypes.c_uint64(), ctypes.c_uint64()
+    gl.glGetQueryObjectui64v(start, GL_QUERY_RESULT, ctypes.byref(a))
+    gl.glGetQueryObjectui64v(end, GL_QUERY_RESULT, ctypes.byref(b))
+    return (b.value - a.value) / 1e6
+
+
+class Timer:
+    """What the renderers time work with: start(), stop(), then elapsed_ms; a `with` block brackets
+    the work the same way; release() frees what it holds. GpuTimer (timestamps) and WallTimer (the
+    wall clock, where timestamps cannot be believed) are the two."""
+
+    available = True
+
+    def start(self) -> None:
+        raise NotImplementedError
+
+    def stop(self) -> None:
+        raise NotImplementedError
+
+    @property
+    def elapsed_ms(self) -> float:
+        raise NotImplementedError
+
+    def release(self) -> None:
+        pass
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+
+class GpuTimer(Timer):
     """Brackets GPU work with two timestamps; ``elapsed_ms`` waits for the result.
 
     >>> t = GpuTimer(); t.start(); ...dispatch...; t.stop(); t.elapsed_ms
@@ -100,20 +136,10 @@ class GpuTimer:
             self._fallback.__exit__(None, None, None)
         self._running = False
 
-    def __enter__(self):
-        self.start()
-        return self
-
-    def __exit__(self, *exc):
-        self.stop()
-
     @property
     def elapsed_ms(self) -> float:
         if self._gl is not None:
-            a, b = ctypes.c_uint64(), ctypes.c_uint64()
-            self._gl.glGetQueryObjectui64v(self._ids[0], GL_QUERY_RESULT, ctypes.byref(a))
-            self._gl.glGetQueryObjectui64v(self._ids[1], GL_QUERY_RESULT, ctypes.byref(b))
-            return (b.value - a.value) / 1e6
+            return _span_ms(self._gl, self._ids[0], self._ids[1])
         if self._fallback is not None:
             return self._fallback.elapsed / 1e6
         return float("nan")
@@ -175,12 +201,10 @@ class SpanClock:
             self._gl.glGetQueryObjectui64v(end, GL_QUERY_RESULT_AVAILABLE, ctypes.byref(ready))
             if not ready.value:
                 break
-            a, b = ctypes.c_uint64(), ctypes.c_uint64()
-            self._gl.glGetQueryObjectui64v(start, GL_QUERY_RESULT, ctypes.byref(a))
-            self._gl.glGetQueryObjectui64v(end, GL_QUERY_RESULT, ctypes.byref(b))
+            ms = _span_ms(self._gl, start, end)
             self._gl.glDeleteQueries(2, (ctypes.c_uint * 2)(start, end))
             self._spans.pop(0)
-            newest = (b.value - a.value) / 1e6 / max(units, 1e-9)
+            newest = ms / max(units, 1e-9)
         return newest
 
     def release(self) -> None:
@@ -191,13 +215,11 @@ class SpanClock:
         self._spans.clear()
 
 
-class WallTimer:
+class WallTimer(Timer):
     """The wall clock from start() to the end of the work between start() and stop() (a glFinish
     at each end, so that work queued before is not counted and work queued between is): the
     viewer's timer where GPU timestamps cannot be believed (app/viewer/pacing.py). Holds the GPU
     timer it replaces, released with it."""
-
-    available = True
 
     def __init__(self, ctx, replaces=None):
         import time
@@ -213,13 +235,6 @@ class WallTimer:
     def stop(self) -> None:
         self._ctx.finish()
         self._stop = self._clock()
-
-    def __enter__(self):
-        self.start()
-        return self
-
-    def __exit__(self, *exc):
-        self.stop()
 
     @property
     def elapsed_ms(self) -> float:

@@ -24,6 +24,14 @@ bench/h100-auto-progressive v5). A setting whose estimate is a standard error ab
 gives way to the next; one not yet told apart from it is kept while the path tracer's samples
 narrow the interval. Everything counts: bakes, light grids, raymarched frames and path
 traced samples (GPU time), and the host's wall time is reported beside it.
+
+With `denoise` the path tracer denoised is a candidate too (issue 42). Half a's image through the
+denoiser, D(a), is independent of half b, so E[mean((D(a) - b)^2)] = its squared error + Var(b),
+and Var(b) is the share n_a / (n_a + n_b) of E[(a - b)^2]: mean((D(a) - b)^2 - n_a / (n_a + n_b)
+(a - b)^2) / T^2 estimates D(a)'s squared relative error (estimate_denoised). Once that is within
+the target the image returned is both halves' mean denoised, which has twice D(a)'s samples; the
+estimate reported is D(a)'s, an upper bound in expectation. The guides (albedo and normal, made
+once) and every round's filter are charged in wall ms to the search (`denoise_ms`).
 """
 from __future__ import annotations
 
@@ -35,6 +43,7 @@ import numpy as np
 
 from ..scene import Scene
 from .auto_probes import PROBES_PER_VOXEL_LIMIT
+from ..methods import METHODS
 from .refine import weight
 
 # (probes per axis, walks per probe), in order of bake cost (probes x walks, then probes)
@@ -69,13 +78,15 @@ class AutoResult:
     image_spp: int = 0
     image_ms: float = 0.0
     image_bake_ms: float = 0.0
+    denoised: bool = False         # the path tracer's image through the denoiser (auto's denoise)
 
     def report(self, log: bool = True) -> str:
         """The outcome, then (log=True) every trial's line; a caller that printed the lines as
         they came (progress) leaves them out."""
         what = (f"raymarched over {self.scene.probes.grid[0]}^3 probes x "
-                f"{self.scene.probes.samples} walks" if self.method == "raymarch"
-                else f"the path tracer at {self.pt_spp} spp")
+                f"{self.scene.probes.samples} walks" if METHODS[self.method].needs_probes
+                else f"the path tracer at {self.pt_spp} spp"
+                + (", denoised" if self.denoised else ""))
         head = (f"auto: {what}: estimated rRMSE {self.estimate:.4f} (+- {self.standard_error:.4f})"
                 f", target {self.target:.4f} {'met' if self.met else 'NOT met'}; "
                 f"{self.gpu_ms:.1f} ms of GPU time in all ({self.pt_ms:.1f} ms path tracing), "
@@ -154,6 +165,20 @@ def estimate_image(image: np.ndarray, halves: Halves) -> tuple[float, float]:
     return _interval(values, signal2)
 
 
+def estimate_denoised(denoised_a: np.ndarray, halves: Halves) -> tuple[float, float]:
+    """Half a's image denoised (independent of half b): its estimated relative RMSE against the
+    exact image and its standard error (the module's note)."""
+    noise, power, _ = halves.terms()
+    signal2 = float(power.mean() - noise.mean())
+    if not signal2 > 0:
+        return math.inf, math.inf
+    a, b = halves.means()
+    n_a, n_b = halves.counts
+    values = (_per_pixel((np.asarray(denoised_a, np.float64) - b) ** 2)
+              - (n_a / max(n_a + n_b, 1)) * _per_pixel((a - b) ** 2))
+    return _interval(values, signal2)
+
+
 def candidates(scene: Scene, volume_dims, ladder=LADDER) -> list[Scene]:
     """The ladder's probe settings for `scene`, cheapest first: SH order, precision, fit and
     channels as `auto_probes` sets them; grids of at most PROBES_PER_VOXEL_LIMIT probes a voxel
@@ -192,9 +217,11 @@ def next_pt_spp(spp: int, estimate: float, standard_error: float, target: float)
 
 
 def auto_render(renderer, target: float, progress=None, seed: int = 0,
-                max_pt_spp: int = MAX_PT_SPP, ladder=LADDER) -> AutoResult:
+                max_pt_spp: int = MAX_PT_SPP, ladder=LADDER, denoise: bool = False) -> AutoResult:
     """Renders the scene the renderer holds within `target` (estimated relative RMSE) as cheaply
-    as the module's note says; leaves the renderer on the scene of the image returned."""
+    as the module's note says; leaves the renderer on the scene of the image returned. `denoise`:
+    the path tracer denoised is a candidate too (where the denoiser cannot run, a note in the log
+    and the search goes on without it)."""
     if not 0 < target <= 1:
         raise ValueError(f"auto target must be a relative RMSE in (0, 1], got {target}")
     start = time.perf_counter()
@@ -209,6 +236,13 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
 
     halves = None
     pt_ms = trial_ms = 0.0
+    denoiser = guides = None
+    if denoise:
+        from .denoise import shared_denoiser
+        denoiser = shared_denoiser()
+        if not denoiser.available:
+            say(f"denoised candidates left out: {denoiser.failure}")
+            denoiser = None
     trials: list[dict] = []
     current = None            # (index into ladder, image, bake+render ms) of the probe setting
     k = 0
@@ -233,12 +267,35 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
             return AutoResult(halves.mean().astype(np.float32), "pt", original, target, pt_est,
                               pt_se, True, halves.spp, pt_ms + trial_ms, pt_ms,
                               time.perf_counter() - start, trials, log, halves.spp, pt_ms)
+        if denoiser is not None:
+            t0 = time.perf_counter()
+            if guides is None:   # the scene's camera and medium: made once, kept
+                renderer.begin("pt")
+                albedo, normal, _ = renderer.denoise_guides("albedo-normal")
+                guides = (albedo, normal)
+            d_a = denoiser(halves.means()[0].astype(np.float32), *guides)
+            est, se = estimate_denoised(d_a.image, halves)
+            trial_ms += 1e3 * (time.perf_counter() - t0)
+            trials.append({"method": "pt+denoise", "pt_spp": halves.spp, "rrmse": est,
+                           "standard_error": se})
+            say(f"path tracer denoised: rRMSE {est:.4f} (+- {se:.4f}) from half its "
+                f"{halves.spp} spp")
+            if est + Z * se <= target:
+                t0 = time.perf_counter()
+                image = denoiser(halves.mean().astype(np.float32), *guides).image
+                trial_ms += 1e3 * (time.perf_counter() - t0)
+                renderer.set_scene(original)
+                return AutoResult(np.asarray(image, np.float32), "pt", original, target, est, se,
+                                  True, halves.spp, pt_ms + trial_ms, pt_ms,
+                                  time.perf_counter() - start, trials, log, halves.spp, pt_ms,
+                                  denoised=True)
         # the path tracer's expected time still to go: its error falls as 1 / sqrt(samples)
         pt_to_go = pt_ms * max((pt_est / target) ** 2 - 1.0, 0.0)
         while k < len(ladder):
             if current is None:
                 allowed = EXPLORE_SHARE * (pt_ms + pt_to_go)
-                if trials and trial_ms + _predicted_ms(ladder, k, trials) > allowed:
+                tried = [t for t in trials if "grid" in t]   # the probe settings' trials
+                if tried and trial_ms + _predicted_ms(ladder, k, tried) > allowed:
                     break                  # more path tracing first: the trial would not pay
                 renderer.set_scene(ladder[k])
                 run = renderer.render("raymarch", spp=RAYMARCH_FRAMES, seed=seed + 77,

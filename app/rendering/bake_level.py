@@ -27,6 +27,7 @@ import numpy as np
 from ..bricks import DEFAULT_BRICK_SIZE, HOST_WHOLE_BYTES, texel_bytes
 from ..gl.textures import check_volume_fits, device_available, volume_texture
 from ..volume import Volume, VolumeError
+from .cache_keys import majorant_grid_key
 from .majorant_grid import MajorantGrid
 from .resources import TRANSFER_UNIT, VOLUME_UNIT, SceneResources
 from .volume_placement import coarser
@@ -156,7 +157,7 @@ class BakeMedium:
             self._key = key
         self.shown = shown
         s = shown.scene
-        majorant_key = (key, s.transfer_function, s.channels, s.density_scale, shown.clip)
+        majorant_key = (key, shown.clip, majorant_grid_key(s))
         if majorant_key != self._majorant_key:
             self.majorant_grid.build(shown.transfer_gpu, shown.medium_table, s.density_scale,
                                      TRANSFER_UNIT, clip=shown.clip,

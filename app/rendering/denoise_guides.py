@@ -21,6 +21,7 @@ GUIDE_FRAMES = 4
 class DenoiseGuides:
     def __init__(self, ctx: moderngl.Context, defines: dict | None = None):
         self.ctx = ctx
+        self.defines = dict(defines or {})   # the medium's build (Renderer rebuilds on a change)
         self.program = compute_program(ctx, "denoise_guide_images.comp", defines)
         self.albedo: Accumulation | None = None
         self.normal: Accumulation | None = None

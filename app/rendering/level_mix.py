@@ -13,7 +13,8 @@ pixels. The placement chooses for the camera it is given; C is resident whole an
 every slot the cap allows, so F's bricks are streamed as the camera moves
 (app/rendering/level_stream.py: the same choice, choose_fine, made again for the new camera).
 Every method reads the same mixed medium: the path tracer stays the reference of what is shown.
-Off by default (RenderSettings.mixed_levels): the benchmark has not shown it paying.
+Off but for the bench's comparisons (LabOptions.mixed_levels, app/rendering/lab_options.py): the
+benchmark has not shown it paying.
 """
 from __future__ import annotations
 

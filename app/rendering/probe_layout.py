@@ -114,8 +114,7 @@ def resolve_channels(channels: str | int, table: np.ndarray, irradiance, environ
     return int(channels)
 
 
-# "auto"'s order where the probes must hold directions (guided directions,
-# RenderSettings.guided_directions) and g = 0 would give 0.
+# "auto"'s order where the probes must hold directions (surfaces) and g = 0 would give 0.
 AUTO_DIRECTIONAL_ORDER = 2
 
 
@@ -123,8 +122,8 @@ def resolve_sh_order(order: str | int, anisotropy: float, walks: int | None = No
                      directions: bool = False) -> int:
     """The SH order probes are baked with: `order` itself, or for "auto" the scene's choice for
     probes of `walks` walks each (None: as many as the higher bands want). `directions`: the
-    probes must hold directions (`guided` drawing its directions from them, or surfaces reading
-    their irradiance, glsl/lib/hybrid_scattering.glsl): "auto" then never
+    probes must hold directions (surfaces reading their irradiance,
+    glsl/lib/hybrid_scattering.glsl): "auto" then never
     gives order 0, which holds none (AUTO_DIRECTIONAL_ORDER instead where g = 0)."""
     if order == "auto":
         g = abs(float(anisotropy))

@@ -16,7 +16,6 @@ every walk has ended; the first dispatch of a chunk starts its walks afresh, so 
 from __future__ import annotations
 
 import math
-import os
 import struct
 from dataclasses import dataclass
 
@@ -38,10 +37,6 @@ PROBE_IMAGE_LIMIT = 8         # textures one dispatch publishes (lib/probe_publi
 DIRECTIONS_PER_PASS = 64     # = probe_project.comp's local size: one invocation per walk of a pass
 WALKS_PER_CHUNK = 1 << 20     # resumable walks: 80 MiB of walk state and 16 MiB of results at most
 WALKS_PER_CHUNK_UNBOUNDED = 1 << 22   # walks that end in one dispatch: 64 MiB of results at most
-# The probes' own sun marched by shadow_march.glsl (walk_sun "ray") jumps over empty macrocells:
-# taken out after the H100 lost its context with it (commit 03404d4); off until the cause is
-# known. RADIANCE_PROBES_SUN_MARCH_SKIPS=1 turns it on for that investigation.
-SUN_MARCH_SKIPS_EMPTY_CELLS = os.environ.get("RADIANCE_PROBES_SUN_MARCH_SKIPS", "0") == "1"
 # A bake's first timed chunk: its walks' cost is not known yet. 2^18 walks (about one wave of an
 # H100's threads) took 135 ms on the battery's backlit shells (bench/h100-bias: albedo 0.99, up to
 # 256 events a walk); a sixteenth of that stays under the target there.
@@ -231,6 +226,8 @@ class ProbeGrid:
                               **tracking}
         if sun == "grid":
             self._walk_defines["WALK_SUN_GRID"] = 1
+            if self.sun_correction > 0.0:   # the correction's reservoir (lib/integrator.glsl)
+                self._walk_defines["WALK_SUN_CORRECTION"] = 1
         if self.environment_map:
             self._walk_defines["ENVIRONMENT_MAP"] = 1
         if self.area_lights:
@@ -250,8 +247,7 @@ class ProbeGrid:
         # the probes' own sun: from the light grid when the walks read it (probe_sun.comp)
         self.sun_program = compute_program(
             ctx, "probe_sun.comp",
-            {**self.defines(), **({"PROBE_SUN_GRID": 1} if sun == "grid" else {}),
-             **({"SUN_MARCH_SKIPS_EMPTY_CELLS": 1} if SUN_MARCH_SKIPS_EMPTY_CELLS else {})})
+            {**self.defines(), **({"PROBE_SUN_GRID": 1} if sun == "grid" else {})})
         self.noise_program = (compute_program(ctx, "probe_noise.comp", self.defines())
                               if self.adaptive else None)
         self.budget_program = (compute_program(ctx, "probe_walk_budget.comp", self.defines())

@@ -40,6 +40,13 @@ from ..gl.shaders import compute_program, set_uniforms
 from .accumulation import Accumulation, SumAccumulation
 
 GROUP_SIDE = 16
+# The raymarcher's frames refine accumulates at most (its image is then as good as its bias lets
+# it be; the rest goes to `guided`); the guided samples each half needs before its estimate may
+# replace the raymarcher's image; the seed offset of the second half. The viewer's session and a
+# still image (render_refine) share them.
+REFINE_RAYMARCH_FRAMES = 16
+REFINE_MIN_HALF_SAMPLES = 4
+REFINE_HALF_SEED = 0x68E31DA4
 
 
 @dataclass(frozen=True)
@@ -168,3 +175,51 @@ class HalfBuffers:
         self.combined.release()
         for obj in (self.partials, self.sums, self._combine, self._reduce):
             obj.release()
+
+
+@dataclass
+class RefineImage:
+    """A still image of `refine` (render_refine): the image shown, which method it is ("raymarch"
+    or "guided"), the estimate that chose it, and GPU ms of each part."""
+    image: np.ndarray
+    shown: str
+    estimate: RefineEstimate
+    raymarch_ms: float
+    guided_ms: float
+
+
+def render_refine(renderer, spp: int, seed: int, width: int | None = None,
+                  height: int | None = None) -> RefineImage:
+    """`refine` as a still image, as the viewer's view ends once the samples are spent: the
+    raymarcher's image (min(spp, REFINE_RAYMARCH_FRAMES) frames) and `spp` samples of `guided` in
+    two independent halves; the halves' mean is shown where its estimated error is below the
+    raymarcher's (each half with at least REFINE_MIN_HALF_SAMPLES), else the raymarcher's image.
+    The probes and the light grid must be in hand (Renderer.render bakes them)."""
+    r = renderer
+    ray = halves = None
+    try:
+        with r.lend(None) as lent:   # an accumulation of its own, released here
+            ray = lent.begin("raymarch", width, height, seed)
+            camera = lent.camera
+            raymarch_ms = lent.add_samples(min(spp, REFINE_RAYMARCH_FRAMES))
+        halves = HalfBuffers(r.ctx, camera.width, camera.height)
+        halves.reset()
+        guided_ms = 0.0
+        for index, n in ((0, (spp + 1) // 2), (1, spp // 2)):
+            if n:
+                half = halves.halves[index]
+                with r.lend(half.residual, "guided", camera, seed ^ (REFINE_HALF_SEED if index else 0),
+                            level0=half.level0, slot=index) as lent:
+                    guided_ms += lent.add_samples(n)
+        halves.combine(ray, reduce=True)
+        estimate = halves.read_estimate(with_raymarch=True)
+        guided = (min(halves.counts) >= REFINE_MIN_HALF_SAMPLES
+                  and estimate.guided < estimate.raymarch)   # (False while either is NaN)
+        image = (halves.combined if guided else ray).read()
+        return RefineImage(image, "guided" if guided else "raymarch", estimate, raymarch_ms,
+                           guided_ms)
+    finally:
+        if ray is not None:
+            ray.release()
+        if halves is not None:
+            halves.release()

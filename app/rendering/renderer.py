@@ -10,6 +10,7 @@ from typing import Callable
 import moderngl
 import numpy as np
 
+from ..methods import ACCUMULATED, METHODS as REGISTRY, method as registered
 from ..twins.camera import camera_frame
 from ..twins.light_grid import light_grid_lookup
 from ..gl.context import is_software
@@ -17,12 +18,13 @@ from ..gl.timer import GpuTimer
 from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation, SumAccumulation
+from .cache_keys import (adaptive_planes_key, light_grid_key, probe_bake_key,
+                         visible_region_key)
 from .bake_level import SPACING_LEVEL, BakeMedium, spacing_level
 from .limits import check_image_size
 from .pathtracer import PathTracer
 from .light_transmittance import LightTransmittance, min_side_for_probes
 from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, sun_lobe_g
-from .sun_lobe_fit import SunLobeFit, SunLobeFitter
 from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
@@ -32,18 +34,18 @@ from .denoise import (GUIDE_SETS, Denoised, choose_guides, radiance_as_albedo, s
                       shared_denoiser)
 from .denoise_guides import GUIDE_FRAMES, DenoiseGuides
 from .raymarch import Raymarcher, min_step_voxels
+from .refine import render_refine
+from .lab_options import LabOptions
 from .resources import SceneResources
 from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noqa: F401 (re-exported)
                        check_gather_event)
 
-METHODS = ("pt", "probes", "probes-only", "raymarch", "guided")
+# The methods one accumulation holds (app/methods.py, the registry: every method's properties).
+METHODS = ACCUMULATED
 # The methods whose sample may be split into bands of work groups over several calls
-# (add_groups): one
-# pass whose every pixel is its own running mean (the raymarcher as a compute pass only; guided's
-# two levels stay whole).
+# (add_groups): one pass whose every pixel is its own running mean (the raymarcher as a compute
+# pass only; guided's two levels stay whole).
 BANDED_METHODS = ("pt", "probes", "probes-only", "raymarch")
-# Variants of glsl/pathtrace.comp: the probe renderers stop at the first scattering event.
-PROBE_LIGHTING = {"probes": 1, "probes-only": 2}
 # The probes hold max_bounces - 1 events whatever the gather event, so a gather at event k lets a
 # path scatter up to max_bounces + k - 1 times. Up to this max_bounces the CLI and the viewer say
 # so: measured on llvmpipe (a cloud of albedo 0.95, 8^3 probes), gather 2 at max_bounces 2 came out
@@ -127,18 +129,24 @@ class _LightSlot:
 
 class Renderer:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
-                 settings: RenderSettings | None = None):
+                 settings: RenderSettings | None = None, lab: LabOptions | None = None):
         """`settings`: how it renders and bakes (RenderSettings; None: the defaults), resolved
-        for this device (RenderSettings.resolved)."""
+        for this device (RenderSettings.resolved). `lab`: the bench's and the experiments'
+        comparison switches (LabOptions; None: the product's), never a user's."""
         self.ctx = ctx
         self._software = is_software(ctx)
         settings = (settings or RenderSettings()).resolved(self._software)  # checked first
+        lab = lab or LabOptions()
+        if not isinstance(lab, LabOptions):
+            raise TypeError(f"lab: expected a LabOptions, got {type(lab).__name__}")
         self.resources = SceneResources(ctx, scene, volume,
                                         use_majorant_grid=settings.empty_space_skipping,
                                         volume_memory_bytes=settings.volume_memory_bytes,
                                         brick_size=settings.brick_size,
-                                        mixed_levels=settings.mixed_levels)
+                                        mixed_levels=lab.mixed_levels)
+        self.resources.environment_sampling = lab.environment_sampling
         self._settings = settings
+        self._lab = lab
         self._passes: dict[tuple, PathTracer] = {}
         # Which path states a pass uses (pass_for): a PathTracer keeps one per pixel between
         # dispatches, so two accumulations of one method advanced in turn (the viewer's `refine`
@@ -154,9 +162,6 @@ class Renderer:
         self._walk_light = _LightSlot()    # the bake's own at bake_level > 0 (the coarse level)
         self._bake_medium: BakeMedium | None = None   # the coarse level, made when first needed
         self.baked_level = 0   # the bake level of the probes in hand (start_bake)
-        self.last_sun_lobe_fit: SunLobeFit | None = None   # the last bake start's choice
-        self._sun_lobe_fitter: SunLobeFitter | None = None   # made when first asked for
-        self._fit_ms = 0.0   # GPU ms of the last bake start's pilot, not yet counted in a bake's time
         self._probe_ms: dict[tuple, float] = {}   # measured GPU ms per probe walked, per layout
         self._sample_ms: dict[tuple, float] = {}  # GPU ms per sample of a path-state pass, per size
         self.last_slice_ms = 0.0
@@ -203,6 +208,21 @@ class Renderer:
         self.resources.use_majorant_grid = self._settings.empty_space_skipping
         self.resources.set_bricking(self._settings.volume_memory_bytes, self._settings.brick_size)
 
+    @property
+    def lab(self) -> LabOptions:
+        """The comparison switches this renderer runs with (lab_options.py; not for users).
+        Assign a new LabOptions to change them: passes compile anew where they differ; a change
+        of mixed_levels applies where the volume is next placed."""
+        return self._lab
+
+    @lab.setter
+    def lab(self, lab: LabOptions) -> None:
+        if not isinstance(lab, LabOptions):
+            raise TypeError(f"lab: expected a LabOptions, got {type(lab).__name__}")
+        self._lab = lab
+        self.resources.mixed_levels = lab.mixed_levels
+        self.resources.environment_sampling = lab.environment_sampling
+
     def configure(self, **changes) -> RenderSettings:
         """Replaces the named settings (RenderSettings' fields; checked); returns the new ones."""
         self.settings = replace(self._settings, **changes)
@@ -248,19 +268,17 @@ class Renderer:
         """The compiled pass of a method (compiled once per probe layout, on first use); the
         layout is the given probe grid's, else the one the current scene will bake."""
         defines = None
-        if method in PROBE_LIGHTING:
-            defines = {"PROBE_LIGHTING": PROBE_LIGHTING[method],
-                       **(probe_defines or self._probe_defines())}
+        lighting = REGISTRY[method].probe_lighting
+        if lighting:   # a variant of glsl/pathtrace.comp that reads the probes at its gather event
+            defines = {"PROBE_LIGHTING": lighting, **(probe_defines or self._probe_defines())}
         elif method == "guided":   # level 1: a path-traced sample minus level 0's prediction
             defines = {"GUIDED_RESIDUAL": 1,
                        "GUIDED_DIRECTION_CONTROL": int(self._settings.guided_direction_control),
-                       "GUIDED_DIRECTIONS": int(self._settings.guided_directions > 0.0),
-                       "GUIDED_DISTANCES": int(self._settings.guided_distances > 0.0),
                        **(probe_defines or self._probe_defines())}
         if self.resources.defines():
             defines = {**(defines or {}), **self.resources.defines()}
-        if self._settings.sun_shadow_rays != 1:
-            defines = {**(defines or {}), "SUN_SHADOW_RAYS": self._settings.sun_shadow_rays}
+        if self._lab.sun_shadow_rays != 1:
+            defines = {**(defines or {}), "SUN_SHADOW_RAYS": self._lab.sun_shadow_rays}
         if self._settings.shadow_tracking == "residual":
             defines = {**(defines or {}), "SHADOW_TRACKING_RESIDUAL": 1}
         key = (method, tuple(sorted((defines or {}).items())))
@@ -292,17 +310,11 @@ class Renderer:
 
     # ---- probes -------------------------------------------------------------------------------
     def bake_key(self) -> tuple:
-        spec, st = self.scene.probes, self._settings
-        return (*self.resources.bake_key(), spec.sh_order, self._sh_order(), spec.fit,
-                spec.channels,
-                spec.layout, spec.adaptive_strength, spec.adaptive_indicator,
-                self.resources.use_majorant_grid, st.walk_sun, st.walk_adaptive, st.sun_lobe,
-                st.walk_sun_correction if st.walk_sun == "grid" else None,
-                st.shadow_tracking,
-                (st.light_max_side, st.light_min_side, st.light_follows_probes,
-                 st.light_precision)
-                if st.walk_sun == "grid" or st.shadow_tracking == "residual" else None,
-                self.bake_level())
+        """What the probes in hand were baked for (a different key: a new bake): the volume's
+        version, the crop, the resolved SH order and bake level, and the Scene's and the
+        settings' fields the bake reads (cache_keys.probe_bake_key)."""
+        return (*self.resources.bake_key()[:2], self._sh_order(), self.bake_level(),
+                probe_bake_key(self.scene, self._settings))
 
     def bake_level(self) -> int:
         """The level the probes' bake walks, counted from the level shown (0: that level):
@@ -334,9 +346,8 @@ class Renderer:
         """World corners of what the transfer function makes visible (cached: one GPU pass over
         the volume, glsl/visible_region.comp, redone when the volume or the transfer function
         changes)."""
-        s = self.scene
-        key = (self.resources.volume_version, s.transfer_function, s.channels, s.density_scale > 0,
-               self.resources.clip)
+        key = (self.resources.volume_version, self.resources.clip,
+               visible_region_key(self.scene))
         if self._region_key != key:
             self._region = self._region_pass.region(self.resources)
             self._region_key = key
@@ -372,13 +383,11 @@ class Renderer:
 
     def _sh_order(self) -> int:
         """The SH order the current scene's probes are baked with (probe_layout.resolve_sh_order;
-        guided directions need directions, and so do surfaces (their irradiance is the clamped
-        cosine's bands 0 to 2 of the probes' light): "auto" gives no order 0 while either is
-        on)."""
+        surfaces need directions (their irradiance is the clamped cosine's bands 0 to 2 of the
+        probes' light): "auto" gives no order 0 while they are on)."""
         spec = self.scene.probes
         return resolve_sh_order(spec.sh_order, self.scene.anisotropy, spec.samples,
-                                directions=(self._settings.guided_directions > 0.0
-                                            or self.scene.surface.gradient_factor > 0.0))
+                                directions=self.scene.surface.gradient_factor > 0.0)
 
     def adaptive_planes(self, grid: tuple[int, int, int], box) -> tuple | None:
         """The adaptive layout's probe planes for this grid and box (cached; None: it came out
@@ -386,11 +395,8 @@ class Renderer:
         s = self.scene
         spec = s.probes
         sun = spec.adaptive_indicator == "sun"
-        key = (self.resources.volume_version, s.transfer_function, s.channels, s.density_scale,
-               grid, box,
-               spec.adaptive_strength, spec.adaptive_indicator,
-               (s.light.direction, self._settings.light_max_side, self._settings.light_min_side,
-                self._settings.light_follows_probes) if sun else None)
+        key = (self.resources.volume_version, self.resources.clip, grid, box,
+               adaptive_planes_key(s, self._settings))
         if key != self._planes_key:
             start = time.perf_counter()
             if sun:
@@ -426,15 +432,6 @@ class Renderer:
         env_map = self.resources.environment is not None
         st = self._settings
         lobe = sun_lobe_g(self.scene.anisotropy, plan.sh_order) if st.sun_lobe else 0.0
-        self.last_sun_lobe_fit = None
-        if lobe > 0.0 and st.sun_lobe_fit:
-            if self._sun_lobe_fitter is None:
-                self._sun_lobe_fitter = SunLobeFitter(self.ctx)
-            fit = self._sun_lobe_fitter.fit(self.bake_resources(), plan.box, plan.grid, spec.samples,
-                                            plan.grey, env_map, seed)
-            lobe = fit.h
-            self.last_sun_lobe_fit = fit
-            self._fit_ms += fit.gpu_ms
         medium = self.bake_resources().medium_defines()
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
                          g.adaptive, g.environment_map, g.planes, g.sun_lobe) != (
@@ -478,7 +475,7 @@ class Renderer:
         if self.probes_current():
             return 0.0
         grid = self.start_bake(seed)
-        total = self._light_for_walks() + self._take_fit_ms()
+        total = self._light_for_walks()
         light = self.walk_light() if grid.needs_light else None
         resources = self.bake_resources()
         if progress is None:
@@ -496,11 +493,6 @@ class Renderer:
             progress(grid)
         self.last_bake_ms = total
         return total
-
-    def _take_fit_ms(self) -> float:
-        """The sun-lobe pilot's GPU ms since a bake's time last counted it (then 0)."""
-        ms, self._fit_ms = self._fit_ms, 0.0
-        return ms
 
     def _light_for_walks(self) -> float:
         """The light grid the walks read when walk_sun is "grid" (GPU ms if it was baked now; the
@@ -529,9 +521,8 @@ class Renderer:
         s, st = self.scene, self._settings
         min_side = (min_side_for_probes(s.probes.grid, st.light_min_side)
                     if st.light_follows_probes else st.light_min_side)
-        key = (self.resources.volume_version, s.transfer_function, s.channels, s.density_scale,
-               s.light.direction, st.light_max_side, min_side, st.light_precision,
-               self.resources.clip)
+        key = (self.resources.volume_version, self.resources.clip, min_side,
+               light_grid_key(s, st))
         return key, min_side
 
     def light_current(self) -> bool:
@@ -670,9 +661,10 @@ class Renderer:
         return self._light
 
     def invalidate(self) -> None:
-        """Forgets the baked probes and light grid, so the next image pays for both again (the
-        benchmark charges every record what its image cost)."""
+        """Forgets the baked probes, the light grid and the denoiser's guides, so the next image
+        pays for them again (the benchmark charges every record what its image cost)."""
         self._baked_key = None
+        self._guides_key = None
         for slot in (self._image_light, self._walk_light):
             slot.key = slot.pending = None
 
@@ -688,7 +680,7 @@ class Renderer:
             self._acc = Accumulation(self.ctx, width, height)
         return self._acc
 
-    # ---- streaming a mix of levels (RenderSettings.mixed_levels under a cap) -------------------
+    # ---- streaming a mix of levels (LabOptions.mixed_levels under a cap) -----------------------
     def restream(self, camera=None, budget_s: float | None = None) -> bool:
         """Moves a mixed pool towards the bricks `camera` (None: the scene's) deserves
         (app/rendering/level_stream.py); with `budget_s`, about that many seconds of writes, the
@@ -713,8 +705,10 @@ class Renderer:
     def begin(self, method: str = "pt", width: int | None = None, height: int | None = None,
               seed: int = 0) -> Accumulation:
         """Starts a fresh accumulation for `method` with the scene's current camera."""
-        if method not in METHODS:
-            raise ValueError(f"unknown method '{method}' (known: {', '.join(METHODS)})")
+        if registered(method).composite:
+            raise ValueError(f"{method} is made of {' and '.join(REGISTRY[method].parts)}'s "
+                             f"images, which no one accumulation holds: render() it (or the "
+                             f"viewer) (one accumulation: {', '.join(METHODS)})")
         self.camera = camera_frame(self.scene.camera, width, height)
         check_image_size(self.ctx, self.camera.width, self.camera.height)
         self.method = method
@@ -736,7 +730,7 @@ class Renderer:
         return self._acc0
 
     def needs_probes(self, method: str | None = None) -> bool:
-        return (method or self.method) in (*PROBE_LIGHTING, "raymarch", "guided")
+        return registered(method or self.method).needs_probes
 
     def bake_step(self, seed: int = 0, budget_ms: float | None = None) -> float:
         """One slice of a progressive bake if the probes are stale or unfinished (GPU ms; 0 when
@@ -779,7 +773,6 @@ class Renderer:
                 seen = ms / ran
                 # (the first slice of a bake also runs the sun's pass)
                 self._probe_ms[key] = _slice_estimate(per_probe, seen)
-        ms += self._take_fit_ms()
         self.last_slice_ms = light_ms + ms
         return light_ms + ms
 
@@ -792,7 +785,8 @@ class Renderer:
     def needs_light(self, method: str) -> bool:
         """Whether rendering `method` reads the light grid: the raymarcher and `guided` always,
         every path-traced method where the shadow rays are residual-tracked against it."""
-        return method in ("raymarch", "guided") or self._settings.shadow_tracking == "residual"
+        return (REGISTRY[method].needs_light_grid
+                or self._settings.shadow_tracking == "residual")
 
     def add_samples(self, n: int = 1) -> float:
         """Adds n samples per pixel to the accumulation begun by begin(); returns GPU ms.
@@ -815,9 +809,7 @@ class Renderer:
                      "guided_level0_budget": GUIDED_LEVEL0_BUDGET})
                 self.timer.stop()
                 level0_ms = self.timer.elapsed_ms
-            extra = {**extra, **self._light.uniforms(),
-                     "guided_direction_probability": float(self._settings.guided_directions),
-                     "guided_distance_probability": float(self._settings.guided_distances)}
+            extra = {**extra, **self._light.uniforms()}
         if method == "raymarch":
             marcher = self.raymarcher()
             step = self.raymarch_step_voxels * 2 * self.resources.march_step
@@ -865,8 +857,8 @@ class Renderer:
                 raise RuntimeError("probe methods need a bake first (bake() or bake_step())")
             extra = self.probe_uniforms()
             # probes-only traces no shadow rays, which the events before a later gather need
-            extra["probe_gather_event"] = (self._settings.gather_event if method == "probes"
-                                           else 1)
+            extra["probe_gather_event"] = (self._settings.gather_event
+                                           if "gather_event" in REGISTRY[method].options else 1)
         # a sliced light-grid bake under way (bake_step) is read as it is, not finished here
         light_ms = (self.bake_light() if self.needs_light(method)
                     and not self.light_baking() else 0.0)
@@ -877,7 +869,7 @@ class Renderer:
         """The path-state pass of `method` (pt, the probe renderers, guided's level 1) and its
         uniforms."""
         defines = (self._read_defines(self.probe_grid.defines())
-                   if method in (*PROBE_LIGHTING, "guided") else None)
+                   if REGISTRY[method].needs_probes else None)
         tracer = self.pass_for(method, defines)
         if self._settings.shadow_tracking == "residual":   # the shadow rays' control
             self._light.bind()
@@ -943,11 +935,14 @@ class Renderer:
         the image goes through the denoiser with `denoise_guides` (RenderResult.raw_image keeps
         the raw one; .denoised says what ran, or why not; "auto": denoise.choose_guides). A
         streamed mix
-        of levels (RenderSettings.mixed_levels under a cap) is first made the one this camera
+        of levels (LabOptions.mixed_levels under a cap) is first made the one this camera
         and image size deserve (restream, all of it)."""
         if self.resources.stream is not None:
             cam = self.scene.camera
             self.restream(replace(cam, width=width or cam.width, height=height or cam.height))
+        if registered(method).composite:
+            return self._render_composite(method, spp, seed, width, height, bake_progress,
+                                          denoise, denoise_guides)
         acc = self.begin(method, width, height, seed)
         bake_ms = 0.0
         if self.needs_probes(method):
@@ -970,6 +965,31 @@ class Renderer:
         denoised, guides_ms = self.denoise(None, guides)
         return RenderResult(denoised.image, method, spp, render_ms, bake_ms, stats=stats,
                             raw_image=image, denoised=denoised, guides_ms=guides_ms)
+
+    def _render_composite(self, method: str, spp: int, seed: int, width: int | None,
+                          height: int | None, bake_progress: Callable | None, denoise: bool,
+                          denoise_guides: str) -> RenderResult:
+        """render() of a method made of others' images (the registry's `parts`): `refine`, as
+        its view in the viewer ends (refine.render_refine). stats["shown"] names the part shown
+        and stats["refine_estimate"] the estimated errors that chose it."""
+        if method != "refine":
+            raise NotImplementedError(f"render(): no still image of {method} yet")
+        bake_ms = self.bake(seed, progress=bake_progress) + self.bake_light()
+        self.resources.reset_stats()
+        done = render_refine(self, spp, seed, width, height)
+        self.camera = camera_frame(self.scene.camera, width, height)   # the guides' camera
+        stats = self.resources.read_stats()
+        stats["shown"] = done.shown
+        stats["refine_estimate"] = {"guided": done.estimate.guided,
+                                    "raymarch": done.estimate.raymarch,
+                                    "samples": done.estimate.samples}
+        render_ms = done.raymarch_ms + done.guided_ms
+        if not denoise:
+            return RenderResult(done.image, method, spp, render_ms, bake_ms, stats=stats)
+        guides = choose_guides(denoise_guides, spp, self.probes_shown())
+        denoised, guides_ms = self.denoise(done.image, guides, signed=REGISTRY[done.shown].signed)
+        return RenderResult(denoised.image, method, spp, render_ms, bake_ms, stats=stats,
+                            raw_image=done.image, denoised=denoised, guides_ms=guides_ms)
 
     # ---- the denoiser's guides (denoise_guides.py) and the denoiser (denoise.py) ----------------
     def denoise_guides(self, guides: str = "albedo-normal", frames: int = GUIDE_FRAMES,
@@ -1013,8 +1033,11 @@ class Renderer:
             self.timer.stop()
             albedo, normal, ms = radiance_as_albedo(acc.read()), None, light_ms + self.timer.elapsed_ms
         else:
-            if self._guides is None:
-                self._guides = DenoiseGuides(self.ctx, self.resources.medium_defines())
+            medium = self.resources.medium_defines()
+            if self._guides is None or self._guides.defines != medium:
+                if self._guides is not None:   # a crop, channels or surfaces changed the build
+                    self._guides.release()
+                self._guides = DenoiseGuides(self.ctx, medium)
             self.timer.start()
             self._guides.run(self.resources, camera, step, frames, self.seed)
             self.timer.stop()
@@ -1025,10 +1048,12 @@ class Renderer:
         return albedo, normal, ms
 
     def denoise(self, image: np.ndarray | None = None, guides: str = "albedo-normal",
-                quality: str = "high", copy: bool = True) -> tuple[Denoised, float]:
+                quality: str = "high", copy: bool = True,
+                signed: bool | None = None) -> tuple[Denoised, float]:
         """The image of the camera begun (None: the accumulation in hand, read from GL straight
         into the denoiser's memory) through the denoiser with `guides`: (Denoised, the guides'
-        GPU ms). Where the denoiser cannot run, Denoised holds the raw image and a note."""
+        GPU ms). Where the denoiser cannot run, Denoised holds the raw image and a note.
+        `signed`: whether the image may dip below zero (None: the method begun's, app/methods.py)."""
         denoiser = shared_denoiser("auto", quality)
         if not denoiser.available:
             raw = self.image() if image is None else image
@@ -1045,7 +1070,8 @@ class Renderer:
                 image = staged
             else:
                 image = self.image()
-        return denoiser(image, albedo, normal, copy=copy, signed=self.method == "guided"), guides_ms
+        signed = REGISTRY[self.method].signed if signed is None else signed
+        return denoiser(image, albedo, normal, copy=copy, signed=signed), guides_ms
 
     def release(self) -> None:
         if self._guides is not None:
@@ -1065,7 +1091,5 @@ class Renderer:
             if acc is not None:
                 acc.release()
         self._region_pass.release()
-        if self._sun_lobe_fitter is not None:
-            self._sun_lobe_fitter.release()
         self.resources.release()
         self.timer.release()

@@ -21,6 +21,7 @@ from ..scene import Scene
 from ..transfer import transfer_table
 from ..volume import Volume, load_scene_volume
 from ..twins.majorant_grid import macrocell_counts
+from .cache_keys import KEYS, majorant_grid_key, scene_key
 from .majorant_grid import MAJORANT_UNIT, MajorantGrid
 from .volume_placement import place_volume
 
@@ -66,7 +67,7 @@ class SceneResources:
         self.environment: EnvironmentMap | None = None   # the scene's map, None: constant
         self.environment_tex = None
         self.environment_cdf_tex = None
-        # False: paths find the map by phase sampling alone (for measuring what sampling gains).
+        # False: paths find the map by phase sampling alone (LabOptions.environment_sampling).
         self.environment_sampling = True
         self.stats = ctx.buffer(reserve=16)
         self.max_path_steps = DEFAULT_MAX_PATH_STEPS
@@ -181,8 +182,7 @@ class SceneResources:
         self.scene = scene
         if "volume" in changed:
             self.majorant_grid.set_volume(self.volume)
-        key = (self.volume_version, scene.transfer_function, scene.channels, scene.density_scale,
-               clip)
+        key = (self.volume_version, clip, majorant_grid_key(scene))
         if key != self._majorant_key:
             self.majorant_grid.build(self.transfer_gpu, self.medium_table, scene.density_scale,
                                      TRANSFER_UNIT, clip=clip,
@@ -249,9 +249,14 @@ class SceneResources:
 
     def medium_defines(self) -> dict:
         """What every pass that includes lib/medium.glsl is compiled with for this scene: nothing
-        for one channel (the one-channel code, unchanged), else MEDIUM_CHANNELS; and
-        HYBRID_SCATTERING where the scene's surface.gradient_factor is above 0."""
+        for one channel (the one-channel code, unchanged), else MEDIUM_CHANNELS; NO_CLIP_REGION
+        where no crop or clip plane is set; and HYBRID_SCATTERING where the scene's
+        surface.gradient_factor is above 0. A pass built with them is rebuilt when they change."""
         defines = {} if self.tables is None else {"MEDIUM_CHANNELS": self.tables.count}
+        if self.clip is None:
+            # no crop or clip plane: lib/clip_region.glsl's tests fold away (a uniform test cost
+            # the walks 7%); a crop set later changes these defines, so every pass is rebuilt
+            defines = {**defines, "NO_CLIP_REGION": 1}
         if self.scene.surface.gradient_factor > 0.0:
             # hybrid scattering (glsl/lib/hybrid_scattering.glsl: the medium scatters by a
             # surface BRDF too); k = 0 compiles every pass without it, as it was
@@ -288,8 +293,7 @@ class SceneResources:
         s = self.scene
         self.majorant_grid.build(self.transfer_gpu, self.medium_table, s.density_scale,
                                  TRANSFER_UNIT, clip=self.clip, half_extent=volume.half_extent)
-        self._majorant_key = (self.volume_version, s.transfer_function, s.channels,
-                              s.density_scale, self.clip)
+        self._majorant_key = (self.volume_version, self.clip, majorant_grid_key(s))
 
     def placement_camera(self, scene: Scene):
         """The camera levels are mixed for under a cap (place_volume), None: one whole level."""
@@ -342,14 +346,11 @@ class SceneResources:
         return float(min(2.0 * he[i] / dims[i] for i in range(3)) / 2.0)
 
     def bake_key(self) -> tuple:
-        """What the probes depend on: everything but the camera (camera moves never re-bake)."""
-        s = self.scene
-        return (self.volume_version, s.transfer_function, s.channels, s.density_scale, s.albedo,
-                s.anisotropy,
-                s.light, s.environment, s.environment_map, s.max_bounces, s.surface,
-                tuple(light for light in s.area_lights if light.enabled),
-                s.probes.grid, s.probes.samples,
-                s.probes.precision, self.clip)
+        """What the probes depend on in the scene (camera moves never re-bake): the volume's
+        version, the crop resolved against it, and the Scene's fields the bake reads
+        (cache_keys.py; Renderer.bake_key adds the settings')."""
+        return (self.volume_version, self.clip,
+                scene_key(self.scene, *KEYS["probe_bake"][0]))
 
     def uniforms(self) -> dict:
         s = self.scene

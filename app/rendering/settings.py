@@ -63,8 +63,6 @@ class RenderSettings:
     # Probes of SH order 3 also hold a lobe about the sun's direction where the scene scatters
     # forward (probe_layout.sun_lobe_g; lib/sun_lobe.glsl); False: never (comparisons).
     sun_lobe: bool = True
-    # The lobe's shape chosen per scene by a pilot bake (sun_lobe_fit.py); built, not the default.
-    sun_lobe_fit: bool = False
     # `probes` reads the probes at this scattering event (1: the paper's renderer; k > 1 traces
     # events 1 .. k-1 as the path tracer does first: a final gather). Read-side only.
     gather_event: int = 1
@@ -94,41 +92,12 @@ class RenderSettings:
     # mean over the phase function as a control variate (mean 0 at any probes;
     # lib/guided_direction_control.glsl). False: level 1 subtracts at the first event only.
     guided_direction_control: bool = True
-    # `guided`: the probability with which a level-1 path draws its next direction from the phase
-    # function times the probes' radiance (tabulated per event; one-sample MIS with the phase
-    # function, exact pdf: unbiased at any probes; lib/guided_directions.glsl); 0 (the default):
-    # the phase function alone. Off by default: on the H100 it took no variance away on any bench
-    # scene and cost 10-680% more time a sample (bench/h100-guided-directions). Costs per event
-    # one probe fetch (shared with the direction control) and 64 SH evaluations; with an
-    # environment map the map's samples weigh themselves against the mixture too (one more table
-    # per event). Needs directions in the probes: where `auto` would bake SH order 0 (g = 0),
-    # > 0 bakes order 2 for every method (9 coefficients a probe instead of 1). 1 draws from the
-    # product alone: weights up to 20 an event where the probes are wrong (heavy-tailed).
-    guided_directions: float = 0.0
-    # `guided`: the share P of a level-1 flight's real-or-null decisions (after its first event)
-    # taken by what the probes predict each choice brings back, the zero-variance choice, rather
-    # than by sigma_t / majorant alone; the path weighted so that the mean stays delta tracking's
-    # at any probes, each weight at most 1 / (1 - P) (lib/guided_distances.glsl). 0 (the
-    # default): delta tracking's own decisions. Costs a probe fetch and a light-grid read at each
-    # tentative collision where 0 < sigma_t < majorant.
-    guided_distances: float = 0.0
     # Bricked volumes (app/rendering/volume_placement.py): the volume's GPU memory at most, in bytes
     # (None: what the device has left); where one 3D texture exceeds it, the finest level whose
     # bricks fit is shown, with a note. `brick_size`: bricks of that many voxels per axis always
     # (None: bricks of 64 only where one texture does not fit; tests force small ones).
     volume_memory_bytes: int | None = None
     brick_size: int | None = None
-    # True: under a cap given, the memory the shown level leaves holds the next finer level's
-    # bricks where the scene's camera sees them largest (app/rendering/level_mix.py). Off by
-    # default: on the H100 (bench/h100-bricks-open) it took a zoomed view of the 2048^3 volume
-    # from 2.97% to 2.92% rRMSE against level 0, for frames 2.3x as long and a first image 5.8 s
-    # later.
-    mixed_levels: bool = False
-    # Independent ratio-tracked shadow rays towards the sun a scattering event averages, in the
-    # render passes (lib/integrator.glsl SUN_SHADOW_RAYS): 1, the default; more only measures how
-    # much of a path's variance the shadow ray's own noise holds (the mean is the same;
-    # lab/experiments/experiment_shadow_variance.py).
-    sun_shadow_rays: int = 1
     # How every shadow ray towards the sun is tracked, in the renderers and the bake: "ratio"
     # (ratio tracking against the macrocell majorants) or "residual" (residual ratio tracking with
     # the light grid's optical depth as the control: the same collisions, factors near 1 where the
@@ -155,12 +124,6 @@ class RenderSettings:
         if isinstance(r, bool) or not isinstance(r, (int, float)) or not (
                 math.isfinite(r) and 0.0 < r <= 64.0):
             raise ValueError(f"guided level-0 ratio {r!r}: expected a number in (0, 64]")
-        d = self.guided_directions
-        if isinstance(d, bool) or not isinstance(d, (int, float)) or not 0.0 <= d <= 1.0:
-            raise ValueError(f"guided directions {d!r}: expected a probability in [0, 1]")
-        d = self.guided_distances
-        if isinstance(d, bool) or not isinstance(d, (int, float)) or not 0.0 <= d < 1.0:
-            raise ValueError(f"guided distances {d!r}: expected a probability in [0, 1)")
         q = self.walk_sun_correction
         if isinstance(q, bool) or not isinstance(q, (int, float)) or not 0.0 <= q <= 1.0:
             raise ValueError(f"walk sun correction {q!r}: expected a rate in [0, 1]")
@@ -172,7 +135,6 @@ class RenderSettings:
             _check_positive_int("brick size", self.brick_size)
             if self.brick_size < 2:
                 raise ValueError(f"brick size: expected at least 2 voxels, got {self.brick_size}")
-        _check_positive_int("sun shadow rays", self.sun_shadow_rays)
         if self.shadow_tracking not in SHADOW_TRACKINGS:
             raise ValueError(f"shadow tracking {self.shadow_tracking!r}: expected one of "
                              f"{', '.join(SHADOW_TRACKINGS)}")
@@ -192,7 +154,7 @@ class RenderSettings:
         if isinstance(step, bool) or not isinstance(step, (int, float)) or not (
                 math.isfinite(step) and step > 0):
             raise ValueError(f"raymarch step: expected a finite number of voxels > 0, got {step!r}")
-        for name in ("sun_lobe", "sun_lobe_fit", "bake_warm", "empty_space_skipping",
+        for name in ("sun_lobe", "bake_warm", "empty_space_skipping",
                      "guided_direction_control"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")

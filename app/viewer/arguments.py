@@ -5,7 +5,7 @@ import argparse
 
 from ..frontend import (add_scene_edit_options, add_volume_options, grid_arg, memory_size,
                         positive_float, positive_int, render_scale, window_size)
-from ..scene_types import VIEWER_METHODS as METHODS
+from ..methods import VIEWER_METHODS as METHODS
 
 
 def add_view_parser(sub, func) -> argparse.ArgumentParser:
@@ -21,6 +21,12 @@ def add_view_parser(sub, func) -> argparse.ArgumentParser:
     v.add_argument("--probe-view", nargs="?", const="over", choices=("over", "alone"),
                    help="draw the probes as spheres, over the volume (default) or alone")
     v.add_argument("--box", action="store_true", help="draw the volume's box")
+    v.add_argument("--slices", nargs="?", const="three", choices=("three", "x", "y", "z"),
+                   help="the slice view beside the 3D view: three orthogonal slices (default) or "
+                        "the one across x, y or z")
+    v.add_argument("--slice-colours", choices=("window", "tf"),
+                   help="the slices in grey through the window (default) or in the transfer "
+                        "function's colours")
     v.add_argument("--screenshot", metavar="PNG", help="save the window's image (panels included) "
                                                        "after the frames or the script, then exit")
     v.add_argument("--frames", type=positive_int, help="render this many frames, then exit")

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import moderngl
 
+from ..methods import METHODS
 from ..rendering.denoise import choose_guides, shared_denoiser
 
-DENOISED = ("pt", "probes", "probes-only", "guided")
 INTERVAL_S = 0.5
 
 
@@ -62,7 +62,7 @@ class ViewDenoise:
         for name, view in session.views.items():
             acc, shown = view.acc, view.shown
             generation = (id(acc), session.restarts)
-            if acc is None or shown not in DENOISED or acc.samples == 0:
+            if acc is None or not METHODS[shown].noisy or acc.samples == 0:
                 self.images.pop(name, None)
                 continue
             now = time.monotonic()
@@ -79,7 +79,7 @@ class ViewDenoise:
                 break
             self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
             acc.texture.read_into(staged)
-            d = denoiser(staged, albedo, normal, copy=False, signed=shown == "guided")
+            d = denoiser(staged, albedo, normal, copy=False, signed=METHODS[shown].signed)
             if not d.denoised:
                 self.note, self.enabled = d.note, False
                 self.images.clear()

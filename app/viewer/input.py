@@ -10,8 +10,10 @@ from typing import Callable
 
 from imgui_bundle import imgui
 
+from ..methods import METHODS
 from .glfw_lib import glfw
 
+from .slice_view import SLICE_VIEWS
 from .state import PROBE_VIEWS
 
 
@@ -28,15 +30,13 @@ def _method(name: str) -> Callable:
 
 
 SHORTCUTS = (
-    Shortcut("1", "method: path tracer (pt)", _method("pt")),
-    Shortcut("2", "method: probes", _method("probes")),
-    Shortcut("3", "method: probes-only", _method("probes-only")),
-    Shortcut("4", "method: raymarch", _method("raymarch")),
-    Shortcut("5", "method: refine (raymarch at once, then guided to the exact image)",
-             _method("refine")),
+    *(Shortcut(m.viewer_key, f"method: {m.name} ({m.doc})", _method(m.name))
+      for m in METHODS.values() if m.viewer_key is not None),   # the registry's keys
     Shortcut("s", "split view on/off (method | split method)", lambda v: v.state.toggle_display("split")),
     Shortcut("e", "error view on/off (heat map against pt)", lambda v: v.state.toggle_display("error")),
     Shortcut("g", "probe grid: off, over the volume, alone", lambda v: v.state.cycle("probe_view", PROBE_VIEWS)),
+    Shortcut("v", "slice view: off, three slices, the x, y or z slice alone",
+             lambda v: v.state.cycle("slice_view", SLICE_VIEWS)),
     Shortcut("b", "volume box on/off", lambda v: setattr(v.state, "show_box", not v.state.show_box)),
     Shortcut("]", "probe grid finer", lambda v: v.state.step_probe_grid(+1)),
     Shortcut("[", "probe grid coarser", lambda v: v.state.step_probe_grid(-1)),
@@ -75,6 +75,8 @@ SHORTCUTS = (
 GROUP_HELP = (("ctrl+1 .. ctrl+9", "save the view as bookmark N"),
               ("shift+1 .. shift+9", "go to bookmark N"))
 MOUSE_HELP = (("left drag", "orbit (on a crop or clip handle: move that face or the plane)"), ("right or middle drag", "pan"), ("wheel", "zoom"),
+              ("click in a slice", "the slices and the orbit's centre to that voxel (the wheel "
+                                   "steps the slice)"),
               ("drop a file", "open a scene (.json), a volume (.raw, .nrrd, .npy, .nii, .nii.gz, .tif) "
                                "or a folder (TIFF stack, DICOM series)"))
 
@@ -112,7 +114,7 @@ DIVIDER_GRAB_PIXELS = 6.0
 @dataclass
 class Drag:
     button: int
-    kind: str          # orbit, pan, divider or handle
+    kind: str          # orbit, pan, divider, handle or slice
     handle: object = None   # the crop or clip handle being dragged (crop_handles.Handle)
 
 
@@ -171,13 +173,19 @@ class InputRouter:
         if self.drag.kind == "handle":
             self.viewer.drag_handle(self.drag.handle, dx, dy)
             return
+        if self.drag.kind == "slice":
+            self.viewer.slices.pick(float(x), float(y))
+            return
         target = self.orbit_pixels if self.drag.kind == "orbit" else self.pan_pixels
         target[0] += dx
         target[1] += dy
 
     def on_mouse_button(self, window, button: int, action: int, mods: int) -> None:
         imgui.backends.glfw_mouse_button_callback(self.address, button, action, mods)
-        if action == glfw.PRESS and self.drag is None and self._over_view():
+        if (action == glfw.PRESS and self.drag is None and button == glfw.MOUSE_BUTTON_LEFT
+                and not imgui.get_io().want_capture_mouse and self.viewer.slices.pick(*self.cursor)):
+            self.drag = Drag(button, "slice")
+        elif action == glfw.PRESS and self.drag is None and self._over_view():
             divider = self.viewer.divider_x_window()
             handle = (self.viewer.handle_at(*self.cursor) if button == glfw.MOUSE_BUTTON_LEFT
                       else None)
@@ -195,6 +203,8 @@ class InputRouter:
         imgui.backends.glfw_scroll_callback(self.address, float(dx), float(dy))
         if self._over_view():
             self.zoom_steps += dy
+        elif not imgui.get_io().want_capture_mouse:
+            self.viewer.slices.scroll(*self.cursor, float(dy))
 
     def on_key(self, window, key: int, scancode: int, action: int, mods: int) -> None:
         imgui.backends.glfw_key_callback(self.address, key, scancode, action, mods)

@@ -27,6 +27,10 @@ def initial_state(scene: Scene, args: argparse.Namespace) -> ViewerState:
         state.set_display("error")
     if args.probe_view:
         state.probe_view = args.probe_view
+    if args.slices:
+        state.slice_view = args.slices
+    if args.slice_colours:
+        state.slice_colours = "window" if args.slice_colours == "window" else "transfer function"
     state.show_box = args.box or state.show_box
     if args.exposure is not None:
         state.exposure = args.exposure
@@ -49,11 +53,14 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
     return apply_options(scene, args)
 
 
-def view_aspect(window: tuple[int, int]) -> float:
-    """The picture's aspect in a window of this size (the panel on its left)."""
+def view_aspect(window: tuple[int, int], slices: str | None = None) -> float:
+    """The picture's aspect in a window of this size (the panel on its left, the slice column,
+    where `slices` is on, on its right)."""
     from .layout import SIDEBAR_WIDTH
+    from .slice_view import column_width
     width, height = window
-    return max(width - SIDEBAR_WIDTH, 1) / max(height, 1)
+    column = column_width(slices or "off", window, SIDEBAR_WIDTH)
+    return max(width - SIDEBAR_WIDTH - column, 1) / max(height, 1)
 
 
 def run_view(args: argparse.Namespace) -> int:
@@ -84,7 +91,8 @@ def run_view(args: argparse.Namespace) -> int:
         if volume is None:
             volume = load_scene_volume(scene)
             scene = opening_scene(scene, volume)   # a CT opens with its clinical preset
-        scene = frame_default_camera(scene, volume.half_extent, view_aspect(args.window))
+        scene = frame_default_camera(scene, volume.half_extent,
+                                     view_aspect(args.window, args.slices))
         load_scene_environment(scene)   # and an environment map (kept in its cache)
         for note in volume.notes:
             print(f"view: note: {note}", file=sys.stderr)

@@ -1,4 +1,5 @@
-"""Where the picture goes: the window minus the sidebar, in window coordinates (what the cursor
+"""Where the picture goes: the window minus the sidebar (and the slice column at the right,
+`right_width`, where the slice view is on), in window coordinates (what the cursor
 reports, top-left origin) and in framebuffer pixels (GL's bottom-left origin). On a HiDPI
 screen the framebuffer has more pixels than the window has coordinates."""
 from __future__ import annotations
@@ -6,17 +7,20 @@ from __future__ import annotations
 SIDEBAR_WIDTH = 370           # the panel's logical pixels, before the UI scale
 
 
-def view_rect_window(window_size, sidebar_width: float) -> tuple[float, float, float, float]:
+def view_rect_window(window_size, sidebar_width: float,
+                     right_width: float = 0.0) -> tuple[float, float, float, float]:
     w, h = window_size
     x = min(float(sidebar_width), w - 1.0)
-    return (x, 0.0, max(w - x, 1.0), float(h))
+    return (x, 0.0, max(w - x - float(right_width), 1.0), float(h))
 
 
-def view_rect_framebuffer(window_size, framebuffer_size, sidebar_width: float) -> tuple[int, int, int, int]:
+def view_rect_framebuffer(window_size, framebuffer_size, sidebar_width: float,
+                          right_width: float = 0.0) -> tuple[int, int, int, int]:
     scale_x = framebuffer_size[0] / max(window_size[0], 1)
-    x, _, _, _ = view_rect_window(window_size, sidebar_width)
+    x, _, w, _ = view_rect_window(window_size, sidebar_width, right_width)
     x0 = int(round(x * scale_x))
-    return (x0, 0, max(framebuffer_size[0] - x0, 1), max(framebuffer_size[1], 1))
+    x1 = framebuffer_size[0] if right_width <= 0 else int(round((x + w) * scale_x))
+    return (x0, 0, max(x1 - x0, 1), max(framebuffer_size[1], 1))
 
 
 def render_size(view_rect, render_scale: float) -> tuple[int, int]:

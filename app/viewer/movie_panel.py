@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from imgui_bundle import ImVec2, imgui
 
-from ..scene_types import MOVIE_METHODS as METHODS
+from ..methods import MOVIE_METHODS as METHODS
 from .recorder import MOVIE_MODES
 
 

@@ -65,6 +65,14 @@ def pan(cam: CameraSpec, dx_pixels: float, dy_pixels: float, viewport_height: fl
     return _spec(cam, eye + shift, target + shift)
 
 
+def recentre(cam: CameraSpec, point) -> CameraSpec:
+    """Moves eye and target together so that the orbit's centre (the target) is `point`, keeping
+    the view direction and distance (a click in the slice view)."""
+    eye, target = np.asarray(cam.eye, np.float64), np.asarray(cam.target, np.float64)
+    shift = np.asarray(point, np.float64) - target
+    return _spec(cam, eye + shift, target + shift)
+
+
 def zoom(cam: CameraSpec, wheel_steps: float) -> CameraSpec:
     """Moves the eye towards the target (positive steps) or away, keeping the view direction."""
     eye, target, forward, _, _ = _basis(cam)

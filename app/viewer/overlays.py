@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from imgui_bundle import ImVec2, imgui
 
+from ..methods import REFERENCE
 from .input import GROUP_HELP, MOUSE_HELP, SHORTCUTS
 
 ERROR_COLOUR = (1.0, 0.45, 0.4, 1.0)
@@ -107,7 +108,7 @@ def view_labels(v) -> None:
         label(x + 8, v.session.label(state.method))
         right = v.session.label(state.split_method)
         label(x + w - imgui.calc_text_size(right).x - 12, right)
-    elif state.display == "error" and state.method != "pt":
+    elif state.display == "error" and state.method != REFERENCE:
         rmse = v.error_meter.value
         label(x + 8, f"|{state.method} - pt|  rel. RMSE {rmse:.4f}  (pt {v.error_meter.samples[1]} spp)")
     else:

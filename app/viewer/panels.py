@@ -9,7 +9,7 @@ import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
 from ..rendering.renderer import MAX_GATHER_EVENT, RAYMARCH_STAGES
-from ..scene_types import VIEWER_METHODS as METHODS
+from ..methods import METHODS as REGISTRY, REFERENCE, VIEWER_METHODS as METHODS
 from ..scene import (ORIENTATIONS, PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS,
                      PROBE_LAYOUTS, PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS)
 from ..volume import BUILTIN_VOLUMES
@@ -176,7 +176,7 @@ def render_section(v) -> None:
 
 def _error_summary(v) -> None:
     state = v.state
-    if state.method == "pt":
+    if state.method == REFERENCE:
         imgui.text_wrapped("The error view compares a probe method with the path tracer: choose one.")
         return
     rmse = v.error_meter.value
@@ -487,7 +487,8 @@ def auto_section(v) -> None:
         v.auto_target = float(t)
     if imgui.button("Auto: cheapest probes meeting it"):
         from ..rendering.auto_probes import choose_probes
-        method = state.method if state.method != "pt" else "raymarch"
+        shown = REGISTRY[state.method]   # (refine's probes are its raymarcher's)
+        method = shown.name if shown.needs_probes and not shown.composite else "raymarch"
         choice = choose_probes(v.session.renderer, v.auto_target, method)
         p = choice.scene.probes
         state.set_probes(grid=p.grid, samples=p.samples, sh_order=p.sh_order,
@@ -561,10 +562,14 @@ def help_section(v) -> None:
     shortcut_table()
 
 
-SECTIONS = (("Render", render_section), ("Data", data_section), ("Time", time_section),
+def slices_section(v) -> None:
+    v.slices.section()
+
+
+SECTIONS = (("Render", render_section), ("Slices", slices_section), ("Data", data_section), ("Time", time_section),
             ("Transfer function", transfer_panel),
             ("Crop and clip", crop_section), ("Light", light_section), ("Probes", probes_section),
             ("Bookmarks and movie", movie_section), ("Stats", stats_section),
             ("Camera and files", camera_section), ("Help (F1)", help_section))
-CLOSED_AT_START = ("Help (F1)", "Data", "Camera and files", "Crop and clip",
+CLOSED_AT_START = ("Help (F1)", "Slices", "Data", "Camera and files", "Crop and clip",
                    "Bookmarks and movie")

@@ -2,8 +2,9 @@
 ones GLFW calls), frame by frame, and save screenshots and state dumps. Tests and the screenshot
 script use them; a person can too (``view SCENE --script steps.json``).
 
-Steps (one key each; positions are window coordinates, a widget's name, or {"view": [fx, fy]},
-fractions of the picture's rectangle):
+Steps (one key each; positions are window coordinates, a widget's name, {"view": [fx, fy]},
+fractions of the picture's rectangle, or {"slice": "x" | "y" | "z", "at": [fx, fy]}, fractions of
+that slice's image in the slice view):
   {"frames": N}                      render N frames
   {"until": "baked" | "done" | "loaded", "max_frames": M}   frames until the probes are baked /
                                      nothing is left to render (the scripted --spp cap reached) /
@@ -13,6 +14,7 @@ fractions of the picture's rectangle):
   {"double_click": TARGET}
   {"drag": TARGET, "to": TARGET | "by": [dx, dy], "button": "left", "steps": 6}
   {"scroll": TARGET, "steps": 1}     mouse wheel notches (positive zooms in)
+  {"move": TARGET}                   move the mouse there (hover), then one frame
   {"resize": [W, H]}                 resize the window
   {"drop": [PATH, ...]}              drop files on the window
   {"screenshot": PATH}               save the window's image (panels included) after one frame
@@ -102,6 +104,8 @@ class ScriptRunner:
         elif "drag" in s:
             self.drag(s["drag"], s.get("to"), s.get("by"), BUTTONS[s.get("button", "left")],
                       int(s.get("steps", 6)))
+        elif "move" in s:
+            self.move(self.position(s["move"]))
         elif "scroll" in s:
             self.move(self.position(s["scroll"]))
             self.input.on_scroll(self.handle, 0.0, float(s.get("steps", 1)))
@@ -150,6 +154,10 @@ class ScriptRunner:
         if isinstance(target, str):
             self._scroll_into_view(target)
             return self.viewer.widgets.centre(target)
+        if isinstance(target, dict) and "slice" in target:
+            x, y, w, h = self.viewer.slices.image_rect(target["slice"])
+            fx, fy = target.get("at", (0.5, 0.5))
+            return x + fx * w, y + fy * h
         if isinstance(target, dict) and "view" in target:
             x, y, w, h = self.viewer.view_rect_window()
             fx, fy = target["view"]

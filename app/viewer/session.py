@@ -37,8 +37,10 @@ from ..gl.timer import WallTimer
 from ..rendering.accumulation import Accumulation
 from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from ..rendering.probes import BakeProgress
-from ..rendering.refine import HalfBuffers, RefineEstimate
-from ..rendering.renderer import PROBE_LIGHTING, Renderer
+from ..methods import METHODS
+from ..rendering.refine import (REFINE_HALF_SEED, REFINE_MIN_HALF_SAMPLES,  # noqa: F401 (tests)
+                                REFINE_RAYMARCH_FRAMES, HalfBuffers, RefineEstimate)
+from ..rendering.renderer import Renderer
 from ..rendering.sample_bands import TileCosts, fill_frame, tile_grid
 from ..scene import Scene
 from ..volume import Volume
@@ -51,15 +53,12 @@ RECENT_DISPATCHES = 5    # dispatches whose GPU ms per sample set the next frame
 # What a probe-lit method shows while its probes bake: the raymarcher over the probes as they are.
 PREVIEW_WHILE_BAKING = "raymarch"
 REFINE = "refine"
-# `refine`: the raymarcher's frames it accumulates at most (its image is then as good as its bias
-# lets it be; the rest of each frame goes to `guided`); a reduction of the halves' error (a 16-byte
-# read-back) whenever guided's samples double and at least every REFINE_CHECK_FRAMES frames with
-# guided samples (about 4 a second at 60 Hz), never every frame; the guided samples each half
-# needs before its estimate may switch the view; the seed offset of the second half.
-REFINE_RAYMARCH_FRAMES = 16
+# `refine`: a reduction of the halves' error (a 16-byte read-back) whenever guided's samples
+# double and at least every REFINE_CHECK_FRAMES frames with guided samples (about 4 a second at
+# 60 Hz), never every frame; the raymarcher's frames, the guided samples a half needs before its
+# estimate may switch the view and the second half's seed are app/rendering/refine.py's (a still
+# image of refine shares them).
 REFINE_CHECK_FRAMES = 16
-REFINE_MIN_HALF_SAMPLES = 4
-REFINE_HALF_SEED = 0x68E31DA4
 REFINE_HISTORY = 64     # frames after a restart whose shown image a refine view remembers (tests)
 
 
@@ -188,13 +187,14 @@ class _PacedView:
 class RenderSession:
     def __init__(self, ctx: moderngl.Context, scene: Scene, volume: Volume | None = None,
                  seed: int = 0, renderer: Renderer | None = None, settings=None,
-                 clock: str | None = None):
+                 clock: str | None = None, lab=None):
         """`renderer`: one to drive instead of a new one (the interact benchmark's replay);
-        `settings`: the new one's RenderSettings (None: the defaults); `clock`: "gpu" or "wall"
-        to pace by that clock always (None: by the device, app/viewer/pacing.py)."""
+        `settings`: the new one's RenderSettings (None: the defaults); `lab`: its LabOptions
+        (tests and the bench only; None: the product's); `clock`: "gpu" or "wall" to pace by that
+        clock always (None: by the device, app/viewer/pacing.py)."""
         self.ctx = ctx
         self.renderer = (renderer if renderer is not None else
-                         Renderer(ctx, scene, volume, settings=settings))
+                         Renderer(ctx, scene, volume, settings=settings, lab=lab))
         self.seed = seed
         self.views: dict[str, MethodView] = {}
         self.size = (0, 0)
@@ -343,13 +343,13 @@ class RenderSession:
 
     def needs_probes(self, method: str) -> bool:
         """Whether a view of `method` reads the probes (refine: its raymarcher and `guided` do)."""
-        return method == REFINE or self.renderer.needs_probes(method)
+        return METHODS[method].needs_probes
 
     def shown_method(self, method: str) -> str:
         """What a view of `method` renders now: the raymarcher while a probe-lit method's probes
         bake (PREVIEW_WHILE_BAKING), else the method itself."""
         r = self.renderer
-        if method in PROBE_LIGHTING and r.probe_grid is not None and not r.probes_current():
+        if METHODS[method].probe_lighting and r.probe_grid is not None and not r.probes_current():
             return PREVIEW_WHILE_BAKING
         return method
 

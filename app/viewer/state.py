@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from ..scene_types import VIEWER_METHODS as METHODS
+from ..methods import METHODS as REGISTRY, REFERENCE, VIEWER_METHODS as METHODS
 from ..scene import BookmarkSpec, CameraSpec, ClipPlaneSpec, CropSpec, Scene, ViewerSpec
 from .history import SceneHistory
 
@@ -27,6 +27,11 @@ class ViewerState:
     probe_slab_axis: str = "all"           # the probe view's slab: all, or one plane across x/y/z
     probe_slab: float = 0.5                # where that plane is, 0 to 1 across the probe box
     show_box: bool = False
+    # The slice view (app/viewer/slice_view.py): off, three slices or one beside the 3D view,
+    # coloured by the window or the transfer function, through this world point.
+    slice_view: str = "off"
+    slice_colours: str = "window"
+    slice_point: tuple[float, float, float] = (0.0, 0.0, 0.0)
     exposure: float = 1.0
     max_samples: int = 1024                # accumulation stops here (per pixel)
     render_scale: float = 1.0              # render pixels per window pixel
@@ -167,12 +172,13 @@ class ViewerState:
         methods = [self.method]
         if self.display == "split" and self.split_method != self.method:
             methods.append(self.split_method)
-        if self.display == "error" and self.method != "pt":
-            methods.append("pt")
+        if self.display == "error" and self.method != REFERENCE:
+            methods.append(REFERENCE)
         return methods
 
     def wants_probes(self) -> bool:
-        return self.probe_view != "off" or any(m != "pt" for m in self.shown_methods())
+        return self.probe_view != "off" or any(REGISTRY[m].needs_probes
+                                               for m in self.shown_methods())
 
     # ---- edits (each replaces the frozen scene) -------------------------------------------------
     def set_method(self, method: str) -> None:
@@ -188,7 +194,7 @@ class ViewerState:
             raise ValueError(f"unknown display mode {mode!r}")
         self.display = mode
         if mode == "split" and self.split_method == self.method:
-            self.split_method = "pt" if self.method != "pt" else "probes"
+            self.split_method = REFERENCE if self.method != REFERENCE else "probes"
 
     def toggle_display(self, mode: str) -> None:
         self.set_display("image" if self.display == mode else mode)

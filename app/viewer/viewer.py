@@ -12,6 +12,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from ..methods import REFERENCE
 from ..twins.camera import camera_frame
 from ..gl.shaders import ShaderError
 from ..gl.timer import GpuTimer
@@ -31,6 +32,7 @@ from .probe_view import (BoxOutline, ProbeSpheres, describe_probe, probe_centres
                          slab_plane)
 from .recorder import MovieRecorder
 from .session import FrameTimes, RenderSession
+from .slice_panel import SliceImages, SlicePanel
 from .state import ViewerState
 from ..transfer import opacity_points
 from .tf_editor import histogram_curve
@@ -60,11 +62,12 @@ def could_not_open(path, exc: BaseException) -> str:
 
 class Viewer:
     def __init__(self, ctx: moderngl.Context, state: ViewerState, device: str = "",
-                 file_dialog: str = "auto", volume=None, settings=None):
+                 file_dialog: str = "auto", volume=None, settings=None, lab=None):
         self.ctx = ctx
         self.state = state
         self.device = device
-        self.session = RenderSession(ctx, state.scene, volume, settings=settings)
+        # lab: LabOptions for tests (app/rendering/lab_options.py); the launch never sets it
+        self.session = RenderSession(ctx, state.scene, volume, settings=settings, lab=lab)
         state.show_channels(self.session.volume.channel_count)
         self.widgets = WidgetRects()
         self.error_meter = ErrorMeter()
@@ -106,6 +109,7 @@ class Viewer:
         self.recorder: MovieRecorder | None = None   # the movie being recorded, one frame a frame
         self.movie = MovieRecorder.default_settings()  # the panel's movie settings
         self.transfer_file = "transfer_function.json"  # the transfer-function panel's file field
+        self.slices = SlicePanel(self)           # the slice view, at the window's right when on
 
     # ---- geometry ------------------------------------------------------------------------------
     def sidebar_width(self) -> float:
@@ -113,11 +117,12 @@ class Viewer:
 
     def view_rect_window(self) -> tuple[float, float, float, float]:
         """The picture's rectangle in window coordinates (what the cursor reports), top-left origin."""
-        return layout.view_rect_window(self.window_size, self.sidebar_width())
+        return layout.view_rect_window(self.window_size, self.sidebar_width(), self.slices.width())
 
     def view_rect_framebuffer(self) -> tuple[int, int, int, int]:
         """The same rectangle in framebuffer pixels with GL's bottom-left origin (HiDPI aware)."""
-        return layout.view_rect_framebuffer(self.window_size, self.framebuffer_size, self.sidebar_width())
+        return layout.view_rect_framebuffer(self.window_size, self.framebuffer_size,
+                                            self.sidebar_width(), self.slices.width())
 
     def divider_x_window(self) -> float | None:
         """The split view's divider in window coordinates, None when there is no split view."""
@@ -326,7 +331,7 @@ class Viewer:
         return replace(cam, width=w, height=h) if w > 0 and h > 0 else cam
 
     def _restream(self) -> None:
-        """A mixed pool (RenderSettings.mixed_levels under a cap) follows the camera once it has
+        """A mixed pool (LabOptions.mixed_levels under a cap) follows the camera once it has
         settled (no camera change for RESTREAM_SETTLE_S, no button held): not on every frame of a
         drag. A restream under way goes on a budget of OPEN_WRITE_BUDGET_S a frame (the Volume
         panel shows it); a camera that settles elsewhere meanwhile starts it over."""
@@ -505,7 +510,7 @@ class Viewer:
             except RECOVERABLE as exc:
                 state.error(f"rendering stopped: {exc}")
                 self._halted_scene = state.scene
-        if state.display == "error" and state.method != "pt":
+        if state.display == "error" and state.method != REFERENCE:
             self.error_meter.update(self.session, state.method, state.max_samples)
         self.ctx.screen.use()
         self.ctx.viewport = (0, 0, *self.framebuffer_size)
@@ -531,9 +536,10 @@ class Viewer:
             other = None
             if state.display == "split":
                 other = session.texture(state.split_method)
-            elif state.display == "error" and state.method != "pt":
-                other = session.texture("pt")
-            mode = state.display if (state.display != "error" or state.method != "pt") else "image"
+            elif state.display == "error" and state.method != REFERENCE:
+                other = session.texture(REFERENCE)
+            mode = (state.display if (state.display != "error" or state.method != REFERENCE)
+                    else "image")
             if state.probe_view == "alone":
                 mode = "image"
             rms = self.error_meter.reference_rms
@@ -552,6 +558,10 @@ class Viewer:
             if box is not None:
                 self.ctx.viewport = rect
                 box.draw(matrix, session.volume.half_extent)
+        if state.slice_view != "off":
+            images = self._pass("slices", SliceImages)
+            if images is not None:
+                self.slices.render(images)
 
     def _mouse_held(self) -> bool:
         """A mouse button down (a drag under way: a slider, a curve point, a handle)."""
@@ -587,6 +597,7 @@ class Viewer:
         if self.state.show_ui:
             panels.sidebar(self)
         overlays.view_labels(self)
+        self.slices.draw()
         overlays.crop_overlay(self)
         overlays.probe_tooltip(self)
         overlays.help_window(self)
@@ -708,6 +719,7 @@ class Viewer:
                              "box_max": list(session.renderer.resources.clip.box_max),
                              "plane": list(session.renderer.resources.clip.plane)}),
             "handles": {m.name: list(p) for m, p in self.handle_points()},
+            "slices": self.slices.snapshot(),
             "undo_steps": len(s.history.undo_steps), "redo_steps": len(s.history.redo_steps),
             "recording": None if self.recorder is None else self.recorder.progress(),
             "errors": list(s.errors), "messages": list(s.messages),
@@ -729,6 +741,7 @@ class Viewer:
         for p in self._passes.values():
             p.release()
         self._passes.clear()
+        self.slices.release()
         self.timer.release()
         self.session.release()
 

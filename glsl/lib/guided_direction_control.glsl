@@ -4,7 +4,7 @@
 //
 // At an event at x reached along w_in, the path's estimate of what arrives there is one direction
 // w drawn with density pdf(w) and the radiance a path finds along it, times phase(w) / pdf(w)
-// (pdf = phase: HG, g; with GUIDED_DIRECTIONS the mixture of lib/guided_directions.glsl). The
+// (pdf = phase: HG, g; a BRDF's where a surface scatters). The
 // probes hold an estimate of that radiance, h(w) = sum_l window_l sum_m c_lm Y_lm(w) (their SH,
 // windowed as the probe renderers window it). Its mean over the phase function is known in
 // closed form (Funk-Hecke: HG's Legendre coefficients are g^l):

@@ -1,8 +1,7 @@
 // What `guided`'s two levels predict is scattered at x towards -d, per unit sigma_s: the probes'
 // inscattered radiance (lib/probes.glsl) plus the sun through the light grid's transmittance
 // (lib/light_grid.glsl). Level 0 integrates it along camera rays (lib/guided_level0.glsl); level 1
-// subtracts it at a path's first event (lib/integrator.glsl GUIDED_RESIDUAL); guided distances
-// weigh a collision by it (lib/guided_distances.glsl).
+// subtracts it at a path's first event (lib/integrator.glsl GUIDED_RESIDUAL).
 #include "lib/light_grid.glsl"
 
 // The same from coefficients probe_fetch has just fetched at x.

@@ -23,16 +23,6 @@
 // ENVIRONMENT_MAP_SAMPLING 0 turns the map's samples off (phase sampling alone, escapes weighted
 // 1): the same estimate with more noise, kept for measuring what importance sampling gains.
 //
-// GUIDED_RESIDUAL with GUIDED_DISTANCES 1 (`guided`'s level 1): a flight after a scattering event
-// decides real or null at its tentative collisions by what the probes predict each brings back,
-// the path weighted to keep delta tracking's mean (lib/guided_distances.glsl).
-//
-// GUIDED_RESIDUAL with GUIDED_DIRECTIONS 1 (`guided`'s level 1): the next direction at an event
-// before the last is drawn from the mixture of HG and HG times the probes' radiance
-// (lib/guided_directions.glsl) and the throughput takes its weight phase / pdf. With a map, "the
-// phase function's pdf" of the MIS above is then that mixture's pdf, on both sides: p.phase_pdf
-// of the direction drawn (escapes) and the mixture evaluated at the map sample's direction.
-//
 // HYBRID_SCATTERING (the scene's surface.gradient_factor k > 0; lib/hybrid_scattering.glsl): each
 // real scattering event is a surface's with probability 1 - exp(-k |grad A|) (the path's status is
 // then PATH_ACTIVE_SURFACE until its next direction is drawn), and the event's kernel is the
@@ -62,6 +52,11 @@ uniform float anisotropy;     // Henyey-Greenstein g
 uniform int max_path_steps;   // hang guard: tracking steps one path may take in all
 #if defined(WALK_SUN_GRID)
 uniform float walk_sun_correction;   // least rate at which a shadow ray corrects the grid's sun
+#endif
+#if defined(WALK_SUN_GRID) && defined(WALK_SUN_CORRECTION)
+// The walk's reservoir chose the event at x (grid transmittance `grid`, weight c / w) for the sun's
+// correction, replacing any earlier choice: defined by the walk shader (glsl/probe_walks.comp).
+void walk_correction_choose(vec3 x, float grid, vec3 weight_per_w);
 #endif
 #if defined(PROBE_LIGHTING)
 // The scattering event at which a probe renderer reads the probes and ends the path (>= 1). 1 is
@@ -101,21 +96,6 @@ float mis_power(float a, float b)
 }
 #endif
 
-// Steps a path step keeps back from its tracking for the work after it that loops: guided
-// directions' tables (lib/guided_directions.glsl), one at the event's map sample and one for its
-// next direction; charged as they run.
-#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS && defined(ENVIRONMENT_MAP) && defined(AREA_LIGHTS)
-const int PATH_STEP_KEPT_BACK = 3 * GUIDED_DIRECTION_TABLE_STEPS;
-#elif defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS && defined(AREA_LIGHTS)
-const int PATH_STEP_KEPT_BACK = 2 * GUIDED_DIRECTION_TABLE_STEPS;
-#elif defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS && defined(ENVIRONMENT_MAP)
-const int PATH_STEP_KEPT_BACK = 2 * GUIDED_DIRECTION_TABLE_STEPS;
-#elif defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS
-const int PATH_STEP_KEPT_BACK = GUIDED_DIRECTION_TABLE_STEPS;
-#else
-const int PATH_STEP_KEPT_BACK = 0;
-#endif
-
 #ifndef RR_START_BOUNCE
 #define RR_START_BOUNCE 3
 #endif
@@ -123,7 +103,7 @@ const int PATH_STEP_KEPT_BACK = 0;
 // Independent shadow rays towards the sun per scattering event, averaged (1: the renderers'; more:
 // an experiment's near-noiseless shadow ray, measuring how much of a path's variance the shadow
 // ray's own noise holds: lab/experiments/experiment_shadow_variance.py,
-// RenderSettings.sun_shadow_rays). The mean is the same for any count.
+// LabOptions.sun_shadow_rays). The mean is the same for any count.
 #ifndef SUN_SHADOW_RAYS
 #define SUN_SHADOW_RAYS 1
 #endif
@@ -154,20 +134,19 @@ struct PathState {
     int shadow_pending; // the sun's shadow rays of the event at x still to finish (0: none)
 #if defined(WALK_SUN_GRID)
     float correction_rate_sum;   // the walk's events' correction rates summed (see path_flight)
-    // The walk's one candidate for the sun's correction: where, its weight W c / w (the
-    // estimate's factor on T_ray - T_grid), the grid's transmittance there; the reservoir's
-    // weight sum W.
-    vec3 correction_x;
+    // The reservoir's weight sum W. Its candidate (where, c / w, the grid's transmittance there)
+    // goes straight to the walk's buffer entries (walk_correction_choose, glsl/probe_walks.comp):
+    // held here, in registers through every tracking step, it made the walks 18% slower on an
+    // H200 (bench/h200-bake-speed). The pads keep the resumable state's layout.
+    vec3 correction_pad0;
     float correction_w_sum;
-    vec3 correction_weight;
-    float correction_grid;
+    vec4 correction_pad1;
 #else
     int pad;
 #endif
 #if defined(ENVIRONMENT_MAP)
     vec3 env_w;         // the map sample's direction at x
-    float phase_pdf;    // pdf of the phase sampling that chose w (0: w was not phase-sampled;
-                        // GUIDED_DIRECTIONS: of the mixture that chose it)
+    float phase_pdf;    // pdf of the phase sampling that chose w (0: w was not phase-sampled)
     vec3 env_weight;    // its radiance x phase x MIS weight / pdf, to be times its transmittance
     int env_pending;    // 1 while the map sample's shadow ray at x is unfinished
 #endif
@@ -194,10 +173,9 @@ void path_begin(inout PathState p, vec3 origin, vec3 direction, uint rng)
     p.shadow_pending = 0;
 #if defined(WALK_SUN_GRID)
     p.correction_rate_sum = 0.0;
-    p.correction_x = origin;
+    p.correction_pad0 = vec3(0.0);
     p.correction_w_sum = 0.0;
-    p.correction_weight = vec3(0.0);
-    p.correction_grid = 0.0;
+    p.correction_pad1 = vec4(0.0);
 #else
     p.pad = 0;
 #endif
@@ -232,16 +210,21 @@ vec3 path_surface_normal(PathState p)
     return surface_normal(path_event_gradient, -p.w);
 }
 
-// The event's kernel towards the light direction l (unit, towards the light): the phase function,
-// or at a surface event the BRDF times the cosine (lib/hybrid_scattering.glsl).
+#endif
+
+// The event's kernel towards the light direction l (unit, towards the light): the phase function
+// (the same in every channel), or at a surface event the BRDF times the cosine
+// (lib/hybrid_scattering.glsl). Every light's estimate at an event (the sun's shadow ray or light
+// grid, the probes' stored sun, an area light's sample) weighs by it.
 vec3 path_event_kernel(PathState p, vec3 l)
 {
+#if defined(HYBRID_SCATTERING)
     if (p.status == PATH_ACTIVE_SURFACE)
         return surface_kernel(path_surface_normal(p), -p.w, l, surface_roughness,
                               surface_specular);
+#endif
     return vec3(phase_hg(dot(l, p.w), anisotropy));
 }
-#endif
 
 #if defined(ENVIRONMENT_MAP)
 // The map's radiance for a path that leaves the box along p.w: weighted against the map's own
@@ -325,19 +308,7 @@ int path_flight(inout PathState p, inout int steps_left)
     }
 #endif
     float t;
-#if defined(GUIDED_RESIDUAL) && GUIDED_DISTANCES
-    // `guided`'s free-flight decisions (lib/guided_distances.glsl) on flights after a scattering
-    // event whose collision would be scattered at; the flight's weight joins the throughput
-    // whatever it ends in (an escape's environment, an event, a cut to resume).
-    guided_flight = p.bounce >= 1 && p.bounce < max_bounces;
-    guided_flight_sun_phase = phase_hg(dot(sun_direction, p.w), anisotropy);
-    guided_flight_weight = 1.0;
     int event = delta_track(p.x, p.w, t0, t1, p.rng, steps_left, t);
-    p.throughput *= guided_flight_weight;
-    guided_flight = false;
-#else
-    int event = delta_track(p.x, p.w, t0, t1, p.rng, steps_left, t);
-#endif
     if (event == TRACK_ESCAPED) {
         p.radiance += path_escape(p);
         return STEP_DONE;
@@ -398,11 +369,7 @@ int path_flight(inout PathState p, inout int steps_left)
             vec3 light_w = area_light_sample(p.x, u0, u1, u2, light_le, light_pdf);
             p.light_pending = 0;
             if (light_pdf > 0.0 && any(greaterThan(light_le, vec3(0.0)))) {
-#if defined(HYBRID_SCATTERING)
                 vec3 kernel = path_event_kernel(p, light_w);
-#else
-                vec3 kernel = vec3(phase_hg(dot(light_w, p.w), anisotropy));
-#endif
                 p.light_w = light_w;
                 p.light_weight = light_le * kernel / light_pdf;
                 p.light_pending = 2;
@@ -410,13 +377,8 @@ int path_flight(inout PathState p, inout int steps_left)
         }
 #endif
 #if PROBE_LIGHTING == 2
-#if defined(HYBRID_SCATTERING)
         p.radiance += p.throughput * sun_irradiance
                       * (probe_sun_transmittance * path_event_kernel(p, sun_direction));
-#else
-        p.radiance += p.throughput * sun_irradiance
-                      * (probe_sun_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy));
-#endif
         return STEP_DONE;
 #endif
     }
@@ -451,15 +413,6 @@ int path_flight(inout PathState p, inout int steps_left)
             if (any(greaterThan(le, vec3(0.0)))) {
                 // the pdf with which path_step would draw env_w at this event
                 float direction_pdf = phase;
-#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS
-                if (p.bounce < max_bounces) {   // (path_step's condition for guiding)
-                    vec3 coeffs[SH_COUNT];
-                    float probe_sun;
-                    probe_fetch(p.x, coeffs, probe_sun);
-                    direction_pdf *= guided_direction_density_at(coeffs, p.w, anisotropy, env_w);
-                    steps_left -= GUIDED_DIRECTION_TABLE_STEPS;
-                }
-#endif
                 p.env_w = env_w;
                 p.env_weight = le * (phase * mis_power(env_pdf, direction_pdf) / env_pdf);
                 p.env_pending = 1;
@@ -493,16 +446,6 @@ int path_flight(inout PathState p, inout int steps_left)
                 float phase = phase_hg(dot(light_w, p.w), anisotropy);
                 kernel = vec3(phase);
                 direction_pdf = phase;
-#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS
-                if (p.bounce < max_bounces) {   // (path_step's condition for guiding)
-                    vec3 coeffs[SH_COUNT];
-                    float probe_sun;
-                    probe_fetch(p.x, coeffs, probe_sun);
-                    direction_pdf *= guided_direction_density_at(coeffs, p.w, anisotropy,
-                                                                 light_w);
-                    steps_left -= GUIDED_DIRECTION_TABLE_STEPS;
-                }
-#endif
             }
             if (any(greaterThan(kernel, vec3(0.0)))) {
                 p.light_w = light_w;
@@ -528,29 +471,24 @@ int path_flight(inout PathState p, inout int steps_left)
     // in the walk shader made every walk 2-2.5x slower on an H100 whether or not it ran
     // (bench/h100-bake-split). walk_sun_correction = 0: the grid alone (biased).
     if (any(greaterThan(sun_irradiance, vec3(0.0)))) {
-        float sun_phase = phase_hg(dot(sun_direction, p.w), anisotropy);
         float tau = light_grid_optical_depth(p.x);
         float grid = exp(-tau);
-#if defined(HYBRID_SCATTERING)
         vec3 c = p.throughput * sun_irradiance * path_event_kernel(p, sun_direction);
-#else
-        vec3 c = p.throughput * sun_irradiance * sun_phase;
-#endif
         p.radiance += c * grid;
+#if defined(WALK_SUN_CORRECTION)   // compiled where the rate is above 0 (its code alone made the
+                                   // walks 18% slower on an H200: bench/h200-bake-speed)
         if (walk_sun_correction > 0.0) {
             float change = tau - light_grid_optical_depth(p.x + light_grid_texel * sun_direction);
             float q = clamp(walk_sun_correction * (1.0 + 8.0 * change), walk_sun_correction, 0.5);
             float w = max(c.r, max(c.g, c.b)) * q;
             if (w > 0.0) {
                 p.correction_w_sum += w;
-                if (rng_next(p.rng) * p.correction_w_sum < w) {
-                    p.correction_x = p.x;
-                    p.correction_weight = c / w;
-                    p.correction_grid = grid;
-                }
+                if (rng_next(p.rng) * p.correction_w_sum < w)
+                    walk_correction_choose(p.x, grid, c / w);
                 p.correction_rate_sum += q;
             }
         }
+#endif
     }
     return STEP_CONTINUE;
 #endif
@@ -589,15 +527,9 @@ int path_step(inout PathState p, inout int steps_left)
                                         steps_left))
             return STEP_SHADOW_CUT;
         p.shadow_pending -= 1;
-#if defined(HYBRID_SCATTERING)
         p.radiance += p.throughput * sun_irradiance
                       * (p.shadow_transmittance * path_event_kernel(p, sun_direction)
                          / float(SUN_SHADOW_RAYS));
-#else
-        p.radiance += p.throughput * sun_irradiance
-                      * (p.shadow_transmittance * phase_hg(dot(sun_direction, p.w), anisotropy)
-                         / float(SUN_SHADOW_RAYS));
-#endif
         p.shadow_t = -1.0;          // the next ray (or the map sample's) starts afresh
         p.shadow_transmittance = 1.0;
     }
@@ -665,9 +597,9 @@ int path_step(inout PathState p, inout int steps_left)
         return STEP_CONTINUE;
     }
 #endif
-#if defined(GUIDED_RESIDUAL) && (GUIDED_DIRECTIONS || GUIDED_DIRECTION_CONTROL)
-    // Both read the probes at the event; neither at the last event the path may scatter at (what
-    // follows it is an escape alone, which the probes' radiance does not track).
+#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTION_CONTROL
+    // The control reads the probes at the event; not at the last event the path may scatter at
+    // (what follows it is an escape alone, which the probes' radiance does not track).
     bool guide = p.bounce < max_bounces;
     vec3 event_coeffs[SH_COUNT];
     if (guide) {
@@ -675,23 +607,7 @@ int path_step(inout PathState p, inout int steps_left)
         probe_fetch(p.x, event_coeffs, probe_sun);
     }
 #endif
-#if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTIONS
-    // `guided`'s directions (lib/guided_directions.glsl): the mixture of HG and HG times the
-    // probes' radiance, weighted by phase / pdf = 1 / q(u); exact for any probes (unbiased).
-    if (guide) {
-        float cdf[GUIDED_CELLS];
-        guided_direction_table(event_coeffs, w_in, anisotropy, cdf);
-        float xi_choice = rng_next(p.rng), xi1 = rng_next(p.rng), xi2 = rng_next(p.rng);
-        vec2 u = guided_direction_primary(cdf, xi_choice, xi1, xi2);
-        phase_over_pdf = 1.0 / guided_direction_density(cdf, u);
-        p.w = sample_hg(w_in, anisotropy, u.x, u.y);
-        steps_left -= GUIDED_DIRECTION_TABLE_STEPS;
-    } else {
-        p.w = sample_hg(w_in, anisotropy, rng_next(p.rng), rng_next(p.rng));
-    }
-#else
     p.w = sample_hg(w_in, anisotropy, rng_next(p.rng), rng_next(p.rng));
-#endif
 #if defined(GUIDED_RESIDUAL) && GUIDED_DIRECTION_CONTROL
     // `guided`'s control variate on the direction (lib/guided_direction_control.glsl): the probes'
     // radiance expected over the phase function minus their radiance in the direction drawn,
@@ -739,9 +655,7 @@ int path_continue(inout PathState p, inout int loop_budget, int reserve)
         bool dispatch_bound = loop_budget < path_left;
         int steps_left = min(path_left, loop_budget);
         int before = steps_left;
-        steps_left -= PATH_STEP_KEPT_BACK;   // tracking stops short of it; what runs after, charged
         int result = path_step(p, steps_left);
-        steps_left += PATH_STEP_KEPT_BACK;
         p.steps_used += before - steps_left;
         loop_budget -= before - steps_left;
         if (result == STEP_DONE)

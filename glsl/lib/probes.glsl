@@ -73,8 +73,7 @@ uniform sampler3D probe_textures[PROBE_TEXTURE_COUNT];
 // per SH band: g^l (the phase convolution) times the SH window
 uniform float probe_band_factors[SH_BANDS];
 // per SH band: the window alone (g = 1): the probes' radiance itself, h(w), which `guided`'s
-// direction control and guided directions read (lib/guided_direction_control.glsl,
-// lib/guided_directions.glsl)
+// direction control reads (lib/guided_direction_control.glsl)
 uniform float probe_window_factors[SH_BANDS];
 
 // Texture `slot` of the probes at texture coordinate uvw: hardware trilinear, or where

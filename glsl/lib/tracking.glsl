@@ -58,17 +58,11 @@ bool ratio_roulette(inout float transmittance, inout uint rng)
 #include "lib/cell_walk.glsl"
 
 // A tentative collision at x (majorant m) of a flight along d: real (true) or null. Delta
-// tracking's own decision, real with probability sigma_t / m; `guided`'s level 1 with
-// GUIDED_DISTANCES replaces it (lib/guided_distances.glsl, defined after the probes' includes)
-// with a decision that follows the probes and weights the path to keep the same mean.
-#if defined(GUIDED_DISTANCES) && GUIDED_DISTANCES
-bool tracking_collides(vec3 x, vec3 d, float m, inout uint rng);
-#else
+// tracking's own decision, real with probability sigma_t / m.
 bool tracking_collides(vec3 x, vec3 d, float m, inout uint rng)
 {
     return rng_next(rng) * m < sigma_t_at(x);
 }
-#endif
 
 #if !defined(GLOBAL_MAJORANT)
 // Starts a walk over the macrocells for t in [t, t_max] clipped to the box; m is the first cell's

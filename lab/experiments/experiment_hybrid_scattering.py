@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, ".")
-from radiance_probes.bench.metrics import corrected_rrmse, reference_noise, rrmse
+from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer

@@ -9,7 +9,7 @@ control takes away.
 Per scene, per max_bounces (1: the first event alone, the camera ray's free flight against the sun's
 shadow ray there; `own`: the scene's), per shadow-ray estimator (RenderSettings.shadow_tracking,
 where this checkout has it) and per count N of independent shadow rays a scattering event averages
-(RenderSettings.sun_shadow_rays; 1 is the renderers', 16 nearly a noiseless shadow ray): the path
+(LabOptions.sun_shadow_rays, app/rendering/lab_options.py; 1 is the renderers', 16 nearly a noiseless shadow ray): the path
 tracer renders K images of SPP samples a pixel with independent seeds. From them a sample's relative
 variance
     v = SPP * sum over pixels of var_k(image_k) / sum over pixels of mean_k(image_k)^2
@@ -47,6 +47,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from radiance_probes.bench.scenes import ALL_SCENES, bench_scene  # noqa: E402
+from radiance_probes.rendering.lab_options import LabOptions  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
 from radiance_probes.scene import parse_scene  # noqa: E402
@@ -147,10 +148,9 @@ def measure_scene(ctx, name: str, args, log) -> dict | None:
                     log(f"{name}: shadow tracking {tracking!r} is not in this checkout, skipped")
                     continue
                 for rays in (int(n) for n in args.rays.split(",")):
-                    changes = {"sun_shadow_rays": rays}
+                    renderer.lab = LabOptions(sun_shadow_rays=rays)
                     if HAS_TRACKING:
-                        changes["shadow_tracking"] = tracking
-                    renderer.configure(**changes)
+                        renderer.configure(shadow_tracking=tracking)
                     t0 = time.perf_counter()
                     images, ms, stats = render_images(renderer, args.images, args.spp,
                                                       args.per_pass, args.seed)

@@ -7,7 +7,7 @@ Usage (GPU): python lab/experiments/experiment_sun_lobe.py OUT.json SETTINGS REF
 [CHANGES ...]
   SETTINGS  GRIDxWALKS,...   e.g. 128x256,64x512
   LOBES     lobe g = (scene's g)^p for each p, 0 for none, "auto" for the shape the pilot chooses
-            (app/rendering/sun_lobe_fit.py); e.g. 0,3,auto (the bands above the order extrapolated
+            (lab/sun_lobe_fit.py); e.g. 0,3,auto (the bands above the order extrapolated
             from the top two instead were measured too: bench/h100-sun-lobe)
   CHANGES   scene changes as JSON, each its own scene: '{"anisotropy": 0.9}',
             '{"light": [1, 0.2, 0]}' (the sun's direction), '{"albedo": 0.8}', and probe
@@ -20,6 +20,7 @@ import numpy as np
 
 sys.path.insert(0, ".")
 import radiance_probes.rendering.probe_layout as layout_module
+from lab.sun_lobe_fit import SunLobeFitter
 from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
@@ -63,12 +64,17 @@ for n_change, change in enumerate(changes):
             layout_module.SUN_LOBE_POWER = 3.0 if auto else lobe
             layout_module.SUN_LOBE_MIN_G = 0.0
             r.configure(sun_lobe=auto or lobe > 0)
-            r.configure(sun_lobe_fit=auto)
             r.set_scene(s)
+            fit = None
+            if auto:   # the pilot's choice (it was RenderSettings.sun_lobe_fit), its time the bake's
+                fitter = SunLobeFitter(ctx)
+                fit = fitter.fit_for(r, seed=11)
+                fitter.release()
+                layout_module.SUN_LOBE_POWER = fit.power
             r.invalidate()
             r.bake(seed=11)
             r.invalidate()
-            bake_ms = r.bake(seed=11)
+            bake_ms = r.bake(seed=11) + (fit.gpu_ms if fit is not None else 0.0)
             res = r.render("raymarch", spp=16, seed=11, samples_per_pass=16)
             img = res.image[..., :3].astype(np.float64)
             sq = ((img - ref) ** 2).sum(axis=-1)
@@ -78,7 +84,6 @@ for n_change, change in enumerate(changes):
                        rim_ratio=float(img[rim].mean() / ref[rim].mean()),
                        rim_share=float(sq[rim].sum() / sq.sum()),
                        bake_ms=bake_ms, render_ms=res.render_ms, frame_ms=res.render_ms / 16)
-            fit = r.last_sun_lobe_fit
             if fit is not None:
                 row.update(fit_h=fit.h, fit_candidates=fit.candidates, fit_gains=fit.gains,
                            fit_ms=fit.gpu_ms)

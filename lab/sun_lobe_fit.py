@@ -1,5 +1,9 @@
 """The shape of the probes' lobe about the sun's direction, chosen per scene from a pilot bake
-(glsl/sun_lobe_fit.comp; the lobe itself: glsl/lib/sun_lobe.glsl).
+(lab/sun_lobe_fit.comp; the lobe itself: glsl/lib/sun_lobe.glsl). An experiment's, outside the
+package (lab/experiments/experiment_sun_lobe.py): it was RenderSettings.sun_lobe_fit, built and
+measured, never the default, and left the product (docs/experiments.md). To bake with the lobe it
+chooses, set radiance_probes.rendering.probe_layout.SUN_LOBE_POWER to the fit's `power` (the
+experiment does).
 
 The lobe is HG_h about the sun's direction with h = g^p. The best p depends on the scene:
 measured on the H100 it is 2 for a front-lit g = 0.8 cloud, 3 to 4 backlit, and 4 at g = 0.9
@@ -7,29 +11,33 @@ measured on the H100 it is 2 for a front-lit g = 0.8 cloud, 3 to 4 backlit, and 
 per axis over the same box, shadow rays to the sun) walks two passes of PILOT_WALKS walks; for
 each candidate p, the two passes' independent amplitudes estimate what the lobe would take out of
 the error the renderers see, less the noise its amplitude would add with the bake's own walk count
-(app/twins/sun_lobe.py fit_gains);
+(fit_gains below);
 the candidate with the largest sum over probes wins. Its cost (the pilot's walks and the fit, GPU
 time) is part of the bake's time; its read-back (two passes' amplitudes, 96 bytes a pilot probe)
 is one wait per bake start.
 
-Built and measured, not the default (RenderSettings.sun_lobe_fit; bench/h100-sun-lobe/auto_fit_*.json,
+Built and measured, not the default (bench/h100-sun-lobe/auto_fit_*.json,
 H100, five variants of the bench's cloud at 32^3 to 192^3 probes): at g = 0.9 it chose p = 4 and
 gained 0.8 to 0.9 points (128^3 x 256: 8.34 -> 7.45%); on the bench's cloud it kept p = 3 (64^3 x
 128: 4); elsewhere it lost up to 0.14 points, and front-lit it kept p = 3 where p = 2 measured
 better (2.84 against 2.59%). The pilot took 2.5 to 7 ms of GPU time a bake."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import moderngl
 import numpy as np
 
-from ..gl.context import is_software
-from ..gl.shaders import compute_program, set_uniforms
-from ..gl.timer import GpuTimer
-from ..twins.sun_lobe import fit_gains
-from .probe_layout import SUN_LOBE_MIN_G, SUN_LOBE_POWER
-from .probes import ProbeGrid
+from radiance_probes.gl.context import is_software
+from radiance_probes.gl.shaders import compute_program, set_uniforms
+from radiance_probes.gl.timer import GpuTimer
+from radiance_probes.rendering import probe_layout
+from radiance_probes.rendering.probes import ProbeGrid
+from radiance_probes.twins.sun_lobe import basis, norm
+
+SHADER = Path(__file__).resolve().with_name("sun_lobe_fit.comp")
 
 SUN_LOBE_FIT_POWERS = (2.0, 3.0, 4.0)   # candidate h = g^p
 PILOT_WALKS = 64   # per pass; the pilot walks two passes
@@ -40,6 +48,7 @@ PILOT_SEED = 0x51D1   # mixed with the bake's seed: a bake's choice follows its 
 @dataclass
 class SunLobeFit:
     h: float                      # the chosen lobe g
+    power: float                  # ... as the phase function's g to this power
     candidates: tuple             # the h tried
     gains: tuple                  # each one's summed gain (larger: better)
     gpu_ms: float                 # the pilot's and the fit's GPU time
@@ -49,7 +58,7 @@ def candidate_hs(anisotropy: float) -> tuple[float, ...]:
     """The lobe shapes tried for phase-function g: g^p for SUN_LOBE_FIT_POWERS, those at least
     SUN_LOBE_MIN_G (a broader lobe changed nothing where measured)."""
     return tuple(h for h in (float(anisotropy) ** p for p in SUN_LOBE_FIT_POWERS)
-                 if h >= SUN_LOBE_MIN_G)
+                 if h >= probe_layout.SUN_LOBE_MIN_G)
 
 
 class SunLobeFitter:
@@ -92,7 +101,8 @@ class SunLobeFitter:
             if self._program is not None:
                 self._program.release()
             self._program = compute_program(self.ctx, "sun_lobe_fit.comp",
-                                            {**pilot.defines(), "SUN_LOBE_CANDIDATES": len(hs)})
+                                            {**pilot.defines(), "SUN_LOBE_CANDIDATES": len(hs)},
+                                            text=SHADER.read_text())
             self._program_key = key
         outputs = pilot.count * len(hs)
         amplitudes = self.ctx.buffer(reserve=16 * 2 * outputs)
@@ -123,8 +133,18 @@ class SunLobeFitter:
         if np.all(np.isfinite(gains)):
             best = int(np.argmax(gains))
         else:   # a non-finite walk (counted in tracking_stats): the fixed power's shape
-            best = int(np.argmin([abs(h - scene.anisotropy ** SUN_LOBE_POWER) for h in hs]))
-        return SunLobeFit(hs[best], hs, tuple(float(v) for v in gains), self.timer.elapsed_ms)
+            best = int(np.argmin([abs(h - scene.anisotropy ** probe_layout.SUN_LOBE_POWER)
+                                  for h in hs]))
+        power = math.log(hs[best]) / math.log(float(scene.anisotropy))
+        return SunLobeFit(hs[best], power, hs, tuple(float(v) for v in gains),
+                          self.timer.elapsed_ms)
+
+    def fit_for(self, renderer, seed: int = 0) -> SunLobeFit:
+        """The fit for the probes `renderer` (a radiance_probes Renderer) would bake now."""
+        plan = renderer.probe_plan()
+        return self.fit(renderer.bake_resources(), plan.box, plan.grid,
+                        renderer.scene.probes.samples, plan.grey,
+                        renderer.resources.environment is not None, seed)
 
     def release(self) -> None:
         if self._pilot is not None:
@@ -134,3 +154,33 @@ class SunLobeFitter:
         self.timer.release()
         self._pilot = self._program = None
         self._pilot_key = self._program_key = None
+
+
+# ---- NumPy twin of lab/sun_lobe_fit.comp, and the choice ------------------------------------
+
+def lobe_amplitudes(mu, radiance, valid, hs, g, n):
+    """lab/sun_lobe_fit.comp: each probe's lobe amplitude for each candidate h, as the bake
+    estimates it from one pass's walks. mu (P, D): each walk's direction . sun; radiance (P, D, 3);
+    valid (P, D). Returns amplitudes (P, len(hs), 3) and walks used (P,)."""
+    mu = np.asarray(mu, np.float64)
+    radiance = np.where(np.asarray(valid, bool)[..., None], np.asarray(radiance, np.float64), 0.0)
+    count = np.sum(valid, axis=1).astype(np.float64)
+    out = np.zeros((mu.shape[0], len(hs), 3))
+    for k, h in enumerate(hs):
+        s = np.sum(radiance * basis(mu, h, n, g)[..., None], axis=1)
+        out[:, k] = np.where(count[:, None] > 0, 4.0 * np.pi * s / np.maximum(count, 1)[:, None], 0.0)
+    return out, count
+
+
+def fit_gains(a, b, hs, g, n, pilot_walks, main_walks):
+    """What each candidate lobe takes out of the error the renderers see, summed over probes and
+    colours, less the noise its amplitude adds in a bake of `main_walks` walks per probe: a and b
+    (P, K, 3) are two independent passes' amplitudes of `pilot_walks` walks each. The error
+    removed is A^2 <r_gh, r_gh> (A the true amplitude; lib/sun_lobe.glsl), estimated without bias
+    by a b <r_gh, r_gh>; the bake's amplitude has the variance of one pass's times pilot_walks /
+    main_walks, one pass's estimated as (a - b)^2 / 2."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    norms = np.array([norm(g * h, n) for h in hs])
+    explained = np.sum(a * b, axis=(0, 2))
+    noise = 0.5 * np.sum((a - b) ** 2, axis=(0, 2)) * pilot_walks / main_walks
+    return norms * (explained - noise)

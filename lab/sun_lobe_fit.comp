@@ -1,5 +1,6 @@
-// Which lobe shape a scene's probes should hold (app/rendering/sun_lobe_fit.py, which chooses from
-// these numbers; NumPy twin: app/twins/sun_lobe.py lobe_amplitudes). One invocation per probe of a
+// Which lobe shape a scene's probes should hold (lab/sun_lobe_fit.py, which chooses from these
+// numbers; NumPy twin: lab/sun_lobe_fit.py lobe_amplitudes; outside the package: an experiment's,
+// compiled with the package's glsl/lib). One invocation per probe of a
 // pilot bake's pass, whose walks are in walk_radiance (probe_walks.comp): for each candidate h
 // (the lobe HG_h about the sun's direction, lib/sun_lobe.glsl) the lobe's amplitude as the bake
 // estimates it from these walks, a = 4 pi / N sum L_i sun_lobe_basis(mu_i) per colour, and N.

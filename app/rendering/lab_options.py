@@ -1,0 +1,39 @@
+"""Switches kept for the bench's comparisons and lab/experiments alone: one frozen record
+(LabOptions), NOT for users. Each one measured no gain as a product setting and left
+RenderSettings (docs/experiments.md says what each found, with its record under bench/); the
+defaults are the product's images, bit for bit. A Renderer holds one (`Renderer(..., lab=...)`,
+`Renderer.lab`); the front ends (command line, viewer, Python API) never set it.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+
+@dataclass(frozen=True)
+class LabOptions:
+    # Independent ratio-tracked shadow rays towards the sun a scattering event averages, in the
+    # render passes (lib/integrator.glsl SUN_SHADOW_RAYS): 1, the product; more measures how much
+    # of a path's variance the shadow ray's own noise holds (the mean is the same;
+    # lab/experiments/experiment_shadow_variance.py).
+    sun_shadow_rays: int = 1
+    # Under a memory cap, the memory the shown level leaves holds the next finer level's bricks
+    # where the scene's camera sees them largest (app/rendering/level_mix.py), streamed as the
+    # camera moves (app/rendering/level_stream.py). On the H100 (bench/h100-bricks-open) it took a
+    # zoomed view of the 2048^3 volume from 2.97% to 2.92% rRMSE against level 0, for frames 2.3x
+    # as long and 7 s more to open (scripts/brick_bench.py compares it).
+    mixed_levels: bool = False
+    # False: paths find an environment map by phase sampling alone (lib/integrator.glsl
+    # ENVIRONMENT_MAP_SAMPLING 0), for measuring what the map's importance sampling gains
+    # (scripts/envmap_sampling.py: about 1900x the efficiency on the sky scene).
+    environment_sampling: bool = True
+
+    def __post_init__(self):
+        rays = self.sun_shadow_rays
+        if isinstance(rays, bool) or not isinstance(rays, int) or rays < 1:
+            raise ValueError(f"sun shadow rays: expected an integer >= 1, got {rays!r}")
+        for name in ("mixed_levels", "environment_sampling"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")
+
+    def as_dict(self) -> dict:
+        return asdict(self)

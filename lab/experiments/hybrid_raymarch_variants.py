@@ -1,0 +1,85 @@
+"""Where does the raymarch frame's time go with hybrid scattering (issue 43: at most 2.5 ms at
+1080p)? Builds copies of the current tree with one piece of lib/raymarch.glsl's hybrid branch
+replaced by a text edit each, and times 16 raymarched frames of each bench scene at 1080p:
+    python lab/experiments/hybrid_raymarch_variants.py OUT.json WORKDIR [scenes] [k,k]
+  head        the tree as it is
+  no-grad     the 6-fetch opacity gradient replaced by a constant (the surface branch still runs)
+  no-surface  the gradient computed, the surface shading never mixed in
+  no-coeffs   the probes read as k = 0 reads them (no array of coefficients held; surface light 0)
+Timing probes only: the edited copies render wrong images."""
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+EDITS = {
+    "no-grad": [("glsl/lib/raymarch.glsl", "vec3 gradient = opacity_gradient(x);",
+                 "vec3 gradient = vec3(0.0, 0.0, 30.0);")],
+    "no-surface": [("glsl/lib/raymarch.glsl", "if (surface_share > 0.0) {",
+                    "if (surface_share > 1e30) {")],
+    "no-coeffs": [("glsl/lib/raymarch.glsl", """        vec3 coeffs[SH_COUNT];
+        float probe_sun;
+        probe_fetch(x, coeffs, probe_sun);
+        vec3 inscattered = probe_inscattered_from(coeffs, d);""", """        float probe_sun;
+        vec3 inscattered = probe_inscattered(x, d, probe_sun);
+        vec3 coeffs[SH_COUNT];
+        for (int c = 0; c < SH_COUNT; ++c) coeffs[c] = vec3(0.0);""")],
+}
+EDITS["no-grad-no-coeffs"] = EDITS["no-grad"] + EDITS["no-coeffs"]
+CHILD = r'''
+import json, sys
+from dataclasses import replace
+sys.path.insert(0, sys.argv[1])
+from app.bench.scenes import bench_scene
+from app.gl.context import create_headless_context
+from app.rendering.renderer import Renderer
+from app.scene import SurfaceSpec
+ctx = create_headless_context()
+for name in sys.argv[2].split(","):
+    for k in (float(v) for v in sys.argv[3].split(",")):
+        scene = bench_scene(name, 1920, 1080)
+        scene = scene.replace(surface=SurfaceSpec(gradient_factor=k, roughness=0.4,
+                                                  specular=(0.04,) * 3))
+        r = Renderer(ctx, scene)
+        r.render("raymarch", spp=16, seed=1)   # compiles, and brings the GPU's clocks up
+        res = r.render("raymarch", spp=16, seed=3)
+        print("RESULT " + json.dumps({"root": sys.argv[1], "scene": name, "k": k,
+                                      "raymarch_ms_per_frame": res.ms_per_sample}), flush=True)
+        r.release()
+'''
+
+
+def main() -> None:
+    out, work = Path(sys.argv[1]), Path(sys.argv[2])
+    scenes = sys.argv[3] if len(sys.argv) > 3 else "foot,bonsai"
+    ks = sys.argv[4] if len(sys.argv) > 4 else "0,0.05,0.2"
+    rows = []
+    for name in ("head", *EDITS):
+        root = work / name
+        if root.exists():
+            shutil.rmtree(root)
+        for part in ("app", "glsl", "assets"):
+            shutil.copytree(ROOT / part, root / part)
+        for path, old, new in EDITS.get(name, []):
+            f = root / path
+            text = f.read_text()
+            if old not in text:
+                raise SystemExit(f"{name}: '{old}' not in {path}")
+            f.write_text(text.replace(old, new))
+        (work / "shared").unlink(missing_ok=True)
+        (work / "shared").symlink_to((ROOT / ".." / "shared").resolve())
+        p = subprocess.run([sys.executable, "-c", CHILD, str(root), scenes, ks],
+                           capture_output=True, text=True)
+        got = [json.loads(x[7:]) for x in p.stdout.splitlines() if x.startswith("RESULT ")]
+        if not got:
+            got = [{"root": str(root), "error": p.stderr[-1500:]}]
+        for g in got:
+            print(json.dumps(g), flush=True)
+        rows += got
+        out.write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()
