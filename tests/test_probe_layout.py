@@ -174,7 +174,8 @@ def test_fitted_grid_bakes_inside_the_visible_region(ctx):
         plan = r.probe_plan()   # a frozen dataclass, equal to what was baked
         assert (plan.grid, plan.box, plan.sh_order, plan.grey) == (grid.grid, grid.box,
                                                                    grid.sh_order, grid.grey)
-        assert plan.defines() == grid.defines() and plan == r.probe_plan()
+        # the layout's defines; the grid's add the medium's (a reader gets those from the scene)
+        assert {**plan.defines(), **grid.medium} == grid.defines() and plan == r.probe_plan()
         with pytest.raises(dataclasses.FrozenInstanceError):
             plan.grid = (1, 1, 1)
         assert grid.grid != (4, 4, 4)   # the cloud is flatter than its box
