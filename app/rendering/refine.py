@@ -114,7 +114,7 @@ class HalfBuffers:
         self.sums = ctx.buffer(reserve=16)
         self._combine = compute_program(ctx, "refine_halves.comp", {"STAGE": 1})
         self._reduce = compute_program(ctx, "refine_halves.comp", {"STAGE": 2})
-        self.reads = 0            # read-backs so far (a test counts them)
+        self.reads = 0            # read-backs since the last reset (a test counts them)
 
     @property
     def counts(self) -> tuple[int, int]:
@@ -129,6 +129,7 @@ class HalfBuffers:
             half.residual.reset()
             half.level0.reset()
         self.combined.reset()
+        self.reads = 0   # counted per restart, as the session's frames are
 
     def next_half(self) -> int:
         """The half the next batch of samples goes to: the one with fewer (A on a tie)."""
