@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import copy
 import json
+import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -66,6 +68,17 @@ def pytest_sessionfinish(session, exitstatus):
 
 
 _SESSION_CONTEXT: list = []   # the session's context, once a test has asked for it
+
+
+@pytest.fixture(scope="session")
+def display():
+    """One private X server for the session's real-window viewer runs (test_viewer,
+    test_viewer_keep, test_slice_view)."""
+    if shutil.which("Xvfb") is None and not os.path.exists("/usr/bin/Xvfb"):
+        pytest.skip("Xvfb is not installed (scripts/setup.sh installs it)")
+    from radiance_probes.viewer.xvfb import Xvfb
+    with Xvfb(1280, 800) as name:
+        yield name
 
 
 @pytest.fixture(scope="session")

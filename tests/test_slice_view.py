@@ -4,8 +4,6 @@ on a private Xvfb with the slices on: the value under the mouse, the crop drawn 
 is, a click moving the slices and the orbit's centre, the wheel stepping a slice."""
 from __future__ import annotations
 
-import os
-import shutil
 from dataclasses import replace
 from types import SimpleNamespace
 
@@ -284,15 +282,6 @@ def test_the_slice_column_takes_its_width_from_the_3d_view():
 
 WINDOW = (900, 600)
 CROP_VOXELS = ["4", "2", "1", "15", "10", "11"]
-
-
-@pytest.fixture(scope="module")
-def display():
-    if shutil.which("Xvfb") is None and not os.path.exists("/usr/bin/Xvfb"):
-        pytest.skip("Xvfb is not installed (scripts/setup.sh installs it)")
-    from radiance_probes.viewer.xvfb import Xvfb
-    with Xvfb(1280, 800) as name:
-        yield name
 
 
 def image_rect(axis: int) -> tuple[float, float, float, float]:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import shutil
 import subprocess
 import sys
@@ -215,16 +214,6 @@ SCENE = {"volume": {"builtin": "cloud", "size": [24, 24, 24]},
          "camera": {"width": 64, "height": 64}}
 WINDOW = "720x440"
 SPP = 4
-
-
-@pytest.fixture(scope="session")
-def display():
-    """One private X server for the session's viewer runs."""
-    if shutil.which("Xvfb") is None and not os.path.exists("/usr/bin/Xvfb"):
-        pytest.skip("Xvfb is not installed (scripts/setup.sh installs it)")
-    from radiance_probes.viewer.xvfb import Xvfb
-    with Xvfb(1280, 800) as name:
-        yield name
 
 
 def _is_background(pixels: np.ndarray, colour, tol: int = 6) -> np.ndarray:

@@ -4,8 +4,6 @@ scripted session of the real viewer on a private Xvfb (tests/viewer_harness.py).
 from __future__ import annotations
 
 import json
-import os
-import shutil
 
 import numpy as np
 import pytest
@@ -111,15 +109,6 @@ WINDOW = "760x560"
 SCENE = {"volume": {"builtin": "cloud", "size": [24, 20, 16]}, "density_scale": 60.0,
          "camera": {"eye": [0.0, 0.3, 3.2]}, "probes": {"grid": 4, "samples": 32},
          "environment": [0.1, 0.1, 0.1]}
-
-
-@pytest.fixture(scope="module")
-def display():
-    if shutil.which("Xvfb") is None and not os.path.exists("/usr/bin/Xvfb"):
-        pytest.skip("Xvfb is not installed (scripts/setup.sh installs it)")
-    from radiance_probes.viewer.xvfb import Xvfb
-    with Xvfb(1280, 800) as name:
-        yield name
 
 
 @pytest.fixture(scope="module")
