@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 CHILD = r'''
-import importlib, json, statistics, sys, dataclasses
+import importlib, json, os, statistics, sys, dataclasses
 root = sys.argv[1]
 sys.path.insert(0, root)
 pkg = "app"
@@ -62,7 +62,6 @@ def rebake(seed, **kw):
         if hasattr(r, a):
             setattr(r, a, None)
     return r.bake(seed=seed, **kw)
-import os
 SETTINGS = [tuple(map(int, s.split("x"))) for s in os.environ.get("BISECT_SETTINGS", "64x512,128x64").split(",")]
 out = {"root": root, "device": ctxm.describe(ctx) if hasattr(ctxm, "describe") else None}
 defaults = getattr(r, "settings", None)

@@ -31,25 +31,29 @@ EDITS["one-fetch"] = [("glsl/lib/tracking.glsl", """    m = cell_majorant(w);   
     m = texelFetch(majorant_grid, inside ? w.cell : start, 0).r;""")]
 
 
-def main() -> None:
-    out, work = sys.argv[1], Path(sys.argv[2])
-    roots = []
-    names = sys.argv[3].split(",") if len(sys.argv) > 3 else ("head", *EDITS)
-    for name in names:
-        root = work / name
-        if root.exists():
-            shutil.rmtree(root)
-        for part in ("app", "glsl", "assets"):
-            shutil.copytree(ROOT / part, root / part, symlinks=False)
-        for path, old, new in EDITS.get(name, []):
-            f = root / path
-            text = f.read_text()
-            if old not in text:
-                raise SystemExit(f"{name}: '{old}' not in {path}")
-            f.write_text(text.replace(old, new))
-        roots.append(str(root))
+def edited_tree(work: Path, name: str, edits) -> Path:
+    """work/name: a copy of this tree's app/, glsl/ and assets/ with each (path, old, new) text
+    edit made (old must be there), beside a link work/shared to ../shared (the datasets)."""
+    root = work / name
+    if root.exists():
+        shutil.rmtree(root)
+    for part in ("app", "glsl", "assets"):
+        shutil.copytree(ROOT / part, root / part)
+    for path, old, new in edits:
+        f = root / path
+        text = f.read_text()
+        if old not in text:
+            raise SystemExit(f"{name}: '{old}' not in {path}")
+        f.write_text(text.replace(old, new))
     (work / "shared").unlink(missing_ok=True)
     (work / "shared").symlink_to((ROOT / ".." / "shared").resolve())
+    return root
+
+
+def main() -> None:
+    out, work = sys.argv[1], Path(sys.argv[2])
+    names = sys.argv[3].split(",") if len(sys.argv) > 3 else ("head", *EDITS)
+    roots = [str(edited_tree(work, name, EDITS.get(name, []))) for name in names]
     subprocess.run([sys.executable, str(ROOT / "lab/experiments/bake_bisect.py"), out, *roots],
                    check=True)
 

@@ -8,12 +8,12 @@ replaced by a text edit each, and times 16 raymarched frames of each bench scene
   no-coeffs   the probes read as k = 0 reads them (no array of coefficients held; surface light 0)
 Timing probes only: the edited copies render wrong images."""
 import json
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bake_variants import edited_tree   # noqa: E402  (the same copies, other edits)
 EDITS = {
     "no-grad": [("glsl/lib/raymarch.glsl", "vec3 gradient = opacity_gradient(x);",
                  "vec3 gradient = vec3(0.0, 0.0, 30.0);")],
@@ -57,19 +57,7 @@ def main() -> None:
     ks = sys.argv[4] if len(sys.argv) > 4 else "0,0.05,0.2"
     rows = []
     for name in ("head", *EDITS):
-        root = work / name
-        if root.exists():
-            shutil.rmtree(root)
-        for part in ("app", "glsl", "assets"):
-            shutil.copytree(ROOT / part, root / part)
-        for path, old, new in EDITS.get(name, []):
-            f = root / path
-            text = f.read_text()
-            if old not in text:
-                raise SystemExit(f"{name}: '{old}' not in {path}")
-            f.write_text(text.replace(old, new))
-        (work / "shared").unlink(missing_ok=True)
-        (work / "shared").symlink_to((ROOT / ".." / "shared").resolve())
+        root = edited_tree(work, name, EDITS.get(name, []))
         p = subprocess.run([sys.executable, "-c", CHILD, str(root), scenes, ks],
                            capture_output=True, text=True)
         got = [json.loads(x[7:]) for x in p.stdout.splitlines() if x.startswith("RESULT ")]
