@@ -794,17 +794,17 @@ def render_to_files(args: argparse.Namespace) -> int:
                                  bake_progress=on_bake_pass,
                                  denoise=getattr(args, "denoise", False),
                                  denoise_guides=getattr(args, "denoise_guides", "auto"))
-    if getattr(args, "denoise", False) and auto is not None and (
-            got.denoised or not METHODS[got.method].noisy):
-        pass   # auto chose the path tracer denoised, or a raymarched image (clean: not denoised)
-    elif getattr(args, "denoise", False):
-        if auto is not None:   # auto_render returned the path tracer's image: denoise that one
-            from .rendering.denoise import choose_guides
-            renderer.begin(args.method)
-            guides = choose_guides(args.denoise_guides, result.spp,
-                                   renderer.needs_probes(args.method) and renderer.probes_shown())
-            d, _ = renderer.denoise(result.image, guides)
-            result.image, result.denoised = d.image, d
+    denoise = getattr(args, "denoise", False)
+    if denoise and auto is not None and not got.denoised and METHODS[got.method].noisy:
+        # auto returned the path tracer's raw image: denoise that one (a denoised one it chose,
+        # or a raymarched image, which is clean, stays as it is)
+        from .rendering.denoise import choose_guides
+        renderer.begin(args.method)
+        guides = choose_guides(args.denoise_guides, result.spp,
+                               renderer.needs_probes(args.method) and renderer.probes_shown())
+        d, _ = renderer.denoise(result.image, guides)
+        result.image, result.denoised = d.image, d
+    if denoise:
         d = result.denoised
         if d is not None and d.denoised:
             print(f"denoised on OIDN's {d.device} device (guides: {args.denoise_guides}): "
