@@ -207,6 +207,72 @@ def _tile_means(image):
     return _block_means(np.asarray(image, np.float32), KEEP_MEANS_BLOCK)
 
 
+def test_renderer_denoise_restores_on_gl_as_the_host_path_does(ctx):
+    """Renderer.denoise from the accumulation takes the GL flow: the same image as the host path
+    (the filter's output given back the raw means by keep_block_means) to float tolerance; its
+    tile means are the raw image's to the interpolation's smoothing, its mean to 0.5%; the
+    parts it timed are there."""
+    pytest.importorskip("pyoidn", reason="the denoiser's library (pyoidn) is a dependency")
+    from radiance_probes.rendering.denoise import shared_denoiser
+    from radiance_probes.rendering.renderer import Renderer
+    from radiance_probes.scene import parse_scene
+    scene = parse_scene({"volume": {"builtin": "cloud", "size": [16, 16, 16]},
+                         "density_scale": 40.0, "albedo": 0.9,
+                         "camera": {"width": 75, "height": 53}})
+    r = Renderer(ctx, scene)
+    try:
+        result = r.render("pt", spp=2, seed=3, denoise=True, denoise_guides="none")
+        d = result.denoised
+        assert d.denoised and d.note is None and not d.signed
+        assert {"readback_ms", "filter_ms", "means_ms", "upload_result_ms",
+                "result_readback_ms"} <= set(d.ms)
+        assert set(d.means_parts_ms) == {"raw_means_ms", "restore_ms"}
+        assert d.ms["means_ms"] == pytest.approx(sum(d.means_parts_ms.values()))
+        raw = result.raw_image
+        host = shared_denoiser("auto", "high")(raw.copy(), copy=True).image
+        assert result.image.shape == raw.shape and np.isfinite(result.image).all()
+        assert result.image.min() >= 0.0
+        np.testing.assert_allclose(result.image, host, rtol=1e-4, atol=1e-5 * raw.mean())
+        assert abs(result.image.mean() / raw.mean() - 1.0) < 5e-3
+        np.testing.assert_allclose(_tile_means(result.image), _tile_means(raw), rtol=0.1)
+    finally:
+        r.release()
+
+
+def test_the_viewer_shows_the_gl_restored_image(ctx):
+    """The viewer's Denoise switch uploads OIDN's output and restores the means into the RGBA32F
+    texture it shows: that image is what the host path makes of the same accumulation."""
+    pytest.importorskip("pyoidn", reason="the denoiser's library (pyoidn) is a dependency")
+    from radiance_probes.rendering.denoise import choose_guides, shared_denoiser
+    from radiance_probes.scene import parse_scene
+    from radiance_probes.viewer.session import RenderSession
+    s = RenderSession(ctx, parse_scene({
+        "volume": {"builtin": "cloud", "size": [12, 12, 12]}, "density_scale": 30.0,
+        "albedo": 0.9, "camera": {"width": 40, "height": 35}}))
+    try:
+        s.resize(40, 35)
+        s.set_methods(["pt"])
+        s.denoise.set_enabled(True)
+        for _ in range(3):
+            s.step(64, False)
+            if s.denoise.images.get("pt") is not None:
+                break
+        got = s.denoise.images["pt"]
+        view = s.views["pt"]
+        assert s.texture("pt") is got.texture and got.texture.components == 4
+        assert view.acc.samples == got.samples   # (the filter runs after a frame's samples)
+        raw = view.acc.read()
+        shown = s.shown_image("pt")
+        guides = choose_guides("auto", got.samples, False)
+        albedo, normal, _ = s.renderer.denoise_guides(guides, camera=view.camera)
+        host = shared_denoiser()(raw.copy(), albedo, normal, copy=True).image
+        assert shown.shape == raw.shape and np.isfinite(shown).all() and shown.min() >= 0.0
+        np.testing.assert_allclose(shown, host, rtol=1e-4, atol=1e-5 * raw.mean())
+        assert abs(shown.mean() / raw.mean() - 1.0) < 5e-3
+    finally:
+        s.release()
+
+
 def test_the_denoiser_leaves_its_means_and_check_to_a_gl_caller():
     """keep_means and check_output off (the GL flow): the image handed out is the filter's output
     buffer itself (the next call writes the same memory), the same values as with the host's
