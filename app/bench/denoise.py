@@ -3,17 +3,29 @@ with each set of guides, against the scene's path-traced reference.
 
 Each snapshot of a progressive run (records.progressive: the path tracer, `probes` at its first
 event and with a gather, `guided`) is recorded raw, then once per guide set of
-`config.denoise_guides` as its denoised twin (`denoise` names the guides). A twin's total is the
-raw image's total plus everything the denoised image cost beyond it:
+`config.denoise_guides` as its denoised twin (`denoise` names the guides). Each twin runs the
+flow the viewer and Renderer.denoise run (app/rendering/kept_means.py denoise_on_gl): the
+snapshot, a host array here, is first written into a scratch RGBA32F texture (not charged: it
+stands for the accumulation, which is in GL already), and the corrected image is read back from
+its texture afterwards for the metrics (not charged: the viewer shows it from there). A twin's
+total is the raw image's total plus everything the denoised image cost beyond it:
   - the guides' GPU time (glsl/denoise_guide_images.comp; for the "probes" guide the raymarched frames,
     and the bake and light grid of its probes where the method had not paid for them already);
-  - the read-back of the image from GL and the upload of the result (io_ms, measured at this size);
-  - the filter's own wall time: the copy to its device, OIDN's execute (synchronous), the copy back.
+  - the read-back of the image from GL into the filter's colour and the upload of the filter's
+    output into a texture (io_ms);
+  - the tile means kept: the GL passes (the raw image's tile means with their small read-back,
+    and the restore: the filtered image's own means, the correction, the output made finite,
+    and a ctx.finish; means_ms);
+  - the filter's own wall time (OIDN's execute, synchronous; for a signed image its two runs),
+    and the host check of its output (check_ms: 0 here, the restore pass does it).
+Not charged: the denoiser's prepare_ms (here mostly the guides' upload, which the bench repeats
+as it switches guide sets and a viewer makes once a camera). filter_parts_ms keeps every part.
 The raymarcher's images (noise-free already) are recorded raw beside them.
 
-Also measured once a run (meta.denoise_cost): the whole cost at 512^2, 1920x1080 and 3840x2160 for
-each of OIDN's quality settings; and per scene, the denoiser's own bias (a denoised image's mean
-against the raw one's, and its error at the longest run's samples against the raw image's)."""
+Also measured once a run (meta.denoise_cost): the whole cost of that flow at 512^2, 1920x1080
+and 3840x2160 for each of OIDN's quality settings; and per scene, the denoiser's own bias (a
+denoised image's mean against the raw one's, and its error at the longest run's samples against
+the raw image's)."""
 from __future__ import annotations
 
 import statistics
@@ -24,6 +36,7 @@ import numpy as np
 from ..imageio import save_png
 from ..methods import METHODS
 from ..rendering.denoise import QUALITIES, shared_denoiser
+from ..rendering.kept_means import KeptMeans, denoise_on_gl
 from .records import (error_of, floor, header as _header, log, make_record, ms_text as _ms,
                       progressive)
 
@@ -36,84 +49,58 @@ def _with_probes(scene, grid: int, walks: int):
     return scene.replace(probes=replace(scene.probes, grid=(grid, grid, grid), samples=walks))
 
 
-def io_ms(renderer, width: int, height: int, repeats: int = 5,
-          guides: tuple[str, ...] = ("albedo", "normal")) -> tuple[float, float]:
-    """Wall ms (median) to read an accumulation of this size back from GL into the denoiser's
-    colour (Renderer.denoise), and to upload its output into a texture: what a denoised frame adds
-    around the filter."""
-    from ..rendering.accumulation import Accumulation
-    ctx = renderer.ctx
-    denoiser = shared_denoiser("auto", "high")
-    acc = Accumulation(ctx, width, height)
-    tex = ctx.texture((width, height), 3, dtype="f4")
-    staged = denoiser.staging(width, height, guides)
-    data = np.zeros((height, width, 3), np.float32)
-    reads, writes = [], []
-    try:
-        for _ in range(repeats):
-            ctx.finish()
-            t0 = time.perf_counter()
-            acc.texture.read_into(staged)
-            t1 = time.perf_counter()
-            tex.write(data)
-            ctx.finish()
-            t2 = time.perf_counter()
-            reads.append(1e3 * (t1 - t0))
-            writes.append(1e3 * (t2 - t1))
-    finally:
-        acc.release()
-        tex.release()
-    return statistics.median(reads), statistics.median(writes)
-
-
 def denoise_cost(renderer, sizes=COST_SIZES, qualities=QUALITIES, repeats: int = 5) -> list[dict]:
     """The whole cost of one denoised frame at each size and quality, guided by an albedo and a
     normal already on the filter's device (they change with the camera, not every frame), as
-    Renderer.denoise does it: GL read straight into the filter's colour, the filter, the output
-    uploaded into a texture. Medians of `repeats` after one untimed frame (which builds the
-    filter and uploads the guides)."""
+    Renderer.denoise and the viewer make it (kept_means.denoise_on_gl), each part in wall ms:
+    readback_ms (GL straight into the filter's colour), the raw tile means' GL pass and its
+    read-back (raw_means_ms), prepare_ms, filter_ms, check_ms (0: the restore pass checks),
+    upload_result_ms (the output into an RGB32F texture), the restore passes with a ctx.finish
+    (restore_ms); means_ms = raw_means_ms + restore_ms, and total_ms the whole flow. Medians of
+    `repeats` after one untimed frame (which builds the filter and uploads the guides)."""
     from ..rendering.accumulation import Accumulation
     ctx = renderer.ctx
     rng = np.random.default_rng(0)
+    kept = KeptMeans(ctx)
     rows = []
-    for width, height in sizes:
-        acc = Accumulation(ctx, width, height)
-        acc.texture.write(rng.exponential(1.0, (height, width, 4)).astype(np.float32))
-        tex = ctx.texture((width, height), 3, dtype="f4")
-        albedo = np.full((height, width, 3), 0.5, np.float32)
-        normal = np.zeros_like(albedo)
-        normal[..., 2] = 1.0
-        try:
-            for quality in qualities:
-                denoiser = shared_denoiser("auto", quality)
-                staged = denoiser.staging(width, height, ("albedo", "normal"))
-                if staged is None:
-                    return [{"note": denoiser.failure}]
-                parts = []
-                for i in range(repeats + 1):
-                    ctx.finish()
-                    t0 = time.perf_counter()
-                    acc.texture.read_into(staged)
-                    t1 = time.perf_counter()
-                    d = denoiser(staged, albedo, normal, copy=False)
-                    t2 = time.perf_counter()
-                    tex.write(d.image)
-                    ctx.finish()
-                    t3 = time.perf_counter()
-                    if i:
-                        parts.append({"readback_ms": 1e3 * (t1 - t0), **d.ms,
-                                      "upload_result_ms": 1e3 * (t3 - t2),
-                                      "total_ms": 1e3 * (t3 - t0)})
-                row = {"width": width, "height": height, "quality": quality,
-                       "device": denoiser.device}
-                for k in parts[0]:
-                    row[k] = statistics.median(p[k] for p in parts)
-                rows.append(row)
-                log(f"  denoise cost {width}x{height} {quality} on {denoiser.device}: "
-                    f"filter {row['filter_ms']:.2f} ms, total {row['total_ms']:.2f} ms")
-        finally:
-            acc.release()
-            tex.release()
+    try:
+        for width, height in sizes:
+            acc = Accumulation(ctx, width, height)
+            acc.texture.write(rng.exponential(1.0, (height, width, 4)).astype(np.float32))
+            result = kept.result_texture(width, height)
+            albedo = np.full((height, width, 3), 0.5, np.float32)
+            normal = np.zeros_like(albedo)
+            normal[..., 2] = 1.0
+            try:
+                for quality in qualities:
+                    denoiser = shared_denoiser("auto", quality)
+                    staged = denoiser.staging(width, height, ("albedo", "normal"))
+                    if staged is None:
+                        return [{"note": denoiser.failure}]
+                    parts = []
+                    for i in range(repeats + 1):
+                        ctx.finish()
+                        t0 = time.perf_counter()
+                        d = denoise_on_gl(kept, denoiser, acc.texture, staged, albedo, normal,
+                                          False, result)
+                        t1 = time.perf_counter()
+                        if not d.denoised:
+                            return [{"note": d.note}]
+                        if i:
+                            parts.append({**d.ms, **d.means_parts_ms,
+                                          "total_ms": 1e3 * (t1 - t0)})
+                    row = {"width": width, "height": height, "quality": quality,
+                           "device": denoiser.device}
+                    for k in parts[0]:
+                        row[k] = statistics.median(p[k] for p in parts)
+                    rows.append(row)
+                    log(f"  denoise cost {width}x{height} {quality} on {denoiser.device}: "
+                        f"filter {row['filter_ms']:.2f} ms, tile means (GL) "
+                        f"{row['means_ms']:.2f} ms, total {row['total_ms']:.2f} ms")
+            finally:
+                acc.release()
+    finally:
+        kept.release()
     return rows
 
 
@@ -128,10 +115,6 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
         raise SystemExit(f"bench --preset denoise: {denoiser.failure}")
     if "denoise_cost" not in results.meta and config.denoise_cost:
         results.meta["denoise_cost"] = denoise_cost(renderer)
-    read_ms, upload_ms = io_ms(renderer, config.width, config.height)
-    around_ms = read_ms + upload_ms
-    results.meta.setdefault("denoise_io_ms", {})[name] = {"readback_ms": read_ms,
-                                                         "upload_result_ms": upload_ms}
     k = config.samples_per_dispatch
 
     # The "probes" guide at each of config.denoise_guide_probes (grid, walks), baked once each:
@@ -150,6 +133,29 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
             guides[guide] = renderer.denoise_guides(g)
             log(f"  guides {guide}: {guides[guide][2]:.2f} ms")
     renderer.set_scene(scene)
+    ctx = renderer.ctx
+    kept = KeptMeans(ctx)
+    source = ctx.texture((config.width, config.height), 4, dtype="f4")   # stands for the accumulation
+    result = kept.result_texture(config.width, config.height)
+
+    def denoise_charged(image: np.ndarray, albedo, normal, signed: bool):
+        """The GL flow over `image`: (the corrected image, its Denoised)."""
+        height, width = image.shape[:2]
+        rgba = np.ones((height, width, 4), np.float32)
+        rgba[..., :3] = image
+        source.write(rgba)                       # not charged: the accumulation is in GL already
+        names = tuple(n for n, g in (("albedo", albedo), ("normal", normal)) if g is not None)
+        staged = denoiser.staging(width, height, names)
+        d = (denoise_on_gl(kept, denoiser, source, staged, albedo, normal, signed, result)
+             if staged is not None else None)
+        if d is None or not d.denoised:
+            raise SystemExit(f"bench --preset denoise: {denoiser.failure}")
+        out = np.frombuffer(result.read(), np.float32).reshape(height, width, 4)   # not charged
+        return out[..., :3].copy(), d
+
+    # one untimed flow first: a driver may build a program at its first dispatch (llvmpipe took
+    # 90 ms there), which the first record would otherwise pay
+    denoise_charged(np.zeros((config.height, config.width, 3), np.float32), None, None, False)
 
     def add(method: str, frames: int, image: np.ndarray, timing, bake_ms: float,
             own_probes: tuple | None, **extra) -> None:
@@ -157,18 +163,16 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
         flip = frames in config.flip_frames or frames == max(config.pt_spp)
         results.add(rec, image if flip else None, reference)
         for g, (albedo, normal, guide_ms) in guides.items():
-            # The image is copied into the filter's colour here (prepare_ms, not charged): in
-            # Renderer.denoise, GL reads it straight there, which io_ms's read-back times.
-            d = denoiser(image, albedo, normal, copy=False, signed=METHODS[method].signed)
-            denoised = d.image.copy()
+            denoised, d = denoise_charged(image, albedo, normal, METHODS[method].signed)
             charged = guide_ms + (0.0 if g not in guide_bake_ms or own_probes == g
                                   else guide_bake_ms[g])
+            io = d.ms["readback_ms"] + d.ms["upload_result_ms"]
             twin = make_record(base, config, method, frames, denoised, reference, timing, bake_ms,
                                **extra)
-            twin.update(denoise=g, denoise_device=d.device, guides_ms=charged, io_ms=around_ms,
-                        filter_parts_ms=d.ms,
+            twin.update(denoise=g, denoise_device=d.device, guides_ms=charged, io_ms=io,
+                        filter_parts_ms={**d.ms, **d.means_parts_ms},
                         mean_ratio=float(denoised.mean() / max(image.mean(), 1e-30)))
-            twin["total_ms"] = (rec["total_ms"] + charged + around_ms + d.ms["filter_ms"]
+            twin["total_ms"] = (rec["total_ms"] + charged + io + d.ms["filter_ms"]
                                 + d.ms["check_ms"] + d.ms["means_ms"])
             results.add(twin, denoised if flip else None, reference)
             if frames == config.image_frames:
@@ -213,6 +217,8 @@ def denoise_scene(renderer, name: str, config, results, out, device: str,
                           probe_grid=grid, probe_samples=walks)
         results.add(rec, image if frames in config.flip_frames else None, reference)
     renderer.set_scene(scene)
+    source.release()
+    kept.release()
 
 
 def flicker(renderer, name: str, config, results, guides: dict, denoiser) -> None:
@@ -261,8 +267,12 @@ def write_denoise_report(data: dict, out):
              "against the path-traced reference, corrected for its noise (SPEC.md), and mean "
              "LDR-FLIP where measured. A denoised record's total is its raw image's GPU total plus "
              "the guides' GPU time (and, for the probes guide, its probes' bake where the method "
-             "did not bake them), the read-back from GL and upload of the result, and the filter's "
-             "wall time (OIDN, synchronous). `OIDN(g)`: the filter guided by g (none: the colour "
+             "did not bake them), the read-back from GL into the filter's colour, the filter's "
+             "wall time (OIDN, synchronous), the upload of its output, and the tile means kept "
+             "(newer records: the GL passes with a finish; older ones: host NumPy). The snapshot "
+             "is written into a texture first and the result read back after, neither charged "
+             "(the accumulation is in GL, the viewer shows the result from there). "
+             "`OIDN(g)`: the filter guided by g (none: the colour "
              "alone; albedo and albedo-normal: glsl/denoise_guide_images.comp; probes: the raymarched "
              "probes as albedo).", ""]
     for s in scenes:
@@ -338,8 +348,12 @@ def write_denoise_report(data: dict, out):
         lines.append("")
     cost = meta.get("denoise_cost") or []
     if cost and "note" not in cost[0]:
+        gl = "raw_means_ms" in cost[0]
         lines += ["## The denoiser's whole cost", "", "Wall ms, medians; guided by an albedo and a "
-                  "normal. Read-back: an RGBA32F image from GL; upload: the result into a texture.",
+                  "normal. Read-back: an RGBA32F image from GL; upload: the result into a texture. "
+                  + ("Tile means kept: the GL passes (the raw image's tile means and their "
+                     "read-back, then the restore with a ctx.finish; the output check is that "
+                     "pass)." if gl else "Tile means kept: host NumPy."),
                   "", "| size | quality | device | read-back into the filter's colour | "
                   "prepare | filter | output check | tile means kept | upload | total |",
                   "|---|---|---|---|---|---|---|---|---|---|"]

@@ -13,8 +13,15 @@ stage remembers the failure so that a viewer does not try again every frame.
 Cost (`Denoised.ms`, wall time; OIDN's execute is synchronous): prepare_ms (the colour's copy into
 the filter's memory where the caller did not read GL straight into it, a pass that finds
 non-finite values, and a new guide's upload), filter_ms, check_ms (a pass over the output and its
-copy where asked), means_ms (the raw image's tile means and their restoring, keep_block_means). The read-back from GL and
-the upload of the result are the caller's (Renderer.denoise, the viewer), and records add them.
+copy where asked), means_ms (the raw image's tile means and their restoring, keep_block_means).
+The read-back from GL and the upload of the result are the caller's, and records add them.
+
+keep_block_means is the host path and the NumPy twin of the GL one (kept_means.py: two compute
+passes, glsl/tile_means.comp and glsl/keep_tile_means.comp), which Renderer.denoise (from the
+accumulation), the viewer and the bench take: they call the filter with keep_means and
+check_output off, and restore the means and check the output on the GPU after the upload.
+Callers that hold host arrays (auto_progressive.py, an image given to Renderer.denoise) keep
+the host path.
 """
 from __future__ import annotations
 
@@ -58,12 +65,17 @@ INSTALL_HINT = "pip install pyoidn"
 
 @dataclass
 class Denoised:
-    """One call's result: the image (the raw one where `note` says the filter did not run), what
-    the filter ran on ("cuda", "cpu" or None), and wall ms of its parts."""
-    image: np.ndarray
+    """One call's result: the image (the raw one where `note` says the filter did not run; None
+    where kept_means.denoise_on_gl left it in a texture), what the filter ran on ("cuda", "cpu"
+    or None), wall ms of its parts (they add up to the whole), and `signed`: the image may dip
+    below zero (it was filtered as its positive and negative parts). `means_parts_ms`: where
+    means_ms was GL passes, its parts (not counted again in total_ms)."""
+    image: np.ndarray | None
     device: str | None
     note: str | None = None
     ms: dict = field(default_factory=dict)
+    signed: bool = False
+    means_parts_ms: dict = field(default_factory=dict)
 
     @property
     def denoised(self) -> bool:
@@ -347,7 +359,8 @@ class Denoiser:
 
     def __call__(self, color: np.ndarray, albedo: np.ndarray | None = None,
                  normal: np.ndarray | None = None, copy: bool = True,
-                 signed: bool = False, keep_means: bool = True) -> Denoised:
+                 signed: bool = False, keep_means: bool = True, check_output: bool = True,
+                 color_finite: bool = False) -> Denoised:
         """The denoised colour (H, W, 3) of `color` (H, W, 3 or 4: RGB, or RGBA whose alpha is
         ignored), guided by the noise-free `albedo` (in [0, 1]) and `normal` (in [-1, 1]) where
         given (a normal needs an albedo: OIDN's rule). Negative, NaN and infinite colours are
@@ -358,8 +371,13 @@ class Denoiser:
         thin shells of the stress battery (bench/h200-denoise/battery). `copy` False: the image
         is a view of the filter's output, valid until the next call. `keep_means`: the result
         keeps the raw image's means over KEEP_MEANS_BLOCK-pixel tiles (keep_block_means: OIDN
-        alone moved an image's mean by up to 4.5% on heavy-tailed noise). Where the filter cannot
-        run: the raw colour, made finite (and, unless signed, non-negative), with a note."""
+        alone moved an image's mean by up to 4.5% on heavy-tailed noise). `check_output` False:
+        no host pass makes the output finite and non-negative, and without `copy` or
+        `keep_means` the image is the filter's output buffer itself (a caller that uploads it and
+        restores the means on the GPU, kept_means.KeptMeans.restore, checks it there).
+        `color_finite`: the caller has found the colour finite (KeptMeans.raw_means), so without
+        `keep_means` no pass looks for non-finite values. Where the filter cannot run: the raw
+        colour, made finite (and, unless signed, non-negative), with a note."""
         color = np.asarray(color)
         if color.ndim != 3 or color.shape[2] not in (3, 4) or min(color.shape[:2]) == 0:
             raise ValueError(f"denoise: the colour image must be (height, width, 3), got "
@@ -389,11 +407,12 @@ class Denoiser:
                     entry["guides"][name] = guide
             t_means = time.perf_counter()
             raw_means = _block_means(staged[..., :3], KEEP_MEANS_BLOCK) if keep_means else None
-            raw_means_ms, keep_ms = 1e3 * (time.perf_counter() - t_means), 0.0
+            raw_means_ms = 1e3 * (time.perf_counter() - t_means) if keep_means else 0.0
+            keep_ms = 0.0
             # a non-finite pixel makes its tile's mean non-finite, so the means (where kept) find
             # one without a pass of their own
             if not (np.isfinite(raw_means).all() if raw_means is not None
-                    else _all_finite(staged)):
+                    else color_finite or _all_finite(staged)):
                 _make_usable(staged) if not signed else np.nan_to_num(
                     staged, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
                 if raw_means is not None:
@@ -421,7 +440,7 @@ class Denoiser:
                         entry["scratch"] = scratch
                 np.copyto(scratch, out)
                 out = scratch
-            if not _all_finite(out):   # (never seen) a filter's overflow
+            if check_output and not _all_finite(out):   # (never seen) a filter's overflow
                 _make_usable(out)
             if raw_means is not None:
                 t_keep = time.perf_counter()
@@ -435,7 +454,7 @@ class Denoiser:
         return Denoised(out, self.device, None,
                         {"prepare_ms": 1e3 * (t1 - t0) - raw_means_ms,
                          "filter_ms": 1e3 * (t2 - t1), "check_ms": 1e3 * (t3 - t2) - keep_ms,
-                         "means_ms": raw_means_ms + keep_ms})
+                         "means_ms": raw_means_ms + keep_ms}, signed=negative is not None)
 
     def _execute(self, entry) -> None:
         entry["filter"].execute()

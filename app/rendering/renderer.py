@@ -33,6 +33,7 @@ from .sample_bands import tile_grid
 from .denoise import (GUIDE_SETS, Denoised, choose_guides, radiance_as_albedo, sanitize,
                       shared_denoiser)
 from .denoise_guides import GUIDE_FRAMES, DenoiseGuides
+from .kept_means import KeptMeans, denoise_on_gl
 from .raymarch import Raymarcher, min_step_voxels
 from .refine import render_refine
 from .lab_options import LabOptions
@@ -182,6 +183,7 @@ class Renderer:
         self._guide_acc: Accumulation | None = None   # the raymarched image a "probes" guide uses
         self._guides_key: tuple | None = None         # what the guides kept were made for
         self._guides_kept: tuple = (None, None)
+        self._kept_means: KeptMeans | None = None     # denoise's tile means on the GPU
 
     @property
     def _light(self) -> LightTransmittance | None:
@@ -1053,7 +1055,13 @@ class Renderer:
         """The image of the camera begun (None: the accumulation in hand, read from GL straight
         into the denoiser's memory) through the denoiser with `guides`: (Denoised, the guides'
         GPU ms). Where the denoiser cannot run, Denoised holds the raw image and a note.
-        `signed`: whether the image may dip below zero (None: the method begun's, app/methods.py)."""
+        `signed`: whether the image may dip below zero (None: the method begun's, app/methods.py).
+
+        From the accumulation (every method but `guided`, whose image is the sum of two) the
+        raw tile means are made and given back on the GPU (kept_means.denoise_on_gl: Denoised.ms
+        has readback_ms, means_ms for the GL passes with a ctx.finish, upload_result_ms, and
+        result_readback_ms, the corrected image read back for the host image returned, which a
+        viewer does not pay); an image given here keeps the host path (keep_block_means)."""
         denoiser = shared_denoiser("auto", quality)
         if not denoiser.available:
             raw = self.image() if image is None else image
@@ -1064,18 +1072,23 @@ class Renderer:
             names = tuple(n for n, g in (("albedo", albedo), ("normal", normal)) if g is not None)
             staged = (denoiser.staging(acc.width, acc.height, names)
                       if self.method != "guided" else None)
+            signed = REGISTRY[self.method].signed if signed is None else signed
             if staged is not None:
-                self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
-                acc.texture.read_into(staged)
-                image = staged
-            else:
-                image = self.image()
+                if self._kept_means is None:
+                    self._kept_means = KeptMeans(self.ctx)
+                kept = self._kept_means
+                return denoise_on_gl(kept, denoiser, acc.texture, staged, albedo, normal, signed,
+                                     kept.result_texture(acc.width, acc.height),
+                                     read_result=True), guides_ms
+            image = self.image()
         signed = REGISTRY[self.method].signed if signed is None else signed
         return denoiser(image, albedo, normal, copy=copy, signed=signed), guides_ms
 
     def release(self) -> None:
         if self._guides is not None:
             self._guides.release()
+        if self._kept_means is not None:
+            self._kept_means.release()
         if self._guide_acc is not None:
             self._guide_acc.release()
         for p in (*self._passes.values(), *self._raymarchers.values()):

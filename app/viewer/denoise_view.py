@@ -9,7 +9,12 @@ grow. A view shows its raw image until its first filtered one, and again after a
 the next. On the H200 a 1080p filter with its read-back and upload costs about 25 ms
 (bench/h200-denoise), so the doubling keeps its share of a 14 ms frame small after the first
 second. OIDN has no temporal mode: the filtered images of a still camera change as samples come
-(docs/denoising.md measures the flicker)."""
+(docs/denoising.md measures the flicker).
+
+The accumulation is read straight into the filter's colour, its tile means made on the GPU
+(app/rendering/kept_means.py), and the filter's output uploaded and given back those means by two
+GL passes into the RGBA32F texture the display shows: the host neither sums the images nor
+checks the output (kept_means.denoise_on_gl)."""
 from __future__ import annotations
 
 import time
@@ -19,6 +24,7 @@ import moderngl
 
 from ..methods import METHODS
 from ..rendering.denoise import choose_guides, shared_denoiser
+from ..rendering.kept_means import KeptMeans, denoise_on_gl
 
 INTERVAL_S = 0.5
 
@@ -39,6 +45,7 @@ class ViewDenoise:
         self.note: str | None = None     # why it switched itself off (the library, the filter)
         self.last_ms = 0.0               # wall ms of the last update's filtering
         self.runs = 0                    # filtered images made (tests, the Stats panel)
+        self.kept_means: KeptMeans | None = None   # the tile means' passes, made on first use
 
     def set_enabled(self, on: bool) -> None:
         self.enabled = bool(on)
@@ -77,21 +84,24 @@ class ViewDenoise:
                 self.note, self.enabled = denoiser.failure, False
                 self.images.clear()
                 break
-            self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
-            acc.texture.read_into(staged)
-            d = denoiser(staged, albedo, normal, copy=False, signed=METHODS[shown].signed)
-            if not d.denoised:
-                self.note, self.enabled = d.note, False
-                self.images.clear()
-                break
             old = self.images.get(name)
             texture = old.texture if old is not None else None
             if texture is None or texture.size != (acc.width, acc.height):
                 if texture is not None:
                     texture.release()
-                texture = self.ctx.texture((acc.width, acc.height), 3, dtype="f4")
+                # RGBA32F: the restore pass stores into it (the display reads rgb)
+                texture = self.ctx.texture((acc.width, acc.height), 4, dtype="f4")
                 texture.filter = acc.texture.filter
-            texture.write(d.image)
+            if self.kept_means is None:
+                self.kept_means = KeptMeans(self.ctx)
+            d = denoise_on_gl(self.kept_means, denoiser, acc.texture, staged, albedo, normal,
+                              METHODS[shown].signed, texture, finish=False)
+            if not d.denoised:
+                texture.release()
+                self.images.pop(name, None)
+                self.note, self.enabled = d.note, False
+                self.release()
+                break
             self.images[name] = _Filtered(texture, generation, acc.samples, now)
             self.runs += 1
         self.last_ms = 1e3 * (time.perf_counter() - start)
@@ -110,3 +120,6 @@ class ViewDenoise:
         for got in self.images.values():
             got.texture.release()
         self.images.clear()
+        if self.kept_means is not None:
+            self.kept_means.release()
+            self.kept_means = None

@@ -667,7 +667,8 @@ class RenderSession:
         if texture is None:
             return view.acc.read()
         w, h = texture.size
-        return np.frombuffer(texture.read(), np.float32).reshape(h, w, 3).copy()
+        rgba = np.frombuffer(texture.read(), np.float32).reshape(h, w, 4)   # (RGBA32F)
+        return rgba[..., :3].copy()
 
     def set_filter(self, linear: bool) -> None:
         self.filter = moderngl.LINEAR if linear else moderngl.NEAREST
