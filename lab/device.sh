@@ -15,13 +15,15 @@ for f in .data/*.gz; do
 done
 for f in .data/*.nrrd; do [ -f "$f" ] && cp -n "$f" ../shared/datasets/; done
 for i in 1 2 3 4; do [ -f .oidnp$i/part ] && cp .oidnp$i/part /tmp/devcache/oidn.part$i; done
+# part 4 travels with the wheels pyoidn needs (cffi, pycparser), kept beside the parts
+[ -d .oidnp4 ] && cp .oidnp4/*.whl /tmp/devcache/ 2>/dev/null
 if [ ! -d /tmp/devcache/oidn/pyoidn ] && [ -f /tmp/devcache/oidn.part1 ] && [ -f /tmp/devcache/oidn.part2 ] \
-   && [ -f /tmp/devcache/oidn.part3 ] && [ -f /tmp/devcache/oidn.part4 ] && [ -d .oidnp4 ]; then
+   && [ -f /tmp/devcache/oidn.part3 ] && [ -f /tmp/devcache/oidn.part4 ]; then
   mkdir -p /tmp/devcache/oidn
   cat /tmp/devcache/oidn.part[1-4] | tar xz -C /tmp/devcache/oidn
   (cd /tmp/devcache/oidn/pyoidn/oidn/lib && ln -sf libOpenImageDenoise.so.2 libOpenImageDenoise.so \
     && ln -sf libOpenImageDenoise.so.2 "libOpenImageDenoise.so.$(ls libOpenImageDenoise_core.so.* | sed 's/.*core\.so\.//')")
-  python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/devcache/oidn .oidnp4/*.whl
+  python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/devcache/oidn /tmp/devcache/*.whl
 fi
 [ -d /tmp/devcache/oidn/pyoidn ] && export PYTHONPATH=/tmp/devcache/oidn:$PYTHONPATH
 true
