@@ -13,6 +13,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, ".")
@@ -33,6 +34,9 @@ parser.add_argument("--frames", type=int, default=16, help="raymarch frames")
 parser.add_argument("--roughness", type=float, default=0.4)
 parser.add_argument("--specular", type=float, default=0.04)
 parser.add_argument("--quick", action="store_true")
+parser.add_argument("--probe-variants", default="",
+                    help="comma list of precision:sh_order (e.g. rgba16f:auto,rgba16f:1): the "
+                         "raymarcher again with probes of each, warm, against the same reference")
 args = parser.parse_args()
 out = Path(args.out)
 out.mkdir(parents=True, exist_ok=True)
@@ -72,6 +76,21 @@ for name, scene in scenes.items():
                    "raymarch_error": corrected_rrmse(rrmse(rm.image, ref), noise),
                    "probes_error": corrected_rrmse(rrmse(pr.image, ref), noise),
                    "wall_s": time.time() - t}
+            variants = []
+            for v in filter(None, args.probe_variants.split(",")):
+                precision, order = v.split(":")
+                probes = replace(s.probes, precision=precision,
+                                 sh_order=order if order == "auto" else int(order))
+                r.set_scene(s.replace(probes=probes))
+                r.invalidate()
+                r.render("raymarch", spp=args.frames, seed=4)   # compile, clocks up
+                vm = r.render("raymarch", spp=args.frames, seed=3)
+                variants.append({"precision": precision, "sh_order": order,
+                                 "sh_order_used": r.probe_grid.sh_order,
+                                 "raymarch_ms_per_frame": vm.ms_per_sample,
+                                 "raymarch_error": corrected_rrmse(rrmse(vm.image, ref), noise)})
+            if variants:
+                row["probe_variants"] = variants
         finally:
             r.release()
         records.append(row)
