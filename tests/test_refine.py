@@ -210,3 +210,67 @@ def test_interact_quick_preset_replays_refine(ctx, tmp_path):
     text = write_report(path).read_text()
     assert "Within 2% within 1 s of every event" in text
     assert "| anisotropic | 32x24 | 8^3x128 | refine | 10 |" in text
+
+
+@pytest.mark.parametrize("n_a, n_b, scale", [(8, 8, 0.5), (4, 12, 1.0), (16, 16, 2.0)])
+def test_denoised_half_error_matches_a_known_filters_error(n_a, n_b, scale):
+    """refine.denoised_half_error: a known, biased filter (a 5x5 box blur) on half a, judged
+    against half b alone, estimates the filtered half's true relative RMSE (its bias on this
+    rough image included) within 10%."""
+    from radiance_probes.rendering.refine import denoised_half_error
+    rng = np.random.default_rng(11 + n_a)
+    truth = _truth(rng)
+    sigma = scale * truth.mean() * rng.uniform(0.5, 1.5, SHAPE)
+    a, b = _halves(rng, truth, sigma, n_a, n_b)
+    pad = np.pad(a, ((2, 2), (2, 2), (0, 0)), mode="edge")
+    blurred = sum(pad[dy:dy + SHAPE[0], dx:dx + SHAPE[1]] for dy in range(5) for dx in range(5)) / 25
+    true_error = rrmse(blurred, truth)
+    est = denoised_half_error(blurred, a, b, n_a, n_b)
+    assert est == pytest.approx(true_error, rel=0.1)
+    assert math.isnan(denoised_half_error(blurred, a, b, 0, n_b))
+
+
+def test_refine_judges_guided_denoised_where_the_denoise_switch_is_on(ctx, monkeypatch):
+    """With the Denoise switch on, a check that the raw halves' estimate does not pass asks the
+    denoised halves' error (half a filtered, judged against half b), once per doubling of the
+    samples, and switches on it; its wall time is the frame's denoise_ms. The filter here is a
+    stand-in that returns half b (an error estimate of 0), so the view switches at the first check
+    with REFINE_MIN_HALF_SAMPLES a half. With the switch off it is never asked."""
+    from radiance_probes.rendering.denoise import Denoised
+    from radiance_probes.viewer import session as session_module
+    from radiance_probes.viewer.session import REFINE_MIN_HALF_SAMPLES, RenderSession
+    calls = []
+
+    class HalfB:
+        def __call__(self, image, albedo=None, normal=None, **kw):
+            calls.append(image.shape)
+            return Denoised(s.views["refine"].halves.halves[1].read(), "cpu")
+    monkeypatch.setattr(session_module, "shared_denoiser", lambda *a, **k: HalfB())
+    s = RenderSession(ctx, parse_scene(SCENE))
+    try:
+        s.resize(24, 16)
+        s.set_methods(["refine"])
+        s.denoise.set_enabled(False)
+        asked = []
+        real = s._denoised_halves_error
+        monkeypatch.setattr(s, "_denoised_halves_error", lambda v: asked.append(1) or real(v))
+        for _ in range(6):
+            s.step(MAX_SAMPLES, True)
+        assert not asked and not calls
+        s.denoise.set_enabled(True)
+        monkeypatch.setattr(s.denoise, "update", lambda session: 0.0)   # the display's own filter
+        s.restart()
+        view = s.views["refine"]
+        frame_denoise_ms = []
+        for _ in range(400):
+            times = s.step(MAX_SAMPLES, True)
+            frame_denoise_ms.append(times.denoise_ms)
+            if view.shown == "guided":
+                break
+        assert view.shown == "guided"
+        assert view.denoised_estimate == 0.0
+        assert min(view.halves.counts) >= REFINE_MIN_HALF_SAMPLES
+        assert calls and len(calls) == len(asked) <= view.halves.samples.bit_length()
+        assert frame_denoise_ms[-1] > 0.0
+    finally:
+        s.release()

@@ -98,6 +98,28 @@ def half_buffer_error(a: np.ndarray, b: np.ndarray, n_a: int = 1, n_b: int = 1,
                            n_a + n_b, raymarched is not None)
 
 
+def denoised_half_error(denoised_a: np.ndarray, a: np.ndarray, b: np.ndarray, n_a: int,
+                        n_b: int) -> float:
+    """The estimated relative RMSE of half a's image through the denoiser (`denoised_a`, a
+    function of half a alone), judged against the independent half b: E[mean((D(a) - b)^2)] =
+    mean((D(a) - t)^2) + mean(Var(b)), and mean(Var(b)) = s^2 / n_b = n_a / (n_a + n_b) times
+    E[mean((a - b)^2)]; the denominator T^2 as error_from_sums makes it. The image shown, the
+    denoised mean of both halves, holds more samples than half a, so this errs high. NaN where
+    a half is empty or the signal is not positive."""
+    w = weight(n_a, n_b)
+    if w <= 0.0:
+        return float("nan")
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    diff2 = float(np.mean((a - b) ** 2))
+    m = (n_a * a + n_b * b) / (n_a + n_b)
+    signal2 = float(np.mean(m * m)) - w * diff2
+    if not signal2 > 0.0:
+        return float("nan")
+    error2 = (float(np.mean((np.asarray(denoised_a, np.float64) - b) ** 2))
+              - n_a / (n_a + n_b) * diff2)
+    return math.sqrt(max(error2, 0.0) / signal2)
+
+
 class HalfBuffers:
     """Two independent `guided` accumulations (each a SumAccumulation: level 1 and level 0) and
     the image shown, their count-weighted mean (an Accumulation: rgb the mean, alpha the count),

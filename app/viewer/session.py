@@ -38,8 +38,10 @@ from ..rendering.accumulation import Accumulation
 from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from ..rendering.probes import BakeProgress
 from ..methods import METHODS
+from ..rendering.denoise import choose_guides, shared_denoiser
 from ..rendering.refine import (REFINE_HALF_SEED, REFINE_MIN_HALF_SAMPLES,  # noqa: F401 (tests)
-                                REFINE_RAYMARCH_FRAMES, HalfBuffers, RefineEstimate)
+                                REFINE_RAYMARCH_FRAMES, HalfBuffers, RefineEstimate,
+                                denoised_half_error)
 from ..rendering.renderer import Renderer
 from ..rendering.sample_bands import TileCosts, fill_frame, tile_grid
 from ..scene import Scene
@@ -109,6 +111,8 @@ class RefineView:
         self.estimate: RefineEstimate | None = None   # the last check's
         self.frames_since_check = 0
         self.checked_stage = 0          # bit_length of guided's samples at the last check
+        self.denoise_checked_stage = 0  # ... at the last estimate of the denoised halves' error
+        self.denoised_estimate = float("nan")   # that estimate (refine.denoised_half_error)
         self.switched_at: int | None = None   # guided's samples when it replaced the raymarcher
         self.frames = 0                 # frames stepped since the last restart
         self.shown_frames: list[str] = []   # what each of the first REFINE_HISTORY of them showed
@@ -146,7 +150,8 @@ class FrameTimes:
     samples: int = 0          # samples per pixel dispatched in the frame, over its views
     tiles: int = 0            # 8x8 tiles of samples split into bands (the wall clock's pacing),
     bands: int = 0            # and how many bands they were (sample_bands.py)
-    denoise_ms: float = 0.0   # wall ms the Denoise switch's filtering took (not GPU time)
+    denoise_ms: float = 0.0   # wall ms the Denoise switch's filtering took (not GPU time), refine's
+    #                           denoised checks included
     clock: str = "gpu"        # what bake_ms and render_ms are: GPU time, or "wall" clock time
     frame_wall_ms: float | None = None   # the whole frame's wall time (its display and panels too)
 
@@ -212,6 +217,7 @@ class RenderSession:
         # Denoise: on by default on a GPU; on a CPU rasteriser the filter (OIDN's CPU device)
         # takes as long as several frames, so it waits to be switched on
         self.denoise = ViewDenoise(ctx, enabled=device == "gpu")
+        self._check_denoise_ms = 0.0   # wall ms of refine's denoised checks this frame
         self.pacer = FramePacer(device == "software", ctx.info.get("GL_RENDERER", ""), clock)
         self._frame_began: float | None = None   # when the last working frame's step began
         if self.pacer.wall:
@@ -326,6 +332,7 @@ class RenderSession:
         view.shown = "raymarch"
         view.estimate, view.switched_at = None, None
         view.frames_since_check, view.checked_stage = 0, 0
+        view.denoise_checked_stage, view.denoised_estimate = 0, float("nan")
         view.frames, view.shown_frames = 0, []
 
     def _drop(self, name: str) -> None:
@@ -404,7 +411,8 @@ class RenderSession:
             del recent[:-RECENT_DISPATCHES]
             times.render_ms += ms
             times.samples += n
-        times.denoise_ms = self.denoise.update(self)
+        times.denoise_ms = self.denoise.update(self) + self._check_denoise_ms
+        self._check_denoise_ms = 0.0
         self.last = times
         return times
 
@@ -514,12 +522,41 @@ class RenderSession:
             view.estimate = halves.read_estimate(with_ray)
             view.frames_since_check, view.checked_stage = 0, stage
             est = view.estimate
-            if (with_ray and view.frames > 1 and min(halves.counts) >= REFINE_MIN_HALF_SAMPLES
-                    and est.guided < est.raymarch):   # (False while either is NaN)
-                view.shown = "guided"
-                view.switched_at = halves.samples
+            if with_ray and view.frames > 1 and min(halves.counts) >= REFINE_MIN_HALF_SAMPLES:
+                guided = est.guided
+                if not guided < est.raymarch and self._denoised_check_due(view, stage):
+                    guided = self._denoised_halves_error(view)
+                if guided < est.raymarch:   # (False while either is NaN)
+                    view.shown = "guided"
+                    view.switched_at = halves.samples
         self._note_shown(view)
         return ms_total + ms, n_total + n
+
+    def _denoised_check_due(self, view: RefineView, stage: int) -> bool:
+        """Whether to estimate the denoised halves' error at this check: where the Denoise switch
+        is on (the view then shows guided denoised), once each time guided's samples double (it
+        reads both halves back and runs the filter: about 40 ms at 1080p on the H200)."""
+        return self.denoise.enabled and stage != view.denoise_checked_stage
+
+    def _denoised_halves_error(self, view: RefineView) -> float:
+        """Half a denoised (with the guides the Denoise switch would give the view), its error
+        estimated against half b (refine.denoised_half_error); NaN where the filter cannot run.
+        The raw halves' noise alone kept the raymarcher on screen for 150 frames to for ever
+        after an edit on bonsai at 1080p, while guided denoised was at half its error
+        (bench/h200-interact-refine)."""
+        start = time.perf_counter()
+        r = self.renderer
+        halves = view.halves
+        view.denoise_checked_stage = halves.samples.bit_length()
+        n_a, n_b = halves.counts
+        a, b = halves.halves[0].read(), halves.halves[1].read()
+        guides = choose_guides("auto", n_a, r.probes_current())
+        albedo, normal, _ = r.denoise_guides(guides, camera=view.camera)
+        d = shared_denoiser()(a, albedo, normal, signed=METHODS["guided"].signed)
+        view.denoised_estimate = (denoised_half_error(d.image, a, b, n_a, n_b) if d.denoised
+                                  else float("nan"))
+        self._check_denoise_ms += 1e3 * (time.perf_counter() - start)   # the frame's denoise_ms
+        return view.denoised_estimate
 
     @staticmethod
     def _note_shown(view: RefineView) -> None:
