@@ -10,7 +10,7 @@ from .frontend import (ArgumentParser, OptionError, add_colorbar_options, add_sc
                        add_volume_options, fraction, grid_arg, positive_float, positive_int,
                        render_to_files)
 from .methods import VIEWER_METHODS
-from .scene import SceneError
+from .scene import PROBE_PRECISIONS, SceneError
 
 
 
@@ -189,9 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sh-window", choices=("none", "hann", "lanczos"),
                    help="window on the probes' spherical harmonics against ringing near sharp "
                         "light (probes.sh_window; default none)")
-    r.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"),
+    r.add_argument("--probe-precision", choices=PROBE_PRECISIONS,
                    help="the probe textures' format; rgba16f takes half the memory "
-                        "(probes.precision; default rgba32f)")
+                        "(probes.precision; default auto: rgba16f with surfaces, else rgba32f)")
     r.add_argument("--probe-layout", choices=PROBE_LAYOUTS,
                    help="probe planes evenly spaced (uniform) or denser where the indicator "
                         "varies (adaptive); default: the scene's (uniform)")

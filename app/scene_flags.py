@@ -27,7 +27,7 @@ FLAGS: dict[str, tuple[str, str]] = {
     "probes.grid": ("--probe-grid", "N|NX,NY,NZ"),
     "probes.samples": ("--probe-samples", "N"),
     "probes.sh_window": ("--sh-window", "none|hann|lanczos"),
-    "probes.precision": ("--probe-precision", "rgba32f|rgba16f"),
+    "probes.precision": ("--probe-precision", "auto|rgba32f|rgba16f"),
     "probes.layout": ("--probe-layout", "uniform|adaptive"),
     "probes.adaptive_strength": ("--adaptive-strength", "S"),
     "probes.adaptive_indicator": ("--adaptive-indicator", "extinction|sun"),

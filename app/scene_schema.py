@@ -284,7 +284,8 @@ def keys() -> dict[str, Key]:
             values=f"1 to {MAX_PROBE_AXIS}, or 3 of them"),
         "probes.samples": Key("Walks per probe.", number(1, MAX_PROBE_SAMPLES, integer=True)),
         "probes.sh_window": Key("Window against SH ringing.", choice(SH_WINDOWS)),
-        "probes.precision": Key("Probe texture format (rgba16f: half the memory).",
+        "probes.precision": Key("Probe texture format (rgba16f: half the memory); auto: rgba16f "
+                                "with surfaces (surface.gradient_factor > 0), else rgba32f.",
                                 choice(PROBE_PRECISIONS)),
         "probes.sh_order": Key(
             "Spherical-harmonics order; auto: 0 for g = 0, 3 for |g|^3 >= 0.2 with 128 walks or "

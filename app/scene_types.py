@@ -44,7 +44,9 @@ MAX_PROBE_AXIS = 256
 MAX_PROBE_SAMPLES = 1 << 20
 MAX_TRANSFER_ROWS = 4096  # the table is an N x 1 texture; GL guarantees widths up to 16384
 SH_WINDOWS = ("none", "hann", "lanczos")
-PROBE_PRECISIONS = ("rgba32f", "rgba16f")
+# "auto" (probe_layout.resolve_precision): rgba16f where surfaces read the probes' directions, else
+# rgba32f
+PROBE_PRECISIONS = ("auto", "rgba32f", "rgba16f")
 PROBE_FITS = ("visible", "box")
 PROBE_LAYOUTS = ("uniform", "adaptive")
 # What drives an adaptive layout's probe density (app/rendering/probe_planes.py): "extinction", the
@@ -197,7 +199,8 @@ class ProbeSpec:
     grid: tuple[int, int, int] = (16, 16, 16)
     samples: int = 256
     sh_window: str = "none"
-    precision: str = "rgba32f"
+    # "auto": rgba16f with surfaces (k > 0), else rgba32f (probe_layout.resolve_precision)
+    precision: str = "auto"
     # "auto": order 0 when g = 0 (the phase convolution zeroes bands 1 and 2: exact), else 2.
     sh_order: str | int = "auto"
     # "visible": the grid covers only where the transfer function makes the medium visible, and a

@@ -299,3 +299,30 @@ def test_probe_fetch_unpacks_every_coefficient(ctx, order, grey):
             expected = 3.0 * channel[f] if k < kept else np.zeros(count)
             np.testing.assert_allclose(coeffs[:, k, c], expected, rtol=1e-6, err_msg=f"k={k} c={c}")
     np.testing.assert_allclose(out[:, -1], channel[3 if grey else 27], rtol=1e-6)
+
+
+def test_auto_precision_is_16_bit_only_where_surfaces_read_the_probes(ctx):
+    """probes.precision "auto" (the default): rgba16f where surfaces need the probes' directions
+    (k > 0: seven textures a sample instead of two, halved in size), rgba32f otherwise, so that
+    k = 0 bakes exactly what it did; an explicit precision is kept either way; an unknown one is
+    refused by name."""
+    from radiance_probes.rendering.probe_layout import resolve_precision
+    assert resolve_precision("auto") == "rgba32f"
+    assert resolve_precision("auto", directions=True) == "rgba16f"
+    assert resolve_precision("rgba32f", directions=True) == "rgba32f"
+    assert resolve_precision("rgba16f") == "rgba16f"
+    base = {"volume": {"builtin": "cloud", "size": [12, 12, 12]}, "camera": {"width": 8, "height": 8},
+            "probes": {"grid": [2, 2, 2], "samples": 8, "fit": "box"}}
+    assert parse_scene(base).probes.precision == "auto"
+    for surface, precision, want in (({}, None, "rgba32f"), ({"gradient_factor": 0.2}, None, "rgba16f"),
+                                     ({"gradient_factor": 0.2}, "rgba32f", "rgba32f")):
+        d = {**base, "surface": surface,
+             "probes": {**base["probes"], **({"precision": precision} if precision else {})}}
+        r = Renderer(ctx, parse_scene(d))
+        try:
+            r.bake(seed=1)
+            assert r.probe_grid.precision == want, (surface, precision)
+        finally:
+            r.release()
+    with pytest.raises(SceneError, match="probes.precision"):
+        parse_scene({"probes": {"precision": "rgba8"}})

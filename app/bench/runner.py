@@ -24,7 +24,7 @@ from ..gl.checks import checks_for
 from ..gl.dispatch_log import DispatchLog
 from .records import log as _log, make_record, progressive as _progressive
 from .report import load as load_results
-from ..rendering.probe_layout import resolve_sh_order
+from ..rendering.probe_layout import resolve_precision, resolve_sh_order
 from .scenes import bench_scene
 
 PROBE_METHODS = PROBE_LIT   # the path tracer's probe-lit variants (app/methods.py)
@@ -250,7 +250,8 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
 
     # The sweep's probe precision (--probe-precision; the scene's by default), and the other one as
     # the showcase setting's variant.
-    precision = config.probe_precision or scene.probes.precision
+    precision = resolve_precision(config.probe_precision or scene.probes.precision,
+                                  scene.surface.gradient_factor > 0.0)
     other_precision = "rgba32f" if precision == "rgba16f" else "rgba16f"
     settings = [(g, s) for g in config.probe_grids for s in config.probe_samples]
     settings += [gs for gs in config.large_grids if gs not in settings]
@@ -278,7 +279,7 @@ def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out
             bake_ms = baked_ms if baked_ms > 0 else bake_ms
             walk_light_ms = light_ms if renderer.settings.walk_sun == "grid" else 0.0
             probe_info = {"probe_grid": grid, "probe_samples": samples,
-                          "precision": renderer.scene.probes.precision,
+                          "precision": renderer.probe_grid.precision,
                           "sh_window": renderer.scene.probes.sh_window,
                           "probe_bytes": renderer.probe_grid.gpu_bytes,
                           "sh_order": renderer.probe_grid.sh_order,

@@ -24,7 +24,8 @@ from .bake_level import SPACING_LEVEL, BakeMedium, spacing_level
 from .limits import check_image_size
 from .pathtracer import PathTracer
 from .light_transmittance import LightTransmittance, min_side_for_probes
-from .probe_layout import fitted_grid, resolve_channels, resolve_sh_order, sun_lobe_g
+from .probe_layout import (fitted_grid, resolve_channels, resolve_precision, resolve_sh_order,
+                           sun_lobe_g)
 from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
 from .visible_region import VisibleRegionPass
 from .probes import ProbeGrid
@@ -70,6 +71,7 @@ class ProbePlan:
     sh_order: int
     grey: bool
     planes: tuple | None = None
+    precision: str = "rgba32f"     # the textures' format (probe_layout.resolve_precision)
 
     def defines(self) -> dict:
         """The compile-time probe layout of the shaders that read such a grid (lib/probes.glsl)."""
@@ -379,6 +381,8 @@ class Renderer:
                   if region and spec.layout == "adaptive" else None)
         return ProbePlan(grid=grid, box=box,
                          sh_order=self._sh_order(),
+                         precision=resolve_precision(spec.precision,
+                                                     self.scene.surface.gradient_factor > 0.0),
                          grey=resolve_channels(spec.channels, self.resources.medium_table,
                                                s.light.irradiance, environment) == 1,
                          planes=planes)
@@ -437,14 +441,14 @@ class Renderer:
         medium = self.bake_resources().medium_defines()
         if g is None or (g.grid, g.samples, g.precision, g.sh_order, g.box, g.grey, g.sun,
                          g.adaptive, g.environment_map, g.planes, g.sun_lobe) != (
-                plan.grid, spec.samples, spec.precision, plan.sh_order, plan.box, plan.grey,
+                plan.grid, spec.samples, plan.precision, plan.sh_order, plan.box, plan.grey,
                 st.walk_sun, st.walk_adaptive, env_map, plan.planes, lobe) or (
                 g.sun_correction != st.walk_sun_correction) or g.medium != medium or (
                 g.shadow_tracking != st.shadow_tracking) or (
                 g.area_lights != self.resources.area_lights_on):
             if g is not None:
                 g.release()
-            self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, spec.precision,
+            self.probe_grid = ProbeGrid(self.ctx, plan.grid, spec.samples, plan.precision,
                                         plan.sh_order, plan.box, plan.grey,
                                         sun=st.walk_sun, adaptive=st.walk_adaptive,
                                         sun_correction=st.walk_sun_correction,

@@ -6,6 +6,7 @@ import argparse
 from ..frontend import (add_scene_edit_options, add_volume_options, grid_arg, memory_size,
                         positive_float, positive_int, render_scale, window_size)
 from ..methods import VIEWER_METHODS as METHODS
+from ..scene import PROBE_PRECISIONS
 
 
 def add_view_parser(sub, func) -> argparse.ArgumentParser:
@@ -44,9 +45,9 @@ def add_view_parser(sub, func) -> argparse.ArgumentParser:
     v.add_argument("--sh-window", choices=("none", "hann", "lanczos"),
                    help="window on the probes' spherical harmonics against ringing near sharp "
                         "light (probes.sh_window; default none)")
-    v.add_argument("--probe-precision", choices=("rgba32f", "rgba16f"),
+    v.add_argument("--probe-precision", choices=PROBE_PRECISIONS,
                    help="the probe textures' format; rgba16f takes half the memory "
-                        "(probes.precision; default rgba32f)")
+                        "(probes.precision; default auto: rgba16f with surfaces, else rgba32f)")
     v.add_argument("--seed", type=int, default=0,
                    help="random seed of the samples (default 0): the same seed, the same image")
     v.add_argument("--volume-memory", type=memory_size, metavar="BYTES",
