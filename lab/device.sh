@@ -14,13 +14,15 @@ for f in .data/*.gz; do
   [ -f "$raw" ] || gunzip -c "$f" > "$raw"
 done
 for f in .data/*.nrrd; do [ -f "$f" ] && cp -n "$f" ../shared/datasets/; done
-for i in 1 2 3 4; do [ -f .oidnp$i/part ] && cp .oidnp$i/part /tmp/devcache/oidn.part$i; done
-# part 4 travels with the wheels pyoidn needs (cffi, pycparser), kept beside the parts
-[ -d .oidnp4 ] && cp .oidnp4/*.whl /tmp/devcache/ 2>/dev/null
-if [ ! -d /tmp/devcache/oidn/pyoidn ] && [ -f /tmp/devcache/oidn.part1 ] && [ -f /tmp/devcache/oidn.part2 ] \
-   && [ -f /tmp/devcache/oidn.part3 ] && [ -f /tmp/devcache/oidn.part4 ]; then
+# The library travels in parts, one a call (each call's tree must stay under 64 MiB): call k
+# carries .oidnqk (k = 1 .. 5; the last with pyoidn's wheels, cffi and pycparser) and copies it to
+# /tmp/devcache; the call that finds all five assembles them.
+for i in 1 2 3 4 5; do [ -f .oidnq$i/part ] && cp .oidnq$i/part /tmp/devcache/oidn.q$i; done
+for d in .oidnq5; do [ -d $d ] && cp $d/*.whl /tmp/devcache/ 2>/dev/null; done
+if [ ! -d /tmp/devcache/oidn/pyoidn ] && [ -f /tmp/devcache/oidn.q1 ] && [ -f /tmp/devcache/oidn.q2 ] \
+   && [ -f /tmp/devcache/oidn.q3 ] && [ -f /tmp/devcache/oidn.q4 ] && [ -f /tmp/devcache/oidn.q5 ]; then
   mkdir -p /tmp/devcache/oidn
-  cat /tmp/devcache/oidn.part[1-4] | tar xz -C /tmp/devcache/oidn
+  cat /tmp/devcache/oidn.q[1-5] | tar xz -C /tmp/devcache/oidn
   (cd /tmp/devcache/oidn/pyoidn/oidn/lib && ln -sf libOpenImageDenoise.so.2 libOpenImageDenoise.so \
     && ln -sf libOpenImageDenoise.so.2 "libOpenImageDenoise.so.$(ls libOpenImageDenoise_core.so.* | sed 's/.*core\.so\.//')")
   python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/devcache/oidn /tmp/devcache/*.whl

@@ -233,9 +233,10 @@ def test_denoised_half_error_matches_a_known_filters_error(n_a, n_b, scale):
 def test_refine_judges_guided_denoised_where_the_denoise_switch_is_on(ctx, monkeypatch):
     """With the Denoise switch on, a check that the raw halves' estimate does not pass asks the
     denoised halves' error (half a filtered, judged against half b), once per doubling of the
-    samples, and switches on it; its wall time is the frame's denoise_ms. The filter here is a
-    stand-in that returns half b (an error estimate of 0), so the view switches at the first check
-    with REFINE_MIN_HALF_SAMPLES a half. With the switch off it is never asked."""
+    samples, and switches on it; its wall time is the frame's denoise_ms. The raw estimate is held
+    above the raymarcher's, and the filter is a stand-in that returns half b (an error estimate of
+    0), so the view switches at the first check with REFINE_MIN_HALF_SAMPLES a half, on the
+    denoised estimate alone. With the switch off it is never asked."""
     from radiance_probes.rendering.denoise import Denoised
     from radiance_probes.viewer import session as session_module
     from radiance_probes.viewer.session import REFINE_MIN_HALF_SAMPLES, RenderSession
@@ -246,6 +247,10 @@ def test_refine_judges_guided_denoised_where_the_denoise_switch_is_on(ctx, monke
             calls.append(image.shape)
             return Denoised(s.views["refine"].halves.halves[1].read(), "cpu")
     monkeypatch.setattr(session_module, "shared_denoiser", lambda *a, **k: HalfB())
+    # the raw halves' estimate never passes here (on a tiny scene it may, and then nothing asks)
+    from radiance_probes.rendering.refine import RefineEstimate
+    monkeypatch.setattr(session_module.HalfBuffers, "read_estimate",
+                        lambda self, with_ray: RefineEstimate(1.0, 0.5, self.samples))
     s = RenderSession(ctx, parse_scene(SCENE))
     try:
         s.resize(24, 16)

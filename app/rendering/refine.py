@@ -98,6 +98,14 @@ def half_buffer_error(a: np.ndarray, b: np.ndarray, n_a: int = 1, n_b: int = 1,
                            n_a + n_b, raymarched is not None)
 
 
+def _mean_square(x: np.ndarray) -> float:
+    """mean(x^2) of a float32 array through one BLAS dot (float32 products and sums, the partial
+    sums blocked: a relative error near 1e-6 at a 1080p image's 6 million values), not a float64
+    copy: at 1080p that copy made the estimate 0.4 s on a 2-core machine."""
+    flat = np.ascontiguousarray(x, np.float32).ravel()
+    return float(np.dot(flat, flat)) / max(flat.size, 1)
+
+
 def denoised_half_error(denoised_a: np.ndarray, a: np.ndarray, b: np.ndarray, n_a: int,
                         n_b: int) -> float:
     """The estimated relative RMSE of half a's image through the denoiser (`denoised_a`, a
@@ -105,18 +113,19 @@ def denoised_half_error(denoised_a: np.ndarray, a: np.ndarray, b: np.ndarray, n_
     mean((D(a) - t)^2) + mean(Var(b)), and mean(Var(b)) = s^2 / n_b = n_a / (n_a + n_b) times
     E[mean((a - b)^2)]; the denominator T^2 as error_from_sums makes it. The image shown, the
     denoised mean of both halves, holds more samples than half a, so this errs high. NaN where
-    a half is empty or the signal is not positive."""
+    a half is empty or the signal is not positive. float32 arithmetic (_mean_square)."""
     w = weight(n_a, n_b)
     if w <= 0.0:
         return float("nan")
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    diff2 = float(np.mean((a - b) ** 2))
-    m = (n_a * a + n_b * b) / (n_a + n_b)
-    signal2 = float(np.mean(m * m)) - w * diff2
+    a = np.asarray(a, np.float32)
+    b = np.asarray(b, np.float32)
+    diff2 = _mean_square(a - b)
+    m = a * np.float32(n_a / (n_a + n_b))
+    m += b * np.float32(n_b / (n_a + n_b))
+    signal2 = _mean_square(m) - w * diff2
     if not signal2 > 0.0:
         return float("nan")
-    error2 = (float(np.mean((np.asarray(denoised_a, np.float64) - b) ** 2))
-              - n_a / (n_a + n_b) * diff2)
+    error2 = _mean_square(np.asarray(denoised_a, np.float32) - b) - n_a / (n_a + n_b) * diff2
     return math.sqrt(max(error2, 0.0) / signal2)
 
 
