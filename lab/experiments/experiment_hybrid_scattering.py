@@ -72,6 +72,7 @@ for name, scene in scenes.items():
                    "height": s.camera.height,
                    "pt_ms_per_sample": 0.5 * (a.ms_per_sample + b.ms_per_sample),
                    "raymarch_ms_per_frame": rm.ms_per_sample, "bake_ms": rm.bake_ms,
+                   "probe_precision": r.probe_grid.precision, "sh_order": r.probe_grid.sh_order,
                    "reference_noise": noise,
                    "raymarch_error": corrected_rrmse(rrmse(rm.image, ref), noise),
                    "probes_error": corrected_rrmse(rrmse(pr.image, ref), noise),
