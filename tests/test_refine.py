@@ -236,7 +236,8 @@ def test_refine_judges_guided_denoised_where_the_denoise_switch_is_on(ctx, monke
     samples, and switches on it; its wall time is the frame's denoise_ms. The raw estimate is held
     above the raymarcher's, and the filter is a stand-in that returns half b (an error estimate of
     0), so the view switches at the first check with REFINE_MIN_HALF_SAMPLES a half, on the
-    denoised estimate alone. With the switch off it is never asked."""
+    denoised estimate alone. With the switch off it is never asked, nor while the raw estimate is
+    more than DENOISED_CHECK_RATIO times the raymarcher's."""
     from radiance_probes.rendering.denoise import Denoised
     from radiance_probes.viewer import session as session_module
     from radiance_probes.viewer.session import REFINE_MIN_HALF_SAMPLES, RenderSession
@@ -264,6 +265,16 @@ def test_refine_judges_guided_denoised_where_the_denoise_switch_is_on(ctx, monke
         assert not asked and not calls
         s.denoise.set_enabled(True)
         monkeypatch.setattr(s.denoise, "update", lambda session: 0.0)   # the display's own filter
+        # a raw estimate further than DENOISED_CHECK_RATIO above the raymarcher's: not asked
+        monkeypatch.setattr(session_module.HalfBuffers, "read_estimate",
+                            lambda self, with_ray: RefineEstimate(
+                                1.0, 0.99 / session_module.DENOISED_CHECK_RATIO, self.samples))
+        s.restart()
+        for _ in range(40):
+            s.step(MAX_SAMPLES, True)
+        assert not asked and s.views["refine"].shown == "raymarch"
+        monkeypatch.setattr(session_module.HalfBuffers, "read_estimate",
+                            lambda self, with_ray: RefineEstimate(1.0, 0.5, self.samples))
         s.restart()
         view = s.views["refine"]
         frame_denoise_ms = []

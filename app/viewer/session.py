@@ -61,6 +61,11 @@ REFINE = "refine"
 # estimate may switch the view and the second half's seed are app/rendering/refine.py's (a still
 # image of refine shares them).
 REFINE_CHECK_FRAMES = 16
+# refine with the Denoise switch on asks the denoised halves' error (a read-back of both halves
+# and a filter run: a hitch of a frame) only once the raw halves' estimate is within this factor of
+# the raymarcher's: the filter took guided's error down 2 to 4x on bonsai (10% -> 2.8% at 16
+# samples, 3.5% -> 1.7% at 128, bench/h200-denoise), so a check further off could not switch.
+DENOISED_CHECK_RATIO = 4.0
 REFINE_HISTORY = 64     # frames after a restart whose shown image a refine view remembers (tests)
 
 
@@ -524,7 +529,8 @@ class RenderSession:
             est = view.estimate
             if with_ray and view.frames > 1 and min(halves.counts) >= REFINE_MIN_HALF_SAMPLES:
                 guided = est.guided
-                if not guided < est.raymarch and self._denoised_check_due(view, stage):
+                if (not guided < est.raymarch and guided < DENOISED_CHECK_RATIO * est.raymarch
+                        and self._denoised_check_due(view, stage)):
                     guided = self._denoised_halves_error(view)
                 if guided < est.raymarch:   # (False while either is NaN)
                     view.shown = "guided"
