@@ -210,11 +210,15 @@ def radiance_as_albedo(image: np.ndarray) -> np.ndarray:
     [0, 1] (OIDN's range for an albedo). One scale keeps the ratios between pixels, which is
     what the filter reads from a guide; the brightest half percent clip."""
     image = sanitize(image)
-    peak = image.max(axis=-1)
+    # the largest channel channel by channel, and the scaling in place: max over a last axis of 3
+    # and a new array for image / scale took 0.14 s of 0.18 at 1080p (a hitch whenever the
+    # viewer's probes change); the same values
+    peak = np.maximum(np.maximum(image[..., 0], image[..., 1]), image[..., 2])
     scale = float(np.quantile(peak, ALBEDO_SCALE_QUANTILE)) if peak.size else 0.0
     if not scale > 0.0:
         return np.zeros_like(image)
-    return np.clip(image / scale, 0.0, 1.0)
+    np.divide(image, scale, out=image)
+    return np.clip(image, 0.0, 1.0, out=image)
 
 
 def _check_image(name: str, image: np.ndarray, shape: tuple | None = None) -> None:
