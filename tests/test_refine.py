@@ -290,3 +290,31 @@ def test_refine_judges_guided_denoised_where_the_denoise_switch_is_on(ctx, monke
         assert frame_denoise_ms[-1] > 0.0
     finally:
         s.release()
+
+
+def test_still_refine_with_denoise_judges_guided_denoised(ctx, monkeypatch):
+    """render("refine", denoise=True) chooses as the viewer's Denoise switch does: where the raw
+    halves' estimate does not pass (held above the raymarcher's here), half a through the filter
+    (OIDN on the CPU) judged against half b decides, and the choice follows that estimate; without
+    denoise nothing is asked."""
+    from radiance_probes.rendering import refine as refine_module
+    from radiance_probes.rendering.refine import RefineEstimate
+    from radiance_probes.rendering.renderer import Renderer
+    monkeypatch.setattr(refine_module.HalfBuffers, "read_estimate",
+                        lambda self, with_raymarch: RefineEstimate(1.0, 0.5, self.samples))
+    r = Renderer(ctx, parse_scene(SCENE))
+    try:
+        raw = r.render("refine", spp=16, seed=1)
+        assert raw.stats["shown"] == "raymarch"
+        assert math.isnan(raw.stats["refine_estimate"]["guided_denoised"])
+        den = r.render("refine", spp=16, seed=1, denoise=True)
+        assert den.denoised is not None and den.denoised.denoised, den.denoised.note
+        judged = den.stats["refine_estimate"]["guided_denoised"]
+        assert math.isfinite(judged) and judged >= 0.0
+        assert den.stats["shown"] == ("guided" if judged < 0.5 else "raymarch")
+        # with the raymarcher's estimate below anything the filter reaches: the raymarcher
+        monkeypatch.setattr(refine_module.HalfBuffers, "read_estimate",
+                            lambda self, with_raymarch: RefineEstimate(1.0, 0.0, self.samples))
+        assert r.render("refine", spp=16, seed=1, denoise=True).stats["shown"] == "raymarch"
+    finally:
+        r.release()

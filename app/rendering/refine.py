@@ -218,15 +218,19 @@ class RefineImage:
     estimate: RefineEstimate
     raymarch_ms: float
     guided_ms: float
+    denoised_estimate: float = float("nan")   # guided denoised's, where `denoised` was asked
 
 
 def render_refine(renderer, spp: int, seed: int, width: int | None = None,
-                  height: int | None = None) -> RefineImage:
+                  height: int | None = None, denoised=None) -> RefineImage:
     """`refine` as a still image, as the viewer's view ends once the samples are spent: the
     raymarcher's image (min(spp, REFINE_RAYMARCH_FRAMES) frames) and `spp` samples of `guided` in
     two independent halves; the halves' mean is shown where its estimated error is below the
     raymarcher's (each half with at least REFINE_MIN_HALF_SAMPLES), else the raymarcher's image.
-    The probes and the light grid must be in hand (Renderer.render bakes them)."""
+    `denoised` (the image will be denoised; as the viewer's Denoise switch): a function of half
+    a's image giving it through the filter (or None where the filter cannot run); where the raw
+    estimate does not pass, guided is shown if denoised_half_error passes. The probes and the
+    light grid must be in hand (Renderer.render bakes them)."""
     r = renderer
     ray = halves = None
     try:
@@ -245,11 +249,18 @@ def render_refine(renderer, spp: int, seed: int, width: int | None = None,
                     guided_ms += lent.add_samples(n)
         halves.combine(ray, reduce=True)
         estimate = halves.read_estimate(with_raymarch=True)
-        guided = (min(halves.counts) >= REFINE_MIN_HALF_SAMPLES
-                  and estimate.guided < estimate.raymarch)   # (False while either is NaN)
+        enough = min(halves.counts) >= REFINE_MIN_HALF_SAMPLES
+        guided = enough and estimate.guided < estimate.raymarch   # (False while either is NaN)
+        judged = float("nan")
+        if enough and not guided and denoised is not None:
+            a, b = halves.halves[0].read(), halves.halves[1].read()
+            filtered = denoised(a)
+            if filtered is not None:
+                judged = denoised_half_error(filtered, a, b, *halves.counts)
+                guided = judged < estimate.raymarch
         image = (halves.combined if guided else ray).read()
         return RefineImage(image, "guided" if guided else "raymarch", estimate, raymarch_ms,
-                           guided_ms)
+                           guided_ms, judged)
     finally:
         if ray is not None:
             ray.release()
