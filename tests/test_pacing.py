@@ -96,7 +96,8 @@ def test_the_session_stops_believing_lying_timestamps_and_paces_by_the_wall_cloc
             paced.append((times.samples, times.render_ms))
         per_sample = min(ms / n for n, ms in paced[2:])
         for n, ms in paced[3:]:   # what 30 ms holds at the sample's wall time (at least one)
-            assert n < MAX_SAMPLES_PER_FRAME and (n == 1 or n * per_sample <= 30.0 * 1.5), paced
+            # (at most the cap: an idle machine fits about 50 of them in 30 ms here)
+            assert n <= MAX_SAMPLES_PER_FRAME and (n == 1 or n * per_sample <= 30.0 * 1.5), paced
     finally:
         s.release()
 

@@ -356,3 +356,19 @@ def test_the_session_paced_by_the_wall_clock_splits_samples_and_shows_whole_imag
         assert view.camera.eye[0] == pytest.approx(old_eye[0] + 0.3)
     finally:
         s.release()
+
+
+def test_a_frame_makes_at_most_most_samples_whole_over_all_its_steps():
+    """`most` caps the frame, not each step: a device whose samples are far cheaper than the
+    budget, after a band left a sample part done, still gets at most `most` whole samples a frame
+    (the session's MAX_SAMPLES_PER_FRAME; a fast idle machine made 67 in one frame)."""
+    device = FakeDevice(FakeClock(), 5, [0.01] * 25, dispatch_ms=0.0)   # 0.25 ms a sample
+    costs = device.costs()
+    for budget in (30.0, 60.0, 1000.0):
+        for _ in range(4):
+            done = fill_frame(device, costs, budget, 100000, most=64)
+            assert 1 <= done.samples <= 64, (budget, done)
+    # a band in progress first (a sample part done), then whole samples: still at most 64
+    device.add_groups(7)
+    done = fill_frame(device, costs, 1000.0, 100000, most=64)
+    assert done.samples <= 64 and device.groups_done == 0

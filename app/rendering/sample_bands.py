@@ -177,14 +177,16 @@ class FrameWork:
 
 def fill_frame(target: BandedTarget, costs: TileCosts, budget_ms: float, max_samples: int,
                most: int = 64, stop: Callable[[], bool] | None = None) -> FrameWork:
-    """A frame's work on `target` within `budget_ms`: next_work's steps until it says none, each
-    step's ms teaching `costs`; `stop()` true after a step ends the frame too (a camera move
-    waiting for a whole sample)."""
+    """A frame's work on `target` within `budget_ms`: next_work's steps until it says none or
+    `most` samples are whole, each step's ms teaching `costs`; `stop()` true after a step ends
+    the frame too (a camera move waiting for a whole sample)."""
     done = FrameWork()
     for _ in range(costs.count + most):   # (the budget ends it sooner)
         started = done.samples > 0 or done.bands > 0
+        if done.samples >= most:   # `most` is the frame's, not a step's (a fast frame took 67)
+            break
         work = next_work(costs, target.groups_done, budget_ms - done.ms, started,
-                         max_samples - target.samples, most)
+                         max_samples - target.samples, most - done.samples)
         if work is None:
             break
         kind, amount = work
