@@ -247,7 +247,8 @@ def test_refine_judges_guided_denoised_where_the_denoise_switch_is_on(ctx, monke
         def __call__(self, image, albedo=None, normal=None, **kw):
             calls.append(image.shape)
             return Denoised(s.views["refine"].halves.halves[1].read(), "cpu")
-    monkeypatch.setattr(session_module, "shared_denoiser", lambda *a, **k: HalfB())
+    from radiance_probes.rendering import refine as refine_module
+    monkeypatch.setattr(refine_module, "shared_denoiser", lambda *a, **k: HalfB())
     # the raw halves' estimate never passes here (on a tiny scene it may, and then nothing asks)
     from radiance_probes.rendering.refine import RefineEstimate
     monkeypatch.setattr(session_module.HalfBuffers, "read_estimate",

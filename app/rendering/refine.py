@@ -37,7 +37,9 @@ import moderngl
 import numpy as np
 
 from ..gl.shaders import compute_program, set_uniforms
+from ..methods import METHODS
 from .accumulation import Accumulation, SumAccumulation
+from .denoise import choose_guides, shared_denoiser
 
 GROUP_SIDE = 16
 # The raymarcher's frames refine accumulates at most (its image is then as good as its bias lets
@@ -127,6 +129,19 @@ def denoised_half_error(denoised_a: np.ndarray, a: np.ndarray, b: np.ndarray, n_
         return float("nan")
     error2 = _mean_square(np.asarray(denoised_a, np.float32) - b) - n_a / (n_a + n_b) * diff2
     return math.sqrt(max(error2, 0.0) / signal2)
+
+
+def denoised_halves_error(renderer, halves: "HalfBuffers", camera, guides: str = "auto") -> float:
+    """Half a read back and put through the denoiser with the guides (`guides`, "auto": as
+    choose_guides picks) a denoised image of `camera` gets, its error estimated against half b
+    (denoised_half_error); NaN where the filter cannot run. refine's judgement of guided
+    denoised, in the viewer (app/viewer/session.py) and for a still image (render_refine)."""
+    n_a, n_b = halves.counts
+    a, b = halves.halves[0].read(), halves.halves[1].read()
+    names = choose_guides(guides, n_a, renderer.probes_shown())
+    albedo, normal, _ = renderer.denoise_guides(names, camera=camera)
+    d = shared_denoiser()(a, albedo, normal, signed=METHODS["guided"].signed)
+    return denoised_half_error(d.image, a, b, n_a, n_b) if d.denoised else float("nan")
 
 
 class HalfBuffers:
@@ -222,15 +237,14 @@ class RefineImage:
 
 
 def render_refine(renderer, spp: int, seed: int, width: int | None = None,
-                  height: int | None = None, denoised=None) -> RefineImage:
+                  height: int | None = None, denoise_guides: str | None = None) -> RefineImage:
     """`refine` as a still image, as the viewer's view ends once the samples are spent: the
     raymarcher's image (min(spp, REFINE_RAYMARCH_FRAMES) frames) and `spp` samples of `guided` in
     two independent halves; the halves' mean is shown where its estimated error is below the
     raymarcher's (each half with at least REFINE_MIN_HALF_SAMPLES), else the raymarcher's image.
-    `denoised` (the image will be denoised; as the viewer's Denoise switch): a function of half
-    a's image giving it through the filter (or None where the filter cannot run); where the raw
-    estimate does not pass, guided is shown if denoised_half_error passes. The probes and the
-    light grid must be in hand (Renderer.render bakes them)."""
+    `denoise_guides` (the image will be denoised with these guides; as the viewer's Denoise
+    switch): where the raw estimate does not pass, guided is shown if denoised_halves_error
+    passes. The probes and the light grid must be in hand (Renderer.render bakes them)."""
     r = renderer
     ray = halves = None
     try:
@@ -252,12 +266,9 @@ def render_refine(renderer, spp: int, seed: int, width: int | None = None,
         enough = min(halves.counts) >= REFINE_MIN_HALF_SAMPLES
         guided = enough and estimate.guided < estimate.raymarch   # (False while either is NaN)
         judged = float("nan")
-        if enough and not guided and denoised is not None:
-            a, b = halves.halves[0].read(), halves.halves[1].read()
-            filtered = denoised(a)
-            if filtered is not None:
-                judged = denoised_half_error(filtered, a, b, *halves.counts)
-                guided = judged < estimate.raymarch
+        if enough and not guided and denoise_guides is not None:
+            judged = denoised_halves_error(r, halves, camera, denoise_guides)
+            guided = judged < estimate.raymarch
         image = (halves.combined if guided else ray).read()
         return RefineImage(image, "guided" if guided else "raymarch", estimate, raymarch_ms,
                            guided_ms, judged)

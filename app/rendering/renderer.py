@@ -982,20 +982,9 @@ class Renderer:
             raise NotImplementedError(f"render(): no still image of {method} yet")
         bake_ms = self.bake(seed, progress=bake_progress) + self.bake_light()
         self.resources.reset_stats()
-        camera = camera_frame(self.scene.camera, width, height)   # the guides' camera
-
-        def filtered(half_a: np.ndarray) -> np.ndarray | None:
-            """Half a through the denoiser, as the image shown would go (refine's judgement of
-            guided denoised: render_refine)."""
-            self.camera = camera
-            names = choose_guides(denoise_guides, spp // 2 or 1, self.probes_shown())
-            albedo, normal, _ = self.denoise_guides(names)
-            d = shared_denoiser("auto", "high")(half_a, albedo, normal,
-                                                signed=REGISTRY["guided"].signed)
-            return d.image if d.denoised else None
         done = render_refine(self, spp, seed, width, height,
-                             denoised=filtered if denoise else None)
-        self.camera = camera
+                             denoise_guides=denoise_guides if denoise else None)
+        self.camera = camera_frame(self.scene.camera, width, height)   # the guides' camera
         stats = self.resources.read_stats()
         stats["shown"] = done.shown
         stats["refine_estimate"] = {"guided": done.estimate.guided,

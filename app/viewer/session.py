@@ -38,10 +38,9 @@ from ..rendering.accumulation import Accumulation
 from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from ..rendering.probes import BakeProgress
 from ..methods import METHODS
-from ..rendering.denoise import choose_guides, shared_denoiser
 from ..rendering.refine import (REFINE_HALF_SEED, REFINE_MIN_HALF_SAMPLES,  # noqa: F401 (tests)
                                 REFINE_RAYMARCH_FRAMES, HalfBuffers, RefineEstimate,
-                                denoised_half_error)
+                                denoised_halves_error)
 from ..rendering.renderer import Renderer
 from ..rendering.sample_bands import TileCosts, fill_frame, tile_grid
 from ..scene import Scene
@@ -541,26 +540,19 @@ class RenderSession:
     def _denoised_check_due(self, view: RefineView, stage: int) -> bool:
         """Whether to estimate the denoised halves' error at this check: where the Denoise switch
         is on (the view then shows guided denoised), once each time guided's samples double (it
-        reads both halves back and runs the filter: about 40 ms at 1080p on the H200)."""
+        reads both halves back and runs the filter: a hitch of a frame,
+        bench/h200-interact-refine)."""
         return self.denoise.enabled and stage != view.denoise_checked_stage
 
     def _denoised_halves_error(self, view: RefineView) -> float:
         """Half a denoised (with the guides the Denoise switch would give the view), its error
-        estimated against half b (refine.denoised_half_error); NaN where the filter cannot run.
+        estimated against half b (refine.denoised_halves_error); NaN where the filter cannot run.
         The raw halves' noise alone kept the raymarcher on screen for 150 frames to for ever
         after an edit on bonsai at 1080p, while guided denoised was at half its error
         (bench/h200-interact-refine)."""
         start = time.perf_counter()
-        r = self.renderer
-        halves = view.halves
-        view.denoise_checked_stage = halves.samples.bit_length()
-        n_a, n_b = halves.counts
-        a, b = halves.halves[0].read(), halves.halves[1].read()
-        guides = choose_guides("auto", n_a, r.probes_current())
-        albedo, normal, _ = r.denoise_guides(guides, camera=view.camera)
-        d = shared_denoiser()(a, albedo, normal, signed=METHODS["guided"].signed)
-        view.denoised_estimate = (denoised_half_error(d.image, a, b, n_a, n_b) if d.denoised
-                                  else float("nan"))
+        view.denoise_checked_stage = view.halves.samples.bit_length()
+        view.denoised_estimate = denoised_halves_error(self.renderer, view.halves, view.camera)
         self._check_denoise_ms += 1e3 * (time.perf_counter() - start)   # the frame's denoise_ms
         return view.denoised_estimate
 
