@@ -8,6 +8,7 @@ each with bake_bisect.py (the walks do the same steps in every copy; only the co
   no-both     both
 Each copy is a timing probe, not a renderer to use: no-corr loses the correction's unbiasedness,
 no-clip ignores crops."""
+import json
 import shutil
 import subprocess
 import sys
@@ -48,6 +49,17 @@ def edited_tree(work: Path, name: str, edits) -> Path:
     (work / "shared").unlink(missing_ok=True)
     (work / "shared").symlink_to((ROOT / ".." / "shared").resolve())
     return root
+
+
+def child_rows(code: str, name: str, *args: str) -> list[dict]:
+    """Runs `code` in a fresh Python with `args` and returns the JSON of each line it printed as
+    "RESULT {...}", with a row {"root": name, "error": ...} added where it printed none or failed
+    (the edited copies' experiments: hybrid_raymarch_variants.py, hybrid_raymarch_costs.py)."""
+    p = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True)
+    rows = [json.loads(x[7:]) for x in p.stdout.splitlines() if x.startswith("RESULT ")]
+    if not rows or p.returncode:
+        rows.append({"root": name, "error": p.stderr[-1500:]})
+    return rows
 
 
 def main() -> None:

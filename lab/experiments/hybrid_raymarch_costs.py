@@ -9,12 +9,11 @@ the march's step doubled. Edits:
 Prints a JSON line a configuration: ms a frame (GPU timer, after a 16-frame warm-up), the probe
 grid and SH order in use, and for `count` the mean samples a pixel."""
 import json
-import subprocess
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bake_variants import edited_tree   # noqa: E402
+from bake_variants import child_rows, edited_tree   # noqa: E402
 
 EDITS = {
     "count": [("glsl/lib/raymarch.glsl", "    float tau_start = -1.0;\n",
@@ -75,11 +74,7 @@ def main() -> None:
     for name, configs in (("head", SETTINGS), ("count", [{"k": 0.0}, {"k": 0.05}]),
                           ("t1e-3", [{"k": 0.0}, {"k": 0.05}])):
         root = edited_tree(work, name, EDITS.get(name, []))
-        p = subprocess.run([sys.executable, "-c", CHILD, str(root), scenes, json.dumps(configs),
-                            name], capture_output=True, text=True)
-        got = [json.loads(x[7:]) for x in p.stdout.splitlines() if x.startswith("RESULT ")]
-        if not got or p.returncode:
-            got.append({"root": name, "error": p.stderr[-1500:]})
+        got = child_rows(CHILD, name, str(root), scenes, json.dumps(configs), name)
         for g in got:
             print(json.dumps(g), flush=True)
         rows += got

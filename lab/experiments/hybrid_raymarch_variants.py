@@ -9,12 +9,11 @@ replaced by a text edit each, and times 16 raymarched frames of each bench scene
   grad-forward  the gradient by forward differences (four lookups, not six)
 Timing probes only: the edited copies render wrong images."""
 import json
-import subprocess
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bake_variants import edited_tree   # noqa: E402  (the same copies, other edits)
+from bake_variants import child_rows, edited_tree   # noqa: E402  (the same copies, other edits)
 EDITS = {
     "no-grad": [("glsl/lib/raymarch.glsl", "vec3 gradient = opacity_gradient(x);",
                  "vec3 gradient = vec3(0.0, 0.0, 30.0);")],
@@ -74,11 +73,7 @@ def main() -> None:
     rows = []
     for name in ("head", *EDITS):
         root = edited_tree(work, name, EDITS.get(name, []))
-        p = subprocess.run([sys.executable, "-c", CHILD, str(root), scenes, ks, *precision],
-                           capture_output=True, text=True)
-        got = [json.loads(x[7:]) for x in p.stdout.splitlines() if x.startswith("RESULT ")]
-        if not got:
-            got = [{"root": str(root), "error": p.stderr[-1500:]}]
+        got = child_rows(CHILD, str(root), str(root), scenes, ks, *precision)
         for g in got:
             print(json.dumps(g), flush=True)
         rows += got
