@@ -19,8 +19,9 @@ total is the raw image's total plus everything the denoised image cost beyond it
   - the filter's own wall time (OIDN's execute, synchronous; for a signed image its two runs),
     and the host check of its output (check_ms: 0 here, the restore pass does it).
 The flow runs FLOW_REPEATS times on each snapshot and the twin is charged the run of median total
-(a single run's wall time swung by up to 2 ms). Not charged: the denoiser's prepare_ms (here mostly the guides' upload, which the bench repeats
-as it switches guide sets and a viewer makes once a camera). filter_parts_ms keeps every part.
+(a single run's wall time swung by up to 2 ms). Not charged: the denoiser's prepare_ms (here
+mostly the guides' upload, which the bench repeats as it switches guide sets and a viewer makes
+once a camera). filter_parts_ms keeps every part.
 The raymarcher's images (noise-free already) are recorded raw beside them.
 
 Also measured once a run (meta.denoise_cost): the whole cost of that flow at 512^2, 1920x1080

@@ -131,7 +131,8 @@ def denoised_half_error(denoised_a: np.ndarray, a: np.ndarray, b: np.ndarray, n_
     return math.sqrt(max(error2, 0.0) / signal2)
 
 
-def denoised_halves_error(renderer, halves: "HalfBuffers", camera, guides: str = "auto") -> float:
+def denoised_halves_error(renderer, halves: "HalfBuffers", camera,
+                          guides: str = "auto") -> float:
     """Half a read back and put through the denoiser with the guides (`guides`, "auto": as
     choose_guides picks) a denoised image of `camera` gets, its error estimated against half b
     (denoised_half_error); NaN where the filter cannot run. refine's judgement of guided
