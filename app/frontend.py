@@ -828,7 +828,11 @@ def render_to_files(args: argparse.Namespace) -> int:
     shown = result.stats.get("shown")   # a composite method's part shown (refine)
     if shown is not None:
         est = result.stats["refine_estimate"]
-        print(f"{result.method} shows {shown}'s image (estimated rRMSE: guided {est['guided']:.4f}, "
+        w = est.get("blend_weight")
+        what = (f"{shown}'s image" if w is None or w in (0.0, 1.0) else
+                f"guided denoised blended with the raymarcher's image (weight {w:.2f}, estimated "
+                f"rRMSE of the blend {est['blend']:.4f})")
+        print(f"{result.method} shows {what} (estimated rRMSE: guided {est['guided']:.4f}, "
               f"raymarch {est['raymarch']:.4f})")
     if renderer.probe_grid is not None and METHODS[args.method].needs_probes:
         g = renderer.probe_grid

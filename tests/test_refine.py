@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.metrics import rrmse
-from radiance_probes.rendering.refine import HalfBuffers, error_from_sums, half_buffer_error, half_buffer_sums
+from radiance_probes.rendering.refine import (BLEND_SNAP, BlendPass, HalfBuffers, blend_from_sums,
+                                              blend_images, error_from_sums, half_buffer_error,
+                                              half_buffer_sums, judge_sums)
 from radiance_probes.scene import parse_scene
 
 SHAPE = (48, 64, 3)
@@ -96,6 +98,28 @@ def test_gpu_reduction_and_combine_match_numpy(ctx):
         rgba = buffers.combined.read_rgba()
         np.testing.assert_allclose(rgba[..., :3], (3 * a + 5 * b) / 8, rtol=1e-5, atol=1e-6)
         assert (rgba[..., 3] == 8).all() and buffers.combined.samples == 8
+        # the judgement's pass (STAGE 3) against its twin, and half A written alone
+        denoised = rng.uniform(0.0, 1.0, (h, w, 4)).astype(np.float32)
+        buffers.denoised_a.write(denoised.tobytes())
+        got = buffers.judge(ray)
+        want = judge_sums(denoised[..., :3], b, parts[4][..., :3])
+        np.testing.assert_allclose(got[:3], want[:3], rtol=1e-4)
+        assert got[3] == want[3]
+        buffers.combine(ray, write_half_a=True)
+        half_a = buffers.half_a.read_rgba()
+        np.testing.assert_allclose(half_a[..., :3], a, rtol=1e-6, atol=1e-6)
+        assert (half_a[..., 3] == 3).all() and buffers.half_a.samples == 3
+        # the display's blend against its twin
+        blended = ctx.texture((w, h), 4, dtype="f4")
+        blender = BlendPass(ctx)
+        blender.run(ray.texture, buffers.denoised_a, blended, 0.3)
+        out = np.frombuffer(blended.read(), np.float32).reshape(h, w, 4)
+        np.testing.assert_allclose(out[..., :3], blend_images(parts[4][..., :3],
+                                                              denoised[..., :3], 0.3),
+                                   rtol=1e-6, atol=1e-6)
+        assert (out[..., 3] == denoised[..., 3]).all()
+        blender.release()
+        blended.release()
         ray.release()
     finally:
         buffers.release()
@@ -191,7 +215,7 @@ def test_interact_quick_preset_replays_refine(ctx, tmp_path):
         *[(e, v) for e in ("tf_drag", "sun_30deg", "density", "albedo") for v in ("warm", "cold")]]
     took_over = 0
     for r in recs:
-        shown = [s for _, _, _, s in r["frame_trace"]]
+        shown = [f[3] for f in r["frame_trace"]]
         assert set(shown) <= {"raymarch", "guided"}
         first = 0 if r["event"] != "orbit" else r["orbit_frames"] - 1
         assert shown[first] == "raymarch", (r["event"], shown)   # at once after the event
@@ -212,92 +236,124 @@ def test_interact_quick_preset_replays_refine(ctx, tmp_path):
     assert "| anisotropic | 32x24 | 8^3x128 | refine | 10 |" in text
 
 
-@pytest.mark.parametrize("n_a, n_b, scale", [(8, 8, 0.5), (4, 12, 1.0), (16, 16, 2.0)])
-def test_denoised_half_error_matches_a_known_filters_error(n_a, n_b, scale):
-    """refine.denoised_half_error: a known, biased filter (a 5x5 box blur) on half a, judged
-    against half b alone, estimates the filtered half's true relative RMSE (its bias on this
-    rough image included) within 10%."""
-    from radiance_probes.rendering.refine import denoised_half_error
+@pytest.mark.parametrize("n_a, n_b, scale, bias", [(8, 8, 0.5, 0.05), (4, 12, 1.0, 0.1),
+                                                   (16, 16, 2.0, 0.25), (8, 8, 0.2, 0.3)])
+def test_blend_from_sums_finds_the_best_weight_from_the_halves_alone(n_a, n_b, scale, bias):
+    """refine.blend_from_sums: a known, biased filter (a 5x5 box blur) on half a and a biased
+    clean image r (a smooth field of relative size `bias`), judged against half b alone: the
+    weight is the one the truth would choose for D(a) within 0.05, and each estimated relative
+    RMSE (D(a)'s, r's, the blend's) is the true one within 10% (where the noise of b leaves
+    the raymarcher's bias measurable)."""
     rng = np.random.default_rng(11 + n_a)
     truth = _truth(rng)
     sigma = scale * truth.mean() * rng.uniform(0.5, 1.5, SHAPE)
     a, b = _halves(rng, truth, sigma, n_a, n_b)
     pad = np.pad(a, ((2, 2), (2, 2), (0, 0)), mode="edge")
     blurred = sum(pad[dy:dy + SHAPE[0], dx:dx + SHAPE[1]] for dy in range(5) for dx in range(5)) / 25
-    true_error = rrmse(blurred, truth)
-    est = denoised_half_error(blurred, a, b, n_a, n_b)
-    assert est == pytest.approx(true_error, rel=0.1)
-    assert math.isnan(denoised_half_error(blurred, a, b, 0, n_b))
+    y, x = np.mgrid[0:SHAPE[0], 0:SHAPE[1]]
+    ray = truth * (1.0 + bias * np.sin(x / 9.0 + y / 13.0)[..., None])
+    apart = ray - blurred
+    best = float(np.clip(np.sum((ray - truth) * apart) / np.sum(apart * apart), 0.0, 1.0))
+    got = blend_from_sums(half_buffer_sums(a, b, n_a, n_b), judge_sums(blurred, b, ray), n_a, n_b)
+    assert got.weight == pytest.approx(best, abs=0.05)
+    assert got.denoised == pytest.approx(rrmse(blurred, truth), rel=0.1)
+    assert got.raymarch == pytest.approx(rrmse(ray, truth), rel=0.1)
+    # the blend's own estimate is of the weight chosen on the same halves, so it errs low where
+    # b's noise dominates (15% at noise 2x the signal, 16 samples)
+    assert got.blend == pytest.approx(rrmse(blend_images(ray, blurred, got.weight), truth),
+                                      rel=0.1 if scale < 2.0 else 0.2)
+    assert got.blend <= min(got.denoised, got.raymarch) * 1.001
+    empty = blend_from_sums(half_buffer_sums(a, b, 0, n_b), judge_sums(blurred, b, ray), 0, n_b)
+    assert empty.weight == 0.0 and math.isnan(empty.blend)
 
 
-def test_refine_judges_guided_denoised_where_the_denoise_switch_is_on(ctx, monkeypatch):
-    """With the Denoise switch on, a check that the raw halves' estimate does not pass asks the
-    denoised halves' error (half a filtered, judged against half b), once per doubling of the
-    samples, and switches on it; its wall time is the frame's denoise_ms. The raw estimate is held
-    above the raymarcher's, and the filter is a stand-in that returns half b (an error estimate of
-    0), so the view switches at the first check with REFINE_MIN_HALF_SAMPLES a half, on the
-    denoised estimate alone. With the switch off it is never asked, nor while the raw estimate is
-    more than DENOISED_CHECK_RATIO times the raymarcher's."""
-    from radiance_probes.rendering.denoise import Denoised
+def test_blend_weight_snaps_to_either_image_near_the_ends():
+    """A weight within BLEND_SNAP of 0 or 1 is 0 or 1: the raymarcher's image exact (r = t), or
+    the filter's exact (D = t), each against a noisy half b."""
+    rng = np.random.default_rng(2)
+    truth = _truth(rng)
+    a, b = _halves(rng, truth, 0.3 * truth.mean(), 8, 8)
+    off = truth * 1.2
+    assert blend_from_sums(half_buffer_sums(a, b, 8, 8), judge_sums(off, b, truth), 8, 8).weight == 0.0
+    assert blend_from_sums(half_buffer_sums(a, b, 8, 8), judge_sums(truth, b, off), 8, 8).weight == 1.0
+    assert 0.0 < BLEND_SNAP < 0.1
+
+
+def test_refine_blends_by_its_judgement_where_the_denoise_switch_is_on(ctx, monkeypatch):
+    """With the Denoise switch on, each check judges the blend (refine.judged_blend: half A
+    filtered on the GL path, judged with the raymarcher's image against half B) once per doubling
+    of the samples, and guided takes over from the first weight above 0, blended with the
+    raymarcher's image: the display is then (1 - w) r + w D(m), D(m) the switch's own filtered
+    image; its wall time is the frame's denoise_ms. The raw estimate is held above the
+    raymarcher's (it alone never switches), and the judgement's weight is set to 0, then 0.4,
+    then 1 (guided alone, judging ends). With the switch off nothing is judged."""
+    from radiance_probes.rendering import refine as refine_module
+    from radiance_probes.rendering.refine import RefineBlend, RefineEstimate
     from radiance_probes.viewer import session as session_module
     from radiance_probes.viewer.session import REFINE_MIN_HALF_SAMPLES, RenderSession
-    calls = []
-
-    class HalfB:
-        def __call__(self, image, albedo=None, normal=None, **kw):
-            calls.append(image.shape)
-            return Denoised(s.views["refine"].halves.halves[1].read(), "cpu")
-    from radiance_probes.rendering import refine as refine_module
-    monkeypatch.setattr(refine_module, "shared_denoiser", lambda *a, **k: HalfB())
-    # the raw halves' estimate never passes here (on a tiny scene it may, and then nothing asks)
-    from radiance_probes.rendering.refine import RefineEstimate
     monkeypatch.setattr(session_module.HalfBuffers, "read_estimate",
                         lambda self, with_ray: RefineEstimate(1.0, 0.5, self.samples))
+    weights, judged = [0.0], []
+
+    def judge(*args, **kw):
+        got = refine_module.judged_blend(*args, **kw)   # the GL path runs
+        assert got is not None and 0.0 <= got.weight <= 1.0 and math.isfinite(got.denoised)
+        judged.append(got)
+        return RefineBlend(weights[0], 0.01, got.denoised, got.raymarch)
+    monkeypatch.setattr(session_module, "judged_blend", judge)
     s = RenderSession(ctx, parse_scene(SCENE))
     try:
         s.resize(24, 16)
         s.set_methods(["refine"])
         s.denoise.set_enabled(False)
-        asked = []
-        real = s._denoised_halves_error
-        monkeypatch.setattr(s, "_denoised_halves_error", lambda v: asked.append(1) or real(v))
-        for _ in range(6):
+        for _ in range(12):
             s.step(MAX_SAMPLES, True)
-        assert not asked and not calls
+        assert not judged and s.views["refine"].shown == "raymarch"
         s.denoise.set_enabled(True)
-        monkeypatch.setattr(s.denoise, "update", lambda session: 0.0)   # the display's own filter
-        # a raw estimate further than DENOISED_CHECK_RATIO above the raymarcher's: not asked
-        monkeypatch.setattr(session_module.HalfBuffers, "read_estimate",
-                            lambda self, with_ray: RefineEstimate(
-                                1.0, 0.99 / session_module.DENOISED_CHECK_RATIO, self.samples))
-        s.restart()
-        for _ in range(40):
-            s.step(MAX_SAMPLES, True)
-        assert not asked and s.views["refine"].shown == "raymarch"
-        monkeypatch.setattr(session_module.HalfBuffers, "read_estimate",
-                            lambda self, with_ray: RefineEstimate(1.0, 0.5, self.samples))
         s.restart()
         view = s.views["refine"]
-        frame_denoise_ms = []
         for _ in range(400):
-            times = s.step(MAX_SAMPLES, True)
-            frame_denoise_ms.append(times.denoise_ms)
-            if view.shown == "guided":
+            s.step(MAX_SAMPLES, True)
+            if judged:
                 break
-        assert view.shown == "guided"
-        assert view.denoised_estimate == 0.0
+        assert judged and view.shown == "raymarch"          # a weight of 0: the raymarcher
         assert min(view.halves.counts) >= REFINE_MIN_HALF_SAMPLES
-        assert calls and len(calls) == len(asked) <= view.halves.samples.bit_length()
-        assert frame_denoise_ms[-1] > 0.0
+        assert len(judged) == 1
+        weights[0] = 0.4
+        denoise_ms = []
+        while view.shown == "raymarch" and len(denoise_ms) < 400:
+            denoise_ms.append(s.step(MAX_SAMPLES, True).denoise_ms)
+        assert view.shown == "guided" and view.weight == 0.4 and view.blending
+        assert denoise_ms[-1] > 0.0
+        shown = s.shown_image("refine")
+        filtered = s.denoise.images["refine"]
+        d = np.frombuffer(filtered.texture.read(), np.float32).reshape(16, 24, 4)[..., :3]
+        np.testing.assert_allclose(shown, blend_images(view.ray.read(), d, 0.4), rtol=1e-5,
+                                   atol=1e-6)
+        assert "blended" in s.label("refine")
+        weights[0] = 1.0
+        count = len(judged)
+        for _ in range(400):
+            s.step(MAX_SAMPLES, True)
+            if not view.blending:
+                break
+        assert view.shown == "guided" and view.weight == 1.0 and not view.blending
+        assert len(judged) == count + 1          # judged no more once guided is alone
+        for _ in range(20):
+            s.step(MAX_SAMPLES, True)
+        assert len(judged) == count + 1
+        d = np.frombuffer(s.denoise.images["refine"].texture.read(),
+                          np.float32).reshape(16, 24, 4)[..., :3]
+        np.testing.assert_array_equal(s.shown_image("refine"), d)
     finally:
         s.release()
 
 
-def test_still_refine_with_denoise_judges_guided_denoised(ctx, monkeypatch):
-    """render("refine", denoise=True) chooses as the viewer's Denoise switch does: where the raw
-    halves' estimate does not pass (held above the raymarcher's here), half a through the filter
-    (OIDN on the CPU) judged against half b decides, and the choice follows that estimate; without
-    denoise nothing is asked."""
+def test_still_refine_with_denoise_blends_as_the_viewer_does(ctx, monkeypatch):
+    """render("refine", denoise=True) judges as the viewer's Denoise switch does (OIDN on the CPU,
+    the GL path): its stats give the weight and estimates, guided is shown where the weight is
+    above 0, and the image is (1 - w) r + w D(m) of the raymarcher's image and the halves' mean
+    denoised; without denoise nothing is judged."""
     from radiance_probes.rendering import refine as refine_module
     from radiance_probes.rendering.refine import RefineEstimate
     from radiance_probes.rendering.renderer import Renderer
@@ -307,15 +363,22 @@ def test_still_refine_with_denoise_judges_guided_denoised(ctx, monkeypatch):
     try:
         raw = r.render("refine", spp=16, seed=1)
         assert raw.stats["shown"] == "raymarch"
-        assert math.isnan(raw.stats["refine_estimate"]["guided_denoised"])
+        assert raw.stats["refine_estimate"]["blend_weight"] is None
         den = r.render("refine", spp=16, seed=1, denoise=True)
-        assert den.denoised is not None and den.denoised.denoised, den.denoised.note
-        judged = den.stats["refine_estimate"]["guided_denoised"]
-        assert math.isfinite(judged) and judged >= 0.0
-        assert den.stats["shown"] == ("guided" if judged < 0.5 else "raymarch")
-        # with the raymarcher's estimate below anything the filter reaches: the raymarcher
-        monkeypatch.setattr(refine_module.HalfBuffers, "read_estimate",
-                            lambda self, with_raymarch: RefineEstimate(1.0, 0.0, self.samples))
-        assert r.render("refine", spp=16, seed=1, denoise=True).stats["shown"] == "raymarch"
+        est = den.stats["refine_estimate"]
+        w = est["blend_weight"]
+        assert 0.0 <= w <= 1.0 and math.isfinite(est["guided_denoised"])
+        assert den.stats["shown"] == ("guided" if w > 0.0 else "raymarch")
+        if 0.0 < w < 1.0:
+            assert den.denoised is not None and den.denoised.denoised, den.denoised.note
+            assert est["blend"] <= min(est["guided_denoised"], est["raymarch"] + 1e-9) * 1.001
+        # the weight the judgement gives, whatever it is, makes the image
+        monkeypatch.setattr(refine_module, "blend_from_sums",
+                            lambda *a: refine_module.RefineBlend(0.25, 0.0, 0.0, 0.0))
+        mixed = r.render("refine", spp=16, seed=1, denoise=True)
+        assert mixed.stats["shown"] == "guided"
+        ray = r.render("raymarch", spp=16, seed=1).image
+        np.testing.assert_allclose(mixed.image, blend_images(ray, mixed.denoised.image, 0.25),
+                                   rtol=1e-4, atol=1e-5)
     finally:
         r.release()

@@ -112,8 +112,12 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
         ms = times.total_ms + times.denoise_ms   # the Denoise switch's filtering (wall ms)
         frames.append(ms)
         walls.append(wall)
+        view = s.views[method]
         trace.append([round(times.bake_ms, 3), round(times.render_ms, 3), times.samples,
-                      s.views[method].shown])   # refine: "raymarch" or "guided"
+                      view.shown,   # refine: "raymarch" or "guided", and guided's blend weight
+                      *([round(view.weight, 3) if view.shown == "guided" else 0.0]
+                        if hasattr(view, "blending") else []),
+                      round(times.denoise_ms, 2)])
         t, wall_t = t + ms, wall_t + wall
         after = f - lead
         if after < 0:
@@ -144,7 +148,8 @@ def record(base: dict, event: str, method: str, variant, run: dict, **extra) -> 
                curve=[[float(a), float(c)] for a, _, c in curve],
                wall_curve=[[float(b), float(c)] for _, b, c in curve],
                # per frame: bake slice ms, samples' ms, samples per pixel, the method shown (a
-               # probe-lit view shows the raymarcher while it bakes): what a frame over budget spent
+               # probe-lit view shows the raymarcher while it bakes; refine: then guided's blend
+               # weight), the Denoise switch's wall ms: what a frame over budget spent
                frame_trace=run.get("trace", []))
     for target in TARGETS:
         pct = round(target * 100)

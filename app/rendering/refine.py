@@ -26,6 +26,19 @@ below that (app/viewer/session.py).
 The sums are reduced on the GPU (a workgroup's in shared memory, then one workgroup over the
 partials) and 16 bytes read back, only at the checks the session schedules (REFINE_CHECK_FRAMES):
 the combine itself runs every frame with no read-back.
+
+The blend (the Denoise switch on: the view then shows guided denoised, D(m), not m). The
+raymarcher's image r is biased but clean, D(m) noisy and blurred but unbiased in the limit, and
+their errors are nearly independent (on bonsai at 128^2 their correlation was -0.02 to 0.09:
+lab/experiments/refine_blend.py), so a blend (1 - w) r + w D beats either while they are of one
+size. The error of the blend is |(1 - w)(r - t) + w (D - t)|^2, whose minimum over w is at
+w* = <r - t, r - D> / |r - D|^2. Half A denoised, D(a), is independent of half b, and so is r, so
+E[<r - b, r - D(a)>] = <r - t, r - D(a)> (b's noise has mean 0): the weight comes from the halves
+alone as w = sum (r - b) . (r - D(a)) / sum (r - D(a))^2, clamped to [0, 1] (`blend_from_sums`;
+each term: glsl/refine_halves.comp STAGE 3, twin `judge_sums`). D(m) holds twice D(a)'s samples,
+so w errs towards the raymarcher (0.37 against the best 0.48 at 16 samples there, the blend 6.3%
+against the best 6.2%, the raymarcher 8.5%, D(m) 8.9%). Each error is estimated as
+against half b: E[mean((X - b)^2)] = mean((X - t)^2) + mean(Var(b)).
 """
 from __future__ import annotations
 
@@ -40,6 +53,7 @@ from ..gl.shaders import compute_program, set_uniforms
 from ..methods import METHODS
 from .accumulation import Accumulation, SumAccumulation
 from .denoise import choose_guides, shared_denoiser
+from .kept_means import KeptMeans, denoise_on_gl
 
 GROUP_SIDE = 16
 # The raymarcher's frames refine accumulates at most (its image is then as good as its bias lets
@@ -49,6 +63,9 @@ GROUP_SIDE = 16
 REFINE_RAYMARCH_FRAMES = 16
 REFINE_MIN_HALF_SAMPLES = 4
 REFINE_HALF_SEED = 0x68E31DA4
+# A blend weight within this of 0 or 1 is taken as 0 (the raymarcher alone) or 1 (guided alone):
+# 2% of a 2% error is below what the estimate resolves.
+BLEND_SNAP = 0.02
 
 
 @dataclass(frozen=True)
@@ -93,56 +110,115 @@ def error_from_sums(sums, n_a: int, n_b: int, samples: int = 0,
     return RefineEstimate(guided, raymarch, samples)
 
 
+@dataclass(frozen=True)
+class RefineBlend:
+    """refine's blend judged from the halves (blend_from_sums): the weight w of guided denoised
+    in (1 - w) r + w D (snapped to 0 or 1 within BLEND_SNAP), and the estimated relative RMSEs of
+    the blend (of a weight chosen on the same halves: it errs low where their noise dominates,
+    15% at noise twice the signal in tests/test_refine.py), of half A denoised (D(m)'s errs high)
+    and of the raymarcher (against half b)."""
+    weight: float
+    blend: float
+    denoised: float
+    raymarch: float
+
+
+def judge_sums(denoised_a: np.ndarray, b: np.ndarray,
+               raymarched: np.ndarray) -> tuple[float, float, float, int]:
+    """The judgement's sums (glsl/refine_halves.comp STAGE 3; float64): sum (D - b)^2,
+    sum (r - b)^2, sum (r - b) . (D - b), and the count of values."""
+    b = np.asarray(b, np.float64)
+    d = np.asarray(denoised_a, np.float64) - b
+    e = np.asarray(raymarched, np.float64) - b
+    return float(np.sum(d * d)), float(np.sum(e * e)), float(np.sum(e * d)), b.size
+
+
+def blend_from_sums(sums, judged, n_a: int, n_b: int) -> RefineBlend:
+    """The blend's weight and estimates (the module's docstring) from the check's sums
+    (half_buffer_sums: sum (a - b)^2, sum m^2, ...) and the judgement's (judge_sums). NaN
+    estimates and weight 0 where a half is empty or the signal is not positive."""
+    diff, mean_sq, _, count = sums
+    dd, rr, rd, _ = judged
+    nan = float("nan")
+    w_m = weight(n_a, n_b)
+    if w_m <= 0.0 or count <= 0:
+        return RefineBlend(0.0, nan, nan, nan)
+    signal2 = mean_sq / count - w_m * diff / count
+    if not signal2 > 0.0:
+        return RefineBlend(0.0, nan, nan, nan)
+    noise_b = n_a / (n_a + n_b) * diff / count          # mean(Var(b))
+    e_dd, e_rr, e_rd = dd / count - noise_b, rr / count - noise_b, rd / count - noise_b
+    apart = (rr + dd - 2.0 * rd) / count                # mean((r - D)^2): no noise term
+    w = (rr - rd) / count / apart if apart > 0.0 else (1.0 if e_dd <= e_rr else 0.0)
+    w = min(max(w, 0.0), 1.0)
+    w = 0.0 if w < BLEND_SNAP else 1.0 if w > 1.0 - BLEND_SNAP else w
+    blend2 = (1.0 - w) ** 2 * e_rr + w * w * e_dd + 2.0 * w * (1.0 - w) * e_rd
+
+    def rel(x: float) -> float:
+        return math.sqrt(max(x, 0.0) / signal2)
+    return RefineBlend(w, rel(blend2), rel(e_dd), rel(e_rr))
+
+
+def blend_images(raymarched: np.ndarray, denoised: np.ndarray, w: float) -> np.ndarray:
+    """(1 - w) r + w D (glsl/refine_blend.comp's twin)."""
+    return (1.0 - w) * np.asarray(raymarched, np.float32) + w * np.asarray(denoised, np.float32)
+
+
+class BlendPass:
+    """glsl/refine_blend.comp: (1 - w) r + w D into a texture, on the GPU (the viewer's display of
+    a blending refine view)."""
+
+    def __init__(self, ctx: moderngl.Context):
+        self.ctx = ctx
+        self.program = compute_program(ctx, "refine_blend.comp")
+
+    def run(self, raymarched: moderngl.Texture, denoised: moderngl.Texture,
+            blended: moderngl.Texture, w: float) -> None:
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+        raymarched.bind_to_image(0, read=True, write=False)
+        denoised.bind_to_image(1, read=True, write=False)
+        blended.bind_to_image(2, read=False, write=True)
+        set_uniforms(self.program, {"weight": float(w)})
+        width, height = blended.size
+        self.program.run((width + GROUP_SIDE - 1) // GROUP_SIDE,
+                         (height + GROUP_SIDE - 1) // GROUP_SIDE)
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+
+    def release(self) -> None:
+        self.program.release()
+
+
+def judged_blend(renderer, halves: "HalfBuffers", raymarched: Accumulation, camera,
+                 kept: KeptMeans, guides: str = "auto") -> RefineBlend | None:
+    """refine's judgement on the GPU: the check's sums (a 16-byte read-back) and half A written
+    alone, put through the denoiser with the guides (`guides`; "auto": as choose_guides
+    picks) a denoised image of `camera` gets (kept_means.denoise_on_gl: the image stays on the
+    GPU), judged with the raymarcher's image against half B (STAGE 3: 16 bytes more), and
+    the blend of the module's docstring. None where the filter cannot run. The viewer
+    (app/viewer/session.py) and a still image (render_refine) both judge through this."""
+    n_a, n_b = halves.counts
+    if min(n_a, n_b) <= 0:
+        return None
+    halves.combine(raymarched, reduce=True, write_half_a=True)
+    sums = halves.read_sums()
+    names = choose_guides(guides, n_a, renderer.probes_shown())
+    albedo, normal, _ = renderer.denoise_guides(names, camera=camera)
+    denoiser = shared_denoiser()
+    staged = denoiser.staging(halves.width, halves.height, names)
+    if staged is None:
+        return None
+    d = denoise_on_gl(kept, denoiser, halves.half_a.texture, staged, albedo, normal,
+                      METHODS["guided"].signed, halves.denoised_a, finish=False)
+    if not d.denoised:
+        return None
+    return blend_from_sums(sums, halves.judge(raymarched), n_a, n_b)
+
+
 def half_buffer_error(a: np.ndarray, b: np.ndarray, n_a: int = 1, n_b: int = 1,
                       raymarched: np.ndarray | None = None) -> RefineEstimate:
     """The estimated relative RMSE of the halves' mean (and of `raymarched`, when given)."""
     return error_from_sums(half_buffer_sums(a, b, n_a, n_b, raymarched), n_a, n_b,
                            n_a + n_b, raymarched is not None)
-
-
-def _mean_square(x: np.ndarray) -> float:
-    """mean(x^2) of a float32 array through one BLAS dot (float32 products and sums, the partial
-    sums blocked: a relative error near 1e-6 at a 1080p image's 6 million values), not a float64
-    copy: at 1080p that copy made the estimate 0.4 s on a 2-core machine."""
-    flat = np.ascontiguousarray(x, np.float32).ravel()
-    return float(np.dot(flat, flat)) / max(flat.size, 1)
-
-
-def denoised_half_error(denoised_a: np.ndarray, a: np.ndarray, b: np.ndarray, n_a: int,
-                        n_b: int) -> float:
-    """The estimated relative RMSE of half a's image through the denoiser (`denoised_a`, a
-    function of half a alone), judged against the independent half b: E[mean((D(a) - b)^2)] =
-    mean((D(a) - t)^2) + mean(Var(b)), and mean(Var(b)) = s^2 / n_b = n_a / (n_a + n_b) times
-    E[mean((a - b)^2)]; the denominator T^2 as error_from_sums makes it. The image shown, the
-    denoised mean of both halves, holds more samples than half a, so this errs high. NaN where
-    a half is empty or the signal is not positive. float32 arithmetic (_mean_square)."""
-    w = weight(n_a, n_b)
-    if w <= 0.0:
-        return float("nan")
-    a = np.asarray(a, np.float32)
-    b = np.asarray(b, np.float32)
-    diff2 = _mean_square(a - b)
-    m = a * np.float32(n_a / (n_a + n_b))
-    m += b * np.float32(n_b / (n_a + n_b))
-    signal2 = _mean_square(m) - w * diff2
-    if not signal2 > 0.0:
-        return float("nan")
-    error2 = _mean_square(np.asarray(denoised_a, np.float32) - b) - n_a / (n_a + n_b) * diff2
-    return math.sqrt(max(error2, 0.0) / signal2)
-
-
-def denoised_halves_error(renderer, halves: "HalfBuffers", camera,
-                          guides: str = "auto") -> float:
-    """Half a read back and put through the denoiser with the guides (`guides`, "auto": as
-    choose_guides picks) a denoised image of `camera` gets, its error estimated against half b
-    (denoised_half_error); NaN where the filter cannot run. refine's judgement of guided
-    denoised, in the viewer (app/viewer/session.py) and for a still image (render_refine)."""
-    n_a, n_b = halves.counts
-    a, b = halves.halves[0].read(), halves.halves[1].read()
-    names = choose_guides(guides, n_a, renderer.probes_shown())
-    albedo, normal, _ = renderer.denoise_guides(names, camera=camera)
-    d = shared_denoiser()(a, albedo, normal, signed=METHODS["guided"].signed)
-    return denoised_half_error(d.image, a, b, n_a, n_b) if d.denoised else float("nan")
 
 
 class HalfBuffers:
@@ -156,11 +232,15 @@ class HalfBuffers:
         self.halves = [SumAccumulation(Accumulation(ctx, width, height),
                                        Accumulation(ctx, width, height)) for _ in range(2)]
         self.combined = Accumulation(ctx, width, height)
+        self._half_a: Accumulation | None = None        # half A alone and its filtered image,
+        self._denoised_a: moderngl.Texture | None = None   # made on the first judgement
         self.groups = ((width + GROUP_SIDE - 1) // GROUP_SIDE, (height + GROUP_SIDE - 1) // GROUP_SIDE)
         self.partials = ctx.buffer(reserve=16 * self.groups[0] * self.groups[1])
         self.sums = ctx.buffer(reserve=16)
         self._combine = compute_program(ctx, "refine_halves.comp", {"STAGE": 1})
         self._reduce = compute_program(ctx, "refine_halves.comp", {"STAGE": 2})
+        self._judge: moderngl.ComputeShader | None = None
+        self.judge_sums = ctx.buffer(reserve=16)
         self.reads = 0            # read-backs since the last reset (a test counts them)
 
     @property
@@ -178,14 +258,30 @@ class HalfBuffers:
         self.combined.reset()
         self.reads = 0   # counted per restart, as the session's frames are
 
+    @property
+    def half_a(self) -> Accumulation:
+        """Half A's image alone (combine(write_half_a=True) writes it), for the denoiser."""
+        if self._half_a is None:
+            self._half_a = Accumulation(self.ctx, self.width, self.height)
+        return self._half_a
+
+    @property
+    def denoised_a(self) -> moderngl.Texture:
+        """Half A through the denoiser (RGBA32F, judged_blend's)."""
+        if self._denoised_a is None:
+            self._denoised_a = self.ctx.texture((self.width, self.height), 4, dtype="f4")
+        return self._denoised_a
+
     def next_half(self) -> int:
         """The half the next batch of samples goes to: the one with fewer (A on a tie)."""
         a, b = self.counts
         return 0 if a <= b else 1
 
-    def combine(self, raymarched: Accumulation | None = None, reduce: bool = False) -> None:
+    def combine(self, raymarched: Accumulation | None = None, reduce: bool = False,
+                write_half_a: bool = False) -> None:
         """Writes the halves' mean into `combined` (no host transfer); with `reduce`, also the
-        estimator's sums into a 16-byte buffer that `read_estimate` reads."""
+        estimator's sums into a 16-byte buffer that `read_estimate` reads; with `write_half_a`,
+        half A's image alone into `half_a`."""
         n_a, n_b = self.counts
         total = n_a + n_b
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
@@ -194,13 +290,18 @@ class HalfBuffers:
         for unit, acc in enumerate(units):
             acc.texture.bind_to_image(unit, read=True, write=False)
         self.combined.texture.bind_to_image(5, read=False, write=True)
+        (self.half_a if write_half_a else self.combined).texture.bind_to_image(6, read=False,
+                                                                              write=True)
         self.partials.bind_to_storage_buffer(0)
         self.sums.bind_to_storage_buffer(1)
         set_uniforms(self._combine, {"weight_a": n_a / total if total else 0.5,
                                      "total_samples": float(total), "reduce": int(reduce),
-                                     "have_raymarch": int(raymarched is not None)})
+                                     "have_raymarch": int(raymarched is not None),
+                                     "write_half_a": int(write_half_a), "samples_a": float(n_a)})
         self._combine.run(*self.groups)
         self.combined.samples = total
+        if write_half_a:
+            self.half_a.samples = n_a
         if reduce:
             self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
             set_uniforms(self._reduce, {"partial_count": self.groups[0] * self.groups[1]})
@@ -213,6 +314,27 @@ class HalfBuffers:
         x, y, z, _ = struct.unpack("4f", self.sums.read())
         return x, y, z, 3 * self.width * self.height
 
+    def judge(self, raymarched: Accumulation) -> tuple[float, float, float, int]:
+        """judge_sums on the GPU: `denoised_a` (half A filtered) and the raymarcher's image
+        against half B, reduced to 16 bytes and read back."""
+        if self._judge is None:
+            self._judge = compute_program(self.ctx, "refine_halves.comp", {"STAGE": 3})
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+        self.halves[1].residual.texture.bind_to_image(2, read=True, write=False)
+        self.halves[1].level0.texture.bind_to_image(3, read=True, write=False)
+        raymarched.texture.bind_to_image(4, read=True, write=False)
+        self.denoised_a.bind_to_image(6, read=True, write=False)
+        self.partials.bind_to_storage_buffer(0)
+        self._judge.run(*self.groups)
+        self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+        self.judge_sums.bind_to_storage_buffer(1)
+        set_uniforms(self._reduce, {"partial_count": self.groups[0] * self.groups[1]})
+        self._reduce.run(1, 1)
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+        self.reads += 1
+        x, y, z, _ = struct.unpack("4f", self.judge_sums.read())
+        return x, y, z, 3 * self.width * self.height
+
     def read_estimate(self, with_raymarch: bool) -> RefineEstimate:
         n_a, n_b = self.counts
         return error_from_sums(self.read_sums(), n_a, n_b, n_a + n_b, with_raymarch)
@@ -221,20 +343,25 @@ class HalfBuffers:
         for half in self.halves:
             half.release()
         self.combined.release()
-        for obj in (self.partials, self.sums, self._combine, self._reduce):
-            obj.release()
+        for obj in (self._half_a, self._denoised_a, self._judge, self.partials, self.sums,
+                    self.judge_sums, self._combine, self._reduce):
+            if obj is not None:
+                obj.release()
 
 
 @dataclass
 class RefineImage:
-    """A still image of `refine` (render_refine): the image shown, which method it is ("raymarch"
-    or "guided"), the estimate that chose it, and GPU ms of each part."""
+    """A still image of `refine` (render_refine): the image of the method shown ("raymarch" or
+    "guided"), the estimate that chose it, and GPU ms of each part. Where a judgement ran (the
+    image to be denoised), `blend` holds it and `raymarch_image` the raymarcher's image: the
+    image to show is then (1 - w) raymarch_image + w denoise(image) (w = blend.weight)."""
     image: np.ndarray
     shown: str
     estimate: RefineEstimate
     raymarch_ms: float
     guided_ms: float
-    denoised_estimate: float = float("nan")   # guided denoised's, where `denoised` was asked
+    blend: RefineBlend | None = None
+    raymarch_image: np.ndarray | None = None
 
 
 def render_refine(renderer, spp: int, seed: int, width: int | None = None,
@@ -244,10 +371,11 @@ def render_refine(renderer, spp: int, seed: int, width: int | None = None,
     two independent halves; the halves' mean is shown where its estimated error is below the
     raymarcher's (each half with at least REFINE_MIN_HALF_SAMPLES), else the raymarcher's image.
     `denoise_guides` (the image will be denoised with these guides; as the viewer's Denoise
-    switch): where the raw estimate does not pass, guided is shown if denoised_halves_error
-    passes. The probes and the light grid must be in hand (Renderer.render bakes them)."""
+    switch): the halves are judged (judged_blend) and guided is shown, blended with the
+    raymarcher's image, wherever its weight is above 0. The probes and the light grid must be in
+    hand (Renderer.render bakes them)."""
     r = renderer
-    ray = halves = None
+    ray = halves = kept = None
     try:
         with r.lend(None) as lent:   # an accumulation of its own, released here
             ray = lent.begin("raymarch", width, height, seed)
@@ -266,14 +394,18 @@ def render_refine(renderer, spp: int, seed: int, width: int | None = None,
         estimate = halves.read_estimate(with_raymarch=True)
         enough = min(halves.counts) >= REFINE_MIN_HALF_SAMPLES
         guided = enough and estimate.guided < estimate.raymarch   # (False while either is NaN)
-        judged = float("nan")
-        if enough and not guided and denoise_guides is not None:
-            judged = denoised_halves_error(r, halves, camera, denoise_guides)
-            guided = judged < estimate.raymarch
+        blend = None
+        if enough and denoise_guides is not None:
+            kept = KeptMeans(r.ctx)
+            blend = judged_blend(r, halves, ray, camera, kept, denoise_guides)
+            if blend is not None:
+                guided = blend.weight > 0.0
         image = (halves.combined if guided else ray).read()
         return RefineImage(image, "guided" if guided else "raymarch", estimate, raymarch_ms,
-                           guided_ms, judged)
+                           guided_ms, blend, ray.read() if blend is not None else None)
     finally:
+        if kept is not None:
+            kept.release()
         if ray is not None:
             ray.release()
         if halves is not None:

@@ -36,7 +36,7 @@ from .denoise import (GUIDE_SETS, Denoised, choose_guides, radiance_as_albedo, s
 from .denoise_guides import GUIDE_FRAMES, DenoiseGuides
 from .kept_means import KeptMeans, denoise_on_gl
 from .raymarch import Raymarcher, min_step_voxels
-from .refine import render_refine
+from .refine import blend_images, render_refine
 from .lab_options import LabOptions
 from .resources import SceneResources
 from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noqa: F401 (re-exported)
@@ -987,17 +987,26 @@ class Renderer:
         self.camera = camera_frame(self.scene.camera, width, height)   # the guides' camera
         stats = self.resources.read_stats()
         stats["shown"] = done.shown
+        blend = done.blend
         stats["refine_estimate"] = {"guided": done.estimate.guided,
                                     "raymarch": done.estimate.raymarch,
                                     "samples": done.estimate.samples,
-                                    "guided_denoised": done.denoised_estimate}
+                                    "blend_weight": None if blend is None else blend.weight,
+                                    "blend": None if blend is None else blend.blend,
+                                    "guided_denoised": None if blend is None else blend.denoised}
         render_ms = done.raymarch_ms + done.guided_ms
         if not denoise:
             return RenderResult(done.image, method, spp, render_ms, bake_ms, stats=stats)
+        if done.shown == "raymarch":   # nothing noisy shown: the filter has nothing to do
+            return RenderResult(done.image, method, spp, render_ms, bake_ms, stats=stats)
         guides = choose_guides(denoise_guides, spp, self.probes_shown())
         denoised, guides_ms = self.denoise(done.image, guides, signed=REGISTRY[done.shown].signed)
-        return RenderResult(denoised.image, method, spp, render_ms, bake_ms, stats=stats,
-                            raw_image=done.image, denoised=denoised, guides_ms=guides_ms)
+        image, raw = denoised.image, done.image
+        if blend is not None and blend.weight < 1.0 and denoised.denoised:
+            image = blend_images(done.raymarch_image, denoised.image, blend.weight)
+            raw = blend_images(done.raymarch_image, done.image, blend.weight)
+        return RenderResult(image, method, spp, render_ms, bake_ms, stats=stats,
+                            raw_image=raw, denoised=denoised, guides_ms=guides_ms)
 
     # ---- the denoiser's guides (denoise_guides.py) and the denoiser (denoise.py) ----------------
     def denoise_guides(self, guides: str = "albedo-normal", frames: int = GUIDE_FRAMES,

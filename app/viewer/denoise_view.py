@@ -14,7 +14,11 @@ second. OIDN has no temporal mode: the filtered images of a still camera change 
 The accumulation is read straight into the filter's colour, its tile means made on the GPU
 (app/rendering/kept_means.py), and the filter's output uploaded and given back those means by two
 GL passes into the RGBA32F texture the display shows: the host neither sums the images nor
-checks the output (kept_means.denoise_on_gl)."""
+checks the output (kept_means.denoise_on_gl).
+
+A `refine` view blending guided with the raymarcher's image (RefineView.blending: the weight its
+last judgement gave, app/rendering/refine.py) shows (1 - w) r + w D, made on the GPU
+(refine.BlendPass) whenever D, r or w has changed."""
 from __future__ import annotations
 
 import time
@@ -25,6 +29,7 @@ import moderngl
 from ..methods import METHODS
 from ..rendering.denoise import choose_guides, shared_denoiser
 from ..rendering.kept_means import KeptMeans, denoise_on_gl
+from ..rendering.refine import BlendPass
 
 INTERVAL_S = 0.5
 
@@ -35,6 +40,8 @@ class _Filtered:
     generation: tuple      # (the accumulation's id, the session's restarts) it was made from
     samples: int           # samples of the image it filtered
     at: float              # when (monotonic seconds)
+    blended: object = None   # refine's blend with the raymarcher's image, and what it was made of
+    blend_key: tuple | None = None
 
 
 class ViewDenoise:
@@ -46,6 +53,13 @@ class ViewDenoise:
         self.last_ms = 0.0               # wall ms of the last update's filtering
         self.runs = 0                    # filtered images made (tests, the Stats panel)
         self.kept_means: KeptMeans | None = None   # the tile means' passes, made on first use
+        self.blend_pass: BlendPass | None = None
+
+    def kept(self) -> KeptMeans:
+        """The tile means' passes (refine's judgement filters through them too)."""
+        if self.kept_means is None:
+            self.kept_means = KeptMeans(self.ctx)
+        return self.kept_means
 
     def set_enabled(self, on: bool) -> None:
         self.enabled = bool(on)
@@ -70,7 +84,7 @@ class ViewDenoise:
             acc, shown = view.acc, view.shown
             generation = (id(acc), session.restarts)
             if acc is None or not METHODS[shown].noisy or acc.samples == 0:
-                self.images.pop(name, None)
+                self._forget(name)
                 continue
             now = time.monotonic()
             if not self._due(name, generation, acc.samples, now):
@@ -92,9 +106,7 @@ class ViewDenoise:
                 # RGBA32F: the restore pass stores into it (the display reads rgb)
                 texture = self.ctx.texture((acc.width, acc.height), 4, dtype="f4")
                 texture.filter = acc.texture.filter
-            if self.kept_means is None:
-                self.kept_means = KeptMeans(self.ctx)
-            d = denoise_on_gl(self.kept_means, denoiser, acc.texture, staged, albedo, normal,
+            d = denoise_on_gl(self.kept(), denoiser, acc.texture, staged, albedo, normal,
                               METHODS[shown].signed, texture, finish=False)
             if not d.denoised:
                 texture.release()
@@ -102,10 +114,41 @@ class ViewDenoise:
                 self.note, self.enabled = d.note, False
                 self.release()
                 break
-            self.images[name] = _Filtered(texture, generation, acc.samples, now)
+            blended = old.blended if old is not None else None
+            self.images[name] = _Filtered(texture, generation, acc.samples, now, blended)
             self.runs += 1
+        if self.enabled:
+            self._blend(session)
         self.last_ms = 1e3 * (time.perf_counter() - start)
         return self.last_ms
+
+    def _forget(self, name: str) -> None:
+        got = self.images.pop(name, None)
+        if got is not None:
+            got.texture.release()
+            if got.blended is not None:
+                got.blended.release()
+
+    def _blend(self, session) -> None:
+        """Each blending refine view's (1 - w) r + w D, where its inputs have changed."""
+        for name, view in session.views.items():
+            got = self.images.get(name)
+            if not getattr(view, "blending", False) or got is None:
+                continue
+            if got.generation != (id(view.acc), session.restarts):
+                continue
+            key = (got.samples, got.at, view.weight, view.ray.samples)
+            if got.blend_key == key:
+                continue
+            if got.blended is None or got.blended.size != got.texture.size:
+                if got.blended is not None:
+                    got.blended.release()
+                got.blended = self.ctx.texture(got.texture.size, 4, dtype="f4")
+                got.blended.filter = got.texture.filter
+            if self.blend_pass is None:
+                self.blend_pass = BlendPass(self.ctx)
+            self.blend_pass.run(view.ray.texture, got.texture, got.blended, view.weight)
+            got.blend_key = key
 
     def texture(self, name: str, view, restarts: int):
         """The view's filtered image, where one of its current accumulation exists."""
@@ -114,12 +157,19 @@ class ViewDenoise:
         got = self.images.get(name)
         if got is None or got.generation != (id(view.acc), restarts):
             return None
+        if getattr(view, "blending", False):
+            return got.blended if got.blend_key is not None else None
         return got.texture
 
     def release(self) -> None:
         for got in self.images.values():
             got.texture.release()
+            if got.blended is not None:
+                got.blended.release()
         self.images.clear()
+        if self.blend_pass is not None:
+            self.blend_pass.release()
+            self.blend_pass = None
         if self.kept_means is not None:
             self.kept_means.release()
             self.kept_means = None

@@ -39,8 +39,8 @@ from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from ..rendering.probes import BakeProgress
 from ..methods import METHODS
 from ..rendering.refine import (REFINE_HALF_SEED, REFINE_MIN_HALF_SAMPLES,  # noqa: F401 (tests)
-                                REFINE_RAYMARCH_FRAMES, HalfBuffers, RefineEstimate,
-                                denoised_halves_error)
+                                REFINE_RAYMARCH_FRAMES, HalfBuffers, RefineBlend,
+                                RefineEstimate, judged_blend)
 from ..rendering.renderer import Renderer
 from ..rendering.sample_bands import TileCosts, fill_frame, tile_grid
 from ..scene import Scene
@@ -60,11 +60,6 @@ REFINE = "refine"
 # estimate may switch the view and the second half's seed are app/rendering/refine.py's (a still
 # image of refine shares them).
 REFINE_CHECK_FRAMES = 16
-# refine with the Denoise switch on asks the denoised halves' error (a read-back of both halves
-# and a filter run: a hitch of a frame) only once the raw halves' estimate is within this factor of
-# the raymarcher's: the filter took guided's error down 2 to 4x on bonsai (10% -> 2.8% at 16
-# samples, 3.5% -> 1.7% at 128, bench/h200-denoise), so a check further off could not switch.
-DENOISED_CHECK_RATIO = 4.0
 REFINE_HISTORY = 64     # frames after a restart whose shown image a refine view remembers (tests)
 
 
@@ -103,7 +98,9 @@ class MethodView:
 
 class RefineView:
     """The `refine` view: the raymarcher's accumulation (`ray`), `guided`'s two halves and their
-    mean (`halves`), and which of the two the display shows (`shown`: "raymarch" or "guided")."""
+    mean (`halves`), and which of the two the display shows (`shown`: "raymarch" or "guided").
+    With the Denoise switch on, "guided" is blended with the raymarcher's image by `weight` (of
+    guided denoised; 1: guided alone), as the last judgement (refine.judged_blend) estimated."""
 
     def __init__(self, method: str = REFINE):
         self.method = method
@@ -115,8 +112,9 @@ class RefineView:
         self.estimate: RefineEstimate | None = None   # the last check's
         self.frames_since_check = 0
         self.checked_stage = 0          # bit_length of guided's samples at the last check
-        self.denoise_checked_stage = 0  # ... at the last estimate of the denoised halves' error
-        self.denoised_estimate = float("nan")   # that estimate (refine.denoised_half_error)
+        self.judged_stage = 0           # ... at the last judgement of the blend
+        self.blend: RefineBlend | None = None   # that judgement
+        self.weight = 1.0               # of guided (denoised) in the image shown, while "guided"
         self.switched_at: int | None = None   # guided's samples when it replaced the raymarcher
         self.frames = 0                 # frames stepped since the last restart
         self.shown_frames: list[str] = []   # what each of the first REFINE_HISTORY of them showed
@@ -132,6 +130,11 @@ class RefineView:
     def samples(self) -> int:
         acc = self.acc
         return 0 if acc is None else acc.samples
+
+    @property
+    def blending(self) -> bool:
+        """Guided shown, blended with the raymarcher's image (the raymarcher still judged)."""
+        return self.shown == "guided" and self.weight < 1.0
 
     @property
     def guided_samples(self) -> int:
@@ -336,7 +339,7 @@ class RenderSession:
         view.shown = "raymarch"
         view.estimate, view.switched_at = None, None
         view.frames_since_check, view.checked_stage = 0, 0
-        view.denoise_checked_stage, view.denoised_estimate = 0, float("nan")
+        view.judged_stage, view.blend, view.weight = 0, None, 1.0
         view.frames, view.shown_frames = 0, []
 
     def _drop(self, name: str) -> None:
@@ -474,8 +477,8 @@ class RenderSession:
                          and not self._check_pending(view))))
 
     def _check_pending(self, view: RefineView) -> bool:
-        """Guided samples since the last check while the raymarcher is shown."""
-        return (view.shown == "raymarch" and view.guided_samples > 0
+        """Guided samples since the last check while the raymarcher is shown (or blended in)."""
+        return ((view.shown == "raymarch" or view.blending) and view.guided_samples > 0
                 and view.frames_since_check > 0 and self.renderer.probes_current())
 
     def _step_refine(self, view: RefineView, budget_ms: float, max_samples: int) -> tuple[float, int]:
@@ -483,13 +486,15 @@ class RenderSession:
         and short of REFINE_RAYMARCH_FRAMES; `guided` samples once the probes are current (half the
         budget each while both run; at least one sample each), split between the halves (the
         emptier first), then the halves combined on the GPU and, at a check, their error read
-        (16 bytes) and the view switched to guided if its estimate is below the raymarcher's.
-        The frame of a restart (any edit) always shows the raymarcher: guided may take over from
-        the next frame on. Returns GPU ms and samples per pixel dispatched."""
+        (16 bytes) and the view switched to guided if its estimate is below the raymarcher's;
+        with the Denoise switch on, the blend judged instead (_judge, once a doubling), guided
+        shown from a weight above 0. The frame of a restart (any edit) always shows the
+        raymarcher: guided may take over from the next frame on. Returns GPU ms and samples per
+        pixel dispatched."""
         r = self.renderer
         view.frames += 1
         ray_cap = min(REFINE_RAYMARCH_FRAMES, max_samples)
-        ray_todo = view.shown == "raymarch" and view.ray.samples < ray_cap
+        ray_todo = (view.shown == "raymarch" or view.blending) and view.ray.samples < ray_cap
         guided_todo = r.probes_current() and view.guided_samples < max_samples
         share = budget_ms / 2 if ray_todo and guided_todo else budget_ms
         ms_total, n_total = 0.0, 0
@@ -520,41 +525,48 @@ class RenderSession:
             self._note_shown(view)
             return ms_total, n_total
         check = check and view.frames > 1   # an edit's own frame shows the raymarcher
-        with_ray = view.shown == "raymarch"
+        if view.blending and not self.denoise.enabled:   # the switch went off: no blend to show
+            view.shown, view.weight = "raymarch", 1.0
+        with_ray = view.shown == "raymarch" or view.blending
         halves.combine(view.ray if with_ray else None, reduce=check)
         if check:
             view.estimate = halves.read_estimate(with_ray)
             view.frames_since_check, view.checked_stage = 0, stage
             est = view.estimate
             if with_ray and view.frames > 1 and min(halves.counts) >= REFINE_MIN_HALF_SAMPLES:
-                guided = est.guided
-                if (not guided < est.raymarch and guided < DENOISED_CHECK_RATIO * est.raymarch
-                        and self._denoised_check_due(view, stage)):
-                    guided = self._denoised_halves_error(view)
-                if guided < est.raymarch:   # (False while either is NaN)
-                    view.shown = "guided"
+                blend = self._judge(view) if self._judge_due(view, stage) else None
+                if blend is not None:
+                    if blend.weight > 0.0 and view.shown == "raymarch":
+                        view.shown, view.switched_at = "guided", halves.samples
+                    if view.shown == "guided":   # (a weight may fall again: the blend follows)
+                        view.weight = blend.weight
+                elif view.shown == "raymarch" and est.guided < est.raymarch:   # (NaN: False)
+                    view.shown, view.weight = "guided", 1.0
                     view.switched_at = halves.samples
         self._note_shown(view)
         return ms_total + ms, n_total + n
 
-    def _denoised_check_due(self, view: RefineView, stage: int) -> bool:
-        """Whether to estimate the denoised halves' error at this check: where the Denoise switch
-        is on (the view then shows guided denoised), once each time guided's samples double (it
-        reads both halves back and runs the filter: a hitch of a frame,
-        bench/h200-interact-refine)."""
-        return self.denoise.enabled and stage != view.denoise_checked_stage
+    def _judge_due(self, view: RefineView, stage: int) -> bool:
+        """Whether to judge the blend at this check: where the Denoise switch is on (the view then
+        shows guided denoised), once each time guided's samples double."""
+        return self.denoise.enabled and stage != view.judged_stage
 
-    def _denoised_halves_error(self, view: RefineView) -> float:
-        """Half a denoised (with the guides the Denoise switch would give the view), its error
-        estimated against half b (refine.denoised_halves_error); NaN where the filter cannot run.
-        The raw halves' noise alone kept the raymarcher on screen for 150 frames to for ever
-        after an edit on bonsai at 1080p, while guided denoised was at half its error
+    def _judge(self, view: RefineView) -> RefineBlend | None:
+        """The blend of the raymarcher's image and guided denoised, judged from the halves on the
+        GPU (refine.judged_blend: half A filtered with the guides the Denoise switch gives the
+        view, one 16-byte read-back); None where the filter cannot run. Its wall time is the
+        frame's denoise_ms. Judging guided by its raw noise kept the raymarcher on screen for ever
+        after some bonsai edits at 1080p, and the first judgement of guided denoised (half A read
+        to the host, filtered there and summed in NumPy) made hitches of 200 to 440 ms
         (bench/h200-interact-refine)."""
         start = time.perf_counter()
-        view.denoise_checked_stage = view.halves.samples.bit_length()
-        view.denoised_estimate = denoised_halves_error(self.renderer, view.halves, view.camera)
+        view.judged_stage = view.halves.samples.bit_length()
+        blend = judged_blend(self.renderer, view.halves, view.ray, view.camera,
+                             self.denoise.kept())
+        if blend is not None:
+            view.blend = blend
         self._check_denoise_ms += 1e3 * (time.perf_counter() - start)   # the frame's denoise_ms
-        return view.denoised_estimate
+        return blend
 
     @staticmethod
     def _note_shown(view: RefineView) -> None:
@@ -655,6 +667,10 @@ class RenderSession:
         def pct(x) -> str:
             return "?" if x is None or not math.isfinite(x) else f"{100 * x:.1f}%"
         guided = pct(None if est is None else est.guided)
+        if view.blending:
+            blend = pct(None if view.blend is None else view.blend.blend)
+            return (f"{view.method}  guided {view.guided_samples} spp denoised, blended "
+                    f"{100 * view.weight:.0f}% with the raymarcher: est. error {blend}")
         if view.shown == "guided":
             return f"{view.method}  guided {view.guided_samples} spp, est. error {guided}"
         text = f"{view.method}  raymarch {0 if view.ray is None else view.ray.samples} spp"
@@ -675,6 +691,10 @@ class RenderSession:
                 "estimated_rrmse": None if est is None else
                 {"guided": est.guided, "raymarch": est.raymarch, "samples": est.samples},
                 "switched_at": view.switched_at, "frames": view.frames,
+                "weight": view.weight if view.shown == "guided" else 0.0,
+                "blend": None if view.blend is None else
+                {"weight": view.blend.weight, "blend": view.blend.blend,
+                 "denoised": view.blend.denoised, "raymarch": view.blend.raymarch},
                 "shown_frames": list(view.shown_frames),
                 "reads": 0 if view.halves is None else view.halves.reads}
 

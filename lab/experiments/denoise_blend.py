@@ -5,7 +5,7 @@ raw image and the denoised one do better, with the blend weight estimated from t
 For each sample count N: two independent halves a and b of N/2 samples, their mean m, and D(m)
 through the denoiser (OIDN, the colour alone, tile means kept). Per 32-pixel tile, the raw
 mean's noise s2 = mean((a - b)^2) / 4 and the denoised image's error e2, estimated from D(a)
-against the independent half b (refine.denoised_half_error's algebra per tile: mean((D(a) - b)^2)
+against the independent half b (refine.blend_from_sums' algebra per tile: mean((D(a) - b)^2)
 - mean((a - b)^2) / 2), scaled by 1/2 to stand for D(m)'s; the blend alpha D(m) + (1 - alpha) m with
 alpha = s2 / (s2 + e2) per tile (as if the two errors were independent), interpolated smoothly
 between tiles as the kept means are. Errors: rRMSE against a reference of REF_SPP samples,
