@@ -109,6 +109,12 @@ def test_gpu_reduction_and_combine_match_numpy(ctx):
         half_a = buffers.half_a.read_rgba()
         np.testing.assert_allclose(half_a[..., :3], a, rtol=1e-6, atol=1e-6)
         assert (half_a[..., 3] == 3).all() and buffers.half_a.samples == 3
+        # the copy the viewer adopts as its filtered image: exact (RGBA32F)
+        adopted = ctx.texture((w, h), 4, dtype="f4")
+        buffers.copy_denoised_a(adopted)
+        np.testing.assert_array_equal(np.frombuffer(adopted.read(), np.float32).reshape(h, w, 4),
+                                      denoised)
+        adopted.release()
         # the display's blend against its twin
         blended = ctx.texture((w, h), 4, dtype="f4")
         blender = BlendPass(ctx)

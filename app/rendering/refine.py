@@ -234,12 +234,14 @@ class HalfBuffers:
         self.combined = Accumulation(ctx, width, height)
         self._half_a: Accumulation | None = None        # half A alone and its filtered image,
         self._denoised_a: moderngl.Texture | None = None   # made on the first judgement
+        self._denoised_a_frame: moderngl.Framebuffer | None = None
         self.groups = ((width + GROUP_SIDE - 1) // GROUP_SIDE, (height + GROUP_SIDE - 1) // GROUP_SIDE)
         self.partials = ctx.buffer(reserve=16 * self.groups[0] * self.groups[1])
         self.sums = ctx.buffer(reserve=16)
         self._combine = compute_program(ctx, "refine_halves.comp", {"STAGE": 1})
         self._reduce = compute_program(ctx, "refine_halves.comp", {"STAGE": 2})
-        self._judge: moderngl.ComputeShader | None = None
+        # compiled with the view, not at its first judgement (which follows an edit)
+        self._judge = compute_program(ctx, "refine_halves.comp", {"STAGE": 3})
         self.judge_sums = ctx.buffer(reserve=16)
         self.reads = 0            # read-backs since the last reset (a test counts them)
 
@@ -276,6 +278,17 @@ class HalfBuffers:
         """The half the next batch of samples goes to: the one with fewer (A on a tie)."""
         a, b = self.counts
         return 0 if a <= b else 1
+
+    def copy_denoised_a(self, texture: moderngl.Texture) -> None:
+        """`denoised_a` copied into `texture` (RGBA32F of its size) on the GPU."""
+        if self._denoised_a_frame is None:
+            self._denoised_a_frame = self.ctx.framebuffer(color_attachments=[self.denoised_a])
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+        # framebuffer to framebuffer (a blit keeps RGBA32F; a copy into a texture went through
+        # 8 bits a channel)
+        target = self.ctx.framebuffer(color_attachments=[texture])
+        self.ctx.copy_framebuffer(target, self._denoised_a_frame)
+        target.release()
 
     def combine(self, raymarched: Accumulation | None = None, reduce: bool = False,
                 write_half_a: bool = False) -> None:
@@ -317,8 +330,6 @@ class HalfBuffers:
     def judge(self, raymarched: Accumulation) -> tuple[float, float, float, int]:
         """judge_sums on the GPU: `denoised_a` (half A filtered) and the raymarcher's image
         against half B, reduced to 16 bytes and read back."""
-        if self._judge is None:
-            self._judge = compute_program(self.ctx, "refine_halves.comp", {"STAGE": 3})
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
         self.halves[1].residual.texture.bind_to_image(2, read=True, write=False)
         self.halves[1].level0.texture.bind_to_image(3, read=True, write=False)
@@ -344,7 +355,7 @@ class HalfBuffers:
             half.release()
         self.combined.release()
         for obj in (self._half_a, self._denoised_a, self._judge, self.partials, self.sums,
-                    self.judge_sums, self._combine, self._reduce):
+                    self.judge_sums, self._combine, self._reduce, self._denoised_a_frame):
             if obj is not None:
                 obj.release()
 

@@ -53,7 +53,8 @@ class ViewDenoise:
         self.last_ms = 0.0               # wall ms of the last update's filtering
         self.runs = 0                    # filtered images made (tests, the Stats panel)
         self.kept_means: KeptMeans | None = None   # the tile means' passes, made on first use
-        self.blend_pass: BlendPass | None = None
+        # compiled with the session where the switch starts on, not at a view's first blend
+        self.blend_pass: BlendPass | None = BlendPass(ctx) if enabled else None
 
     def kept(self) -> KeptMeans:
         """The tile means' passes (refine's judgement filters through them too)."""
@@ -121,6 +122,23 @@ class ViewDenoise:
             self._blend(session)
         self.last_ms = 1e3 * (time.perf_counter() - start)
         return self.last_ms
+
+    def adopt(self, name: str, halves, restarts: int) -> None:
+        """refine's judgement filtered half A (refine.judged_blend): that image becomes the view's
+        filtered image (a GPU copy), counted as of the halves' whole sample count, so the view is
+        filtered again at the next doubling (or INTERVAL_S), not a second time in this frame."""
+        combined = halves.combined
+        old = self.images.get(name)
+        texture = old.texture if old is not None else None
+        if texture is None or texture.size != (combined.width, combined.height):
+            if texture is not None:
+                texture.release()
+            texture = self.ctx.texture((combined.width, combined.height), 4, dtype="f4")
+            texture.filter = combined.texture.filter
+        halves.copy_denoised_a(texture)
+        blended = old.blended if old is not None else None
+        self.images[name] = _Filtered(texture, (id(combined), restarts), combined.samples,
+                                      time.monotonic(), blended)
 
     def _forget(self, name: str) -> None:
         got = self.images.pop(name, None)
