@@ -7,6 +7,10 @@ replaced by a text edit each, and times 16 raymarched frames of each bench scene
   no-surface  the gradient computed, the surface shading never mixed in
   no-coeffs   the probes read as k = 0 reads them (no array of coefficients held; surface light 0)
   grad-forward  the gradient by forward differences (four lookups, not six)
+  grad-one-fetch  the gradient from one density texel (the cost of reading a gradient texture)
+  no-light    the light grid's optical depth a constant (what its lookups cost)
+  no-probes   k = 0's probe read a constant (what the probes cost the phase-function march)
+  stop-1e-3   the march stops at transmittance 1e-3, not 1e-6
 Timing probes only: the edited copies render wrong images."""
 import json
 import sys
@@ -40,6 +44,17 @@ EDITS["grad-forward"] = [("glsl/lib/hybrid_scattering.glsl", """    vec3 g;
     g.y = classified_at(x + vec3(0.0, h.y, 0.0)).a - a0;
     g.z = classified_at(x + vec3(0.0, 0.0, h.z)).a - a0;
     return g / h;""")]
+# the gradient from one density texel: what reading a precomputed gradient texture would cost
+EDITS["grad-one-fetch"] = [("glsl/lib/raymarch.glsl", "vec3 gradient = opacity_gradient(x);",
+                            "vec3 gradient = vec3(0.0, 0.0, 30.0) * texture(volume_density, "
+                            "x / (2.0 * box_half_extent) + 0.5).r;")]
+EDITS["no-light"] = [("glsl/lib/raymarch.glsl",
+                      "float tau_end = light_grid_optical_depth(origin + (t0 + float(i + 1) * dt) * d);",
+                      "float tau_end = 0.5 * float(i + 1) * dt;")]
+EDITS["no-probes"] = [("glsl/lib/raymarch.glsl", "vec3 inscattered = probe_inscattered(x, d, probe_sun);",
+                       "vec3 inscattered = vec3(0.1); probe_sun = 0.5;")]
+EDITS["stop-1e-3"] = [("glsl/lib/raymarch.glsl", "i < n && transmittance > 1e-6;",
+                       "i < n && transmittance > 1e-3;")]
 CHILD = r'''
 import json, sys
 from dataclasses import replace
