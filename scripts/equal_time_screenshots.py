@@ -1,6 +1,7 @@
 """The methods at equal time (issues 29, 42): on bonsai and the anisotropic cloud at 512^2, the
-path tracer raw and denoised, the raymarcher, and `guided` denoised (what the viewer's `refine`
-shows) each given 100 ms and 1 s, everything its image cost included (bake, light grid, samples,
+path tracer raw and denoised, the raymarcher, and `refine` denoised (the viewer's refine with the
+Denoise switch: the raymarcher's image blended with guided denoised, weighted by the errors its
+halves estimate) each given 100 ms and 1 s, everything its image cost included (bake, light grid, samples,
 the denoiser's guides, read-back and filter), with a signed error map per image against a
 path-traced reference ((image - reference) / mean reference: red too bright, blue too dark, full
 colour at 10%) and its rRMSE corrected for the reference's noise.
@@ -38,9 +39,10 @@ SIZE, PANEL, REF_SPP = 512, 256, 32768
 BUDGETS_MS = (100.0, 1000.0)
 # "+denoise": the same method through the denoiser, its setting and guides the best of the
 # denoise records (--denoise-records) within the budget; the denoiser's whole wall time (guides,
-# read-back, filter, tile means) is charged. `guided` is what the viewer's `refine` accumulates
-# and shows once its estimated error is below the raymarcher's.
-METHODS = ("pt", "pt+denoise", "raymarch", "guided+denoise")
+# read-back, filter, tile means) is charged. `refine` takes guided's setting (its probes and
+# guides); its whole call (bake, raymarcher, guided's halves, the judgement, the filter and the
+# blend) is charged on the wall clock.
+METHODS = ("pt", "pt+denoise", "raymarch", "refine+denoise")
 MAX_RAYMARCH_FRAMES = 64   # past its jitter's averaging a raymarched image stops changing
 FULL = 0.1
 
@@ -121,6 +123,26 @@ def render_within(r: Renderer, method: str, budget_ms: float, size: int, seed: i
     return image, spent + ms, bake_ms, acc.samples
 
 
+def refine_within(r: Renderer, budget_ms: float, size: int, seed: int, guides: str):
+    """A still image of `refine`, denoised, within budget_ms on the wall clock (render's whole
+    call after a GL finish, the bake included): guided's samples first as render_within finds
+    they fit, then fewer while the call runs over. Returns (RenderResult, ms, samples)."""
+    r.render("refine", spp=8, width=16, height=16, seed=seed, denoise=True,
+             denoise_guides=guides)   # untimed: every shader's and the filter's first use
+    n = max(render_within(r, "guided", budget_ms, size, seed, guides)[3], 8)
+    while True:
+        r.invalidate()
+        r.ctx.finish()
+        t0 = time.perf_counter()
+        result = r.render("refine", spp=n, width=size, height=size, seed=seed, denoise=True,
+                          denoise_guides=guides)
+        r.ctx.finish()
+        ms = 1e3 * (time.perf_counter() - t0)
+        if ms <= budget_ms or n <= 8:
+            return result, ms, n
+        n = max(8, int(n * 0.9 * budget_ms / ms))
+
+
 def caption(method: str, rec: dict | None) -> str:
     if method == "pt" or rec is None:
         return method
@@ -170,7 +192,8 @@ def main() -> None:
             for column in METHODS:
                 method, _, denoise = column.partition("+")
                 if denoise:
-                    rec = best_denoised(denoised_data, name, method, budget)
+                    rec = best_denoised(denoised_data, name,
+                                        "guided" if method == "refine" else method, budget)
                     if rec is not None and method == "pt" and rec["denoise"].startswith("probes"):
                         rec = best_denoised(denoised_data, name, method, budget, probes=False)
                 else:
@@ -190,11 +213,20 @@ def main() -> None:
                                 raymarch_step=rec.get("raymarch_step", 0.5))
                 else:
                     r.set_scene(scene)
-                image, ms, bake_ms, n = render_within(r, method, budget, size, seed=3,
-                                                      guides=guides)
+                if method == "refine":
+                    result, ms, n = refine_within(r, budget, size, 3, guides)
+                    image, bake_ms = result.image, result.bake_ms
+                    w = result.stats["refine_estimate"]["blend_weight"]
+                    shown = (f"blend w {w:.2f}" if w is not None and 0.0 < w < 1.0
+                             else result.stats["shown"])
+                else:
+                    image, ms, bake_ms, n = render_within(r, method, budget, size, seed=3,
+                                                          guides=guides)
                 e = corrected_rrmse(rrmse(image, ref), noise)
-                unit = "spp" if method in ("pt", "guided") else "frames"
+                unit = "spp" if method in ("pt", "guided", "refine") else "frames"
                 title = caption(method, rec) + (f", denoised ({guides})" if denoise else "")
+                if method == "refine":
+                    title += f"; {shown}"
                 f = flip(image, ref)
                 print(f"{name} {budget:g} ms {title}: {ms:.1f} ms (bake {bake_ms:.1f}), {n} "
                       f"{unit}, rRMSE {e:.4f}, FLIP {'n/a' if f is None else f'{f:.4f}'}",
