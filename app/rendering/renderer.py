@@ -586,7 +586,9 @@ class Renderer:
                 slot.light.release()
             slot.light = LightTransmittance(self.ctx, st.light_max_side, st.light_precision,
                                             medium=medium)
-            slot.pending = None
+            # a new object holds no grid: its key may be the old one's (surfaces switched on or
+            # off change the medium's defines, not the grid's key), which held a texture
+            slot.key = slot.pending = None
         slot.light.segment_target = st.light_segment_target
         if key == slot.key:
             return 0.0
