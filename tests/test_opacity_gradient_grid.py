@@ -212,6 +212,9 @@ def test_baked_where_k_is_above_zero_and_again_only_when_the_medium_changes(ctx)
             assert grid.builds == n, change
         r.render("pt", spp=1)   # the path tracer keeps the exact gradient: no bake for it
         assert grid.builds == 4
+        r.set_scene(_sphere(**LIT, surface={"gradient_factor": 0.0}))
+        r.render("raymarch", spp=1)   # surfaces off: the grid's memory given back
+        assert grid.texture is None and grid.gpu_bytes == 0
     finally:
         r.release()
 

@@ -86,6 +86,11 @@ class OpacityGradientGrid:
         """The next update bakes again (its time is then real), the texture kept for it."""
         self.key = None
 
+    def drop(self) -> None:
+        """Gives the texture's memory back (surfaces switched off); the next update bakes anew."""
+        self.key = None
+        self._drop_texture()
+
     def _program(self, defines: dict) -> ComputeProgram:
         key = tuple(sorted(defines.items()))
         program = self._programs.get(key)

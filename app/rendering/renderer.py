@@ -543,38 +543,45 @@ class Renderer:
         return (res.volume_version, res.clip, opacity_gradient_grid_key(self.scene),
                 tuple(sorted(res.medium_defines().items())))
 
-    def _reads_gradient_grid(self) -> bool:
-        """Whether the raymarcher would read the grid: surfaces on (k > 0) and the lab's switch
-        on; grid_refusal then says whether the grid can be made."""
-        return self.scene.surface.gradient_factor > 0.0 and self._lab.opacity_gradient_grid
+    def _gradient_grid_for_scene(self) -> OpacityGradientGrid | None:
+        """The grid object where the raymarcher reads one (surfaces on, k > 0, and the lab's
+        switch on; grid_refusal then says whether the grid can be made), None where it computes
+        the gradient. With k = 0 a grid kept from before gives its memory back."""
+        if not self.scene.surface.gradient_factor > 0.0:
+            if self._gradient_grid is not None:
+                self._gradient_grid.drop()
+            return None
+        if not self._lab.opacity_gradient_grid:
+            return None
+        if self._gradient_grid is None:
+            self._gradient_grid = OpacityGradientGrid(self.ctx)
+        return self._gradient_grid
 
     def bake_gradient_grid(self) -> float:
         """Bakes the raymarcher's opacity-gradient grid if stale (where it reads one); GPU ms (0
         where it was current, not read, or refused: opacity_gradient_grid.grid_refusal)."""
         self.last_gradient_grid_ms = 0.0
-        if not self._reads_gradient_grid():
+        grid = self._gradient_grid_for_scene()
+        if grid is None:
             return 0.0
-        if self._gradient_grid is None:
-            self._gradient_grid = OpacityGradientGrid(self.ctx)
         key = self._gradient_grid_key()
-        if self._gradient_grid.key == key:
+        if grid.key == key:
             return 0.0
         self.timer.start()
-        baked = self._gradient_grid.update(self.resources, key)
+        baked = grid.update(self.resources, key)
         self.timer.stop()
         if baked:
-            self.last_gradient_grid_ms = self._gradient_grid.cost_ms = self.timer.elapsed_ms
+            self.last_gradient_grid_ms = grid.cost_ms = self.timer.elapsed_ms
         return self.last_gradient_grid_ms
 
     def _gradient_grid_ready(self) -> OpacityGradientGrid | None:
         """The grid the raymarcher reads now, made if stale (untimed: the callers that time it
         bake it first, bake_gradient_grid); None where the raymarcher computes the gradient."""
-        if not self._reads_gradient_grid():
+        grid = self._gradient_grid_for_scene()
+        if grid is None:
             return None
-        if self._gradient_grid is None:
-            self._gradient_grid = OpacityGradientGrid(self.ctx)
-        self._gradient_grid.update(self.resources, self._gradient_grid_key())
-        return self._gradient_grid if self._gradient_grid.usable else None
+        grid.update(self.resources, self._gradient_grid_key())
+        return grid if grid.usable else None
 
     @property
     def opacity_gradient_grid(self) -> OpacityGradientGrid | None:
