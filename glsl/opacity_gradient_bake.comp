@@ -5,15 +5,15 @@
 // (and the grid is exact at its texel centres). Rebuilt when the volume, the transfer functions,
 // the channels, the crop or the clip plane change (app/rendering/opacity_gradient_grid.py).
 //
-// Stored as RGBA16F (image formats have no rgb16f; a is 0). 16 bits are enough: a half float holds
-// each component to 2^-11 relative (4.9e-4) up to 65504, where |grad A| of a volume in one texture
-// stays below 4 channels' opacity over one voxel of a 2048-voxel side, about 4100 (a voxel
-// thinner than 1/16000 of the box's longest side could pass 65504: clamped there, not made
-// infinite, which would make the normal NaN); the chance
-// P = 1 - exp(-k |g|) then moves by at most k |g| exp(-k |g|) 4.9e-4 <= 1.8e-4 and the normal by
-// about 5e-4 rad. Gradients below the smallest normal half (6.1e-5) keep 6e-8 absolute, which
-// moves P by k 6e-8 (6e-4 at the largest k the scene takes, 10^4). Both far below the grid's
-// interpolation bias; RGBA32F would take twice the memory (16 bytes a voxel against 8).
+// Stored as RGBA16F (image formats have no rgb16f; a is 0). 16 bits are enough: a half float
+// holds each component to 2^-11 relative (4.9e-4) up to 65504. |grad A| stays below about 4100 in
+// a volume one texture holds (4 channels' opacity over one voxel of a 2048-voxel side); a voxel
+// thinner than 1/16000 of the box's longest side could pass 65504, and is clamped there rather
+// than made infinite (a NaN normal). The rounding moves P = 1 - exp(-k |g|) by at most
+// k |g| exp(-k |g|) 4.9e-4 <= 1.8e-4 and the normal by about 5e-4 rad; gradients below the
+// smallest normal half (6.1e-5) keep 6e-8 absolute, moving P by k 6e-8 (6e-4 at the largest k a
+// scene takes, 10^4). Both far below the grid's interpolation bias (docs/design.md), in half the
+// memory of RGBA32F (8 bytes a voxel against 16).
 layout(local_size_x = 4, local_size_y = 4, local_size_z = 4) in;
 #include "lib/medium.glsl"
 // (lib/phase.glsl: PI and orthonormal_basis, which the BRDF beside opacity_gradient uses)
