@@ -76,6 +76,7 @@ def _keys(scene, settings) -> dict:
     return {"majorant_grid": ck.majorant_grid_key(scene),
             "visible_region": ck.visible_region_key(scene),
             "light_grid": ck.light_grid_key(scene, settings),
+            "opacity_gradient_grid": ck.opacity_gradient_grid_key(scene),
             "probe_bake": ck.probe_bake_key(scene, settings)}
 
 
@@ -104,6 +105,9 @@ def test_a_scene_field_changes_exactly_the_keys_of_its_group(path):
         if name == "visible_region" and path == "density_scale":
             assert not changed   # only whether it is positive
             assert ck.visible_region_key(BASE.replace(density_scale=0.0)) != before[name]
+            continue
+        if name == "opacity_gradient_grid" and path == "density_scale":
+            assert not changed   # the opacity A = sigma_t / density_scale does not depend on it
             continue
         assert changed == (group in groups), (name, path, group)
 

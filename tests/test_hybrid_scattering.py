@@ -217,6 +217,23 @@ def test_k_zero_is_todays_image_bit_for_bit(ctx, method):
     assert hybrid_lit == 1 and np.abs(lit - plain).max() > 1e-3
 
 
+def test_surfaces_switched_on_in_a_renderer_bake_its_light_grid_again(ctx):
+    """k from 0 to > 0 in one Renderer (the viewer's slider) changes the medium's defines, so the
+    light grid's pass is compiled anew; its grid (same key: k is not in it) is baked again, not
+    read from the new pass's empty texture."""
+    scene = _scene(**LIT)
+    r = Renderer(ctx, scene)
+    try:
+        r.render("raymarch", spp=1)
+        r.set_scene(scene.replace(surface=type(scene.surface)(gradient_factor=0.5)))
+        image = r.render("raymarch", spp=1).image
+        r.set_scene(scene)
+        again = r.render("raymarch", spp=1).image
+    finally:
+        r.release()
+    assert np.isfinite(image).all() and np.abs(image - again).max() > 1e-3
+
+
 def test_white_furnace_with_a_non_absorbing_brdf(ctx):
     """Albedo 1 in a uniform environment with surfaces everywhere the opacity changes, the BRDF
     diffuse alone (F0 = 0): every path still escapes with throughput 1, each pixel the

@@ -67,6 +67,7 @@ KEYS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "majorant_grid": (("medium",), ()),
     "visible_region": (("medium",), ()),
     "light_grid": (("medium", "sun"), ("light_grid",)),
+    "opacity_gradient_grid": (("medium",), ()),
     "probe_bake": (("medium", "sun", "light", "transport", "probe_bake"), ("bake", "light_grid")),
 }
 
@@ -100,6 +101,12 @@ def visible_region_key(scene) -> tuple:
     only whether it is positive (glsl/visible_region.comp)."""
     return (*scene_key(scene, *KEYS["visible_region"][0], exclude=("density_scale",)),
             scene.density_scale > 0)
+
+
+def opacity_gradient_grid_key(scene) -> tuple:
+    """The raymarcher's opacity-gradient grid (opacity_gradient_grid.py): the medium but its
+    density scale, which the opacity A = sigma_t / density_scale does not depend on."""
+    return scene_key(scene, *KEYS["opacity_gradient_grid"][0], exclude=("density_scale",))
 
 
 def light_grid_key(scene, settings) -> tuple:

@@ -26,12 +26,17 @@ class LabOptions:
     # ENVIRONMENT_MAP_SAMPLING 0), for measuring what the map's importance sampling gains
     # (scripts/envmap_sampling.py: about 1900x the efficiency on the sky scene).
     environment_sampling: bool = True
+    # False: the raymarcher's hybrid branch computes the exact opacity gradient (six medium
+    # lookups) at every sample instead of reading the baked grid (app/rendering/
+    # opacity_gradient_grid.py), for measuring the grid's bias and what it saves
+    # (lab/experiments/experiment_hybrid_scattering.py, hybrid_raymarch_variants.py).
+    opacity_gradient_grid: bool = True
 
     def __post_init__(self):
         rays = self.sun_shadow_rays
         if isinstance(rays, bool) or not isinstance(rays, int) or rays < 1:
             raise ValueError(f"sun shadow rays: expected an integer >= 1, got {rays!r}")
-        for name in ("mixed_levels", "environment_sampling"):
+        for name in ("mixed_levels", "environment_sampling", "opacity_gradient_grid"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")
 

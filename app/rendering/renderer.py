@@ -14,16 +14,18 @@ from ..methods import ACCUMULATED, METHODS as REGISTRY, method as registered
 from ..twins.camera import camera_frame
 from ..twins.light_grid import light_grid_lookup
 from ..gl.context import is_software
+from ..gl.shaders import set_uniforms
 from ..gl.timer import GpuTimer
 from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation, SumAccumulation
-from .cache_keys import (adaptive_planes_key, light_grid_key, probe_bake_key,
-                         visible_region_key)
+from .cache_keys import (adaptive_planes_key, light_grid_key, opacity_gradient_grid_key,
+                         probe_bake_key, visible_region_key)
 from .bake_level import SPACING_LEVEL, BakeMedium, spacing_level
 from .limits import check_image_size
 from .pathtracer import PathTracer
 from .light_transmittance import LightTransmittance, min_side_for_probes
+from .opacity_gradient_grid import OpacityGradientGrid
 from .probe_layout import (fitted_grid, resolve_channels, resolve_precision, resolve_sh_order,
                            sun_lobe_g)
 from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
@@ -163,6 +165,9 @@ class Renderer:
         self._raymarchers: dict[str, Raymarcher] = {}
         self._image_light = _LightSlot()   # the light grid the image reads (the level shown)
         self._walk_light = _LightSlot()    # the bake's own at bake_level > 0 (the coarse level)
+        # the raymarcher's opacity-gradient grid (hybrid scattering), made when first read
+        self._gradient_grid: OpacityGradientGrid | None = None
+        self.last_gradient_grid_ms = 0.0   # GPU ms of its last bake (0: it was current)
         self._bake_medium: BakeMedium | None = None   # the coarse level, made when first needed
         self.baked_level = 0   # the bake level of the probes in hand (start_bake)
         self._probe_ms: dict[tuple, float] = {}   # measured GPU ms per probe walked, per layout
@@ -515,11 +520,74 @@ class Renderer:
         if guided_level0:
             defines["GUIDED_LEVEL0"] = 1
             stage = "compute"
+        # the opacity gradient read from its grid (hybrid scattering; not `guided`'s level 0,
+        # whose paths keep the exact gradient), where the grid can be made
+        grid = None if guided_level0 else self._gradient_grid_ready()
+        if grid is not None:
+            defines["OPACITY_GRADIENT_GRID"] = 1
         key = (stage, tuple(sorted(defines.items())))
         if key not in self._raymarchers:
             self._raymarchers[key] = Raymarcher(self.ctx, stage, defines)
+        marcher = self._raymarchers[key]
         self._light.bind()
-        return self._raymarchers[key]
+        if grid is not None:
+            grid.bind()
+            set_uniforms(marcher.program, grid.uniforms())
+        return marcher
+
+    # ---- the raymarcher's opacity-gradient grid (opacity_gradient_grid.py) ---------------------
+    def _gradient_grid_key(self) -> tuple:
+        """What the grid depends on: the level shown's version, the crop resolved against it, the
+        medium's fields (not density_scale) and its defines (channels, crop on or off)."""
+        res = self.resources
+        return (res.volume_version, res.clip, opacity_gradient_grid_key(self.scene),
+                tuple(sorted(res.medium_defines().items())))
+
+    def _gradient_grid_for_scene(self) -> OpacityGradientGrid | None:
+        """The grid object where the raymarcher reads one (surfaces on, k > 0, and the lab's
+        switch on; grid_refusal then says whether the grid can be made), None where it computes
+        the gradient. With k = 0 a grid kept from before gives its memory back."""
+        if not self.scene.surface.gradient_factor > 0.0:
+            if self._gradient_grid is not None:
+                self._gradient_grid.drop()
+            return None
+        if not self._lab.opacity_gradient_grid:
+            return None
+        if self._gradient_grid is None:
+            self._gradient_grid = OpacityGradientGrid(self.ctx)
+        return self._gradient_grid
+
+    def bake_gradient_grid(self) -> float:
+        """Bakes the raymarcher's opacity-gradient grid if stale (where it reads one); GPU ms (0
+        where it was current, not read, or refused: opacity_gradient_grid.grid_refusal)."""
+        self.last_gradient_grid_ms = 0.0
+        grid = self._gradient_grid_for_scene()
+        if grid is None:
+            return 0.0
+        key = self._gradient_grid_key()
+        if grid.key == key:
+            return 0.0
+        self.timer.start()
+        baked = grid.update(self.resources, key)
+        self.timer.stop()
+        if baked:
+            self.last_gradient_grid_ms = grid.cost_ms = self.timer.elapsed_ms
+        return self.last_gradient_grid_ms
+
+    def _gradient_grid_ready(self) -> OpacityGradientGrid | None:
+        """The grid the raymarcher reads now, made if stale (untimed: the callers that time it
+        bake it first, bake_gradient_grid); None where the raymarcher computes the gradient."""
+        grid = self._gradient_grid_for_scene()
+        if grid is None:
+            return None
+        grid.update(self.resources, self._gradient_grid_key())
+        return grid if grid.usable else None
+
+    @property
+    def opacity_gradient_grid(self) -> OpacityGradientGrid | None:
+        """The raymarcher's opacity-gradient grid, None before one was needed (its texture,
+        memory, and `refusal` where it could not be made)."""
+        return self._gradient_grid
 
     def _light_target(self) -> tuple[tuple, int]:
         """The light grid the current scene needs: its key and least texels along the longest
@@ -586,7 +654,9 @@ class Renderer:
                 slot.light.release()
             slot.light = LightTransmittance(self.ctx, st.light_max_side, st.light_precision,
                                             medium=medium)
-            slot.pending = None
+            # a new object holds no grid: its key may be the old one's (surfaces switched on or
+            # off change the medium's defines, not the grid's key), which held a texture
+            slot.key = slot.pending = None
         slot.light.segment_target = st.light_segment_target
         if key == slot.key:
             return 0.0
@@ -667,12 +737,15 @@ class Renderer:
         return self._light
 
     def invalidate(self) -> None:
-        """Forgets the baked probes, the light grid and the denoiser's guides, so the next image
-        pays for them again (the benchmark charges every record what its image cost)."""
+        """Forgets the baked probes, the light grid, the opacity-gradient grid and the
+        denoiser's guides, so the next image pays for them again (the benchmark charges every
+        record what its image cost)."""
         self._baked_key = None
         self._guides_key = None
         for slot in (self._image_light, self._walk_light):
             slot.key = slot.pending = None
+        if self._gradient_grid is not None:
+            self._gradient_grid.forget()
 
     def probe_uniforms(self) -> dict:
         self.probe_grid.bind()
@@ -869,6 +942,8 @@ class Renderer:
         light_ms = (self.bake_light() if self.needs_light(method)
                     and not self.light_baking() else 0.0)
         self.last_light_ms = light_ms
+        if method == "raymarch":   # its opacity-gradient grid (last_gradient_grid_ms)
+            self.bake_gradient_grid()
         return extra, light_ms
 
     def _traced_pass(self, method: str, extra: dict | None) -> tuple[PathTracer, dict | None]:
@@ -955,6 +1030,8 @@ class Renderer:
             bake_ms = self.bake(seed, progress=bake_progress)
         if self.needs_light(method):
             bake_ms += self.bake_light()
+        if method == "raymarch":
+            bake_ms += self.bake_gradient_grid()
         render_ms = 0.0
         chunk = max(samples_per_pass, 1)
         while acc.samples < spp:
@@ -1042,7 +1119,7 @@ class Renderer:
                     acc.release()
                 acc = self._guide_acc = Accumulation(self.ctx, camera.width, camera.height)
             acc.reset()
-            light_ms = self.bake_light()
+            light_ms = self.bake_light() + self.bake_gradient_grid()
             extra = self.probe_uniforms()
             self.timer.start()
             self.raymarcher().run(self.resources, camera, acc, probe_frames, self.seed ^ 0x2545F491,
@@ -1111,6 +1188,8 @@ class Renderer:
         for slot in (self._image_light, self._walk_light):
             if slot.light is not None:
                 slot.light.release()
+        if self._gradient_grid is not None:
+            self._gradient_grid.release()
         if self._bake_medium is not None:
             self._bake_medium.release()
         if self.probe_grid is not None:

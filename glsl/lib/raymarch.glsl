@@ -14,10 +14,13 @@
 // sample is a surface's with probability P = 1 - exp(-k |grad A|), and the march adds the mean of
 // both: (1 - P) times the phase function's light and P times the surface's, which reflects the
 // probes' light by surface_probe_radiance (the diffuse irradiance from the SH in closed form and a
-// specular term from the mirror direction) and the sun by the BRDF times the cosine. Without it
-// the code is as it was.
+// specular term from the mirror direction) and the sun by the BRDF times the cosine. The
+// gradient is read from the baked opacity-gradient grid in one fetch where there is one
+// (lib/opacity_gradient_grid.glsl: OPACITY_GRADIENT_GRID; exact at the voxel centres, trilinear
+// between), else computed exactly. Without HYBRID_SCATTERING the code is as it was.
 #if defined(HYBRID_SCATTERING)
 #include "lib/hybrid_scattering.glsl"
+#include "lib/opacity_gradient_grid.glsl"
 #endif
 // AREA_LIGHTS (lib/area_lights.glsl): a light the camera ray meets is seen, in front of the
 // volume or behind it (in place of the environment); the light they shed reaches the march only
@@ -95,7 +98,7 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
         probe_fetch(x, coeffs, probe_sun);
         vec3 inscattered = probe_inscattered_from(coeffs, d);
         vec3 sun_kernel = vec3(sun_phase);
-        vec3 gradient = opacity_gradient(x);
+        vec3 gradient = raymarch_opacity_gradient(x);
         float surface_share = surface_probability(gradient, surface_gradient_factor);
         if (surface_share > 0.0) {
             vec3 n = surface_normal(gradient, -d);

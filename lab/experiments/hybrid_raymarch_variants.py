@@ -2,24 +2,29 @@
 1080p)? Builds copies of the current tree with one piece of lib/raymarch.glsl's hybrid branch
 replaced by a text edit each, and times 16 raymarched frames of each bench scene at 1080p:
     python lab/experiments/hybrid_raymarch_variants.py OUT.json WORKDIR [scenes] [k,k] [precision]
-  head        the tree as it is
-  no-grad     the 6-fetch opacity gradient replaced by a constant (the surface branch still runs)
-  no-surface  the gradient computed, the surface shading never mixed in
+  head        the tree as it is: the gradient read from the opacity-gradient grid (one fetch)
+  grad-exact  the exact 6-lookup gradient at every sample (the raymarcher before the grid; the
+              grid is still baked, outside the frames timed): head against it is what the grid saves
+  no-grad     the gradient replaced by a constant (the surface branch still runs)
+  no-surface  the gradient read, the surface shading never mixed in
   no-coeffs   the probes read as k = 0 reads them (no array of coefficients held; surface light 0)
-  grad-forward  the gradient by forward differences (four lookups, not six)
-  grad-one-fetch  the gradient from one density texel (the cost of reading a gradient texture)
+  grad-forward  the gradient by forward differences (four lookups, not six) in place of the grid
   no-light    the light grid's optical depth a constant (what its lookups cost)
   no-probes   k = 0's probe read a constant (what the probes cost the phase-function march)
   stop-1e-3   the march stops at transmittance 1e-3, not 1e-6
-Timing probes only: the edited copies render wrong images."""
+Timing probes only: the edited copies but head and grad-exact render wrong images."""
 import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bake_variants import child_rows, edited_tree   # noqa: E402  (the same copies, other edits)
+# the line of lib/raymarch.glsl that reads the gradient (lib/opacity_gradient_grid.glsl)
+GRADIENT_READ = "vec3 gradient = raymarch_opacity_gradient(x);"
 EDITS = {
-    "no-grad": [("glsl/lib/raymarch.glsl", "vec3 gradient = opacity_gradient(x);",
+    "grad-exact": [("glsl/lib/raymarch.glsl", GRADIENT_READ,
+                    "vec3 gradient = opacity_gradient(x);")],
+    "no-grad": [("glsl/lib/raymarch.glsl", GRADIENT_READ,
                  "vec3 gradient = vec3(0.0, 0.0, 30.0);")],
     "no-surface": [("glsl/lib/raymarch.glsl", "if (surface_share > 0.0) {",
                     "if (surface_share > 1e30) {")],
@@ -33,8 +38,8 @@ EDITS = {
 }
 EDITS["no-grad-no-coeffs"] = EDITS["no-grad"] + EDITS["no-coeffs"]
 # forward differences from the point itself: four lookups instead of six (timing only: a
-# different normal from the path tracer's)
-EDITS["grad-forward"] = [("glsl/lib/hybrid_scattering.glsl", """    vec3 g;
+# different normal from the path tracer's), computed in the raymarcher in place of the grid's read
+EDITS["grad-forward"] = EDITS["grad-exact"] + [("glsl/lib/hybrid_scattering.glsl", """    vec3 g;
     g.x = classified_at(x + vec3(h.x, 0.0, 0.0)).a - classified_at(x - vec3(h.x, 0.0, 0.0)).a;
     g.y = classified_at(x + vec3(0.0, h.y, 0.0)).a - classified_at(x - vec3(0.0, h.y, 0.0)).a;
     g.z = classified_at(x + vec3(0.0, 0.0, h.z)).a - classified_at(x - vec3(0.0, 0.0, h.z)).a;
@@ -44,10 +49,6 @@ EDITS["grad-forward"] = [("glsl/lib/hybrid_scattering.glsl", """    vec3 g;
     g.y = classified_at(x + vec3(0.0, h.y, 0.0)).a - a0;
     g.z = classified_at(x + vec3(0.0, 0.0, h.z)).a - a0;
     return g / h;""")]
-# the gradient from one density texel: what reading a precomputed gradient texture would cost
-EDITS["grad-one-fetch"] = [("glsl/lib/raymarch.glsl", "vec3 gradient = opacity_gradient(x);",
-                            "vec3 gradient = vec3(0.0, 0.0, 30.0) * texture(volume_density, "
-                            "x / (2.0 * box_half_extent) + 0.5).r;")]
 EDITS["no-light"] = [("glsl/lib/raymarch.glsl",
                       "float tau_end = light_grid_optical_depth(origin + (t0 + float(i + 1) * dt) * d);",
                       "float tau_end = 0.5 * float(i + 1) * dt;")]
@@ -72,10 +73,14 @@ for name in sys.argv[2].split(","):
         if len(sys.argv) > 4:   # the probes' texture format
             scene = scene.replace(probes=replace(scene.probes, precision=sys.argv[4]))
         r = Renderer(ctx, scene)
-        r.render("raymarch", spp=16, seed=1)   # compiles, and brings the GPU's clocks up
-        res = r.render("raymarch", spp=16, seed=3)
+        r.render("raymarch", spp=64, seed=1)   # compiles, and brings the GPU's clocks up
+        res = r.render("raymarch", spp=32, seed=3)
+        grid = r.opacity_gradient_grid   # the gradient grid baked (k > 0), None before
         print("RESULT " + json.dumps({"root": sys.argv[1], "scene": name, "k": k,
-                                      "raymarch_ms_per_frame": res.ms_per_sample}), flush=True)
+                                      "raymarch_ms_per_frame": res.ms_per_sample,
+                                      "gradient_grid_ms": grid.cost_ms if grid else 0.0,
+                                      "gradient_grid_bytes": grid.gpu_bytes if grid else 0}),
+              flush=True)
         r.release()
 '''
 
