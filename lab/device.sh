@@ -15,14 +15,17 @@ for f in .data/*.gz; do
 done
 for f in .data/*.nrrd; do [ -f "$f" ] && cp -n "$f" ../shared/datasets/; done
 # The library travels in parts, one a call (each call's tree must stay under 64 MiB): call k
-# carries .oidnqk (k = 1 .. 5; the last with pyoidn's wheels, cffi and pycparser) and copies it to
-# /tmp/devcache; the call that finds all five assembles them.
-for i in 1 2 3 4 5; do [ -f .oidnq$i/part ] && cp .oidnq$i/part /tmp/devcache/oidn.q$i; done
-for d in .oidnq5; do [ -d $d ] && cp $d/*.whl /tmp/devcache/ 2>/dev/null; done
-if [ ! -d /tmp/devcache/oidn/pyoidn ] && [ -f /tmp/devcache/oidn.q1 ] && [ -f /tmp/devcache/oidn.q2 ] \
-   && [ -f /tmp/devcache/oidn.q3 ] && [ -f /tmp/devcache/oidn.q4 ] && [ -f /tmp/devcache/oidn.q5 ]; then
+# carries .oidnqk (k = 1 .. OIDN_PARTS, made by `split -n OIDN_PARTS -d .oidn/pyoidn.tgz`; the last
+# also with pyoidn's wheels, cffi and pycparser) and copies it to /tmp/devcache; the call that
+# finds all parts assembles them.
+OIDN_PARTS=8
+for i in $(seq 1 $OIDN_PARTS); do [ -f .oidnq$i/part ] && cp .oidnq$i/part /tmp/devcache/oidn.q$i; done
+cp .oidnq$OIDN_PARTS/*.whl /tmp/devcache/ 2>/dev/null
+have=0
+for i in $(seq 1 $OIDN_PARTS); do [ -f /tmp/devcache/oidn.q$i ] && have=$((have + 1)); done
+if [ ! -d /tmp/devcache/oidn/pyoidn ] && [ $have -eq $OIDN_PARTS ]; then
   mkdir -p /tmp/devcache/oidn
-  cat /tmp/devcache/oidn.q[1-5] | tar xz -C /tmp/devcache/oidn
+  for i in $(seq 1 $OIDN_PARTS); do cat /tmp/devcache/oidn.q$i; done | tar xz -C /tmp/devcache/oidn
   (cd /tmp/devcache/oidn/pyoidn/oidn/lib && ln -sf libOpenImageDenoise.so.2 libOpenImageDenoise.so \
     && ln -sf libOpenImageDenoise.so.2 "libOpenImageDenoise.so.$(ls libOpenImageDenoise_core.so.* | sed 's/.*core\.so\.//')")
   python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/devcache/oidn /tmp/devcache/*.whl
