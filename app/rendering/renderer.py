@@ -286,6 +286,13 @@ class Renderer:
                        **(probe_defines or self._probe_defines())}
         if self.resources.defines():
             defines = {**(defines or {}), **self.resources.defines()}
+            if "HYBRID_SCATTERING" in defines:
+                # With surfaces this pass keeps the crop and clip tests (their uniforms then say
+                # "none": the same image). Compiled out, they made the path tracer's sample 16%
+                # slower on the H200 (the foot at 1080p: 4.72 against 4.07 ms; 3.69 at k = 0),
+                # while the raymarcher and k = 0 gain from it (bench/h200-hybrid-cost,
+                # lab/experiments/hybrid_pt_bisect.py)
+                defines.pop("NO_CLIP_REGION", None)
         if self._lab.sun_shadow_rays != 1:
             defines = {**(defines or {}), "SUN_SHADOW_RAYS": self._lab.sun_shadow_rays}
         if self._settings.shadow_tracking == "residual":
