@@ -7,7 +7,7 @@ own time to each target are in bench/h100/report.md (the same scenes, size and d
 Run on the GPU:
     python lab/experiments/experiment_auto_progressive.py OUT_DIR
         [--scenes fuel,hydrogen,foot,bonsai,thick,anisotropic,grey] [--targets 0.05,0.02,0.01]
-        [--ref-spp 4096] [--size 512]
+        [--ref-spp 4096] [--size 512] [--denoise]
 On llvmpipe, in seconds: --quick (a 20^3 cloud at 48^2, targets 0.2,0.1).
 The table against a benchmark run (its path tracer's and its fastest setting's time to each target,
 app/bench/report.py time_to_error), from the records alone:
@@ -37,6 +37,8 @@ parser.add_argument("--targets", default="0.05,0.02,0.01")
 parser.add_argument("--ref-spp", type=int, default=4096, help="samples per reference half")
 parser.add_argument("--size", type=int, default=512)
 parser.add_argument("--quick", action="store_true")
+parser.add_argument("--denoise", action="store_true",
+                    help="auto's denoised path tracer a candidate too (render --auto --denoise)")
 parser.add_argument("--compare", type=Path, help="write OUT_DIR/report.md against this bench run")
 args = parser.parse_args()
 out = Path(args.out)
@@ -63,7 +65,7 @@ def compare(out: Path, bench: Path) -> None:
         pt = time_to_error([x for x in recs if x["method"] == "pt"], r["target"])
         best = time_to_error(recs, r["target"])
         chose = (f"raymarch {r['grid']}^3 x {r['walks']}" if r["method"] == "raymarch"
-                 else f"pt {r['pt_spp']} spp")
+                 else f"pt {r['pt_spp']} spp" + (", denoised" if r.get("denoised") else ""))
 
         def ms(x):
             return "not reached" if x is None else f"{x['total_ms']:.3g} ms"
@@ -108,10 +110,11 @@ for name in names:
         r.render("raymarch", spp=1, seed=1)   # shaders compiled before the clock starts
         r.set_scene(base)
         start = time.perf_counter()
-        got = auto_render(r, target, seed=11)
+        got = auto_render(r, target, seed=11, denoise=args.denoise)
         wall = time.perf_counter() - start
         measured = rrmse(got.image, reference)
         row = {"scene": name, "target": target, "method": got.method,
+               "denoise": args.denoise, "denoised": got.denoised,
                "grid": got.scene.probes.grid[0] if got.method == "raymarch" else None,
                "walks": got.scene.probes.samples if got.method == "raymarch" else None,
                "estimate": got.estimate, "standard_error": got.standard_error,
