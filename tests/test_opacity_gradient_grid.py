@@ -219,6 +219,31 @@ def test_baked_where_k_is_above_zero_and_again_only_when_the_medium_changes(ctx)
         r.release()
 
 
+@pytest.mark.parametrize("method", ["raymarch", "refine"])
+def test_an_images_bake_time_holds_the_grids_bake(ctx, method, monkeypatch):
+    """A record's total is everything its image cost: render()'s bake_ms holds the grid's bake
+    wherever the image's raymarcher needed one (refine's too), and the grid is baked once."""
+    r = Renderer(ctx, _sphere(**LIT, surface={"gradient_factor": 0.3}))
+    grid_ms = []
+    real = r.bake_gradient_grid
+
+    def bake():
+        grid_ms.append(real())
+        return grid_ms[-1]
+    monkeypatch.setattr(r, "bake_gradient_grid", bake)
+    # the probes' and the light grid's bakes run, their times taken as 0: what is left is the grid's
+    for name in ("bake", "bake_light"):
+        work = getattr(r, name)
+        monkeypatch.setattr(r, name, lambda *a, _work=work, **kw: _work(*a, **kw) and 0.0)
+    try:
+        result = r.render(method, spp=8, seed=1)
+        assert r.opacity_gradient_grid.builds == 1
+    finally:
+        r.release()
+    assert grid_ms and grid_ms[0] > 0.0 and all(ms == 0.0 for ms in grid_ms[1:])
+    assert result.bake_ms == grid_ms[0]
+
+
 def test_the_exact_gradient_where_the_volume_is_bricked_or_the_grid_over_budget(ctx, monkeypatch):
     scene = _sphere(**LIT, volume={"builtin": "sphere", "size": [16, 16, 16]},
                     surface={"gradient_factor": 0.3})

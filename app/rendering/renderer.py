@@ -1064,7 +1064,10 @@ class Renderer:
         and stats["refine_estimate"] the estimated errors that chose it."""
         if method != "refine":
             raise NotImplementedError(f"render(): no still image of {method} yet")
-        bake_ms = self.bake(seed, progress=bake_progress) + self.bake_light()
+        # the raymarcher's opacity-gradient grid too (surfaces on), so that the image's bake
+        # time holds it (the raymarch inside render_refine then finds it current)
+        bake_ms = (self.bake(seed, progress=bake_progress) + self.bake_light()
+                   + self.bake_gradient_grid())
         self.resources.reset_stats()
         done = render_refine(self, spp, seed, width, height,
                              denoise_guides=denoise_guides if denoise else None)
