@@ -316,16 +316,25 @@ class HalfBuffers:
         if write_half_a:
             self.half_a.samples = n_a
         if reduce:
-            self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
-            set_uniforms(self._reduce, {"partial_count": self.groups[0] * self.groups[1]})
-            self._reduce.run(1, 1)
+            self._reduce_partials(self.sums)
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+
+    def _reduce_partials(self, into: moderngl.Buffer) -> None:
+        """STAGE 2: the workgroups' partial sums (STAGE 1's or 3's) added into `into`."""
+        self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+        into.bind_to_storage_buffer(1)
+        set_uniforms(self._reduce, {"partial_count": self.groups[0] * self.groups[1]})
+        self._reduce.run(1, 1)
+
+    def _read(self, sums: moderngl.Buffer) -> tuple[float, float, float, int]:
+        """A reduction's three sums (a 16-byte read-back) and the count of values."""
+        self.reads += 1
+        x, y, z, _ = struct.unpack("4f", sums.read())
+        return x, y, z, 3 * self.width * self.height
 
     def read_sums(self) -> tuple[float, float, float, int]:
         """The last reduction's sums (a 16-byte read-back) and the count of values."""
-        self.reads += 1
-        x, y, z, _ = struct.unpack("4f", self.sums.read())
-        return x, y, z, 3 * self.width * self.height
+        return self._read(self.sums)
 
     def judge(self, raymarched: Accumulation) -> tuple[float, float, float, int]:
         """judge_sums on the GPU: `denoised_a` (half A filtered) and the raymarcher's image
@@ -337,14 +346,9 @@ class HalfBuffers:
         self.denoised_a.bind_to_image(6, read=True, write=False)
         self.partials.bind_to_storage_buffer(0)
         self._judge.run(*self.groups)
-        self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
-        self.judge_sums.bind_to_storage_buffer(1)
-        set_uniforms(self._reduce, {"partial_count": self.groups[0] * self.groups[1]})
-        self._reduce.run(1, 1)
+        self._reduce_partials(self.judge_sums)
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
-        self.reads += 1
-        x, y, z, _ = struct.unpack("4f", self.judge_sums.read())
-        return x, y, z, 3 * self.width * self.height
+        return self._read(self.judge_sums)
 
     def read_estimate(self, with_raymarch: bool) -> RefineEstimate:
         n_a, n_b = self.counts
@@ -364,8 +368,9 @@ class HalfBuffers:
 class RefineImage:
     """A still image of `refine` (render_refine): the image of the method shown ("raymarch" or
     "guided"), the estimate that chose it, and GPU ms of each part. Where a judgement ran (the
-    image to be denoised), `blend` holds it and `raymarch_image` the raymarcher's image: the
-    image to show is then (1 - w) raymarch_image + w denoise(image) (w = blend.weight)."""
+    image to be denoised), `blend` holds it; where guided is shown and w = blend.weight < 1,
+    `raymarch_image` holds the raymarcher's image and the image to show is
+    (1 - w) raymarch_image + w denoise(image)."""
     image: np.ndarray
     shown: str
     estimate: RefineEstimate
@@ -412,8 +417,9 @@ def render_refine(renderer, spp: int, seed: int, width: int | None = None,
             if blend is not None:
                 guided = blend.weight > 0.0
         image = (halves.combined if guided else ray).read()
+        mixed = guided and blend is not None and blend.weight < 1.0   # r in the image shown
         return RefineImage(image, "guided" if guided else "raymarch", estimate, raymarch_ms,
-                           guided_ms, blend, ray.read() if blend is not None else None)
+                           guided_ms, blend, ray.read() if mixed else None)
     finally:
         if kept is not None:
             kept.release()

@@ -97,21 +97,14 @@ class ViewDenoise:
             staged = denoiser.staging(acc.width, acc.height, names)
             if staged is None:
                 self.note, self.enabled = denoiser.failure, False
-                self.images.clear()
+                self.release()
                 break
             old = self.images.get(name)
-            texture = old.texture if old is not None else None
-            if texture is None or texture.size != (acc.width, acc.height):
-                if texture is not None:
-                    texture.release()
-                # RGBA32F: the restore pass stores into it (the display reads rgb)
-                texture = self.ctx.texture((acc.width, acc.height), 4, dtype="f4")
-                texture.filter = acc.texture.filter
+            texture = self._sized(None if old is None else old.texture, acc.texture)
             d = denoise_on_gl(self.kept(), denoiser, acc.texture, staged, albedo, normal,
                               METHODS[shown].signed, texture, finish=False)
             if not d.denoised:
                 texture.release()
-                self.images.pop(name, None)
                 self.note, self.enabled = d.note, False
                 self.release()
                 break
@@ -129,16 +122,23 @@ class ViewDenoise:
         filtered again at the next doubling (or INTERVAL_S), not a second time in this frame."""
         combined = halves.combined
         old = self.images.get(name)
-        texture = old.texture if old is not None else None
-        if texture is None or texture.size != (combined.width, combined.height):
-            if texture is not None:
-                texture.release()
-            texture = self.ctx.texture((combined.width, combined.height), 4, dtype="f4")
-            texture.filter = combined.texture.filter
+        texture = self._sized(None if old is None else old.texture, combined.texture)
         halves.copy_denoised_a(texture)
         blended = old.blended if old is not None else None
         self.images[name] = _Filtered(texture, (id(combined), restarts), combined.samples,
                                       time.monotonic(), blended)
+
+    def _sized(self, texture, like):
+        """`texture`, or where it is missing or not of `like`'s size (it is then released) a new
+        RGBA32F texture of that size and filter: the restore and blend passes store into it, the
+        display reads rgb."""
+        if texture is not None and texture.size == like.size:
+            return texture
+        if texture is not None:
+            texture.release()
+        texture = self.ctx.texture(like.size, 4, dtype="f4")
+        texture.filter = like.filter
+        return texture
 
     def _forget(self, name: str) -> None:
         got = self.images.pop(name, None)
@@ -158,11 +158,7 @@ class ViewDenoise:
             key = (got.samples, got.at, view.weight, view.ray.samples)
             if got.blend_key == key:
                 continue
-            if got.blended is None or got.blended.size != got.texture.size:
-                if got.blended is not None:
-                    got.blended.release()
-                got.blended = self.ctx.texture(got.texture.size, 4, dtype="f4")
-                got.blended.filter = got.texture.filter
+            got.blended = self._sized(got.blended, got.texture)
             if self.blend_pass is None:
                 self.blend_pass = BlendPass(self.ctx)
             self.blend_pass.run(view.ray.texture, got.texture, got.blended, view.weight)
@@ -180,11 +176,8 @@ class ViewDenoise:
         return got.texture
 
     def release(self) -> None:
-        for got in self.images.values():
-            got.texture.release()
-            if got.blended is not None:
-                got.blended.release()
-        self.images.clear()
+        for name in list(self.images):
+            self._forget(name)
         if self.blend_pass is not None:
             self.blend_pass.release()
             self.blend_pass = None
