@@ -11,9 +11,11 @@ Each ROOT's ../shared/datasets must hold the foot raw (link it). Runs on the GPU
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bake_variants import child_rows   # noqa: E402  (a fresh interpreter, its RESULT lines)
 
 CHILD = r'''
 import importlib, json, os, sys
@@ -43,14 +45,10 @@ def main() -> None:
     out = Path(sys.argv[1])
     rows = []
     for root in sys.argv[2:]:
-        got = subprocess.run([sys.executable, "-c", CHILD, root], capture_output=True, text=True)
-        for line in got.stdout.splitlines():
-            if line.startswith("RESULT "):
-                rows.append(json.loads(line[7:]))
-                print(line[7:], flush=True)
-        if got.returncode:
-            rows.append({"root": root, "error": got.stderr[-2000:]})
-            print(got.stderr[-2000:], flush=True)
+        got = child_rows(CHILD, root, root)
+        for g in got:
+            print(json.dumps(g), flush=True)
+        rows += got
         out.write_text(json.dumps(rows, indent=1))
 
 

@@ -5,7 +5,8 @@ them, be better than either while guided is still noisy?
 For each guided sample count N: halves a and b of N/2 samples, their mean m, the raymarched image
 R (the same probes), D(m) and D(a) through the denoiser (OIDN, the probes' image as guide where
 choose_guides gives it). The blend B = (1 - w) R + w D(m), w from the halves alone
-(refine.blend_weight: the three inner products of R - b and D(a) - b, less b's noise). Errors:
+(refine.blend_from_sums' algebra, without its snap to 0 or 1: the three inner products of
+R - b and D(a) - b, less b's noise). Errors:
 rRMSE against a path-traced reference of REF_SPP samples, corrected for its noise; "best" is the
 blend at the weight the reference would choose. CPU (llvmpipe, OIDN's CPU device):
     python lab/experiments/refine_blend.py OUT.json [scene] [size] [ref_spp] [probe_grid] [walks]
