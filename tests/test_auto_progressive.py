@@ -8,8 +8,9 @@ import pytest
 
 from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.rendering.auto_progressive import (RAYMARCH_FRAMES, Halves, auto_render,
-                                                        estimate_denoised, estimate_image,
-                                                        estimate_pt)
+                                                        denoised_aim, estimate_denoised,
+                                                        estimate_image, estimate_pt,
+                                                        should_judge_denoised)
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.scene import parse_scene
 
@@ -72,6 +73,29 @@ def test_the_denoised_estimate_finds_a_filtered_halfs_known_error(noise, blur):
     assert true < 0.8 * estimate_pt(halves)[0]   # the case is one the denoiser wins
 
 
+def test_the_denoised_candidate_is_judged_where_it_may_pass():
+    """First round: judged. Then only where the last ratio of D(a)'s error to the raw error, times
+    the raw error now, is within the target, or the samples grew 4x."""
+    assert should_judge_denoised([], 2, 0.3, 0.05)
+    last = [(4, 0.06, 0.2)]                      # the filter took the error to 0.3x the raw one
+    assert not should_judge_denoised(last, 8, 0.18, 0.05)    # 0.3 x 0.18 = 0.054 > 0.05
+    assert should_judge_denoised(last, 8, 0.16, 0.05)        # 0.048: may pass
+    assert should_judge_denoised(last, 16, 0.5, 0.05)        # 4x the samples: judged anyway
+
+
+def test_the_denoised_aim_follows_its_fall_and_stays_in_range():
+    """Two judgements whose error fell as samples^-0.3 (within the clamp): the aim is where that
+    fall meets the target; a steeper or flatter fall is clamped; one judgement gives no aim."""
+    upper, target = 0.06, 0.05
+    judged = [(8, 0.08, 0.3), (16, 0.08 * 2 ** -0.3, 0.2)]
+    aim = denoised_aim(judged, upper, target)
+    assert aim == pytest.approx(16 * (upper / target) ** (1 / 0.3) * 1.05)
+    flat = [(8, 0.08, 0.3), (16, 0.0799, 0.2)]                  # alpha ~0: clamped at 0.15
+    assert denoised_aim(flat, upper, target) == pytest.approx(16 * 1.2 ** (1 / 0.15) * 1.05)
+    assert denoised_aim(judged[:1], upper, target) == math.inf
+    assert denoised_aim(judged, 0.04, target) == pytest.approx(16 * 1.05)   # already within
+
+
 def test_auto_with_the_denoiser_returns_a_denoised_path_tracer_within_the_target(ctx):
     """With denoise, the path tracer denoised is a candidate (OIDN on the CPU here): where no
     probe setting reaches the target it wins with fewer samples than the raw path tracer needs, and its
@@ -95,6 +119,10 @@ def test_auto_with_the_denoiser_returns_a_denoised_path_tracer_within_the_target
         assert "denoised" in got.report() and any(t.get("method") == "pt+denoise"
                                                   for t in got.trials)
         assert got.gpu_ms > got.pt_ms   # the guides and filters are charged
+        judged = [t for t in got.trials if t.get("method") == "pt+denoise"]
+        assert all(t["filter_ms"] > 0 for t in judged)
+        assert got.gpu_ms - got.pt_ms >= sum(t["filter_ms"] for t in judged)
+        assert got.denoise_setup_ms > 0 and "set-up" in got.report()
     finally:
         r.release()
 

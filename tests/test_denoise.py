@@ -55,6 +55,25 @@ def test_the_filter_brings_a_noisy_image_closer_to_its_clean_answer(cpu_denoiser
     assert set(out.ms) == {"prepare_ms", "filter_ms", "check_ms", "means_ms"}
 
 
+def test_a_warmed_filter_gives_the_same_image_and_takes_the_guides_given_after():
+    """warm makes the filter and runs it once on black; the next call with guides of its own is
+    the image a cold filter gives (the black guides were not kept in their place)."""
+    clean, noisy = _clean_and_noisy(seed=3)
+    albedo = np.clip(clean / clean.max(), 0, 1)
+    normal = np.zeros_like(clean)
+    normal[..., 2] = 1.0
+    cold = Denoiser("cpu")
+    warm = Denoiser("cpu")
+    try:
+        expected = cold(noisy, albedo, normal).image
+        assert warm.warm(noisy.shape[1], noisy.shape[0], ("albedo", "normal")) > 0.0
+        np.testing.assert_allclose(warm(noisy, albedo, normal).image, expected, rtol=1e-5,
+                                   atol=1e-6)
+    finally:
+        cold.close()
+        warm.close()
+
+
 def test_no_nan_inf_or_negative_out_even_when_they_come_in(cpu_denoiser):
     clean, noisy = _clean_and_noisy(seed=1, size=48)
     bad = noisy.copy()

@@ -31,7 +31,18 @@ and Var(b) is the share n_a / (n_a + n_b) of E[(a - b)^2]: mean((D(a) - b)^2 - n
 (a - b)^2) / T^2 estimates D(a)'s squared relative error (estimate_denoised). Once that is within
 the target the image returned is both halves' mean denoised, which has twice D(a)'s samples; the
 estimate reported is D(a)'s, an upper bound in expectation. The guides (albedo and normal, made
-once) and every round's filter are charged in wall ms to the search (`denoise_ms`).
+once: their GPU ms) and every filter run (its own wall ms: the colour's copy into the filter's
+memory, the filter, the output's read and the tile means kept) are charged to the search. The
+filter's set-up (its weights' load and the device's first run) happens once a process, before the
+first judgement, and is reported beside the total, not in it, as the shaders' compiles are not.
+
+A judgement costs a filter run, so D(a) is judged at the first round and then only where it may
+pass: where the last judgement's ratio of D(a)'s error to the raw image's, times the raw image's
+error now, is within the target (the ratio grows with the samples: the prediction errs low, so a
+round that may pass is not skipped), or the samples have grown JUDGE_GROWTH times since. After two
+judgements the rounds aim at the samples where D(a)'s error, falling as samples^-alpha (alpha from
+those two, clamped to DENOISED_FALL), meets the target, where that is sooner than the raw path
+tracer's aim: the filter's error falls slower than the raw one's, so the raw aim overshoots.
 """
 from __future__ import annotations
 
@@ -55,6 +66,8 @@ GROWTH = 3.0               # a trial expected to cost at most this many times th
 Z = 2.0                    # standard errors a decision stands clear of the target by
 MAX_PT_SPP = 1 << 16
 PT_MARGIN = 1.05           # the path tracer's next round aims this many times the samples predicted
+JUDGE_GROWTH = 4           # the denoised candidate is judged again at least every 4x the samples
+DENOISED_FALL = (0.15, 0.5)   # the denoised error's fall with samples, samples^-alpha: alpha's range
 
 
 @dataclass
@@ -79,6 +92,7 @@ class AutoResult:
     image_ms: float = 0.0
     image_bake_ms: float = 0.0
     denoised: bool = False         # the path tracer's image through the denoiser (auto's denoise)
+    denoise_setup_ms: float = 0.0  # the filter's set-up, once a process (wall ms, not in gpu_ms)
 
     def report(self, log: bool = True) -> str:
         """The outcome, then (log=True) every trial's line; a caller that printed the lines as
@@ -90,7 +104,9 @@ class AutoResult:
         head = (f"auto: {what}: estimated rRMSE {self.estimate:.4f} (+- {self.standard_error:.4f})"
                 f", target {self.target:.4f} {'met' if self.met else 'NOT met'}; "
                 f"{self.gpu_ms:.1f} ms of GPU time in all ({self.pt_ms:.1f} ms path tracing), "
-                f"{self.wall_s:.2f} s wall")
+                f"{self.wall_s:.2f} s wall"
+                + (f" (the denoiser's set-up {self.denoise_setup_ms:.0f} ms of it)"
+                   if self.denoise_setup_ms else ""))
         return "\n".join([head, *("  " + line for line in (self.log if log else ()))])
 
 
@@ -216,6 +232,32 @@ def next_pt_spp(spp: int, estimate: float, standard_error: float, target: float)
     return total + total % 2
 
 
+def should_judge_denoised(judgements: list[tuple[int, float, float]], spp: int,
+                          pt_estimate: float, target: float) -> bool:
+    """Whether a round judges the denoised candidate (the module's note): `judgements` holds
+    (samples, D(a)'s estimate, the raw image's estimate then) of those so far."""
+    if not judgements:
+        return True
+    last_spp, denoised, raw = judgements[-1]
+    if spp >= JUDGE_GROWTH * last_spp:
+        return True
+    ratio = denoised / raw if raw > 0 and math.isfinite(raw) else 1.0
+    return ratio * pt_estimate <= target
+
+
+def denoised_aim(judgements: list[tuple[int, float, float]], upper: float, target: float) -> float:
+    """The samples (both halves) where D(a)'s error, now `upper` (estimate + Z standard errors)
+    at the last judgement's samples, meets the target if it falls as samples^-alpha, alpha from
+    the last two judgements within DENOISED_FALL; inf before two judgements."""
+    if len(judgements) < 2 or not math.isfinite(upper):
+        return math.inf
+    (n0, e0, _), (n1, e1, _) = judgements[-2:]
+    alpha = (math.log(e0 / e1) / math.log(n1 / n0)
+             if n1 > n0 and e0 > 0 and e1 > 0 else DENOISED_FALL[0])
+    alpha = min(max(alpha, DENOISED_FALL[0]), DENOISED_FALL[1])
+    return n1 * max(upper / target, 1.0) ** (1.0 / alpha) * PT_MARGIN
+
+
 def auto_render(renderer, target: float, progress=None, seed: int = 0,
                 max_pt_spp: int = MAX_PT_SPP, ladder=LADDER, denoise: bool = False) -> AutoResult:
     """Renders the scene the renderer holds within `target` (estimated relative RMSE) as cheaply
@@ -243,6 +285,8 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
         if not denoiser.available:
             say(f"denoised candidates left out: {denoiser.failure}")
             denoiser = None
+    judgements: list[tuple[int, float, float]] = []   # the denoised candidate's (should_judge_denoised)
+    setup_ms = 0.0
     trials: list[dict] = []
     current = None            # (index into ladder, image, bake+render ms) of the probe setting
     k = 0
@@ -266,29 +310,42 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
             renderer.set_scene(original)
             return AutoResult(halves.mean().astype(np.float32), "pt", original, target, pt_est,
                               pt_se, True, halves.spp, pt_ms + trial_ms, pt_ms,
-                              time.perf_counter() - start, trials, log, halves.spp, pt_ms)
-        if denoiser is not None:
-            t0 = time.perf_counter()
+                              time.perf_counter() - start, trials, log, halves.spp, pt_ms,
+                              denoise_setup_ms=setup_ms)
+        denoised_upper = math.inf
+        if denoiser is not None and should_judge_denoised(judgements, halves.spp, pt_est, target):
             if guides is None:   # the scene's camera and medium: made once, kept
                 renderer.begin("pt")
-                albedo, normal, _ = renderer.denoise_guides("albedo-normal")
+                albedo, normal, guides_ms = renderer.denoise_guides("albedo-normal")
                 guides = (albedo, normal)
+                trial_ms += guides_ms
+                height, width = halves.sums[0].shape[:2]
+                setup_ms = denoiser.warm(width, height, ("albedo", "normal"))
+                say(f"denoiser ready on {denoiser.device or 'no device'} in {setup_ms:.0f} ms "
+                    f"(once a process, not charged)")
             d_a = denoiser(halves.means()[0].astype(np.float32), *guides)
-            est, se = estimate_denoised(d_a.image, halves)
-            trial_ms += 1e3 * (time.perf_counter() - t0)
-            trials.append({"method": "pt+denoise", "pt_spp": halves.spp, "rrmse": est,
-                           "standard_error": se})
-            say(f"path tracer denoised: rRMSE {est:.4f} (+- {se:.4f}) from half its "
-                f"{halves.spp} spp")
-            if est + Z * se <= target:
-                t0 = time.perf_counter()
-                image = denoiser(halves.mean().astype(np.float32), *guides).image
-                trial_ms += 1e3 * (time.perf_counter() - t0)
+            trial_ms += d_a.total_ms
+            if not d_a.denoised:   # the filter failed: the search goes on without it
+                say(f"denoised candidates left out: {d_a.note}")
+                denoiser = None
+            else:
+                est, se = estimate_denoised(d_a.image, halves)
+                judgements.append((halves.spp, est, pt_est))
+                denoised_upper = est + Z * se
+                trials.append({"method": "pt+denoise", "pt_spp": halves.spp, "rrmse": est,
+                               "standard_error": se, "filter_ms": d_a.total_ms})
+                say(f"path tracer denoised: rRMSE {est:.4f} (+- {se:.4f}) from half its "
+                    f"{halves.spp} spp, {d_a.total_ms:.1f} ms filter")
+            if denoiser is not None and denoised_upper <= target:
+                d_m = denoiser(halves.mean().astype(np.float32), *guides)
+                trial_ms += d_m.total_ms
+                if d_m.note:
+                    say(d_m.note)
                 renderer.set_scene(original)
-                return AutoResult(np.asarray(image, np.float32), "pt", original, target, est, se,
-                                  True, halves.spp, pt_ms + trial_ms, pt_ms,
+                return AutoResult(np.asarray(d_m.image, np.float32), "pt", original, target, est,
+                                  se, True, halves.spp, pt_ms + trial_ms, pt_ms,
                                   time.perf_counter() - start, trials, log, halves.spp, pt_ms,
-                                  denoised=True)
+                                  denoised=d_m.denoised, denoise_setup_ms=setup_ms)
         # the path tracer's expected time still to go: its error falls as 1 / sqrt(samples)
         pt_to_go = pt_ms * max((pt_est / target) ** 2 - 1.0, 0.0)
         while k < len(ladder):
@@ -316,7 +373,7 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
                 return AutoResult(np.asarray(image, np.float32), "raymarch", ladder[index],
                                   target, est, se, True, halves.spp, pt_ms + trial_ms, pt_ms,
                                   time.perf_counter() - start, trials, log, chosen.spp,
-                                  chosen.render_ms, chosen.bake_ms)
+                                  chosen.render_ms, chosen.bake_ms, denoise_setup_ms=setup_ms)
             if est - se > target:
                 k, current = k + 1, None   # above (a standard error clear): the next setting
                 continue
@@ -326,6 +383,12 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
             say(f"stopped at {halves.spp} spp, the most allowed")
             return AutoResult(halves.mean().astype(np.float32), "pt", original, target, pt_est,
                               pt_se, False, halves.spp, pt_ms + trial_ms, pt_ms,
-                              time.perf_counter() - start, trials, log, halves.spp, pt_ms)
-        batch = max(1, (next_pt_spp(halves.spp, pt_est, pt_se, target) - halves.spp) // 2)
+                              time.perf_counter() - start, trials, log, halves.spp, pt_ms,
+                              denoise_setup_ms=setup_ms)
+        total = next_pt_spp(halves.spp, pt_est, pt_se, target)
+        aim = denoised_aim(judgements, denoised_upper, target)
+        if aim < total:   # the denoised candidate is expected to pass sooner
+            total = max(math.ceil(aim), halves.spp + 2)
+            total += total % 2
+        batch = max(1, (total - halves.spp) // 2)
         round_ += 1

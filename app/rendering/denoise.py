@@ -361,6 +361,28 @@ class Denoiser:
             self.close()
             return None
 
+    def warm(self, width: int, height: int, guides: tuple[str, ...] = ()) -> float:
+        """Makes the filter for this size and guides and runs it once on a black image, so that
+        the next call costs what every later one does (the weights' load and the device's first
+        run, about 0.1 s on an H200, happen here). Wall ms taken; 0 where the filter cannot
+        run (its note is in `failure`)."""
+        if not self._load():
+            return 0.0
+        t0 = time.perf_counter()
+        try:
+            entry = self._filter_for(width, height, tuple(guides))
+            entry["color"][...] = 0.0
+            for name in guides:   # black guides until a caller gives its own (then uploaded)
+                zeros = np.zeros((height, width, 3), np.float32)
+                entry["buffers"][name].write(0, zeros.nbytes, zeros)
+                entry["guides"].pop(name, None)
+            self._execute(entry)
+        except Exception as exc:
+            self.failure = f"the denoiser failed ({exc}). Showing the image as rendered."
+            self.close()
+            return 0.0
+        return 1e3 * (time.perf_counter() - t0)
+
     def __call__(self, color: np.ndarray, albedo: np.ndarray | None = None,
                  normal: np.ndarray | None = None, copy: bool = True,
                  signed: bool = False, keep_means: bool = True, check_output: bool = True,

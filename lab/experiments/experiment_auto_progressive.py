@@ -122,8 +122,11 @@ for name in names:
                "reference_noise": noise, "met": corrected_rrmse(measured, noise) <= target,
                "gpu_ms": got.gpu_ms, "pt_ms": got.pt_ms, "trial_ms": got.gpu_ms - got.pt_ms,
                "pt_spp": got.pt_spp, "wall_s": wall, "trials": got.trials,
+               "denoise_setup_ms": got.denoise_setup_ms,
                "total_includes": "path-traced samples + every trial's bake, light grid and "
-                                 "raymarched frames (GPU time)"}
+                                 "raymarched frames (GPU time); with denoise the guides (GPU "
+                                 "time) and every filter run (its wall time; the filter's "
+                                 "set-up, once a process, in denoise_setup_ms and wall_s only)"}
         rows.append(row)
         print(f"  {target:g}: {got.method} {row['grid']}^3 x {row['walks']}: estimated "
               f"{got.estimate:.4f}, measured {row['rrmse']:.4f} "
