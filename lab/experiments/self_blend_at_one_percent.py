@@ -1,0 +1,83 @@
+"""At 1% on bonsai the filter removes little: the path tracer raw 1.05% at 2048 samples, denoised
+0.93% (bench/h200-denoise). Its error is then mostly the filter's blur, which is nearly independent
+of the raw image's noise. Does a blend of the raw mean m with its own denoised image, (1 - w) m +
+w D(m), reach 1% sooner?
+
+For each sample count N: halves a, b of N/2 (m their mean), D(m) and D(a) through OIDN (colour
+alone). Weights: "best", the one the reference chooses (the most any global weight can give);
+"halves", <a - b, a - D(a)> / |a - D(a)|^2, whose numerator is in expectation <a - x, a - D(a)>
+for the exact image x (b is independent of a): the best weight for half the samples, which errs
+high for m (less noise: less to take away). Errors: rRMSE against a REF_SPP reference, corrected
+for its noise. Cost: the path tracer's GPU ms and the wall ms of each filter run.
+    python lab/experiments/self_blend_at_one_percent.py OUT.json [scene] [size] [ref_spp] [N,N]
+"""
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / ".pkg"))
+from radiance_probes.bench.scenes import bench_scene                      # noqa: E402
+from radiance_probes.gl.context import create_headless_context           # noqa: E402
+from radiance_probes.rendering.denoise import shared_denoiser            # noqa: E402
+from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
+from radiance_probes.rendering.refine import blend_images                # noqa: E402
+from radiance_probes.rendering.renderer import Renderer                  # noqa: E402
+
+
+def main():
+    out = Path(sys.argv[1])
+    name = sys.argv[2] if len(sys.argv) > 2 else "bonsai"
+    size = int(sys.argv[3]) if len(sys.argv) > 3 else 512
+    ref_spp = int(sys.argv[4]) if len(sys.argv) > 4 else 16384
+    counts = [int(v) for v in (sys.argv[5] if len(sys.argv) > 5 else "512,1024,2048").split(",")]
+    scene = bench_scene(name, size, size)
+    ctx = create_headless_context()
+    r = Renderer(ctx, scene)
+    halves = [r.render("pt", spp=ref_spp // 2, seed=1001 + i, samples_per_pass=64).image
+              for i in range(2)]
+    ref, noise = 0.5 * (halves[0] + halves[1]), reference_noise(*halves)
+    print(f"reference {ref_spp} spp, noise {noise:.4f}", flush=True)
+    den = shared_denoiser()
+    den.warm(size, size)
+
+    def err(img):
+        return corrected_rrmse(rrmse(img, ref), noise)
+
+    def filtered(img):
+        t0 = time.perf_counter()
+        d = den(np.asarray(img, np.float32))
+        return d.image, 1e3 * (time.perf_counter() - t0)
+
+    rows = []
+    for n in counts:
+        ra = r.render("pt", spp=n // 2, seed=11 + n, samples_per_pass=16)
+        rb = r.render("pt", spp=n // 2, seed=5000 + n, samples_per_pass=16)
+        a, b = ra.image.astype(np.float64), rb.image.astype(np.float64)
+        m = 0.5 * (a + b)
+        d_m, ms_m = filtered(m)
+        d_a, ms_a = filtered(a)
+        u = a - d_a
+        w_halves = float(np.sum((a - b) * u) / np.sum(u * u))
+        ws = np.linspace(0.0, 1.0, 101)
+        best = float(min(ws, key=lambda w: rrmse(blend_images(d_m, m, 1 - w), ref)))
+        row = {"scene": name, "size": size, "spp": n, "raw": err(m), "denoised": err(d_m),
+               "best_weight": best, "best_blend": err(blend_images(d_m, m, 1 - best)),
+               "halves_weight": w_halves,
+               "halves_blend": err(blend_images(d_m, m, 1 - min(max(w_halves, 0), 1))),
+               "error_correlation": float(np.sum((m - ref) * (d_m - ref))
+                                          / np.sqrt(np.sum((m - ref) ** 2)
+                                                    * np.sum((d_m - ref) ** 2))),
+               "pt_ms": ra.render_ms + rb.render_ms, "filter_ms": ms_m, "judge_ms": ms_a}
+        rows.append(row)
+        print(json.dumps({k: round(v, 4) if isinstance(v, float) else v
+                          for k, v in row.items()}), flush=True)
+        out.write_text(json.dumps({"reference_spp": ref_spp, "reference_noise": noise,
+                                   "rows": rows}, indent=1))
+    r.release()
+
+
+if __name__ == "__main__":
+    main()
