@@ -90,18 +90,19 @@ uniform float probe_window_factors[SH_BANDS];
 // PROBE_SUN_LOBE: the lobe's amplitude, scaled, into probe_fetched_lobe.
 void probe_unpack(vec4 texel[PROBE_TEXTURE_COUNT], int kept, inout vec3 coeffs[SH_COUNT])
 {
+    // a condition, not a break: the loop unrolls with every texel index a constant (kept may vary)
     for (int k = 0; k < PROBE_SH_COEFFS; ++k) {
-        if (k >= kept)
-            break;
+        if (k < kept) {
 #if PROBE_GREY
-        int f = k < 3 ? k : k + 1;
-        coeffs[k] = vec3(texel[f / 4][f % 4]);
+            int f = k < 3 ? k : k + 1;
+            coeffs[k] = vec3(texel[f / 4][f % 4]);
 #else
-        for (int c = 0; c < 3; ++c) {
-            int f = probe_colour_channel(k, c);
-            coeffs[k][c] = texel[f / 4][f % 4];
-        }
+            for (int c = 0; c < 3; ++c) {
+                int f = probe_colour_channel(k, c);
+                coeffs[k][c] = texel[f / 4][f % 4];
+            }
 #endif
+        }
     }
 #if PROBE_SUN_LOBE && PROBE_GREY
     probe_fetched_lobe = vec3(texel[(PROBE_LOBE_COEFFICIENT + 1) / 4][(PROBE_LOBE_COEFFICIENT + 1) % 4]
