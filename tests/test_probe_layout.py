@@ -11,8 +11,9 @@ from radiance_probes.twins.medium import sigma_t_at
 from radiance_probes.rendering.probe_layout import (AUTO_BAND_WEIGHT, AUTO_MAX_ORDER, AUTO_WALKS_PER_HIGH_BAND,
                                      GREY_TEXTURES_FOR_ORDER,
                                      TEXTURES_FOR_ORDER,
-                                     colour_channel, fitted_grid, phase_bands, resolve_sh_order,
-                                     slots_for_bands, unpack_coefficients, visible_region)
+                                     colour_channel, fitted_grid, phase_bands,
+                                     resolve_sh_order, slots_for_bands,
+                                     unpack_coefficients, visible_region)
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.scene import SceneError, parse_scene
 from radiance_probes.transfer import transfer_table

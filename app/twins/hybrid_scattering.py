@@ -1,6 +1,7 @@
 """NumPy twin of glsl/lib/hybrid_scattering.glsl: the opacity gradient, the chance of a surface
-event, the raymarcher's draw of that choice and its Russian roulette, the surface normal, the BRDF's kernel K = f (n.l), its sampler and pdf, and the surface's
-radiance from the probes' SH coefficients. Directions are arrays (..., 3) of unit vectors."""
+event, the raymarcher's draw of that choice and its Russian roulette, the surface normal, the
+BRDF's kernel K = f (n.l), its sampler and pdf, and the surface's radiance from the probes' SH
+coefficients. Directions are arrays (..., 3) of unit vectors."""
 from __future__ import annotations
 
 import numpy as np

@@ -37,7 +37,8 @@ GRADIENT_READ = "vec3 gradient = raymarch_opacity_gradient(x);"
 # the line of lib/raymarch.glsl that draws a sample's choice
 CHOICE = "float surface_share = surface_choice_uniform(choice_offset, i) < surface_chance ? 1.0 : 0.0;"
 EDITS = {
-    "mix": [("glsl/lib/raymarch.glsl", '#if defined(HYBRID_SCATTERING)\n#include "lib/hybrid_scattering.glsl"',
+    "mix": [("glsl/lib/raymarch.glsl",
+             '#if defined(HYBRID_SCATTERING)\n#include "lib/hybrid_scattering.glsl"',
              '#define HYBRID_MARCH_EXPECTATION 1\n#if defined(HYBRID_SCATTERING)\n'
              '#include "lib/hybrid_scattering.glsl"')],
     "no-roulette": [("glsl/lib/raymarch.glsl",
