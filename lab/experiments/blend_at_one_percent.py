@@ -8,8 +8,12 @@ For each sample count N: the path tracer in halves a, b of N/2 (m their mean), D
 through OIDN (colour alone), w = blend_from_sums's weight, and the blend; r the raymarcher at
 each probe setting (bake and 64 frames). Errors: rRMSE against a REF_SPP reference, corrected for
 its noise; "best" the weight the reference would choose; cost: GPU ms of bake, frames and
-samples, wall ms of each filter run (GPU: OIDN's CUDA device).
+samples, wall ms of each filter run (GPU: OIDN's CUDA device). GUIDE "probes": the filter
+guided by each setting's raymarched image as its albedo (radiance_as_albedo, the bench's "probes"
+guide; the same image is r), so D(m) and D(a) are made once per setting; "none" (default): the
+colour alone.
     python lab/experiments/blend_at_one_percent.py OUT.json [scene] [size] [ref_spp] [N,N] [G:W,G:W]
+        [GUIDE]
 """
 import json
 import sys
@@ -22,7 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / ".pkg"))
 from radiance_probes.bench.scenes import bench_scene                      # noqa: E402
 from radiance_probes.gl.context import create_headless_context           # noqa: E402
-from radiance_probes.rendering.denoise import shared_denoiser            # noqa: E402
+from radiance_probes.rendering.denoise import radiance_as_albedo, shared_denoiser  # noqa: E402
 from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
 from radiance_probes.rendering.refine import (blend_from_sums, blend_images,  # noqa: E402
                                               half_buffer_sums, judge_sums)
@@ -37,6 +41,7 @@ def main():
     counts = [int(v) for v in (sys.argv[5] if len(sys.argv) > 5 else "256,512,1024").split(",")]
     settings = [tuple(int(x) for x in v.split(":"))
                 for v in (sys.argv[6] if len(sys.argv) > 6 else "64:128,128:64").split(",")]
+    guide = sys.argv[7] if len(sys.argv) > 7 else "none"
     scene = bench_scene(name, size, size)
     ctx = create_headless_context()
     r = Renderer(ctx, scene)
@@ -45,13 +50,17 @@ def main():
     ref, noise = 0.5 * (halves[0] + halves[1]), reference_noise(*halves)
     print(f"reference {ref_spp} spp, noise {noise:.4f}", flush=True)
     den = shared_denoiser()
+    den.warm(size, size)
+    den.warm(size, size, ("albedo",))
 
     def err(img):
         return corrected_rrmse(rrmse(img, ref), noise)
 
-    def filtered(img):
+    def filtered(img, albedo=None):
         t0 = time.perf_counter()
-        d = den(img)
+        d = den(np.asarray(img, np.float32), albedo)
+        if not d.denoised:
+            raise SystemExit(f"the filter did not run: {d.note}")
         return d.image, 1e3 * (time.perf_counter() - t0)
 
     rays = []
@@ -71,16 +80,21 @@ def main():
         rb = r.render("pt", spp=n // 2, seed=5000 + n, samples_per_pass=16)
         a, b = ra.image, rb.image
         m = 0.5 * (a + b)
-        d_m, ms_m = filtered(m)
-        d_a, ms_a = filtered(a)
         pt_ms = ra.render_ms + rb.render_ms
+        if guide == "none":
+            d_m, ms_m = filtered(m)
+            d_a, ms_a = filtered(a)
         for ray in rays:
+            if guide == "probes":
+                albedo = radiance_as_albedo(ray["image"])
+                d_m, ms_m = filtered(m, albedo)
+                d_a, ms_a = filtered(a, albedo)
             got = blend_from_sums(half_buffer_sums(a, b, n // 2, n // 2),
                                   judge_sums(d_a, b, ray["image"]), n // 2, n // 2)
             blend = blend_images(ray["image"], d_m, got.weight)
             ws = np.linspace(0.0, 1.0, 51)
             best = min(ws, key=lambda w: rrmse(blend_images(ray["image"], d_m, w), ref))
-            row = {"scene": name, "size": size, "spp": n, "probe_grid": ray["grid"],
+            row = {"scene": name, "size": size, "spp": n, "guide": guide, "probe_grid": ray["grid"],
                    "probe_walks": ray["walks"], "raw": err(m), "denoised": err(d_m),
                    "raymarch": ray["error"], "blend": err(blend), "weight": got.weight,
                    "best_weight": float(best),
