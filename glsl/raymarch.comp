@@ -4,7 +4,13 @@
 // raymarch_resolve.comp folds them into the accumulation in frame order: a small image fills a
 // large GPU only with several frames in flight (app/rendering/raymarch.py LAYER_PIXELS). A uniform,
 // not a define, so that one program (one compile) serves both.
-layout(local_size_x = 8, local_size_y = 8) in;
+// The work group's shape comes from app/rendering/raymarch.py (group_shape: 8 x 4 without
+// surfaces, 8 x 8 with them, as measured); the pixels' arithmetic does not depend on it.
+#ifndef RAYMARCH_GROUP_X
+#define RAYMARCH_GROUP_X 8
+#define RAYMARCH_GROUP_Y 8
+#endif
+layout(local_size_x = RAYMARCH_GROUP_X, local_size_y = RAYMARCH_GROUP_Y) in;
 #include "raymarch_common.glsl"
 
 uniform int frame_layers;

@@ -199,6 +199,31 @@ def test_raymarch_skipping_empty_space_changes_nothing(ctx):
     r.release()
 
 
+def test_the_raymarch_work_group_shape_changes_nothing(ctx, monkeypatch):
+    """Without surfaces the compute pass runs 8 x 4 groups (one warp; measured faster on an H200),
+    with them or for `guided`'s level 0 8 x 8: each pixel's arithmetic is the same, so a frame is
+    the 8 x 8 one bit for bit, at a size neither shape divides (the edge groups half empty)."""
+    from radiance_probes.rendering import raymarch
+    assert raymarch.group_shape({}) == (8, 4)
+    assert raymarch.group_shape({"HYBRID_SCATTERING": 1}) == (8, 8)
+    assert raymarch.group_shape({"GUIDED_LEVEL0": 1}) == (8, 8)
+    assert raymarch.group_shape({"RAYMARCH_GROUP_X": 4, "RAYMARCH_GROUP_Y": 2}) == (4, 2)
+    with pytest.raises(ValueError, match="must divide 8"):
+        raymarch.group_shape({"RAYMARCH_GROUP_X": 16, "RAYMARCH_GROUP_Y": 8})
+    r = _renderer(ctx, camera={**CAMERA, "width": 37, "height": 29})
+    r.bake()
+    monkeypatch.setattr(raymarch, "LAYER_PIXELS", 1)   # one dispatch a frame, the groups' grid
+    plain = _raymarch_frames(r, 2)
+    assert r.raymarcher().group == (8, 4)
+    monkeypatch.setattr(raymarch, "GROUP_PLAIN", (8, 8))
+    r._raymarchers.clear()
+    assert r.raymarcher().group == (8, 8)
+    wide = _raymarch_frames(r, 2)
+    assert plain[..., :3].max() > 0
+    np.testing.assert_array_equal(plain, wide)
+    r.release()
+
+
 def test_raymarch_frames_in_one_dispatch_equal_one_per_dispatch(ctx, monkeypatch):
     """Small images march several frames per dispatch into layers, folded in frame order: the
     same running mean as one dispatch per frame."""

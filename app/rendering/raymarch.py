@@ -7,8 +7,8 @@ import moderngl
 from ..twins.camera import CameraFrame
 from ..gl.shaders import compute_program, render_program, set_uniforms
 from .accumulation import Accumulation
-from .pathtracer import LOCAL_SIZE, groups
-from .sample_bands import tile_grid, tile_rects
+from .pathtracer import groups
+from .sample_bands import TILE, tile_grid, tile_rects
 from .resources import SceneResources
 
 STAGES = ("compute", "fragment")
@@ -20,6 +20,31 @@ MAX_MARCH_STEPS = 8192   # glsl/lib/raymarch.glsl clamps a ray's step count to t
 # this big fills it.
 LAYER_PIXELS = 1 << 21
 MAX_FRAME_LAYERS = 32   # layers of the frames' texture at most (tiny images)
+# The compute pass's work groups (pixels across, down): 8 x 4, one warp, for the march without
+# surfaces; 8 x 8 with them (HYBRID_SCATTERING) and for `guided`'s level 0 (GUIDED_LEVEL0).
+# Measured on an H200 at 1920x1080 (bench/h200-hybrid-cost/workgroups*.json, every pixel's
+# arithmetic the same, so the images are too): without surfaces the foot's frame 2.66 -> 2.28 ms
+# and bonsai's 1.61 -> 1.33 ms at 8 x 4 (4 x 8 the same; 64 to 256 invocations 2.7 to 3.1 ms, 16
+# 3.1 to 3.2 ms on the foot); with surfaces 8 x 4 was slower (foot 3.13 -> 3.33 ms, bonsai 1.73
+# -> 1.89) and 16 x 8 within 2% of 8 x 8. Each side divides TILE: a band of 8 x 8 tiles
+# (sample_bands) is whole groups.
+GROUP_PLAIN = (8, 4)
+GROUP_WIDE = (8, 8)
+
+
+def group_shape(defines: dict | None) -> tuple[int, int]:
+    """The compute pass's work-group shape for a build (`defines`): RAYMARCH_GROUP_X and _Y where
+    the caller gives them, else GROUP_WIDE with surfaces or `guided`'s level 0, else GROUP_PLAIN."""
+    defines = defines or {}
+    if "RAYMARCH_GROUP_X" in defines:
+        shape = (int(defines["RAYMARCH_GROUP_X"]), int(defines["RAYMARCH_GROUP_Y"]))
+    elif "HYBRID_SCATTERING" in defines or "GUIDED_LEVEL0" in defines:
+        shape = GROUP_WIDE
+    else:
+        shape = GROUP_PLAIN
+    if any(side <= 0 or TILE % side for side in shape):
+        raise ValueError(f"raymarch work group {shape}: each side must divide {TILE}")
+    return shape
 
 
 def frame_layers(width: int, height: int, frames: int = MAX_FRAME_LAYERS) -> int:
@@ -61,7 +86,10 @@ class Raymarcher:
         self.stage = stage
         self._frame_values = None       # the layers one dispatch writes, one frame each
         if stage == "compute":
-            self.program = compute_program(ctx, "raymarch.comp", defines)
+            self.group = group_shape(defines)
+            self.program = compute_program(ctx, "raymarch.comp",
+                                           {**(defines or {}), "RAYMARCH_GROUP_X": self.group[0],
+                                            "RAYMARCH_GROUP_Y": self.group[1]})
             # folds layered frames into the accumulation (compiled with the march, so a new
             # variant costs its compiles at one moment)
             self._resolve = compute_program(ctx, "raymarch_resolve.comp")
@@ -88,6 +116,10 @@ class Raymarcher:
             self._frame_values = self.ctx.texture_array(size, 4, dtype="f4")
         return self._frame_values
 
+    def _groups(self, width: int, height: int) -> tuple[int, int]:
+        gx, gy = self.group
+        return -(-width // gx), -(-height // gy)
+
     def run(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation, frames: int,
             seed: int, step: float, uniforms: dict) -> None:
         """Adds `frames` jittered frames to acc's running mean: one dispatch per frame, or (compute,
@@ -109,7 +141,7 @@ class Raymarcher:
             while done < frames:
                 n = min(layers, frames - done)
                 set_uniforms(self.program, {"frame_index": acc.samples, "frame_layers": n})
-                self.program.run(*groups(acc.width, acc.height), n)
+                self.program.run(*self._groups(acc.width, acc.height), n)
                 self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
                 set_uniforms(self._resolve, {"frame_index": acc.samples, "layers": n})
                 self._resolve.run(*groups(acc.width, acc.height))
@@ -120,7 +152,7 @@ class Raymarcher:
         for _ in range(frames):
             set_uniforms(self.program, {"frame_index": acc.samples})
             if self.stage == "compute":
-                self.program.run(*groups(acc.width, acc.height))
+                self.program.run(*self._groups(acc.width, acc.height))
             else:
                 fbo = self._framebuffer(acc.width, acc.height)
                 fbo.use()
@@ -148,9 +180,10 @@ class Raymarcher:
         set_uniforms(self.program, {"raymarch_step": step, "seed": seed & 0xFFFFFFFF,
                                     "frame_layers": 0, "frame_index": acc.samples})
         acc.bind_image(0)
+        gx, gy = self.group
         for x0, y0, nx, ny in tile_rects(tiles_x, first, end):
-            set_uniforms(self.program, {"tile_offset": (x0 * LOCAL_SIZE, y0 * LOCAL_SIZE)})
-            self.program.run(nx, ny)
+            set_uniforms(self.program, {"tile_offset": (x0 * TILE, y0 * TILE)})
+            self.program.run(nx * (TILE // gx), ny * (TILE // gy))
         self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
 
     def release(self) -> None:

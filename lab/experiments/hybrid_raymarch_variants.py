@@ -2,9 +2,9 @@
 1080p)? Builds copies of the current tree with one piece of lib/raymarch.glsl's hybrid branch
 replaced by a text edit each, and times 16 raymarched frames of each bench scene at 1080p:
     python lab/experiments/hybrid_raymarch_variants.py OUT.json WORKDIR [scenes] [k,k] [precision]
-        [variants]
+        [variants] [WxH]
 (precision: the probes' texture format, "auto" as the scenes have it; variants: a comma-separated
-subset of the names below, all of them by default)
+subset of the names below, all of them by default; WxH: the image, 1920x1080 by default)
   head        the tree as it is: the gradient read from the opacity-gradient grid (one fetch), each
               sample's surface-or-phase choice drawn (the phase branch reading band 0 alone at
               g = 0) and the roulette below transmittance 1e-3
@@ -24,6 +24,8 @@ subset of the names below, all of them by default)
   no-light    the light grid's optical depth a constant (what its lookups cost)
   no-probes   k = 0's probe read a constant (what the probes cost the phase-function march)
   stop-1e-3   the march stops at transmittance 1e-3, not 1e-6
+  wgXxY       the raymarch pass's work groups X x Y pixels in every build (the same images;
+              as shipped: 8 x 4 without surfaces, 8 x 8 with them)
 Timing probes only: the edited copies but head, mix, no-roulette and grad-exact render wrong
 images."""
 import json
@@ -78,6 +80,16 @@ EDITS["no-probes"] = [("glsl/lib/raymarch.glsl", "vec3 inscattered = probe_insca
                        "vec3 inscattered = vec3(0.1); probe_sun = 0.5;")]
 EDITS["stop-1e-3"] = [("glsl/lib/raymarch.glsl", "i < n && transmittance > 1e-6;",
                        "i < n && transmittance > 1e-3;")]
+# the raymarch pass's work-group shape for every build (app/rendering/raymarch.py group_shape:
+# 8 x 4 without surfaces, 8 x 8 with them, as shipped; every pixel's arithmetic the same, so the
+# images are too); sides that do not divide the bands' tiles are let through (timing only)
+for gx, gy in ((8, 8), (16, 8), (8, 4), (16, 16), (32, 4), (4, 8), (16, 4), (8, 2), (4, 4),
+               (32, 2)):
+    EDITS[f"wg{gx}x{gy}"] = [
+        ("app/rendering/raymarch.py", "GROUP_PLAIN = (8, 4)", f"GROUP_PLAIN = ({gx}, {gy})"),
+        ("app/rendering/raymarch.py", "GROUP_WIDE = (8, 8)", f"GROUP_WIDE = ({gx}, {gy})"),
+        ("app/rendering/raymarch.py", "if any(side <= 0 or TILE % side for side in shape):",
+         "if False:")]
 CHILD = r'''
 import json, sys
 from dataclasses import replace
@@ -89,16 +101,18 @@ from app.scene import SurfaceSpec
 ctx = create_headless_context()
 for name in sys.argv[2].split(","):
     for k in (float(v) for v in sys.argv[3].split(",")):
-        scene = bench_scene(name, 1920, 1080)
+        width, height = (int(v) for v in sys.argv[5].split("x"))
+        scene = bench_scene(name, width, height)
         scene = scene.replace(surface=SurfaceSpec(gradient_factor=k, roughness=0.4,
                                                   specular=(0.04,) * 3))
-        if len(sys.argv) > 4:   # the probes' texture format
+        if sys.argv[4] != "auto":   # the probes' texture format
             scene = scene.replace(probes=replace(scene.probes, precision=sys.argv[4]))
         r = Renderer(ctx, scene)
         r.render("raymarch", spp=64, seed=1)   # compiles, and brings the GPU's clocks up
         res = r.render("raymarch", spp=32, seed=3)
         grid = r.opacity_gradient_grid   # the gradient grid baked (k > 0), None before
         print("RESULT " + json.dumps({"root": sys.argv[1], "scene": name, "k": k,
+                                      "size": [width, height],
                                       "raymarch_ms_per_frame": res.ms_per_sample,
                                       "gradient_grid_ms": grid.cost_ms if grid else 0.0,
                                       "gradient_grid_bytes": grid.gpu_bytes if grid else 0}),
@@ -111,15 +125,16 @@ def main() -> None:
     out, work = Path(sys.argv[1]), Path(sys.argv[2])
     scenes = sys.argv[3] if len(sys.argv) > 3 else "foot,bonsai"
     ks = sys.argv[4] if len(sys.argv) > 4 else "0,0.05,0.2"
-    precision = sys.argv[5:6]   # auto (the scenes' own), rgba32f or rgba16f
-    names = sys.argv[6].split(",") if len(sys.argv) > 6 else ("head", *EDITS)
+    precision = sys.argv[5] if len(sys.argv) > 5 else "auto"   # the scenes' own, rgba32f, rgba16f
+    names = sys.argv[6].split(",") if len(sys.argv) > 6 and sys.argv[6] else ("head", *EDITS)
+    size = sys.argv[7] if len(sys.argv) > 7 else "1920x1080"
     unknown = set(names) - {"head", *EDITS}
     if unknown:
         raise SystemExit(f"unknown variants {sorted(unknown)}: head, {', '.join(EDITS)}")
     rows = []
     for name in names:
         root = edited_tree(work, name, EDITS.get(name, []))
-        got = child_rows(CHILD, str(root), str(root), scenes, ks, *precision)
+        got = child_rows(CHILD, str(root), str(root), scenes, ks, precision, size)
         for g in got:
             print(json.dumps(g), flush=True)
         rows += got
