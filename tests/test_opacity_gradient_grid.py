@@ -167,10 +167,8 @@ LIT = {"density_scale": 30.0, "environment": [0.2, 0.3, 0.4],
 @pytest.mark.parametrize("k", [0.05, 0.5])
 def test_the_raymarchers_image_with_the_grid_stays_close_to_the_exact_gradients(ctx, k):
     """The same probes and frames, the gradient read from the grid or computed exactly
-    (LabOptions.opacity_gradient_grid False): measured on llvmpipe 1.0% relative RMS apart at
-    k = 0.05 and 1.7% at k = 0.5, the mean within 0.2% (1.1% and 2.3% when the march added the
-    mix by P; it draws the choice now, with the same numbers for both gradients at the same
-    seed); and the grid is read again bit for bit."""
+    (LabOptions.opacity_gradient_grid False): measured on llvmpipe 1.1% relative RMS apart at
+    k = 0.05 and 2.3% at k = 0.5, the mean within 0.3%; and the grid is read again bit for bit."""
     scene = _sphere(**LIT, surface={"gradient_factor": k, "roughness": 0.4,
                                     "specular": [0.04, 0.04, 0.04]})
     r = Renderer(ctx, scene)

@@ -11,8 +11,7 @@ from radiance_probes.twins.medium import sigma_t_at
 from radiance_probes.rendering.probe_layout import (AUTO_BAND_WEIGHT, AUTO_MAX_ORDER, AUTO_WALKS_PER_HIGH_BAND,
                                      GREY_TEXTURES_FOR_ORDER,
                                      TEXTURES_FOR_ORDER,
-                                     colour_channel, fitted_grid, phase_bands,
-                                     resolve_sh_order, slots_for_bands,
+                                     colour_channel, fitted_grid, resolve_sh_order,
                                      unpack_coefficients, visible_region)
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.scene import SceneError, parse_scene
@@ -300,103 +299,6 @@ def test_probe_fetch_unpacks_every_coefficient(ctx, order, grey):
             expected = 3.0 * channel[f] if k < kept else np.zeros(count)
             np.testing.assert_allclose(coeffs[:, k, c], expected, rtol=1e-6, err_msg=f"k={k} c={c}")
     np.testing.assert_allclose(out[:, -1], channel[3 if grey else 27], rtol=1e-6)
-
-
-# lib/probes.glsl probe_fetch_bands at points x for test_bands bands: per point every
-# coefficient's rgb, then probe_slots_for_bands(test_bands), probe_phase_bands() and the sun lobe's
-# amplitude (0 without PROBE_SUN_LOBE).
-PROBE_BANDS_KERNEL = """
-#define PROBE_SAMPLING
-#include "lib/rng.glsl"
-#include "lib/directions.glsl"
-#include "lib/sh.glsl"
-#include "lib/lights.glsl"
-#include "lib/probes.glsl"
-layout(std430, binding = 0) readonly buffer In { float x[]; };
-layout(std430, binding = 1) writeonly buffer Out { float o[]; };
-uniform int test_bands;
-void main()
-{
-    uint i = gl_GlobalInvocationID.x;
-    if (i >= count) return;
-    vec3 coeffs[SH_COUNT];
-    probe_fetch_bands(vec3(x[3u * i], x[3u * i + 1u], x[3u * i + 2u]), test_bands, coeffs);
-    uint base = uint(3 * SH_COUNT + 5) * i;
-    for (int k = 0; k < SH_COUNT; ++k)
-        for (int c = 0; c < 3; ++c)
-            o[base + uint(3 * k + c)] = coeffs[k][c];
-    o[base + uint(3 * SH_COUNT)] = float(probe_slots_for_bands(test_bands));
-    o[base + uint(3 * SH_COUNT + 1)] = float(probe_phase_bands());
-    vec3 lobe = vec3(0.0);
-#if PROBE_SUN_LOBE
-    lobe = probe_fetched_lobe;
-#endif
-    for (int c = 0; c < 3; ++c)
-        o[base + uint(3 * SH_COUNT + 2 + c)] = lobe[c];
-}
-"""
-
-
-@pytest.mark.parametrize("grey", [False, True])
-@pytest.mark.parametrize("order,sun_lobe", [(0, False), (1, False), (2, False), (3, False),
-                                            (3, True), (4, False)])
-def test_probe_fetch_bands_reads_the_bands_and_their_textures_alone(ctx, order, grey, sun_lobe):
-    """probe_fetch_bands (the raymarcher's read with surfaces): for every band count, probe_fetch's
-    coefficients of those bands and 0 above them, from the first probe_slots_for_bands slots, the
-    twin's count (the fewest that hold those bands: band 0 one texture at any order); and
-    probe_phase_bands, the bands of non-zero phase factor (band 0 alone at g = 0), as its twin."""
-    from glsl_harness import probe_texel_centres, probe_textures, run_kernel
-    from radiance_probes.rendering.probes import band_factors, probe_unit
-    grid = (3, 2, 2)
-    count = grid[0] * grid[1] * grid[2]
-    ids = (GREY_TEXTURES_FOR_ORDER if grey else TEXTURES_FOR_ORDER)[order]
-    rng = np.random.default_rng(order + 10 * grey)
-    texels = {t: rng.uniform(0.05, 1.0, (count, 4)).astype(np.float32) for t in ids}
-    channel = {4 * t + c: texels[t][:, c] for t in ids for c in range(4)}
-    textures = probe_textures(ctx, grid, texels)
-    x = probe_texel_centres(grid).astype(np.float32)
-    sh_count = (max(order, 2) + 1) ** 2
-    lobe_k = (order + 1) ** 2   # the sun lobe: the coefficient after the last
-    seen_bands = set()
-    try:
-        for bands in range(1, order + 2):
-            for g, window in ((0.0, "hann"), (0.6, "none"), (0.6, "hann")):
-                factors = band_factors(g, window, order)
-                out = run_kernel(ctx, PROBE_BANDS_KERNEL, [x.ravel()], (count, 3 * sh_count + 5),
-                                 defines={"PROBE_SH_ORDER": order, "PROBE_GREY": int(grey),
-                                          "PROBE_SUN_LOBE": int(sun_lobe)},
-                                 uniforms={"probe_textures": tuple(probe_unit(t) for t in ids),
-                                           "probe_grid": grid,
-                                           "probe_box_min": (-1.0, -1.0, -1.0),
-                                           "probe_box_size": (2.0, 2.0, 2.0),
-                                           "probe_radiance_scale": 3.0, "test_bands": bands,
-                                           "probe_band_factors": factors})
-                coeffs = out[:, :3 * sh_count].reshape(count, sh_count, 3)
-                for k in range(sh_count):
-                    for c in range(3):
-                        f = (k if k < 3 else k + 1) if grey else colour_channel(k, c)
-                        expected = 3.0 * channel[f] if k < bands * bands else np.zeros(count)
-                        np.testing.assert_allclose(coeffs[:, k, c], expected, rtol=1e-6,
-                                                   err_msg=f"bands={bands} k={k} c={c}")
-                slots = slots_for_bands(order, grey, bands, sun_lobe)
-                assert np.all(out[:, -5] == slots), (bands, out[0, -5], slots)
-                assert np.all(out[:, -4] == phase_bands(factors, order, sun_lobe))
-                seen_bands.add(int(out[0, -4]))
-                if sun_lobe and bands == order + 1:
-                    lobe = [3.0 * channel[lobe_k + 1 if grey else colour_channel(lobe_k, c)]
-                            for c in range(3)]
-                    np.testing.assert_allclose(out[:, -3:], np.stack(lobe, -1), rtol=1e-6)
-                # the fewest slots: every channel kept lies in them, and the last holds one
-                kept = [(k if k < 3 else k + 1) if grey else colour_channel(k, c)
-                        for k in range(bands * bands) for c in range(3)]
-                if sun_lobe and bands == order + 1:
-                    kept += [lobe_k + 1] if grey else [colour_channel(lobe_k, c) for c in range(3)]
-                assert max(kept) // 4 == slots - 1
-        assert slots_for_bands(order, grey, 1) == 1   # band 0: one texture whatever the order
-        assert seen_bands == ({order + 1} if sun_lobe else {1, order + 1})
-    finally:
-        for tex in textures:
-            tex.release()
 
 
 def test_auto_precision_is_16_bit_only_where_surfaces_read_the_probes(ctx):

@@ -84,28 +84,6 @@ def texture_ids(order: int, grey: bool) -> tuple[int, ...]:
     return {0: (0, 6), 1: (0, 1, 2, 6)}.get(order, tuple(range(colour_textures(order))))
 
 
-def slots_for_bands(order: int, grey: bool, bands: int, sun_lobe: bool = False) -> int:
-    """How many slots (the first ones) hold the coefficients of bands 0 .. bands - 1, with
-    `sun_lobe` the lobe's amplitude too where bands is every band (probe_slots_for_bands): a
-    coefficient's texture number is its slot in every packing."""
-    if not 1 <= bands <= order + 1:
-        raise ValueError(f"bands {bands}: expected 1 .. {order + 1} at SH order {order}")
-    last = sh_count(bands - 1) - 1
-    if sun_lobe and bands > order:
-        last = sh_count(order)   # the lobe: the coefficient after the last (PROBE_LOBE_COEFFICIENT)
-    f = (last if last < 3 else last + 1) if grey else colour_channel(last, 2)
-    return f // 4 + 1
-
-
-def phase_bands(band_factors, order: int, sun_lobe: bool = False) -> int:
-    """The bands the phase function's light takes from probes of this order (probe_phase_bands):
-    up to the highest of factor (g^l times the window) not 0, every band with the sun lobe."""
-    if sun_lobe:
-        return order + 1
-    nonzero = [l for l in range(1, order + 1) if band_factors[l] != 0.0]
-    return max(nonzero, default=0) + 1
-
-
 TEXTURES_FOR_ORDER = {order: texture_ids(order, False) for order in SH_ORDERS}
 GREY_TEXTURES_FOR_ORDER = {order: texture_ids(order, True) for order in SH_ORDERS}
 

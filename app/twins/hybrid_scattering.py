@@ -1,7 +1,6 @@
 """NumPy twin of glsl/lib/hybrid_scattering.glsl: the opacity gradient, the chance of a surface
-event, the raymarcher's draw of that choice and its Russian roulette, the surface normal, the
-BRDF's kernel K = f (n.l), its sampler and pdf, and the surface's radiance from the probes' SH
-coefficients. Directions are arrays (..., 3) of unit vectors."""
+event, the surface normal, the BRDF's kernel K = f (n.l), its sampler and pdf, and the surface's
+radiance from the probes' SH coefficients. Directions are arrays (..., 3) of unit vectors."""
 from __future__ import annotations
 
 import numpy as np
@@ -38,18 +37,6 @@ def opacity_gradient(opacity_at, x, step) -> np.ndarray:
 def surface_probability(gradient, k: float) -> np.ndarray:
     """P = 1 - exp(-k |grad A|)."""
     return 1.0 - np.exp(-k * np.linalg.norm(np.asarray(gradient, np.float64), axis=-1))
-
-
-# 2^32 over the golden ratio: the step of surface_choice_uniform's Weyl sequence
-GOLDEN_STEP = np.uint32(2654435769)
-
-
-def surface_choice_uniform(ray_offset, i) -> np.ndarray:
-    """The uniform number the raymarcher's sample i compares with P: (ray_offset + i * 2^32 /
-    golden ratio) mod 2^32, its top 24 bits in [0, 1), bit for bit the GLSL's."""
-    with np.errstate(over="ignore"):
-        word = np.asarray(ray_offset, np.uint32) + np.asarray(i, np.uint32) * GOLDEN_STEP
-    return (word >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0)
 
 
 HYBRID_MARCH_ROULETTE_TRANSMITTANCE = np.float32(1e-3)

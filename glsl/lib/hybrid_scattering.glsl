@@ -49,22 +49,10 @@ float surface_probability(vec3 gradient, float k)
     return 1.0 - exp(-k * length(gradient));
 }
 
-// The raymarcher's draw of that choice (lib/raymarch.glsl): sample i of a ray is the surface's
-// where this number is below P. The ray's random offset (one 32-bit draw) plus i times 2^32 over
-// the golden ratio, modulo 2^32 (a Weyl sequence), to 24 bits as rng_next: each sample's number is
-// a uniform offset shifted by a constant, so uniform whatever i, and its choice is the surface's
-// with probability P exactly; and the numbers along a ray are spread evenly (low discrepancy), so
-// a run of samples of about the same P picks the surface about P of the time, with less noise than
-// independent draws. The sample's place (the jitter) and the pixel's ray come from earlier draws of
-// the stream, independent of the offset.
-float surface_choice_uniform(uint ray_offset, int i)
-{
-    return float((ray_offset + uint(i) * 2654435769u) >> 8u) * (1.0 / 16777216.0);
-}
-
-// The raymarcher's Russian roulette (lib/raymarch.glsl): below this transmittance a ray goes on
-// with probability transmittance / this, carrying this transmittance, and stops otherwise; the
-// expected transmittance, so every later sample's expected weight, stays what it was.
+// The raymarcher's Russian roulette (lib/raymarch.glsl, with surfaces): below this transmittance
+// a ray goes on with probability transmittance / this, carrying this transmittance, and stops
+// otherwise; the expected transmittance, so every later sample's expected weight, stays what it
+// was. NumPy twin: app/twins/hybrid_scattering.py hybrid_march_roulette.
 const float HYBRID_MARCH_ROULETTE_TRANSMITTANCE = 1e-3;
 
 // The transmittance after the roulette at `transmittance` (below the threshold) with uniform u:

@@ -57,28 +57,6 @@ int probe_colour_channel(int k, int colour)
     return k < 9 ? 3 * k + colour : 28 + 3 * (k - 9) + colour;
 }
 
-// The slots that hold the coefficients of bands 0 .. bands - 1 (1 <= bands <= PROBE_SH_ORDER + 1)
-// are slots 0 .. probe_slots_for_bands(bands) - 1, with PROBE_SUN_LOBE the lobe's amplitude too
-// where bands is every band: a coefficient's texture number is its slot in every packing (only the
-// colour packing's sun texture moves, at orders 0 and 1), and later coefficients lie in later
-// channels. Band 0 lies in slot 0 alone in either packing, so a read of band 0 alone (the phase
-// function's light at g = 0: lib/raymarch.glsl) takes one texture at any order, as order 0 does.
-// NumPy twin: app/rendering/probe_layout.py slots_for_bands.
-int probe_slots_for_bands(int bands)
-{
-    int last = bands * bands - 1;   // the last coefficient kept
-#if PROBE_SUN_LOBE
-    if (bands > PROBE_SH_ORDER)
-        last = PROBE_LOBE_COEFFICIENT;
-#endif
-#if PROBE_GREY
-    int f = last < 3 ? last : last + 1;
-#else
-    int f = probe_colour_channel(last, 2);
-#endif
-    return f / 4 + 1;
-}
-
 // The colour packing's channel f: the coefficient it holds, or PROBE_SUN_COEFFICIENT for the
 // sun's transmittance (channel 27).
 const int PROBE_SUN_COEFFICIENT = -1;

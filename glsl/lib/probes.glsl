@@ -84,52 +84,15 @@ uniform float probe_window_factors[SH_BANDS];
 #define PROBE_TEXEL(slot) texture(probe_textures[slot], uvw)
 #endif
 
-// Coefficients 0 .. kept - 1 (kept <= PROBE_SH_COEFFS) from the texels of every slot (indexed by
-// texture number: every slot but the colour packing's sun texture at orders 0 and 1, which holds
-// no coefficient), as stored (not yet times probe_radiance_scale); the others left as they are.
-// PROBE_SUN_LOBE: the lobe's amplitude, scaled, into probe_fetched_lobe.
-void probe_unpack(vec4 texel[PROBE_TEXTURE_COUNT], int kept, inout vec3 coeffs[SH_COUNT])
-{
-    // a condition, not a break: the loop unrolls with every texel index a constant (kept may vary)
-    for (int k = 0; k < PROBE_SH_COEFFS; ++k) {
-        if (k < kept) {
-#if PROBE_GREY
-            int f = k < 3 ? k : k + 1;
-            coeffs[k] = vec3(texel[f / 4][f % 4]);
-#else
-            for (int c = 0; c < 3; ++c) {
-                int f = probe_colour_channel(k, c);
-                coeffs[k][c] = texel[f / 4][f % 4];
-            }
-#endif
-        }
-    }
-#if PROBE_SUN_LOBE && PROBE_GREY
-    probe_fetched_lobe = vec3(texel[(PROBE_LOBE_COEFFICIENT + 1) / 4][(PROBE_LOBE_COEFFICIENT + 1) % 4]
-                              * probe_radiance_scale);
-#elif PROBE_SUN_LOBE
-    for (int c = 0; c < 3; ++c) {
-        int f = probe_colour_channel(PROBE_LOBE_COEFFICIENT, c);
-        probe_fetched_lobe[c] = texel[f / 4][f % 4] * probe_radiance_scale;
-    }
-#endif
-}
-
-// The probe textures' coordinate of world point x.
-vec3 probe_uvw(vec3 x)
-{
-#if PROBE_WARP
-    return probe_warp_uvw((x - probe_box_min) / probe_box_size);
-#else
-    return (x - probe_box_min) / probe_box_size;
-#endif
-}
-
 // Trilinearly interpolated (PROBE_VISIBILITY: visibility-weighted) SH coefficients and sun
 // transmittance at world point x; coefficients above PROBE_SH_ORDER read as 0.
 void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
 {
-    vec3 uvw = probe_uvw(x);
+#if PROBE_WARP
+    vec3 uvw = probe_warp_uvw((x - probe_box_min) / probe_box_size);
+#else
+    vec3 uvw = (x - probe_box_min) / probe_box_size;
+#endif
 #if PROBE_VISIBILITY
     ProbeCorners corners;
     bool occluded = probe_visibility_corners(x, uvw, corners);
@@ -154,58 +117,34 @@ void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
     vec4 texel[PROBE_TEXTURE_COUNT];   // slot = texture number from here on
     for (int slot = 0; slot < PROBE_TEXTURE_COUNT; ++slot)
         texel[slot] = PROBE_TEXEL(slot);
-    probe_unpack(texel, PROBE_SH_COEFFS, coeffs);
+    for (int k = 0; k < PROBE_SH_COEFFS; ++k) {
+#if PROBE_GREY
+        int f = k < 3 ? k : k + 1;
+        coeffs[k] = vec3(texel[f / 4][f % 4]);
+#else
+        for (int c = 0; c < 3; ++c) {
+            int f = probe_colour_channel(k, c);
+            coeffs[k][c] = texel[f / 4][f % 4];
+        }
+#endif
+    }
 #if PROBE_GREY
     sun_transmittance = clamp(texel[0].a, 0.0, 1.0);
 #else
     sun_transmittance = clamp(texel[6].a, 0.0, 1.0);
 #endif
-#endif
-    for (int k = 0; k < PROBE_SH_COEFFS; ++k)
-        coeffs[k] *= probe_radiance_scale;
-}
-
-// probe_fetch's coefficients of bands 0 .. bands - 1 (1 <= bands <= PROBE_SH_ORDER + 1; every
-// other coefficient 0), read from those bands' textures alone (lib/probe_packing.glsl
-// probe_slots_for_bands): where a caller needs fewer bands at some points than at others (the
-// raymarcher's phase-function light at g = 0, band 0 alone, against a surface's irradiance, every
-// band) the other textures are not read there. PROBE_SUN_LOBE: the lobe's amplitude where bands is
-// every band. No sun transmittance (its texture is not read for the coefficients' sake).
-void probe_fetch_bands(vec3 x, int bands, out vec3 coeffs[SH_COUNT])
-{
-    vec3 uvw = probe_uvw(x);
-#if PROBE_VISIBILITY
-    ProbeCorners corners;
-    bool occluded = probe_visibility_corners(x, uvw, corners);
-#endif
-    int slots = probe_slots_for_bands(bands);
-    vec4 texel[PROBE_TEXTURE_COUNT];
-    for (int slot = 0; slot < PROBE_TEXTURE_COUNT; ++slot) {
-        texel[slot] = vec4(0.0);
-        if (slot < slots)
-            texel[slot] = PROBE_TEXEL(slot);
+#if PROBE_SUN_LOBE && PROBE_GREY
+    probe_fetched_lobe = vec3(texel[(PROBE_LOBE_COEFFICIENT + 1) / 4][(PROBE_LOBE_COEFFICIENT + 1) % 4]
+                              * probe_radiance_scale);
+#elif PROBE_SUN_LOBE
+    for (int c = 0; c < 3; ++c) {
+        int f = probe_colour_channel(PROBE_LOBE_COEFFICIENT, c);
+        probe_fetched_lobe[c] = texel[f / 4][f % 4] * probe_radiance_scale;
     }
-    for (int k = 0; k < SH_COUNT; ++k)
-        coeffs[k] = vec3(0.0);
-    probe_unpack(texel, bands * bands, coeffs);
+#endif
+#endif
     for (int k = 0; k < PROBE_SH_COEFFS; ++k)
         coeffs[k] *= probe_radiance_scale;
-}
-
-// The bands probe_inscattered_from takes from the probes: up to the highest whose factor (g^l
-// times the window) is not 0, so band 0 alone at g = 0; every band with the sun lobe, whose
-// amplitude lies past the last band. NumPy twin: app/rendering/probe_layout.py phase_bands.
-int probe_phase_bands()
-{
-#if PROBE_SUN_LOBE
-    return PROBE_SH_ORDER + 1;
-#else
-    int bands = 1;
-    for (int l = 1; l <= PROBE_SH_ORDER; ++l)
-        if (probe_band_factors[l] != 0.0)
-            bands = l + 1;
-    return bands;
-#endif
 }
 
 // Radiance in-scattered towards a ray travelling along d, from coefficients probe_fetch has just

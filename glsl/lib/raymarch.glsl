@@ -1,5 +1,4 @@
-// The raymarcher (the design card's): deterministic front-to-back marching with a jittered start
-// (with surfaces it draws its choices too: HYBRID_SCATTERING below).
+// The raymarcher (the design card's): deterministic front-to-back marching with a jittered start.
 // Each step of length dt at x adds transmittance * (1 - exp(-sigma_t dt)) * albedo(x) *
 // [sun * T_sun(x) * phase + probe radiance convolved with the phase function]; T_sun comes from the
 // baked light-transmittance texture (light_transmittance.comp). The step's opacity is integrated
@@ -12,28 +11,21 @@
 // samples contribute as without skipping (test_raymarch_skipping_empty_space_changes_nothing).
 //
 // HYBRID_SCATTERING (the scene's surface.gradient_factor k > 0; lib/hybrid_scattering.glsl): a
-// sample is a surface's with probability P = 1 - exp(-k |grad A|), and the march draws that choice
-// at each non-empty sample (surface_choice_uniform: a random offset a ray, a low-discrepancy step a
-// sample) and shades that branch alone: the phase function's light (the probes convolved, the sun
-// times the phase function), reading only the probe textures its bands need (band 0, one texture,
-// at g = 0: probe_phase_bands), or the surface's, which reflects the probes' light by
-// surface_probe_radiance (the diffuse irradiance from the SH in closed form and a specular term
-// from the mirror direction; every band) and the sun by the BRDF times the cosine. Its expectation
-// is the mix (1 - P) phase + P surface at every sample, what the march added before it drew (at
-// seven probe textures a sample): unbiased, with more noise a frame, which the frames' running
-// mean averages away. Below transmittance 1e-3 a Russian roulette (hybrid_march_roulette) ends the
-// ray or carries it on at 1e-3: unbiased too, and most rays stop there instead of at 1e-6. The
+// sample is a surface's with probability P = 1 - exp(-k |grad A|), and the march adds the mean of
+// both: (1 - P) times the phase function's light and P times the surface's, which reflects the
+// probes' light by surface_probe_radiance (the diffuse irradiance from the SH in closed form and a
+// specular term from the mirror direction) and the sun by the BRDF times the cosine; below
+// transmittance 1e-3 a Russian roulette (hybrid_march_roulette) ends the ray or carries it on at
+// 1e-3, unbiased, where without surfaces the march goes on to 1e-6 (HYBRID_MARCH_NO_ROULETTE, a
+// test build, keeps that stop: tests/test_hybrid_scattering.py). The
 // gradient is read from the baked opacity-gradient grid in one fetch where there is one
 // (lib/opacity_gradient_grid.glsl: OPACITY_GRADIENT_GRID; exact at the voxel centres, trilinear
 // between), else computed exactly. Without HYBRID_SCATTERING the code is as it was.
-// HYBRID_MARCH_EXPECTATION (tests only: tests/test_hybrid_scattering.py) adds the mix by P at
-// every sample and stops at 1e-6 without roulette: the expectation of the choices, the answer
-// that the march's mean over frames must reach.
 #if defined(HYBRID_SCATTERING)
 #include "lib/hybrid_scattering.glsl"
 #include "lib/opacity_gradient_grid.glsl"
-// The hybrid march's random numbers, continuing the stream that drew the pixel's ray and the
-// jitter (raymarch_frame): the surface choices' offset first, then one per roulette.
+// The roulette's random numbers (hybrid_march_roulette), continuing the stream that drew the
+// pixel's ray and the jitter (raymarch_frame).
 uint hybrid_march_rng;
 #endif
 // AREA_LIGHTS (lib/area_lights.glsl): a light the camera ray meets is seen, in front of the
@@ -93,10 +85,6 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
     // colour and the probes; the sun's optical depth at its two ends, the end carried over to the
     // next segment (-1: not fetched, after a jump over empty space).
     float tau_start = -1.0;
-#if defined(HYBRID_SCATTERING)
-    int phase_bands = probe_phase_bands();
-    uint choice_offset = rng_next_uint(hybrid_march_rng);
-#endif
     for (int i = 0; i < n && transmittance > 1e-6; ++i) {
         float t = t0 + (float(i) + jitter) * dt;
         vec3 x = origin + t * d;
@@ -111,22 +99,13 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
         }
         float opacity = 1.0 - exp(-sigma_t * dt);
 #if defined(HYBRID_SCATTERING)
-        vec3 gradient = raymarch_opacity_gradient(x);
-        float surface_chance = surface_probability(gradient, surface_gradient_factor);
-#if defined(HYBRID_MARCH_EXPECTATION)
-        float surface_share = surface_chance;
-#else
-        // 1: this sample's event is the surface's, 0: the phase function's
-        float surface_share = surface_choice_uniform(choice_offset, i) < surface_chance ? 1.0 : 0.0;
-#endif
         vec3 coeffs[SH_COUNT];
-        probe_fetch_bands(x, surface_share > 0.0 ? PROBE_SH_ORDER + 1 : phase_bands, coeffs);
-        vec3 inscattered = vec3(0.0);
-        vec3 sun_kernel = vec3(0.0);
-        if (surface_share < 1.0) {
-            inscattered = probe_inscattered_from(coeffs, d);
-            sun_kernel = vec3(sun_phase);
-        }
+        float probe_sun;
+        probe_fetch(x, coeffs, probe_sun);
+        vec3 inscattered = probe_inscattered_from(coeffs, d);
+        vec3 sun_kernel = vec3(sun_phase);
+        vec3 gradient = raymarch_opacity_gradient(x);
+        float surface_share = surface_probability(gradient, surface_gradient_factor);
         if (surface_share > 0.0) {
             vec3 n = surface_normal(gradient, -d);
             inscattered = mix(inscattered, surface_probe_radiance(coeffs, n, -d, surface_specular),
@@ -152,7 +131,7 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
 #endif
         radiance += transmittance * scatter_allowed * source;
         transmittance *= 1.0 - opacity;
-#if defined(HYBRID_SCATTERING) && !defined(HYBRID_MARCH_EXPECTATION)
+#if defined(HYBRID_SCATTERING) && !defined(HYBRID_MARCH_NO_ROULETTE)
         if (transmittance < HYBRID_MARCH_ROULETTE_TRANSMITTANCE)
             transmittance = hybrid_march_roulette(transmittance, rng_next(hybrid_march_rng));
 #endif

@@ -1,9 +1,9 @@
-"""How much noise a frame does the hybrid raymarcher's drawn surface-or-phase choice (and its
-roulette below 1e-3) add? The raymarcher with surfaces draws each sample's choice, unbiased
-against the mix by P it replaced (tests/test_hybrid_scattering.py), but a single frame is no
-longer the mix's smooth image: each frame's rRMSE against the mix's own 64-frame image
-(HYBRID_MARCH_EXPECTATION, the tests' build of the mix), for the drawn march and for the mix (its
-jitter alone), at 1, 4 and 16 frames, and k = 0's jitter noise beside them. Bench scenes:
+"""How much noise a frame does the hybrid raymarcher's roulette below transmittance 1e-3 add?
+Each frame's rRMSE against the 64-frame image of the march that goes on to 1e-6
+(HYBRID_MARCH_NO_ROULETTE, the tests' build), for the march as shipped and for that one (its
+jitter alone), at 1, 4 and 16 frames, and k = 0's jitter noise beside them. (Run on the march
+that drew each sample's surface-or-phase choice, its reference build then the mix by P, it gave
+bench/h200-hybrid-cost/hybrid_frame_noise.json.) Bench scenes:
     python lab/experiments/hybrid_march_frame_noise.py OUT.json [scenes] [k] [WxH]"""
 import json
 import sys
@@ -19,11 +19,11 @@ from radiance_probes.scene_types import SurfaceSpec                      # noqa:
 FRAMES = (1, 4, 16)
 
 
-def images(ctx, scene, expectation: bool) -> dict:
+def images(ctx, scene, full: bool) -> dict:
     real = renderer_module.Raymarcher
 
     def marcher(ctx_, stage, defines=None):
-        extra = {"HYBRID_MARCH_EXPECTATION": 1} if expectation else {}
+        extra = {"HYBRID_MARCH_NO_ROULETTE": 1} if full else {}
         return real(ctx_, stage, {**(defines or {}), **extra})
     renderer_module.Raymarcher = marcher
     r = renderer_module.Renderer(ctx, scene)
@@ -50,14 +50,14 @@ def main():
             continue
         hybrid = base.replace(surface=SurfaceSpec(gradient_factor=k, roughness=0.4,
                                                   specular=(0.04, 0.04, 0.04)))
-        mix = images(ctx, hybrid, True)
-        drawn = images(ctx, hybrid, False)
+        full = images(ctx, hybrid, True)
+        shipped = images(ctx, hybrid, False)
         plain = images(ctx, base, False)
         row = {"scene": name, "k": k, "size": [w, h],
-               "drawn_vs_mix64": {n: rrmse(drawn[n], mix[64]) for n in FRAMES},
-               "mix_vs_mix64": {n: rrmse(mix[n], mix[64]) for n in FRAMES},
+               "shipped_vs_full64": {n: rrmse(shipped[n], full[64]) for n in FRAMES},
+               "full_vs_full64": {n: rrmse(full[n], full[64]) for n in FRAMES},
                "k0_vs_k0_64": {n: rrmse(plain[n], plain[64]) for n in FRAMES},
-               "drawn64_vs_mix64": rrmse(drawn[64], mix[64])}
+               "shipped64_vs_full64": rrmse(shipped[64], full[64])}
         rows.append(row)
         print(json.dumps(row), flush=True)
         out.write_text(json.dumps({"rows": rows}, indent=1))

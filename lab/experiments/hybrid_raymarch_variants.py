@@ -5,29 +5,24 @@ replaced by a text edit each, and times 16 raymarched frames of each bench scene
         [variants] [WxH]
 (precision: the probes' texture format, "auto" as the scenes have it; variants: a comma-separated
 subset of the names below, all of them by default; WxH: the image, 1920x1080 by default)
-  head        the tree as it is: the gradient read from the opacity-gradient grid (one fetch), each
-              sample's surface-or-phase choice drawn (the phase branch reading band 0 alone at
-              g = 0) and the roulette below transmittance 1e-3
-  mix         the march before the draws: both branches mixed by P at every sample (all the probe
-              textures), no roulette, the stop at 1e-6 (HYBRID_MARCH_EXPECTATION, the tests' build):
-              head against it is what the draws save
-  no-roulette the choices drawn, the roulette off (the stop at 1e-6): what the roulette saves
-  choice-shared  one choice offset for every pixel of a dispatch instead of one a ray, so that
-              neighbouring rays mostly take the same branch (timing only: the pixels' noise is
-              correlated): what the branches' divergence costs
+  head        the tree as it is: the gradient read from the opacity-gradient grid (one fetch),
+              the phase function's and the surface's light mixed by P at every sample, the
+              roulette below transmittance 1e-3
+  no-roulette the roulette off (the stop at 1e-6, HYBRID_MARCH_NO_ROULETTE): what it saves
   grad-exact  the exact 6-lookup gradient at every sample (the raymarcher before the grid; the
               grid is still baked, outside the frames timed): head against it is what the grid saves
   no-grad     the gradient replaced by a constant (the surface branch still runs)
-  no-surface  the gradient read, the surface never chosen
-  no-coeffs   every sample reads band 0 alone (one probe texture, as k = 0; surface light from it)
+  no-surface  the gradient read, the surface shading never mixed in
+  no-coeffs   the probes read as k = 0 reads them (no array of coefficients held; surface light 0)
   grad-forward  the gradient by forward differences (four lookups, not six) in place of the grid
   no-light    the light grid's optical depth a constant (what its lookups cost)
   no-probes   k = 0's probe read a constant (what the probes cost the phase-function march)
   stop-1e-3   the march stops at transmittance 1e-3, not 1e-6
   wgXxY       the raymarch pass's work groups X x Y pixels in every build (the same images;
               as shipped: 8 x 4 without surfaces, 8 x 8 with them)
-Timing probes only: the edited copies but head, mix, no-roulette and grad-exact render wrong
-images."""
+Timing probes only: the edited copies but head, no-roulette, grad-exact and wgXxY render wrong
+images. (The march that drew each sample's surface-or-phase choice, 3.10-3.13 ms on the foot
+against 3.01 for the mix, and its variants are in the history: bench/h200-hybrid-cost.)"""
 import json
 import sys
 from pathlib import Path
@@ -36,29 +31,23 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bake_variants import child_rows, edited_tree   # noqa: E402  (the same copies, other edits)
 # the line of lib/raymarch.glsl that reads the gradient (lib/opacity_gradient_grid.glsl)
 GRADIENT_READ = "vec3 gradient = raymarch_opacity_gradient(x);"
-# the line of lib/raymarch.glsl that draws a sample's choice
-CHOICE = "float surface_share = surface_choice_uniform(choice_offset, i) < surface_chance ? 1.0 : 0.0;"
 EDITS = {
-    "mix": [("glsl/lib/raymarch.glsl",
-             '#if defined(HYBRID_SCATTERING)\n#include "lib/hybrid_scattering.glsl"',
-             '#define HYBRID_MARCH_EXPECTATION 1\n#if defined(HYBRID_SCATTERING)\n'
-             '#include "lib/hybrid_scattering.glsl"')],
     "no-roulette": [("glsl/lib/raymarch.glsl",
-                     "if (transmittance < HYBRID_MARCH_ROULETTE_TRANSMITTANCE)",
-                     "if (transmittance < 0.0)")],
-    "choice-shared": [("glsl/lib/raymarch.glsl",
-                       "uint choice_offset = rng_next_uint(hybrid_march_rng);",
-                       "uint choice_offset = pcg_hash(frame_index ^ seed);")],
+                     "#if defined(HYBRID_SCATTERING) && !defined(HYBRID_MARCH_NO_ROULETTE)",
+                     "#if 0")],
     "grad-exact": [("glsl/lib/raymarch.glsl", GRADIENT_READ,
                     "vec3 gradient = opacity_gradient(x);")],
     "no-grad": [("glsl/lib/raymarch.glsl", GRADIENT_READ,
                  "vec3 gradient = vec3(0.0, 0.0, 30.0);")],
-    # the chance still computed (and compared, so the gradient's read stays), never taken
-    "no-surface": [("glsl/lib/raymarch.glsl", CHOICE,
-                    "float surface_share = surface_chance > 1e30 ? 1.0 : 0.0;")],
-    "no-coeffs": [("glsl/lib/raymarch.glsl",
-                   "probe_fetch_bands(x, surface_share > 0.0 ? PROBE_SH_ORDER + 1 : phase_bands, coeffs);",
-                   "probe_fetch_bands(x, 1, coeffs);")],
+    "no-surface": [("glsl/lib/raymarch.glsl", "if (surface_share > 0.0) {",
+                    "if (surface_share > 1e30) {")],
+    "no-coeffs": [("glsl/lib/raymarch.glsl", """        vec3 coeffs[SH_COUNT];
+        float probe_sun;
+        probe_fetch(x, coeffs, probe_sun);
+        vec3 inscattered = probe_inscattered_from(coeffs, d);""", """        float probe_sun;
+        vec3 inscattered = probe_inscattered(x, d, probe_sun);
+        vec3 coeffs[SH_COUNT];
+        for (int c = 0; c < SH_COUNT; ++c) coeffs[c] = vec3(0.0);""")],
 }
 EDITS["no-grad-no-coeffs"] = EDITS["no-grad"] + EDITS["no-coeffs"]
 # forward differences from the point itself: four lookups instead of six (timing only: a
