@@ -732,7 +732,9 @@ def test_time_series_plays_steps_and_pauses(display, tmp_path):
     (tmp_path / "series.json").write_text(json.dumps(scene))
     script = write_script(tmp_path / "s.json", [
         {"frames": 2}, {"dump": "start.json"}, {"screenshot": "start.png"},
-        {"click": "Play"}, {"frames": 4}, {"dump": "playing.json"},
+        # (a step each 0.1 s of wall time: frames enough to span that on a fast machine too; 4
+        # frames of llvmpipe once took less)
+        {"click": "Play"}, {"frames": 10}, {"dump": "playing.json"},
         {"key": "."}, {"frames": 2}, {"dump": "stepped.json"},
         {"drag": "Time step", "by": [-400, 0]}, {"frames": 1}, {"dump": "slider.json"},
         {"close": True}])
