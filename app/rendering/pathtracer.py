@@ -18,8 +18,10 @@ PIXEL_STATE_BYTES_ENVIRONMENT_MAP = 128  # the same with ENVIRONMENT_MAP (PathSt
 PATH_STATE_BYTES_AREA_LIGHTS = 32        # and AREA_LIGHTS' light sample (lib/integrator.glsl)
 
 
-def groups(width: int, height: int) -> tuple[int, int]:
-    return (width + LOCAL_SIZE - 1) // LOCAL_SIZE, (height + LOCAL_SIZE - 1) // LOCAL_SIZE
+def groups(width: int, height: int,
+           shape: tuple[int, int] = (LOCAL_SIZE, LOCAL_SIZE)) -> tuple[int, int]:
+    """Work groups of `shape` (pixels across, down) that cover a width x height image."""
+    return -(-width // shape[0]), -(-height // shape[1])
 
 
 def band_edges(height: int, bands: int) -> list[int]:

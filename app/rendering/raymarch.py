@@ -116,10 +116,6 @@ class Raymarcher:
             self._frame_values = self.ctx.texture_array(size, 4, dtype="f4")
         return self._frame_values
 
-    def _groups(self, width: int, height: int) -> tuple[int, int]:
-        gx, gy = self.group
-        return -(-width // gx), -(-height // gy)
-
     def run(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation, frames: int,
             seed: int, step: float, uniforms: dict) -> None:
         """Adds `frames` jittered frames to acc's running mean: one dispatch per frame, or (compute,
@@ -141,7 +137,7 @@ class Raymarcher:
             while done < frames:
                 n = min(layers, frames - done)
                 set_uniforms(self.program, {"frame_index": acc.samples, "frame_layers": n})
-                self.program.run(*self._groups(acc.width, acc.height), n)
+                self.program.run(*groups(acc.width, acc.height, self.group), n)
                 self.ctx.memory_barrier(moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
                 set_uniforms(self._resolve, {"frame_index": acc.samples, "layers": n})
                 self._resolve.run(*groups(acc.width, acc.height))
@@ -152,7 +148,7 @@ class Raymarcher:
         for _ in range(frames):
             set_uniforms(self.program, {"frame_index": acc.samples})
             if self.stage == "compute":
-                self.program.run(*self._groups(acc.width, acc.height))
+                self.program.run(*groups(acc.width, acc.height, self.group))
             else:
                 fbo = self._framebuffer(acc.width, acc.height)
                 fbo.use()

@@ -156,13 +156,11 @@ vec3 raymarch_frame(ivec2 pixel, uint frame)
 #if defined(GUIDED_LEVEL0)
     return guided_level0_radiance(camera_eye, camera_ray_direction(vec2(pixel) + sub), rng);
 #endif
-#if defined(HYBRID_SCATTERING)
     float jitter = rng_next(rng);
+#if defined(HYBRID_SCATTERING)
     hybrid_march_rng = rng;   // after the jitter's draw: the ray and the jitter as without surfaces
-    return raymarch_radiance(camera_eye, camera_ray_direction(vec2(pixel) + sub), jitter);
-#else
-    return raymarch_radiance(camera_eye, camera_ray_direction(vec2(pixel) + sub), rng_next(rng));
 #endif
+    return raymarch_radiance(camera_eye, camera_ray_direction(vec2(pixel) + sub), jitter);
 }
 
 // Adds frame frame_index to the pixel's running mean in the accumulation image.
