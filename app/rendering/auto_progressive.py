@@ -228,6 +228,12 @@ def next_pt_spp(spp: int, estimate: float, standard_error: float, target: float)
     twice the samples the target needed (bonsai at 2%: 1024 spp for an error of 1.49%)."""
     upper = estimate + Z * standard_error
     need = spp * (upper / target) ** 2 * PT_MARGIN if math.isfinite(upper) else 2.0 * spp
+    return round_samples(need, spp)
+
+
+def round_samples(need: float, spp: int) -> int:
+    """A round's aim of `need` samples in all as the halves take it: whole, even, at least 2 more
+    than `spp` and at most twice it."""
     total = min(max(math.ceil(need), spp + 2), 2 * spp)
     return total + total % 2
 
@@ -388,7 +394,6 @@ def auto_render(renderer, target: float, progress=None, seed: int = 0,
         total = next_pt_spp(halves.spp, pt_est, pt_se, target)
         aim = denoised_aim(judgements, denoised_upper, target)
         if aim < total:   # the denoised candidate is expected to pass sooner
-            total = max(math.ceil(aim), halves.spp + 2)
-            total += total % 2
+            total = round_samples(aim, halves.spp)
         batch = max(1, (total - halves.spp) // 2)
         round_ += 1
