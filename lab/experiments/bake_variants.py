@@ -62,6 +62,15 @@ def child_rows(code: str, name: str, *args: str) -> list[dict]:
     return rows
 
 
+def keep_rows(out: Path, rows: list, got: list[dict]) -> None:
+    """Prints a child's rows (child_rows) as they come, adds them to `rows` and writes every row
+    so far to `out` (a run cut short keeps what it had)."""
+    for g in got:
+        print(json.dumps(g), flush=True)
+    rows += got
+    out.write_text(json.dumps(rows, indent=1))
+
+
 def main() -> None:
     out, work = sys.argv[1], Path(sys.argv[2])
     names = sys.argv[3].split(",") if len(sys.argv) > 3 else ("head", *EDITS)

@@ -33,6 +33,42 @@ from radiance_probes.rendering.refine import (blend_from_sums, blend_images,  # 
 from radiance_probes.rendering.renderer import Renderer                  # noqa: E402
 
 
+def reference(r, ref_spp: int):
+    """The path tracer's reference (two halves of ref_spp / 2 samples) and its noise, printed."""
+    halves = [r.render("pt", spp=ref_spp // 2, seed=1001 + i, samples_per_pass=64).image
+              for i in range(2)]
+    ref, noise = 0.5 * (halves[0] + halves[1]), reference_noise(*halves)
+    print(f"reference {ref_spp} spp, noise {noise:.4f}", flush=True)
+    return ref, noise
+
+
+def timed_filter(den):
+    """filtered(image, albedo=None) -> (the denoised image, the run's wall ms); exits where the
+    filter did not run (it would hand back the raw image, recorded as denoised)."""
+    def filtered(img, albedo=None):
+        t0 = time.perf_counter()
+        d = den(np.asarray(img, np.float32), albedo)
+        if not d.denoised:
+            raise SystemExit(f"the filter did not run: {d.note}")
+        return d.image, 1e3 * (time.perf_counter() - t0)
+    return filtered
+
+
+def pt_halves(r, n: int):
+    """The path tracer's two independent halves of n / 2 samples each (their renders)."""
+    return (r.render("pt", spp=n // 2, seed=11 + n, samples_per_pass=16),
+            r.render("pt", spp=n // 2, seed=5000 + n, samples_per_pass=16))
+
+
+def write_row(out: Path, rows: list, row: dict, ref_spp: int, noise: float) -> None:
+    """Adds a row, prints it (rounded) and writes every row so far."""
+    rows.append(row)
+    print(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in row.items()}),
+          flush=True)
+    out.write_text(json.dumps({"reference_spp": ref_spp, "reference_noise": noise, "rows": rows},
+                              indent=1))
+
+
 def main():
     out = Path(sys.argv[1])
     name = sys.argv[2] if len(sys.argv) > 2 else "bonsai"
@@ -45,23 +81,14 @@ def main():
     scene = bench_scene(name, size, size)
     ctx = create_headless_context()
     r = Renderer(ctx, scene)
-    halves = [r.render("pt", spp=ref_spp // 2, seed=1001 + i, samples_per_pass=64).image
-              for i in range(2)]
-    ref, noise = 0.5 * (halves[0] + halves[1]), reference_noise(*halves)
-    print(f"reference {ref_spp} spp, noise {noise:.4f}", flush=True)
+    ref, noise = reference(r, ref_spp)
     den = shared_denoiser()
     den.warm(size, size)
     den.warm(size, size, ("albedo",))
+    filtered = timed_filter(den)
 
     def err(img):
         return corrected_rrmse(rrmse(img, ref), noise)
-
-    def filtered(img, albedo=None):
-        t0 = time.perf_counter()
-        d = den(np.asarray(img, np.float32), albedo)
-        if not d.denoised:
-            raise SystemExit(f"the filter did not run: {d.note}")
-        return d.image, 1e3 * (time.perf_counter() - t0)
 
     rays = []
     for grid, walks in settings:
@@ -76,8 +103,7 @@ def main():
     r.set_scene(scene)
     rows = []
     for n in counts:
-        ra = r.render("pt", spp=n // 2, seed=11 + n, samples_per_pass=16)
-        rb = r.render("pt", spp=n // 2, seed=5000 + n, samples_per_pass=16)
+        ra, rb = pt_halves(r, n)
         a, b = ra.image, rb.image
         m = 0.5 * (a + b)
         pt_ms = ra.render_ms + rb.render_ms
@@ -102,11 +128,7 @@ def main():
                    "pt_ms": pt_ms, "raymarch_ms": ray["ms"], "filter_ms": ms_m, "judge_ms": ms_a,
                    "denoised_total_ms": pt_ms + ms_m,
                    "blend_total_ms": pt_ms + ray["ms"] + ms_m + ms_a}
-            rows.append(row)
-            print(json.dumps({k: round(v, 4) if isinstance(v, float) else v
-                              for k, v in row.items()}), flush=True)
-            out.write_text(json.dumps({"reference_spp": ref_spp, "reference_noise": noise,
-                                       "rows": rows}, indent=1))
+            write_row(out, rows, row, ref_spp, noise)
     r.release()
 
 

@@ -10,12 +10,11 @@ interpreter per ROOT imports that commit's package, loads the bench's foot at 19
 Each ROOT's ../shared/datasets must hold the foot raw (link it). Runs on the GPU machine."""
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bake_variants import child_rows   # noqa: E402  (a fresh interpreter, its RESULT lines)
+from bake_variants import child_rows, keep_rows   # noqa: E402  (a fresh interpreter, its RESULT lines)
 
 CHILD = r'''
 import importlib, json, os, sys
@@ -46,10 +45,7 @@ def main() -> None:
     rows = []
     for root in sys.argv[2:]:
         got = child_rows(CHILD, root, root)
-        for g in got:
-            print(json.dumps(g), flush=True)
-        rows += got
-        out.write_text(json.dumps(rows, indent=1))
+        keep_rows(out, rows, got)
 
 
 if __name__ == "__main__":

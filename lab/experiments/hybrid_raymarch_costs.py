@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bake_variants import child_rows, edited_tree   # noqa: E402
+from bake_variants import child_rows, edited_tree, keep_rows   # noqa: E402
 
 EDITS = {
     "count": [("glsl/lib/raymarch.glsl", "    float tau_start = -1.0;\n",
@@ -75,10 +75,7 @@ def main() -> None:
                           ("t1e-3", [{"k": 0.0}, {"k": 0.05}])):
         root = edited_tree(work, name, EDITS.get(name, []))
         got = child_rows(CHILD, name, str(root), scenes, json.dumps(configs), name)
-        for g in got:
-            print(json.dumps(g), flush=True)
-        rows += got
-        out.write_text(json.dumps(rows, indent=1))
+        keep_rows(out, rows, got)
 
 
 if __name__ == "__main__":

@@ -23,12 +23,11 @@ subset of the names below, all of them by default; WxH: the image, 1920x1080 by 
 Timing probes only: the edited copies but head, no-roulette, grad-exact and wgXxY render wrong
 images. (The march that drew each sample's surface-or-phase choice, 3.10-3.13 ms on the foot
 against 3.01 for the mix, and its variants are in the history: bench/h200-hybrid-cost.)"""
-import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bake_variants import child_rows, edited_tree   # noqa: E402  (the same copies, other edits)
+from bake_variants import child_rows, edited_tree, keep_rows   # noqa: E402  (the same copies, other edits)
 # the line of lib/raymarch.glsl that reads the gradient (lib/opacity_gradient_grid.glsl)
 GRADIENT_READ = "vec3 gradient = raymarch_opacity_gradient(x);"
 EDITS = {
@@ -88,9 +87,9 @@ from app.gl.context import create_headless_context
 from app.rendering.renderer import Renderer
 from app.scene import SurfaceSpec
 ctx = create_headless_context()
+width, height = (int(v) for v in sys.argv[5].split("x"))
 for name in sys.argv[2].split(","):
     for k in (float(v) for v in sys.argv[3].split(",")):
-        width, height = (int(v) for v in sys.argv[5].split("x"))
         scene = bench_scene(name, width, height)
         scene = scene.replace(surface=SurfaceSpec(gradient_factor=k, roughness=0.4,
                                                   specular=(0.04,) * 3))
@@ -124,10 +123,7 @@ def main() -> None:
     for name in names:
         root = edited_tree(work, name, EDITS.get(name, []))
         got = child_rows(CHILD, str(root), str(root), scenes, ks, precision, size)
-        for g in got:
-            print(json.dumps(g), flush=True)
-        rows += got
-        out.write_text(json.dumps(rows, indent=1))
+        keep_rows(out, rows, got)
 
 
 if __name__ == "__main__":

@@ -11,18 +11,18 @@ high for m (less noise: less to take away). Errors: rRMSE against a REF_SPP refe
 for its noise. Cost: the path tracer's GPU ms and the wall ms of each filter run.
     python lab/experiments/self_blend_at_one_percent.py OUT.json [scene] [size] [ref_spp] [N,N]
 """
-import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / ".pkg"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from blend_at_one_percent import pt_halves, reference, timed_filter, write_row  # noqa: E402
 from radiance_probes.bench.scenes import bench_scene                      # noqa: E402
 from radiance_probes.gl.context import create_headless_context           # noqa: E402
 from radiance_probes.rendering.denoise import shared_denoiser            # noqa: E402
-from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
+from radiance_probes.rendering.metrics import corrected_rrmse, rrmse     # noqa: E402
 from radiance_probes.rendering.refine import blend_images                # noqa: E402
 from radiance_probes.rendering.renderer import Renderer                  # noqa: E402
 
@@ -36,25 +36,17 @@ def main():
     scene = bench_scene(name, size, size)
     ctx = create_headless_context()
     r = Renderer(ctx, scene)
-    halves = [r.render("pt", spp=ref_spp // 2, seed=1001 + i, samples_per_pass=64).image
-              for i in range(2)]
-    ref, noise = 0.5 * (halves[0] + halves[1]), reference_noise(*halves)
-    print(f"reference {ref_spp} spp, noise {noise:.4f}", flush=True)
+    ref, noise = reference(r, ref_spp)
     den = shared_denoiser()
     den.warm(size, size)
+    filtered = timed_filter(den)
 
     def err(img):
         return corrected_rrmse(rrmse(img, ref), noise)
 
-    def filtered(img):
-        t0 = time.perf_counter()
-        d = den(np.asarray(img, np.float32))
-        return d.image, 1e3 * (time.perf_counter() - t0)
-
     rows = []
     for n in counts:
-        ra = r.render("pt", spp=n // 2, seed=11 + n, samples_per_pass=16)
-        rb = r.render("pt", spp=n // 2, seed=5000 + n, samples_per_pass=16)
+        ra, rb = pt_halves(r, n)
         a, b = ra.image.astype(np.float64), rb.image.astype(np.float64)
         m = 0.5 * (a + b)
         d_m, ms_m = filtered(m)
@@ -71,11 +63,7 @@ def main():
                                           / np.sqrt(np.sum((m - ref) ** 2)
                                                     * np.sum((d_m - ref) ** 2))),
                "pt_ms": ra.render_ms + rb.render_ms, "filter_ms": ms_m, "judge_ms": ms_a}
-        rows.append(row)
-        print(json.dumps({k: round(v, 4) if isinstance(v, float) else v
-                          for k, v in row.items()}), flush=True)
-        out.write_text(json.dumps({"reference_spp": ref_spp, "reference_noise": noise,
-                                   "rows": rows}, indent=1))
+        write_row(out, rows, row, ref_spp, noise)
     r.release()
 
 
