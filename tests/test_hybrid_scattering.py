@@ -410,19 +410,15 @@ def _raymarch_frames_mean(ctx, scene, frames, seed, monkeypatch, roulette=True):
     HYBRID_MARCH_NO_ROULETTE (the march stops at transmittance 1e-6, as without surfaces)."""
     from radiance_probes.rendering import renderer as renderer_module
     real = renderer_module.Raymarcher
-
-    def marcher(ctx_, stage, defines=None):
-        extra = {} if roulette else {"HYBRID_MARCH_NO_ROULETTE": 1}
-        return real(ctx_, stage, {**(defines or {}), **extra})
-    monkeypatch.setattr(renderer_module, "Raymarcher", marcher)
-    r = Renderer(ctx, scene)
+    if not roulette:
+        monkeypatch.setattr(renderer_module, "Raymarcher", lambda ctx_, stage, defines=None: real(
+            ctx_, stage, {**(defines or {}), "HYBRID_MARCH_NO_ROULETTE": 1}))
     try:
-        image = r.render("raymarch", spp=frames, seed=seed).image.astype(np.float64)
-        assert r.resources.defines().get("HYBRID_SCATTERING") == 1
+        image, hybrid = _render(ctx, scene, "raymarch", spp=frames, seed=seed)
     finally:
-        r.release()
         monkeypatch.setattr(renderer_module, "Raymarcher", real)
-    return image
+    assert hybrid == 1
+    return image.astype(np.float64)
 
 
 def test_the_hybrid_raymarchers_roulette_averages_to_the_full_march(ctx, monkeypatch):
