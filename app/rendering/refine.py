@@ -54,6 +54,7 @@ from ..methods import METHODS
 from .accumulation import Accumulation, SumAccumulation
 from .denoise import choose_guides, shared_denoiser
 from .kept_means import KeptMeans, denoise_on_gl
+from .pathtracer import groups
 
 GROUP_SIDE = 16
 # The raymarcher's frames refine accumulates at most (its image is then as good as its bias lets
@@ -180,8 +181,7 @@ class BlendPass:
         blended.bind_to_image(2, read=False, write=True)
         set_uniforms(self.program, {"weight": float(w)})
         width, height = blended.size
-        self.program.run((width + GROUP_SIDE - 1) // GROUP_SIDE,
-                         (height + GROUP_SIDE - 1) // GROUP_SIDE)
+        self.program.run(*groups(width, height, (GROUP_SIDE, GROUP_SIDE)))
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
 
     def release(self) -> None:
@@ -235,7 +235,7 @@ class HalfBuffers:
         self._half_a: Accumulation | None = None        # half A alone and its filtered image,
         self._denoised_a: moderngl.Texture | None = None   # made on the first judgement
         self._denoised_a_frame: moderngl.Framebuffer | None = None
-        self.groups = ((width + GROUP_SIDE - 1) // GROUP_SIDE, (height + GROUP_SIDE - 1) // GROUP_SIDE)
+        self.groups = groups(width, height, (GROUP_SIDE, GROUP_SIDE))
         self.partials = ctx.buffer(reserve=16 * self.groups[0] * self.groups[1])
         self.sums = ctx.buffer(reserve=16)
         self._combine = compute_program(ctx, "refine_halves.comp", {"STAGE": 1})
