@@ -238,8 +238,13 @@ class SceneResources:
     def defines(self) -> dict:
         """Compile-time variants of the scene: its medium's channels (MEDIUM_CHANNELS, in every
         pass that includes lib/medium.glsl; medium_defines) and what its lights need in every
-        pass that includes lib/lights.glsl."""
+        pass that includes lib/lights.glsl; and PHASE_ISOTROPIC with surfaces where g = 0, for the
+        passes that read the probes (lib/probes.glsl: the phase function's light from band 0
+        alone; surfaces make the probes order 2, which g = 0 does not need, where k = 0 keeps
+        order 0 and the sum folds away by itself)."""
         defines = self.medium_defines()
+        if "HYBRID_SCATTERING" in defines and self.scene.anisotropy == 0.0:
+            defines = {**defines, "PHASE_ISOTROPIC": 1}
         if self.area_lights_on:
             defines = {**defines, "AREA_LIGHTS": 1}   # lib/area_lights.glsl
         if self.environment is None:

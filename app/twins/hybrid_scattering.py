@@ -39,7 +39,7 @@ def surface_probability(gradient, k: float) -> np.ndarray:
     return 1.0 - np.exp(-k * np.linalg.norm(np.asarray(gradient, np.float64), axis=-1))
 
 
-HYBRID_MARCH_ROULETTE_TRANSMITTANCE = np.float32(1e-3)
+HYBRID_MARCH_ROULETTE_TRANSMITTANCE = np.float32(2e-2)   # lib/hybrid_scattering.glsl
 
 
 def hybrid_march_roulette(transmittance, u) -> np.ndarray:

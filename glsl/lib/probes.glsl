@@ -85,8 +85,10 @@ uniform float probe_window_factors[SH_BANDS];
 #endif
 
 // Trilinearly interpolated (PROBE_VISIBILITY: visibility-weighted) SH coefficients and sun
-// transmittance at world point x; coefficients above PROBE_SH_ORDER read as 0.
-void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
+// transmittance at world point x, the coefficients (and the sun lobe) times `scale`; coefficients
+// above PROBE_SH_ORDER read as 0. probe_fetch below: scaled to radiance.
+void probe_fetch_scaled(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance,
+                        float scale)
 {
 #if PROBE_WARP
     vec3 uvw = probe_warp_uvw((x - probe_box_min) / probe_box_size);
@@ -135,16 +137,22 @@ void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
 #endif
 #if PROBE_SUN_LOBE && PROBE_GREY
     probe_fetched_lobe = vec3(texel[(PROBE_LOBE_COEFFICIENT + 1) / 4][(PROBE_LOBE_COEFFICIENT + 1) % 4]
-                              * probe_radiance_scale);
+                              * scale);
 #elif PROBE_SUN_LOBE
     for (int c = 0; c < 3; ++c) {
         int f = probe_colour_channel(PROBE_LOBE_COEFFICIENT, c);
-        probe_fetched_lobe[c] = texel[f / 4][f % 4] * probe_radiance_scale;
+        probe_fetched_lobe[c] = texel[f / 4][f % 4] * scale;
     }
 #endif
 #endif
     for (int k = 0; k < PROBE_SH_COEFFS; ++k)
-        coeffs[k] *= probe_radiance_scale;
+        coeffs[k] *= scale;
+}
+
+// The probes' radiance coefficients and sun transmittance at x (probe_fetch_scaled).
+void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
+{
+    probe_fetch_scaled(x, coeffs, sun_transmittance, probe_radiance_scale);
 }
 
 // Radiance in-scattered towards a ray travelling along d, from coefficients probe_fetch has just
@@ -152,7 +160,15 @@ void probe_fetch(vec3 x, out vec3 coeffs[SH_COUNT], out float sun_transmittance)
 // negative (SH ringing is clamped).
 vec3 probe_inscattered_from(vec3 coeffs[SH_COUNT], vec3 d)
 {
+#if defined(PHASE_ISOTROPIC)
+    // g = 0 (SceneResources.defines, with surfaces): the bands above 0 are scaled by g^l =
+    // 0, so the sum is its first term alone, band 0's factor times c_00 Y_00, in the order
+    // sh_evaluate_convolved takes it; the surfaces' bands 1 and 2 are not read into it (on an H200
+    // the foot's 1080p frame with surfaces 2.73 -> 2.59 ms: bench/h200-hybrid-cost)
+    vec3 inscattered = probe_band_factors[0] * (coeffs[0] * SH_C0);
+#else
     vec3 inscattered = sh_evaluate_convolved(coeffs, d, probe_band_factors);
+#endif
 #if PROBE_SUN_LOBE
     inscattered += probe_fetched_lobe
                    * sun_lobe_convolved(dot(d, sun_direction), sun_lobe_phase_g, PROBE_SH_ORDER);

@@ -15,8 +15,8 @@
 // both: (1 - P) times the phase function's light and P times the surface's, which reflects the
 // probes' light by surface_probe_radiance (the diffuse irradiance from the SH in closed form and a
 // specular term from the mirror direction) and the sun by the BRDF times the cosine; below
-// transmittance 1e-3 a Russian roulette (hybrid_march_roulette) ends the ray or carries it on at
-// 1e-3, unbiased, where without surfaces the march goes on to 1e-6 (HYBRID_MARCH_NO_ROULETTE, a
+// transmittance 2e-2 a Russian roulette (hybrid_march_roulette) ends the ray or carries it on at
+// 2e-2, unbiased, where without surfaces the march goes on to 1e-6 (HYBRID_MARCH_NO_ROULETTE, a
 // test build, keeps that stop: tests/test_hybrid_scattering.py). The
 // gradient is read from the baked opacity-gradient grid in one fetch where there is one
 // (lib/opacity_gradient_grid.glsl: OPACITY_GRADIENT_GRID; exact at the voxel centres, trilinear
@@ -99,9 +99,12 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
         }
         float opacity = 1.0 - exp(-sigma_t * dt);
 #if defined(HYBRID_SCATTERING)
+        // the coefficients as stored: the probes' radiance scale goes on the mixed light below,
+        // not on the 27 coefficients (every term is linear in them, and the clamps at 0 keep
+        // their sign: the same light to rounding; bench/h200-hybrid-cost)
         vec3 coeffs[SH_COUNT];
         float probe_sun;
-        probe_fetch(x, coeffs, probe_sun);
+        probe_fetch_scaled(x, coeffs, probe_sun, 1.0);
         vec3 inscattered = probe_inscattered_from(coeffs, d);
         vec3 sun_kernel = vec3(sun_phase);
         vec3 gradient = raymarch_opacity_gradient(x);
@@ -113,6 +116,7 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
             sun_kernel = mix(sun_kernel, surface_kernel(n, -d, sun_direction, surface_roughness,
                                                         surface_specular), vec3(surface_share));
         }
+        inscattered *= probe_radiance_scale;
 #else
         float probe_sun;
         vec3 inscattered = probe_inscattered(x, d, probe_sun);
