@@ -7,7 +7,9 @@ replaced by a text edit each, and times 16 raymarched frames of each bench scene
 subset of the names below, all of them by default; WxH: the image, 1920x1080 by default)
   head        the tree as it is: the gradient read from the opacity-gradient grid (one fetch),
               the phase function's and the surface's light mixed by P at every sample, the
-              roulette below transmittance 1e-3
+              roulette below transmittance 2e-2, the phase function's light from band 0 where
+              g = 0 (PHASE_ISOTROPIC), the sun's GGX kernel in one division, the probes' scale
+              on the mixed light
   no-roulette the roulette off (the stop at 1e-6, HYBRID_MARCH_NO_ROULETTE): what it saves
   grad-exact  the exact 6-lookup gradient at every sample (the raymarcher before the grid; the
               grid is still baked, outside the frames timed): head against it is what the grid saves
@@ -20,9 +22,23 @@ subset of the names below, all of them by default; WxH: the image, 1920x1080 by 
   stop-1e-3   the march stops at transmittance 1e-3, not 1e-6
   wgXxY       the raymarch pass's work groups X x Y pixels in every build (the same images;
               as shipped: 8 x 4 without surfaces, 8 x 8 with them)
-Timing probes only: the edited copies but head, no-roulette, grad-exact and wgXxY render wrong
-images. (The march that drew each sample's surface-or-phase choice, 3.10-3.13 ms on the foot
+  roulette-T  the roulette below transmittance T instead of 2e-2 (unbiased; noisier a frame the
+              higher T is)
+  unpack      the order-2 colour unpack written out, every index a constant (no faster: kept out)
+  no-iso      PHASE_ISOTROPIC off: the phase function's full SH sum where g = 0 too
+  lambda-ggx  the sun's specular kernel through the two Smith Lambdas (four divisions), as before
+  no-spec     the specular lobe never taken (F0 read as 0)
+  no-sun-kernel  the sun's surface kernel never mixed in
+  scale-early the probes' radiance scale on the 27 coefficients, not on the mixed light
+  cosine-folded  the surface's two SH sums with A_l / pi folded into the basis's constants
+  before-iso  roulette-1e-3, no-iso, lambda-ggx and scale-early: the code before those four
+Timing probes only: the edited copies but head, no-roulette, grad-exact, wgXxY, roulette-T,
+unpack, no-iso and lambda-ggx render wrong images. Each row also has a frame's noise: `frame_noise`, the rRMSE of one frame
+(seed 7: every build's rays and jitter the same) against the 64-frame image of the no-roulette
+build where the run has one (else its own), so the builds' noise a frame is compared with their
+time a frame. (The march that drew each sample's surface-or-phase choice, 3.10-3.13 ms on the foot
 against 3.01 for the mix, and its variants are in the history: bench/h200-hybrid-cost.)"""
+import json
 import sys
 from pathlib import Path
 
@@ -42,7 +58,7 @@ EDITS = {
                     "if (surface_share > 1e30) {")],
     "no-coeffs": [("glsl/lib/raymarch.glsl", """        vec3 coeffs[SH_COUNT];
         float probe_sun;
-        probe_fetch(x, coeffs, probe_sun);
+        probe_fetch_scaled(x, coeffs, probe_sun, 1.0);
         vec3 inscattered = probe_inscattered_from(coeffs, d);""", """        float probe_sun;
         vec3 inscattered = probe_inscattered(x, d, probe_sun);
         vec3 coeffs[SH_COUNT];
@@ -78,9 +94,84 @@ for gx, gy in ((8, 8), (16, 8), (8, 4), (16, 16), (32, 4), (4, 8), (16, 4), (8, 
         ("app/rendering/raymarch.py", "GROUP_WIDE = (8, 8)", f"GROUP_WIDE = ({gx}, {gy})"),
         ("app/rendering/raymarch.py", "if any(side <= 0 or TILE % side for side in shape):",
          "if False:")]
+for threshold in ("1e-3", "3e-3", "1e-2", "3e-2", "1e-1"):
+    EDITS[f"roulette-{threshold}"] = [
+        ("glsl/lib/hybrid_scattering.glsl",
+         "const float HYBRID_MARCH_ROULETTE_TRANSMITTANCE = 2e-2;",
+         f"const float HYBRID_MARCH_ROULETTE_TRANSMITTANCE = {threshold};")]
+# the order-2 colour unpack written out (every index a constant), as orders 0 and 1 have it
+EDITS["unpack"] = [("glsl/lib/probes.glsl", """#else
+    vec4 texel[PROBE_TEXTURE_COUNT];   // slot = texture number from here on""", """#elif !PROBE_GREY && PROBE_SH_ORDER == 2
+    vec4 t0 = PROBE_TEXEL(0), t1 = PROBE_TEXEL(1), t2 = PROBE_TEXEL(2), t3 = PROBE_TEXEL(3);
+    vec4 t4 = PROBE_TEXEL(4), t5 = PROBE_TEXEL(5), t6 = PROBE_TEXEL(6);
+    coeffs[0] = t0.rgb;
+    coeffs[1] = vec3(t0.a, t1.rg);
+    coeffs[2] = vec3(t1.ba, t2.r);
+    coeffs[3] = t2.gba;
+    coeffs[4] = t3.rgb;
+    coeffs[5] = vec3(t3.a, t4.rg);
+    coeffs[6] = vec3(t4.ba, t5.r);
+    coeffs[7] = t5.gba;
+    coeffs[8] = t6.rgb;
+    sun_transmittance = clamp(t6.a, 0.0, 1.0);
+#else
+    vec4 texel[PROBE_TEXTURE_COUNT];   // slot = texture number from here on""")]
+# the phase function's full SH sum where g = 0 too (PHASE_ISOTROPIC off: the same image to rounding)
+EDITS["no-iso"] = [("app/rendering/resources.py",
+                    'if "HYBRID_SCATTERING" in defines and self.scene.anisotropy == 0.0:',
+                    "if False:")]
+# the sun's specular kernel through the two Smith Lambdas (four divisions), as before it took one
+EDITS["lambda-ggx"] = [("glsl/lib/hybrid_scattering.glsl", """        float s_v = sqrt(n_v * n_v * (1.0 - a2) + a2), s_l = sqrt(n_l * n_l * (1.0 - a2) + a2);
+        float n_h = dot(n, h);
+        float t = n_h * n_h * (a2 - 1.0) + 1.0;
+        kernel += f0 * (a2 * n_l / (2.0 * PI * t * t * (n_l * s_v + n_v * s_l)));""", """        float g2 = 1.0 / (1.0 + ggx_lambda(n_v, a2) + ggx_lambda(n_l, a2));
+        kernel += f0 * (ggx_distribution(dot(n, h), a2) * g2 / (4.0 * n_v));""")]
+# timing only: the specular lobe never taken (F0 read as 0), the sun's surface kernel never mixed
+EDITS["no-spec"] = [("glsl/lib/hybrid_scattering.glsl", "    if (s > 0.0) {\n        for",
+                     "    if (s > 1e30) {\n        for"),
+                    ("glsl/lib/hybrid_scattering.glsl", "    if (s > 0.0) {\n        //",
+                     "    if (s > 1e30) {\n        //")]
+EDITS["no-sun-kernel"] = [("glsl/lib/raymarch.glsl", """            sun_kernel = mix(sun_kernel, surface_kernel(n, -d, sun_direction, surface_roughness,
+                                                        surface_specular), vec3(surface_share));""",
+                           "            sun_kernel *= 1.0 - 0.5 * surface_share;")]
+# the surface's two SH sums with the clamped cosine's bands over pi folded into the basis's
+# constants (SH order 2; the same sums reassociated)
+EDITS["cosine-folded"] = [("glsl/lib/hybrid_scattering.glsl", """vec3 surface_probe_radiance(vec3 coeffs[SH_COUNT], vec3 n, vec3 v, vec3 f0)
+{
+""", """#if SH_ORDER == 2
+vec3 sh_cosine_over_pi(vec3 c[SH_COUNT], vec3 w)
+{
+    const float K1 = 2.0 / 3.0 * SH_C1, K2 = 0.25 * SH_C2, K20 = 0.25 * SH_C20;
+    const float K22 = 0.25 * SH_C22;
+    float x = w.x, y = w.y, z = w.z;
+    return SH_C0 * c[0] + K1 * (y * c[1] + z * c[2] + x * c[3])
+           + K2 * (x * y * c[4] + y * z * c[5] + x * z * c[7])
+           + K20 * (3.0 * z * z - 1.0) * c[6] + K22 * (x * x - y * y) * c[8];
+}
+#endif
+vec3 surface_probe_radiance(vec3 coeffs[SH_COUNT], vec3 n, vec3 v, vec3 f0)
+{
+#if SH_ORDER == 2
+    float s0 = surface_specular_weight(f0);
+    vec3 folded = (1.0 - s0) * max(sh_cosine_over_pi(coeffs, n), vec3(0.0));
+    if (s0 > 0.0)
+        folded += f0 * max(sh_cosine_over_pi(coeffs, 2.0 * dot(n, v) * n - v), vec3(0.0));
+    return folded;
+#endif
+""")]
+# the probes' radiance scale on the 27 coefficients (probe_fetch), not on the mixed light, as before
+EDITS["scale-early"] = [("glsl/lib/raymarch.glsl", "probe_fetch_scaled(x, coeffs, probe_sun, 1.0);",
+                         "probe_fetch(x, coeffs, probe_sun);"),
+                        ("glsl/lib/raymarch.glsl", "        inscattered *= probe_radiance_scale;\n",
+                         "")]
+# the code before those four changes (bench/h200-hybrid-cost: timed against them in one run)
+EDITS["before-iso"] = (EDITS["roulette-1e-3"] + EDITS["no-iso"] + EDITS["lambda-ggx"]
+                       + EDITS["scale-early"])
 CHILD = r'''
 import json, sys
 from dataclasses import replace
+from pathlib import Path
+import numpy as np
 sys.path.insert(0, sys.argv[1])
 from app.bench.scenes import bench_scene
 from app.gl.context import create_headless_context
@@ -96,10 +187,15 @@ for name in sys.argv[2].split(","):
         if sys.argv[4] != "auto":   # the probes' texture format
             scene = scene.replace(probes=replace(scene.probes, precision=sys.argv[4]))
         r = Renderer(ctx, scene)
-        r.render("raymarch", spp=64, seed=1)   # compiles, and brings the GPU's clocks up
+        # compiles, and brings the GPU's clocks up; kept as the build's converged image
+        converged = r.render("raymarch", spp=64, seed=1).image
         res = r.render("raymarch", spp=32, seed=3)
+        frame = r.render("raymarch", spp=1, seed=7).image
+        stem = Path(sys.argv[1]).name + f"_{name}_{k}"
+        np.save(Path(sys.argv[1]).parent / f"{stem}_64.npy", converged)
+        np.save(Path(sys.argv[1]).parent / f"{stem}_1.npy", frame)
         grid = r.opacity_gradient_grid   # the gradient grid baked (k > 0), None before
-        print("RESULT " + json.dumps({"root": sys.argv[1], "scene": name, "k": k,
+        print("RESULT " + json.dumps({"root": sys.argv[1], "scene": name, "k": k, "stem": stem,
                                       "size": [width, height],
                                       "raymarch_ms_per_frame": res.ms_per_sample,
                                       "gradient_grid_ms": grid.cost_ms if grid else 0.0,
@@ -107,6 +203,25 @@ for name in sys.argv[2].split(","):
               flush=True)
         r.release()
 '''
+
+
+def frame_noise(work: Path, rows: list[dict]) -> None:
+    """Adds each row's `frame_noise` (its frame against the no-roulette build's 64 frames of the
+    same scene and k, else its own build's) and drops the images."""
+    import numpy as np
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    from app.rendering.metrics import rrmse
+    for row in rows:
+        if "stem" not in row:
+            continue
+        tail = row["stem"][len(Path(row["root"]).name):]
+        reference = work / f"no-roulette{tail}_64.npy"
+        if not reference.exists():
+            reference = work / f"{row['stem']}_64.npy"
+        row["frame_noise"] = rrmse(np.load(work / f"{row['stem']}_1.npy"), np.load(reference))
+        row["frame_noise_against"] = reference.stem[:-3]
+    for f in work.glob("*.npy"):
+        f.unlink()
 
 
 def main() -> None:
@@ -124,6 +239,12 @@ def main() -> None:
         root = edited_tree(work, name, EDITS.get(name, []))
         got = child_rows(CHILD, str(root), str(root), scenes, ks, precision, size)
         keep_rows(out, rows, got)
+    frame_noise(work, rows)
+    out.write_text(json.dumps(rows, indent=1))
+    for row in rows:
+        if "frame_noise" in row:
+            print(Path(row["root"]).name, row["scene"], row["k"],
+                  f"{row['raymarch_ms_per_frame']:.3f} ms", f"noise {row['frame_noise']:.5f}")
 
 
 if __name__ == "__main__":
