@@ -199,7 +199,7 @@ PRESETS = {
     "denoise-battery": BenchConfig(mode="denoise", scenes=BATTERY_SCENES, width=256, height=256,
                                    ref_spp=8192, ref_samples_per_pass=256,
                                    pt_spp=(4, 16, 64, 256, 1024), probe_frames=(4, 64),
-                                   gather_events=(2,), gather_frames=(16, 256),
+                                   gather_events=(2, 3), gather_frames=(16, 256),
                                    guided_frames=(16, 256), raymarch_frames=(16,),
                                    denoise_guide_probes=((32, 64),), denoise_probe_setting=(32, 64),
                                    denoise_gather_setting=(32, 64),
