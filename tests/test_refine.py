@@ -298,12 +298,15 @@ def test_refine_blends_by_its_judgement_where_the_denoise_switch_is_on(ctx, monk
     from radiance_probes.viewer import session as session_module
     from radiance_probes.viewer.session import REFINE_MIN_HALF_SAMPLES, RenderSession
     monkeypatch.setattr(session_module.HalfBuffers, "read_estimate",
-                        lambda self, with_ray: RefineEstimate(1.0, 0.5, self.samples))
+                        lambda self, with_ray, sums=None: RefineEstimate(1.0, 0.5, self.samples))
     weights, judged = [0.0], []
 
     def judge(*args, **kw):
+        halves, reads = args[1], args[1].reads
         got = refine_module.judged_blend(*args, **kw)   # the GL path runs
         assert got is not None and 0.0 <= got.weight <= 1.0 and math.isfinite(got.denoised)
+        # the check's combine wrote half A and its sums came along: one read, the judgement's
+        assert kw.get("sums") is not None and halves.reads == reads + 1
         judged.append(got)
         return RefineBlend(weights[0], 0.01, got.denoised, got.raymarch)
     monkeypatch.setattr(session_module, "judged_blend", judge)
@@ -367,7 +370,8 @@ def test_still_refine_with_denoise_blends_as_the_viewer_does(ctx, monkeypatch):
     from radiance_probes.rendering.refine import RefineEstimate
     from radiance_probes.rendering.renderer import Renderer
     monkeypatch.setattr(refine_module.HalfBuffers, "read_estimate",
-                        lambda self, with_raymarch: RefineEstimate(1.0, 0.5, self.samples))
+                        lambda self, with_raymarch, sums=None: RefineEstimate(1.0, 0.5,
+                                                                              self.samples))
     r = Renderer(ctx, parse_scene(SCENE))
     try:
         raw = r.render("refine", spp=16, seed=1)

@@ -189,18 +189,22 @@ class BlendPass:
 
 
 def judged_blend(renderer, halves: "HalfBuffers", raymarched: Accumulation, camera,
-                 kept: KeptMeans, guides: str = "auto") -> RefineBlend | None:
+                 kept: KeptMeans, guides: str = "auto",
+                 sums: tuple[float, float, float, int] | None = None) -> RefineBlend | None:
     """refine's judgement on the GPU: the check's sums (a 16-byte read-back) and half A written
     alone, put through the denoiser with the guides (`guides`; "auto": as choose_guides
     picks) a denoised image of `camera` gets (kept_means.denoise_on_gl: the image stays on the
     GPU), judged with the raymarcher's image against half B (STAGE 3: 16 bytes more), and
-    the blend of the module's docstring. None where the filter cannot run. The viewer
-    (app/viewer/session.py) and a still image (render_refine) both judge through this."""
+    the blend of the module's docstring. `sums`: the check's own, where its combine
+    (reduce and write_half_a, with `raymarched`) has just run, so neither is done again. None
+    where the filter cannot run. The viewer (app/viewer/session.py) and a still image
+    (render_refine) both judge through this."""
     n_a, n_b = halves.counts
     if min(n_a, n_b) <= 0:
         return None
-    halves.combine(raymarched, reduce=True, write_half_a=True)
-    sums = halves.read_sums()
+    if sums is None:
+        halves.combine(raymarched, reduce=True, write_half_a=True)
+        sums = halves.read_sums()
     names = choose_guides(guides, n_a, renderer.probes_shown())
     albedo, normal, _ = renderer.denoise_guides(names, camera=camera)
     denoiser = shared_denoiser()
@@ -350,9 +354,12 @@ class HalfBuffers:
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
         return self._read(self.judge_sums)
 
-    def read_estimate(self, with_raymarch: bool) -> RefineEstimate:
+    def read_estimate(self, with_raymarch: bool,
+                      sums: tuple[float, float, float, int] | None = None) -> RefineEstimate:
+        """The halves' error estimate from the last reduction (`sums`: already read)."""
         n_a, n_b = self.counts
-        return error_from_sums(self.read_sums(), n_a, n_b, n_a + n_b, with_raymarch)
+        return error_from_sums(self.read_sums() if sums is None else sums, n_a, n_b, n_a + n_b,
+                               with_raymarch)
 
     def release(self) -> None:
         for half in self.halves:
@@ -406,14 +413,16 @@ def render_refine(renderer, spp: int, seed: int, width: int | None = None,
                 with r.lend(half.residual, "guided", camera, seed ^ (REFINE_HALF_SEED if index else 0),
                             level0=half.level0, slot=index) as lent:
                     guided_ms += lent.add_samples(n)
-        halves.combine(ray, reduce=True)
-        estimate = halves.read_estimate(with_raymarch=True)
         enough = min(halves.counts) >= REFINE_MIN_HALF_SAMPLES
+        judge = enough and denoise_guides is not None
+        halves.combine(ray, reduce=True, write_half_a=judge)   # half A too where it is judged
+        sums = halves.read_sums()
+        estimate = halves.read_estimate(True, sums)
         guided = enough and estimate.guided < estimate.raymarch   # (False while either is NaN)
         blend = None
-        if enough and denoise_guides is not None:
+        if judge:
             kept = KeptMeans(r.ctx)
-            blend = judged_blend(r, halves, ray, camera, kept, denoise_guides)
+            blend = judged_blend(r, halves, ray, camera, kept, denoise_guides, sums)
             if blend is not None:
                 guided = blend.weight > 0.0
         image = (halves.combined if guided else ray).read()

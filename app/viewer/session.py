@@ -531,13 +531,18 @@ class RenderSession:
         if view.blending and not self.denoise.enabled:   # the switch went off: no blend to show
             view.shown, view.weight = "raymarch", 1.0
         with_ray = view.shown == "raymarch" or view.blending
-        halves.combine(view.ray if with_ray else None, reduce=check)
+        judgeable = (check and with_ray and view.frames > 1
+                     and min(halves.counts) >= REFINE_MIN_HALF_SAMPLES)
+        judge = judgeable and self._judge_due(view, stage)
+        # a judgement's half A written by the check's own combine, its sums read once
+        halves.combine(view.ray if with_ray else None, reduce=check, write_half_a=judge)
         if check:
-            view.estimate = halves.read_estimate(with_ray)
+            sums = halves.read_sums()
+            view.estimate = halves.read_estimate(with_ray, sums)
             view.frames_since_check, view.checked_stage = 0, stage
             est = view.estimate
-            if with_ray and view.frames > 1 and min(halves.counts) >= REFINE_MIN_HALF_SAMPLES:
-                blend = self._judge(view) if self._judge_due(view, stage) else None
+            if judgeable:
+                blend = self._judge(view, sums) if judge else None
                 if blend is not None:
                     if blend.weight > 0.0 and view.shown == "raymarch":
                         view.shown, view.switched_at = "guided", halves.samples
@@ -558,10 +563,11 @@ class RenderSession:
         return self.denoise.enabled and (view.judged_stage == 0
                                          or stage >= view.judged_stage + JUDGE_STAGES)
 
-    def _judge(self, view: RefineView) -> RefineBlend | None:
+    def _judge(self, view: RefineView, sums: tuple[float, float, float, int]) -> RefineBlend | None:
         """The blend of the raymarcher's image and guided denoised, judged from the halves on the
-        GPU (refine.judged_blend: half A filtered with the guides the Denoise switch gives the
-        view, one 16-byte read-back); None where the filter cannot run. Its wall time is the
+        GPU (refine.judged_blend: half A, which the check's combine wrote beside its `sums`,
+        filtered with the guides the Denoise switch gives the view; one 16-byte read-back);
+        None where the filter cannot run. Its wall time is the
         frame's denoise_ms. Judging guided by its raw noise kept the raymarcher on screen for ever
         after some bonsai edits at 1080p, and the first judgement of guided denoised (half A read
         to the host, filtered there and summed in NumPy) made hitches of 200 to 440 ms
@@ -569,7 +575,7 @@ class RenderSession:
         start = time.perf_counter()
         view.judged_stage = view.halves.samples.bit_length()
         blend = judged_blend(self.renderer, view.halves, view.ray, view.camera,
-                             self.denoise.kept())
+                             self.denoise.kept(), sums=sums)
         if blend is not None:
             view.blend = blend
             if blend.weight > 0.0:   # half A denoised stands for the view's until its next run
