@@ -2,9 +2,10 @@
 1080p)? Builds copies of the current tree with one piece of lib/raymarch.glsl's hybrid branch
 replaced by a text edit each, and times 16 raymarched frames of each bench scene at 1080p:
     python lab/experiments/hybrid_raymarch_variants.py OUT.json WORKDIR [scenes] [k,k] [precision]
-        [variants] [WxH]
+        [variants] [WxH] [method]
 (precision: the probes' texture format, "auto" as the scenes have it; variants: a comma-separated
-subset of the names below, all of them by default; WxH: the image, 1920x1080 by default)
+subset of the names below, all of them by default; WxH: the image, 1920x1080 by default; method:
+what is timed, raymarch by default, or guided, whose level 0 is a raymarch pass)
   head        the tree as it is: the gradient read from the opacity-gradient grid (one fetch),
               the phase function's and the surface's light mixed by P at every sample, the
               roulette below transmittance 2e-2, the phase function's light from band 0 where
@@ -32,6 +33,7 @@ subset of the names below, all of them by default; WxH: the image, 1920x1080 by 
   scale-early the probes' radiance scale on the 27 coefficients, not on the mixed light
   cosine-folded  the surface's two SH sums with A_l / pi folded into the basis's constants
   before-iso  roulette-1e-3, no-iso, lambda-ggx and scale-early: the code before those four
+  level0-plain  `guided`'s level 0 in the march without surfaces' 8 x 4 work groups (not 8 x 8)
 Timing probes only: the edited copies but head, no-roulette, grad-exact, wgXxY, roulette-T,
 unpack, no-iso and lambda-ggx render wrong images. Each row also has a frame's noise: `frame_noise`, the rRMSE of one frame
 (seed 7: every build's rays and jitter the same) against the 64-frame image of the no-roulette
@@ -164,6 +166,9 @@ EDITS["scale-early"] = [("glsl/lib/raymarch.glsl", "probe_fetch_scaled(x, coeffs
                          "probe_fetch(x, coeffs, probe_sun);"),
                         ("glsl/lib/raymarch.glsl", "        inscattered *= probe_radiance_scale;\n",
                          "")]
+EDITS["level0-plain"] = [("app/rendering/raymarch.py",
+                          'elif "HYBRID_SCATTERING" in defines or "GUIDED_LEVEL0" in defines:',
+                          'elif "HYBRID_SCATTERING" in defines:')]
 # the code before those four changes (bench/h200-hybrid-cost: timed against them in one run)
 EDITS["before-iso"] = (EDITS["roulette-1e-3"] + EDITS["no-iso"] + EDITS["lambda-ggx"]
                        + EDITS["scale-early"])
@@ -188,16 +193,19 @@ for name in sys.argv[2].split(","):
             scene = scene.replace(probes=replace(scene.probes, precision=sys.argv[4]))
         r = Renderer(ctx, scene)
         # compiles, and brings the GPU's clocks up; kept as the build's converged image
-        converged = r.render("raymarch", spp=64, seed=1).image
-        res = r.render("raymarch", spp=32, seed=3)
-        frame = r.render("raymarch", spp=1, seed=7).image
+        method = sys.argv[6]
+        converged = r.render(method, spp=64, seed=1).image
+        res = r.render(method, spp=32, seed=3)
+        frame = r.render(method, spp=1, seed=7).image
         stem = Path(sys.argv[1]).name + f"_{name}_{k}"
         np.save(Path(sys.argv[1]).parent / f"{stem}_64.npy", converged)
         np.save(Path(sys.argv[1]).parent / f"{stem}_1.npy", frame)
         grid = r.opacity_gradient_grid   # the gradient grid baked (k > 0), None before
         print("RESULT " + json.dumps({"root": sys.argv[1], "scene": name, "k": k, "stem": stem,
                                       "size": [width, height],
-                                      "raymarch_ms_per_frame": res.ms_per_sample,
+                                      "method": method, "ms_per_sample": res.ms_per_sample,
+                                      **({"raymarch_ms_per_frame": res.ms_per_sample}
+                                         if method == "raymarch" else {}),
                                       "gradient_grid_ms": grid.cost_ms if grid else 0.0,
                                       "gradient_grid_bytes": grid.gpu_bytes if grid else 0}),
               flush=True)
@@ -231,20 +239,21 @@ def main() -> None:
     precision = sys.argv[5] if len(sys.argv) > 5 else "auto"   # the scenes' own, rgba32f, rgba16f
     names = sys.argv[6].split(",") if len(sys.argv) > 6 and sys.argv[6] else ("head", *EDITS)
     size = sys.argv[7] if len(sys.argv) > 7 else "1920x1080"
+    method = sys.argv[8] if len(sys.argv) > 8 else "raymarch"
     unknown = set(names) - {"head", *EDITS}
     if unknown:
         raise SystemExit(f"unknown variants {sorted(unknown)}: head, {', '.join(EDITS)}")
     rows = []
     for name in names:
         root = edited_tree(work, name, EDITS.get(name, []))
-        got = child_rows(CHILD, str(root), str(root), scenes, ks, precision, size)
+        got = child_rows(CHILD, str(root), str(root), scenes, ks, precision, size, method)
         keep_rows(out, rows, got)
     frame_noise(work, rows)
     out.write_text(json.dumps(rows, indent=1))
     for row in rows:
         if "frame_noise" in row:
             print(Path(row["root"]).name, row["scene"], row["k"],
-                  f"{row['raymarch_ms_per_frame']:.3f} ms", f"noise {row['frame_noise']:.5f}")
+                  f"{row['ms_per_sample']:.3f} ms", f"noise {row['frame_noise']:.5f}")
 
 
 if __name__ == "__main__":
