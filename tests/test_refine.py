@@ -297,8 +297,8 @@ def test_refine_blends_by_its_judgement_where_the_denoise_switch_is_on(ctx, monk
     from radiance_probes.rendering.refine import RefineBlend, RefineEstimate
     from radiance_probes.viewer import session as session_module
     from radiance_probes.viewer.session import REFINE_MIN_HALF_SAMPLES, RenderSession
-    monkeypatch.setattr(session_module.HalfBuffers, "read_estimate",
-                        lambda self, with_ray, sums=None: RefineEstimate(1.0, 0.5, self.samples))
+    monkeypatch.setattr(session_module.HalfBuffers, "estimate_from",
+                        lambda self, sums, with_ray: RefineEstimate(1.0, 0.5, self.samples))
     weights, judged = [0.0], []
 
     def judge(*args, **kw):
@@ -369,9 +369,8 @@ def test_still_refine_with_denoise_blends_as_the_viewer_does(ctx, monkeypatch):
     from radiance_probes.rendering import refine as refine_module
     from radiance_probes.rendering.refine import RefineEstimate
     from radiance_probes.rendering.renderer import Renderer
-    monkeypatch.setattr(refine_module.HalfBuffers, "read_estimate",
-                        lambda self, with_raymarch, sums=None: RefineEstimate(1.0, 0.5,
-                                                                              self.samples))
+    monkeypatch.setattr(refine_module.HalfBuffers, "estimate_from",
+                        lambda self, sums, with_raymarch: RefineEstimate(1.0, 0.5, self.samples))
     r = Renderer(ctx, parse_scene(SCENE))
     try:
         raw = r.render("refine", spp=16, seed=1)

@@ -297,7 +297,7 @@ class HalfBuffers:
     def combine(self, raymarched: Accumulation | None = None, reduce: bool = False,
                 write_half_a: bool = False) -> None:
         """Writes the halves' mean into `combined` (no host transfer); with `reduce`, also the
-        estimator's sums into a 16-byte buffer that `read_estimate` reads; with `write_half_a`,
+        estimator's sums into a 16-byte buffer that `read_sums` reads; with `write_half_a`,
         half A's image alone into `half_a`."""
         n_a, n_b = self.counts
         total = n_a + n_b
@@ -354,12 +354,11 @@ class HalfBuffers:
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
         return self._read(self.judge_sums)
 
-    def read_estimate(self, with_raymarch: bool,
-                      sums: tuple[float, float, float, int] | None = None) -> RefineEstimate:
-        """The halves' error estimate from the last reduction (`sums`: already read)."""
+    def estimate_from(self, sums: tuple[float, float, float, int],
+                      with_raymarch: bool) -> RefineEstimate:
+        """The halves' error estimate from their reduction's sums (read_sums)."""
         n_a, n_b = self.counts
-        return error_from_sums(self.read_sums() if sums is None else sums, n_a, n_b, n_a + n_b,
-                               with_raymarch)
+        return error_from_sums(sums, n_a, n_b, n_a + n_b, with_raymarch)
 
     def release(self) -> None:
         for half in self.halves:
@@ -417,7 +416,7 @@ def render_refine(renderer, spp: int, seed: int, width: int | None = None,
         judge = enough and denoise_guides is not None
         halves.combine(ray, reduce=True, write_half_a=judge)   # half A too where it is judged
         sums = halves.read_sums()
-        estimate = halves.read_estimate(True, sums)
+        estimate = halves.estimate_from(sums, with_raymarch=True)
         guided = enough and estimate.guided < estimate.raymarch   # (False while either is NaN)
         blend = None
         if judge:

@@ -538,7 +538,7 @@ class RenderSession:
         halves.combine(view.ray if with_ray else None, reduce=check, write_half_a=judge)
         if check:
             sums = halves.read_sums()
-            view.estimate = halves.read_estimate(with_ray, sums)
+            view.estimate = halves.estimate_from(sums, with_ray)
             view.frames_since_check, view.checked_stage = 0, stage
             est = view.estimate
             if judgeable:
