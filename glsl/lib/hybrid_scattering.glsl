@@ -111,7 +111,8 @@ vec3 surface_kernel(vec3 n, vec3 v, vec3 l, float alpha, vec3 f0)
     if (s > 0.0) {
         // D G2 / (4 n.v) with G2 = 1 / (1 + Lambda(n.v) + Lambda(n.l)): as sqrt(1 + a2 tan^2) =
         // sqrt(c^2 (1 - a2) + a2) / c, that is D (n.l) / (2 (n.l S_v + n.v S_l)), S_c =
-        // sqrt(c^2 (1 - a2) + a2): one division where the Lambdas took four (the twin keeps them)
+        // sqrt(c^2 (1 - a2) + a2), with ggx_distribution's D written in: one division where the
+        // Lambdas and D took five (the twin keeps them)
         vec3 h = normalize(v + l);
         float a2 = alpha * alpha;
         float s_v = sqrt(n_v * n_v * (1.0 - a2) + a2), s_l = sqrt(n_l * n_l * (1.0 - a2) + a2);
