@@ -20,6 +20,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -60,6 +61,28 @@ def pt_halves(r, n: int):
             r.render("pt", spp=n // 2, seed=5000 + n, samples_per_pass=16))
 
 
+def open_run(default_counts: str) -> SimpleNamespace:
+    """The command line the one-percent experiments share (OUT.json [scene] [size] [ref_spp]
+    [N,N], each script's own arguments after) and what each sets up from it: the scene, its
+    renderer `r`, the reference and its noise, the warmed filter `den`, `filtered` (timed_filter)
+    and `err` (an image's rRMSE against the reference, corrected for its noise)."""
+    name = sys.argv[2] if len(sys.argv) > 2 else "bonsai"
+    size = int(sys.argv[3]) if len(sys.argv) > 3 else 512
+    ref_spp = int(sys.argv[4]) if len(sys.argv) > 4 else 16384
+    counts = [int(v) for v in (sys.argv[5] if len(sys.argv) > 5 else default_counts).split(",")]
+    scene = bench_scene(name, size, size)
+    r = Renderer(create_headless_context(), scene)
+    ref, noise = reference(r, ref_spp)
+    den = shared_denoiser()
+    den.warm(size, size)
+
+    def err(img):
+        return corrected_rrmse(rrmse(img, ref), noise)
+    return SimpleNamespace(out=Path(sys.argv[1]), name=name, size=size, ref_spp=ref_spp,
+                           counts=counts, scene=scene, r=r, ref=ref, noise=noise, den=den,
+                           filtered=timed_filter(den), err=err)
+
+
 def write_row(out: Path, rows: list, row: dict, ref_spp: int, noise: float) -> None:
     """Adds a row, prints it (rounded) and writes every row so far."""
     rows.append(row)
@@ -70,25 +93,13 @@ def write_row(out: Path, rows: list, row: dict, ref_spp: int, noise: float) -> N
 
 
 def main():
-    out = Path(sys.argv[1])
-    name = sys.argv[2] if len(sys.argv) > 2 else "bonsai"
-    size = int(sys.argv[3]) if len(sys.argv) > 3 else 512
-    ref_spp = int(sys.argv[4]) if len(sys.argv) > 4 else 16384
-    counts = [int(v) for v in (sys.argv[5] if len(sys.argv) > 5 else "256,512,1024").split(",")]
+    run = open_run("256,512,1024")
+    out, name, size, ref_spp, noise = run.out, run.name, run.size, run.ref_spp, run.noise
+    r, scene, ref, filtered, err = run.r, run.scene, run.ref, run.filtered, run.err
     settings = [tuple(int(x) for x in v.split(":"))
                 for v in (sys.argv[6] if len(sys.argv) > 6 else "64:128,128:64").split(",")]
     guide = sys.argv[7] if len(sys.argv) > 7 else "none"
-    scene = bench_scene(name, size, size)
-    ctx = create_headless_context()
-    r = Renderer(ctx, scene)
-    ref, noise = reference(r, ref_spp)
-    den = shared_denoiser()
-    den.warm(size, size)
-    den.warm(size, size, ("albedo",))
-    filtered = timed_filter(den)
-
-    def err(img):
-        return corrected_rrmse(rrmse(img, ref), noise)
+    run.den.warm(size, size, ("albedo",))
 
     rays = []
     for grid, walks in settings:
@@ -102,7 +113,7 @@ def main():
               flush=True)
     r.set_scene(scene)
     rows = []
-    for n in counts:
+    for n in run.counts:
         ra, rb = pt_halves(r, n)
         a, b = ra.image, rb.image
         m = 0.5 * (a + b)

@@ -35,7 +35,8 @@ what is timed, raymarch by default, or guided, whose level 0 is a raymarch pass)
   before-iso  roulette-1e-3, no-iso, lambda-ggx and scale-early: the code before those four
   level0-plain  `guided`'s level 0 in the march without surfaces' 8 x 4 work groups (not 8 x 8)
 Timing probes only: the edited copies but head, no-roulette, grad-exact, wgXxY, roulette-T,
-unpack, no-iso and lambda-ggx render wrong images. Each row also has a frame's noise: `frame_noise`, the rRMSE of one frame
+unpack, no-iso, lambda-ggx, scale-early, cosine-folded, before-iso and level0-plain render wrong
+images. Each row also has a frame's noise: `frame_noise`, the rRMSE of one frame
 (seed 7: every build's rays and jitter the same) against the 64-frame image of the no-roulette
 build where the run has one (else its own), so the builds' noise a frame is compared with their
 time a frame. (The march that drew each sample's surface-or-phase choice, 3.10-3.13 ms on the foot

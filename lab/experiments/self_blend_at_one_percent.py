@@ -18,34 +18,16 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / ".pkg"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from blend_at_one_percent import pt_halves, reference, timed_filter, write_row  # noqa: E402
-from radiance_probes.bench.scenes import bench_scene                      # noqa: E402
-from radiance_probes.gl.context import create_headless_context           # noqa: E402
-from radiance_probes.rendering.denoise import shared_denoiser            # noqa: E402
-from radiance_probes.rendering.metrics import corrected_rrmse, rrmse     # noqa: E402
+from blend_at_one_percent import open_run, pt_halves, write_row  # noqa: E402
+from radiance_probes.rendering.metrics import rrmse                      # noqa: E402
 from radiance_probes.rendering.refine import blend_images                # noqa: E402
-from radiance_probes.rendering.renderer import Renderer                  # noqa: E402
 
 
 def main():
-    out = Path(sys.argv[1])
-    name = sys.argv[2] if len(sys.argv) > 2 else "bonsai"
-    size = int(sys.argv[3]) if len(sys.argv) > 3 else 512
-    ref_spp = int(sys.argv[4]) if len(sys.argv) > 4 else 16384
-    counts = [int(v) for v in (sys.argv[5] if len(sys.argv) > 5 else "512,1024,2048").split(",")]
-    scene = bench_scene(name, size, size)
-    ctx = create_headless_context()
-    r = Renderer(ctx, scene)
-    ref, noise = reference(r, ref_spp)
-    den = shared_denoiser()
-    den.warm(size, size)
-    filtered = timed_filter(den)
-
-    def err(img):
-        return corrected_rrmse(rrmse(img, ref), noise)
-
+    run = open_run("512,1024,2048")
+    r, ref, filtered, err = run.r, run.ref, run.filtered, run.err
     rows = []
-    for n in counts:
+    for n in run.counts:
         ra, rb = pt_halves(r, n)
         a, b = ra.image.astype(np.float64), rb.image.astype(np.float64)
         m = 0.5 * (a + b)
@@ -55,7 +37,7 @@ def main():
         w_halves = float(np.sum((a - b) * u) / np.sum(u * u))
         ws = np.linspace(0.0, 1.0, 101)
         best = float(min(ws, key=lambda w: rrmse(blend_images(d_m, m, 1 - w), ref)))
-        row = {"scene": name, "size": size, "spp": n, "raw": err(m), "denoised": err(d_m),
+        row = {"scene": run.name, "size": run.size, "spp": n, "raw": err(m), "denoised": err(d_m),
                "best_weight": best, "best_blend": err(blend_images(d_m, m, 1 - best)),
                "halves_weight": w_halves,
                "halves_blend": err(blend_images(d_m, m, 1 - min(max(w_halves, 0), 1))),
@@ -63,7 +45,7 @@ def main():
                                           / np.sqrt(np.sum((m - ref) ** 2)
                                                     * np.sum((d_m - ref) ** 2))),
                "pt_ms": ra.render_ms + rb.render_ms, "filter_ms": ms_m, "judge_ms": ms_a}
-        write_row(out, rows, row, ref_spp, noise)
+        write_row(run.out, rows, row, run.ref_spp, run.noise)
     r.release()
 
 
