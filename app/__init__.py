@@ -20,9 +20,10 @@ and releases its own headless GL context. In Jupyter an Image shows inline and
 # The public names load on first use (PEP 562), so that importing a submodule (the command line,
 # a test) does not load the whole facade first.
 _PUBLIC = {
-    "DicomSeries": "dicom", "RenderSettings": "rendering.settings", "Scene": "scene",
-    "SceneError": "scene", "VolumeError": "scene_types", "DEFAULT_SPP": "_api", "METHODS": "_api",
-    "Renderer": "_api", "render": "_api", "view": "_api", "Image": "_image",
+    "DicomSeries": "io.dicom", "RenderSettings": "rendering.settings", "Scene": "io.scene_file",
+    "SceneError": "io.scene_file", "VolumeError": "scene.types", "DEFAULT_SPP": "api.render",
+    "METHODS": "api.render", "Renderer": "api.render", "render": "api.render", "view": "api.render",
+    "Image": "api.image",
 }
 __all__ = sorted([*_PUBLIC, "dicom_series"])
 
@@ -43,5 +44,5 @@ def __dir__():
 def dicom_series(path) -> list:
     """The series of a DICOM folder tree or DICOMDIR: number, uid, description, modality, size
     (columns x rows x slices) and, where one does not make a volume, why (`problem`)."""
-    from .dicom import list_series
+    from radiance_probes.io.dicom import list_series
     return list(list_series(path).series)

@@ -1,3 +1,3 @@
-from .cli import main
+from radiance_probes.cli.main import main
 
 raise SystemExit(main())

@@ -1,5 +1,5 @@
-// The filtered image given back the raw image's tile means (app/rendering/kept_means.py; NumPy
-// twin keep_block_means in app/rendering/denoise.py, with _cell_field and _apply_cells). Per
+// The filtered image given back the raw image's tile means (app/rendering/denoise/kept_means.py; NumPy
+// twin keep_block_means in app/rendering/denoise/filter.py, with _cell_field and _apply_cells). Per
 // tile, from the raw image's means and the filtered image's own (tile_means.comp, the latter of
 // the usable values): where the tile gained energy (raw < own) a scale raw / own, where it lost
 // the difference added; a signed image (signed_radiance) has the difference throughout. That

@@ -11,10 +11,10 @@ layout(local_size_x = 4, local_size_y = 4, local_size_z = 4) in;
 #include "lib/medium.glsl"
 
 // RG32F per macrocell: the smallest and largest density trilinear filtering can return inside it
-// (already widened for rounding; app/majorant.py density_range_grid).
+// (already widened for rounding; app/twins/majorant_grid.py density_range_grid).
 uniform sampler3D density_range;
 uniform ivec3 cells;
-uniform float majorant_safety;   // app/majorant.py MAJORANT_SAFETY
+uniform float majorant_safety;   // app/twins/majorant_grid.py MAJORANT_SAFETY
 // How far beyond its faces (in cells) a cell counts for the crop and clip plane: rounding may put a
 // collision a few ulps outside the cell the DDA walks (app/twins/majorant_grid.py CELL_SLACK).
 const float CELL_SLACK = 1.0 / 256.0;

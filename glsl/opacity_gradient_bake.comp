@@ -3,7 +3,7 @@
 // the voxel's centre by lib/hybrid_scattering.glsl's opacity_gradient, the same six classified_at
 // lookups the path tracer makes, so the crop, the clip plane and several channels' mixture follow
 // (and the grid is exact at its texel centres). Rebuilt when the volume, the transfer functions,
-// the channels, the crop or the clip plane change (app/rendering/opacity_gradient_grid.py).
+// the channels, the crop or the clip plane change (app/rendering/grids/opacity_gradient_grid.py).
 //
 // Stored as RGBA16F (image formats have no rgb16f; a is 0). 16 bits are enough: a half float
 // holds each component to 2^-11 relative (4.9e-4) up to 65504. |grad A| stays below about 4100 in

@@ -48,8 +48,8 @@ uniform int loop_reserve;      // suspend a path when the budget falls to this
 // memset and upload on every restart, that is every camera move in the viewer).
 uniform int restart;
 // The first pixel (column, row) of this dispatch: a large image is dispatched in bands of rows,
-// so that no dispatch runs long (app/rendering/dispatch_budget.py), and a sample longer than a
-// viewer's frame in bands of work groups over frames (app/rendering/sample_bands.py).
+// so that no dispatch runs long (app/rendering/budgets/dispatch_budget.py), and a sample longer than a
+// viewer's frame in bands of work groups over frames (app/rendering/budgets/sample_bands.py).
 uniform ivec2 tile_offset;
 
 void main()

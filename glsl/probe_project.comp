@@ -2,7 +2,7 @@
 // Fibonacci set), fold them into each probe's running mean and publish the probe textures (the
 // first eight; probe_publish.comp the others).
 // One work group per probe, one invocation per walk of the pass (at most 64 directions a pass,
-// app/rendering/probes.py DIRECTIONS_PER_PASS). Each invocation puts its walk's radiance (one array
+// app/rendering/probes/bake.py DIRECTIONS_PER_PASS). Each invocation puts its walk's radiance (one array
 // per colour) and SH basis in shared memory; then each channel (coefficient and colour) is summed
 // over the walks by one invocation, or two where the channels leave invocations idle, and its
 // running mean updated there: three barriers and no tree reduction. On an H100 (128^3 probes x

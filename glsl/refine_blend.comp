@@ -1,4 +1,4 @@
-// refine's blend with the Denoise switch on (app/rendering/refine.py, NumPy twin `blend_images`):
+// refine's blend with the Denoise switch on (app/rendering/refine/refine.py, NumPy twin `blend_images`):
 // the image shown, (1 - w) r + w D, of the raymarcher's image r and guided denoised D, with the
 // weight w its last judgement estimated. Alpha is D's (guided's sample count).
 layout(local_size_x = 16, local_size_y = 16) in;

@@ -1,4 +1,4 @@
-// The viewer's `refine` (app/rendering/refine.py, NumPy twin `half_buffer_sums`): two independent
+// The viewer's `refine` (app/rendering/refine/refine.py, NumPy twin `half_buffer_sums`): two independent
 // `guided` accumulations, the halves A and B, each level 1 (residual) plus level 0, combined into
 // the image shown, their count-weighted mean m = (nA a + nB b) / (nA + nB); and, when asked, the
 // sums over pixels and channels that estimate its error, reduced on the GPU to 16 bytes:

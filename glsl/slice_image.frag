@@ -1,4 +1,4 @@
-// A slice of the volume (app/viewer/slice_panel.py): its texture drawn into a rectangle of the
+// A slice of the volume (app/viewer/panels/slice_panel.py): its texture drawn into a rectangle of the
 // window, one texel a voxel, unfiltered (texelFetch: no sampler state can blur it); row 0 of the
 // texture at the top.
 uniform sampler2D slice_image;

@@ -1,5 +1,5 @@
-// An image's mean over each KEEP_MEANS_TILE x KEEP_MEANS_TILE-pixel tile (app/rendering/kept_means.py;
-// NumPy twin _block_means in app/rendering/denoise.py): one workgroup a tile, each invocation
+// An image's mean over each KEEP_MEANS_TILE x KEEP_MEANS_TILE-pixel tile (app/rendering/denoise/kept_means.py;
+// NumPy twin _block_means in app/rendering/denoise/filter.py): one workgroup a tile, each invocation
 // summing the pixels of the tile that fall on it, then the group's sums added in shared memory.
 // Tiles at the right and bottom edges average the pixels they have. The image is read with
 // texelFetch, so an RGBA32F accumulation and an RGB32F texture both serve (rgb: linear radiance;

@@ -1,4 +1,4 @@
-// A running-mean image tone mapped into 8-bit sRGB on the GPU, for movie frames (app/movie.py):
+// A running-mean image tone mapped into 8-bit sRGB on the GPU, for movie frames (app/movie/frames.py):
 // exposure, clip, sRGB (lib/tonemap.glsl, the twin of app/rendering/tonemap.py to_uint8). Reading
 // back 4 bytes a pixel instead of the float image, and leaving NumPy's float64 pow out, is what
 // lets a 1080p frame go to the encoder in a millisecond or two.

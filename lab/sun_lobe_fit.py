@@ -2,7 +2,7 @@
 (lab/sun_lobe_fit.comp; the lobe itself: glsl/lib/sun_lobe.glsl). An experiment's, outside the
 package (lab/experiments/experiment_sun_lobe.py): it was RenderSettings.sun_lobe_fit, built and
 measured, never the default, and left the product (docs/experiments.md). To bake with the lobe it
-chooses, set radiance_probes.rendering.probe_layout.SUN_LOBE_POWER to the fit's `power` (the
+chooses, set radiance_probes.rendering.probes.layout.SUN_LOBE_POWER to the fit's `power` (the
 experiment does).
 
 The lobe is HG_h about the sun's direction with h = g^p. The best p depends on the scene:
@@ -33,8 +33,8 @@ import numpy as np
 from radiance_probes.gl.context import is_software
 from radiance_probes.gl.shaders import compute_program, set_uniforms
 from radiance_probes.gl.timer import GpuTimer
-from radiance_probes.rendering import probe_layout
-from radiance_probes.rendering.probes import ProbeGrid
+from radiance_probes.rendering.probes import layout as probe_layout
+from radiance_probes.rendering.probes.bake import ProbeGrid
 from radiance_probes.twins.sun_lobe import basis, norm
 
 SHADER = Path(__file__).resolve().with_name("sun_lobe_fit.comp")

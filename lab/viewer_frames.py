@@ -46,7 +46,7 @@ def main(argv=None) -> int:
                    help="more arguments of `view` (e.g. --method raymarch)")
     args = p.parse_args(argv)
 
-    from radiance_probes import cli
+    from radiance_probes.cli.main import main as cli
     from radiance_probes.viewer import window as window_module
 
     records: list[dict] = []

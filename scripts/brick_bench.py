@@ -53,13 +53,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from radiance_probes.rendering.metrics import rrmse  # noqa: E402
-from radiance_probes.cli import memory_size  # noqa: E402
+from radiance_probes.cli.main import memory_size  # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
 from radiance_probes.rendering.lab_options import LabOptions  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
-from radiance_probes.scene import parse_scene  # noqa: E402
-from radiance_probes.volume import VolumeError, load_scene_volume, volume_from_array  # noqa: E402
+from radiance_probes.io.scene_file import parse_scene  # noqa: E402
+from radiance_probes.io.volume import VolumeError, load_scene_volume, volume_from_array  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -97,7 +97,7 @@ def _coords(n: int, lo: int, hi: int) -> np.ndarray:
 def write_ome_zarr(path: Path, dims, chunk: int, levels: int, value=density) -> float:
     """An OME-Zarr image of `levels` levels (uint16, axes z, y, x), written slab by slab; seconds."""
     import zarr
-    from radiance_probes.bricks import box_filtered
+    from radiance_probes.io.bricks import box_filtered
     start = time.perf_counter()
     if path.exists():
         shutil.rmtree(path)
@@ -239,7 +239,7 @@ def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
     old = out / "results.json"
     records: dict = json.loads(old.read_text()) if reuse and old.exists() else {}
     records.update({"device": describe(ctx), "settings": asdict(s), "quick": quick})
-    from radiance_probes.bricks import slot_bytes
+    from radiance_probes.io.bricks import slot_bytes
     cap = s.cap or 12 * slot_bytes(s.brick, 1, False)
     levels = max(1, int(np.log2(max(s.size // 64, 1))) + 1) if not quick else 3
     path = stores / "volume.zarr"
@@ -366,7 +366,7 @@ def _stream(ctx, records, scene, settings, cap, s):
     of OPEN_WRITE_BUDGET_S a call, a raymarched frame drawn between calls, waited for), then the
     probes and light grid baked again where the mix changed (the viewer does it in slices)."""
     from dataclasses import replace
-    from radiance_probes.rendering.progressive_open import OPEN_WRITE_BUDGET_S
+    from radiance_probes.rendering.levels.progressive_open import OPEN_WRITE_BUDGET_S
     start = time.perf_counter()
     r = Renderer(ctx, scene, settings=settings, lab=LabOptions(mixed_levels=True))
     r.render("raymarch", spp=1, seed=0)
@@ -448,8 +448,8 @@ def _progressive(ctx, records, scene, settings, cap):
     writes bricks for up to OPEN_WRITE_BUDGET_S and draws the preview's raymarched frame (the
     viewer's frame: begin, one sample, waited for, nothing read back); then the store's own first
     frame. Times from opening."""
-    from radiance_probes.rendering.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
-    from radiance_probes.volume import zarr_preview
+    from radiance_probes.rendering.levels.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
+    from radiance_probes.io.volume import zarr_preview
 
     def frame(r, seed, bake=False):
         if bake:        # a new volume: its probes and light grid first (the viewer's first frames)
@@ -492,7 +492,7 @@ def _progressive(ctx, records, scene, settings, cap):
 
 
 def _open_breakdown(r: Renderer) -> dict:
-    """Where the open's time went (app/bricks.py BrickStore.seconds, app/gl/brick_pool.py
+    """Where the open's time went (app/io/bricks.py BrickStore.seconds, app/gl/brick_pool.py
     BrickPool): wall seconds of level 0's range pass and of the shown level's, of the upload
     (upload_store, all of it) and of its texture writes (with their count); the caller's waits
     for the readers and for the assembling threads; and the seconds the readers spent reading

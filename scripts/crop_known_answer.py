@@ -25,12 +25,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from radiance_probes.clip_region import clip_region  # noqa: E402
+from radiance_probes.scene.clip_region import clip_region  # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
-from radiance_probes.scene import load_scene, parse_scene  # noqa: E402
-from radiance_probes.volume import load_scene_volume  # noqa: E402
+from radiance_probes.io.scene_file import load_scene, parse_scene  # noqa: E402
+from radiance_probes.io.volume import load_scene_volume  # noqa: E402
 
 
 def rms(a, b) -> float:

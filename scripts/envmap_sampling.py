@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
 from radiance_probes.rendering.lab_options import LabOptions  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
-from radiance_probes.scene import load_scene  # noqa: E402
+from radiance_probes.io.scene_file import load_scene  # noqa: E402
 
 root = Path(__file__).resolve().parents[1]
 scene = load_scene(sys.argv[1] if len(sys.argv) > 1 else root / "assets/scenes/sky.json")

@@ -43,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from radiance_probes.bench.records import progressive  # noqa: E402
 from radiance_probes.bench.scenes import ALL_SCENES, bench_scene  # noqa: E402
-from radiance_probes.rendering.probe_layout import resolve_sh_order  # noqa: E402
+from radiance_probes.rendering.probes.layout import resolve_sh_order  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from radiance_probes.imageio import save_exr  # noqa: E402
+from radiance_probes.frontend.imageio import save_exr  # noqa: E402
 from radiance_probes.twins.environment_map import uv_to_direction  # noqa: E402
 
 out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[1] / "assets/scenes/sky.exr"

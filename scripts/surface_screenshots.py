@@ -20,7 +20,7 @@ sys.path.insert(0, ".")
 from radiance_probes.gl.context import create_headless_context, describe   # noqa: E402
 from radiance_probes.rendering.metrics import rrmse                          # noqa: E402
 from radiance_probes.rendering.renderer import Renderer                     # noqa: E402
-from radiance_probes.scene import parse_scene                               # noqa: E402
+from radiance_probes.io.scene_file import parse_scene                               # noqa: E402
 from panel_sheet import ldr, panel_sheet                                     # noqa: E402
 
 DATA = Path("..") / "shared" / "datasets"

@@ -39,11 +39,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from radiance_probes.rendering.metrics import rrmse  # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe, is_software  # noqa: E402
-from radiance_probes.rendering.accumulation import Accumulation  # noqa: E402
+from radiance_probes.rendering.methods.accumulation import Accumulation  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
-from radiance_probes.scene import parse_scene  # noqa: E402
+from radiance_probes.io.scene_file import parse_scene  # noqa: E402
 from radiance_probes.viewer.session import RenderSession  # noqa: E402
-from radiance_probes.volume import builtin_cloud  # noqa: E402
+from radiance_probes.io.volume import builtin_cloud  # noqa: E402
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,8 @@ from panel_sheet import ldr, panel_sheet
 from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.gl.context import create_headless_context
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
-from radiance_probes.volume import Volume
+from radiance_probes.io.scene_file import parse_scene
+from radiance_probes.io.volume import Volume
 
 SIZE, PANEL = 128, 256
 out = Path(sys.argv[1] if len(sys.argv) > 1 else "screenshots")

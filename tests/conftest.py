@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-import radiance_probes.scene as _scene_module
+import radiance_probes.io.scene_file as _scene_module
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASETS = ROOT.parent / "shared" / "datasets"
@@ -44,7 +44,7 @@ def pytest_sessionfinish(session, exitstatus):
         import jsonschema
     except ImportError:   # the test extras are not installed: tests/test_scene_schema.py says so
         return
-    from radiance_probes.scene_schema import scene_schema
+    from radiance_probes.io.scene_schema import scene_schema
     validator = jsonschema.Draft202012Validator(scene_schema())
     bad = []
     for data in PARSED_SCENES.values():

@@ -23,7 +23,7 @@ def probe_textures(ctx, grid, texels: dict) -> list:
     4), probe index = i + nx (j + ny k)), trilinear, each bound to its unit (probe_unit). Release
     them when done."""
     import moderngl
-    from radiance_probes.rendering.probes import probe_unit
+    from radiance_probes.rendering.probes.bake import probe_unit
     textures = []
     for t, values in texels.items():
         tex = ctx.texture3d(grid, 4, np.ascontiguousarray(values, np.float32).tobytes(), dtype="f4")

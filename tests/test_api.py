@@ -15,8 +15,8 @@ import pytest
 from PIL import Image as PILImage
 
 import radiance_probes as rp
-from radiance_probes.scene import SceneError
-from radiance_probes.scene_types import VolumeError
+from radiance_probes.io.scene_file import SceneError
+from radiance_probes.scene.types import VolumeError
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = dict(width=24, height=20, probes={"grid": 4, "samples": 16})
@@ -51,7 +51,7 @@ def test_render_an_array_with_defaults():
 @pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.uint16, np.float32, np.float16, np.int64,
                                    bool])
 def test_any_dtype_makes_a_volume(dtype):
-    from radiance_probes._api import build_scene
+    from radiance_probes.api.render import build_scene
     data = blob(np.float64) > 100 if dtype is bool else blob(dtype)
     scene, volume = build_scene(data, None, {"spacing": (1, 1, 2)})
     assert volume.dims == (16, 14, 12) and volume.spacing == (1.0, 1.0, 2.0)
@@ -72,7 +72,7 @@ def test_bad_arrays_are_refused_plainly(data, needle):
 
 
 def test_options_are_scene_keys_and_named_when_wrong():
-    from radiance_probes._api import build_scene
+    from radiance_probes.api.render import build_scene
     scene, volume = build_scene(blob(), None, dict(colormap="viridis", width=40, albedo=0.5,
                                                    window=(100, 100), camera={"fov_y": 20}))
     assert scene.transfer_function.colormap == "viridis" and scene.camera.width == 40
@@ -230,7 +230,7 @@ def test_crop_clip_and_colour_points_are_scene_options():
     """Issue 32's scene keys pass through **scene_options: a voxel crop renders less of the
     volume, a crop beyond it or keeping nothing is refused before the GPU (naming the key), colour
     points are a transfer-function shortcut, and a colormap given later replaces them."""
-    from radiance_probes._api import build_scene
+    from radiance_probes.api.render import build_scene
     half = {"min": [0, 0, 0], "max": [8, 14, 12], "units": "voxels"}
     scene, _ = build_scene(blob(), None, {"crop": half, "clip_plane": {"normal": [0, 1, 0]},
                                           "colors": [[0, 0, 0, 1], [1, 1, 0, 0]]})

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from radiance_probes.area_lights import check_area_lights, light_geometry
+from radiance_probes.scene.area_lights import check_area_lights, light_geometry
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import SceneError, parse_scene
+from radiance_probes.io.scene_file import SceneError, parse_scene
 from radiance_probes.twins import area_lights as twin
 from radiance_probes.twins.directions import fibonacci_directions
 from glsl_harness import run_kernel
@@ -60,7 +60,7 @@ def test_the_sampler_matches_the_twin_and_its_pdf_is_the_one_a_hit_reads(ctx):
     x[-40:] = [1.6, 0.0, -0.2]          # behind the rectangle: its back face sends nothing
     u = r.uniform(0, 1, (n, 3))
     data = np.concatenate([x, u], axis=1).astype(np.float32)
-    from radiance_probes.area_lights import area_light_uniforms
+    from radiance_probes.scene.area_lights import area_light_uniforms
     out = run_kernel(ctx, SAMPLE_KERNEL, [data.ravel()], (n, 8), count=n,
                      uniforms=area_light_uniforms(scene)).astype(np.float64)
     data = data.astype(np.float64)
@@ -193,7 +193,7 @@ def _light_single_scatter(scene, volume, sub=2, steps=40, directions=20000, shad
     each point the light's radiance over the directions of its cone (a Fibonacci set), times the
     transmittance to the box's boundary and the phase function. Independent of the GLSL."""
     from transport_reference import optical_depth, pixel_rays
-    from radiance_probes.transfer import transfer_table
+    from radiance_probes.scene.transfer import transfer_table
     from radiance_probes.twins.medium import albedo_at, box_intersect, sigma_t_at
     from radiance_probes.twins.phase import phase_hg
     cam, rays = pixel_rays(scene, sub)
@@ -243,7 +243,7 @@ def test_single_scattering_of_a_near_light_matches_quadrature(ctx):
                          # inside the box, looking through the medium: no silhouettes to resolve
                          "camera": {"eye": [0.0, -0.3, 0.4], "target": [0.1, 0.2, -0.4],
                                     "fov_y": 50.0, "width": 5, "height": 5}})
-    from radiance_probes.volume import load_scene_volume
+    from radiance_probes.io.volume import load_scene_volume
     ref = _light_single_scatter(scene, load_scene_volume(scene), steps=32, directions=10000,
                                 shadow_steps=2)
     a, _ = _image(ctx, scene, "pt", 1024, seed=1)

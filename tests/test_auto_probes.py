@@ -1,10 +1,10 @@
-"""`auto` (app/rendering/auto_probes.py): the cheapest setting meeting the target, measured against
+"""`auto` (app/rendering/probes/auto.py): the cheapest setting meeting the target, measured against
 a path-traced pilot; says so when nothing meets it; leaves the renderer's scene unchanged."""
 import pytest
 
-from radiance_probes.rendering.auto_probes import choose_probes
+from radiance_probes.rendering.probes.auto import choose_probes
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 
 SCENE = {"volume": {"builtin": "cloud", "size": [20, 20, 20]}, "density_scale": 40.0,
          "camera": {"eye": [0, 0.3, 2.2], "width": 32, "height": 32}}

@@ -1,4 +1,4 @@
-"""`auto` without a search (app/rendering/auto_progressive.py): the error estimates against the
+"""`auto` without a search (app/rendering/refine/auto_progressive.py): the error estimates against the
 path tracer's two halves, checked on images whose error is known; the choice on a small scene,
 checked against a converged reference."""
 import math
@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.metrics import rrmse
-from radiance_probes.rendering.auto_progressive import (RAYMARCH_FRAMES, Halves, auto_render,
+from radiance_probes.rendering.refine.auto_progressive import (RAYMARCH_FRAMES, Halves, auto_render,
                                                         denoised_aim, estimate_denoised,
                                                         estimate_image, estimate_pt,
                                                         should_judge_denoised)
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 
 SCENE = {"volume": {"builtin": "cloud", "size": [20, 20, 20]}, "density_scale": 40.0,
          "camera": {"eye": [0, 0.3, 2.2], "width": 32, "height": 32}}
@@ -100,7 +100,7 @@ def test_auto_with_the_denoiser_returns_a_denoised_path_tracer_within_the_target
     """With denoise, the path tracer denoised is a candidate (OIDN on the CPU here): where no
     probe setting reaches the target it wins with fewer samples than the raw path tracer needs, and its
     image is within the target of a converged reference."""
-    from radiance_probes.rendering.denoise import shared_denoiser
+    from radiance_probes.rendering.denoise.filter import shared_denoiser
     if not shared_denoiser("auto").available:
         pytest.fail(f"the denoiser should load in the test environment: "
                     f"{shared_denoiser('auto').failure}")
@@ -185,7 +185,7 @@ def test_the_path_tracers_rounds_stop_near_the_samples_the_target_needs():
     """An error falling exactly as 1 / sqrt(samples): the rounds never more than double, always
     add samples, and stop within PT_MARGIN and a round's rounding of the samples the target
     needs (doubling every round overshot by up to 2x)."""
-    from radiance_probes.rendering.auto_progressive import PT_MARGIN, Z, next_pt_spp
+    from radiance_probes.rendering.refine.auto_progressive import PT_MARGIN, Z, next_pt_spp
     for target, c in ((0.02, 0.47), (0.01, 0.31), (0.05, 0.9), (0.013, 0.2)):
         need = (c / target) ** 2            # error c / sqrt(spp); se 1% of the estimate
         spp = 2
@@ -206,7 +206,7 @@ def test_the_command_line_prints_each_trial_once(tmp_path, capsys):
     printed is the image's own."""
     import json
 
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
     scene = tmp_path / "s.json"
     scene.write_text(json.dumps(SCENE))
     assert main(["render", str(scene), "--auto", "0.1", "--out", str(tmp_path / "a.png")]) == 0

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import radiance_probes.rendering.probes as probes_module
+import radiance_probes.rendering.probes.bake as probes_module
 from radiance_probes.gl.profiler import GpuProfile
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.settings import RenderSettings
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 
 CAMERA = {"eye": [0.0, 0.2, 1.3], "target": [0, 0, 0], "fov_y": 40.0, "width": 8, "height": 8}
 # Thin enough that every walk ends well inside llvmpipe's loop limit, so the one-dispatch build can
@@ -196,7 +196,7 @@ def test_sun_from_the_light_grid_has_a_small_measured_bias(ctx):
 
 def _light_grid_and_twin(r):
     """The renderer's baked light grid (z, y, x), its layout, and the NumPy twin's bake of it."""
-    from radiance_probes.rendering.light_transmittance import LIGHT_MARCH_VOXELS
+    from radiance_probes.rendering.grids.light_transmittance import LIGHT_MARCH_VOXELS
     from radiance_probes.twins.light_grid import light_grid_bake
     r.configure(light_precision="f4")     # exact float32 sums (the default 16-bit texels round them)
     r.bake_light()
@@ -210,8 +210,8 @@ def _light_grid_and_twin(r):
 def test_light_grid_size_and_layout():
     """Texels over the box follow the volume and the probe grid; the sheared layout keeps the box's
     texel spacing and widens the two other axes by the sun's shear."""
-    from radiance_probes.light_grid_layout import light_grid_layout
-    from radiance_probes.rendering.light_transmittance import light_grid_size, min_side_for_probes
+    from radiance_probes.scene.light_grid_layout import light_grid_layout
+    from radiance_probes.rendering.grids.light_transmittance import light_grid_size, min_side_for_probes
     assert light_grid_size((64, 64, 64)) == (128, 128, 128)
     assert light_grid_size((256, 256, 100)) == (256, 256, 100)
     assert light_grid_size((1024, 512, 8)) == (512, 512, 8)
@@ -239,7 +239,7 @@ def test_light_grid_size_and_layout():
     big = light_grid_layout((512, 512, 512), (1.0, 1.0, 1.0), (0.5, 0.7071, 0.5), 512)
     assert np.prod(big.size) <= (1 << 29) and big.size[1] == 725
     # columns cut into segments only where there are few of them (a GPU they cannot fill)
-    from radiance_probes.rendering.light_transmittance import column_segments
+    from radiance_probes.rendering.grids.light_transmittance import column_segments
     small = light_grid_layout((128, 128, 128), (1.0, 1.0, 1.0), (0.0, 1.0, 0.0), 512)
     assert column_segments(small, 1 << 17) == 8 and column_segments(small, 0) == 1
     assert column_segments(small, 1 << 18) == 16   # at most 128 / MIN_SEGMENT_TEXELS
@@ -275,7 +275,7 @@ def test_light_grid_in_segments_equals_whole_columns(ctx, density_scale):
     it) store what one march per column stores, up to float rounding, also baked a slab of rays at
     a time; with an opaque core (density_scale 3000) the texels past tau = 104 hold 104 either
     way, as the twin's do."""
-    from radiance_probes.rendering.light_transmittance import column_segments
+    from radiance_probes.rendering.grids.light_transmittance import column_segments
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [10, 8, 12]},
                                    "density_scale": density_scale, "camera": CAMERA,
                                    "light": {"direction": [0.3, 0.8, -0.52]}}))
@@ -351,7 +351,7 @@ def test_light_grid_lookup_agrees_with_a_march_from_each_point(ctx):
     """The sheared grid read at random points of a cloud against the shadow march from each point
     (lib/shadow_march.glsl's twin): the sun's transmittance agrees to the grid's interpolation
     error (measured 0.63% relative RMS at these sizes), for a sun off every axis."""
-    from radiance_probes.rendering.light_transmittance import LIGHT_MARCH_VOXELS
+    from radiance_probes.rendering.grids.light_transmittance import LIGHT_MARCH_VOXELS
     from radiance_probes.twins.light_grid import light_grid_lookup
     from radiance_probes.twins.shadow_march import sun_optical_depth_march
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [16, 12, 14]},
@@ -379,7 +379,7 @@ def test_probes_sun_from_the_light_grid_or_a_march(ctx):
     """The probes' own sun (channel 27, probe_sun.comp): with the walks' sun from the light grid it
     is the grid's lookup at each probe (its twin), otherwise the march from the probe (its twin);
     the two agree to the grid's interpolation error (as the raymarcher's sun does)."""
-    from radiance_probes.rendering.light_transmittance import LIGHT_MARCH_VOXELS
+    from radiance_probes.rendering.grids.light_transmittance import LIGHT_MARCH_VOXELS
     from radiance_probes.twins.light_grid import light_grid_lookup
     from radiance_probes.twins.shadow_march import sun_optical_depth_march
     from radiance_probes.viewer.probe_view import probe_centres
@@ -519,7 +519,7 @@ def test_progress_sums_on_the_gpu_are_the_probes_column_sums(ctx):
 
 
 def test_accumulation_clears_on_the_gpu_and_leaves_the_framebuffer_alone(ctx):
-    from radiance_probes.rendering.accumulation import Accumulation
+    from radiance_probes.rendering.methods.accumulation import Accumulation
     acc = Accumulation(ctx, 5, 3)
     other = ctx.simple_framebuffer((2, 2))
     try:

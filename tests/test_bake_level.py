@@ -1,4 +1,4 @@
-"""RenderSettings.bake_level (app/rendering/bake_level.py): the probes' bake walks a coarser level
+"""RenderSettings.bake_level (app/rendering/probes/bake_level.py): the probes' bake walks a coarser level
 than the image. Level 0 is the bake as it was; a level whose medium equals the level shown gives
 the same probes from the same seeds; the coarse level is what coarser() makes; changing the level
 re-bakes and a camera move does not; what the image reads directly (the path tracer, the
@@ -11,14 +11,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from radiance_probes.bricks import box_filtered
-from radiance_probes.rendering.bake_level import coarse_volume, level_dims, spacing_level
-from radiance_probes.rendering.probes import ProbeGrid
+from radiance_probes.io.bricks import box_filtered
+from radiance_probes.rendering.probes.bake_level import coarse_volume, level_dims, spacing_level
+from radiance_probes.rendering.probes.bake import ProbeGrid
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.settings import RenderSettings
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.twins.majorant_grid import density_range_grid, macrocell_counts
-from radiance_probes.volume import VolumeError, volume_from_array
+from radiance_probes.io.volume import VolumeError, volume_from_array
 
 SCENE = {"volume": {"builtin": "cloud", "size": [16, 16, 16]}, "density_scale": 30.0,
          "albedo": 0.8, "max_bounces": 8, "camera": {"width": 16, "height": 12},

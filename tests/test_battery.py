@@ -12,7 +12,7 @@ from radiance_probes.bench.scenes import BATTERY_SCENES, battery_scene
 from radiance_probes.gl.checks import check_sites
 from radiance_probes.gl.shaders import compute_program, set_uniforms
 from radiance_probes.gl.dispatch_log import DispatchLog
-from radiance_probes.rendering.dispatch_budget import DISPATCH_BOUND_MS, device_slowdown
+from radiance_probes.rendering.budgets.dispatch_budget import DISPATCH_BOUND_MS, device_slowdown
 from radiance_probes.rendering.renderer import METHODS, Renderer
 
 

@@ -177,7 +177,7 @@ def test_tiny_benchmark_writes_every_field(ctx, tmp_path):
 def test_records_after_a_slow_speed_check_are_counted(tmp_path):
     """The report counts the records taken after a speed check slower than the scene's fastest
     by more than SPEED_CHECK_SLOWER (a shared or clocked-down GPU), and only those."""
-    from radiance_probes.rendering.ceiling import SPEED_CHECK_SLOWER
+    from radiance_probes.rendering.budgets.ceiling import SPEED_CHECK_SLOWER
     def rec(check):
         return {"scene": "s", "method": "pt", "rrmse": 0.1, "total_ms": 1.0, "spp": 1,
                 "frame_ms": 1.0, "bake_ms": 0.0, "probe_grid": None, "probe_samples": None,
@@ -299,7 +299,7 @@ def test_progressive_snapshots_are_the_images_read_between_dispatches(ctx, metho
     images are the ones a read-back after each snapshot's dispatches gives."""
     from radiance_probes.bench.records import progressive
     from radiance_probes.rendering.renderer import Renderer
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.io.scene_file import parse_scene
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [12, 10, 8]},
                                    "camera": {"eye": [0, 0.2, 1.3], "target": [0, 0, 0],
                                               "fov_y": 40.0, "width": 12, "height": 10},
@@ -341,7 +341,7 @@ def test_gpu_clock_log_summarises_what_nvidia_smi_printed(tmp_path):
 
 def test_sh_orders_argument_names_what_is_wrong():
     import argparse
-    from radiance_probes.cli import sh_orders_arg
+    from radiance_probes.cli.main import sh_orders_arg
     assert sh_orders_arg("2,3,4,3") == (2, 3, 4)
     for bad in ("", "5", "2,x", "-1"):
         with pytest.raises(argparse.ArgumentTypeError, match="SH orders 0 to 4"):
@@ -350,7 +350,7 @@ def test_sh_orders_argument_names_what_is_wrong():
 
 def test_auto_targets_argument_names_what_is_wrong():
     import argparse
-    from radiance_probes.cli import auto_targets_arg
+    from radiance_probes.cli.main import auto_targets_arg
     assert auto_targets_arg("0.05,0.02,0.05") == (0.05, 0.02)
     for bad in ("", "0", "1.5", "0.05,x", "-0.1"):
         with pytest.raises(argparse.ArgumentTypeError, match=r"targets in \(0, 1\)"):
@@ -409,9 +409,9 @@ def test_merged_runs_keep_every_runs_clock_log(tmp_path):
 def test_the_dependent_chain_marches_the_same_steps_as_the_ceiling(ctx):
     """The walk latency floor (DEPENDENT_CHAIN in glsl/ceiling_march.comp) reads the same sigma_t
     at the same points as the throughput ceiling; only the order of waiting differs."""
-    from radiance_probes.rendering.ceiling import measure_ceiling
+    from radiance_probes.rendering.budgets.ceiling import measure_ceiling
     from radiance_probes.rendering.renderer import Renderer
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.io.scene_file import parse_scene
     r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [16, 12, 14]},
                                    "density_scale": 50.0}))
     plain = measure_ceiling(r, rays=256, steps=32, repeats=1)
@@ -462,12 +462,12 @@ def test_the_benchs_defaults_are_the_modules():
     """BenchConfig's speed_check_rays, auto_pilot_side and auto_pilot_frames default to
     ceiling.SPEED_CHECK_RAYS and auto_probes' PILOT_SIDE and PILOT_FRAMES (config.py writes the
     numbers out so that it imports no GL): the GPU presets measure what the records did."""
-    from radiance_probes.rendering.ceiling import SPEED_CHECK_RAYS
+    from radiance_probes.rendering.budgets.ceiling import SPEED_CHECK_RAYS
     from radiance_probes.bench.config import PRESETS
     assert BenchConfig().speed_check_rays == SPEED_CHECK_RAYS
     assert PRESETS["gpu"].speed_check_rays == PRESETS["interact"].speed_check_rays == SPEED_CHECK_RAYS
     assert PRESETS["interact-quick"].speed_check_rays < SPEED_CHECK_RAYS
-    from radiance_probes.rendering.auto_probes import PILOT_FRAMES, PILOT_SIDE
+    from radiance_probes.rendering.probes.auto import PILOT_FRAMES, PILOT_SIDE
     assert (BenchConfig().auto_pilot_side, BenchConfig().auto_pilot_frames) == (PILOT_SIDE,
                                                                                PILOT_FRAMES)
 

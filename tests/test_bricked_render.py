@@ -118,8 +118,8 @@ def _channels_zarr(tmp_path) -> str:
 def test_bricked_zarr_store_of_channels_renders_the_same_image(ctx, tmp_path, method):
     """A Zarr store of 3 channels (one switched off, one in its own window) read brick by brick
     renders what the whole loader's volume renders in one texture."""
-    from radiance_probes.bricks import LazyData
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.io.bricks import LazyData
+    from radiance_probes.io.scene_file import parse_scene
     scene = parse_scene({
         "volume": {"path": _channels_zarr(tmp_path)},
         "channels": [{"index": 0}, {"index": 1, "value_range": [0, 2000]},

@@ -1,4 +1,4 @@
-"""Bricked volumes from a store (app/bricks.py): a Zarr array read brick by brick, constant bricks
+"""Bricked volumes from a store (app/io/bricks.py): a Zarr array read brick by brick, constant bricks
 read once and never uploaded (counted), the majorant grid from the bricks' ranges; the memory cap
 (a coarser level, with a note; a cap below one brick refused); a volume longer than
 GL_MAX_3D_TEXTURE_SIZE bricked, not refused."""
@@ -9,15 +9,15 @@ import re
 import numpy as np
 import pytest
 
-from radiance_probes.bricks import ArraySource, BrickStore, LazyData, box_filtered, constant_bricks
+from radiance_probes.io.bricks import ArraySource, BrickStore, LazyData, box_filtered, constant_bricks
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.settings import RenderSettings
-from radiance_probes.rendering.volume_placement import place_volume
-from radiance_probes.scene import parse_scene
-from radiance_probes.scene_types import VolumeSpec
+from radiance_probes.rendering.levels.volume_placement import place_volume
+from radiance_probes.io.scene_file import parse_scene
+from radiance_probes.scene.types import VolumeSpec
 from radiance_probes.twins.brick_pool import CONSTANT, brick_ranges, pack
 from radiance_probes.twins.majorant_grid import brick_density_range_grid, density_range_grid
-from radiance_probes.volume import VolumeError, load_scene_volume, load_volume, volume_from_array
+from radiance_probes.io.volume import VolumeError, load_scene_volume, load_volume, volume_from_array
 
 BRICK = 8
 CAMERA = {"eye": [0.0, 0.3, 2.2], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y": 35.0,
@@ -183,7 +183,7 @@ def _sphere_scene():
 
 
 def test_cap_shows_a_coarser_level_and_says_so(ctx):
-    from radiance_probes.bricks import slot_bytes
+    from radiance_probes.io.bricks import slot_bytes
     one = slot_bytes(BRICK, 1, False)
     r = Renderer(ctx, _sphere_scene(), settings=RenderSettings(brick_size=BRICK,
                                                                volume_memory_bytes=12 * one))
@@ -292,7 +292,7 @@ def test_reads_in_processes_equal_threads(tmp_path, monkeypatch, channels):
     """A large Zarr store is read in processes (Zarr decodes under the GIL): the same ranges and
     the same bricks with aprons as the threads' reads, each brick counted as often (one channel,
     and several read as [z, y, x, c])."""
-    import radiance_probes.bricks as bricks
+    import radiance_probes.io.bricks as bricks
     raw = _blob() if channels == 1 else np.moveaxis(_channel_blobs(channels), 0, -1)
     path = (_zarr(tmp_path, raw) if channels == 1
             else _zarr_channels(tmp_path, _channel_blobs(channels)))
@@ -460,7 +460,7 @@ def test_bricked_ome_zarr_levels_read_the_same_channels_with_the_same_ranges(ctx
     loader's volume (a time step of a series where the scene gives the channels' ranges); its
     coarser level reads the same channels, normalised by level 0's ranges (each channel's
     histogram from it); a cap that shows level 1 uploads those densities, with its channels."""
-    from radiance_probes.rendering.volume_placement import level_bytes
+    from radiance_probes.rendering.levels.volume_placement import level_bytes
     data = _channel_blobs(3)[[0, 2]].astype(np.uint16)
     scene = {}
     if axes == "tczyx":
@@ -503,7 +503,7 @@ def _refused(load) -> str:
 def test_bricked_zarr_store_refuses_channels_as_the_whole_loader_does(tmp_path):
     """More than 4 channels without a choice, a channel the store lacks, more than 4 chosen, and
     a channel of one value with no range: refused, each message the whole loader's."""
-    from radiance_probes.scene_types import ChannelSpec
+    from radiance_probes.scene.types import ChannelSpec
     data = _channel_blobs(6)
     data[4] = 7
     path = _zarr_channels(tmp_path, data)
@@ -549,7 +549,7 @@ class _Blocks:
 
 
 def _processes(monkeypatch):
-    import radiance_probes.bricks as bricks
+    import radiance_probes.io.bricks as bricks
     monkeypatch.setattr(bricks, "PROCESS_READ_VOXELS", 1)
     monkeypatch.setattr(bricks, "reader_processes", lambda: 2)
     blocks = _Blocks()
@@ -563,7 +563,7 @@ def _processes(monkeypatch):
 def test_upload_from_processes_maps_there_and_moves_bricks_through_shared_memory(
         ctx, tmp_path, monkeypatch, dtype, value_range):
     """A store read in processes: each reader maps its bricks to densities (uint16 and uint8 in
-    float32 arithmetic, app/volume.py float32_exact; float32 data with a fractional range in
+    float32 arithmetic, app/io/volume.py float32_exact; float32 data with a fractional range in
     float64, as normalise does) and hands them over in shared memory blocks, every one unlinked
     afterwards; the atlas equals the whole loader's volume bit for bit (tolerance 0: the float32
     mapping is exact there), the reads are counted as the threads' are, and the atlas is written
@@ -691,7 +691,7 @@ def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
     free space: none here, or room for the bricks of the layer reading most) come back from the
     processes pickled, as before: the same bricks with aprons as the threads' reads, each read
     once more (those of one value not at all)."""
-    import radiance_probes.bricks as bricks
+    import radiance_probes.io.bricks as bricks
     data = _blob()
     varied = _varied(data)
     read_layers = int(np.count_nonzero(varied.any(axis=(1, 2))))    # the layers the upload reads
@@ -721,7 +721,7 @@ def test_bricked_time_series_is_normalised_by_the_whole_series_range(tmp_path, c
     whole series' least and largest value, read brick by brick as read whole (each step's range
     differs here, so a step's own range would give other densities)."""
     import zarr
-    from radiance_probes import volume as volume_module
+    from radiance_probes.io import volume as volume_module
     r = np.random.default_rng(5)
     shape = (3, channels, 16, 12, 20) if channels > 1 else (3, 16, 12, 20)
     data = r.integers(100, 1000, shape).astype(np.uint16)
@@ -792,7 +792,7 @@ def _sparse_store(path, raw: np.ndarray, fill: int, zarr_format: int, chunk: int
 def _bricks_with_stored_chunks(raw: np.ndarray, fill: int, stored: int) -> np.ndarray:
     """[bz, by, bx] 1 where a brick of BRICK voxels overlaps a stored chunk (or shard) of
     `stored` voxels holding a value other than the fill value in a channel, else 0: the bricks
-    a read of a store Zarr wrote so must read (counted voxel by voxel, not as app/bricks.py
+    a read of a store Zarr wrote so must read (counted voxel by voxel, not as app/io/bricks.py
     does)."""
     off = raw != fill
     if off.ndim == 4:
@@ -823,7 +823,7 @@ def test_unwritten_chunks_are_not_read_and_read_as_the_fill_value(
     value; the ranges, the constant bricks, the pool's plan and the upload are those of the
     plain read (the same store with its listing failing: every brick read, as before) and of the
     whole loader's volume, packed by the twin."""
-    import radiance_probes.bricks as bricks
+    import radiance_probes.io.bricks as bricks
     raw = _sparse(fill, channels)
     path = _sparse_store(tmp_path / "sparse.zarr", raw, fill, zarr_format, chunk, shard,
                          separator)
@@ -859,8 +859,8 @@ def test_unwritten_bricks_of_a_time_step_and_the_channels_shown(tmp_path):
     channels shown (in the scene's order, not the file's) was never written; the range pass
     reads the others alone and gives the raw ranges of the step's voxels."""
     import zarr
-    from radiance_probes.bricks import ZarrSource
-    from radiance_probes.volume import normalise
+    from radiance_probes.io.bricks import ZarrSource
+    from radiance_probes.io.volume import normalise
     data = np.zeros((2, 4, 24, 24, 24), np.uint16)         # [t, c, z, y, x]
     data[1, 2, 0:8, 0:8, 0:8] = 5                          # brick (0, 0, 0): step 1, channel 2
     data[1, 1, 8:16, 0:8, 0:8] = 6                         # brick (1, 0, 0): step 1, channel 1
@@ -900,8 +900,8 @@ def test_a_store_not_listed_is_read_whole(tmp_path):
     store the listing does not know), every brick is read, as before."""
     import os
     import zarr
-    from radiance_probes.bricks import ZarrSource, stored_chunks
-    from radiance_probes.volume import normalise
+    from radiance_probes.io.bricks import ZarrSource, stored_chunks
+    from radiance_probes.io.volume import normalise
     raw = _sparse(0, 1)
     path = _sparse_store(tmp_path / "linked.zarr", raw, 0, 3, 8, None, "/")
     array = zarr.open(str(path), mode="r")
@@ -949,7 +949,7 @@ def test_unwritten_chunks_of_a_non_finite_fill_value(tmp_path):
 def test_bricks_overlapping_chunks_of_any_size():
     """bricks_overlapping against each brick's voxels, chunks smaller and larger than a brick,
     aligned or not, partial at the far faces."""
-    from radiance_probes.bricks import bricks_overlapping
+    from radiance_probes.io.bricks import bricks_overlapping
     rng = np.random.default_rng(3)
     for _ in range(100):
         shape = tuple(int(n) for n in rng.integers(1, 30, 3))

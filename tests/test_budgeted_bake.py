@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 
 SCENE = {"volume": {"builtin": "cloud", "size": [8, 8, 8]}, "density_scale": 30.0,
          "albedo": 0.8, "camera": {"width": 24, "height": 16},

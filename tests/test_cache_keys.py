@@ -10,8 +10,8 @@ import pytest
 
 from radiance_probes.rendering import cache_keys as ck
 from radiance_probes.rendering.settings import RenderSettings
-from radiance_probes.scene import default_scene
-from radiance_probes.scene_types import (AreaLightSpec, BookmarkSpec, ChannelSpec, ClipPlaneSpec,
+from radiance_probes.io.scene_file import default_scene
+from radiance_probes.scene.types import (AreaLightSpec, BookmarkSpec, ChannelSpec, ClipPlaneSpec,
                                          CropSpec, EnvironmentMapSpec, Scene, ViewerSpec)
 
 SPLIT = ("probes", "light")   # the records whose fields the groups name one by one

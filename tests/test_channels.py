@@ -10,15 +10,15 @@ import math
 import numpy as np
 import pytest
 
-from radiance_probes.channels import ChannelTables, channel_uniforms
+from radiance_probes.scene.channels import ChannelTables, channel_uniforms
 from radiance_probes.gl.textures import TransferTable, volume_texture
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
-from radiance_probes.scene_types import ChannelSpec, SceneError, TransferFunctionSpec, VolumeError
+from radiance_probes.io.scene_file import parse_scene
+from radiance_probes.scene.types import ChannelSpec, SceneError, TransferFunctionSpec, VolumeError
 from radiance_probes.twins.majorant_grid import channel_density_ranges, macrocell_counts, majorant_grid
 from radiance_probes.twins.medium import albedo_at, classified_at, density_at, mixed_transfer_at, sigma_t_at
 from radiance_probes.twins.visible_region import visible_region
-from radiance_probes.volume import Volume, load_scene_volume
+from radiance_probes.io.volume import Volume, load_scene_volume
 from glsl_harness import run_kernel
 
 DENSITY_SCALE = 23.0
@@ -105,7 +105,7 @@ def test_mixture_matches_its_twin(ctx, from_buffer):
     assert np.all(np.abs(out[inside, 8] - twin_sigma) <= DENSITY_SCALE * (2 * slope * 2e-2 + 1e-5))
     # the SPEC's formula, written out: sigma_t the sum, albedo the sigma_t-weighted mix
     a = [tables.tables[c] for c in (0, 2)]
-    from radiance_probes.transfer import lookup
+    from radiance_probes.scene.transfer import lookup
     rows = [lookup(t, d[inside][:, c]) for t, c in zip(a, (0, 2))]
     sigma = sum(DENSITY_SCALE * r[:, 3] for r in rows)
     np.testing.assert_allclose(out[inside, 8], sigma, rtol=2e-5, atol=1e-4)
@@ -427,7 +427,7 @@ def test_channel_refusals_name_the_problem(tmp_path):
     two = parse_scene({"volume": {**spec, "path": str(tmp_path / "two.npy")},
                        "transfer_function": {"colormap": "grey"}})
     with pytest.raises(SceneError, match="the volume has 2 channels; give each its own"):
-        from radiance_probes.channels import effective_channels
+        from radiance_probes.scene.channels import effective_channels
         effective_channels(two, load_scene_volume(two).channel_count)
 
 
@@ -444,7 +444,7 @@ def test_channel_windows_and_defaults(tmp_path):
                                atol=1e-6)
     assert v.channel_ranges[1] == (2000.0, 4000.0)
     # defaults: a file's channels each in its own colour
-    from radiance_probes.channels import effective_channels
+    from radiance_probes.scene.channels import effective_channels
     plain = parse_scene({"volume": {"path": str(tmp_path / "v.npy"), "axes": "czyx"}})
     shown = effective_channels(plain, load_scene_volume(plain).channel_count)
     assert len(shown) == 3 and len({c.transfer_function.colors for c in shown}) == 3
@@ -454,7 +454,7 @@ def test_channel_windows_and_defaults(tmp_path):
 def test_adaptive_layout_and_probe_view_see_every_channel_shown(ctx, tmp_path):
     """The adaptive layout's extinction indicator is the channels' summed sigma_t, and the
     viewer's probe selection counts a probe visible where any channel shown is."""
-    from radiance_probes.rendering.probe_planes import extinction_field
+    from radiance_probes.rendering.probes.planes import extinction_field
     from radiance_probes.viewer.probe_view import visible_cells as probe_cells
     data = _blobs(shape=(10, 12, 14))
     scene = parse_scene(_scene_file(tmp_path, data, THREE, **{
@@ -476,7 +476,7 @@ def test_adaptive_layout_and_probe_view_see_every_channel_shown(ctx, tmp_path):
 
 
 def test_colour_bar_and_transfer_function_options_refuse_channels(tmp_path, capsys):
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
     np.save(tmp_path / "v.npy", _blobs(shape=(6, 6, 6)))
     scene = {"volume": {"path": str(tmp_path / "v.npy"), "axes": "czyx"},
              "camera": {"width": 8, "height": 8}}
@@ -509,7 +509,7 @@ def test_channels_known_answer_script_quick(tmp_path):
 def test_volume_from_an_array_in_memory():
     """The Python API's way in: a NumPy array with its axes named, channels and time steps as
     from a file, refused where the axes do not fit."""
-    from radiance_probes.volume import volume_from_array
+    from radiance_probes.io.volume import volume_from_array
     data = _blobs(shape=(6, 7, 8))
     v = volume_from_array(data, axes="czyx")
     assert v.channel_count == 3 and v.dims == (8, 7, 6)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from radiance_probes.cli import main
+from radiance_probes.cli.main import main
 
 
 @pytest.fixture
@@ -202,7 +202,7 @@ def test_image_beyond_the_device_is_one_line_before_the_scene_is_uploaded(scene,
 def test_renderer_options_are_checked(ctx):
     from radiance_probes.rendering.renderer import Renderer
     from radiance_probes.rendering.settings import RenderSettings
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.io.scene_file import parse_scene
     scene = parse_scene({"volume": {"builtin": "sphere", "size": [4, 4, 4]},
                          "camera": {"width": 4, "height": 4}})
     for bad in (0, -1.0, math.nan, math.inf, "0.5", True):
@@ -233,15 +233,15 @@ def test_a_failed_write_after_the_render_says_where_the_image_went(scene, tmp_pa
     """The output was writable when checked but not when the render ended (here: a save that
     fails for the asked path): the image is written to the temporary folder instead, the error
     line says where, and the exit is non-zero."""
-    import radiance_probes.imageio
-    real_save_png = radiance_probes.imageio.save_png
+    import radiance_probes.frontend.imageio
+    real_save_png = radiance_probes.frontend.imageio.save_png
     wanted = tmp_path / "o.png"
 
     def failing_save_png(path, image, exposure=1.0):
         if Path(path) == wanted:
             raise OSError(28, "No space left on device")
         return real_save_png(path, image, exposure)
-    monkeypatch.setattr(radiance_probes.imageio, "save_png", failing_save_png)
+    monkeypatch.setattr(radiance_probes.frontend.imageio, "save_png", failing_save_png)
     monkeypatch.setattr("tempfile.tempdir", str(tmp_path / "rescue"))
     (tmp_path / "rescue").mkdir()
     rc, lines, out = run(["render", scene, "--out", wanted, "--spp", 1, "--linear",

@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from radiance_probes.cli import build_parser, main
-from radiance_probes.frontend import apply_options, scene_from_arg, set_value
-from radiance_probes.scene_flags import FLAGS, flag_for, with_flag
-from radiance_probes.volume import load_scene_volume
+from radiance_probes.cli.main import build_parser, main
+from radiance_probes.frontend.common import apply_options, scene_from_arg, set_value
+from radiance_probes.scene.flags import FLAGS, flag_for, with_flag
+from radiance_probes.io.volume import load_scene_volume
 
 APP = Path(__file__).resolve().parents[1] / "app"
 # A scene key as a message names it: dotted, from one of the scene's objects or lists.
@@ -61,7 +61,7 @@ def test_every_flag_of_every_command_has_help_text():
 
 
 def test_the_flags_the_messages_name_exist():
-    """Every flag app/scene_flags.py names exists on render; the scene-key flags and --set on
+    """Every flag app/scene/flags.py names exists on render; the scene-key flags and --set on
     render, view and animate alike."""
     commands = subparsers()
     for key, (flag, _) in FLAGS.items():
@@ -138,7 +138,7 @@ def test_every_message_that_names_a_scene_key_names_the_flag_that_sets_it():
     bad = []
     for path in sorted(APP.rglob("*.py")):
         rel = path.relative_to(APP).as_posix()
-        if rel.startswith(("bench/", "viewer/")) or rel in ("scene_schema.py", "scene_flags.py"):
+        if rel.startswith(("bench/", "viewer/")) or rel in ("io/scene_schema.py", "scene/flags.py"):
             continue
         bad += [f"app/{rel}:{line}: {text!r}" for line, text in unflagged_messages(path.read_text())]
     assert not bad, "messages naming a scene key but no flag:\n" + "\n".join(bad)
@@ -236,7 +236,7 @@ def test_raw_flags_read_a_raw_file_its_name_does_not_describe(tmp_path):
 
 
 def test_colormap_grey_and_gray_are_a_grey_ramp():
-    from radiance_probes.transfer import transfer_table
+    from radiance_probes.scene.transfer import transfer_table
     for name in ("grey", "gray"):
         table = transfer_table(scene_of("--colormap", name).transfer_function)
         assert np.allclose(table[:, 0], table[:, 1]) and np.allclose(table[:, 1], table[:, 2])

@@ -1,4 +1,4 @@
-"""Clinical CT presets (app/clinical_presets.py): each expands to a valid transfer function that
+"""Clinical CT presets (app/scene/clinical_presets.py): each expands to a valid transfer function that
 is its curve over Hounsfield units exactly, cut to the volume's window; the scene, the command
 line and the viewer's state pick them; a CT opens with one; a CT window or preset on data that is
 not in Hounsfield units is refused with a message that says so (it used to render an opaque box)."""
@@ -9,12 +9,12 @@ import argparse
 import numpy as np
 import pytest
 
-from radiance_probes.clinical_presets import (CLINICAL_PRESETS, check_hounsfield, expand,
+from radiance_probes.scene.clinical_presets import (CLINICAL_PRESETS, check_hounsfield, expand,
                                               hounsfield_problem, opening_scene)
-from radiance_probes.frontend import OptionError, apply_options, scene_from_arg
-from radiance_probes.scene import SceneError, TransferFunctionSpec, parse_scene, scene_to_dict
-from radiance_probes.transfer import lookup, transfer_table
-from radiance_probes.volume import VolumeError, load_scene_volume
+from radiance_probes.frontend.common import OptionError, apply_options, scene_from_arg
+from radiance_probes.io.scene_file import SceneError, TransferFunctionSpec, parse_scene, scene_to_dict
+from radiance_probes.scene.transfer import lookup, transfer_table
+from radiance_probes.io.volume import VolumeError, load_scene_volume
 from test_volume_formats import write_dicom_series
 
 
@@ -155,7 +155,7 @@ def test_the_command_line_option(tmp_path):
 
 
 def test_the_render_help_names_the_presets(capsys):
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
     with pytest.raises(SystemExit):
         main(["render", "--help"])
     text = " ".join(capsys.readouterr().out.split())

@@ -1,4 +1,4 @@
-"""The crop box and the clip plane (SPEC.md, Crop and clip; app/clip_region.py,
+"""The crop box and the clip plane (SPEC.md, Crop and clip; app/scene/clip_region.py,
 glsl/lib/clip_region.glsl): the scene keys, the GLSL test against its NumPy twin, the majorant
 grid and the visible region with a crop, the light grid fitted to the kept box, and the known
 answer: a crop renders as the cropped volume does, with every method.
@@ -16,16 +16,16 @@ import dataclasses
 import numpy as np
 import pytest
 
-from radiance_probes.clip_region import clip_region
+from radiance_probes.scene.clip_region import clip_region
 from radiance_probes.gl.textures import TransferTable, volume_texture
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.settings import RenderSettings
-from radiance_probes.scene import SceneError, parse_scene, scene_to_dict
-from radiance_probes.transfer import transfer_table
+from radiance_probes.io.scene_file import SceneError, parse_scene, scene_to_dict
+from radiance_probes.scene.transfer import transfer_table
 from radiance_probes.twins.majorant_grid import density_range_grid, macrocell_counts, majorant_grid
 from radiance_probes.twins.medium import box_intersect, density_at, sigma_t_at
 from radiance_probes.twins.visible_region import visible_region
-from radiance_probes.volume import Volume
+from radiance_probes.io.volume import Volume
 from glsl_harness import run_kernel
 
 # ---- scene keys ------------------------------------------------------------------------------
@@ -404,7 +404,7 @@ def test_clipped_matter_neither_scatters_nor_shadows(ctx):
 ])
 def test_crop_and_clip_options_refused_with_the_option_named(tmp_path, capsys, args, message):
     import re
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
     rc = main(["render", "--spp", "1", "--width", "8", "--height", "8",
                "--out", str(tmp_path / "x.png"), *args])
     err = capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""The denoising stage (app/rendering/denoise.py) on OIDN's CPU device, and its guides
+"""The denoising stage (app/rendering/denoise/filter.py) on OIDN's CPU device, and its guides
 (glsl/denoise_guide_images.comp) against their NumPy twin (app/twins/denoise_guides.py)."""
 from __future__ import annotations
 
@@ -8,14 +8,14 @@ import sys
 import numpy as np
 import pytest
 
-from radiance_probes.rendering import denoise as denoise_module
-from radiance_probes.rendering.denoise import Denoiser, sanitize
-from radiance_probes.rendering.denoise_guides import DenoiseGuides
+from radiance_probes.rendering.denoise import filter as denoise_module
+from radiance_probes.rendering.denoise.filter import Denoiser, sanitize
+from radiance_probes.rendering.denoise.guides import DenoiseGuides
 from radiance_probes.rendering.resources import SceneResources
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.twins.camera import camera_frame
 from radiance_probes.twins.denoise_guides import guide_frame
-from radiance_probes.volume import Volume
+from radiance_probes.io.volume import Volume
 
 pytest.importorskip("pyoidn", reason="the denoiser's library (pyoidn) is a dependency: install it")
 
@@ -219,7 +219,7 @@ def test_a_denoised_render_is_closer_to_the_converged_image(ctx):
 
 
 def test_choose_guides_follows_the_records():
-    from radiance_probes.rendering.denoise import choose_guides
+    from radiance_probes.rendering.denoise.filter import choose_guides
     assert choose_guides("auto", 4, has_probes=True) == "probes"
     assert choose_guides("auto", 1024, has_probes=True) == "none"
     assert choose_guides("auto", 4, has_probes=False) == "albedo-normal"
@@ -231,7 +231,7 @@ def test_choose_guides_follows_the_records():
 
 def test_render_denoise_from_the_command_line_and_the_api(tmp_path, capsys):
     import radiance_probes as rp
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
     out = tmp_path / "d.png"
     assert main(["render", "--method", "pt", "--spp", "2", "--width", "24", "--height", "16",
                  "--denoise", "--out", str(out)]) == 0
@@ -299,7 +299,7 @@ def test_the_viewers_denoise_switch(ctx, monkeypatch):
 def test_keep_block_means_gives_back_the_raw_means():
     """keep_block_means: the whole image's mean exactly, each tile's to the interpolation's
     smoothing; a constant difference is added exactly; the tile means match a direct sum."""
-    from radiance_probes.rendering.denoise import _block_means, keep_block_means
+    from radiance_probes.rendering.denoise.filter import _block_means, keep_block_means
     rng = np.random.default_rng(3)
     raw = rng.exponential(1.0, (70, 90, 3)).astype(np.float32)
     means = _block_means(raw, 32)

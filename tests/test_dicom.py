@@ -1,4 +1,4 @@
-"""DICOM as a scanner or PACS writes it (app/dicom.py): folder trees and DICOMDIRs list their
+"""DICOM as a scanner or PACS writes it (app/io/dicom.py): folder trees and DICOMDIRs list their
 series, the largest that makes a volume opens with a note naming the others, a scene or --series
 names another, and series that do not make a volume say why in plain words. Against small series
 pydicom writes here, and against pydicom's own test folders where the installed pydicom ships them
@@ -13,9 +13,9 @@ import pydicom
 import pytest
 from pydicom.fileset import FileSet
 
-from radiance_probes.dicom import list_series
-from radiance_probes.scene import VolumeSpec, parse_scene
-from radiance_probes.volume import VolumeError, load_volume
+from radiance_probes.io.dicom import list_series
+from radiance_probes.io.scene_file import VolumeSpec, parse_scene
+from radiance_probes.io.volume import VolumeError, load_volume
 from test_volume_formats import ct_slice, write_dicom_series
 
 PYDICOM_TESTS = Path(pydicom.__file__).parent / "data" / "test_files" / "dicomdirtests"
@@ -162,7 +162,7 @@ def test_pydicom_dicomdir_opens_its_largest_volume():
 # ---- the command line ---------------------------------------------------------------------------
 
 def test_the_series_command_lists_them_and_marks_the_default(tmp_path, capsys):
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
     root = scanner_folder(tmp_path / "study")
     assert main(["series", str(root)]) == 0
     out = capsys.readouterr().out
@@ -173,7 +173,7 @@ def test_the_series_command_lists_them_and_marks_the_default(tmp_path, capsys):
 
 
 def test_render_takes_series_and_says_what_it_opened(tmp_path, capsys):
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
     root = scanner_folder(tmp_path / "study")
     assert main(["render", str(root), "--width", "8", "--height", "8", "--spp", "1",
                  "--out", str(tmp_path / "a.png")]) == 0
@@ -192,7 +192,7 @@ def test_render_takes_series_and_says_what_it_opened(tmp_path, capsys):
 def test_window_and_orientation_options(tmp_path, capsys):
     """--data-window (a preset or LEVEL,WIDTH) and --orientation reach the scene as its keys would."""
     import argparse
-    from radiance_probes.frontend import apply_options, scene_from_arg, window_arg
+    from radiance_probes.frontend.common import apply_options, scene_from_arg, window_arg
     scene = scene_from_arg(str(tmp_path))
     args = argparse.Namespace(data_window=window_arg("bone"), orientation="patient", series=2)
     out = apply_options(scene, args)

@@ -1,4 +1,4 @@
-"""Multi-frame DICOM (app/dicom.py): an RT dose grid (pydicom's own rtdose.dcm: 15 frames placed by
+"""Multi-frame DICOM (app/io/dicom.py): an RT dose grid (pydicom's own rtdose.dcm: 15 frames placed by
 GridFrameOffsetVector, values x DoseGridScaling) and an enhanced CT or MR (frames placed by their
 per-frame functional groups, rescaled by PixelValueTransformationSequence) each open as a volume
 with the geometry a series of single slices of the same data has; a multi-frame file that places
@@ -16,10 +16,10 @@ from pydicom.dataset import Dataset, FileDataset, FileMetaDataset
 from pydicom.sequence import Sequence
 from pydicom.uid import ExplicitVRLittleEndian, generate_uid
 
-from radiance_probes.cli import main
-from radiance_probes.dicom import list_series
-from radiance_probes.scene import VolumeSpec
-from radiance_probes.volume import VolumeError, load_volume
+from radiance_probes.cli.main import main
+from radiance_probes.io.dicom import list_series
+from radiance_probes.io.scene_file import VolumeSpec
+from radiance_probes.io.volume import VolumeError, load_volume
 from test_volume_formats import ct_slice
 
 ENHANCED_CT = "1.2.840.10008.5.1.4.1.1.2.1"

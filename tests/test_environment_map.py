@@ -18,10 +18,10 @@ import math
 import numpy as np
 import pytest
 
-from radiance_probes.environment_map import load_environment_map, read_environment_map
+from radiance_probes.io.environment_map import load_environment_map, read_environment_map
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.resources import ENVIRONMENT_CDF_UNIT, ENVIRONMENT_MAP_UNIT, environment_textures
-from radiance_probes.scene import EnvironmentMapSpec, SceneError, parse_scene
+from radiance_probes.io.scene_file import EnvironmentMapSpec, SceneError, parse_scene
 from radiance_probes.twins import environment_map as tw
 from glsl_harness import run_kernel
 
@@ -515,7 +515,7 @@ def test_cli_bad_map_is_one_line_before_the_gpu(tmp_path, capsys, monkeypatch, m
     problem, and no GL context made (creating one fails the test)."""
     import json
     import radiance_probes.gl.context
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
 
     def refuse(*_a, **_k):
         raise AssertionError("a GL context was created before the map was checked")

@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from radiance_probes.rendering.pathtracer import PathTracer
+from radiance_probes.rendering.methods.pathtracer import PathTracer
 from radiance_probes.rendering.renderer import MAX_GATHER_EVENT, Renderer
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 
 WHITE = {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]}
 CAMERA = {"eye": [0.0, 0.2, 1.3], "target": [0, 0, 0], "fov_y": 40.0, "width": 16, "height": 16}

@@ -1,4 +1,4 @@
-"""The default camera frames the volume's whole box (app/framing.py): every corner inside the
+"""The default camera frames the volume's whole box (app/scene/framing.py): every corner inside the
 image, at the camera's field of view and the image's aspect, for tall, flat, long and cubic boxes
 in landscape and portrait images; a box that fits keeps the default eye; a camera the scene gives
 is left alone. Projected with the renderers' own camera (app/twins/camera.py)."""
@@ -10,9 +10,9 @@ import json
 import numpy as np
 import pytest
 
-from radiance_probes.framing import frame_default_camera, framed_camera, is_default_view
-from radiance_probes.scene import parse_scene
-from radiance_probes.scene_types import CameraSpec
+from radiance_probes.scene.framing import frame_default_camera, framed_camera, is_default_view
+from radiance_probes.io.scene_file import parse_scene
+from radiance_probes.scene.types import CameraSpec
 from radiance_probes.twins.camera import camera_frame
 
 
@@ -69,7 +69,7 @@ def test_a_camera_the_scene_gives_is_its_own():
 def test_render_frames_a_tall_volume_it_is_given(tmp_path, capsys):
     """The command line's default view of a file: the whole box in the image (the volume's
     silhouette stays off the image's edges) at the image's aspect."""
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
     np.save(tmp_path / "cube.npy", np.ones((24, 24, 24), np.float32))
     out = tmp_path / "lin.npy"
     assert main(["render", str(tmp_path / "cube.npy"), "--width", "48", "--height", "96",

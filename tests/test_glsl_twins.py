@@ -26,9 +26,9 @@ from radiance_probes.twins import rng as nrng
 from radiance_probes.twins.camera import camera_frame
 from radiance_probes.gl.textures import TransferTable, volume_texture
 from radiance_probes.twins.medium import albedo_at, box_intersect, density_at, sigma_t_at
-from radiance_probes.scene import CameraSpec
-from radiance_probes.transfer import lookup
-from radiance_probes.volume import Volume
+from radiance_probes.io.scene_file import CameraSpec
+from radiance_probes.scene.transfer import lookup
+from radiance_probes.io.volume import Volume
 from glsl_harness import run_kernel
 
 # ---------------------------------------------------------------------------------------------

@@ -25,7 +25,7 @@ import pytest
 
 from radiance_probes.gl.memory import gpu_available_bytes
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 
 ITERATIONS = 1000
 WARM_UP = 40                 # first edits compile each shader variant and fill caches
@@ -93,8 +93,8 @@ def counted(ctx, monkeypatch):
 
 def assert_all_released(ctx, counter) -> None:
     """After Renderer.release() nothing it made is alive but the majorant grid's build pass,
-    which is compiled once per context and shared by design (app/rendering/majorant_grid.py)."""
-    from radiance_probes.rendering.majorant_grid import _programs
+    which is compiled once per context and shared by design (app/rendering/grids/majorant_grid.py)."""
+    from radiance_probes.rendering.grids.majorant_grid import _programs
     shared = _programs.get(ctx)
     alive = [r() for r in counter.made if r() is not None
              and not isinstance(r().mglo, moderngl.InvalidObject) and r() is not shared]

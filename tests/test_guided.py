@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 
 SCENE = {"volume": {"builtin": "cloud", "size": [16, 14, 12]}, "density_scale": 40.0,
          "albedo": 0.9, "anisotropy": 0.5, "max_bounces": 12,
@@ -126,7 +126,7 @@ def test_guided_under_an_environment_map_with_wrong_probes(ctx, tmp_path):
     probes that claim the light comes from the opposite side (band 1 against the patch: their
     radiance towards it rings below 0): the direction control subtracts what they predict at
     every event, and `guided` keeps the path tracer's mean with the map's MIS."""
-    from radiance_probes.rendering.probe_layout import colour_channel
+    from radiance_probes.rendering.probes.layout import colour_channel
     from radiance_probes.twins import environment_map as tw
     h, rotation = 16, 30.0
     sky = np.full((h, 2 * h, 3), 0.05, np.float32)

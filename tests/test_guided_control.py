@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from radiance_probes.rendering.probes import band_factors, probe_unit, SH_WINDOW_IDS
-from radiance_probes.rendering.probe_layout import TEXTURES_FOR_ORDER
+from radiance_probes.rendering.probes.bake import band_factors, probe_unit, SH_WINDOW_IDS
+from radiance_probes.rendering.probes.layout import TEXTURES_FOR_ORDER
 from radiance_probes.twins.guided_direction_control import direction_control
 from radiance_probes.twins.phase import phase_hg
 from radiance_probes.twins.sh import SH_WINDOW_HANN, SH_WINDOW_LANCZOS, SH_WINDOW_NONE, sphere_quadrature

@@ -54,12 +54,12 @@ from radiance_probes.twins import rng as nrng
 from radiance_probes.twins.camera import camera_frame
 from radiance_probes.gl.shaders import compute_program, set_uniforms
 from radiance_probes.twins.medium import box_intersect
-from radiance_probes.rendering.probe_layout import resolve_sh_order
+from radiance_probes.rendering.probes.layout import resolve_sh_order
 from radiance_probes.twins.phase import phase_hg
 from radiance_probes.rendering.renderer import Renderer, RenderResult
-from radiance_probes.scene import Scene, parse_scene
-from radiance_probes.transfer import transfer_table
-from radiance_probes.volume import Volume, builtin_cloud, load_scene_volume
+from radiance_probes.io.scene_file import Scene, parse_scene
+from radiance_probes.scene.transfer import transfer_table
+from radiance_probes.io.volume import Volume, builtin_cloud, load_scene_volume
 from glsl_harness import HEADER
 from transport_reference import optical_depth, pixel_rays
 
@@ -716,7 +716,7 @@ def test_new_volume_never_reuses_stale_probes_or_light(renderers, monkeypatch):
     is often reused by a later one (CPython), which then passed for already baked (4 times in 100
     tries, measured). As a viewer might: bake for volume A, switch to B without baking (A is freed),
     switch to C; C must never pass for baked."""
-    from radiance_probes.rendering.light_transmittance import LightTransmittance
+    from radiance_probes.rendering.grids.light_transmittance import LightTransmittance
     bakes = []
     real_begin = LightTransmittance.begin     # every light-grid bake, whole or sliced, begins
     monkeypatch.setattr(LightTransmittance, "begin",

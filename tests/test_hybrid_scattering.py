@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import SceneError, parse_scene
-from radiance_probes.transfer import transfer_table
+from radiance_probes.io.scene_file import SceneError, parse_scene
+from radiance_probes.scene.transfer import transfer_table
 from radiance_probes.twins import hybrid_scattering as hs
 from radiance_probes.twins.directions import fibonacci_directions as spherical_fibonacci
 from radiance_probes.twins.medium import classified_at
-from radiance_probes.volume import load_scene_volume
+from radiance_probes.io.volume import load_scene_volume
 from glsl_harness import run_kernel
 
 BRDF_KERNEL = """
@@ -563,7 +563,7 @@ def test_furnace_under_a_constant_map_with_surfaces(ctx, tmp_path):
 
 def test_the_surface_option_merges_into_the_scene():
     import argparse
-    from radiance_probes.frontend import OptionError, apply_options, scene_from_arg, surface_arg
+    from radiance_probes.frontend.common import OptionError, apply_options, scene_from_arg, surface_arg
     scene = scene_from_arg(None)
     out = apply_options(scene, argparse.Namespace(surface=surface_arg("2,0.3,0.1")))
     assert (out.surface.gradient_factor, out.surface.roughness, out.surface.specular) == (

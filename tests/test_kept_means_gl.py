@@ -1,5 +1,5 @@
-"""The denoiser's kept tile means on the GPU (app/rendering/kept_means.py: glsl/tile_means.comp,
-glsl/keep_tile_means.comp) against their NumPy twin (app/rendering/denoise.py _block_means,
+"""The denoiser's kept tile means on the GPU (app/rendering/denoise/kept_means.py: glsl/tile_means.comp,
+glsl/keep_tile_means.comp) against their NumPy twin (app/rendering/denoise/filter.py _block_means,
 keep_block_means) on llvmpipe; and the GL flow (Renderer.denoise, the viewer) against the host
 path on OIDN's CPU device."""
 from __future__ import annotations
@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from radiance_probes.rendering.denoise import (KEEP_MEANS_BLOCK, _block_means, _make_usable,
+from radiance_probes.rendering.denoise.filter import (KEEP_MEANS_BLOCK, _block_means, _make_usable,
                                                keep_block_means)
-from radiance_probes.rendering.kept_means import KeptMeans, tile_grid
+from radiance_probes.rendering.denoise.kept_means import KeptMeans, tile_grid
 
 SIZES = [(75, 53), (64, 96)]   # (width, height): neither a multiple of 32 nor of 8; both
 
@@ -213,9 +213,9 @@ def test_renderer_denoise_restores_on_gl_as_the_host_path_does(ctx):
     tile means are the raw image's to the interpolation's smoothing, its mean to 0.5%; the
     parts it timed are there."""
     pytest.importorskip("pyoidn", reason="the denoiser's library (pyoidn) is a dependency")
-    from radiance_probes.rendering.denoise import shared_denoiser
+    from radiance_probes.rendering.denoise.filter import shared_denoiser
     from radiance_probes.rendering.renderer import Renderer
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.io.scene_file import parse_scene
     scene = parse_scene({"volume": {"builtin": "cloud", "size": [16, 16, 16]},
                          "density_scale": 40.0, "albedo": 0.9,
                          "camera": {"width": 75, "height": 53}})
@@ -243,8 +243,8 @@ def test_the_viewer_shows_the_gl_restored_image(ctx):
     """The viewer's Denoise switch uploads OIDN's output and restores the means into the RGBA32F
     texture it shows: that image is what the host path makes of the same accumulation."""
     pytest.importorskip("pyoidn", reason="the denoiser's library (pyoidn) is a dependency")
-    from radiance_probes.rendering.denoise import choose_guides, shared_denoiser
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser
+    from radiance_probes.io.scene_file import parse_scene
     from radiance_probes.viewer.session import RenderSession
     s = RenderSession(ctx, parse_scene({
         "volume": {"builtin": "cloud", "size": [12, 12, 12]}, "density_scale": 30.0,
@@ -278,7 +278,7 @@ def test_the_denoiser_leaves_its_means_and_check_to_a_gl_caller():
     buffer itself (the next call writes the same memory), the same values as with the host's
     check, no host means; Denoised.signed says when the output was filtered as two parts."""
     pytest.importorskip("pyoidn", reason="the denoiser's library (pyoidn) is a dependency")
-    from radiance_probes.rendering.denoise import Denoiser
+    from radiance_probes.rendering.denoise.filter import Denoiser
     d = Denoiser("cpu")
     try:
         rng = np.random.default_rng(5)

@@ -1,16 +1,16 @@
 """The lower bound on a level's bricks that are not constant, from a coarser level
-(app/level_bound.py), and the placement that passes over a level too large for the cap without
-its range pass (app/rendering/volume_placement.py)."""
+(app/io/level_bound.py), and the placement that passes over a level too large for the cap without
+its range pass (app/rendering/levels/volume_placement.py)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from radiance_probes.bricks import ArraySource, BrickStore, box_filtered, constant_bricks
-from radiance_probes.level_bound import bound_level, inside_ranges, varying_bricks
-from radiance_probes.rendering.volume_placement import level_bytes, plan_placement
-from radiance_probes.scene import parse_scene
-from radiance_probes.volume import load_scene_volume
+from radiance_probes.io.bricks import ArraySource, BrickStore, box_filtered, constant_bricks
+from radiance_probes.io.level_bound import bound_level, inside_ranges, varying_bricks
+from radiance_probes.rendering.levels.volume_placement import level_bytes, plan_placement
+from radiance_probes.io.scene_file import parse_scene
+from radiance_probes.io.volume import load_scene_volume
 
 LIMITS = (2048, None, "the test's device")
 
@@ -190,13 +190,13 @@ def test_without_a_value_range_the_open_reads_the_range_pass(tmp_path):
 def test_mixed_levels_read_no_finer_range_pass_where_no_brick_is_worth_a_slot(tmp_path):
     """Levels mixed by the camera: seen from far (no voxel of level 1 over the footprint that
     earns a slot), level 0's range pass is still not read: the pool is a mix (its bricks of level
-    0 streamed in as the camera comes near: app/rendering/level_stream.py) where every brick of
+    0 streamed in as the camera comes near: app/rendering/levels/level_stream.py) where every brick of
     level 0 reads level 1, level 1 whole."""
     from dataclasses import replace
     brick = 16
     scene = _store(tmp_path)
     lazy = load_scene_volume(scene, brick=brick)
-    from radiance_probes.bricks import slot_bytes
+    from radiance_probes.io.bricks import slot_bytes
     cap = level_bytes(BrickStore(lazy.levels[0], brick), 1, False, 2048) + 4 * slot_bytes(
         brick, 1, False)           # room for a few of level 0's bricks, not for level 0
     far = replace(scene.camera, eye=(0.0, 0.0, 40.0), target=(0.0, 0.0, 0.0))

@@ -1,4 +1,4 @@
-"""Mixed levels under a cap (app/rendering/level_mix.py, lib/brick_pool.glsl BRICK_LEVELS): the pool
+"""Mixed levels under a cap (app/rendering/levels/level_mix.py, lib/brick_pool.glsl BRICK_LEVELS): the pool
 holds the finer level where the camera sees it largest and the coarser elsewhere, within the cap;
 what the GPU holds is the twin's mixed medium; the majorant grid bounds it; every method reads it
 with no page miss; and it is nearer the uncapped image than the coarser level alone."""
@@ -10,8 +10,8 @@ import numpy as np
 
 from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.bench.scenes import battery_scene
-from radiance_probes.bricks import box_filtered, slot_bytes
-from radiance_probes.rendering.level_mix import MIX_FOOTPRINT_PX, footprints
+from radiance_probes.io.bricks import box_filtered, slot_bytes
+from radiance_probes.rendering.levels.level_mix import MIX_FOOTPRINT_PX, footprints
 from radiance_probes.rendering.renderer import METHODS, Renderer
 from radiance_probes.rendering.lab_options import LabOptions
 from radiance_probes.rendering.settings import RenderSettings

@@ -1,4 +1,4 @@
-"""Streaming a mixed pool's finer level as the camera moves (app/rendering/level_stream.py): after a
+"""Streaming a mixed pool's finer level as the camera moves (app/rendering/levels/level_stream.py): after a
 restream the pool is what a fresh placement for that camera gives (page table per brick, the
 bricks' texels, the constants, the majorant grid, the images), each brick loaded is read once,
 the pool never holds more than its slots, the same camera writes nothing, a budget spreads the
@@ -11,8 +11,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from radiance_probes.bricks import CONSTANT, REDIRECT, box_filtered
-from radiance_probes.rendering.level_mix import coarse_ranges_read, mixed_density_ranges
+from radiance_probes.io.bricks import CONSTANT, REDIRECT, box_filtered
+from radiance_probes.rendering.levels.level_mix import coarse_ranges_read, mixed_density_ranges
 from radiance_probes.rendering.lab_options import LabOptions
 from radiance_probes.rendering.renderer import METHODS
 from radiance_probes.twins.brick_pool import brick_block, bricked_sample, mixed_reference
@@ -147,7 +147,7 @@ def test_bricks_leave_and_come_back_read_once_a_load_within_the_slots(ctx):
         fine = stream.fine
         at_a = set(stream.slot_of)
         # a brick of one value (its apron not: else it is constant) is loaded from its range,
-        # not read (app/bricks.py: the upload reads bricks of more than one value)
+        # not read (app/io/bricks.py: the upload reads bricks of more than one value)
         lo, hi = (np.asarray(a) for a in fine.ranges())
         one_value = np.all(lo == hi, axis=-1) if lo.ndim == 4 else lo == hi
         for eye in (EYE_B, EYE_C, EYE_A, EYE_FAR, EYE_A):
@@ -249,7 +249,7 @@ def test_no_page_miss_after_restreams(checked_ctx):
 
 def test_mixed_density_ranges_are_the_brick_by_brick_ranges(ctx):
     """coarse_ranges_read (array operations) against the bricks reached, brick by brick."""
-    from radiance_probes.bricks import BrickStore, ArraySource, around, bricks_reached
+    from radiance_probes.io.bricks import BrickStore, ArraySource, around, bricks_reached
     rng = np.random.default_rng(1)
     fine_data = rng.uniform(0, 1, (27, 21, 37)).astype(np.float32)
     fine_data[:, :9] = 0.0
@@ -291,11 +291,11 @@ def test_a_store_placed_from_far_reads_level_0_when_the_camera_comes_near(ctx, t
     level 0 reads level 1. Restreamed for a near camera, the range pass is read then, level 0's
     constant bricks become constants and its bricks worth a slot are loaded: the pool and image
     of a fresh placement for the near camera."""
-    from radiance_probes.bricks import BrickStore, slot_bytes
+    from radiance_probes.io.bricks import BrickStore, slot_bytes
     from radiance_probes.rendering.renderer import Renderer
     from radiance_probes.rendering.settings import RenderSettings
-    from radiance_probes.rendering.volume_placement import level_bytes
-    from radiance_probes.volume import load_scene_volume
+    from radiance_probes.rendering.levels.volume_placement import level_bytes
+    from radiance_probes.io.volume import load_scene_volume
     from test_level_bound import _store
     brick = 16
     scene = _store(tmp_path)

@@ -41,9 +41,9 @@ def test_every_method_renders_through_the_api(name):
 
 
 def test_the_front_ends_read_the_registry():
-    from radiance_probes import _api
+    from radiance_probes.api import render as _api
     from radiance_probes.rendering.renderer import METHODS as ACCUMULATED_BY_RENDERER
-    from radiance_probes.scene_schema import scene_schema
+    from radiance_probes.io.scene_schema import scene_schema
     from radiance_probes.viewer.input import SHORTCUTS
     assert rp.METHODS == NAMES and set(rp.DEFAULT_SPP) == set(NAMES)
     assert _api.METHODS is NAMES and ACCUMULATED_BY_RENDERER == ACCUMULATED
@@ -55,7 +55,7 @@ def test_the_front_ends_read_the_registry():
     for m in METHODS.values():
         if m.viewer_key is not None:
             assert m.name in keys[m.viewer_key].what
-    from radiance_probes.cli import build_parser
+    from radiance_probes.cli.main import build_parser
     parser = build_parser()
     render = parser._subparsers._group_actions[0].choices["render"]
     choices = next(a.choices for a in render._actions if a.dest == "method")
@@ -81,7 +81,7 @@ def test_each_record_is_consistent():
 
 def test_a_composite_method_has_no_single_accumulation(ctx):
     from radiance_probes.rendering.renderer import Renderer
-    from radiance_probes.scene import default_scene
+    from radiance_probes.io.scene_file import default_scene
     r = Renderer(ctx, default_scene())
     try:
         for m in METHODS.values():

@@ -1,4 +1,4 @@
-"""Movies (app/movie.py, app/camera_path.py, app/movie_writer.py, `radiance-probes animate`): the
+"""Movies (app/movie/frames.py, app/scene/camera_path.py, app/movie/writer.py, `radiance-probes animate`): the
 camera paths, the frames a media player reads back, the probes baked once per movie."""
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from radiance_probes.camera_path import keyframes, turntable
-from radiance_probes.cli import main
-from radiance_probes.movie_writer import MovieError, MovieWriter, count_frames, movie_format
+from radiance_probes.scene.camera_path import keyframes, turntable
+from radiance_probes.cli.main import main
+from radiance_probes.movie.writer import MovieError, MovieWriter, count_frames, movie_format
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import BookmarkSpec, CameraSpec, parse_scene
+from radiance_probes.io.scene_file import BookmarkSpec, CameraSpec, parse_scene
 
 # ---- camera paths ------------------------------------------------------------------------------
 
@@ -75,7 +75,7 @@ def test_writer_frames_read_back(tmp_path, name):
 
 
 def test_frame_readback_is_the_png_tone_map(ctx):
-    from radiance_probes.rendering.accumulation import Accumulation
+    from radiance_probes.rendering.methods.accumulation import Accumulation
     from radiance_probes.rendering.frame_readback import FrameReadback
     from radiance_probes.rendering.tonemap import to_uint8
     rng = np.random.default_rng(1)

@@ -1,4 +1,4 @@
-"""The raymarcher's opacity-gradient grid (app/rendering/opacity_gradient_grid.py,
+"""The raymarcher's opacity-gradient grid (app/rendering/grids/opacity_gradient_grid.py,
 glsl/opacity_gradient_bake.comp, glsl/lib/opacity_gradient_grid.glsl): the baked grid against its
 NumPy twin (app/twins/opacity_gradient_grid.py) with a crop, a clip plane and several channels;
 its one-fetch read against the twin's trilinear lookup and, at the voxel centres, against the exact
@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from radiance_probes.rendering import opacity_gradient_grid as grid_module
+from radiance_probes.rendering.grids import opacity_gradient_grid as grid_module
 from radiance_probes.rendering.lab_options import LabOptions
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.settings import RenderSettings
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.twins import opacity_gradient_grid as og
 from glsl_harness import run_kernel
 

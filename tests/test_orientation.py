@@ -1,4 +1,4 @@
-"""`"orientation": "patient"` (app/orientation.py): NIfTI (sform/qform, RAS), DICOM (LPS) and NRRD
+"""`"orientation": "patient"` (app/io/orientation.py): NIfTI (sform/qform, RAS), DICOM (LPS) and NRRD
 (space directions) volumes are permuted and flipped, never resampled, so that world +x is the
 patient's left, +y superior and +z anterior. Known answer: the octant of a volume on the patient's
 left, superior and anterior side lands in world's +x, +y, +z octant, whatever the acquisition
@@ -13,9 +13,9 @@ import nrrd
 import numpy as np
 import pytest
 
-from radiance_probes.orientation import PATIENT_WORLD, residual_degrees, to_patient
-from radiance_probes.scene import VolumeSpec, parse_scene
-from radiance_probes.volume import load_volume
+from radiance_probes.io.orientation import PATIENT_WORLD, residual_degrees, to_patient
+from radiance_probes.io.scene_file import VolumeSpec, parse_scene
+from radiance_probes.io.volume import load_volume
 from test_volume_formats import ct_slice
 
 DIMS = (6, 5, 4)   # x, y, z voxel counts: every axis a different length

@@ -7,7 +7,7 @@ from __future__ import annotations
 import time
 
 from radiance_probes.gl.timer import WallTimer
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.viewer.pacing import (DISTRUST_FRAMES, WALL_FRAME_MS, WALL_MIN_WORK_MS,
                                            FramePacer)
 from radiance_probes.viewer.session import MAX_SAMPLES_PER_FRAME, RenderSession

@@ -1,4 +1,4 @@
-"""Probe layout that follows the scene (app/rendering/probe_layout.py): the visible region bounds
+"""Probe layout that follows the scene (app/rendering/probes/layout.py): the visible region bounds
 every point where sigma_t > 0, a cubic request follows the region's aspect, SH order 0 gives the
 same images as order 2 when g = 0 (the phase convolution zeroes bands 1 and 2), and a fitted grid
 renders as well as the box grid."""
@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 
 from radiance_probes.twins.medium import sigma_t_at
-from radiance_probes.rendering.probe_layout import (AUTO_BAND_WEIGHT, AUTO_MAX_ORDER, AUTO_WALKS_PER_HIGH_BAND,
+from radiance_probes.rendering.probes.layout import (AUTO_BAND_WEIGHT, AUTO_MAX_ORDER, AUTO_WALKS_PER_HIGH_BAND,
                                      GREY_TEXTURES_FOR_ORDER,
                                      TEXTURES_FOR_ORDER,
                                      colour_channel, fitted_grid, resolve_sh_order,
                                      unpack_coefficients, visible_region)
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import SceneError, parse_scene
-from radiance_probes.transfer import transfer_table
-from radiance_probes.scene import TransferFunctionSpec
-from radiance_probes.volume import Volume
+from radiance_probes.io.scene_file import SceneError, parse_scene
+from radiance_probes.scene.transfer import transfer_table
+from radiance_probes.io.scene_file import TransferFunctionSpec
+from radiance_probes.io.volume import Volume
 
 
 def _volume(data: np.ndarray, spacing=(1.0, 1.0, 1.0)) -> Volume:
@@ -194,7 +194,7 @@ def test_fitted_grid_bakes_inside_the_visible_region(ctx):
 
 
 def test_grey_scenes_are_detected():
-    from radiance_probes.rendering.probe_layout import scene_is_grey
+    from radiance_probes.rendering.probes.layout import scene_is_grey
     grey = _table([[0, 0], [1, 1]])
     assert scene_is_grey(grey, (3, 3, 3), (0.1, 0.1, 0.1))
     assert not scene_is_grey(grey, (3, 3, 2.9), (0.1, 0.1, 0.1))
@@ -271,7 +271,7 @@ def test_probe_fetch_unpacks_every_coefficient(ctx, order, grey):
     random textures in the packing of lib/probe_packing.glsl: every coefficient up to the order
     (times the radiance scale), zeros above it, and the sun's transmittance."""
     from glsl_harness import PROBE_FETCH_KERNEL, probe_texel_centres, probe_textures, run_kernel
-    from radiance_probes.rendering.probes import probe_unit
+    from radiance_probes.rendering.probes.bake import probe_unit
     grid = (3, 2, 4)
     count = grid[0] * grid[1] * grid[2]
     ids = (GREY_TEXTURES_FOR_ORDER if grey else TEXTURES_FOR_ORDER)[order]
@@ -306,7 +306,7 @@ def test_auto_precision_is_16_bit_only_where_surfaces_read_the_probes(ctx):
     (k > 0: seven textures a sample instead of two, halved in size), rgba32f otherwise, so that
     k = 0 bakes exactly what it did; an explicit precision is kept either way; an unknown one is
     refused by name."""
-    from radiance_probes.rendering.probe_layout import resolve_precision
+    from radiance_probes.rendering.probes.layout import resolve_precision
     assert resolve_precision("auto") == "rgba32f"
     assert resolve_precision("auto", directions=True) == "rgba16f"
     assert resolve_precision("rgba32f", directions=True) == "rgba32f"

@@ -1,4 +1,4 @@
-"""The adaptive probe layout: per-axis probe planes (app/rendering/probe_planes.py) read through the
+"""The adaptive probe layout: per-axis probe planes (app/rendering/probes/planes.py) read through the
 warp of glsl/lib/probe_warp.glsl, against its NumPy twin app/twins/probe_warp.py.
 
 Tolerances
@@ -18,10 +18,10 @@ import math
 import numpy as np
 import pytest
 
-from radiance_probes.rendering.probe_planes import (MAX_SPACING, MIN_SPACING, adaptive_planes,
+from radiance_probes.rendering.probes.planes import (MAX_SPACING, MIN_SPACING, adaptive_planes,
                                      planes_from_density, probe_density)
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import SceneError, parse_scene
+from radiance_probes.io.scene_file import SceneError, parse_scene
 from radiance_probes.twins.probe_warp import (WARP_COLUMNS, probe_fractions, texture_trilinear, uniform_planes,
                                   warp_exact, warp_lookup, warp_table)
 from radiance_probes.viewer.probe_view import probe_centres

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.twins.camera import camera_frame
 from radiance_probes.viewer import orbit
 from radiance_probes.viewer.probe_view import (MAX_SPHERES, describe_probe, probe_centres,
@@ -67,7 +67,7 @@ def test_the_probe_under_the_mouse_is_the_nearest_whose_sphere_holds_it():
 
 
 def test_a_probe_is_described_by_what_it_holds():
-    from radiance_probes.rendering.probe_layout import colour_channel
+    from radiance_probes.rendering.probes.layout import colour_channel
     channels = np.zeros(28)
     c00 = np.array([2.0, 1.0, 0.5]) * np.sqrt(4 * np.pi)     # mean radiance (2, 1, 0.5)
     for c in range(3):

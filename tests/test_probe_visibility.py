@@ -11,10 +11,10 @@ import pytest
 
 from radiance_probes.gl.textures import TransferTable, volume_texture
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.twins.medium import sigma_t_at
 from radiance_probes.twins.probe_visibility import blend, corner_weights
-from radiance_probes.volume import Volume
+from radiance_probes.io.volume import Volume
 from glsl_harness import PROBE_FETCH_KERNEL, run_kernel
 
 WHITE_RAMP = {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]}   # sigma_t = density_scale x density

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 
 WHITE = {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]}
 WHITE_SOLID = {"rgba": [[1, 1, 1, 1.0], [1, 1, 1, 1.0]]}
@@ -203,7 +203,7 @@ def test_the_raymarch_work_group_shape_changes_nothing(ctx, monkeypatch):
     """Without surfaces the compute pass runs 8 x 4 groups (one warp; measured faster on an H200),
     with them or for `guided`'s level 0 8 x 8: each pixel's arithmetic is the same, so a frame is
     the 8 x 8 one bit for bit, at a size neither shape divides (the edge groups half empty)."""
-    from radiance_probes.rendering import raymarch
+    from radiance_probes.rendering.methods import raymarch
     assert raymarch.group_shape({}) == (8, 4)
     assert raymarch.group_shape({"HYBRID_SCATTERING": 1}) == (8, 8)
     assert raymarch.group_shape({"GUIDED_LEVEL0": 1}) == (8, 8)
@@ -227,7 +227,7 @@ def test_the_raymarch_work_group_shape_changes_nothing(ctx, monkeypatch):
 def test_raymarch_frames_in_one_dispatch_equal_one_per_dispatch(ctx, monkeypatch):
     """Small images march several frames per dispatch into layers, folded in frame order: the
     same running mean as one dispatch per frame."""
-    from radiance_probes.rendering import raymarch
+    from radiance_probes.rendering.methods import raymarch
     r = _renderer(ctx, camera={**CAMERA, "width": 24, "height": 20})
     r.bake()
     assert raymarch.frame_layers(24, 20, 5) == 5

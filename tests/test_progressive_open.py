@@ -1,5 +1,5 @@
-"""A Zarr store read brick by brick opens on a thread (app/rendering/progressive_open.py) with a
-preview of a small level shown meanwhile (app/volume.py zarr_preview): the result is place_volume's,
+"""A Zarr store read brick by brick opens on a thread (app/rendering/levels/progressive_open.py) with a
+preview of a small level shown meanwhile (app/io/volume.py zarr_preview): the result is place_volume's,
 the preview sits in the same world box, and errors surface on the context's thread."""
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import sys
 import numpy as np
 import pytest
 
-from radiance_probes.bricks import LazyData
-from radiance_probes.rendering.progressive_open import ProgressiveOpen
+from radiance_probes.io.bricks import LazyData
+from radiance_probes.rendering.levels.progressive_open import ProgressiveOpen
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.settings import RenderSettings
-from radiance_probes.rendering.volume_placement import place_volume
-from radiance_probes.scene import parse_scene
-from radiance_probes.volume import VolumeError, load_scene_volume, reads_lazily, zarr_preview
+from radiance_probes.rendering.levels.volume_placement import place_volume
+from radiance_probes.io.scene_file import parse_scene
+from radiance_probes.io.volume import VolumeError, load_scene_volume, reads_lazily, zarr_preview
 
 BRICK = 8
 CAMERA = {"eye": [0.0, 0.3, 2.2], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y": 35.0,
@@ -64,7 +64,7 @@ def test_progressive_open_gives_place_volumes_pool(ctx, store):
 
 
 def test_progressive_open_under_a_cap_shows_the_level_place_volume_shows(ctx, store):
-    from radiance_probes.bricks import slot_bytes
+    from radiance_probes.io.bricks import slot_bytes
     scene = _scene(store)
     cap = 6 * slot_bytes(BRICK, 1, False) + 4096     # only a coarser level fits
     want_shown, want = place_volume(ctx, load_scene_volume(scene, BRICK), cap, BRICK)

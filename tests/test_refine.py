@@ -1,6 +1,6 @@
 """The viewer's `refine` mode: the half-buffer error estimate (NumPy, on synthetic noise of known
 variance; and the GPU reduction against it), and the session showing the raymarcher at once after
-an edit and `guided` later (app/rendering/refine.py, app/viewer/session.py)."""
+an edit and `guided` later (app/rendering/refine/refine.py, app/viewer/session.py)."""
 from __future__ import annotations
 
 import math
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.metrics import rrmse
-from radiance_probes.rendering.refine import (BLEND_SNAP, BlendPass, HalfBuffers, blend_from_sums,
+from radiance_probes.rendering.refine.refine import (BLEND_SNAP, BlendPass, HalfBuffers, blend_from_sums,
                                               blend_images, error_from_sums, half_buffer_error,
                                               half_buffer_sums, judge_sums)
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 
 SHAPE = (48, 64, 3)
 
@@ -83,7 +83,7 @@ def test_gpu_reduction_and_combine_match_numpy(ctx):
         parts = [rng.uniform(-0.2, 1.0, (h, w, 4)).astype(np.float32) for _ in range(5)]
         accs = [buffers.halves[0].residual, buffers.halves[0].level0, buffers.halves[1].residual,
                 buffers.halves[1].level0]
-        from radiance_probes.rendering.accumulation import Accumulation
+        from radiance_probes.rendering.methods.accumulation import Accumulation
         ray = Accumulation(ctx, w, h)
         for acc, data in zip([*accs, ray], parts):
             acc.texture.write(data.tobytes())
@@ -293,8 +293,8 @@ def test_refine_blends_by_its_judgement_where_the_denoise_switch_is_on(ctx, monk
     image; its wall time is the frame's denoise_ms. The raw estimate is held above the
     raymarcher's (it alone never switches), and the judgement's weight is set to 0, then 0.4,
     then 1 (guided alone, judging ends). With the switch off nothing is judged."""
-    from radiance_probes.rendering import refine as refine_module
-    from radiance_probes.rendering.refine import RefineBlend, RefineEstimate
+    from radiance_probes.rendering.refine import refine as refine_module
+    from radiance_probes.rendering.refine.refine import RefineBlend, RefineEstimate
     from radiance_probes.viewer import session as session_module
     from radiance_probes.viewer.session import REFINE_MIN_HALF_SAMPLES, RenderSession
     monkeypatch.setattr(session_module.HalfBuffers, "estimate_from",
@@ -366,8 +366,8 @@ def test_still_refine_with_denoise_blends_as_the_viewer_does(ctx, monkeypatch):
     the GL path): its stats give the weight and estimates, guided is shown where the weight is
     above 0, and the image is (1 - w) r + w D(m) of the raymarcher's image and the halves' mean
     denoised; without denoise nothing is judged."""
-    from radiance_probes.rendering import refine as refine_module
-    from radiance_probes.rendering.refine import RefineEstimate
+    from radiance_probes.rendering.refine import refine as refine_module
+    from radiance_probes.rendering.refine.refine import RefineEstimate
     from radiance_probes.rendering.renderer import Renderer
     monkeypatch.setattr(refine_module.HalfBuffers, "estimate_from",
                         lambda self, sums, with_raymarch: RefineEstimate(1.0, 0.5, self.samples))

@@ -1,5 +1,5 @@
 """A sample split into bands over frames (issue 44: the viewer keeps pace without a GPU). The
-planning is pure Python (app/rendering/sample_bands.py), tested on a fake device whose
+planning is pure Python (app/rendering/budgets/sample_bands.py), tested on a fake device whose
 dispatches advance a fake clock: bands are cut from the wall time the earlier ones took, whole
 samples are taken where they fit. On llvmpipe: bands of work groups give the image of whole
 samples, bit for bit and count for count (Renderer.add_groups, PathTracer.run's bands), and the
@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from radiance_probes.rendering.sample_bands import (UNTIMED_ABOVE_FACTOR, UNTIMED_FACTOR,
+from radiance_probes.rendering.budgets.sample_bands import (UNTIMED_ABOVE_FACTOR, UNTIMED_FACTOR,
                                                     FrameWork, TileCosts, fill_frame, next_work,
                                                     tile_rects)
 
@@ -216,7 +216,7 @@ def done_pixels(end: int) -> np.ndarray:
 @pytest.fixture
 def renderer(ctx):
     from radiance_probes.rendering.renderer import Renderer
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.io.scene_file import parse_scene
     r = Renderer(ctx, parse_scene(SCENE))
     yield r
     r.release()
@@ -262,7 +262,7 @@ def test_bands_of_tiles_give_the_whole_samples_image_bit_for_bit(renderer):
 
 def test_the_probe_renderers_and_the_raymarcher_in_bands_give_their_whole_image(ctx):
     from radiance_probes.rendering.renderer import Renderer
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.io.scene_file import parse_scene
     r = Renderer(ctx, parse_scene({**SCENE, "probes": {"grid": [4, 4, 4], "samples": 32}}))
     try:
         r.bake(0)
@@ -291,7 +291,7 @@ def test_the_probe_renderers_and_the_raymarcher_in_bands_give_their_whole_image(
 def test_a_pass_cut_into_bands_counts_every_pixel_once(renderer):
     """PathTracer.run's bands (a GPU's long samples): a band ending inside a group of 8 rows also
     ran the next band's first rows, whose fresh start then counted their first samples twice."""
-    from radiance_probes.rendering.pathtracer import band_edges
+    from radiance_probes.rendering.methods.pathtracer import band_edges
     r = renderer
     whole = _whole(r, "pt", 2)
     for bands in (2, 3):
@@ -310,7 +310,7 @@ def test_the_session_paced_by_the_wall_clock_splits_samples_and_shows_whole_imag
     progress, then begins."""
     from dataclasses import replace
 
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.io.scene_file import parse_scene
     from radiance_probes.viewer.session import RenderSession
     s = RenderSession(ctx, parse_scene(SCENE), seed=7)
     try:

@@ -1,4 +1,4 @@
-"""The scene file's JSON Schema (app/scene_schema.py): the committed docs/scene.schema.json and
+"""The scene file's JSON Schema (app/io/scene_schema.py): the committed docs/scene.schema.json and
 docs/scene-format.md's key table are what the scene's types generate; every scene in assets/
 validates (and every scene the other tests parse: tests/conftest.py checks them when the session
 ends); a wrong key fails the schema and the loader, the loader's own message naming it; the loader
@@ -11,8 +11,8 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from radiance_probes.scene import SceneError, load_scene, parse_scene
-from radiance_probes.scene_schema import TABLE_END, TABLE_START, key_table, scene_schema, schema_text
+from radiance_probes.io.scene_file import SceneError, load_scene, parse_scene
+from radiance_probes.io.scene_schema import TABLE_END, TABLE_START, key_table, scene_schema, schema_text
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA_FILE = ROOT / "docs" / "scene.schema.json"
@@ -49,7 +49,7 @@ def test_every_asset_scene_validates_and_loads(validator):
 
 
 def test_the_default_scene_and_a_saved_one_validate(validator):
-    from radiance_probes.scene import default_scene, scene_to_dict
+    from radiance_probes.io.scene_file import default_scene, scene_to_dict
     validator.validate({})
     validator.validate(scene_to_dict(default_scene()))
     full = parse_scene({"volume": {"path": "ct/", "window": "bone", "series": 2,

@@ -69,7 +69,7 @@ def test_raymarched_opaque_box_has_single_scatterings_closed_form(ctx, density_s
     whatever sigma_t. Taking the sun's transmittance at one point of each segment, the raymarcher
     gave 85% too little at sigma_t = 1e4 (its lit skin is far thinner than a step)."""
     from radiance_probes.rendering.renderer import Renderer
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.io.scene_file import parse_scene
     sun = np.array([0.3, 0.8, 0.52])
     sun /= np.linalg.norm(sun)
     scene = parse_scene({"volume": {"builtin": "constant", "size": [8, 8, 8]},

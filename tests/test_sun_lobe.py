@@ -82,7 +82,7 @@ def _lobe_scene(tmp_path, g, h, amplitude, base, sun):
     lum = base + amplitude * sun_lobe.hg(d @ s, h)
     path = tmp_path / "lobe.npy"
     np.save(path, np.repeat(lum[..., None], 3, axis=-1).astype(np.float32))
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.io.scene_file import parse_scene
     return parse_scene({"volume": {"builtin": "empty", "size": [4, 4, 4]}, "anisotropy": g,
                         "environment": {"map": str(path)},
                         "light": {"direction": list(sun), "irradiance": [0, 0, 0]},
@@ -93,7 +93,7 @@ def _lobe_scene(tmp_path, g, h, amplitude, base, sun):
 def test_bake_projects_the_lobe_and_leaves_the_bands_alone(ctx, tmp_path):
     """Probes that see base + A HG_h(omega . s) hold amplitude A in the lobe's channels (r is
     orthogonal to the bands and to the constant), and the same SH bands as without the lobe."""
-    from radiance_probes.rendering.probe_layout import sun_lobe_g
+    from radiance_probes.rendering.probes.layout import sun_lobe_g
     from radiance_probes.rendering.renderer import Renderer
     g, amplitude = 0.8, 0.7
     h = sun_lobe_g(g, 3)
@@ -125,7 +125,7 @@ def test_furnace_with_the_lobe_returns_the_environment(ctx, method):
     """A white furnace (albedo 1, every direction the same radiance): the lobe's projection is
     0 up to the quadrature of the walks' directions, and the image is the environment."""
     from radiance_probes.rendering.renderer import Renderer
-    from radiance_probes.scene import parse_scene
+    from radiance_probes.io.scene_file import parse_scene
     env = [0.3, 0.6, 0.9]
     scene = parse_scene({"volume": {"builtin": "cloud", "size": [16, 12, 14]}, "anisotropy": 0.8,
                          "transfer_function": {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]},
@@ -145,7 +145,7 @@ def test_furnace_with_the_lobe_returns_the_environment(ctx, method):
 
 
 def test_sun_lobe_g_rule():
-    from radiance_probes.rendering.probe_layout import sun_lobe_g
+    from radiance_probes.rendering.probes.layout import sun_lobe_g
     assert sun_lobe_g(0.8, 3) == pytest.approx(0.512)
     assert sun_lobe_g(0.8, 2) == 0.0 and sun_lobe_g(0.8, 4) == 0.0
     assert sun_lobe_g(-0.8, 3) == 0.0 and sun_lobe_g(0.5, 3) == 0.0
@@ -177,8 +177,8 @@ def test_probe_inscattered_adds_the_convolved_lobe(ctx):
     """lib/probes.glsl probe_inscattered with PROBE_SUN_LOBE at the probes' texel centres, against
     NumPy: the convolved bands of the unpacked coefficients plus the lobe's amplitude (channels
     49 .. 51) times the convolved residual at d . s, clamped at 0."""
-    from radiance_probes.rendering.probe_layout import TEXTURES_FOR_ORDER, colour_channel
-    from radiance_probes.rendering.probes import probe_unit
+    from radiance_probes.rendering.probes.layout import TEXTURES_FOR_ORDER, colour_channel
+    from radiance_probes.rendering.probes.bake import probe_unit
     from radiance_probes.twins.sh import sh_band_factors, sh_basis
     grid, order, g, h, scale = (3, 2, 2), 3, 0.8, 0.512, 2.0
     count = grid[0] * grid[1] * grid[2]
@@ -328,7 +328,7 @@ def test_fit_chooses_the_lobe_the_probes_see(ctx, tmp_path, power, monkeypatch):
     """Probes under an environment map base + A HG_h(omega . s): the pilot picks h among g^2, g^3
     and g^4 (the error the lobe removes is largest for the lobe that is there), and a bake with
     its power (as lab/experiments/experiment_sun_lobe.py sets it) holds it."""
-    from radiance_probes.rendering import probe_layout
+    from radiance_probes.rendering.probes import layout as probe_layout
     from radiance_probes.rendering.renderer import Renderer
     g = 0.8
     scene = _lobe_scene(tmp_path, g, g ** power, 0.7, 0.4, (-0.3, 0.35, -0.89))

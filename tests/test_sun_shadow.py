@@ -15,7 +15,7 @@ import pytest
 
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.settings import RenderSettings
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.twins.light_grid import light_grid_optical_depth
 from radiance_probes.twins.medium import box_intersect, sigma_t_at
 from radiance_probes.twins.sun_shadow import sun_transmittance

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
-from radiance_probes.scene_types import SceneError, VolumeError
-from radiance_probes.volume import load_scene_volume
+from radiance_probes.io.scene_file import parse_scene
+from radiance_probes.scene.types import SceneError, VolumeError
+from radiance_probes.io.volume import load_scene_volume
 
 
 def moving_blob(steps=4, shape=(10, 12, 14), scale=1000.0) -> np.ndarray:
@@ -161,7 +161,7 @@ def test_animate_plays_the_series_one_bake_a_step(tmp_path, capsys):
     the frames follow the ball. A volume without a time axis is refused."""
     import json
     from PIL import Image
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
     np.save(tmp_path / "s.npy", moving_blob())
     scene = {"volume": {"path": str(tmp_path / "s.npy"), "axes": "tzyx"}, **SMALL,
              "camera": {"width": 24, "height": 16}}

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from radiance_probes.scene import TransferFunctionSpec, parse_scene
-from radiance_probes.transfer import ALIASES, COLORMAPS, colormap_rgb, lookup, opacity_curve, transfer_table
+from radiance_probes.io.scene_file import TransferFunctionSpec, parse_scene
+from radiance_probes.scene.transfer import ALIASES, COLORMAPS, colormap_rgb, lookup, opacity_curve, transfer_table
 
 
 @pytest.mark.parametrize("n", [2, 7, 256, 1000])
@@ -66,7 +66,7 @@ def test_alias_character():
 
 
 def test_colormap_endpoints_are_the_preset_endpoints():
-    from radiance_probes.transfer import _colormap_tables
+    from radiance_probes.scene.transfer import _colormap_tables
     for name, table in _colormap_tables().items():
         c = colormap_rgb(name, 17)
         np.testing.assert_allclose(c[0], table[0])
@@ -114,7 +114,7 @@ def _mri_like_rows(n: int = 256) -> tuple:
 
 
 def test_the_editor_sees_an_explicit_tables_real_opacity():
-    from radiance_probes.transfer import opacity_points
+    from radiance_probes.scene.transfer import opacity_points
     spec = TransferFunctionSpec(rgba=_mri_like_rows())
     points, error = opacity_points(spec)
     assert error < 1e-12 and len(points) <= 5          # the same curve, from its corners only
@@ -127,7 +127,7 @@ def test_the_editor_sees_an_explicit_tables_real_opacity():
 
 
 def test_a_noisy_table_is_shown_with_the_points_that_matter_and_says_how_far_off():
-    from radiance_probes.transfer import MAX_EDIT_POINTS, opacity_points
+    from radiance_probes.scene.transfer import MAX_EDIT_POINTS, opacity_points
     rng = np.random.default_rng(3)
     d = np.linspace(0, 1, 4096)
     alpha = np.clip(np.sin(6 * d) * 0.5 + 0.5 + rng.normal(0, 0.002, d.size), 0, 1)
@@ -139,7 +139,7 @@ def test_a_noisy_table_is_shown_with_the_points_that_matter_and_says_how_far_off
 
 
 def test_editing_an_explicit_tables_curve_keeps_its_colours():
-    from radiance_probes.transfer import rgba_with_opacity
+    from radiance_probes.scene.transfer import rgba_with_opacity
     rows = ((0.0, 0.0, 1.0, 0.0), (1.0, 0.5, 0.0, 0.5), (0.2, 1.0, 0.2, 1.0))
     spec = TransferFunctionSpec(rgba=rows)
     new = np.asarray(rgba_with_opacity(spec, ((0.0, 0.0), (0.25, 0.8), (1.0, 0.1))))

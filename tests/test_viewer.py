@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 
 from radiance_probes.twins.camera import camera_frame
-from radiance_probes.scene import CameraSpec, load_scene, parse_scene
+from radiance_probes.io.scene_file import CameraSpec, load_scene, parse_scene
 from radiance_probes.twins.sh import sh_evaluate
 from radiance_probes.viewer import layout, orbit
 from radiance_probes.viewer.probe_view import RADIUS_PER_SPACING, box_edges, probe_centres, uv_sphere
 from radiance_probes.viewer.state import (ViewerState, add_point, angles_from_direction, direction_from_angles,
                               move_point, remove_point)
 from viewer_harness import dump, png, srgb8, view, view_pixels, write_script
-from radiance_probes.rendering.probe_layout import TEXTURES_FOR_ORDER
-from radiance_probes.transfer import transfer_table
+from radiance_probes.rendering.probes.layout import TEXTURES_FOR_ORDER
+from radiance_probes.scene.transfer import transfer_table
 
 # The test scene scatters isotropically (g = 0), so "auto" stores SH order 0: two textures.
 PROBE_TEXTURES_G0 = len(TEXTURES_FOR_ORDER[0])
@@ -122,7 +122,7 @@ def test_editing_an_explicit_tables_opacity_keeps_it_explicit():
 def test_probe_view_draws_the_visible_probes_and_thins_large_grids():
     from radiance_probes.twins.medium import sigma_t_at
     from radiance_probes.viewer.probe_view import MAX_SPHERES, select_probes, visible_cells
-    from radiance_probes.volume import load_volume
+    from radiance_probes.io.volume import load_volume
     scene = parse_scene({"volume": {"builtin": "sphere", "size": [40, 40, 40]},
                          "transfer_function": {"opacity": [[0, 0], [0.5, 0], [0.6, 1], [1, 1]]}})
     volume = load_volume(scene.volume)
@@ -201,7 +201,7 @@ def test_sphere_mesh_faces_outwards_and_probe_centres_follow_the_spec():
 
 
 def test_headless_commands_do_not_import_the_window_toolkit():
-    code = ("import sys, radiance_probes.cli; radiance_probes.cli.build_parser(); "
+    code = ("import sys, radiance_probes.cli.main; radiance_probes.cli.main.build_parser(); "
             "print(any(m.split('.')[0] in ('glfw', 'imgui_bundle') for m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
@@ -457,7 +457,7 @@ def test_unseen_volume_with_an_explicit_table_and_a_fine_probe_grid(display, tmp
     function that leaves the air transparent, the probe view at 32^3. The editor shows the
     table's own opacity, and the probe view draws the probes in the visible head only, so most
     of the picture is still the volume."""
-    from radiance_probes.transfer import opacity_points
+    from radiance_probes.scene.transfer import opacity_points
     z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in (40, 48, 40)), indexing="ij")
     r = np.sqrt(x * x + (y / 1.1) ** 2 + z * z)
     head = np.where(r < 0.7, 0.55 + 0.3 * (r < 0.6), 0.02 * np.cos(9 * x) ** 2)

@@ -8,11 +8,11 @@ import json
 import numpy as np
 import pytest
 
-from radiance_probes.scene import CameraSpec, load_scene, load_transfer_function, parse_scene
+from radiance_probes.io.scene_file import CameraSpec, load_scene, load_transfer_function, parse_scene
 from radiance_probes.viewer.crop_handles import dragged, drag_start, handles, plane_polygon
 from radiance_probes.viewer.history import SceneHistory
 from radiance_probes.viewer.state import ViewerState
-from radiance_probes.volume import Volume
+from radiance_probes.io.volume import Volume
 from viewer_harness import dump, png, view, view_pixels, write_script
 
 # ---- undo and redo (no window) ---------------------------------------------------------------------
@@ -187,7 +187,7 @@ def test_scene_saved_with_the_viewer_state_and_a_movie_recorded(session):
     rec = dump(out / "recorded.json")
     assert rec["recording"] is None and rec["errors"] == []
     assert any("recorded 2 frames" in m for m in rec["messages"])
-    from radiance_probes.movie_writer import count_frames
+    from radiance_probes.movie.writer import count_frames
     assert count_frames(out / "movie.mp4") == 2
 
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from radiance_probes.gl.textures import volume_texture
-from radiance_probes.scene import VolumeSpec, parse_scene
-from radiance_probes.volume import (BUILTIN_VOLUMES, Volume, VolumeError, load_scene_volume, load_volume,
+from radiance_probes.io.scene_file import VolumeSpec, parse_scene
+from radiance_probes.io.volume import (BUILTIN_VOLUMES, Volume, VolumeError, load_scene_volume, load_volume,
                         normalise)
 from conftest import dataset
 
@@ -388,9 +388,9 @@ def test_volume_beyond_the_memory_left_is_refused_with_why():
     ("int8", [(-128, 127), (-1, 1)])])
 def test_normalise_in_float32_equals_float64_for_every_small_integer(dtype, ranges):
     """normalise maps 8- and 16-bit integers with a whole-number range in float32 arithmetic
-    (app/volume.py float32_exact; the bricked upload maps this way in its reading processes):
+    (app/io/volume.py float32_exact; the bricked upload maps this way in its reading processes):
     bit for bit the float64 mapping rounded to float32, for every value of the type."""
-    from radiance_probes.volume import float32_exact
+    from radiance_probes.io.volume import float32_exact
     info = np.iinfo(dtype)
     raw = np.arange(info.min, info.max + 1).astype(dtype).reshape(-1, 1, 1)
     for lo, hi in ranges:
@@ -405,7 +405,7 @@ def test_normalise_in_float32_equals_float64_for_every_small_integer(dtype, rang
 def test_normalise_keeps_float64_where_float32_is_not_exact():
     """Float data, 32-bit integers and fractional or huge ranges keep the float64 mapping (the
     float32 one could differ by more than float32's rounding there)."""
-    from radiance_probes.volume import float32_exact
+    from radiance_probes.io.volume import float32_exact
     rng = np.random.default_rng(4)
     cases = [(rng.normal(size=(3, 4, 5)).astype(np.float32), (-1.5, 2.25)),
              (rng.integers(0, 2 ** 30, (3, 4, 5)).astype(np.int32), (0.0, 2.0 ** 30)),

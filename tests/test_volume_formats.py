@@ -13,10 +13,10 @@ import tifffile
 from pydicom.dataset import FileDataset, FileMetaDataset
 from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
 
-from radiance_probes.scene import SceneError, VolumeSpec, parse_scene
-from radiance_probes.scene_types import WINDOW_PRESETS
-from radiance_probes.transfer import lookup, transfer_table
-from radiance_probes.volume import VolumeError, load_volume
+from radiance_probes.io.scene_file import SceneError, VolumeSpec, parse_scene
+from radiance_probes.scene.types import WINDOW_PRESETS
+from radiance_probes.scene.transfer import lookup, transfer_table
+from radiance_probes.io.volume import VolumeError, load_volume
 
 # x = 5, y = 4, z = 3: every axis a different length, so a swapped axis cannot pass
 ARRAY = (np.arange(3 * 4 * 5, dtype=np.int16).reshape(3, 4, 5) * 37 - 900)
@@ -319,7 +319,7 @@ def test_window_in_the_scene_json():
 
 
 def test_histogram_axis_in_data_units():
-    from radiance_probes.viewer.tf_editor import data_ticks, window_choice
+    from radiance_probes.viewer.panels.tf_editor import data_ticks, window_choice
     ticks, labels = data_ticks((-160.0, 240.0))   # the soft-tissue window in HU
     assert labels == ["-100", "0", "100", "200"]
     np.testing.assert_allclose(ticks, [60 / 400, 160 / 400, 260 / 400, 360 / 400])

@@ -7,9 +7,9 @@ import numpy as np
 from radiance_probes.twins.camera import camera_frame
 from radiance_probes.twins.medium import box_intersect, sigma_t_at
 from radiance_probes.twins.phase import phase_hg
-from radiance_probes.scene import Scene
-from radiance_probes.transfer import transfer_table
-from radiance_probes.volume import Volume
+from radiance_probes.io.scene_file import Scene
+from radiance_probes.scene.transfer import transfer_table
+from radiance_probes.io.volume import Volume
 
 
 def pixel_rays(scene: Scene, sub: int):

@@ -81,7 +81,7 @@ def _release_check(argv: list[str]) -> int:
     import moderngl
 
     import radiance_probes.viewer.window as window_module
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
 
     seen: list = []
     original_close = window_module.ViewerWindow.close
@@ -112,11 +112,11 @@ if __name__ == "__main__":
         import radiance_probes.rendering.shader_files as shader_files
         shader_files.GLSL_DIR = Path(hooks[hooks.index("--glsl") + 1])
     if "--lazy-bytes" in hooks:   # Zarr stores larger than this are read brick by brick
-        import radiance_probes.volume
-        radiance_probes.volume.LAZY_BYTES = int(hooks[hooks.index("--lazy-bytes") + 1])
+        import radiance_probes.io.volume
+        radiance_probes.io.volume.LAZY_BYTES = int(hooks[hooks.index("--lazy-bytes") + 1])
     if "--open-delay" in hooks:   # a volume opening on a thread starts this many seconds late
         import time as _time
-        from radiance_probes.rendering.progressive_open import ProgressiveOpen
+        from radiance_probes.rendering.levels.progressive_open import ProgressiveOpen
         delay, work = float(hooks[hooks.index("--open-delay") + 1]), ProgressiveOpen._work
         ProgressiveOpen._work = lambda self: (_time.sleep(delay), work(self))[1]
     if "--load-after" in hooks:   # a file opened in the window is read once this file exists
@@ -132,5 +132,5 @@ if __name__ == "__main__":
         VolumeLoading._work = gated
     if "--release-check" in hooks:
         sys.exit(_release_check(view_argv))
-    from radiance_probes.cli import main
+    from radiance_probes.cli.main import main
     sys.exit(main(view_argv))

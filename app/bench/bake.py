@@ -29,9 +29,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..imageio import save_png
-from .records import log as _log, make_record, progressive as _progressive
-from ..rendering.ceiling import measure_ceiling
+from radiance_probes.frontend.imageio import save_png
+from radiance_probes.bench.records import log as _log, make_record, progressive as _progressive
+from radiance_probes.rendering.budgets.ceiling import measure_ceiling
 
 
 def _profiling_supported(renderer) -> bool:
@@ -45,7 +45,7 @@ def _rebake(renderer, seed: int, **kw) -> float:
 
 def _profile(renderer, seed: int) -> dict:
     """Section times of one bake and the profiling build's counters of another."""
-    from ..gl.profiler import GpuProfile
+    from radiance_probes.gl.profiler import GpuProfile
     profile = GpuProfile()
     dispatches = renderer.probe_grid.dispatches
     try:

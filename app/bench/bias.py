@@ -21,8 +21,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..rendering.metrics import block_rrmse, rrmse
-from .records import log as _log
+from radiance_probes.rendering.metrics import block_rrmse, rrmse
+from radiance_probes.bench.records import log as _log
 
 
 @dataclass(frozen=True)
@@ -78,8 +78,8 @@ def _ratio(a: list[float], b: list[float]) -> tuple[float, float]:
 
 def _measure(renderer, config, reference, name: str, variant: str, seeds, out) -> dict:
     """Per seed, the raymarched and `probes` images' mean, rRMSE and block rRMSE."""
-    from ..imageio import save_png
-    from ..gl.dispatch_log import active_log
+    from radiance_probes.frontend.imageio import save_png
+    from radiance_probes.gl.dispatch_log import active_log
     rows = {"raymarch": [], "probes": []}
     bake_ms = []
     log = active_log()
@@ -251,7 +251,7 @@ def bias_report_lines(data: dict) -> list[str]:
 
 
 def write_bias_report(data: dict, out) -> "Path":
-    from .records import caveat
+    from radiance_probes.bench.records import caveat
     meta = data["meta"]
     lines = ["# Bias of the default shortcuts on the stress battery", "",
              f"Device: **{meta['device']}**. Started {meta.get('started')}, finished "

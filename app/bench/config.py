@@ -5,11 +5,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from .scenes import ALL_SCENES, BATTERY_SCENES
-from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
+from radiance_probes.bench.scenes import ALL_SCENES, BATTERY_SCENES
+from radiance_probes.rendering.budgets.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 
 # The sweep's probe layouts (`--probe-layouts`): "uniform", or an adaptive layout driven by that
-# indicator (app/rendering/probe_planes.py), each at the same probe counts.
+# indicator (app/rendering/probes/planes.py), each at the same probe counts.
 BENCH_PROBE_LAYOUTS = ("uniform", "extinction", "sun")
 
 

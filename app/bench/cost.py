@@ -1,7 +1,7 @@
 """The benchmark's "cost that follows the scene" mode: each saving measured against a baseline
 that models the whole box at full generality, at equal nominal settings, with its error beside it.
 
-Variants of the probe layout (app/rendering/probe_layout.py) and precision:
+Variants of the probe layout (app/rendering/probes/layout.py) and precision:
   baseline      grid over the whole box, SH order 2, RGBA32F
   fit visible   grid over the visible region only, aspect following it
   sh order auto order 0 when g = 0
@@ -16,9 +16,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..imageio import save_png
-from ..methods import METHODS
-from .records import log as _log, make_record, progressive as _progressive
+from radiance_probes.frontend.imageio import save_png
+from radiance_probes.methods import METHODS
+from radiance_probes.bench.records import log as _log, make_record, progressive as _progressive
 
 PROBE_VARIANTS = (
     ("baseline", {"fit": "box", "sh_order": 2, "precision": "rgba32f", "channels": 3}),
@@ -99,7 +99,7 @@ def cost_scene(renderer, name: str, config, results, out, device: str,
 
 def auto_scene(renderer, target: float, config, record, log, progressive) -> None:
     """`auto` chooses at its pilot resolution; this checks the choice at full resolution."""
-    from ..rendering.auto_probes import choose_probes
+    from radiance_probes.rendering.probes.auto import choose_probes
     scene = renderer.scene
     # from nothing, as `render --auto-probes` starts: the search pays for every light grid and
     # bake it uses, also one an earlier setting of this run left current

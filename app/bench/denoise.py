@@ -1,10 +1,10 @@
-"""`bench --preset denoise`: every noisy method raw and through the denoiser (app/rendering/denoise.py)
+"""`bench --preset denoise`: every noisy method raw and through the denoiser (app/rendering/denoise/filter.py)
 with each set of guides, against the scene's path-traced reference.
 
 Each snapshot of a progressive run (records.progressive: the path tracer, `probes` at its first
 event and with a gather, `guided`) is recorded raw, then once per guide set of
 `config.denoise_guides` as its denoised twin (`denoise` names the guides). Each twin runs the
-flow the viewer and Renderer.denoise run (app/rendering/kept_means.py denoise_on_gl): the
+flow the viewer and Renderer.denoise run (app/rendering/denoise/kept_means.py denoise_on_gl): the
 snapshot, a host array here, is first written into a scratch RGBA32F texture (not charged: it
 stands for the accumulation, which is in GL already), and the corrected image is read back from
 its texture afterwards for the metrics (not charged: the viewer shows it from there). A twin's
@@ -35,11 +35,11 @@ import time
 
 import numpy as np
 
-from ..imageio import save_png
-from ..methods import METHODS
-from ..rendering.denoise import QUALITIES, shared_denoiser
-from ..rendering.kept_means import KeptMeans, denoise_on_gl
-from .records import (error_of, floor, header as _header, log, make_record, ms_text as _ms,
+from radiance_probes.frontend.imageio import save_png
+from radiance_probes.methods import METHODS
+from radiance_probes.rendering.denoise.filter import QUALITIES, shared_denoiser
+from radiance_probes.rendering.denoise.kept_means import KeptMeans, denoise_on_gl
+from radiance_probes.bench.records import (error_of, floor, header as _header, log, make_record, ms_text as _ms,
                       progressive)
 
 NOISY = ("pt", "probes", "guided")
@@ -60,7 +60,7 @@ def denoise_cost(renderer, sizes=COST_SIZES, qualities=QUALITIES, repeats: int =
     upload_result_ms (the output into an RGB32F texture), the restore passes with a ctx.finish
     (restore_ms); means_ms = raw_means_ms + restore_ms, and total_ms the whole flow. Medians of
     `repeats` after one untimed frame (which builds the filter and uploads the guides)."""
-    from ..rendering.accumulation import Accumulation
+    from radiance_probes.rendering.methods.accumulation import Accumulation
     ctx = renderer.ctx
     rng = np.random.default_rng(0)
     kept = KeptMeans(ctx)

@@ -24,11 +24,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..imageio import save_png
-from ..transfer import opacity_points, rgba_with_opacity
-from ..rendering.ceiling import speed_check_ms
-from ..rendering.metrics import corrected_rrmse, rrmse
-from .records import log as _log
+from radiance_probes.frontend.imageio import save_png
+from radiance_probes.scene.transfer import opacity_points, rgba_with_opacity
+from radiance_probes.rendering.budgets.ceiling import speed_check_ms
+from radiance_probes.rendering.metrics import corrected_rrmse, rrmse
+from radiance_probes.bench.records import log as _log
 
 TARGETS = (0.10, 0.05, 0.03, 0.02)
 # `refine` (the viewer's raymarcher, then `guided`) is judged by this: within 2% of the reference
@@ -172,7 +172,7 @@ def dispatch_tail(r, method: str, k: int, seed: int = 99) -> dict:
 def interact_scene(renderer, name: str, config, results, out, device: str, reference_of) -> None:
     """`reference_of(renderer, key, config)`: the runner's cached path-traced reference of the
     renderer's current scene under `key` (refs/KEY.npy, reused from --ref-dir)."""
-    from ..viewer.session import RenderSession
+    from radiance_probes.viewer.session import RenderSession
     r = renderer
     start = r.scene
     session = RenderSession(r.ctx, start, renderer=r, clock="gpu")   # GPU and wall times apart

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .records import caveat, speed_checks
+from radiance_probes.bench.records import caveat, speed_checks
 
 
 def _ms(v) -> str:
@@ -127,7 +127,7 @@ def goal_section(recs: list[dict]) -> list[str]:
     """Per scene, size, probes and method: whether every event (load, orbit, each edit warm and
     cold) reached the goal's error (interact.REFINE_GOAL: 2%) within its time (1 s) since the
     event, by GPU time and by wall-clock time, and the worst event."""
-    from .interact import REFINE_GOAL
+    from radiance_probes.bench.interact import REFINE_GOAL
     target, limit = REFINE_GOAL
     pct = round(target * 100)
     key, wall_key = f"ms_to_{pct}pct", f"wall_ms_to_{pct}pct"

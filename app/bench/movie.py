@@ -3,7 +3,7 @@ per-frame error against path-traced references of a few of its frames, and the p
 time for the same frames at the same error.
 
 One record per scene:
-- the movie (app/movie.py), rendered by a fresh Renderer after an untimed warm-up (shader
+- the movie (app/movie/frames.py), rendered by a fresh Renderer after an untimed warm-up (shader
   compiles): wall-clock seconds in all (bake, every frame, the GPU tone map, read-back and the
   MP4 encoder's tail), the bake's and the frames' GPU ms, the probes baked once, and the frames
   ffmpeg decodes back from the file;
@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..imageio import save_png
-from ..movie import render_movie
-from ..movie_writer import MovieWriter, count_frames
-from ..rendering.metrics import corrected_rrmse, reference_noise, rrmse
-from .records import log
+from radiance_probes.frontend.imageio import save_png
+from radiance_probes.movie.frames import render_movie
+from radiance_probes.movie.writer import MovieWriter, count_frames
+from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse
+from radiance_probes.bench.records import log
 
 
 def _reference(renderer, camera, config) -> tuple[np.ndarray, float, float]:
@@ -74,8 +74,8 @@ def _pt_to_error(renderer, camera, reference, noise, target: float, config) -> d
 
 
 def movie_scene(renderer, name: str, config, results, out: Path, device: str) -> None:
-    from ..camera_path import turntable
-    from ..rendering.renderer import Renderer
+    from radiance_probes.scene.camera_path import turntable
+    from radiance_probes.rendering.renderer import Renderer
     scene = renderer.scene
     grid, walks = config.movie_probes
     scene = scene.replace(probes=replace(scene.probes, grid=(grid,) * 3, samples=walks))

@@ -9,14 +9,14 @@ import time
 
 import numpy as np
 
-from ..gl.dispatch_log import active_log
-from ..methods import METHODS
+from radiance_probes.gl.dispatch_log import active_log
+from radiance_probes.methods import METHODS
 
-from ..rendering.pathtracer import PIXEL_STATE_BYTES
-from ..rendering.ceiling import SPEED_CHECK_SLOWER
-from .clock_log import report_lines as clock_report_lines
-from .config import BenchConfig
-from ..rendering.metrics import corrected_floor, corrected_rrmse, rrmse
+from radiance_probes.rendering.methods.pathtracer import PIXEL_STATE_BYTES
+from radiance_probes.rendering.budgets.ceiling import SPEED_CHECK_SLOWER
+from radiance_probes.bench.clock_log import report_lines as clock_report_lines
+from radiance_probes.bench.config import BenchConfig
+from radiance_probes.rendering.metrics import corrected_floor, corrected_rrmse, rrmse
 
 ACCUMULATION_BYTES = 16   # RGBA32F running mean per pixel
 
@@ -40,7 +40,7 @@ WARM_UP_WALL_S = 0.3
 def warm_up(renderer, per_dispatch: int) -> float:
     """Untimed dispatches of the run begun: until WARM_UP_MS of GPU work, and on a GPU (not a CPU
     rasteriser) WARM_UP_WALL_S of wall time as well; else at most WARM_UP_DISPATCHES. GPU ms."""
-    from ..gl.context import is_software
+    from radiance_probes.gl.context import is_software
     clocked = not is_software(renderer.ctx)
     start = time.perf_counter()
     warm_ms, dispatches = 0.0, 0
@@ -170,7 +170,7 @@ def speed_checks(data: dict, scenes: list[str],
         return []
     return ["", "## The device's speed during the run", "",
             f"{when[0].upper()}{when[1:]} the run times the same small trilinear march through "
-            "the scene's medium (`speed_check_ms`, app/rendering/ceiling.py). "
+            "the scene's medium (`speed_check_ms`, app/rendering/budgets/ceiling.py). "
             f"Records taken after a check more than {SPEED_CHECK_SLOWER:.1f}x slower than the "
             "scene's fastest ran on a GPU that was shared or clocked down: their times are not "
             "comparable.", "",

@@ -8,8 +8,8 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
-from ..methods import ACCUMULATED
-from .records import (caveat, error_of, floor, header as _header, ms_text as _ms,  # noqa: F401
+from radiance_probes.methods import ACCUMULATED
+from radiance_probes.bench.records import (caveat, error_of, floor, header as _header, ms_text as _ms,  # noqa: F401
                       reference_noise_of as _noise, run_pixels as _pixels, speed_checks)
 
 METHOD_ORDER = ACCUMULATED   # the registry's order (app/methods.py)
@@ -57,7 +57,7 @@ def merge(paths: list[str | Path], out: str | Path) -> Path:
     logs = [Path(p).parent / "nvidia-smi.csv" for p in paths]
     merged["meta"].pop("gpu_clock", None)
     if logs and all(log.is_file() for log in logs):
-        from .clock_log import summary
+        from radiance_probes.bench.clock_log import summary
         combined = path.parent / "nvidia-smi.csv"
         text = "".join(log.read_text() for log in logs)
         combined.write_text(text)
@@ -207,7 +207,7 @@ def plot(data: dict, scenes: list[str], path: Path) -> None:
 def dispatch_lines(data: dict, scenes: list[str]) -> list[str]:
     """The longest single dispatch per scene and method (every record holds the longest since the
     record before it: app/gl/dispatch_log.py), against DISPATCH_BOUND_MS."""
-    from ..rendering.dispatch_budget import DISPATCH_BOUND_MS
+    from radiance_probes.rendering.budgets.dispatch_budget import DISPATCH_BOUND_MS
     recs = [r for r in data["records"] if r.get("longest_dispatch_ms") is not None]
     if not recs:
         return []
@@ -239,16 +239,16 @@ def write_report(results_path: str | Path, out_dir: str | Path | None = None) ->
     if all(r.get("mode") == "bake" for r in data["records"]) and data["records"]:
         return _write_bake_report(data, out, scenes)
     if all(r.get("mode") == "bias" for r in data["records"]) and data["records"]:
-        from .bias import write_bias_report
+        from radiance_probes.bench.bias import write_bias_report
         return write_bias_report(data, out)
     if all(r.get("mode") == "interact" for r in data["records"]) and data["records"]:
-        from .interact_report import write_interact_report
+        from radiance_probes.bench.interact_report import write_interact_report
         return write_interact_report(data, out)
     if all(r.get("mode") == "denoise" for r in data["records"]) and data["records"]:
-        from .denoise import write_denoise_report
+        from radiance_probes.bench.denoise import write_denoise_report
         return write_denoise_report(data, out)
     if all(r.get("mode") == "movie" for r in data["records"]) and data["records"]:
-        from .movie import write_movie_report
+        from radiance_probes.bench.movie import write_movie_report
         return write_movie_report(data, out)
     lines = [f"# Speed against error", "",
              f"Device: **{meta['device']}**. Started {meta.get('started')}, finished "

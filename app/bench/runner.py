@@ -14,18 +14,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..imageio import save_png
-from ..methods import PROBE_LIT, REFERENCE
-from ..rendering.ceiling import speed_check_ms
-from .clock_log import ClockLog
-from .config import BenchConfig
-from ..rendering.metrics import flip, reference_noise
-from ..gl.checks import checks_for
-from ..gl.dispatch_log import DispatchLog
-from .records import log as _log, make_record, progressive as _progressive
-from .report import load as load_results
-from ..rendering.probe_layout import resolve_precision, resolve_sh_order
-from .scenes import bench_scene
+from radiance_probes.frontend.imageio import save_png
+from radiance_probes.methods import PROBE_LIT, REFERENCE
+from radiance_probes.rendering.budgets.ceiling import speed_check_ms
+from radiance_probes.bench.clock_log import ClockLog
+from radiance_probes.bench.config import BenchConfig
+from radiance_probes.rendering.metrics import flip, reference_noise
+from radiance_probes.gl.checks import checks_for
+from radiance_probes.gl.dispatch_log import DispatchLog
+from radiance_probes.bench.records import log as _log, make_record, progressive as _progressive
+from radiance_probes.bench.report import load as load_results
+from radiance_probes.rendering.probes.layout import resolve_precision, resolve_sh_order
+from radiance_probes.bench.scenes import bench_scene
 
 PROBE_METHODS = PROBE_LIT   # the path tracer's probe-lit variants (app/methods.py)
 
@@ -106,9 +106,9 @@ def _layout_info(renderer) -> dict:
 
 
 def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Path:
-    from ..gl.context import create_headless_context, describe
-    from ..rendering.renderer import Renderer
-    from ..volume import load_volume
+    from radiance_probes.gl.context import create_headless_context, describe
+    from radiance_probes.rendering.renderer import Renderer
+    from radiance_probes.io.volume import load_volume
 
     out = Path(out_dir)
     (out / "images").mkdir(parents=True, exist_ok=True)
@@ -200,27 +200,27 @@ def _reference(renderer, name: str, config: BenchConfig, results: Results, out: 
 def _bench_scene(renderer, name: str, config: BenchConfig, results: Results, out: Path,
                  device: str) -> None:
     if config.mode == "cost":
-        from .cost import cost_scene
+        from radiance_probes.bench.cost import cost_scene
         return cost_scene(renderer, name, config, results, out, device,
                           _reference(renderer, name, config, results, out))
     if config.mode == "interact":
-        from .interact import interact_scene
+        from radiance_probes.bench.interact import interact_scene
         return interact_scene(renderer, name, config, results, out, device,
                               lambda r, key, cfg: _reference(r, key, cfg, results, out))
     if config.mode == "movie":
-        from .movie import movie_scene
+        from radiance_probes.bench.movie import movie_scene
         return movie_scene(renderer, name, config, results, out, device)
     if config.mode == "bias":
-        from .bias import bias_scene
+        from radiance_probes.bench.bias import bias_scene
         reference = _reference(renderer, name, config, results, out)
         return bias_scene(renderer, name, config, results, out, device, reference,
                           results.references[name]["noise_rrmse"])
     if config.mode == "denoise":
-        from .denoise import denoise_scene
+        from radiance_probes.bench.denoise import denoise_scene
         return denoise_scene(renderer, name, config, results, out, device,
                              _reference(renderer, name, config, results, out))
     if config.mode == "bake":
-        from .bake import bake_scene
+        from radiance_probes.bench.bake import bake_scene
         return bake_scene(renderer, name, config, results, out, device,
                           _reference(renderer, name, config, results, out), config.code_label)
     scene = renderer.scene

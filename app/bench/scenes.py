@@ -2,8 +2,8 @@
 scenes that stress what the datasets do not (thick high-albedo media, strong anisotropy)."""
 from __future__ import annotations
 
-from ..paths import ASSETS_DIR
-from ..scene import Scene, load_scene, parse_scene
+from radiance_probes.paths import ASSETS_DIR
+from radiance_probes.io.scene_file import Scene, load_scene, parse_scene
 
 DATASET_SCENES = ("fuel", "hydrogen", "foot", "bonsai")
 
@@ -110,7 +110,7 @@ def bench_scene(name: str, width: int, height: int) -> Scene | None:
     if name in BUILTIN_SCENES:
         scene = parse_scene(BUILTIN_SCENES[name])
     elif name in DATASET_SCENES:
-        from ..volume import _resolve
+        from radiance_probes.io.volume import _resolve
         scene = load_scene(ASSETS_DIR / "scenes" / f"{name}.json")
         if not _resolve(scene.volume.path, scene.base_dir).exists():   # a file or a TIFF/DICOM folder
             return None

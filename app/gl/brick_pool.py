@@ -9,10 +9,10 @@ import time
 import moderngl
 import numpy as np
 
-from ..bricks import (APRON, CONSTANTS_WIDTH, FREE_SLOT, brick_counts, slot_bytes,  # noqa: F401
+from radiance_probes.io.bricks import (APRON, CONSTANTS_WIDTH, FREE_SLOT, brick_counts, slot_bytes,  # noqa: F401
                       slot_origin, slot_side, texel_bytes)
-from ..scene_types import VolumeError
-from ..twins.brick_pool import Packed
+from radiance_probes.scene.types import VolumeError
+from radiance_probes.twins.brick_pool import Packed
 
 # Texture units (0: the volume, here the atlas; 1 to 15: the passes' own, app/rendering/*.py).
 ATLAS_UNIT = 0
@@ -89,7 +89,7 @@ class BrickPool:
         self.write_seconds = 0.0  # in them
         self.upload_seconds = None   # upload_store's, all of it
         self.table_writes = 0  # page-table texels written after the pool was made (streaming)
-        # a streamed mix (app/rendering/level_stream.py): the PoolPlan it was made from, and the
+        # a streamed mix (app/rendering/levels/level_stream.py): the PoolPlan it was made from, and the
         # LevelStream that changes it (made by the Renderer's resources on first use)
         self.plan = None
         self.stream = None
@@ -195,7 +195,7 @@ class BrickPool:
         self.atlas.use(ATLAS_UNIT)
         self.table.use(TABLE_UNIT)
         self.constants.use(CONSTANTS_UNIT)
-        from .checks import checks_for
+        from radiance_probes.gl.checks import checks_for
         if checks_for(self.ctx) is not None:
             if self.slots_buffer is None:
                 self.slots_buffer = self.ctx.buffer(self.brick_of_slot.tobytes())

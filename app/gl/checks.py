@@ -15,7 +15,7 @@ import re
 import moderngl
 import numpy as np
 
-from .sources import shader_source
+from radiance_probes.gl.sources import shader_source
 
 SHADER_CHECKS_BINDING = 9   # a storage binding no other pass uses (GL 4.3 promises 0-7; the
                             # checking build runs where there are more: llvmpipe 80, NVIDIA 96)

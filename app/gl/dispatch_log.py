@@ -14,9 +14,9 @@ from __future__ import annotations
 import ctypes
 import time
 
-from .context import is_software
+from radiance_probes.gl.context import is_software
 
-from .timer import GL_QUERY_RESULT, GL_TIMESTAMP, _lib
+from radiance_probes.gl.timer import GL_QUERY_RESULT, GL_TIMESTAMP, _lib
 
 _ACTIVE: list["DispatchLog"] = []
 

@@ -17,7 +17,7 @@ _get_integerv = None
 def _gl_get_integer(pname: int) -> int | None:
     global _get_integerv
     if _get_integerv is None:
-        from .timer import _lib
+        from radiance_probes.gl.timer import _lib
         lib = _lib()
         if lib is None:
             return None

@@ -9,7 +9,7 @@ from __future__ import annotations
 import ctypes
 from contextlib import contextmanager
 
-from .timer import GL_QUERY_RESULT, GL_TIMESTAMP, _lib
+from radiance_probes.gl.timer import GL_QUERY_RESULT, GL_TIMESTAMP, _lib
 
 
 class GpuProfile:

@@ -13,10 +13,10 @@ from typing import Mapping
 
 import moderngl
 
-from .sources import ShaderError, set_source_reader, shader_source  # noqa: F401 (re-exported)
-from .context import is_software
-from .dispatch_log import active_log
-from .textures import transfer_buffer_bindable
+from radiance_probes.gl.sources import ShaderError, set_source_reader, shader_source  # noqa: F401 (re-exported)
+from radiance_probes.gl.context import is_software
+from radiance_probes.gl.dispatch_log import active_log
+from radiance_probes.gl.textures import transfer_buffer_bindable
 
 GLSL_VERSION = "#version 430 core"
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
@@ -84,7 +84,7 @@ def transfer_from_buffer(ctx: moderngl.Context) -> bool:
 def compute_defines(ctx: moderngl.Context) -> dict:
     """Defines every compute pass on this device gets (a caller's own defines win): the transfer
     table's source, and SHADER_CHECKS in a context with the checking build (app/gl/checks.py)."""
-    from .checks import SHADER_CHECKS_BINDING, checks_for
+    from radiance_probes.gl.checks import SHADER_CHECKS_BINDING, checks_for
     defines = {"TRANSFER_FROM_BUFFER": 1} if transfer_from_buffer(ctx) else {}
     if checks_for(ctx) is not None:
         defines.update(SHADER_CHECKS=1, SHADER_CHECKS_BINDING=SHADER_CHECKS_BINDING)

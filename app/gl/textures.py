@@ -4,7 +4,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from ..volume import Volume, VolumeError
+from radiance_probes.io.volume import Volume, VolumeError
 
 
 def _check_gl(ctx: moderngl.Context, what: str) -> None:
@@ -35,8 +35,8 @@ def check_volume_fits(name: str, dims: tuple[int, int, int], bytes_per_voxel: in
 
 def device_available(ctx: moderngl.Context) -> tuple[int | None, str]:
     """The bytes a volume may take on this device (None where it cannot tell), and what they are."""
-    from .context import is_software as software_renderer
-    from .memory import gpu_available_bytes, host_available_bytes
+    from radiance_probes.gl.context import is_software as software_renderer
+    from radiance_probes.gl.memory import gpu_available_bytes, host_available_bytes
     if software_renderer(ctx):
         # the texture lives in host memory, beside the upload's payload and its bytes copy
         available = host_available_bytes()

@@ -1,12 +1,12 @@
 """An accumulation as the 8-bit sRGB picture a movie frame or a PNG holds, tone mapped on the GPU
-(glsl/tonemap_frame.comp) and read back at 4 bytes a pixel (app/movie.py)."""
+(glsl/tonemap_frame.comp) and read back at 4 bytes a pixel (app/movie/frames.py)."""
 from __future__ import annotations
 
 import moderngl
 import numpy as np
 
-from ..gl.shaders import compute_program, set_uniforms
-from .accumulation import Accumulation
+from radiance_probes.gl.shaders import compute_program, set_uniforms
+from radiance_probes.rendering.methods.accumulation import Accumulation
 
 
 class FrameReadback:

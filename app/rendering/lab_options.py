@@ -17,8 +17,8 @@ class LabOptions:
     # lab/experiments/experiment_shadow_variance.py).
     sun_shadow_rays: int = 1
     # Under a memory cap, the memory the shown level leaves holds the next finer level's bricks
-    # where the scene's camera sees them largest (app/rendering/level_mix.py), streamed as the
-    # camera moves (app/rendering/level_stream.py). On the H100 (bench/h100-bricks-open) it took a
+    # where the scene's camera sees them largest (app/rendering/levels/level_mix.py), streamed as the
+    # camera moves (app/rendering/levels/level_stream.py). On the H100 (bench/h100-bricks-open) it took a
     # zoomed view of the 2048^3 volume from 2.97% to 2.92% rRMSE against level 0, for frames 2.3x
     # as long and 7 s more to open (scripts/brick_bench.py compares it).
     mixed_levels: bool = False

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import moderngl
 
-from .pathtracer import PIXEL_STATE_BYTES
+from radiance_probes.rendering.methods.pathtracer import PIXEL_STATE_BYTES
 
 
 class DeviceLimitError(ValueError):
@@ -30,9 +30,9 @@ def check_image_size(ctx: moderngl.Context, width: int, height: int) -> None:
     GL_MAX_TEXTURE_SIZE and GL_MAX_VIEWPORT_DIMS, the compute dispatch within
     GL_MAX_COMPUTE_WORK_GROUP_COUNT, and its buffers within the memory the device has left (the
     NVIDIA driver's query; on a software renderer, the host's available memory)."""
-    from ..gl.context import is_software as software_renderer
-    from ..gl.memory import gpu_available_bytes, host_available_bytes
-    from .pathtracer import LOCAL_SIZE
+    from radiance_probes.gl.context import is_software as software_renderer
+    from radiance_probes.gl.memory import gpu_available_bytes, host_available_bytes
+    from radiance_probes.rendering.methods.pathtracer import LOCAL_SIZE
     side = max(width, height)
     for name in ("GL_MAX_TEXTURE_SIZE", "GL_MAX_VIEWPORT_DIMS"):
         limit = _limit(ctx, name, 16384)

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from .tonemap import tonemap
+from radiance_probes.rendering.tonemap import tonemap
 
 
 def rrmse(image: np.ndarray, reference: np.ndarray) -> float:

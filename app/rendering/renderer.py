@@ -10,38 +10,38 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from ..methods import ACCUMULATED, METHODS as REGISTRY, method as registered
-from ..twins.camera import camera_frame
-from ..twins.light_grid import light_grid_lookup
-from ..gl.context import is_software
-from ..gl.shaders import set_uniforms
-from ..gl.timer import GpuTimer
-from ..scene import Scene
-from ..volume import Volume
-from .accumulation import Accumulation, SumAccumulation
-from .cache_keys import (adaptive_planes_key, light_grid_key, opacity_gradient_grid_key,
+from radiance_probes.methods import ACCUMULATED, METHODS as REGISTRY, method as registered
+from radiance_probes.twins.camera import camera_frame
+from radiance_probes.twins.light_grid import light_grid_lookup
+from radiance_probes.gl.context import is_software
+from radiance_probes.gl.shaders import set_uniforms
+from radiance_probes.gl.timer import GpuTimer
+from radiance_probes.io.scene_file import Scene
+from radiance_probes.io.volume import Volume
+from radiance_probes.rendering.methods.accumulation import Accumulation, SumAccumulation
+from radiance_probes.rendering.cache_keys import (adaptive_planes_key, light_grid_key, opacity_gradient_grid_key,
                          probe_bake_key, visible_region_key)
-from .bake_level import SPACING_LEVEL, BakeMedium, spacing_level
-from .limits import check_image_size
-from .pathtracer import PathTracer
-from .light_transmittance import LightTransmittance, min_side_for_probes
-from .opacity_gradient_grid import OpacityGradientGrid
-from .probe_layout import (fitted_grid, resolve_channels, resolve_precision, resolve_sh_order,
+from radiance_probes.rendering.probes.bake_level import SPACING_LEVEL, BakeMedium, spacing_level
+from radiance_probes.rendering.limits import check_image_size
+from radiance_probes.rendering.methods.pathtracer import PathTracer
+from radiance_probes.rendering.grids.light_transmittance import LightTransmittance, min_side_for_probes
+from radiance_probes.rendering.grids.opacity_gradient_grid import OpacityGradientGrid
+from radiance_probes.rendering.probes.layout import (fitted_grid, resolve_channels, resolve_precision, resolve_sh_order,
                            sun_lobe_g)
-from .probe_planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
-from .visible_region import VisibleRegionPass
-from .probes import ProbeGrid
-from .dispatch_budget import dispatch_target_ms
-from .sample_bands import tile_grid
-from .denoise import (GUIDE_SETS, Denoised, choose_guides, radiance_as_albedo, sanitize,
+from radiance_probes.rendering.probes.planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
+from radiance_probes.rendering.probes.visible_region import VisibleRegionPass
+from radiance_probes.rendering.probes.bake import ProbeGrid
+from radiance_probes.rendering.budgets.dispatch_budget import dispatch_target_ms
+from radiance_probes.rendering.budgets.sample_bands import tile_grid
+from radiance_probes.rendering.denoise.filter import (GUIDE_SETS, Denoised, choose_guides, radiance_as_albedo, sanitize,
                       shared_denoiser)
-from .denoise_guides import GUIDE_FRAMES, DenoiseGuides
-from .kept_means import KeptMeans, denoise_on_gl
-from .raymarch import Raymarcher, min_step_voxels
-from .refine import blend_images, render_refine
-from .lab_options import LabOptions
-from .resources import SceneResources
-from .settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noqa: F401 (re-exported)
+from radiance_probes.rendering.denoise.guides import GUIDE_FRAMES, DenoiseGuides
+from radiance_probes.rendering.denoise.kept_means import KeptMeans, denoise_on_gl
+from radiance_probes.rendering.methods.raymarch import Raymarcher, min_step_voxels
+from radiance_probes.rendering.refine.refine import blend_images, render_refine
+from radiance_probes.rendering.lab_options import LabOptions
+from radiance_probes.rendering.resources import SceneResources
+from radiance_probes.rendering.settings import (MAX_GATHER_EVENT, RAYMARCH_STAGES, RenderSettings,  # noqa: F401 (re-exported)
                        check_gather_event)
 
 # The methods one accumulation holds (app/methods.py, the registry: every method's properties).
@@ -769,7 +769,7 @@ class Renderer:
     # ---- streaming a mix of levels (LabOptions.mixed_levels under a cap) -----------------------
     def restream(self, camera=None, budget_s: float | None = None) -> bool:
         """Moves a mixed pool towards the bricks `camera` (None: the scene's) deserves
-        (app/rendering/level_stream.py); with `budget_s`, about that many seconds of writes, the
+        (app/rendering/levels/level_stream.py); with `budget_s`, about that many seconds of writes, the
         rest left to the next calls (the viewer's frames). True when the medium changed: the
         majorant grid is then remade and the probes, light grid and visible region are stale
         (an edit of the medium). Nothing where the volume is not a streamed mix, or the camera
@@ -976,7 +976,7 @@ class Renderer:
         whole: acc.samples grows by one and groups_done is 0 again; until then the pixels done
         hold one sample more than the others, each pixel its own running mean. The pixels get
         exactly what whole samples give them: a pixel's random numbers follow its index and
-        sample alone (app/rendering/sample_bands.py plans the bands). Returns the timer's ms of
+        sample alone (app/rendering/budgets/sample_bands.py plans the bands). Returns the timer's ms of
         the groups (as in add_samples, a stale light grid's bake before them is in
         last_light_ms)."""
         method, acc = self.method, self._acc

@@ -9,21 +9,21 @@ from collections import OrderedDict
 import moderngl
 import numpy as np
 
-from ..area_lights import area_light_uniforms, check_area_lights
-from ..channels import ChannelTables, channel_uniforms, effective_channels, volume_inputs
-from ..clip_region import ClipRegion, clip_region, region_uniforms
-from ..environment_map import EnvironmentMap, load_scene_environment
-from ..gl.brick_pool import BrickPool
-from ..gl.textures import TransferTable
-from ..twins.environment_map import Distribution
-from ..twins.medium import majorant
-from ..scene import Scene
-from ..transfer import transfer_table
-from ..volume import Volume, load_scene_volume
-from ..twins.majorant_grid import macrocell_counts
-from .cache_keys import KEYS, majorant_grid_key, scene_key
-from .majorant_grid import MAJORANT_UNIT, MajorantGrid
-from .volume_placement import place_volume
+from radiance_probes.scene.area_lights import area_light_uniforms, check_area_lights
+from radiance_probes.scene.channels import ChannelTables, channel_uniforms, effective_channels, volume_inputs
+from radiance_probes.scene.clip_region import ClipRegion, clip_region, region_uniforms
+from radiance_probes.io.environment_map import EnvironmentMap, load_scene_environment
+from radiance_probes.gl.brick_pool import BrickPool
+from radiance_probes.gl.textures import TransferTable
+from radiance_probes.io.environment_map import Distribution
+from radiance_probes.twins.medium import majorant
+from radiance_probes.io.scene_file import Scene
+from radiance_probes.scene.transfer import transfer_table
+from radiance_probes.io.volume import Volume, load_scene_volume
+from radiance_probes.twins.majorant_grid import macrocell_counts
+from radiance_probes.rendering.cache_keys import KEYS, majorant_grid_key, scene_key
+from radiance_probes.rendering.grids.majorant_grid import MAJORANT_UNIT, MajorantGrid
+from radiance_probes.rendering.levels.volume_placement import place_volume
 
 VOLUME_UNIT = 0
 TRANSFER_UNIT = 1
@@ -80,14 +80,14 @@ class SceneResources:
         self.use_majorant_grid = bool(use_majorant_grid)
         self.majorant_grid = MajorantGrid(ctx)
         self._majorant_key: tuple | None = None
-        # The crop box and clip plane resolved against the volume (app/clip_region.py); None: the
+        # The crop box and clip plane resolved against the volume (app/scene/clip_region.py); None: the
         # whole volume is kept.
         self.clip: ClipRegion | None = None
         # A time series' steps shown, kept (volume and texture) up to this many bytes in all:
         # stepping back and forth, or playing the series again, uploads nothing.
         self.step_cache_bytes = STEP_CACHE_BYTES
         self._steps: OrderedDict = OrderedDict()
-        # Bricking (app/rendering/volume_placement.py): the cap on the volume's GPU memory (None:
+        # Bricking (app/rendering/levels/volume_placement.py): the cap on the volume's GPU memory (None:
         # what the device has left) and a forced brick size (None: bricks of 64 voxels where one
         # texture does not fit). The volume given or loaded is kept (`given`) to place again
         # when they change.
@@ -100,7 +100,7 @@ class SceneResources:
     def update(self, scene: Scene, volume: Volume | None = None, placed=None) -> set[str]:
         """Adopt a new scene; returns which parts changed ('volume', 'transfer', 'medium', ...).
         `placed`: (the volume shown, its texture or BrickPool) of `volume`, already placed
-        (app/rendering/progressive_open.py); else place_volume places it here."""
+        (app/rendering/levels/progressive_open.py); else place_volume places it here."""
         changed: set[str] = set()
         old = self.scene
         # The map first: a bad file fails before anything on the GPU changes.
@@ -275,13 +275,13 @@ class SceneResources:
 
     @property
     def stream(self):
-        """The mixed pool's LevelStream (app/rendering/level_stream.py; made on first use), None
+        """The mixed pool's LevelStream (app/rendering/levels/level_stream.py; made on first use), None
         where the volume is not a streamed mix of levels."""
         pool = self.volume_tex
         if not isinstance(pool, BrickPool) or pool.plan is None:
             return None
         if pool.stream is None:
-            from .level_stream import LevelStream
+            from radiance_probes.rendering.levels.level_stream import LevelStream
             pool.stream = LevelStream(pool)
         return pool.stream
 

@@ -15,12 +15,12 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, fields, replace
 
-from .light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_MIN_SIDE,
+from radiance_probes.rendering.grids.light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_MIN_SIDE,
                                   PRECISION as LIGHT_PRECISION, PRECISIONS as LIGHT_PRECISIONS,
                                   SEGMENT_TARGET_INVOCATIONS, SOFTWARE_MIN_SIDE)
 
-from .bake_level import check_bake_level
-from .probes import SHADOW_TRACKINGS, WALK_SUN_MODES
+from radiance_probes.rendering.probes.bake_level import check_bake_level
+from radiance_probes.rendering.probes.bake import SHADOW_TRACKINGS, WALK_SUN_MODES
 
 RAYMARCH_STAGES = ("compute", "fragment")
 # The latest event `probes` may gather at: beyond a few events the path tracer's own sampling
@@ -92,7 +92,7 @@ class RenderSettings:
     # mean over the phase function as a control variate (mean 0 at any probes;
     # lib/guided_direction_control.glsl). False: level 1 subtracts at the first event only.
     guided_direction_control: bool = True
-    # Bricked volumes (app/rendering/volume_placement.py): the volume's GPU memory at most, in bytes
+    # Bricked volumes (app/rendering/levels/volume_placement.py): the volume's GPU memory at most, in bytes
     # (None: what the device has left); where one 3D texture exceeds it, the finest level whose
     # bricks fit is shown, with a note. `brick_size`: bricks of that many voxels per axis always
     # (None: bricks of 64 only where one texture does not fit; tests force small ones).
@@ -105,7 +105,7 @@ class RenderSettings:
     # lib/sun_shadow.glsl).
     shadow_tracking: str = "ratio"
     # The probes' bake (its walks, their sun and its light grid, the probes' own sun) walks the
-    # volume this many levels coarser than the level shown (app/rendering/bake_level.py: coarser()'s
+    # volume this many levels coarser than the level shown (app/rendering/probes/bake_level.py: coarser()'s
     # level in one texture with its own majorant grid); what the image reads directly (camera
     # rays, the raymarcher's sun, the path tracer) stays on the level shown. 0: the level shown
     # (the default); -1: the coarsest level whose voxel is at most half the probe spacing along

@@ -5,8 +5,8 @@ checking build's site table through it too. An import-linter contract keeps the 
 app/paths.py (pyproject.toml)."""
 from __future__ import annotations
 
-from ..gl.sources import ShaderError, set_source_reader
-from ..paths import GLSL_DIR
+from radiance_probes.gl.sources import ShaderError, set_source_reader
+from radiance_probes.paths import GLSL_DIR
 
 
 def read_shader(name: str) -> str:

@@ -1,12 +1,12 @@
 """NumPy twin of glsl/lib/area_lights.glsl: a light's distance along a ray, the first light a ray
 meets, what it emits, a direction's pdf and the sampler. `lights` is the list of
-app/area_lights.py light_geometry tuples (shape, centre, u, v, radiance); x and w are (3,)."""
+app/scene/area_lights.py light_geometry tuples (shape, centre, u, v, radiance); x and w are (3,)."""
 from __future__ import annotations
 
 import numpy as np
 
-from ..area_lights import SPHERE
-from .phase import orthonormal_basis
+from radiance_probes.scene.area_lights import SPHERE
+from radiance_probes.twins.phase import orthonormal_basis
 
 
 def distance(light, x, w) -> float:

@@ -3,7 +3,7 @@ non-constant brick in a slot of an atlas with a one-voxel apron ((B + 2)^3 texel
 table (a uint32 a brick: its slot, or CONSTANT | k for a brick whose voxels and apron all hold
 constant k) and the table of constants (k = 0 is vacuum).
 
-The layout (brick counts, slots, which bricks are constant) is app/bricks.py's, shared with the
+The layout (brick counts, slots, which bricks are constant) is app/io/bricks.py's, shared with the
 store. `pack` builds the three from a whole array (what app/gl/brick_pool.py uploads brick by brick from
 an app.bricks.BrickStore); `bricked_sample` and `bricked_voxel` read them as the shader does, and
 equal app/twins/medium.py trilinear of the whole array (the seams included) within float rounding.
@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..bricks import (APRON, CONSTANT, CONSTANTS_WIDTH, DEFAULT_BRICK_SIZE,  # noqa: F401
+from radiance_probes.io.bricks import (APRON, CONSTANT, CONSTANTS_WIDTH, DEFAULT_BRICK_SIZE,  # noqa: F401
                       FREE_SLOT, LEVEL_SHIFT, REDIRECT, brick_counts, constant_bricks,
                       constant_values, level_tables, slot_grid, slot_origin, slot_side)
-from .medium import trilinear
+from radiance_probes.twins.medium import trilinear
 
 def brick_block(data: np.ndarray, b, brick: int) -> np.ndarray:
     """Brick b's (x, y, z) voxels with the apron: data [z, y, x(, c)] at indices b B - 1 ..
@@ -109,7 +109,7 @@ def pack_levels(levels: list[np.ndarray], level_of_brick: np.ndarray, brick: int
     """The mixed-level form: `levels` a pyramid's arrays [z, y, x(, c)] (level 0 the finest) in
     one world box, `level_of_brick` [bz0, by0, bx0] the level whose voxels each level-0 brick's
     points read. Level 0's bricks that read level 0, and every brick of a coarser level such a
-    point lands in (app/bricks.py level_needs), are resident or constant; slots level by level."""
+    point lands in (app/io/bricks.py level_needs), are resident or constant; slots level by level."""
     levels = [np.asarray(a, np.float32) for a in levels]
     dims = [tuple(a.shape[:3][::-1]) for a in levels]
     described = []

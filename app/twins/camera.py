@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from pyrr import vector, vector3
 
-from ..scene_types import CameraSpec
+from radiance_probes.scene.types import CameraSpec
 
 
 @dataclass(frozen=True)

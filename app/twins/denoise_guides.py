@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .camera import CameraFrame
-from .medium import box_intersect, classified_at
-from .rng import rng_next, rng_seed
+from radiance_probes.twins.camera import CameraFrame
+from radiance_probes.twins.medium import box_intersect, classified_at
+from radiance_probes.twins.rng import rng_next, rng_seed
 
 GUIDE_GRADIENT_WEIGHT = 1e-4
 

@@ -25,11 +25,12 @@ CDFs ((W + 1) x (H + 1): row i < H the conditional CDF of row i, row H the margi
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+# the sampling distribution is built where the map is loaded, before any GPU work
+from radiance_probes.io.environment_map import (LUMINANCE, Distribution,  # noqa: F401
+                                                build_distribution, pixel_weights)
+
 
 
 def direction_to_uv(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -78,58 +79,6 @@ def radiance(image: np.ndarray, d: np.ndarray, scale: float = 1.0, rotation: flo
     """Radiance (..., 3) arriving from world directions d (..., 3)."""
     u, v = direction_to_uv(rotate_y(d, -rotation))
     return scale * bilinear(image, u, v)
-
-
-@dataclass(frozen=True)
-class Distribution:
-    """What the GPU samples from (see the module docstring)."""
-    pdf_uv: np.ndarray      # (H, W) float64: density over (u, v) in [0, 1]^2, mean 1
-    conditional: np.ndarray  # (H, W + 1) float64: row i's CDF over its columns, 0 ... 1
-    marginal: np.ndarray     # (H + 1,) float64: CDF over rows, 0 ... 1
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        return self.pdf_uv.shape
-
-    def cdf_texture(self) -> np.ndarray:
-        """(H + 1, W + 1) float32: conditional CDFs in rows 0..H-1, the marginal CDF in row H."""
-        h, w = self.shape
-        tex = np.ones((h + 1, w + 1), np.float32)
-        tex[:h] = self.conditional
-        tex[h, : h + 1] = self.marginal
-        return tex
-
-
-def _cdf(weights: np.ndarray) -> np.ndarray:
-    """CDFs along the last axis, starting at 0 and ending at exactly 1 (uniform where all 0)."""
-    n = weights.shape[-1]
-    total = weights.sum(axis=-1, keepdims=True)
-    uniform = np.broadcast_to(np.arange(1, n + 1) / n, weights.shape)
-    safe = np.where(total > 0, total, 1.0)
-    c = np.where(total > 0, np.cumsum(weights, axis=-1) / safe, uniform)
-    c[..., -1] = 1.0
-    return np.concatenate([np.zeros(weights.shape[:-1] + (1,)), c], axis=-1)
-
-
-def pixel_weights(image: np.ndarray) -> np.ndarray:
-    """(H, W) sampling weights: the bilinear luminance's integral over each pixel times its solid angle."""
-    h, w = image.shape[:2]
-    lum = np.asarray(image, np.float64) @ LUMINANCE
-    lum = (np.roll(lum, 1, axis=1) + 6.0 * lum + np.roll(lum, -1, axis=1)) / 8.0
-    up = np.concatenate([lum[:1], lum[:-1]], axis=0)
-    down = np.concatenate([lum[1:], lum[-1:]], axis=0)
-    lum = (up + 6.0 * lum + down) / 8.0
-    band = np.cos(np.pi * np.arange(h) / h) - np.cos(np.pi * np.arange(1, h + 1) / h)
-    weights = lum * band[:, None]
-    if not weights.sum() > 0:
-        weights = np.broadcast_to(band[:, None], (h, w)).copy()  # a black map: uniform over the sphere
-    return weights
-
-
-def build_distribution(image: np.ndarray) -> Distribution:
-    weights = pixel_weights(image)
-    return Distribution(pdf_uv=weights / weights.mean(), conditional=_cdf(weights),
-                        marginal=_cdf(weights.sum(axis=1)))
 
 
 def _search(cdf: np.ndarray, x: np.ndarray, row: np.ndarray | None = None) -> np.ndarray:

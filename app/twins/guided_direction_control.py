@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .sh import sh_band_factors, sh_evaluate_convolved
+from radiance_probes.twins.sh import sh_band_factors, sh_evaluate_convolved
 
 
 def direction_control(coeffs, w_in, w, g: float, window: int, order: int = 2,

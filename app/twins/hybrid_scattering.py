@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .phase import orthonormal_basis
-from .sh import sh_evaluate_convolved
+from radiance_probes.twins.phase import orthonormal_basis
+from radiance_probes.twins.sh import sh_evaluate_convolved
 
 # The clamped cosine's SH bands A_l (Ramamoorthi and Hanrahan 2001), l = 0 .. 4.
 COSINE_BANDS = np.array([np.pi, 2.0 * np.pi / 3.0, np.pi / 4.0, 0.0, -np.pi / 24.0])

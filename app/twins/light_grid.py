@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .medium import sigma_t_at, trilinear
-from ..light_grid_layout import LightGridLayout
-from ..volume import Volume
+from radiance_probes.twins.medium import sigma_t_at, trilinear
+from radiance_probes.scene.light_grid_layout import LightGridLayout
+from radiance_probes.io.volume import Volume
 
 
 def light_grid_bake(volume: Volume, table: np.ndarray, density_scale: float, sun_direction,
@@ -87,7 +87,7 @@ def light_grid_optical_depth(optical_depth: np.ndarray, layout: LightGridLayout,
     (`texel`, LightTransmittance.uniforms' light_grid_texel) of where it leaves the box, the
     midpoint march of sigma_t to the box (at most 8 points of about march_step); elsewhere the
     grid's lookup."""
-    from .medium import box_intersect
+    from radiance_probes.twins.medium import box_intersect
     pts = np.asarray(points, np.float64).reshape(-1, 3)
     d = np.asarray(sun_direction, np.float64)
     d = d / np.linalg.norm(d)

@@ -15,7 +15,7 @@ Two stages:
   convex combination of those voxels, so its result lies in ``[min, max]`` up to float rounding,
   which ``DENSITY_WIDEN`` covers.
 - ``majorant_grid`` (whenever the transfer function or density_scale changes; on the GPU in
-  app/rendering/majorant_grid.py): ``density_scale * max A(d)`` over ``d`` in ``[min, max]``. ``A`` is
+  app/rendering/grids/majorant_grid.py): ``density_scale * max A(d)`` over ``d`` in ``[min, max]``. ``A`` is
   piecewise linear, so its maximum over an interval is at the interval's ends or at a table node
   inside it. ``MAJORANT_SAFETY`` covers float32 rounding of the interpolation and the product.
 """
@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..channels import ChannelTables
-from ..transfer import lookup
+from radiance_probes.scene.channels import ChannelTables
+from radiance_probes.scene.transfer import lookup
 
 CELL_VOXELS = 8          # voxels per macrocell along an axis (before clamping the count)
 MAX_CELLS = 64           # macrocells per axis at most
@@ -92,7 +92,7 @@ def density_range_grid(data: np.ndarray, cells: tuple[int, int, int] | None = No
 def brick_density_range_grid(brick_min: np.ndarray, brick_max: np.ndarray, dims, brick: int,
                              cells: tuple[int, int, int] | None = None
                              ) -> tuple[np.ndarray, np.ndarray]:
-    """density_range_grid of a volume read brick by brick (app/bricks.py), from each brick's
+    """density_range_grid of a volume read brick by brick (app/io/bricks.py), from each brick's
     own least and largest density ([bz, by, bx]) alone: a macrocell's range is the union of the
     bricks that hold the voxels its points read (voxel_ranges), so it contains the one of the
     whole array, widened alike. Of several channels ([bz, by, bx, c]) each channel's, [C, cz,

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..channels import ChannelTables
-from ..clip_region import ClipRegion
-from ..transfer import lookup
-from ..volume import Volume
+from radiance_probes.scene.channels import ChannelTables
+from radiance_probes.scene.clip_region import ClipRegion
+from radiance_probes.scene.transfer import lookup
+from radiance_probes.io.volume import Volume
 
 
 def density_at(volume: Volume, points: np.ndarray, clip: ClipRegion | None = None) -> np.ndarray:

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..clip_region import ClipRegion
-from ..volume import Volume
-from .hybrid_scattering import opacity_gradient
-from .medium import classified_at, trilinear
+from radiance_probes.scene.clip_region import ClipRegion
+from radiance_probes.io.volume import Volume
+from radiance_probes.twins.hybrid_scattering import opacity_gradient
+from radiance_probes.twins.medium import classified_at, trilinear
 
 HALF_MAX = 65504.0   # the largest half float: the bake clamps to it (opacity_gradient_bake.comp)
 

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from radiance_probes.scene.basis import orthonormal_basis  # noqa: F401  (phase.glsl builds it too)
+
 INV_4PI = 1.0 / (4.0 * np.pi)
 
 
@@ -20,17 +22,6 @@ def sample_hg_cos_theta(u, g: float) -> np.ndarray:
         return 1.0 - 2.0 * u
     s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
     return np.clip((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0)
-
-
-def orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Duff et al. 2017, for an array of unit vectors (..., 3)."""
-    n = np.asarray(n, np.float64)
-    s = np.where(n[..., 2] >= 0.0, 1.0, -1.0)
-    a = -1.0 / (s + n[..., 2])
-    b = n[..., 0] * n[..., 1] * a
-    b1 = np.stack([1.0 + s * n[..., 0] ** 2 * a, s * b, -s * n[..., 0]], axis=-1)
-    b2 = np.stack([b, s + n[..., 1] ** 2 * a, -n[..., 1]], axis=-1)
-    return b1, b2
 
 
 def sample_hg(direction: np.ndarray, g: float, u1, u2) -> np.ndarray:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .medium import box_intersect, sigma_t_at
-from ..volume import Volume
+from radiance_probes.twins.medium import box_intersect, sigma_t_at
+from radiance_probes.io.volume import Volume
 
 
 def sun_optical_depth_march(volume: Volume, table: np.ndarray, density_scale: float,

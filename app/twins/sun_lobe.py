@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .phase import INV_4PI, phase_hg as hg
+from radiance_probes.twins.phase import INV_4PI, phase_hg as hg
 
 
 def low_bands(mu, x, n):

@@ -1,6 +1,6 @@
 """NumPy twin of glsl/visible_region.comp: the smallest box outside which sigma_t is 0 everywhere.
 
-The probe grid covers only this box (app/rendering/probe_layout.py). The density between voxel centres
+The probe grid covers only this box (app/rendering/probes/layout.py). The density between voxel centres
 is trilinear (clamped to the edge voxel), so sigma_t can be > 0 in the cell between two layers of
 voxel centres exactly when the piecewise-linear opacity is > 0 somewhere in [lo, hi], the smallest
 and largest of its 8 voxels. Cells are counted with the edge voxel repeated once on each side

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import argparse
 
-from ..frontend import (add_scene_edit_options, add_volume_options, grid_arg, memory_size,
+from radiance_probes.frontend.common import (add_scene_edit_options, add_volume_options, grid_arg, memory_size,
                         positive_float, positive_int, render_scale, window_size)
-from ..methods import VIEWER_METHODS as METHODS
-from ..scene import PROBE_PRECISIONS
+from radiance_probes.methods import VIEWER_METHODS as METHODS
+from radiance_probes.io.scene_file import PROBE_PRECISIONS
 
 
 def add_view_parser(sub, func) -> argparse.ArgumentParser:

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..clip_region import clip_region
-from ..scene import Scene
+from radiance_probes.scene.clip_region import clip_region
+from radiance_probes.io.scene_file import Scene
 
 GRAB_PIXELS = 9.0
 

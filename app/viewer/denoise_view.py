@@ -1,5 +1,5 @@
 """The viewer's Denoise switch: each shown view of a noisy method (the path tracer, `probes`,
-`probes-only`, and `refine` once `guided` shows) through the denoiser (app/rendering/denoise.py),
+`probes-only`, and `refine` once `guided` shows) through the denoiser (app/rendering/denoise/filter.py),
 with the guides Renderer.denoise_guides makes for the view's camera ("auto": the probes' image
 where the view has probes, else the albedo and normal at few samples).
 
@@ -12,12 +12,12 @@ second. OIDN has no temporal mode: the filtered images of a still camera change 
 (docs/denoising.md measures the flicker).
 
 The accumulation is read straight into the filter's colour, its tile means made on the GPU
-(app/rendering/kept_means.py), and the filter's output uploaded and given back those means by two
+(app/rendering/denoise/kept_means.py), and the filter's output uploaded and given back those means by two
 GL passes into the RGBA32F texture the display shows: the host neither sums the images nor
 checks the output (kept_means.denoise_on_gl).
 
 A `refine` view blending guided with the raymarcher's image (RefineView.blending: the weight its
-last judgement gave, app/rendering/refine.py) shows (1 - w) r + w D, made on the GPU
+last judgement gave, app/rendering/refine/refine.py) shows (1 - w) r + w D, made on the GPU
 (refine.BlendPass) whenever D, r or w has changed."""
 from __future__ import annotations
 
@@ -26,10 +26,10 @@ from dataclasses import dataclass
 
 import moderngl
 
-from ..methods import METHODS
-from ..rendering.denoise import choose_guides, shared_denoiser
-from ..rendering.kept_means import KeptMeans, denoise_on_gl
-from ..rendering.refine import BlendPass
+from radiance_probes.methods import METHODS
+from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser
+from radiance_probes.rendering.denoise.kept_means import KeptMeans, denoise_on_gl
+from radiance_probes.rendering.refine.refine import BlendPass
 
 INTERVAL_S = 0.5
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from ..rendering.metrics import rrmse
-from ..gl.shaders import render_program, set_uniforms
-from ..transfer import colormap_rgb
+from radiance_probes.rendering.metrics import rrmse
+from radiance_probes.gl.shaders import render_program, set_uniforms
+from radiance_probes.scene.transfer import colormap_rgb
 
 DISPLAY_MODE_IDS = {"image": 0, "split": 1, "error": 2}
 HEAT_COLORMAP = "inferno"

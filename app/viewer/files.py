@@ -10,10 +10,10 @@ import shutil
 from dataclasses import replace
 from pathlib import Path
 
-from ..paths import ASSETS_DIR
-from ..scene import Scene, VolumeSpec, load_scene
-from ..volume import VOLUME_SUFFIXES, is_volume_path
-from ..volume_formats import has_suffix
+from radiance_probes.paths import ASSETS_DIR
+from radiance_probes.io.scene_file import Scene, VolumeSpec, load_scene
+from radiance_probes.io.volume import VOLUME_SUFFIXES, is_volume_path
+from radiance_probes.io.volume_formats import has_suffix
 
 # The open dialog's filter: every suffix load_volume reads (folders are opened with "Open folder").
 DIALOG_PATTERNS = " ".join(["*.json"] + [f"*{s}" for s in VOLUME_SUFFIXES])

@@ -6,7 +6,7 @@ step shown (playing it) are navigation, not edits: they are not steps, and undo 
 and the time step where they are."""
 from __future__ import annotations
 
-from ..scene import CameraSpec, Scene
+from radiance_probes.io.scene_file import CameraSpec, Scene
 
 MAX_STEPS = 200
 _ANY_CAMERA = CameraSpec()

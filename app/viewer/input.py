@@ -10,11 +10,11 @@ from typing import Callable
 
 from imgui_bundle import imgui
 
-from ..methods import METHODS
-from .glfw_lib import glfw
+from radiance_probes.methods import METHODS
+from radiance_probes.viewer.glfw_lib import glfw
 
-from .slice_view import SLICE_VIEWS
-from .state import PROBE_VIEWS
+from radiance_probes.viewer.slice_view import SLICE_VIEWS
+from radiance_probes.viewer.state import PROBE_VIEWS
 
 
 @dataclass(frozen=True)

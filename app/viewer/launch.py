@@ -7,13 +7,13 @@ import os
 import sys
 from pathlib import Path
 
-from ..frontend import (SCENE_KEY_DESTS, apply_options, check_output, render_defaults,
+from radiance_probes.frontend.common import (SCENE_KEY_DESTS, apply_options, check_output, render_defaults,
                         render_to_files, scene_from_arg)
-from ..scene import Scene
-from ..rendering.device_defaults import RENDER_SCALE, probes_named, with_device_probes
-from .files import bundled_scene_for
-from .state import ViewerState
-from .xvfb import Xvfb, XvfbError, has_display
+from radiance_probes.io.scene_file import Scene
+from radiance_probes.rendering.budgets.device_defaults import RENDER_SCALE, probes_named, with_device_probes
+from radiance_probes.viewer.files import bundled_scene_for
+from radiance_probes.viewer.state import ViewerState
+from radiance_probes.viewer.xvfb import Xvfb, XvfbError, has_display
 
 
 def initial_state(scene: Scene, args: argparse.Namespace) -> ViewerState:
@@ -43,8 +43,8 @@ def initial_state(scene: Scene, args: argparse.Namespace) -> ViewerState:
 
 def scene_from_args(args: argparse.Namespace) -> Scene:
     """The scene argument (as `render` reads it) with the --probe-* options applied."""
-    from ..volume import is_volume_path
-    from .files import scene_for_path
+    from radiance_probes.io.volume import is_volume_path
+    from radiance_probes.viewer.files import scene_for_path
     if args.scene and is_volume_path(Path(args.scene)):
         # A volume file opens as it does when dropped: with its bundled scene where there is one.
         scene, _ = scene_for_path(args.scene, scene_from_arg(None))
@@ -56,25 +56,25 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
 def view_aspect(window: tuple[int, int], slices: str | None = None) -> float:
     """The picture's aspect in a window of this size (the panel on its left, the slice column,
     where `slices` is on, on its right)."""
-    from .layout import SIDEBAR_WIDTH
-    from .slice_view import column_width
+    from radiance_probes.viewer.layout import SIDEBAR_WIDTH
+    from radiance_probes.viewer.slice_view import column_width
     width, height = window
     column = column_width(slices or "off", window, SIDEBAR_WIDTH)
     return max(width - SIDEBAR_WIDTH - column, 1) / max(height, 1)
 
 
 def run_view(args: argparse.Namespace) -> int:
-    from ..environment_map import load_scene_environment
-    from ..framing import frame_default_camera
-    from ..clinical_presets import opening_scene
-    from ..volume import load_scene_volume, reads_lazily, zarr_preview
+    from radiance_probes.io.environment_map import load_scene_environment
+    from radiance_probes.scene.framing import frame_default_camera
+    from radiance_probes.scene.clinical_presets import opening_scene
+    from radiance_probes.io.volume import load_scene_volume, reads_lazily, zarr_preview
     scene = scene_from_args(args)
     progressive = False
     if args.screenshot:
         check_output(args.screenshot, "--screenshot")   # before a long scripted run, not after
     steps = None
     if args.script:
-        from .script import ScriptError, load_script
+        from radiance_probes.viewer.script import ScriptError, load_script
         try:
             steps = load_script(args.script)   # a bad script fails before anything opens
         except ScriptError as exc:
@@ -84,7 +84,7 @@ def run_view(args: argparse.Namespace) -> int:
     if has_display() or scripted:
         # A volume that does not load fails here, before a window, an X server or a GL context;
         # a Zarr store read brick by brick loads on a thread once the window is open, a preview
-        # of it shown meanwhile (app/rendering/progressive_open.py).
+        # of it shown meanwhile (app/rendering/levels/progressive_open.py).
         volume = (zarr_preview(scene, memory_bytes=getattr(args, "volume_memory", None))
                   if reads_lazily(scene) else None)
         progressive = volume is not None
@@ -117,14 +117,14 @@ def run_view(args: argparse.Namespace) -> int:
 
 def _run_window(args: argparse.Namespace, scene: Scene, volume, steps, scripted: bool,
                 progressive: bool = False) -> int:
-    from .script import ScriptError, ScriptRunner
-    from .window import ViewerWindow, WindowError
+    from radiance_probes.viewer.script import ScriptError, ScriptRunner
+    from radiance_probes.viewer.window import ViewerWindow, WindowError
     state = initial_state(scene, args)
     width, height = args.window
     try:
         settings = None
         if getattr(args, "volume_memory", None):
-            from ..rendering.settings import RenderSettings
+            from radiance_probes.rendering.settings import RenderSettings
             settings = RenderSettings(volume_memory_bytes=args.volume_memory)
         window = ViewerWindow(state, width, height, vsync=not scripted,
                               file_dialog=args.file_dialog, volume=volume, settings=settings)

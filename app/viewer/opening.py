@@ -12,11 +12,11 @@ from __future__ import annotations
 import threading
 import time
 
-from ..gl.textures import texture_payload
-from ..rendering.majorant_grid import density_ranges
-from ..rendering.volume_placement import plan_placement
-from ..volume import Volume, load_scene_volume
-from .tf_editor import HISTOGRAM_BINS
+from radiance_probes.gl.textures import texture_payload
+from radiance_probes.rendering.grids.majorant_grid import density_ranges
+from radiance_probes.rendering.levels.volume_placement import plan_placement
+from radiance_probes.io.volume import Volume, load_scene_volume
+from radiance_probes.viewer.panels.tf_editor import HISTOGRAM_BINS
 
 
 def prepare_volume(volume: Volume, limits=None, memory_bytes: int | None = None,

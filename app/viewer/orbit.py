@@ -11,8 +11,8 @@ from dataclasses import replace
 import numpy as np
 from pyrr import matrix44, quaternion, vector, vector3
 
-from ..twins.camera import CameraFrame
-from ..scene import CameraSpec
+from radiance_probes.twins.camera import CameraFrame
+from radiance_probes.io.scene_file import CameraSpec
 
 ORBIT_DEGREES_PER_PIXEL = 0.4
 ZOOM_PER_WHEEL_STEP = 0.9          # distance factor of one wheel notch towards the target

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from imgui_bundle import ImVec2, imgui
 
-from ..methods import REFERENCE
-from .input import GROUP_HELP, MOUSE_HELP, SHORTCUTS
+from radiance_probes.methods import REFERENCE
+from radiance_probes.viewer.input import GROUP_HELP, MOUSE_HELP, SHORTCUTS
 
 ERROR_COLOUR = (1.0, 0.45, 0.4, 1.0)
 
@@ -122,7 +122,7 @@ PLANE_COLOUR = (0.35, 0.85, 1.0, 0.95)
 def crop_overlay(v) -> None:
     """The crop box's edges and the clip plane's outline over the view, with their handles (drag
     one to move that face or the plane; 'h' hides them)."""
-    from .crop_handles import kept_box, plane_polygon
+    from radiance_probes.viewer.crop_handles import kept_box, plane_polygon
     state = v.state
     scene = state.scene
     crop_on = scene.crop is not None and scene.crop.enabled

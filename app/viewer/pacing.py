@@ -19,7 +19,7 @@ from collections import deque
 # person's drag; issue 44 asks for about 100 ms on any device): its work gets what is left of it
 # after the rest of the frame, at least WALL_MIN_WORK_MS, and at most the session's frame budget
 # (FRAME_BUDGET_MS, now in wall ms). A sample that takes longer is split into bands of rows over
-# frames (app/rendering/sample_bands.py), so the frame holds to it whatever the picture costs.
+# frames (app/rendering/budgets/sample_bands.py), so the frame holds to it whatever the picture costs.
 WALL_FRAME_MS = 100.0
 WALL_MIN_WORK_MS = 20.0
 DISTRUST_FRAMES = 8

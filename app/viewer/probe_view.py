@@ -19,11 +19,11 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from ..gl.shaders import render_program, set_uniforms
-from ..rendering.probes import ProbeGrid
-from ..rendering.resources import SceneResources
-from ..twins.probe_warp import probe_fractions, warp_exact
-from .orbit import gl_matrix
+from radiance_probes.gl.shaders import render_program, set_uniforms
+from radiance_probes.rendering.probes.bake import ProbeGrid
+from radiance_probes.rendering.resources import SceneResources
+from radiance_probes.twins.probe_warp import probe_fractions, warp_exact
+from radiance_probes.viewer.orbit import gl_matrix
 
 SPHERE_STACKS, SPHERE_SLICES = 8, 12
 RADIUS_PER_SPACING = 0.28      # sphere radius as a fraction of the smallest drawn probe spacing
@@ -127,7 +127,7 @@ def probe_under(pixel, centres: np.ndarray, matrix: np.ndarray, width: int, heig
     """Of the probes at world `centres` (n, 3) drawn as spheres of world `radius`, the one under
     image point `pixel` (x, y in the render's pixels, top-left origin): the nearest to the eye of
     those whose sphere's image disk holds the point; None where none does."""
-    from .orbit import project
+    from radiance_probes.viewer.orbit import project
     if len(centres) == 0:
         return None
     centres = np.asarray(centres, np.float64)
@@ -152,7 +152,7 @@ def describe_probe(index: int, grid: tuple[int, int, int], centre, channels: np.
     """What a probe holds, in words: its place, the mean radiance arriving (L00 / sqrt(4 pi)), the
     direction most light arrives from (band 1, where the order keeps it) and the sun's
     transmittance to it. `channels`: its row of ProbeGrid.coefficients() (colour packing)."""
-    from ..rendering.probe_layout import unpack_coefficients
+    from radiance_probes.rendering.probes.layout import unpack_coefficients
     nx, ny, nz = grid
     i, j, k = index % nx, (index // nx) % ny, index // (nx * ny)
     coeffs, sun = unpack_coefficients(np.asarray(channels, np.float64), sh_order)

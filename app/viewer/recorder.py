@@ -1,14 +1,14 @@
 """The viewer's movie recorder (the 'Bookmarks and movie' panel, ctrl+r): the same movie as
-`radiance-probes animate` (app/movie.py), a turntable or a flight through the bookmarks, rendered
+`radiance-probes animate` (app/movie/frames.py), a turntable or a flight through the bookmarks, rendered
 one movie frame per window frame by the viewer's own renderer (the probes it has baked serve the
 whole movie), so the window stays live and shows the progress."""
 from __future__ import annotations
 
 from dataclasses import replace
 
-from ..colorbar import scene_colorbar_overlay
-from ..movie import MovieFrames, movie_cameras
-from ..movie_writer import MovieWriter, check_movie_output
+from radiance_probes.frontend.colorbar import scene_colorbar_overlay
+from radiance_probes.movie.frames import MovieFrames, movie_cameras
+from radiance_probes.movie.writer import MovieWriter, check_movie_output
 
 MOVIE_MODES = ("turntable", "keyframes")
 

@@ -30,8 +30,8 @@ from pathlib import Path
 
 from imgui_bundle import imgui
 
-from .glfw_lib import glfw
-from .input import parse_keys
+from radiance_probes.viewer.glfw_lib import glfw
+from radiance_probes.viewer.input import parse_keys
 
 BUTTONS = {"left": glfw.MOUSE_BUTTON_LEFT, "right": glfw.MOUSE_BUTTON_RIGHT,
            "middle": glfw.MOUSE_BUTTON_MIDDLE}

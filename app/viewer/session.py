@@ -17,7 +17,7 @@ WALL_FRAME_MS leaves after the rest of the frame (app/viewer/pacing.py).
 
 `refine` (RefineView) is two renderers in one view: after any edit the raymarcher's image shows
 at once; once the probes are current, `guided` samples accumulate beside it in two independent
-halves (app/rendering/refine.py), and the view switches to their mean when its error, estimated from
+halves (app/rendering/refine/refine.py), and the view switches to their mean when its error, estimated from
 the halves, falls below the raymarcher's, estimated against that same unbiased mean. `guided`
 waits for the bake: its two levels must read the same probes for the whole accumulation.
 """
@@ -32,21 +32,21 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from ..gl.context import is_software
-from ..gl.timer import WallTimer
-from ..rendering.accumulation import Accumulation
-from ..rendering.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
-from ..rendering.probes import BakeProgress
-from ..methods import METHODS
-from ..rendering.refine import (REFINE_HALF_SEED, REFINE_MIN_HALF_SAMPLES,  # noqa: F401 (tests)
+from radiance_probes.gl.context import is_software
+from radiance_probes.gl.timer import WallTimer
+from radiance_probes.rendering.methods.accumulation import Accumulation
+from radiance_probes.rendering.budgets.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
+from radiance_probes.rendering.probes.bake import BakeProgress
+from radiance_probes.methods import METHODS
+from radiance_probes.rendering.refine.refine import (REFINE_HALF_SEED, REFINE_MIN_HALF_SAMPLES,  # noqa: F401 (tests)
                                 REFINE_RAYMARCH_FRAMES, HalfBuffers, RefineBlend,
                                 RefineEstimate, judged_blend)
-from ..rendering.renderer import Renderer
-from ..rendering.sample_bands import TileCosts, fill_frame, tile_grid
-from ..scene import Scene
-from ..volume import Volume
-from .denoise_view import ViewDenoise
-from .pacing import FramePacer
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.rendering.budgets.sample_bands import TileCosts, fill_frame, tile_grid
+from radiance_probes.io.scene_file import Scene
+from radiance_probes.io.volume import Volume
+from radiance_probes.viewer.denoise_view import ViewDenoise
+from radiance_probes.viewer.pacing import FramePacer
 
 FRAME_HISTORY = 240
 MAX_SAMPLES_PER_FRAME = 64
@@ -57,7 +57,7 @@ REFINE = "refine"
 # `refine`: a reduction of the halves' error (a 16-byte read-back) whenever guided's samples
 # double and at least every REFINE_CHECK_FRAMES frames with guided samples (about 4 a second at
 # 60 Hz), never every frame; the raymarcher's frames, the guided samples a half needs before its
-# estimate may switch the view and the second half's seed are app/rendering/refine.py's (a still
+# estimate may switch the view and the second half's seed are app/rendering/refine/refine.py's (a still
 # image of refine shares them).
 REFINE_CHECK_FRAMES = 16
 # refine judges its blend when guided's samples have grown 2^JUDGE_STAGES times since the last
@@ -254,7 +254,7 @@ class RenderSession:
     # ---- configuration -------------------------------------------------------------------------
     def set_scene(self, scene: Scene, volume: Volume | None = None, placed=None) -> set[str]:
         """Adopts an edited scene; restarts the accumulations when anything visible changed.
-        `placed`: `volume` already placed (app/rendering/progressive_open.py)."""
+        `placed`: `volume` already placed (app/rendering/levels/progressive_open.py)."""
         if scene is self.renderer.scene and volume is None:
             return set()
         changed = self.renderer.set_scene(scene, volume, placed)

@@ -1,5 +1,5 @@
 """The slice view's maths (no GL, no ImGui): the data on three orthogonal planes beside the 3D
-view, as Slicer, ParaView and napari show it. app/viewer/slice_panel.py draws what this computes.
+view, as Slicer, ParaView and napari show it. app/viewer/panels/slice_panel.py draws what this computes.
 
 The world box is docs/scene-format.md's: centred at the origin, array axis x along world +x, y
 along +y, z along +z, voxel i of n along an axis centred at ((i + 0.5) / n * 2 - 1) * half. The
@@ -197,9 +197,9 @@ def slice_rgba(densities: np.ndarray, mode: str, table=None, kept: np.ndarray | 
     """The slice as drawn, uint8 (rows, columns, 4). `densities`: (rows, columns) of one channel,
     or (rows, columns, c) with `table` an app.channels.ChannelTables; "window": the density as
     grey (of the first channel given); "transfer function": each channel's table colour weighted
-    by its opacity (app/transfer.py lookup, the renderer's interpolation), channels added;
+    by its opacity (app/scene/transfer.py lookup, the renderer's interpolation), channels added;
     `kept`: bool (rows, columns), what is cut away drawn at CUT_AWAY_SHADE."""
-    from ..transfer import lookup
+    from radiance_probes.scene.transfer import lookup
     d = np.asarray(densities, np.float64)
     if mode == "window":
         grey = np.clip(d if d.ndim == 2 else d[..., 0], 0.0, 1.0)
@@ -228,9 +228,9 @@ def slice_rgba(densities: np.ndarray, mode: str, table=None, kept: np.ndarray | 
 
 def value_unit(volume, scene=None) -> str:
     """The data's unit where it is known: Hounsfield units for a DICOM CT (its rescale applied)
-    or a scene windowed with a named CT window (app/clinical_presets.py has checked the data),
+    or a scene windowed with a named CT window (app/scene/clinical_presets.py has checked the data),
     grays for an RT dose; "" otherwise."""
-    from ..clinical_presets import is_ct, is_hounsfield_window
+    from radiance_probes.scene.clinical_presets import is_ct, is_hounsfield_window
     if is_ct(volume) or (scene is not None and not scene.channels
                          and is_hounsfield_window(scene.volume.window)):
         return "HU"

@@ -5,9 +5,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from ..methods import METHODS as REGISTRY, REFERENCE, VIEWER_METHODS as METHODS
-from ..scene import BookmarkSpec, CameraSpec, ClipPlaneSpec, CropSpec, Scene, ViewerSpec
-from .history import SceneHistory
+from radiance_probes.methods import METHODS as REGISTRY, REFERENCE, VIEWER_METHODS as METHODS
+from radiance_probes.io.scene_file import BookmarkSpec, CameraSpec, ClipPlaneSpec, CropSpec, Scene, ViewerSpec
+from radiance_probes.viewer.history import SceneHistory
 
 DISPLAY_MODES = ("image", "split", "error")   # one method; two side by side; error heat map
 PROBE_VIEWS = ("off", "over", "alone")        # probe spheres: none, over the volume, alone
@@ -212,7 +212,7 @@ class ViewerState:
     def set_environment_map(self, path: str | None = None, **changes) -> None:
         """A map file (a new map starts at scale 1, rotation 0), its scale or rotation (degrees
         about +y, wrapped into [-180, 180]); path="" goes back to the constant environment."""
-        from ..scene_types import EnvironmentMapSpec
+        from radiance_probes.scene.types import EnvironmentMapSpec
         current = self.scene.environment_map
         if path == "":
             self.scene = self.scene.replace(environment_map=None)
@@ -289,7 +289,7 @@ class ViewerState:
         """A volume of several channels opened without a channels list: its channels written into
         the scene with their defaults (each in its own colour), so the panels can edit them."""
         if count > 1 and not self.scene.channels:
-            from ..channels import default_channels
+            from radiance_probes.scene.channels import default_channels
             self.scene = self.scene.replace(channels=default_channels(count, "volume"))
             self.history.reset(self.scene)
 
@@ -297,7 +297,7 @@ class ViewerState:
         """Edits the transfer function (the edited channel's, or the scene's). An explicit RGBA
         table keeps its colours when its opacity curve is edited (its alpha column is rewritten),
         and keeps its opacity curve when a colormap replaces its colours."""
-        from ..transfer import opacity_points, rgba_with_opacity
+        from radiance_probes.scene.transfer import opacity_points, rgba_with_opacity
         tf = self.transfer_function
         if tf.rgba is not None:
             if "colormap" in changes or "colors" in changes:
@@ -311,15 +311,15 @@ class ViewerState:
         self.set_edited_transfer(replace(tf, **changes))
 
     def set_clinical_preset(self, name: str, domain: tuple[float, float]) -> None:
-        """The scene's transfer function becomes the clinical preset `name` (app/clinical_presets.py),
+        """The scene's transfer function becomes the clinical preset `name` (app/scene/clinical_presets.py),
         placed by `domain`, the data values the volume maps to densities 0 and 1."""
-        from ..clinical_presets import with_preset
+        from radiance_probes.scene.clinical_presets import with_preset
         if self.scene.channels:
             raise ValueError("clinical presets are for one-channel CT volumes")
         self.scene = with_preset(self.scene, name, domain)
 
     def cycle_colormap(self, step: int = 1) -> None:
-        from ..transfer import COLORMAPS, ALIASES
+        from radiance_probes.scene.transfer import COLORMAPS, ALIASES
         names = [c for c in COLORMAPS if c not in ALIASES]
         current = ALIASES.get(self.transfer_function.colormap, self.transfer_function.colormap)
         index = names.index(current) if current in names else -1

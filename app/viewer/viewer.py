@@ -12,32 +12,33 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from ..methods import REFERENCE
-from ..twins.camera import camera_frame
-from ..gl.shaders import ShaderError
-from ..gl.timer import GpuTimer
-from ..scene import SceneError, scene_to_dict
-from ..environment_map import load_scene_environment
-from ..channels import volume_inputs
-from ..rendering.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
-from ..rendering.volume_placement import device_limits
-from ..clinical_presets import opening_scene
-from ..volume import VolumeError, reads_lazily, zarr_preview
-from . import layout, orbit, overlays, panels
-from .display import BACKGROUND, DisplayPass, ErrorMeter
-from .opening import VolumeLoading
-from .files import FileDialogs, builtin_scene, datasets, scene_for_path
-from . import crop_handles
-from .probe_view import (BoxOutline, ProbeSpheres, describe_probe, probe_centres, probe_under,
+from radiance_probes.methods import REFERENCE
+from radiance_probes.twins.camera import camera_frame
+from radiance_probes.gl.shaders import ShaderError
+from radiance_probes.gl.timer import GpuTimer
+from radiance_probes.io.scene_file import SceneError, scene_to_dict
+from radiance_probes.io.environment_map import load_scene_environment
+from radiance_probes.scene.channels import volume_inputs
+from radiance_probes.rendering.levels.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
+from radiance_probes.rendering.levels.volume_placement import device_limits
+from radiance_probes.scene.clinical_presets import opening_scene
+from radiance_probes.io.volume import VolumeError, reads_lazily, zarr_preview
+from radiance_probes.viewer import layout, orbit, overlays
+from radiance_probes.viewer.panels import sidebar as panels
+from radiance_probes.viewer.display import BACKGROUND, DisplayPass, ErrorMeter
+from radiance_probes.viewer.opening import VolumeLoading
+from radiance_probes.viewer.files import FileDialogs, builtin_scene, datasets, scene_for_path
+from radiance_probes.viewer import crop_handles
+from radiance_probes.viewer.probe_view import (BoxOutline, ProbeSpheres, describe_probe, probe_centres, probe_under,
                          slab_plane)
-from .recorder import MovieRecorder
-from .session import FrameTimes, RenderSession
-from .slice_panel import SliceImages, SlicePanel
-from .state import ViewerState
-from ..transfer import opacity_points
-from .tf_editor import histogram_curve
-from .widgets import WidgetRects
-from ..framing import frame_default_camera
+from radiance_probes.viewer.recorder import MovieRecorder
+from radiance_probes.viewer.session import FrameTimes, RenderSession
+from radiance_probes.viewer.panels.slice_panel import SliceImages, SlicePanel
+from radiance_probes.viewer.state import ViewerState
+from radiance_probes.scene.transfer import opacity_points
+from radiance_probes.viewer.panels.tf_editor import histogram_curve
+from radiance_probes.viewer.widgets import WidgetRects
+from radiance_probes.scene.framing import frame_default_camera
 
 # What a bad scene, volume or shader raises; anything else is a bug and is not swallowed.
 RECOVERABLE = (SceneError, VolumeError, ShaderError, moderngl.Error, OSError, ValueError, RuntimeError)
@@ -291,7 +292,7 @@ class Viewer:
         return self.session.renderer.resources.volume_memory_bytes
 
     def open_in_background(self, scene) -> None:
-        """Loads the scene's volume on a thread (app/rendering/progressive_open.py) while what is
+        """Loads the scene's volume on a thread (app/rendering/levels/progressive_open.py) while what is
         shown now (a preview) stays; it replaces it once all its bricks are written."""
         if self.opening is not None:
             self.opening.cancel()

@@ -10,12 +10,12 @@ import moderngl
 import numpy as np
 from imgui_bundle import imgui, implot
 
-from ..gl.context import GL_VERSION, describe
-from . import layout
-from .glfw_lib import glfw
-from .input import InputRouter
-from .state import ViewerState
-from .viewer import Viewer
+from radiance_probes.gl.context import GL_VERSION, describe
+from radiance_probes.viewer import layout
+from radiance_probes.viewer.glfw_lib import glfw
+from radiance_probes.viewer.input import InputRouter
+from radiance_probes.viewer.state import ViewerState
+from radiance_probes.viewer.viewer import Viewer
 
 FONT_PIXELS = 15.0
 IDLE_WAIT_SECONDS = 0.25
@@ -132,7 +132,7 @@ class ViewerWindow:
         self.ctx.screen.use()
         imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
         if v.pending_screenshot:
-            from ..frontend import save_or_rescue
+            from radiance_probes.frontend.common import save_or_rescue
             path, v.pending_screenshot = v.pending_screenshot, None
             saved, error = save_or_rescue(lambda p: self.save_screenshot(p), path, "screenshot")
             v.last_screenshot = (path, saved, error)

@@ -1,4 +1,4 @@
-// Area lights (the scene's area_lights; AREA_LIGHTS defined where one is on, app/area_lights.py):
+// Area lights (the scene's area_lights; AREA_LIGHTS defined where one is on, app/scene/area_lights.py):
 // spheres and one-sided rectangles of uniform radiance, all outside the volume box, so a ray from
 // inside the box meets one only after it leaves the box (and a camera ray from outside may meet
 // one before it enters). NumPy twin: app/twins/area_lights.py.

@@ -1,4 +1,4 @@
-// Pinhole camera of SPEC.md. The Python side (app/camera.py) passes the basis already scaled:
+// Pinhole camera of SPEC.md. The Python side (app/twins/camera.py) passes the basis already scaled:
 // camera_right by tan(fov_y / 2) * aspect, camera_up by tan(fov_y / 2).
 uniform vec3 camera_eye;
 uniform vec3 camera_forward;

@@ -23,7 +23,7 @@ const float CELL_WALK_NEVER = 1e30;   // t_next along an axis the ray never cros
 // Faces closer than this (in macrocells, along their axis) count as reached; see cell_walk_cross.
 // Far above float rounding of positions in macrocell units (about 1e-5 for origins within a few
 // hundred macrocells), below how far beyond its cell a majorant holds (SUPPORT_SLACK = 1/32 voxel:
-// app/majorant.py; 1/256 of a macrocell of 8 voxels, 1/1024 of one of 32 voxels, which is what a
+// app/twins/majorant_grid.py; 1/256 of a macrocell of 8 voxels, 1/1024 of one of 32 voxels, which is what a
 // 2048-voxel axis gets).
 const float CELL_WALK_SNAP = 1e-4;
 

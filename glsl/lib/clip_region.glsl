@@ -1,4 +1,4 @@
-// The kept region of SPEC.md's "Crop and clip" (app/clip_region.py resolves a scene's crop box
+// The kept region of SPEC.md's "Crop and clip" (app/scene/clip_region.py resolves a scene's crop box
 // and clip plane against its volume into these uniforms; NumPy twin: ClipRegion.kept,
 // sample_points and cuts_box there). Cut-away matter is gone for every ray: lib/medium.glsl's
 // classified_at, which sigma_t_at and the raymarcher read, is 0 where kept_at is false, and

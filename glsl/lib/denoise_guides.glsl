@@ -1,4 +1,4 @@
-// Noise-free guides for the denoiser (app/rendering/denoise.py), from where a camera ray's first
+// Noise-free guides for the denoiser (app/rendering/denoise/filter.py), from where a camera ray's first
 // scattering event lands in expectation. NumPy twin: app/twins/denoise_guides.py.
 //
 // The ray is cut into the raymarcher's segments (lib/raymarch.glsl: the same step, the same

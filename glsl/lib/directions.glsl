@@ -1,5 +1,5 @@
 // The probe-bake direction set: a spherical Fibonacci point set and uniform random rotations of it.
-// NumPy twin: app/directions.py.
+// NumPy twin: app/twins/directions.py.
 
 const float DIRECTIONS_TWO_PI = 6.28318530717958648;
 // Golden-ratio conjugate (sqrt(5) - 1) / 2 in 32-bit fixed point: round(2^32 * 0.618033988...).

@@ -118,7 +118,7 @@ const int PATH_DONE = 0;
 const int PATH_SUSPENDED = 1;
 const int PATH_TRUNCATED = 2;
 
-// std430-friendly: five 16-byte rows (80 bytes; app/rendering/probes.py PATH_STATE_BYTES); seven
+// std430-friendly: five 16-byte rows (80 bytes; app/rendering/probes/bake.py PATH_STATE_BYTES); seven
 // (112 bytes) with ENVIRONMENT_MAP.
 struct PathState {
     vec3 x;             // current vertex (origin, then each scattering point)

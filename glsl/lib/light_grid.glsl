@@ -4,7 +4,7 @@
 // read it at their scattering events instead of tracing a ratio-tracked shadow ray (a bias of the
 // grid's resolution and quadrature, measured by the benchmark's bake mode).
 //
-// The grid's layout (app/rendering/light_transmittance.py, twin app/twins/light_grid.py): `axis` a is
+// The grid's layout (app/rendering/grids/light_transmittance.py, twin app/twins/light_grid.py): `axis` a is
 // the sun direction's largest component; a world point x has sheared coordinates
 // q = x - shear * x[a], with shear = sun_direction / sun_direction[a] and shear[a] = 0, so every
 // point of one sun ray has the same q along the two other axes, and q[a] = x[a]. Texel centres

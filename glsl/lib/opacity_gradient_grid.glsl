@@ -2,7 +2,7 @@
 // alone: the path tracer, the probes' walks and `guided` call opacity_gradient, exact, since the
 // path tracer is the unbiased reference). NumPy twin: app/twins/opacity_gradient_grid.py.
 //
-// OPACITY_GRADIENT_GRID (app/rendering/opacity_gradient_grid.py): grad A baked at every voxel's
+// OPACITY_GRADIENT_GRID (app/rendering/grids/opacity_gradient_grid.py): grad A baked at every voxel's
 // centre by glsl/opacity_gradient_bake.comp, with lib/hybrid_scattering.glsl's opacity_gradient
 // itself (so exact at each texel centre, crop, clip plane and channels included), and read here
 // in one fetch with hardware trilinear filtering, where opacity_gradient takes six classified_at

@@ -1,4 +1,4 @@
-// Each probe's running mean over the bake's passes (app/rendering/probes.py accum_bytes): the colour
+// Each probe's running mean over the bake's passes (app/rendering/probes/bake.py accum_bytes): the colour
 // packing's channels (lib/probe_packing.glsl; 28 up to order 2, 52 at order 3, 76 at order 4),
 // the walks averaged so far, the last pass's change, which the host reads for the bake's progress,
 // and the mean square of the walks' radiance, from which the adaptive bake estimates each probe's

@@ -1,4 +1,4 @@
-// Where each probe quantity lives in the probe textures (NumPy twin: app/rendering/probe_layout.py).
+// Where each probe quantity lives in the probe textures (NumPy twin: app/rendering/probes/layout.py).
 //
 // PROBE_SH_ORDER (0 .. 4; default 2) keeps bands up to that order, PROBE_SH_COEFFS = (order + 1)^2
 // coefficients a colour. Channel f = 4 * texture + component (component rgba).

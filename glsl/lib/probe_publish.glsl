@@ -5,9 +5,9 @@
 // slots PROBE_PUBLISH_FIRST .. PROBE_PUBLISH_FIRST + PROBE_PUBLISH_COUNT - 1, slot i at image unit
 // i - PROBE_PUBLISH_FIRST. probe_project.comp publishes slots 0 .. 7 as it folds in a pass (one
 // invocation a texture); probe_publish.comp the rest (orders 3 and 4: 13 and 19 textures).
-// PROBE_IMAGE_LIMIT comes from app/rendering/probes.py, which splits the dispatches by it.
+// PROBE_IMAGE_LIMIT comes from app/rendering/probes/bake.py, which splits the dispatches by it.
 #ifndef PROBE_IMAGE_LIMIT
-#error "PROBE_IMAGE_LIMIT: set by app/rendering/probes.py (ProbeGrid), which splits the dispatches by it"
+#error "PROBE_IMAGE_LIMIT: set by app/rendering/probes/bake.py (ProbeGrid), which splits the dispatches by it"
 #endif
 #ifndef PROBE_PUBLISH_FIRST
 #define PROBE_PUBLISH_FIRST 0

@@ -6,7 +6,7 @@
 // between the 8 surrounding probes at their real positions; beyond the outer planes it clamps to
 // them, as the uniform grid does.
 //
-// One R32F texture `probe_warp` (app/rendering/probes.py) holds, for axis a:
+// One R32F texture `probe_warp` (app/rendering/probes/bake.py) holds, for axis a:
 //   row a:     w_a tabulated at s = j / (columns - 1), j = 0 .. columns - 1 (16384 columns), read
 //              with linear filtering: exact where w_a is linear (the identity warp included); in a
 //              table step holding a plane off by at most about n_a / 16384 of a probe texel

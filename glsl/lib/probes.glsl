@@ -14,7 +14,7 @@
 //
 // PROBE_SUN_LOBE (0 or 1; default 0): 1 adds to the convolved bands a lobe about the sun's
 // direction, whose amplitude the probes hold beside their coefficients (lib/sun_lobe.glsl; order 3,
-// where app/rendering/probe_layout.py sun_lobe_g turns it on for forward scattering).
+// where app/rendering/probes/layout.py sun_lobe_g turns it on for forward scattering).
 //
 // PROBE_WARP (0 or 1; default 0): 1 places the probe planes of each axis where an adaptive layout
 // put them (lib/probe_warp.glsl) instead of evenly; the textures and their packing are the same.
@@ -25,7 +25,7 @@
 #include "lib/sun_lobe.glsl"
 uniform ivec3 probe_grid;
 // The textures hold the SH coefficients divided by this (the scene's brightest light, as radiance:
-// app/rendering/probes.py radiance_scale), so that 16-bit texels keep their range and precision
+// app/rendering/probes/bake.py radiance_scale), so that 16-bit texels keep their range and precision
 // whatever units the scene's lights use; the sun's transmittance is stored as it is.
 uniform float probe_radiance_scale;
 uniform vec3 probe_box_min;    // world corner of the probe box
@@ -68,7 +68,7 @@ vec3 probe_walk_direction(uint probe_index, uint pass_index, uint slot, uint dir
 #if PROBE_SUN_LOBE
 vec3 probe_fetched_lobe;          // the sun lobe's amplitude that probe_fetch read last
 #endif
-// The textures this build reads, by slot (lib/probe_packing.glsl; app/rendering/probes.py binds them).
+// The textures this build reads, by slot (lib/probe_packing.glsl; app/rendering/probes/bake.py binds them).
 uniform sampler3D probe_textures[PROBE_TEXTURE_COUNT];
 // per SH band: g^l (the phase convolution) times the SH window
 uniform float probe_band_factors[SH_BANDS];

@@ -1,7 +1,7 @@
 // Random numbers: PCG-RXS-M-XS 32 (O'Neill; the GPU form of Jarzynski & Olano 2020).
 // A stream is keyed by (pixel or probe, sample index, seed) through chained hashes, so an image is
 // reproducible for a given seed and independent of how the work is split into passes.
-// NumPy twin: app/rng.py.
+// NumPy twin: app/twins/rng.py.
 
 uint pcg_hash(uint v)
 {

@@ -4,7 +4,7 @@
 // tracking_stats.truncated_paths (the renderers report it, the tests assert it is 0).
 //
 // Empty-space skipping (use_majorant_grid != 0, as in pbrt-v4): the box is cut into macrocells,
-// each with its own majorant (glsl/majorant_grid.comp, app/majorant.py), and tracking walks the
+// each with its own majorant (glsl/majorant_grid.comp, app/twins/majorant_grid.py), and tracking walks the
 // cells along the ray with a 3D DDA (Amanatides and Woo). In a cell of majorant m a free-flight
 // distance is drawn with rate m; if it ends inside the cell, that is a tentative collision (real
 // or null, as with one majorant); if not, the walk moves to the next cell and draws afresh there

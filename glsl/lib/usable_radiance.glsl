@@ -1,6 +1,6 @@
 // A radiance value a later pass can use: non-finite components 0 and, unless `signed_radiance`,
 // negative ones 0 (the denoiser's output as keep_tile_means.comp takes and leaves it). NumPy
-// twins: app/rendering/denoise.py _make_usable, and np.nan_to_num for a signed image.
+// twins: app/rendering/denoise/filter.py _make_usable, and np.nan_to_num for a signed image.
 
 // Finite by its exponent bits (not all ones), so that no compiler's fast maths can fold it away.
 bool finite_component(float x)

@@ -1,6 +1,6 @@
 """At 1% on bonsai the denoiser gains only 2x over the path tracer (bench/h200-denoise: pt +
 OIDN 1.12% at 1024 samples, 0.93% at 2048; the raw path tracer 1.05% at 2048, 0.74% at 4096):
-the filter's blur is then most of its error. Does refine's blend (app/rendering/refine.py:
+the filter's blur is then most of its error. Does refine's blend (app/rendering/refine/refine.py:
 (1 - w) r + w D(m), w from the halves alone) of a fine raymarcher r (clean, biased ~2%) with the
 denoised path tracer reach 1% sooner, its errors being nearly independent at few samples?
 
@@ -27,9 +27,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / ".pkg"))
 from radiance_probes.bench.scenes import bench_scene                      # noqa: E402
 from radiance_probes.gl.context import create_headless_context           # noqa: E402
-from radiance_probes.rendering.denoise import radiance_as_albedo, shared_denoiser  # noqa: E402
+from radiance_probes.rendering.denoise.filter import radiance_as_albedo, shared_denoiser  # noqa: E402
 from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
-from radiance_probes.rendering.refine import (blend_from_sums, blend_images,  # noqa: E402
+from radiance_probes.rendering.refine.refine import (blend_from_sums, blend_images,  # noqa: E402
                                               half_buffer_sums, judge_sums)
 from radiance_probes.rendering.renderer import Renderer                  # noqa: E402
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from radiance_probes.gl.context import create_headless_context
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
+from radiance_probes.io.scene_file import parse_scene
 
 ctx = create_headless_context()
 folder = Path(tempfile.mkdtemp())

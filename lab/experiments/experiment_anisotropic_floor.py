@@ -14,12 +14,12 @@ from dataclasses import replace
 import numpy as np
 
 sys.path.insert(0, ".")
-import radiance_probes.rendering.light_transmittance as light_module
+import radiance_probes.rendering.grids.light_transmittance as light_module
 from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.volume import load_volume
+from radiance_probes.io.volume import load_volume
 
 out_path = sys.argv[1]
 half_spp = int(sys.argv[2]) if len(sys.argv) > 2 else 4096

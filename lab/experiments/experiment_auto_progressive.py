@@ -1,4 +1,4 @@
-"""Does `auto` without a search (app/rendering/auto_progressive.py) reach a target error for less than
+"""Does `auto` without a search (app/rendering/refine/auto_progressive.py) reach a target error for less than
 the path tracer, and how near the best fixed setting? For each scene at 512^2 and each target:
 the image `auto_render` returns, its error against a path-traced reference (two independent halves,
 corrected for their noise), and everything it cost (GPU ms: path-traced samples, every trial's bake,
@@ -22,10 +22,10 @@ sys.path.insert(0, ".")
 from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
 from radiance_probes.bench.scenes import bench_scene  # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
-from radiance_probes.rendering.auto_progressive import auto_render  # noqa: E402
+from radiance_probes.rendering.refine.auto_progressive import auto_render  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
-from radiance_probes.scene import parse_scene  # noqa: E402
-from radiance_probes.volume import load_volume  # noqa: E402
+from radiance_probes.io.scene_file import parse_scene  # noqa: E402
+from radiance_probes.io.volume import load_volume  # noqa: E402
 
 QUICK = {"volume": {"builtin": "cloud", "size": [20, 20, 20]}, "density_scale": 40.0,
          "camera": {"eye": [0, 0.3, 2.2], "width": 48, "height": 48}}

@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from radiance_probes.bench.scenes import bench_scene  # noqa: E402
 from radiance_probes.gl.profiler import GpuProfile  # noqa: E402
 from radiance_probes.gl.context import is_software  # noqa: E402
-from radiance_probes.rendering.dispatch_budget import DISPATCH_TARGET_MS  # noqa: E402
+from radiance_probes.rendering.budgets.dispatch_budget import DISPATCH_TARGET_MS  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 
 VARIANTS = {
@@ -34,7 +34,7 @@ VARIANTS = {
     "no adaptive walks": {"walk_adaptive": 0.0},
     "neither": {"walk_sun_correction": 0.0, "walk_adaptive": 0.0},
     "sun by ray": {"walk_sun": "ray"},
-    # the bake's walk chunks cut at another target (app/rendering/dispatch_budget.py; inf: one
+    # the bake's walk chunks cut at another target (app/rendering/budgets/dispatch_budget.py; inf: one
     # dispatch a pass, as before the bounded dispatches)
     "chunks of 50 ms": {"_target": 50.0},
     "uncut": {"_target": float("inf")},

@@ -44,7 +44,7 @@ from radiance_probes.bench.scenes import BUILTIN_SCENES, DATASET_SCENES, bench_s
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
-from radiance_probes.scene import parse_scene  # noqa: E402
+from radiance_probes.io.scene_file import parse_scene  # noqa: E402
 
 BUILT_IN = ("thick", "anisotropic", "shell-g06", "shell-g09", "speck")
 

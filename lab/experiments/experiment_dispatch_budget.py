@@ -5,7 +5,7 @@ With a finite loop budget (glsl/pathtrace.comp: iterations one invocation may ru
 invocation stops after about the same work and carries its path over to the next dispatch, starting
 new samples within the dispatch as its paths finish. Per budget: each dispatch's GPU ms (median,
 max) and the samples per pixel it added (mean, min over pixels, from the accumulation's counts),
-so ms per sample against the unbounded dispatch's. With the speed check (app/rendering/ceiling.py)
+so ms per sample against the unbounded dispatch's. With the speed check (app/rendering/budgets/ceiling.py)
 before and after.
 Usage:
     python lab/experiments/experiment_dispatch_budget.py OUT.json [--scene bonsai] [--size 1920x1080]
@@ -17,9 +17,9 @@ import numpy as np
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.gl.timer import GpuTimer
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.rendering.ceiling import speed_check_ms
+from radiance_probes.rendering.budgets.ceiling import speed_check_ms
 from radiance_probes.bench.scenes import bench_scene
-from radiance_probes.volume import load_volume
+from radiance_probes.io.volume import load_volume
 
 parser = argparse.ArgumentParser()
 parser.add_argument("out")

@@ -4,7 +4,7 @@ the phase function alone, the code as it was): a path-traced reference (two inde
 the raymarcher and `probes` at the same probes, their errors corrected for the reference's noise,
 the path tracer's GPU ms per sample and the raymarcher's ms per frame. With k > 0 the raymarcher
 runs twice at the same probes: reading the opacity-gradient grid (the product,
-app/rendering/opacity_gradient_grid.py) and computing the exact gradient
+app/rendering/grids/opacity_gradient_grid.py) and computing the exact gradient
 (LabOptions.opacity_gradient_grid False): the grid's bias against the path tracer and the frame
 time it saves. The issue's targets: the hybrid path-traced sample at most 1.2x k = 0's, the
 raymarch frame at most 2.5 ms at 1080p, the raymarcher's error with k > 0 at most 1.5x its error
@@ -30,9 +30,9 @@ from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.lab_options import LabOptions
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.rendering.volume_placement import coarser
-from radiance_probes.scene import SurfaceSpec, parse_scene
-from radiance_probes.volume import load_scene_volume
+from radiance_probes.rendering.levels.volume_placement import coarser
+from radiance_probes.io.scene_file import SurfaceSpec, parse_scene
+from radiance_probes.io.volume import load_scene_volume
 
 parser = argparse.ArgumentParser()
 parser.add_argument("out")

@@ -1,6 +1,6 @@
 """The raymarcher's GPU time per frame against image size (bench/h100-interact found 4 to 16 ms a
 sample at 1920x1080 against 1.05 ms at 1280x720, more than the pixel count explains), with the
-benchmark's speed check (app/rendering/ceiling.py) before and after each size, so that a GPU shared or
+benchmark's speed check (app/rendering/budgets/ceiling.py) before and after each size, so that a GPU shared or
 clocked down at the time shows as such. Sizes are visited twice in different orders.
 Usage:
     python lab/experiments/experiment_raymarch_sizes.py OUT.json [--scenes bonsai,foot] [--grids 128x64,64x256] [--sizes WxH,...]"""
@@ -8,9 +8,9 @@ import argparse, json, statistics
 from dataclasses import replace
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.rendering.ceiling import speed_check_ms
+from radiance_probes.rendering.budgets.ceiling import speed_check_ms
 from radiance_probes.bench.scenes import bench_scene
-from radiance_probes.volume import load_volume
+from radiance_probes.io.volume import load_volume
 
 parser = argparse.ArgumentParser()
 parser.add_argument("out")

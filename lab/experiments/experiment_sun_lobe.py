@@ -19,13 +19,13 @@ from dataclasses import replace
 import numpy as np
 
 sys.path.insert(0, ".")
-import radiance_probes.rendering.probe_layout as layout_module
+import radiance_probes.rendering.probes.layout as layout_module
 from lab.sun_lobe_fit import SunLobeFitter
 from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.volume import load_volume
+from radiance_probes.io.volume import load_volume
 
 out_path = sys.argv[1]
 settings = [tuple(int(v) for v in s.split("x")) for s in sys.argv[2].split(",")]

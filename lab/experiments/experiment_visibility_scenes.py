@@ -12,8 +12,8 @@ sys.path.insert(0, ".")
 from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.gl.context import create_headless_context
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.scene import parse_scene
-from radiance_probes.volume import Volume
+from radiance_probes.io.scene_file import parse_scene
+from radiance_probes.io.volume import Volume
 
 ctx = create_headless_context()
 n = 24

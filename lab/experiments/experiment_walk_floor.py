@@ -19,11 +19,11 @@ from pathlib import Path
 
 sys.path.insert(0, ".")
 from radiance_probes.bench.bake import _profile
-from radiance_probes.rendering.ceiling import measure_ceiling
+from radiance_probes.rendering.budgets.ceiling import measure_ceiling
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.volume import load_volume
+from radiance_probes.io.volume import load_volume
 
 parser = argparse.ArgumentParser()
 parser.add_argument("out")

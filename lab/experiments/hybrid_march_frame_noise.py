@@ -15,7 +15,7 @@ from radiance_probes.bench.scenes import bench_scene                      # noqa
 from radiance_probes.gl.context import create_headless_context           # noqa: E402
 from radiance_probes.rendering import renderer as renderer_module       # noqa: E402
 from radiance_probes.rendering.metrics import rrmse                     # noqa: E402
-from radiance_probes.scene_types import SurfaceSpec                      # noqa: E402
+from radiance_probes.scene.types import SurfaceSpec                      # noqa: E402
 
 FRAMES = (1, 4, 16)
 

@@ -87,15 +87,15 @@ EDITS["no-probes"] = [("glsl/lib/raymarch.glsl", "vec3 inscattered = probe_insca
                        "vec3 inscattered = vec3(0.1); probe_sun = 0.5;")]
 EDITS["stop-1e-3"] = [("glsl/lib/raymarch.glsl", "i < n && transmittance > 1e-6;",
                        "i < n && transmittance > 1e-3;")]
-# the raymarch pass's work-group shape for every build (app/rendering/raymarch.py group_shape:
+# the raymarch pass's work-group shape for every build (app/rendering/methods/raymarch.py group_shape:
 # 8 x 4 without surfaces, 8 x 8 with them, as shipped; every pixel's arithmetic the same, so the
 # images are too); sides that do not divide the bands' tiles are let through (timing only)
 for gx, gy in ((8, 8), (16, 8), (8, 4), (16, 16), (32, 4), (4, 8), (16, 4), (8, 2), (4, 4),
                (32, 2)):
     EDITS[f"wg{gx}x{gy}"] = [
-        ("app/rendering/raymarch.py", "GROUP_PLAIN = (8, 4)", f"GROUP_PLAIN = ({gx}, {gy})"),
-        ("app/rendering/raymarch.py", "GROUP_WIDE = (8, 8)", f"GROUP_WIDE = ({gx}, {gy})"),
-        ("app/rendering/raymarch.py", "if any(side <= 0 or TILE % side for side in shape):",
+        ("app/rendering/methods/raymarch.py", "GROUP_PLAIN = (8, 4)", f"GROUP_PLAIN = ({gx}, {gy})"),
+        ("app/rendering/methods/raymarch.py", "GROUP_WIDE = (8, 8)", f"GROUP_WIDE = ({gx}, {gy})"),
+        ("app/rendering/methods/raymarch.py", "if any(side <= 0 or TILE % side for side in shape):",
          "if False:")]
 for threshold in ("1e-3", "3e-3", "1e-2", "3e-2", "1e-1"):
     EDITS[f"roulette-{threshold}"] = [
@@ -167,7 +167,7 @@ EDITS["scale-early"] = [("glsl/lib/raymarch.glsl", "probe_fetch_scaled(x, coeffs
                          "probe_fetch(x, coeffs, probe_sun);"),
                         ("glsl/lib/raymarch.glsl", "        inscattered *= probe_radiance_scale;\n",
                          "")]
-EDITS["level0-plain"] = [("app/rendering/raymarch.py",
+EDITS["level0-plain"] = [("app/rendering/methods/raymarch.py",
                           'elif "HYBRID_SCATTERING" in defines or "GUIDED_LEVEL0" in defines:',
                           'elif "HYBRID_SCATTERING" in defines:')]
 # the code before those four changes (bench/h200-hybrid-cost: timed against them in one run)

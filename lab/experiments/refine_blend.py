@@ -22,7 +22,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / ".pkg"))
 from radiance_probes.bench.scenes import bench_scene                      # noqa: E402
 from radiance_probes.gl.context import create_headless_context           # noqa: E402
-from radiance_probes.rendering.denoise import choose_guides, shared_denoiser  # noqa: E402
+from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser  # noqa: E402
 from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer                  # noqa: E402
 

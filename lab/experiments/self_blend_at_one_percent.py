@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / ".pkg"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from blend_at_one_percent import open_run, pt_halves, write_row  # noqa: E402
 from radiance_probes.rendering.metrics import rrmse                      # noqa: E402
-from radiance_probes.rendering.refine import blend_images                # noqa: E402
+from radiance_probes.rendering.refine.refine import blend_images                # noqa: E402
 
 
 def main():

@@ -1,0 +1,1 @@
+"""The `radiance-probes` command and its `animate` subcommand."""

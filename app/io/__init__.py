@@ -1,0 +1,1 @@
+"""Loaders: volume files and folders, DICOM, bricks, environment maps, and the scene file itself."""

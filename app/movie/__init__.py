@@ -1,0 +1,1 @@
+"""Movies: a movie's frames with the probes baked once, and the MP4/GIF/PNG writer."""

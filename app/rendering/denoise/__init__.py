@@ -1,0 +1,1 @@
+"""The denoiser over Open Image Denoise, its guides, and the kept raw tile means."""

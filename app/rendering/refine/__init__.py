@@ -1,0 +1,1 @@
+"""Convergence: `refine`'s half-images and their judgement, `render --auto`."""
