@@ -97,7 +97,7 @@ def _coords(n: int, lo: int, hi: int) -> np.ndarray:
 def write_ome_zarr(path: Path, dims, chunk: int, levels: int, value=density) -> float:
     """An OME-Zarr image of `levels` levels (uint16, axes z, y, x), written slab by slab; seconds."""
     import zarr
-    from radiance_probes.io.bricks import box_filtered
+    from radiance_probes.io.brick_sources import box_filtered
     start = time.perf_counter()
     if path.exists():
         shutil.rmtree(path)
@@ -239,7 +239,7 @@ def run(out: Path, s: Settings, quick: bool, parts=PARTS, reuse: bool = False,
     old = out / "results.json"
     records: dict = json.loads(old.read_text()) if reuse and old.exists() else {}
     records.update({"device": describe(ctx), "settings": asdict(s), "quick": quick})
-    from radiance_probes.io.bricks import slot_bytes
+    from radiance_probes.io.brick_layout import slot_bytes
     cap = s.cap or 12 * slot_bytes(s.brick, 1, False)
     levels = max(1, int(np.log2(max(s.size // 64, 1))) + 1) if not quick else 3
     path = stores / "volume.zarr"

@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from radiance_probes.io.bricks import box_filtered
+from radiance_probes.io.brick_sources import box_filtered
 from radiance_probes.rendering.probes.bake_level import coarse_volume, level_dims, spacing_level
 from radiance_probes.rendering.probes.bake import ProbeGrid
 from radiance_probes.rendering.renderer import Renderer

@@ -195,7 +195,7 @@ def test_glsl_bricked_sample_matches_twin_and_whole_texture(ctx, channels):
 # ---- mixed levels ----------------------------------------------------------------------------
 
 def _pyramid(channels: int = 1):
-    from radiance_probes.io.bricks import box_filtered
+    from radiance_probes.io.brick_sources import box_filtered
     levels = [_data(channels)]
     for _ in range(2):
         levels.append(box_filtered(levels[-1]))

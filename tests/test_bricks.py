@@ -9,7 +9,9 @@ import re
 import numpy as np
 import pytest
 
-from radiance_probes.io.bricks import ArraySource, BrickStore, LazyData, box_filtered, constant_bricks
+from radiance_probes.io.brick_sources import ArraySource, box_filtered
+from radiance_probes.io.bricks import BrickStore, LazyData
+from radiance_probes.io.brick_layout import constant_bricks
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.settings import RenderSettings
 from radiance_probes.rendering.levels.volume_placement import place_volume
@@ -183,7 +185,7 @@ def _sphere_scene():
 
 
 def test_cap_shows_a_coarser_level_and_says_so(ctx):
-    from radiance_probes.io.bricks import slot_bytes
+    from radiance_probes.io.brick_layout import slot_bytes
     one = slot_bytes(BRICK, 1, False)
     r = Renderer(ctx, _sphere_scene(), settings=RenderSettings(brick_size=BRICK,
                                                                volume_memory_bytes=12 * one))
@@ -292,13 +294,13 @@ def test_reads_in_processes_equal_threads(tmp_path, monkeypatch, channels):
     """A large Zarr store is read in processes (Zarr decodes under the GIL): the same ranges and
     the same bricks with aprons as the threads' reads, each brick counted as often (one channel,
     and several read as [z, y, x, c])."""
-    import radiance_probes.io.bricks as bricks
+    import radiance_probes.io.brick_reading as brick_reading
     raw = _blob() if channels == 1 else np.moveaxis(_channel_blobs(channels), 0, -1)
     path = (_zarr(tmp_path, raw) if channels == 1
             else _zarr_channels(tmp_path, _channel_blobs(channels)))
     threads = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
-    monkeypatch.setattr(bricks, "PROCESS_READ_VOXELS", 1)
-    monkeypatch.setattr(bricks, "reader_processes", lambda: 2)
+    monkeypatch.setattr(brick_reading, "PROCESS_READ_VOXELS", 1)
+    monkeypatch.setattr(brick_reading, "reader_processes", lambda: 2)
     procs = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
     assert procs._in_processes()       # (the first store, read before the patch, used threads)
     assert procs.channels == channels
@@ -549,11 +551,11 @@ class _Blocks:
 
 
 def _processes(monkeypatch):
-    import radiance_probes.io.bricks as bricks
-    monkeypatch.setattr(bricks, "PROCESS_READ_VOXELS", 1)
-    monkeypatch.setattr(bricks, "reader_processes", lambda: 2)
+    import radiance_probes.io.brick_reading as brick_reading
+    monkeypatch.setattr(brick_reading, "PROCESS_READ_VOXELS", 1)
+    monkeypatch.setattr(brick_reading, "reader_processes", lambda: 2)
     blocks = _Blocks()
-    monkeypatch.setattr(bricks, "shared_memory", blocks)
+    monkeypatch.setattr(brick_reading, "shared_memory", blocks)
     return blocks
 
 
@@ -691,7 +693,7 @@ def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
     free space: none here, or room for the bricks of the layer reading most) come back from the
     processes pickled, as before: the same bricks with aprons as the threads' reads, each read
     once more (those of one value not at all)."""
-    import radiance_probes.io.bricks as bricks
+    import radiance_probes.io.brick_reading as brick_reading
     data = _blob()
     varied = _varied(data)
     read_layers = int(np.count_nonzero(varied.any(axis=(1, 2))))    # the layers the upload reads
@@ -699,7 +701,7 @@ def test_readers_without_shared_memory_to_spare_send_their_bricks_pickled(
     path = _zarr(tmp_path, data)
     threads = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
     blocks = _processes(monkeypatch)
-    monkeypatch.setattr(bricks, "_shared_budget", lambda: budget)
+    monkeypatch.setattr(brick_reading, "_shared_budget", lambda: budget)
     procs = load_volume(VolumeSpec(path=str(path), builtin=None), brick=BRICK).bricks
     _, _, _, resident = procs.layout(4096)
     seen = 0
@@ -823,7 +825,7 @@ def test_unwritten_chunks_are_not_read_and_read_as_the_fill_value(
     value; the ranges, the constant bricks, the pool's plan and the upload are those of the
     plain read (the same store with its listing failing: every brick read, as before) and of the
     whole loader's volume, packed by the twin."""
-    import radiance_probes.io.bricks as bricks
+    import radiance_probes.io.brick_sources as brick_sources
     raw = _sparse(fill, channels)
     path = _sparse_store(tmp_path / "sparse.zarr", raw, fill, zarr_format, chunk, shard,
                          separator)
@@ -837,7 +839,7 @@ def test_unwritten_chunks_are_not_read_and_read_as_the_fill_value(
     def unlisted(array):
         raise OSError("no listing")
     with monkeypatch.context() as m:
-        m.setattr(bricks, "_array_keys", unlisted)
+        m.setattr(brick_sources, "_array_keys", unlisted)
         plain = load_volume(spec, brick=BRICK).bricks
     assert np.all(plain.reads == 1)                  # as before: every brick read once
     for got, want in zip(store.raw_ranges() + store.ranges(), plain.raw_ranges() + plain.ranges()):
@@ -859,7 +861,7 @@ def test_unwritten_bricks_of_a_time_step_and_the_channels_shown(tmp_path):
     channels shown (in the scene's order, not the file's) was never written; the range pass
     reads the others alone and gives the raw ranges of the step's voxels."""
     import zarr
-    from radiance_probes.io.bricks import ZarrSource
+    from radiance_probes.io.brick_sources import ZarrSource
     from radiance_probes.io.volume import normalise
     data = np.zeros((2, 4, 24, 24, 24), np.uint16)         # [t, c, z, y, x]
     data[1, 2, 0:8, 0:8, 0:8] = 5                          # brick (0, 0, 0): step 1, channel 2
@@ -900,7 +902,7 @@ def test_a_store_not_listed_is_read_whole(tmp_path):
     store the listing does not know), every brick is read, as before."""
     import os
     import zarr
-    from radiance_probes.io.bricks import ZarrSource, stored_chunks
+    from radiance_probes.io.brick_sources import ZarrSource, stored_chunks
     from radiance_probes.io.volume import normalise
     raw = _sparse(0, 1)
     path = _sparse_store(tmp_path / "linked.zarr", raw, 0, 3, 8, None, "/")
@@ -949,7 +951,7 @@ def test_unwritten_chunks_of_a_non_finite_fill_value(tmp_path):
 def test_bricks_overlapping_chunks_of_any_size():
     """bricks_overlapping against each brick's voxels, chunks smaller and larger than a brick,
     aligned or not, partial at the far faces."""
-    from radiance_probes.io.bricks import bricks_overlapping
+    from radiance_probes.io.brick_sources import bricks_overlapping
     rng = np.random.default_rng(3)
     for _ in range(100):
         shape = tuple(int(n) for n in rng.integers(1, 30, 3))

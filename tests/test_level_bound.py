@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from radiance_probes.io.bricks import ArraySource, BrickStore, box_filtered, constant_bricks
+from radiance_probes.io.brick_sources import ArraySource, box_filtered
+from radiance_probes.io.bricks import BrickStore
+from radiance_probes.io.brick_layout import constant_bricks
 from radiance_probes.io.level_bound import bound_level, inside_ranges, varying_bricks
 from radiance_probes.rendering.levels.volume_placement import level_bytes, plan_placement
 from radiance_probes.io.scene_file import parse_scene
@@ -196,7 +198,7 @@ def test_mixed_levels_read_no_finer_range_pass_where_no_brick_is_worth_a_slot(tm
     brick = 16
     scene = _store(tmp_path)
     lazy = load_scene_volume(scene, brick=brick)
-    from radiance_probes.io.bricks import slot_bytes
+    from radiance_probes.io.brick_layout import slot_bytes
     cap = level_bytes(BrickStore(lazy.levels[0], brick), 1, False, 2048) + 4 * slot_bytes(
         brick, 1, False)           # room for a few of level 0's bricks, not for level 0
     far = replace(scene.camera, eye=(0.0, 0.0, 40.0), target=(0.0, 0.0, 0.0))

@@ -10,7 +10,8 @@ import numpy as np
 
 from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.bench.scenes import battery_scene
-from radiance_probes.io.bricks import box_filtered, slot_bytes
+from radiance_probes.io.brick_sources import box_filtered
+from radiance_probes.io.brick_layout import slot_bytes
 from radiance_probes.rendering.levels.level_mix import MIX_FOOTPRINT_PX, footprints
 from radiance_probes.rendering.renderer import METHODS, Renderer
 from radiance_probes.rendering.lab_options import LabOptions

@@ -11,7 +11,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from radiance_probes.io.bricks import CONSTANT, REDIRECT, box_filtered
+from radiance_probes.io.brick_layout import CONSTANT, REDIRECT
+from radiance_probes.io.brick_sources import box_filtered
 from radiance_probes.rendering.levels.level_mix import coarse_ranges_read, mixed_density_ranges
 from radiance_probes.rendering.lab_options import LabOptions
 from radiance_probes.rendering.renderer import METHODS
@@ -249,7 +250,9 @@ def test_no_page_miss_after_restreams(checked_ctx):
 
 def test_mixed_density_ranges_are_the_brick_by_brick_ranges(ctx):
     """coarse_ranges_read (array operations) against the bricks reached, brick by brick."""
-    from radiance_probes.io.bricks import BrickStore, ArraySource, around, bricks_reached
+    from radiance_probes.io.bricks import BrickStore
+    from radiance_probes.io.brick_sources import ArraySource
+    from radiance_probes.io.brick_layout import around, bricks_reached
     rng = np.random.default_rng(1)
     fine_data = rng.uniform(0, 1, (27, 21, 37)).astype(np.float32)
     fine_data[:, :9] = 0.0
@@ -291,7 +294,8 @@ def test_a_store_placed_from_far_reads_level_0_when_the_camera_comes_near(ctx, t
     level 0 reads level 1. Restreamed for a near camera, the range pass is read then, level 0's
     constant bricks become constants and its bricks worth a slot are loaded: the pool and image
     of a fresh placement for the near camera."""
-    from radiance_probes.io.bricks import BrickStore, slot_bytes
+    from radiance_probes.io.bricks import BrickStore
+    from radiance_probes.io.brick_layout import slot_bytes
     from radiance_probes.rendering.renderer import Renderer
     from radiance_probes.rendering.settings import RenderSettings
     from radiance_probes.rendering.levels.volume_placement import level_bytes

@@ -64,7 +64,7 @@ def test_progressive_open_gives_place_volumes_pool(ctx, store):
 
 
 def test_progressive_open_under_a_cap_shows_the_level_place_volume_shows(ctx, store):
-    from radiance_probes.io.bricks import slot_bytes
+    from radiance_probes.io.brick_layout import slot_bytes
     scene = _scene(store)
     cap = 6 * slot_bytes(BRICK, 1, False) + 4096     # only a coarser level fits
     want_shown, want = place_volume(ctx, load_scene_volume(scene, BRICK), cap, BRICK)

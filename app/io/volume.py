@@ -142,7 +142,7 @@ class Volume:
                 # strided sample of level 0 would decode a row of chunks for every plane it
                 # takes; at 2048^3, 8 times the volume). Its voxels are averages of level 0's:
                 # the histogram's peaks are a little narrower than level 0's own.
-                from radiance_probes.io.bricks import source_whole
+                from radiance_probes.io.brick_sources import source_whole
                 data = source_whole(small[0])
                 if data.ndim == 4:
                     data = data[..., channel]
@@ -634,7 +634,7 @@ def load_volume(spec: VolumeSpec, base_dir: str | None = None,
                           "brick by brick; give its range in stored values "
                           f"({with_flag('volume.value_range')})")
     if formats.is_zarr(p) and (brick is not None or _large_zarr(p)):
-        from radiance_probes.io.bricks import DEFAULT_BRICK_SIZE
+        from radiance_probes.io.brick_layout import DEFAULT_BRICK_SIZE
         return lazy_zarr_volume(p, spec, time, channels, brick or DEFAULT_BRICK_SIZE)
     found = _read_series(spec, base_dir)
     raw, name, direction, notes = found.raw, found.name, found.direction, found.notes
@@ -696,7 +696,8 @@ def lazy_zarr_volume(p, spec, time: int, channels, brick: int):
     them: volume_from_canonical; several read as [z, y, x, c]); each channel normalised as the
     whole loader does (its value range, else the type's for 8-bit data, else its least and
     largest value, from the range pass)."""
-    from radiance_probes.io.bricks import BrickStore, LazyData, ZarrSource
+    from radiance_probes.io.bricks import BrickStore, LazyData
+    from radiance_probes.io.brick_sources import ZarrSource
     from radiance_probes.scene.channels import check_channel_count, default_channels
     from radiance_probes.scene.types import MAX_CHANNELS
     from radiance_probes.io.volume_formats import open_zarr
@@ -946,7 +947,7 @@ def zarr_preview(scene: Scene, max_voxels: int = PREVIEW_VOXELS,
     least and largest (which its note calls provisional: the store's are known only after its
     range pass); where the store has no such level, an empty box. None for a store of several
     channels, or a time step it lacks (the full open says what is wrong)."""
-    from radiance_probes.io.bricks import ZarrSource
+    from radiance_probes.io.brick_sources import ZarrSource
     from radiance_probes.scene.channels import scene_channels
     from radiance_probes.io.volume_formats import open_zarr
     spec = scene.volume

@@ -34,7 +34,7 @@ import time
 
 import numpy as np
 
-from radiance_probes.io.bricks import CONSTANT, REDIRECT, constant_values
+from radiance_probes.io.brick_layout import CONSTANT, REDIRECT, constant_values
 from radiance_probes.rendering.levels.level_mix import choose_fine, footprints, mixed_density_ranges
 
 READ_C = REDIRECT | 1

@@ -24,7 +24,8 @@ import dataclasses
 
 import numpy as np
 
-from radiance_probes.io.bricks import DEFAULT_BRICK_SIZE, HOST_WHOLE_BYTES, texel_bytes
+from radiance_probes.io.brick_layout import DEFAULT_BRICK_SIZE, texel_bytes
+from radiance_probes.io.bricks import HOST_WHOLE_BYTES
 from radiance_probes.gl.textures import check_volume_fits, device_available, volume_texture
 from radiance_probes.io.volume import Volume, VolumeError
 from radiance_probes.rendering.cache_keys import majorant_grid_key
