@@ -28,7 +28,7 @@ from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.twins.camera import camera_frame
 from radiance_probes.viewer.orbit import project, view_projection
 from radiance_probes.viewer.probe_view import probe_centres, visible_cells
-from radiance_probes.io.volume import load_volume
+from radiance_probes.io.load import load_volume
 
 out = Path(sys.argv[1])
 ref_dir = Path(sys.argv[2]) if len(sys.argv) > 2 and sys.argv[2] != "-" else None

@@ -59,7 +59,9 @@ from radiance_probes.rendering.lab_options import LabOptions  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
 from radiance_probes.io.scene_file import parse_scene  # noqa: E402
-from radiance_probes.io.volume import VolumeError, load_scene_volume, volume_from_array  # noqa: E402
+from radiance_probes.io.volume import VolumeError
+from radiance_probes.io.load import volume_from_array
+from radiance_probes.io.load import load_scene_volume  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -449,7 +451,7 @@ def _progressive(ctx, records, scene, settings, cap):
     viewer's frame: begin, one sample, waited for, nothing read back); then the store's own first
     frame. Times from opening."""
     from radiance_probes.rendering.levels.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
-    from radiance_probes.io.volume import zarr_preview
+    from radiance_probes.io.load import zarr_preview
 
     def frame(r, seed, bake=False):
         if bake:        # a new volume: its probes and light grid first (the viewer's first frames)

@@ -33,7 +33,7 @@ from radiance_probes.gl.context import create_headless_context, describe  # noqa
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.io.scene_file import parse_scene  # noqa: E402
 from radiance_probes.twins.camera import camera_frame  # noqa: E402
-from radiance_probes.io.volume import builtin_cloud  # noqa: E402
+from radiance_probes.io.builtin_volumes import builtin_cloud  # noqa: E402
 
 OPACITY = (0.3, 0.6, 1.0)
 COLOURS = ((1.0, 0.25, 0.25), (0.25, 1.0, 0.25), (0.3, 0.3, 1.0))

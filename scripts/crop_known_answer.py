@@ -30,7 +30,7 @@ from radiance_probes.gl.context import create_headless_context, describe  # noqa
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
 from radiance_probes.io.scene_file import load_scene, parse_scene  # noqa: E402
-from radiance_probes.io.volume import load_scene_volume  # noqa: E402
+from radiance_probes.io.load import load_scene_volume  # noqa: E402
 
 
 def rms(a, b) -> float:

@@ -32,7 +32,7 @@ from radiance_probes.bench.report import equal_time, load as load_results, main_
 from radiance_probes.bench.scenes import bench_scene                                 # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe             # noqa: E402
 from radiance_probes.rendering.renderer import Renderer                                 # noqa: E402
-from radiance_probes.io.volume import load_volume                                       # noqa: E402
+from radiance_probes.io.load import load_volume                                       # noqa: E402
 from panel_sheet import ldr, panel_sheet, signed_error                   # noqa: E402
 
 SIZE, PANEL, REF_SPP = 512, 256, 32768

@@ -19,7 +19,7 @@ from radiance_probes.gl.memory import gpu_available_bytes
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.scene.types import VolumeError
-from radiance_probes.io.volume import load_scene_volume
+from radiance_probes.io.load import load_scene_volume
 
 
 def ct_like(shape_zyx: tuple[int, int, int]) -> np.ndarray:

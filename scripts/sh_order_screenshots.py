@@ -17,7 +17,7 @@ from radiance_probes.rendering.metrics import corrected_rrmse, rrmse
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.io.volume import load_volume
+from radiance_probes.io.load import load_volume
 from panel_sheet import ldr, panel_sheet, signed_error
 
 out = Path(sys.argv[1])

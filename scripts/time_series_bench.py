@@ -43,7 +43,7 @@ from radiance_probes.rendering.methods.accumulation import Accumulation  # noqa:
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.io.scene_file import parse_scene  # noqa: E402
 from radiance_probes.viewer.session import RenderSession  # noqa: E402
-from radiance_probes.io.volume import builtin_cloud  # noqa: E402
+from radiance_probes.io.builtin_volumes import builtin_cloud  # noqa: E402
 
 
 @dataclass(frozen=True)

@@ -243,7 +243,7 @@ def test_single_scattering_of_a_near_light_matches_quadrature(ctx):
                          # inside the box, looking through the medium: no silhouettes to resolve
                          "camera": {"eye": [0.0, -0.3, 0.4], "target": [0.1, 0.2, -0.4],
                                     "fov_y": 50.0, "width": 5, "height": 5}})
-    from radiance_probes.io.volume import load_scene_volume
+    from radiance_probes.io.load import load_scene_volume
     ref = _light_single_scatter(scene, load_scene_volume(scene), steps=32, directions=10000,
                                 shadow_steps=2)
     a, _ = _image(ctx, scene, "pt", 1024, seed=1)

@@ -18,7 +18,8 @@ from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.settings import RenderSettings
 from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.twins.majorant_grid import density_range_grid, macrocell_counts
-from radiance_probes.io.volume import VolumeError, volume_from_array
+from radiance_probes.io.volume import VolumeError
+from radiance_probes.io.load import volume_from_array
 
 SCENE = {"volume": {"builtin": "cloud", "size": [16, 16, 16]}, "density_scale": 30.0,
          "albedo": 0.8, "max_bounces": 8, "camera": {"width": 16, "height": 12},

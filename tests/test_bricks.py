@@ -19,7 +19,9 @@ from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.scene.types import VolumeSpec
 from radiance_probes.twins.brick_pool import CONSTANT, brick_ranges, pack
 from radiance_probes.twins.majorant_grid import brick_density_range_grid, density_range_grid
-from radiance_probes.io.volume import VolumeError, load_scene_volume, load_volume, volume_from_array
+from radiance_probes.io.volume import VolumeError
+from radiance_probes.io.load import volume_from_array
+from radiance_probes.io.load import load_scene_volume, load_volume
 
 BRICK = 8
 CAMERA = {"eye": [0.0, 0.3, 2.2], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y": 35.0,
@@ -723,7 +725,7 @@ def test_bricked_time_series_is_normalised_by_the_whole_series_range(tmp_path, c
     whole series' least and largest value, read brick by brick as read whole (each step's range
     differs here, so a step's own range would give other densities)."""
     import zarr
-    from radiance_probes.io import volume as volume_module
+    from radiance_probes.io import lazy_zarr
     r = np.random.default_rng(5)
     shape = (3, channels, 16, 12, 20) if channels > 1 else (3, 16, 12, 20)
     data = r.integers(100, 1000, shape).astype(np.uint16)
@@ -734,7 +736,7 @@ def test_bricked_time_series_is_normalised_by_the_whole_series_range(tmp_path, c
     arr[...] = data
     axes = "tczyx" if channels > 1 else "tzyx"
     parsed = parse_scene({"volume": {"path": str(path), "axes": axes}, "time": 1})
-    volume_module._SERIES_EXTREMES.clear()
+    lazy_zarr._SERIES_EXTREMES.clear()
     lazy = load_scene_volume(parsed, brick=BRICK)
     whole = load_scene_volume(parsed)
     _same_volume(lazy, whole)

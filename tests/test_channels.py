@@ -18,7 +18,8 @@ from radiance_probes.scene.types import ChannelSpec, SceneError, TransferFunctio
 from radiance_probes.twins.majorant_grid import channel_density_ranges, macrocell_counts, majorant_grid
 from radiance_probes.twins.medium import albedo_at, classified_at, density_at, mixed_transfer_at, sigma_t_at
 from radiance_probes.twins.visible_region import visible_region
-from radiance_probes.io.volume import Volume, load_scene_volume
+from radiance_probes.io.volume import Volume
+from radiance_probes.io.load import load_scene_volume
 from glsl_harness import run_kernel
 
 DENSITY_SCALE = 23.0
@@ -509,7 +510,7 @@ def test_channels_known_answer_script_quick(tmp_path):
 def test_volume_from_an_array_in_memory():
     """The Python API's way in: a NumPy array with its axes named, channels and time steps as
     from a file, refused where the axes do not fit."""
-    from radiance_probes.io.volume import volume_from_array
+    from radiance_probes.io.load import volume_from_array
     data = _blobs(shape=(6, 7, 8))
     v = volume_from_array(data, axes="czyx")
     assert v.channel_count == 3 and v.dims == (8, 7, 6)

@@ -14,7 +14,7 @@ import pytest
 from radiance_probes.cli.main import build_parser, main
 from radiance_probes.frontend.common import apply_options, scene_from_arg, set_value
 from radiance_probes.scene.flags import FLAGS, flag_for, with_flag
-from radiance_probes.io.volume import load_scene_volume
+from radiance_probes.io.load import load_scene_volume
 
 APP = Path(__file__).resolve().parents[1] / "app"
 # A scene key as a message names it: dotted, from one of the scene's objects or lists.

@@ -14,7 +14,8 @@ from radiance_probes.scene.clinical_presets import (CLINICAL_PRESETS, check_houn
 from radiance_probes.frontend.common import OptionError, apply_options, scene_from_arg
 from radiance_probes.io.scene_file import SceneError, TransferFunctionSpec, parse_scene, scene_to_dict
 from radiance_probes.scene.transfer import lookup, transfer_table
-from radiance_probes.io.volume import VolumeError, load_scene_volume
+from radiance_probes.io.volume import VolumeError
+from radiance_probes.io.load import load_scene_volume
 from test_volume_formats import write_dicom_series
 
 

@@ -15,7 +15,8 @@ from pydicom.fileset import FileSet
 
 from radiance_probes.io.dicom import list_series
 from radiance_probes.io.scene_file import VolumeSpec, parse_scene
-from radiance_probes.io.volume import VolumeError, load_volume
+from radiance_probes.io.volume import VolumeError
+from radiance_probes.io.load import load_volume
 from test_volume_formats import ct_slice, write_dicom_series
 
 PYDICOM_TESTS = Path(pydicom.__file__).parent / "data" / "test_files" / "dicomdirtests"

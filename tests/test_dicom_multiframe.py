@@ -19,7 +19,8 @@ from pydicom.uid import ExplicitVRLittleEndian, generate_uid
 from radiance_probes.cli.main import main
 from radiance_probes.io.dicom import list_series
 from radiance_probes.io.scene_file import VolumeSpec
-from radiance_probes.io.volume import VolumeError, load_volume
+from radiance_probes.io.volume import VolumeError
+from radiance_probes.io.load import load_volume
 from test_volume_formats import ct_slice
 
 ENHANCED_CT = "1.2.840.10008.5.1.4.1.1.2.1"

@@ -59,7 +59,9 @@ from radiance_probes.twins.phase import phase_hg
 from radiance_probes.rendering.renderer import Renderer, RenderResult
 from radiance_probes.io.scene_file import Scene, parse_scene
 from radiance_probes.scene.transfer import transfer_table
-from radiance_probes.io.volume import Volume, builtin_cloud, load_scene_volume
+from radiance_probes.io.volume import Volume
+from radiance_probes.io.builtin_volumes import builtin_cloud
+from radiance_probes.io.load import load_scene_volume
 from glsl_harness import HEADER
 from transport_reference import optical_depth, pixel_rays
 

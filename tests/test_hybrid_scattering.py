@@ -14,7 +14,7 @@ from radiance_probes.scene.transfer import transfer_table
 from radiance_probes.twins import hybrid_scattering as hs
 from radiance_probes.twins.directions import fibonacci_directions as spherical_fibonacci
 from radiance_probes.twins.medium import classified_at
-from radiance_probes.io.volume import load_scene_volume
+from radiance_probes.io.load import load_scene_volume
 from glsl_harness import run_kernel
 
 BRDF_KERNEL = """

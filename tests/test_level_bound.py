@@ -12,7 +12,7 @@ from radiance_probes.io.brick_layout import constant_bricks
 from radiance_probes.io.level_bound import bound_level, inside_ranges, varying_bricks
 from radiance_probes.rendering.levels.volume_placement import level_bytes, plan_placement
 from radiance_probes.io.scene_file import parse_scene
-from radiance_probes.io.volume import load_scene_volume
+from radiance_probes.io.load import load_scene_volume
 
 LIMITS = (2048, None, "the test's device")
 

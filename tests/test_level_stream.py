@@ -299,7 +299,7 @@ def test_a_store_placed_from_far_reads_level_0_when_the_camera_comes_near(ctx, t
     from radiance_probes.rendering.renderer import Renderer
     from radiance_probes.rendering.settings import RenderSettings
     from radiance_probes.rendering.levels.volume_placement import level_bytes
-    from radiance_probes.io.volume import load_scene_volume
+    from radiance_probes.io.load import load_scene_volume
     from test_level_bound import _store
     brick = 16
     scene = _store(tmp_path)

@@ -19,7 +19,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from radiance_probes.io.scene_file import VolumeSpec
-from radiance_probes.io.volume import RAW_DTYPES, Volume, VolumeError, load_volume
+from radiance_probes.io.volume_files import RAW_DTYPES
+from radiance_probes.io.volume import Volume, VolumeError
+from radiance_probes.io.load import load_volume
 
 FUZZ = settings(max_examples=400, deadline=2000, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,

@@ -13,7 +13,8 @@ import zarr
 from radiance_probes.cli.main import build_parser, main
 from radiance_probes.frontend.common import apply_options, scene_from_arg
 from radiance_probes.io.scene_file import SceneError, VolumeSpec, parse_scene
-from radiance_probes.io.volume import VolumeError, load_scene_volume, load_volume
+from radiance_probes.io.volume import VolumeError
+from radiance_probes.io.load import load_scene_volume, load_volume
 
 CELLS = np.random.default_rng(7).random((3, 8, 6, 5)).astype(np.float32)   # [c, z, y, x]
 

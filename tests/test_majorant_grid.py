@@ -20,7 +20,8 @@ from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.resources import SceneResources
 from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.scene.transfer import transfer_table
-from radiance_probes.io.volume import Volume, load_scene_volume
+from radiance_probes.io.volume import Volume
+from radiance_probes.io.load import load_scene_volume
 from glsl_harness import run_kernel
 
 WHITE = {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]}

@@ -15,7 +15,7 @@ import pytest
 
 from radiance_probes.io.orientation import PATIENT_WORLD, residual_degrees, to_patient
 from radiance_probes.io.scene_file import VolumeSpec, parse_scene
-from radiance_probes.io.volume import load_volume
+from radiance_probes.io.load import load_volume
 from test_volume_formats import ct_slice
 
 DIMS = (6, 5, 4)   # x, y, z voxel counts: every axis a different length

@@ -15,7 +15,8 @@ from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.settings import RenderSettings
 from radiance_probes.rendering.levels.volume_placement import place_volume
 from radiance_probes.io.scene_file import parse_scene
-from radiance_probes.io.volume import VolumeError, load_scene_volume, reads_lazily, zarr_preview
+from radiance_probes.io.volume import VolumeError
+from radiance_probes.io.load import load_scene_volume, reads_lazily, zarr_preview
 
 BRICK = 8
 CAMERA = {"eye": [0.0, 0.3, 2.2], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y": 35.0,

@@ -15,7 +15,7 @@ from radiance_probes.io.scene_file import CameraSpec, parse_scene
 from radiance_probes.twins.camera import camera_frame
 from radiance_probes.viewer import layout, orbit
 from radiance_probes.viewer import slice_view as sv
-from radiance_probes.io.volume import volume_from_array
+from radiance_probes.io.load import volume_from_array
 from viewer_harness import dump, png, view, write_script
 
 NX, NY, NZ = 20, 16, 12            # voxels along x, y, z: the world box is 1 x 0.8 x 0.6

@@ -10,7 +10,7 @@ import pytest
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.scene.types import SceneError, VolumeError
-from radiance_probes.io.volume import load_scene_volume
+from radiance_probes.io.load import load_scene_volume
 
 
 def moving_blob(steps=4, shape=(10, 12, 14), scale=1000.0) -> np.ndarray:

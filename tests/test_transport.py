@@ -7,7 +7,7 @@ import pytest
 
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.io.scene_file import parse_scene
-from radiance_probes.io.volume import load_scene_volume
+from radiance_probes.io.load import load_scene_volume
 from transport_reference import single_scatter_image, transmittance_image
 
 WHITE = {"rgba": [[1, 1, 1, 0.0], [1, 1, 1, 1.0]]}

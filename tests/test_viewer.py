@@ -122,7 +122,7 @@ def test_editing_an_explicit_tables_opacity_keeps_it_explicit():
 def test_probe_view_draws_the_visible_probes_and_thins_large_grids():
     from radiance_probes.twins.medium import sigma_t_at
     from radiance_probes.viewer.probe_view import MAX_SPHERES, select_probes, visible_cells
-    from radiance_probes.io.volume import load_volume
+    from radiance_probes.io.load import load_volume
     scene = parse_scene({"volume": {"builtin": "sphere", "size": [40, 40, 40]},
                          "transfer_function": {"opacity": [[0, 0], [0.5, 0], [0.6, 1], [1, 1]]}})
     volume = load_volume(scene.volume)

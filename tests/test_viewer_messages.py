@@ -7,7 +7,8 @@ import pytest
 
 from radiance_probes.viewer.files import scene_for_path
 from radiance_probes.viewer.viewer import could_not_open
-from radiance_probes.io.volume import VolumeError, load_scene_volume
+from radiance_probes.io.volume import VolumeError
+from radiance_probes.io.load import load_scene_volume
 from radiance_probes.io.scene_file import default_scene
 
 

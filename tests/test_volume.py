@@ -7,8 +7,9 @@ import pytest
 
 from radiance_probes.gl.textures import volume_texture
 from radiance_probes.io.scene_file import VolumeSpec, parse_scene
-from radiance_probes.io.volume import (BUILTIN_VOLUMES, Volume, VolumeError, load_scene_volume, load_volume,
-                        normalise)
+from radiance_probes.io.builtin_volumes import BUILTIN_VOLUMES
+from radiance_probes.io.volume import Volume, VolumeError, normalise
+from radiance_probes.io.load import load_scene_volume, load_volume
 from conftest import dataset
 
 

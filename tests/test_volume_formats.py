@@ -16,7 +16,8 @@ from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
 from radiance_probes.io.scene_file import SceneError, VolumeSpec, parse_scene
 from radiance_probes.scene.types import WINDOW_PRESETS
 from radiance_probes.scene.transfer import lookup, transfer_table
-from radiance_probes.io.volume import VolumeError, load_volume
+from radiance_probes.io.volume import VolumeError
+from radiance_probes.io.load import load_volume
 
 # x = 5, y = 4, z = 3: every axis a different length, so a swapped axis cannot pass
 ARRAY = (np.arange(3 * 4 * 5, dtype=np.int16).reshape(3, 4, 5) * 37 - 900)

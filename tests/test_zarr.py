@@ -11,7 +11,7 @@ zarr = pytest.importorskip("zarr")
 
 from radiance_probes.io.scene_file import parse_scene  # noqa: E402
 from radiance_probes.scene.types import VolumeError  # noqa: E402
-from radiance_probes.io.volume import load_scene_volume  # noqa: E402
+from radiance_probes.io.load import load_scene_volume  # noqa: E402
 
 DATA = (np.arange(2 * 3 * 4 * 5 * 6) % 251).reshape(2, 3, 4, 5, 6).astype(np.uint16)  # t c z y x
 

@@ -112,8 +112,8 @@ if __name__ == "__main__":
         import radiance_probes.rendering.shader_files as shader_files
         shader_files.GLSL_DIR = Path(hooks[hooks.index("--glsl") + 1])
     if "--lazy-bytes" in hooks:   # Zarr stores larger than this are read brick by brick
-        import radiance_probes.io.volume
-        radiance_probes.io.volume.LAZY_BYTES = int(hooks[hooks.index("--lazy-bytes") + 1])
+        import radiance_probes.io.lazy_zarr
+        radiance_probes.io.lazy_zarr.LAZY_BYTES = int(hooks[hooks.index("--lazy-bytes") + 1])
     if "--open-delay" in hooks:   # a volume opening on a thread starts this many seconds late
         import time as _time
         from radiance_probes.rendering.levels.progressive_open import ProgressiveOpen

@@ -25,7 +25,8 @@ from radiance_probes.io.scene_file import Scene, SceneError, load_scene, parse_s
 from radiance_probes.scene.types import CameraSpec, VolumeError, VolumeSpec
 from radiance_probes.scene.flags import COLOUR_SOURCES
 from radiance_probes.scene.clinical_presets import opening_scene
-from radiance_probes.io.volume import Volume, load_scene_volume, normalise
+from radiance_probes.io.volume import Volume, normalise
+from radiance_probes.io.load import load_scene_volume
 
 from radiance_probes.api.image import Image
 
@@ -186,7 +187,7 @@ def build_scene(data: Any = None, scene: Any = None, options: dict | None = None
         elif axes is None and array.ndim == 3 and not parsed.channels and not parsed.time:
             volume = volume_from_array(array, parsed.volume)
         else:   # channels or time steps (app/io/volume.py volume_from_array reads them as a file)
-            from radiance_probes.io.volume import volume_from_array as from_axes
+            from radiance_probes.io.load import volume_from_array as from_axes
             if axes is None and array.ndim != 3:
                 raise VolumeError(f"a {array.ndim}D array (shape {tuple(array.shape)}): say which "
                                   "axis is which with axes=, e.g. \"czyx\" or \"tzyx\"")

@@ -108,7 +108,7 @@ def _layout_info(renderer) -> dict:
 def run_bench(config: BenchConfig, out_dir: str | Path, command: str = "") -> Path:
     from radiance_probes.gl.context import create_headless_context, describe
     from radiance_probes.rendering.renderer import Renderer
-    from radiance_probes.io.volume import load_volume
+    from radiance_probes.io.load import load_volume
 
     out = Path(out_dir)
     (out / "images").mkdir(parents=True, exist_ok=True)

@@ -110,7 +110,7 @@ def bench_scene(name: str, width: int, height: int) -> Scene | None:
     if name in BUILTIN_SCENES:
         scene = parse_scene(BUILTIN_SCENES[name])
     elif name in DATASET_SCENES:
-        from radiance_probes.io.volume import _resolve
+        from radiance_probes.io.volume_files import _resolve
         scene = load_scene(ASSETS_DIR / "scenes" / f"{name}.json")
         if not _resolve(scene.volume.path, scene.base_dir).exists():   # a file or a TIFF/DICOM folder
             return None

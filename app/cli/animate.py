@@ -97,7 +97,7 @@ def run_animate(args: argparse.Namespace) -> int:
     from radiance_probes.rendering.methods.raymarch import check_step
     from radiance_probes.rendering.renderer import Renderer
     from radiance_probes.rendering.budgets.device_defaults import probes_named, with_device_probes
-    from radiance_probes.io.volume import load_scene_volume
+    from radiance_probes.io.load import load_scene_volume
 
     from radiance_probes.scene.framing import frame_default_camera
     scene = apply_options(scene_from_arg(args.scene), args)

@@ -282,7 +282,7 @@ def add_scene_key_options(parser: argparse.ArgumentParser) -> argparse.ArgumentP
     """The flags that set scene keys (app/scene/flags.py names them in messages): --set for any
     key, and a flag of its own for the keys users set most."""
     from radiance_probes.scene.transfer import ALIASES, COLORMAPS
-    from radiance_probes.io.volume import RAW_DTYPES
+    from radiance_probes.io.volume_files import RAW_DTYPES
     parser.add_argument("--set", dest="set", action="append", type=set_arg, metavar="KEY=VALUE",
                         help="set any scene key (docs/scene-format.md), e.g. volume.spacing=1,1,2 "
                              "or transfer_function.colormap=grey; the value is read as JSON where "
@@ -704,7 +704,7 @@ def render_to_files(args: argparse.Namespace) -> int:
     from radiance_probes.rendering.methods.raymarch import check_step
     from radiance_probes.io.environment_map import load_scene_environment
     from radiance_probes.scene.framing import frame_default_camera
-    from radiance_probes.io.volume import load_scene_volume
+    from radiance_probes.io.load import load_scene_volume
     from radiance_probes.scene.clinical_presets import opening_scene
 
     auto = getattr(args, "auto", None)

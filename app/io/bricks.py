@@ -30,7 +30,7 @@ from radiance_probes.io.brick_layout import (CONSTANT, LEVEL_SHIFT, around, bric
                                              slot_grid, slot_side)
 from radiance_probes.io import brick_reading as reading
 from radiance_probes.io.brick_reading import (SLAB_THREADS, _CoreReader, _layer_ranges_of, _spawn,
-                                              reader_threads, runs)
+                                              reader_threads)
 from radiance_probes.io.brick_sources import source_whole
 
 

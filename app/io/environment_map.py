@@ -76,7 +76,6 @@ def build_distribution(image: np.ndarray) -> Distribution:
                         marginal=_cdf(weights.sum(axis=1)))
 
 
-
 @dataclass(frozen=True)
 class EnvironmentMap:
     path: Path

@@ -26,9 +26,11 @@ from radiance_probes.scene.types import (AXIS_LETTERS, CROP_UNITS, MAX_CHANNELS,
                           scene_to_dict, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS, AREA_LIGHT_SHAPES,
                           MAX_AREA_LIGHTS, AreaLightSpec,
                           transfer_to_dict, window_range)
-from radiance_probes.scene.clinical_presets import CLINICAL_PRESETS, expand as expand_clinical, preset as clinical_preset
+from radiance_probes.scene.clinical_presets import (CLINICAL_PRESETS, expand as expand_clinical,
+                                                    preset as clinical_preset)
 from radiance_probes.scene.transfer import COLORMAPS
-from radiance_probes.io.volume import BUILTIN_VOLUMES, RAW_DTYPES
+from radiance_probes.io.builtin_volumes import BUILTIN_VOLUMES
+from radiance_probes.io.volume_files import RAW_DTYPES
 
 __all__ = ["MAX_BOUNCES_LIMIT", "MAX_IMAGE_SIDE", "MAX_PROBE_AXIS", "MAX_PROBE_SAMPLES",
            "MAX_TRANSFER_ROWS", "ORIENTATIONS", "PROBE_FITS", "PROBE_INDICATORS", "PROBE_INTERPOLATIONS",

@@ -92,12 +92,12 @@ def _clinical() -> dict:
 
 
 def _builtins() -> tuple[str, ...]:
-    from radiance_probes.io.volume import BUILTIN_VOLUMES
+    from radiance_probes.io.builtin_volumes import BUILTIN_VOLUMES
     return tuple(BUILTIN_VOLUMES)
 
 
 def _dtypes() -> tuple[str, ...]:
-    from radiance_probes.io.volume import RAW_DTYPES
+    from radiance_probes.io.volume_files import RAW_DTYPES
     return tuple(RAW_DTYPES)
 
 

@@ -19,7 +19,8 @@ from radiance_probes.io.environment_map import Distribution
 from radiance_probes.twins.medium import majorant
 from radiance_probes.io.scene_file import Scene
 from radiance_probes.scene.transfer import transfer_table
-from radiance_probes.io.volume import Volume, load_scene_volume
+from radiance_probes.io.volume import Volume
+from radiance_probes.io.load import load_scene_volume
 from radiance_probes.twins.majorant_grid import macrocell_counts
 from radiance_probes.rendering.cache_keys import KEYS, majorant_grid_key, scene_key
 from radiance_probes.rendering.grids.majorant_grid import MAJORANT_UNIT, MajorantGrid

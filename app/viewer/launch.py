@@ -67,7 +67,7 @@ def run_view(args: argparse.Namespace) -> int:
     from radiance_probes.io.environment_map import load_scene_environment
     from radiance_probes.scene.framing import frame_default_camera
     from radiance_probes.scene.clinical_presets import opening_scene
-    from radiance_probes.io.volume import load_scene_volume, reads_lazily, zarr_preview
+    from radiance_probes.io.load import load_scene_volume, reads_lazily, zarr_preview
     scene = scene_from_args(args)
     progressive = False
     if args.screenshot:

@@ -15,7 +15,8 @@ import time
 from radiance_probes.gl.textures import texture_payload
 from radiance_probes.rendering.grids.majorant_grid import density_ranges
 from radiance_probes.rendering.levels.volume_placement import plan_placement
-from radiance_probes.io.volume import Volume, load_scene_volume
+from radiance_probes.io.volume import Volume
+from radiance_probes.io.load import load_scene_volume
 from radiance_probes.viewer.panels.tf_editor import HISTOGRAM_BINS
 
 

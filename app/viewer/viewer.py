@@ -22,7 +22,8 @@ from radiance_probes.scene.channels import volume_inputs
 from radiance_probes.rendering.levels.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
 from radiance_probes.rendering.levels.volume_placement import device_limits
 from radiance_probes.scene.clinical_presets import opening_scene
-from radiance_probes.io.volume import VolumeError, reads_lazily, zarr_preview
+from radiance_probes.io.volume import VolumeError
+from radiance_probes.io.load import reads_lazily, zarr_preview
 from radiance_probes.viewer import layout, orbit, overlays
 from radiance_probes.viewer.panels import sidebar as panels
 from radiance_probes.viewer.display import BACKGROUND, DisplayPass, ErrorMeter

@@ -25,7 +25,7 @@ from radiance_probes.gl.context import create_headless_context, describe  # noqa
 from radiance_probes.rendering.refine.auto_progressive import auto_render  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.io.scene_file import parse_scene  # noqa: E402
-from radiance_probes.io.volume import load_volume  # noqa: E402
+from radiance_probes.io.load import load_volume  # noqa: E402
 
 QUICK = {"volume": {"builtin": "cloud", "size": [20, 20, 20]}, "density_scale": 40.0,
          "camera": {"eye": [0, 0.3, 2.2], "width": 48, "height": 48}}

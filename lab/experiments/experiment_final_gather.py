@@ -19,7 +19,7 @@ from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, 
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.io.volume import load_volume
+from radiance_probes.io.load import load_volume
 
 SETTINGS = {"anisotropic": "32x256,64x128,128x256", "bonsai": "64x64,128x64",
             "foot": "64x64,128x64", "fuel": "64x64", "hydrogen": "16x16", "thick": "16x16"}

@@ -32,7 +32,7 @@ from radiance_probes.rendering.lab_options import LabOptions
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.levels.volume_placement import coarser
 from radiance_probes.io.scene_file import SurfaceSpec, parse_scene
-from radiance_probes.io.volume import load_scene_volume
+from radiance_probes.io.load import load_scene_volume
 
 parser = argparse.ArgumentParser()
 parser.add_argument("out")

@@ -11,7 +11,7 @@ from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.rendering.metrics import rrmse, corrected_rrmse
-from radiance_probes.io.volume import load_volume
+from radiance_probes.io.load import load_volume
 
 ctx = create_headless_context()
 refs = dict(a.split("=", 1) for a in sys.argv[2:])

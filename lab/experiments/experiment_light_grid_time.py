@@ -9,7 +9,7 @@ from pathlib import Path
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.bench.scenes import bench_scene
-from radiance_probes.io.volume import load_volume
+from radiance_probes.io.load import load_volume
 
 BEFORE = Path(__file__).resolve().parents[2] / "bench/h100-light-time/results.json"
 before = {}

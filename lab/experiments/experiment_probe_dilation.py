@@ -9,7 +9,7 @@ from radiance_probes.gl.context import create_headless_context
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.rendering.metrics import rrmse, corrected_rrmse
-from radiance_probes.io.volume import load_volume
+from radiance_probes.io.load import load_volume
 from radiance_probes.twins.medium import sigma_t_at
 from radiance_probes.viewer.probe_view import probe_centres
 

@@ -18,7 +18,7 @@ from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, 
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.io.volume import load_volume
+from radiance_probes.io.load import load_volume
 
 VARIANTS = ("trilinear", "visibility")
 parser = argparse.ArgumentParser()

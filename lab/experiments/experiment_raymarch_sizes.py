@@ -10,7 +10,7 @@ from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.budgets.ceiling import speed_check_ms
 from radiance_probes.bench.scenes import bench_scene
-from radiance_probes.io.volume import load_volume
+from radiance_probes.io.load import load_volume
 
 parser = argparse.ArgumentParser()
 parser.add_argument("out")

@@ -10,7 +10,7 @@ from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.gl.profiler import GpuProfile
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.io.volume import load_volume
+from radiance_probes.io.load import load_volume
 ctx = create_headless_context(); print(describe(ctx))
 base = bench_scene("anisotropic", 512, 512)
 r = Renderer(ctx, base, load_volume(base.volume, base.base_dir))

@@ -51,7 +51,7 @@ from radiance_probes.rendering.lab_options import LabOptions  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.rendering.settings import RenderSettings  # noqa: E402
 from radiance_probes.io.scene_file import parse_scene  # noqa: E402
-from radiance_probes.io.volume import load_volume  # noqa: E402
+from radiance_probes.io.load import load_volume  # noqa: E402
 
 SCENES = (*ALL_SCENES, "cloud")
 HAS_TRACKING = "shadow_tracking" in {f.name for f in dataclasses.fields(RenderSettings)}

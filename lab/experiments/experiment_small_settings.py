@@ -9,7 +9,7 @@ from radiance_probes.bench.records import progressive
 from radiance_probes.gl.context import create_headless_context, describe
 from radiance_probes.gl.profiler import GpuProfile
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.io.volume import load_volume
+from radiance_probes.io.load import load_volume
 ctx = create_headless_context(); dev = describe(ctx); print(dev, flush=True)
 rows = []
 def med(xs): return statistics.median(xs)

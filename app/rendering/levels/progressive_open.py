@@ -22,7 +22,8 @@ import moderngl
 from radiance_probes.gl.brick_pool import FREE_SLOT, empty_pool
 from radiance_probes.gl.textures import volume_texture
 from radiance_probes.io.scene_file import Scene
-from radiance_probes.io.volume import Volume, load_scene_volume
+from radiance_probes.io.volume import Volume
+from radiance_probes.io.load import load_scene_volume
 from radiance_probes.rendering.levels.volume_placement import device_limits, plan_placement
 
 # Runs of slots read ahead of the writes, at most (PoolPlan.rows: a run is a row of the slot
