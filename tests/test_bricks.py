@@ -238,14 +238,14 @@ def test_volume_longer_than_the_texture_limit_is_bricked(ctx):
 
 
 def test_brick_bench_quick(tmp_path):
-    """scripts/brick_bench.py --quick (the GPU run's code at llvmpipe's size): a capped OME-Zarr
+    """lab/experiments/brick_bench.py --quick (the GPU run's code at llvmpipe's size): a capped OME-Zarr
     volume shown at a coarser level with its note and timings, its error against level 0, and a
     volume longer than the texture limit rendered bricked."""
     import importlib.util
     import json
     import sys
     from conftest import ROOT
-    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "scripts" / "brick_bench.py")
+    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "lab" / "experiments" / "brick_bench.py")
     bench = importlib.util.module_from_spec(spec)
     sys.modules.setdefault("brick_bench", bench)
     spec.loader.exec_module(bench)
@@ -271,7 +271,7 @@ def test_histogram_of_a_lazy_store_reads_a_small_coarser_level_whole(tmp_path):
     import importlib.util
     import sys
     from conftest import ROOT
-    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "scripts" / "brick_bench.py")
+    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "lab" / "experiments" / "brick_bench.py")
     bench = importlib.util.module_from_spec(spec)
     sys.modules.setdefault("brick_bench", bench)
     spec.loader.exec_module(bench)

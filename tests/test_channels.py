@@ -489,13 +489,13 @@ def test_colour_bar_and_transfer_function_options_refuse_channels(tmp_path, caps
 
 
 def test_channels_known_answer_script_quick(tmp_path):
-    """scripts/channels_known_answer.py --quick: the GPU record's code at llvmpipe's size (the
+    """lab/experiments/channels_known_answer.py --quick: the GPU record's code at llvmpipe's size (the
     known answer itself is checked above)."""
     import importlib.util
     import json
     from conftest import ROOT
     spec = importlib.util.spec_from_file_location("channels_known_answer",
-                                                  ROOT / "scripts" / "channels_known_answer.py")
+                                                  ROOT / "lab" / "experiments" / "channels_known_answer.py")
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
     assert script.main([str(tmp_path), "--quick"]) == 0

@@ -99,7 +99,7 @@ def test_direction_control_has_mean_zero_over_the_phase_function(order, window, 
 
 
 def test_the_variance_script_runs_and_the_control_acts(tmp_path):
-    """scripts/guided_variance.py --quick (the anisotropic cloud, g = 0.8, whose probes hold
+    """lab/experiments/guided_variance.py --quick (the anisotropic cloud, g = 0.8, whose probes hold
     directions): every estimator's variance is finite and positive, the direction control
     changes `guided`'s estimate (it acts), and the report names every estimator."""
     import json
@@ -107,7 +107,7 @@ def test_the_variance_script_runs_and_the_control_acts(tmp_path):
     import sys
     from pathlib import Path
     root = Path(__file__).resolve().parents[1]
-    subprocess.run([sys.executable, str(root / "scripts" / "guided_variance.py"), str(tmp_path),
+    subprocess.run([sys.executable, str(root / "lab" / "experiments" / "guided_variance.py"), str(tmp_path),
                     "--quick"], check=True, capture_output=True, cwd=root)
     data = json.loads((tmp_path / "results.json").read_text())
     (scene,) = data["results"]

@@ -123,12 +123,12 @@ def test_bound_level_is_the_coarsest_that_still_sees_inside_a_brick():
 
 
 def _store(tmp_path, value_range=True, size=96, levels=3):
-    """An OME-Zarr store (scripts/brick_bench.py's procedural ball, mostly zero outside) and its
+    """An OME-Zarr store (lab/experiments/brick_bench.py's procedural ball, mostly zero outside) and its
     scene; chunks of 16 voxels."""
     import importlib.util
     import sys
     from conftest import ROOT
-    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "scripts" / "brick_bench.py")
+    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "lab" / "experiments" / "brick_bench.py")
     bench = sys.modules.get("brick_bench")
     if bench is None:
         bench = importlib.util.module_from_spec(spec)

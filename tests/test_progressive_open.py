@@ -25,7 +25,7 @@ CAMERA = {"eye": [0.0, 0.3, 2.2], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y":
 
 def _bench():
     from conftest import ROOT
-    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "scripts" / "brick_bench.py")
+    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "lab" / "experiments" / "brick_bench.py")
     bench = importlib.util.module_from_spec(spec)
     sys.modules.setdefault("brick_bench", bench)
     spec.loader.exec_module(bench)

@@ -187,14 +187,14 @@ def test_animate_plays_the_series_one_bake_a_step(tmp_path, capsys):
 
 
 def test_time_series_bench_quick(tmp_path):
-    """scripts/time_series_bench.py --quick (the GPU run's code at llvmpipe's size): playback
+    """lab/experiments/time_series_bench.py --quick (the GPU run's code at llvmpipe's size): playback
     timed over every step kept, and the error after a step change, warm and cold, falling to 0
     once the new step's bake ends (a warm bake ends at the cold bake's probes)."""
     import importlib.util
     import json
     from conftest import ROOT
     spec = importlib.util.spec_from_file_location("time_series_bench",
-                                                  ROOT / "scripts" / "time_series_bench.py")
+                                                  ROOT / "lab" / "experiments" / "time_series_bench.py")
     bench = importlib.util.module_from_spec(spec)
     import sys
     sys.modules.setdefault("time_series_bench", bench)   # (its dataclasses look themselves up)

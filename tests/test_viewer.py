@@ -797,7 +797,7 @@ def test_large_zarr_store_opens_on_a_thread_behind_its_preview(display, tmp_path
     loading is; the store itself replaces it once its bricks are written."""
     import importlib.util
     from conftest import ROOT
-    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "scripts" / "brick_bench.py")
+    spec = importlib.util.spec_from_file_location("brick_bench", ROOT / "lab" / "experiments" / "brick_bench.py")
     bench = importlib.util.module_from_spec(spec)
     sys.modules.setdefault("brick_bench", bench)
     spec.loader.exec_module(bench)

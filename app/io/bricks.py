@@ -49,7 +49,7 @@ class BrickStore:
         bx, by, bz = self.counts
         self.reads = np.zeros((bz, by, bx), np.int64)
         self._ranges = None
-        # where the reads' time went (scripts/brick_bench.py records it): the range pass's
+        # where the reads' time went (lab/experiments/brick_bench.py records it): the range pass's
         # wall seconds; the upload's reading and mapping (summed over the readers) and the
         # waits of the caller's thread for the readers and the assembling threads
         self.seconds: dict[str, float] = {}

@@ -20,11 +20,11 @@ class LabOptions:
     # where the scene's camera sees them largest (app/rendering/levels/level_mix.py), streamed as the
     # camera moves (app/rendering/levels/level_stream.py). On the H100 (bench/h100-bricks-open) it took a
     # zoomed view of the 2048^3 volume from 2.97% to 2.92% rRMSE against level 0, for frames 2.3x
-    # as long and 7 s more to open (scripts/brick_bench.py compares it).
+    # as long and 7 s more to open (lab/experiments/brick_bench.py compares it).
     mixed_levels: bool = False
     # False: paths find an environment map by phase sampling alone (lib/integrator.glsl
     # ENVIRONMENT_MAP_SAMPLING 0), for measuring what the map's importance sampling gains
-    # (scripts/envmap_sampling.py: about 1900x the efficiency on the sky scene).
+    # (lab/experiments/envmap_sampling.py: about 1900x the efficiency on the sky scene).
     environment_sampling: bool = True
     # False: the raymarcher's hybrid branch computes the exact opacity gradient (six medium
     # lookups) at every sample instead of reading the baked grid (app/rendering/

@@ -13,7 +13,7 @@ where this checkout has it) and per count N of independent shadow rays a scatter
 tracer renders K images of SPP samples a pixel with independent seeds. From them a sample's relative
 variance
     v = SPP * sum over pixels of var_k(image_k) / sum over pixels of mean_k(image_k)^2
-(the image's squared rRMSE at one sample; with K = 2 exactly scripts/guided_variance.py's
+(the image's squared rRMSE at one sample; with K = 2 exactly lab/experiments/guided_variance.py's
 SPP * sum((a - b)^2) / 2 / sum(((a + b) / 2)^2); more images, more degrees of freedom a pixel) and the GPU ms a sample costs (timer queries; on llvmpipe
 only indicative). Averaging N rays divides the shadow rays' own noise (their variance given the
 path) by N and leaves the rest, so v_N = A + B / N, and the shadow rays' share of a one-ray sample's
@@ -60,7 +60,7 @@ HAS_TRACKING = "shadow_tracking" in {f.name for f in dataclasses.fields(RenderSe
 def relative_variance(images: list, spp: int) -> float:
     """One sample's relative variance from K independent images of spp samples each: spp times the
     pixels' variance across the images (K - 1 degrees of freedom a pixel), summed, over the sum
-    of the mean image's squares (two images: scripts/guided_variance.py's estimate)."""
+    of the mean image's squares (two images: lab/experiments/guided_variance.py's estimate)."""
     stack = np.stack([np.asarray(i, np.float64)[..., :3] for i in images])
     mean = stack.mean(axis=0)
     return float(spp * np.sum(stack.var(axis=0, ddof=1)) / max(np.sum(mean ** 2), 1e-300))

@@ -4,7 +4,7 @@ scattering event 1 (the paper's renderer), 2 and 3 after 1024 frames each, with 
 frames), rRMSE corrected for the reference's noise, and a signed error map per image
 ((image - reference) / mean reference: red too bright, blue too dark, full colour at 10%).
 Run on the GPU (about a minute):
-    python scripts/gather_screenshots.py screenshots
+    python scripts/screenshots/gather_screenshots.py screenshots
 writes screenshots/final_gather.png."""
 import sys
 from dataclasses import replace

@@ -6,7 +6,7 @@
 # `radiance-probes animate`). Uses bonsai from ../shared/datasets when present, else the built-in
 # default scene. Runs in a private Xvfb when there is no display. SPP=... (default 32).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 rp=.venv/bin/radiance-probes
 spp=${SPP:-32}
 scene=

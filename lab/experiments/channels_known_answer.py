@@ -2,7 +2,7 @@
 is alone and their mix where they overlap, against the combined medium's closed form; and what
 several channels cost.
 
-    python scripts/channels_known_answer.py OUT_DIR [--quick] [--size 512] [--spp 4096]
+    python lab/experiments/channels_known_answer.py OUT_DIR [--quick] [--size 512] [--spp 4096]
 
 1. Known answer: a slab 1 x 1 x 1/8 in four quadrants, channel 0 alone, 1 alone, 2 alone and all
    three, constant in each (tests/test_channels.py's scene at a larger size), lit by the sun
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402

@@ -1,7 +1,7 @@
 """Issue 29, step 1 and the steps after it: where each unbiased estimator's noise goes, and what it
 costs, measured from two independent images per estimator (no reference needed).
 
-    python scripts/guided_variance.py OUT_DIR [--quick] [--scenes fuel,foot,...] [--spp 64]
+    python lab/experiments/guided_variance.py OUT_DIR [--quick] [--scenes fuel,foot,...] [--spp 64]
         [--probes 64,128] [--width 512 --height 512] [--estimators ROWS]
 
 Per scene the probes are baked once (GPU ms recorded), then each estimator renders two images of
@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from radiance_probes.bench.records import progressive  # noqa: E402
 from radiance_probes.bench.scenes import ALL_SCENES, bench_scene  # noqa: E402
@@ -146,7 +146,7 @@ def measure_scene(ctx, name: str, width: int, height: int, grid: int, walks: int
 
 
 def report(results: list[dict], device: str) -> str:
-    lines = ["# Where the unbiased estimators' noise goes (scripts/guided_variance.py)", "",
+    lines = ["# Where the unbiased estimators' noise goes (lab/experiments/guided_variance.py)", "",
              f"Device: {device}. Two independent images per estimator; v is one sample's relative "
              "variance (squared rRMSE at one sample), t the GPU ms a sample costs, the time to an "
              "error e is v t / e^2, plus the bake and light grid for `guided`. Speed-ups are "

@@ -3,7 +3,7 @@ surface shading, k = 0.05) under a sphere light and a dim sun, rendered by the p
 raymarcher over the probes, and `guided` denoised with the probes' image as its guide (what the
 viewer's `refine` accumulates and shows), each panel with its time and error against the path
 tracer's image of `--ref-spp` samples. Run on the GPU (about a minute):
-    python scripts/surface_screenshots.py screenshots [--size 512] [--ref-spp 2048]
+    python scripts/screenshots/surface_screenshots.py screenshots [--size 512] [--ref-spp 2048]
 Writes screenshots/surfaces_chest_ct.png and surfaces_foot.png. Datasets from ../shared/datasets
 (skipped when absent).
 

@@ -1,4 +1,4 @@
-"""Puts PNGs side by side with a caption strip: python scripts/montage.py OUT.png A.png:label ..."""
+"""Puts PNGs side by side with a caption strip: python scripts/screenshots/montage.py OUT.png A.png:label ..."""
 import sys
 
 from PIL import Image, ImageDraw

@@ -2,7 +2,7 @@
 and opened under a 4 GiB cap; and a 20000 x 512 x 512 volume (longer than any
 GL_MAX_3D_TEXTURE_SIZE) rendered.
 
-    python scripts/brick_bench.py OUT_DIR [--quick] [--size 2048] [--cap 4G]
+    python lab/experiments/brick_bench.py OUT_DIR [--quick] [--size 2048] [--cap 4G]
         [--width 1920 --height 1080] [--frames 30] [--probes 32] [--long 20000,512,512]
         [--parts write,write-long,capped,progressive,uncapped,zoomed,long,stream] [--reuse]
         [--stores DIR]
@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from radiance_probes.rendering.metrics import rrmse  # noqa: E402
 from radiance_probes.cli.main import memory_size  # noqa: E402

@@ -2,7 +2,7 @@
 one, written as .npy, loaded, path traced and raymarched over probes at 512^2, with the GPU memory
 they take (the NVIDIA driver's query before and after) and the times; then a volume one voxel
 longer than GL_MAX_3D_TEXTURE_SIZE, which must be refused with a message that says why.
-Usage: python scripts/large_volumes.py OUT.json   (the H100 run: bench/h100-large/results.json)"""
+Usage: python lab/experiments/large_volumes.py OUT.json   (the H100 run: bench/h100-large/results.json)"""
 from __future__ import annotations
 
 import json

@@ -11,7 +11,7 @@ Each method runs at the setting a benchmark run found best for that budget on th
 default, bench/h200-denoise for the denoised ones, which also give the guides): the setting is chosen from records, the time and error here are measured anew. Samples
 are added while the next batch is predicted (from the samples' measured GPU time) to keep the
 image within the budget. Run on the GPU (about a minute a scene with REF_DIR, two without):
-    python scripts/equal_time_screenshots.py screenshots [REF_DIR|-] [scene ...] [--records DIR]
+    python scripts/screenshots/equal_time_screenshots.py screenshots [REF_DIR|-] [scene ...] [--records DIR]
 REF_DIR: a bench run's folder whose refs/NAME.npy and measured noise are the reference (as
 `bench --ref-dir`); without it a reference of 32768 spp in two halves is rendered. Writes
 screenshots/equal_time_NAME.png."""

@@ -17,7 +17,7 @@
                                    chest's front cut away) and a clip plane drawn on them, a click
                                    in the axial slice having moved the slices and the orbit's
                                    centre, the mouse over the coronal slice reading its value in HU.
-Run: .venv/bin/python scripts/format_screenshots.py [NAME ...]   (llvmpipe: about a minute each;
+Run: .venv/bin/python scripts/screenshots/format_screenshots.py [NAME ...]   (llvmpipe: about a minute each;
 NAME, e.g. viewer_slices, makes only those)"""
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CHEST = ROOT.parent / "shared" / "datasets" / "lidc2_chest_ct_256x256x133.nrrd"
 
 

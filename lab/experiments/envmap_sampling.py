@@ -4,7 +4,7 @@ phase sampling alone (ENVIRONMENT_MAP_SAMPLING 0), two seeds each, and prints pe
 time per sample, the relative noise of the mean (from the two seeds), the noise of one sample,
 the efficiency (1 / (variance x time)) and the brightest pixel against the converged mean.
 
-    python scripts/envmap_sampling.py [SCENE.json] [SIZE] [SPP]      # default 64 px, 64 spp
+    python lab/experiments/envmap_sampling.py [SCENE.json] [SIZE] [SPP]      # default 64 px, 64 spp
 """
 import math
 import sys
@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402
 from radiance_probes.rendering.lab_options import LabOptions  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.io.scene_file import load_scene  # noqa: E402
 
-root = Path(__file__).resolve().parents[1]
+root = Path(__file__).resolve().parents[2]
 scene = load_scene(sys.argv[1] if len(sys.argv) > 1 else root / "assets/scenes/sky.json")
 size = int(sys.argv[2]) if len(sys.argv) > 2 else 64
 spp = int(sys.argv[3]) if len(sys.argv) > 3 else 64

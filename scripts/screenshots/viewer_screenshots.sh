@@ -5,7 +5,7 @@
 # private Xvfb when there is no display. On llvmpipe this takes a few minutes; SPP=... to change
 # the samples per pixel (default 32).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 spp=${SPP:-32}
 scene=
 if [ -f ../shared/datasets/bonsai_256x256x256_uint8.raw ]; then scene=assets/scenes/bonsai.json; fi

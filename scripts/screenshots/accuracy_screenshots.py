@@ -9,7 +9,7 @@ each with its GPU time (bake + 16 frames) and rRMSE (corrected for the reference
 map of the per-pixel error (|image - reference| / mean reference, 0 to 50%), and the probe layout:
 the probes of the 64^3 grid whose cells hold visible medium, every 4th per axis, projected over
 the image. Run on the GPU (about a minute):
-    python scripts/accuracy_screenshots.py screenshots [REF_DIR|-] [scene ...]
+    python scripts/screenshots/accuracy_screenshots.py screenshots [REF_DIR|-] [scene ...]
 REF_DIR: a bench run's folder, whose refs/NAME.npy and measured noise are the reference (as
 `bench --ref-dir`); without it a reference of 8192 spp in two halves is rendered."""
 import sys

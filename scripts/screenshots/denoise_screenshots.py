@@ -1,7 +1,7 @@
 """screenshots/denoise_*.png from a denoise bench run's images (bench --preset denoise, GPU):
 the path tracer at 64 samples raw, through the denoiser with no guide and with the probes' image as
 its guide, and the reference; a zoomed crop of each under it shows what fine detail survives.
-Usage: python scripts/denoise_screenshots.py RUN_DIR/images [OUT_DIR]   (default screenshots/)"""
+Usage: python scripts/screenshots/denoise_screenshots.py RUN_DIR/images [OUT_DIR]   (default screenshots/)"""
 from __future__ import annotations
 
 import sys
@@ -39,7 +39,7 @@ def montage(folder: Path, name: str) -> Image.Image:
 
 def main(argv: list[str]) -> int:
     folder = Path(argv[0])
-    out = Path(argv[1]) if len(argv) > 1 else Path(__file__).resolve().parents[1] / "screenshots"
+    out = Path(argv[1]) if len(argv) > 1 else Path(__file__).resolve().parents[2] / "screenshots"
     for name in PANELS:
         if (folder / PANELS[name][0][0]).is_file():
             path = out / f"denoise_{name}.png"

@@ -1,6 +1,6 @@
 """Side-by-side images from a benchmark run's images/ folder (the reference, the path tracer at equal
 samples, and the three probe methods at the showcase setting):
-    python scripts/bench_montage.py IMAGES_DIR OUT_DIR [SIZE]"""
+    python scripts/screenshots/bench_montage.py IMAGES_DIR OUT_DIR [SIZE]"""
 import sys
 from pathlib import Path
 

@@ -1,7 +1,7 @@
 """Issue 33's time-series target: a 50-step series plays at 30 fps or better at 1080p raymarched,
 with warm probes; the error after a step change stated against cold bakes.
 
-    python scripts/time_series_bench.py OUT_DIR [--quick] [--steps 50] [--size 192]
+    python lab/experiments/time_series_bench.py OUT_DIR [--quick] [--steps 50] [--size 192]
         [--width 1920 --height 1080] [--probes 128,64] [--loops 2] [--checks 10,20,30,40,49]
 
 The series: the built-in cloud at SIZE^3 as uint8, moved one voxel along x a step (np.roll; the
@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from radiance_probes.rendering.metrics import rrmse  # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe, is_software  # noqa: E402

@@ -4,7 +4,7 @@ frames with 128^3 x 256 probes against a path-traced reference of 8192 spp (two 
 its GPU time (bake + 16 frames), rRMSE (corrected for the reference's noise) and a signed error
 map ((image - reference) / mean reference: red too bright, blue too dark, full colour at 25%).
 Run on the GPU (about half a minute):
-    python scripts/sh_order_screenshots.py screenshots
+    python scripts/screenshots/sh_order_screenshots.py screenshots
 writes screenshots/sh_orders_anisotropic.png."""
 import sys
 from dataclasses import replace

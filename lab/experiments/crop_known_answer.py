@@ -1,7 +1,7 @@
 """The crop's known answer on a dataset (issue 32's target: a crop keeping half of bonsai renders
 within noise of the half volume, with every method):
 
-    python scripts/crop_known_answer.py OUT.json [--scene assets/scenes/bonsai.json]
+    python lab/experiments/crop_known_answer.py OUT.json [--scene assets/scenes/bonsai.json]
         [--size 512] [--spp 256] [--frames 64] [--probes 64,128]
 
 For each method (pt, probes, probes-only, raymarch compute and fragment) it renders
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from radiance_probes.scene.clip_region import clip_region  # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe  # noqa: E402

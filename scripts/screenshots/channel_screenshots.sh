@@ -6,7 +6,7 @@
 # made by the script (NumPy), so it needs no dataset. Runs in a private Xvfb when there is no
 # display. SPP=... (default 32).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 rp=.venv/bin/radiance-probes
 spp=${SPP:-32}
 mkdir -p screenshots

@@ -3,18 +3,18 @@ equirectangular convention, app/twins/environment_map.py): a blue gradient above
 dim ground below it and a small bright sun (a disc of 2.5 degrees radius at 35 degrees
 elevation, towards +z and a little +x, so the default camera sees the cloud front-lit).
 
-    python scripts/make_sky.py [OUT.exr] [HEIGHT]      # default assets/scenes/sky.exr, 128
+    python scripts/screenshots/make_sky.py [OUT.exr] [HEIGHT]      # default assets/scenes/sky.exr, 128
 """
 import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from radiance_probes.frontend.imageio import save_exr  # noqa: E402
 from radiance_probes.twins.environment_map import uv_to_direction  # noqa: E402
 
-out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[1] / "assets/scenes/sky.exr"
+out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[2] / "assets/scenes/sky.exr"
 h = int(sys.argv[2]) if len(sys.argv) > 2 else 128
 w = 2 * h
 v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")

@@ -3,7 +3,7 @@ by an opaque wall (two voxels of 24, between two probe planes of a 4^3 grid), th
 the path tracer, then `probes-only` (the sun's transmittance read from the probes) and the
 raymarcher with trilinear and with visibility-weighted interpolation, each with its rRMSE.
 Runs on llvmpipe in about a minute:
-    python scripts/visibility_screenshots.py screenshots    (writes visibility_leak.png)"""
+    python scripts/screenshots/visibility_screenshots.py screenshots    (writes visibility_leak.png)"""
 import sys
 from pathlib import Path
 
@@ -44,6 +44,6 @@ for method, spp in (("probes-only", 256), ("raymarch", 4)):
                        f"rRMSE {100 * rrmse(image, reference):.1f}%"))
 r.release()
 sheet = panel_sheet(panels, PANEL, 5, "thin medium split by an opaque wall, sun from +x, 4^3 probes: "
-                    "python scripts/visibility_screenshots.py screenshots")
+                    "python scripts/screenshots/visibility_screenshots.py screenshots")
 sheet.save(out / "visibility_leak.png")
 print("wrote", out / "visibility_leak.png")
