@@ -208,3 +208,52 @@ def test_no_front_end_sets_lab_options():
              for i, line in enumerate(p.read_text().splitlines(), 1)
              if "LabOptions(" in line.split("#")[0]]
     assert not found, found
+
+
+# The house's size rules (docs/design.md, "Where each part lives").
+MAX_MODULES_A_FOLDER = 25
+MAX_LINES_A_MODULE = 800
+BENCH_BUDGET_BYTES = 7_000_000     # bench/: the records' JSON, reports and clock logs, no plots
+CODE_SUFFIXES = {".py", ".patch", ".diff", ".sh", ".glsl", ".comp", ".ipynb"}
+
+
+def test_no_folder_of_the_package_holds_more_than_25_modules():
+    crowded = {}
+    for folder in [APP, *(p for p in APP.rglob("*") if p.is_dir() and p.name != "__pycache__")]:
+        modules = [p for p in folder.glob("*.py") if p.name != "__init__.py"]
+        if len(modules) > MAX_MODULES_A_FOLDER:
+            crowded[folder.relative_to(ROOT).as_posix()] = len(modules)
+    assert not crowded, f"folders over {MAX_MODULES_A_FOLDER} modules: {crowded}"
+
+
+def test_no_module_is_longer_than_800_lines():
+    long = {p.relative_to(ROOT).as_posix(): n for p in APP.rglob("*.py")
+            if (n := len(p.read_text().splitlines())) > MAX_LINES_A_MODULE}
+    assert not long, f"modules over {MAX_LINES_A_MODULE} lines (split them by idea): {long}"
+
+
+def _tracked(prefix: str) -> list[Path]:
+    import subprocess
+    out = subprocess.run(["git", "ls-files", "-z", prefix], cwd=ROOT, capture_output=True)
+    if out.returncode != 0:      # not a git checkout (an unpacked archive): the files on disk
+        return [p for p in (ROOT / prefix).rglob("*") if p.is_file()]
+    return [ROOT / f for f in out.stdout.decode().split("\0") if f and (ROOT / f).is_file()]
+
+
+def test_bench_records_stay_under_their_budget():
+    """bench/ holds records, not plots or arrays: `bench --report-only` draws the plots again."""
+    files = _tracked("bench")
+    total = sum(p.stat().st_size for p in files)
+    assert total <= BENCH_BUDGET_BYTES, (
+        f"bench/ holds {total / 1e6:.1f} MB, over its {BENCH_BUDGET_BYTES / 1e6:.0f} MB budget: "
+        "gzip large results.json, leave plots and images out, move superseded runs out "
+        "(one line each in docs/experiments.md)")
+    arrays = [p.relative_to(ROOT).as_posix() for p in files if p.suffix in (".npy", ".npz", ".exr")]
+    assert not arrays, f"arrays committed in records: {arrays}"
+    plots = [p.relative_to(ROOT).as_posix() for p in files if p.suffix == ".png"]
+    assert len(plots) <= 1, f"plots committed in records (draw them with --report-only): {plots}"
+
+
+def test_no_record_folder_holds_code():
+    code = [p.relative_to(ROOT).as_posix() for p in _tracked("bench") if p.suffix in CODE_SUFFIXES]
+    assert not code, f"code in bench/ (experiments live in lab/experiments): {code}"
