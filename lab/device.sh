@@ -18,7 +18,7 @@ for f in .data/*.nrrd; do [ -f "$f" ] && cp -n "$f" ../shared/datasets/; done
 # carries .oidnqk (k = 1 .. OIDN_PARTS, made by `split -n OIDN_PARTS -d .oidn/pyoidn.tgz`; the last
 # also with pyoidn's wheels, cffi and pycparser) and copies it to /tmp/devcache; the call that
 # finds all parts assembles them.
-OIDN_PARTS=8
+OIDN_PARTS=2
 for i in $(seq 1 $OIDN_PARTS); do [ -f .oidnq$i/part ] && cp .oidnq$i/part /tmp/devcache/oidn.q$i; done
 cp .oidnq$OIDN_PARTS/*.whl /tmp/devcache/ 2>/dev/null
 have=0
