@@ -137,9 +137,10 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
             t, wall_t = ms, wall
         view = s.views[method]
         converged = (not needs or r.probes_current()) and s.view_done(method, target_spp)
-        # a point now where the next frame (as long as this one) would leave a gap over
-        # CURVE_WALL_MS since the last
-        gap_due = last_point is None or wall_t + wall - last_point > CURVE_WALL_MS
+        # a point now where the next frame (as long as the longest of the last 8) would leave a
+        # gap over CURVE_WALL_MS since the last (a frame longer than that is a gap of its own)
+        gap_due = (last_point is None
+                   or wall_t + max(walls[-8:]) - last_point > CURVE_WALL_MS)
         if (after in checks or gap_due or converged
                 or f == lead + config.interact_max_frames - 1):
             m0 = time.perf_counter()

@@ -19,7 +19,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..gl.fence import PendingRead
+import moderngl
+
+from ..gl.fence import PendingRead, staging_buffer
 from ..methods import METHODS
 from ..rendering.denoise import choose_guides
 from ..rendering.filter_worker import FilterJob
@@ -51,21 +53,30 @@ class RefineCheck:
                 r.release()
 
 
+def _read(session, view, key: str, source) -> PendingRead:
+    """A read-back of `source` into the view's own staging buffer `key` (RefineView.staging:
+    released with the view, whatever the Denoise switch does meanwhile)."""
+    nbytes = (source.size if isinstance(source, moderngl.Buffer)
+              else source.size[0] * source.size[1] * source.components * 4)
+    buf = view.staging[key] = staging_buffer(session.ctx, view.staging.get(key), nbytes)
+    return PendingRead(session.ctx, source, buf)
+
+
 def begin_check(session, view, with_ray: bool, judgeable: bool, judge: bool,
                 stage_bits: int) -> RefineCheck:
     """The check of the combine just dispatched (its reduction in halves.sums): read-backs
     started, and where it `judge`s, half B copied and half A's and the raymarcher's image read."""
-    halves, denoise = view.halves, session.denoise
-    sums_read = denoise.read((view.method, "sums"), halves.sums)
+    halves = view.halves
+    sums_read = _read(session, view, "sums", halves.sums)
     check = RefineCheck(sums_read, halves.reduced_counts or halves.counts, with_ray, judgeable,
                         judge, stage_bits)
     if judge:
         halves.snapshot_b()
-        check.half_a_read = denoise.read((view.method, "half_a"), halves.half_a.texture)
+        check.half_a_read = _read(session, view, "half_a", halves.half_a.texture)
         r = session.renderer
         names = choose_guides("auto", check.counts[0], r.probes_shown())
         if names == "probes":
-            check.ray_read = denoise.read((view.method, "ray"), view.ray.texture)
+            check.ray_read = _read(session, view, "ray", view.ray.texture)
         else:
             albedo, normal, _ = r.denoise_guides(names, camera=view.camera)
             check.guides = (albedo, normal)
@@ -114,7 +125,7 @@ def advance_check(session, view, check: RefineCheck):
             halves.denoised_a.write(result.rgba)
         with denoise.parts.part("judgement"):
             halves.dispatch_judge(view.ray, from_snapshot=True)
-        check.judge_read = denoise.read((view.method, "judge"), halves.judge_sums)
+        check.judge_read = _read(session, view, "judge", halves.judge_sums)
         check.stage = "judge"
         return "pending", None
     if check.stage == "judge":

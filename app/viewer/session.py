@@ -124,6 +124,7 @@ class RefineView:
         self.frames = 0                 # frames stepped since the last restart
         self.shown_frames: list[str] = []   # what each of the first REFINE_HISTORY of them showed
         self.check: RefineCheck | None = None   # a check (or judgement) under way over frames
+        self.staging: dict = {}         # its read-backs' buffers, by name (refine_judgement)
 
     @property
     def acc(self) -> Accumulation | None:
@@ -153,6 +154,9 @@ class RefineView:
 
     def release(self) -> None:
         self.drop_check()
+        for buf in self.staging.values():
+            buf.release()
+        self.staging.clear()
         if self.ray is not None:
             self.ray.release()
         if self.halves is not None:
