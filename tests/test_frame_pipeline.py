@@ -223,3 +223,64 @@ def test_a_loads_bake_takes_the_frame_where_every_view_restarts_after_it(ctx, fi
         assert s._bake_budget(40.0) == 8.0
     finally:
         s.release()
+
+
+def test_transfers_are_spread_over_frames_and_arrive_whole(ctx):
+    """A read-back's host copy and an upload in parts (fence.TransferBudget): each frame moves
+    at most its budget (rounded to whole units, one unit at least), and the image that arrives is
+    the whole one, bit for bit."""
+    from radiance_probes.gl.fence import (ChunkedUpload, PendingRead, TransferBudget,
+                                          staging_buffer)
+    rng = np.random.default_rng(5)
+    image = rng.random((16, 24, 4), dtype=np.float32)
+    texture = ctx.texture((24, 16), 4, dtype="f4")
+    texture.write(image)
+    read = PendingRead(ctx, texture, staging_buffer(ctx, None, image.nbytes))
+    while not read.ready():
+        pass
+    budget = TransferBudget(1000)            # under a quarter of the image's 6144 bytes
+    frames = 0
+    while True:
+        budget.begin_frame()
+        before = read.copied
+        done = read.read_some(budget)
+        frames += 1
+        assert read.copied - before <= 4096
+        if done:
+            break
+    assert frames >= 2
+    np.testing.assert_array_equal(read.out, image)
+    target = ctx.texture((24, 16), 4, dtype="f4")
+    upload = ChunkedUpload(target, image[::-1].copy())
+    budget = TransferBudget(3 * 24 * 16)     # three rows a frame
+    steps = 0
+    while True:
+        budget.begin_frame()
+        steps += 1
+        if upload.step(budget):
+            break
+    assert steps == 6
+    got = np.frombuffer(target.read(), np.float32).reshape(16, 24, 4)
+    np.testing.assert_array_equal(got, image[::-1])
+    texture.release()
+    target.release()
+
+
+def test_a_filtered_image_lands_whole_under_a_small_transfer_budget(ctx, monkeypatch):
+    """With a frame's transfers capped far below an image, the path tracer's filtered image
+    still arrives over frames and is shown whole: the stand-in's image, every pixel its run."""
+    stand_in = SlowFilter(delay=0.0)
+    s = _session(ctx, monkeypatch, stand_in, ["pt"], 64, False)
+    try:
+        s.denoise.budget.per_frame = 512
+        end = time.monotonic() + 30
+        frames = 0
+        while s.denoise.runs == 0 and time.monotonic() < end:
+            s.step(64, False)
+            frames += 1
+            time.sleep(0.002)
+        assert s.denoise.runs >= 1 and frames > 12   # 6 KB each way at 512 bytes a frame
+        shown = s.shown_image("pt")
+        assert np.all(shown == shown.flat[0]) and shown.flat[0] >= 1
+    finally:
+        s.release()

@@ -101,6 +101,8 @@ class PendingRead:
             source.read_into(staging, alignment=4)
         self.fence = fence()
         self.polls = 0
+        self.copied = 0          # bytes of the host copy made so far (read_some)
+        self.out: np.ndarray | None = None
 
     def ready(self) -> bool:
         self.polls += 1
@@ -114,8 +116,68 @@ class PendingRead:
         self.fence.release()
         return out
 
+    def read_some(self, budget: "TransferBudget") -> bool:
+        """The host copy in parts: as many bytes as `budget` has left this frame (into `out`,
+        made on the first call); True once the whole copy is made. The fence must have
+        signalled (ready())."""
+        if self.out is None:
+            self.out = np.empty(self.shape, np.float32)
+        want = budget.take(self.nbytes - self.copied)
+        if want:
+            self.staging.read_into(self.out, size=want, offset=self.copied,
+                                   write_offset=self.copied)
+            self.copied += want
+        if self.copied >= self.nbytes:
+            self.fence.release()
+            return True
+        return False
+
     def release(self) -> None:
         self.fence.release()
+
+
+class TransferBudget:
+    """Bytes a frame may copy between host and GL (read-backs' host copies, uploads): a 1080p
+    RGBA32F image is 33 MB, several ms of one frame each way, so a transfer is spread over
+    frames at `per_frame` bytes a frame (at least one row's worth goes each frame)."""
+
+    def __init__(self, per_frame: int):
+        self.per_frame = per_frame
+        self.left = per_frame
+
+    def begin_frame(self) -> None:
+        self.left = self.per_frame
+
+    def take(self, want: int, unit: int = 4096) -> int:
+        """Up to `want` bytes of what is left (whole `unit`s, at least one where any is asked
+        and the budget is spent: every transfer moves)."""
+        got = min(want, max(self.left, 0))
+        if got < want:
+            got -= got % unit
+            if got <= 0:
+                got = min(want, unit)
+        self.left -= got
+        return got
+
+
+class ChunkedUpload:
+    """An image (H, W, C float32) written into `texture` in bands of rows over frames, as
+    `budget` allows (`step`: True once whole)."""
+
+    def __init__(self, texture: moderngl.Texture, image: np.ndarray):
+        self.texture, self.image = texture, np.ascontiguousarray(image)
+        self.rows = 0
+
+    def step(self, budget: TransferBudget) -> bool:
+        height, width = self.image.shape[:2]
+        row_bytes = self.image[0].nbytes
+        want = budget.take((height - self.rows) * row_bytes, unit=row_bytes)
+        n = want // row_bytes
+        if n:
+            band = self.image[self.rows:self.rows + n]
+            self.texture.write(band, viewport=(0, self.rows, width, n))
+            self.rows += n
+        return self.rows >= height
 
 
 def staging_buffer(ctx: moderngl.Context, kept: moderngl.Buffer | None,

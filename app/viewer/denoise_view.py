@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import moderngl
 
-from ..gl.fence import PendingRead, staging_buffer
+from ..gl.fence import ChunkedUpload, PendingRead, TransferBudget, staging_buffer
 from ..methods import METHODS
 from ..rendering.denoise import choose_guides, shared_denoiser
 from ..rendering.filter_worker import FilterJob, FilterWorker
@@ -35,6 +35,10 @@ from ..rendering.refine import BlendPass
 from .frame_parts import FrameParts
 
 INTERVAL_S = 0.5
+# Bytes a frame copies between the host and GL for the switch and refine's judgements (fence.py
+# TransferBudget): a 1080p RGBA32F image is 33 MB, its read-back's host copy or its upload
+# several ms of a frame, so each is spread over a few frames.
+TRANSFER_BYTES_PER_FRAME = 16 << 20
 
 
 @dataclass
@@ -79,6 +83,11 @@ class ViewDenoise:
         self.blend_pass: BlendPass | None = BlendPass(ctx) if enabled else None
         self._worker: FilterWorker | None = None
         self._staging: dict[tuple, moderngl.Buffer] = {}
+        self.budget = TransferBudget(TRANSFER_BYTES_PER_FRAME)   # the frame's host transfers
+        # a filtered image being uploaded in bands into a texture of its own, then shown:
+        # {name: (ChunkedUpload, _InFlight)}; and each view's spare texture for the next
+        self.landing: dict[str, tuple] = {}
+        self._spare: dict[str, moderngl.Texture] = {}
 
     # ---- the filter's thread -------------------------------------------------------------------
     def worker(self) -> FilterWorker | None:
@@ -173,9 +182,11 @@ class ViewDenoise:
             self._land(name, worker, generation)
             if not self.enabled:
                 break
+            self._upload(name, generation)
             self._advance(name, worker, generation)
-            if name not in self.inflight and self._due(name, generation, acc.samples,
-                                                      time.monotonic()):
+            # one image under way a view: read back, filtered, uploaded, then the next
+            if (name not in self.inflight and name not in self.landing
+                    and self._due(name, generation, acc.samples, time.monotonic())):
                 self._start(name, session, view, generation)
         if self.enabled:
             with self.parts.part("blend"):
@@ -196,14 +207,33 @@ class ViewDenoise:
             return
         if flight is None or flight.generation != generation:
             return   # the view restarted while it was filtered: not an image of what it shows
-        old = self.images.get(name)
         h, w = result.rgba.shape[:2]
-        texture = self._sized(None if old is None else old.texture, (w, h))
+        texture = self._spare[name] = self._sized(self._spare.get(name), (w, h))
         texture.filter = flight.filter
+        self.landing[name] = (ChunkedUpload(texture, result.rgba), flight)
+
+    def _upload(self, name: str, generation: tuple) -> None:
+        """A band of the filtered image being uploaded; once whole, it is what the view shows
+        (the texture it replaces becomes the spare)."""
+        got = self.landing.get(name)
+        if got is None:
+            return
+        upload, flight = got
+        if flight.generation != generation:
+            del self.landing[name]
+            return
         with self.parts.part("upload"):
-            texture.write(result.rgba)
+            whole = upload.step(self.budget)
+        if not whole:
+            return
+        del self.landing[name]
+        old = self.images.get(name)
+        self._spare.pop(name, None)
+        if old is not None:
+            self._spare[name] = old.texture
         blended = old.blended if old is not None else None
-        self.images[name] = _Filtered(texture, generation, flight.samples, flight.at, blended)
+        self.images[name] = _Filtered(upload.texture, generation, flight.samples, flight.at,
+                                      blended)
         self.runs += 1
 
     def _advance(self, name: str, worker: FilterWorker, generation: tuple) -> None:
@@ -219,7 +249,10 @@ class ViewDenoise:
         if not all(r.ready() for r in flight.reads):
             return
         with self.parts.part("readback", gpu=False):
-            images = [r.read() for r in flight.reads]
+            done = all(r.read_some(self.budget) for r in flight.reads)   # in order, in parts
+        if not done:
+            return
+        images = [r.out for r in flight.reads]
         worker.submit(name, FilterJob(images[0], flight.albedo, flight.normal,
                                       images[1] if flight.probe_guide else None, flight.signed,
                                       tag=flight.samples))
@@ -269,6 +302,10 @@ class ViewDenoise:
         return self.ctx.texture(tuple(size), 4, dtype="f4")
 
     def _forget(self, name: str) -> None:
+        self.landing.pop(name, None)
+        spare = self._spare.pop(name, None)
+        if spare is not None:
+            spare.release()
         got = self.images.pop(name, None)
         if got is not None:
             got.texture.release()
@@ -311,7 +348,7 @@ class ViewDenoise:
         return got.texture
 
     def release(self) -> None:
-        for name in list(self.images) + list(self.inflight):
+        for name in list(self.images) + list(self.inflight) + list(self._spare):
             self._forget(name)
         for buf in self._staging.values():
             buf.release()

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import moderngl
 
-from ..gl.fence import PendingRead, staging_buffer
+from ..gl.fence import ChunkedUpload, PendingRead, staging_buffer
 from ..methods import METHODS
 from ..rendering.denoise import choose_guides
 from ..rendering.filter_worker import FilterJob
@@ -32,7 +32,8 @@ from ..rendering.refine import blend_from_sums
 class RefineCheck:
     """A check under way: the sums' read-back, and where it judges, half A's and the raymarcher's
     and then the filter's and the judgement's. `stage`: "sums" (waiting for the sums), "filter"
-    (half A on the filter's thread), "judge" (the judgement's sums read back), "done"."""
+    (half A on the filter's thread), "upload" (its filtered image going up in bands), "judge"
+    (the judgement's sums read back), "done"."""
     sums_read: PendingRead
     counts: tuple[int, int]
     with_ray: bool
@@ -45,6 +46,7 @@ class RefineCheck:
     stage: str = "sums"
     sums: tuple | None = None
     judge_read: PendingRead | None = None
+    upload: ChunkedUpload | None = None   # the filtered half A going up into denoised_a
     frames: int = 0                   # frames it has been under way
 
     def release(self) -> None:
@@ -95,7 +97,11 @@ def advance_check(session, view, check: RefineCheck):
         reads = [r for r in (check.sums_read, check.half_a_read, check.ray_read) if r is not None]
         if not all(r.ready() for r in reads):
             return "pending", None
-        check.sums = halves.sums_of(check.sums_read.read())
+        with denoise.parts.part("readback", gpu=False):   # in parts over frames
+            done = all(r.read_some(denoise.budget) for r in reads)
+        if not done:
+            return "pending", None
+        check.sums = halves.sums_of(check.sums_read.out)
         if not check.judge:
             check.stage = "done"
             return "sums", check.sums
@@ -103,9 +109,8 @@ def advance_check(session, view, check: RefineCheck):
         if worker is None:
             check.stage = "done"
             return "judged", None
-        with denoise.parts.part("readback", gpu=False):
-            half_a = check.half_a_read.read()
-            ray = check.ray_read.read() if check.ray_read is not None else None
+        half_a = check.half_a_read.out
+        ray = check.ray_read.out if check.ray_read is not None else None
         albedo, normal = check.guides
         worker.submit(key, FilterJob(half_a, albedo, normal, ray, METHODS["guided"].signed))
         check.stage = "filter"
@@ -121,8 +126,13 @@ def advance_check(session, view, check: RefineCheck):
             check.stage = "done"
             return "judged", None
         denoise.filter_ms += result.ms.get("filter_ms", 0.0) + result.ms.get("guide_ms", 0.0)
+        check.upload = ChunkedUpload(halves.denoised_a, result.rgba)
+        check.stage = "upload"
+    if check.stage == "upload":
         with denoise.parts.part("upload"):
-            halves.denoised_a.write(result.rgba)
+            whole = check.upload.step(denoise.budget)
+        if not whole:
+            return "pending", None
         with denoise.parts.part("judgement"):
             halves.dispatch_judge(view.ray, from_snapshot=True)
         check.judge_read = _read(session, view, "judge", halves.judge_sums)
@@ -131,7 +141,9 @@ def advance_check(session, view, check: RefineCheck):
     if check.stage == "judge":
         if not check.judge_read.ready():
             return "pending", None
-        judged = halves.sums_of(check.judge_read.read())
+        if not check.judge_read.read_some(denoise.budget):
+            return "pending", None
+        judged = halves.sums_of(check.judge_read.out)
         check.stage = "done"
         n_a, n_b = check.counts
         return "judged", blend_from_sums(check.sums, judged, n_a, n_b)

@@ -405,6 +405,7 @@ class RenderSession:
         times = FrameTimes(clock=self.pacer.clock)
         self.parts.gpu = not self.pacer.wall   # timestamps believed: the parts' GPU ms too
         times.parts = self.parts.begin_frame()
+        self.denoise.budget.begin_frame()   # the frame's host transfers (fence.TransferBudget)
         r = self.renderer
         budget = self.pacer.work_budget_ms(self.frame_budget_ms)
         if want_probes and not r.probes_current():
