@@ -241,6 +241,17 @@ def test_render_denoise_from_the_command_line_and_the_api(tmp_path, capsys):
     assert image.shape == (16, 16, 3) and not image.notes
 
 
+def _step_until(s, done, max_samples, want_probes, limit_s=60.0):
+    """Steps the session until done() (the filter's thread finishes between frames), within
+    limit_s of wall time."""
+    import time
+    end = time.monotonic() + limit_s
+    while not done():
+        assert time.monotonic() < end, "the filtered image never came"
+        s.step(max_samples, want_probes)
+        time.sleep(0.002)
+
+
 def test_the_viewers_denoise_switch(ctx, monkeypatch):
     """The session's Denoise: off by default on llvmpipe; switched on, the path tracer's view
     shows a filtered image, made again when its samples double (not every frame), dropped at a
@@ -264,6 +275,10 @@ def test_the_viewers_denoise_switch(ctx, monkeypatch):
         for _ in range(12):
             s.step(64, False)
             counts.append((s.views["pt"].acc.samples, s.denoise.runs))
+        # the filter runs on its own thread (app/rendering/filter_worker.py): its image lands
+        # on a later frame, which no frame waits for
+        _step_until(s, lambda: s.denoise.runs > 0, 64, False)
+        counts.append((s.views["pt"].acc.samples, s.denoise.runs))
         assert s.texture("pt") is not s.views["pt"].acc.texture
         filtered = s.denoise.images["pt"]
         # one filtered image per doubling of the samples, never more than one a frame
@@ -279,11 +294,8 @@ def test_the_viewers_denoise_switch(ctx, monkeypatch):
         raw = view.held if view.shows_held else view.acc
         assert s.texture("pt") is raw.texture and raw.texture is not filtered.texture
         s.set_methods(["refine"])
-        for _ in range(400):
-            s.step(256, True)
-            if s.refine_state()["shown"] == "guided" and s.denoise.texture(
-                    "refine", s.views["refine"], s.restarts) is not None:
-                break
+        _step_until(s, lambda: s.refine_state()["shown"] == "guided" and s.denoise.texture(
+            "refine", s.views["refine"], s.restarts) is not None, 256, True)
         assert s.texture("refine") is not s.views["refine"].acc.texture
         monkeypatch.setattr(denoise_view, "shared_denoiser",
                             lambda: type("Broken", (), {"staging": lambda *a: None,

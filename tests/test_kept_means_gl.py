@@ -240,8 +240,10 @@ def test_renderer_denoise_restores_on_gl_as_the_host_path_does(ctx):
 
 
 def test_the_viewer_shows_the_gl_restored_image(ctx):
-    """The viewer's Denoise switch uploads OIDN's output and restores the means into the RGBA32F
-    texture it shows: that image is what the host path makes of the same accumulation."""
+    """The viewer's Denoise switch filters on its own thread (the host path: the means kept
+    there, app/rendering/filter_worker.py) and uploads the result into the RGBA32F texture it
+    shows: that image is what the host path makes of the same accumulation."""
+    import time
     pytest.importorskip("pyoidn", reason="the denoiser's library (pyoidn) is a dependency")
     from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser
     from radiance_probes.io.scene_file import parse_scene
@@ -253,12 +255,15 @@ def test_the_viewer_shows_the_gl_restored_image(ctx):
         s.resize(40, 35)
         s.set_methods(["pt"])
         s.denoise.set_enabled(True)
-        for _ in range(20):   # (a frame may take no whole sample on a slow machine)
-            s.step(64, False)
-            if s.denoise.images.get("pt") is not None:
-                break
-        got = s.denoise.images["pt"]
         view = s.views["pt"]
+        end = time.monotonic() + 60   # the filter's image of the newest samples, over frames
+        while time.monotonic() < end:
+            s.step(64, False)
+            got = s.denoise.images.get("pt")
+            if got is not None and got.samples == view.acc.samples and s.denoise.idle():
+                break
+            time.sleep(0.002)
+        got = s.denoise.images["pt"]
         assert s.texture("pt") is got.texture and got.texture.components == 4
         assert view.acc.samples == got.samples   # (the filter runs after a frame's samples)
         raw = view.acc.read()

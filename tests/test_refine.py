@@ -286,33 +286,41 @@ def test_blend_weight_snaps_to_either_image_near_the_ends():
 
 
 def test_refine_blends_by_its_judgement_where_the_denoise_switch_is_on(ctx, monkeypatch):
-    """With the Denoise switch on, each check judges the blend (refine.judged_blend: half A
-    filtered on the GL path, judged with the raymarcher's image against half B) once per doubling
-    of the samples, and guided takes over from the first weight above 0, blended with the
-    raymarcher's image: the display is then (1 - w) r + w D(m), D(m) the switch's own filtered
-    image; its wall time is the frame's denoise_ms. The raw estimate is held above the
+    """With the Denoise switch on, checks judge the blend (app/viewer/refine_judgement.py: half A
+    read back and filtered on the filter's thread, judged with the raymarcher's image against
+    half B of its check, over frames) once per 4x growth of the samples, and guided takes over
+    from the first weight above 0, blended with the raymarcher's image: the display is then
+    (1 - w) r + w D(m), D(m) the switch's own filtered image. The raw estimate is held above the
     raymarcher's (it alone never switches), and the judgement's weight is set to 0, then 0.4,
     then 1 (guided alone, judging ends). With the switch off nothing is judged."""
-    from radiance_probes.rendering.refine import refine as refine_module
+    import time
+
     from radiance_probes.rendering.refine.refine import RefineBlend, RefineEstimate
+    from radiance_probes.viewer import refine_judgement
     from radiance_probes.viewer import session as session_module
     from radiance_probes.viewer.session import REFINE_MIN_HALF_SAMPLES, RenderSession
     monkeypatch.setattr(session_module.HalfBuffers, "estimate_from",
                         lambda self, sums, with_ray: RefineEstimate(1.0, 0.5, self.samples))
     weights, judged = [0.0], []
+    real = refine_judgement.blend_from_sums
 
-    def judge(*args, **kw):
-        halves, reads = args[1], args[1].reads
-        got = refine_module.judged_blend(*args, **kw)   # the GL path runs
-        assert got is not None and 0.0 <= got.weight <= 1.0 and math.isfinite(got.denoised)
-        # the check's combine wrote half A and its sums came along: one read, the judgement's
-        assert kw.get("sums") is not None and halves.reads == reads + 1
+    def judge(sums, judge_sums, n_a, n_b):
+        got = real(sums, judge_sums, n_a, n_b)   # the GL path and the filter ran
+        assert 0.0 <= got.weight <= 1.0 and math.isfinite(got.denoised)
+        assert min(n_a, n_b) >= REFINE_MIN_HALF_SAMPLES
         judged.append(got)
         return RefineBlend(weights[0], 0.01, got.denoised, got.raymarch)
-    monkeypatch.setattr(session_module, "judged_blend", judge)
+    monkeypatch.setattr(refine_judgement, "blend_from_sums", judge)
     # judgements come once the samples grow 4x: a cap far above where the first lands, however
     # many samples a (wall-clock paced) frame takes, leaves room for the three asked here
     CAP = 1 << 14
+
+    def step_until(done, limit_s=120.0):
+        end = time.monotonic() + limit_s
+        while not done():
+            assert time.monotonic() < end, s.refine_state()
+            s.step(CAP, True)
+            time.sleep(0.002)   # the filter's thread runs between frames
     s = RenderSession(ctx, parse_scene(SCENE))
     try:
         s.resize(24, 16)
@@ -324,19 +332,13 @@ def test_refine_blends_by_its_judgement_where_the_denoise_switch_is_on(ctx, monk
         s.denoise.set_enabled(True)
         s.restart()
         view = s.views["refine"]
-        for _ in range(400):
-            s.step(CAP, True)
-            if judged:
-                break
-        assert judged and view.shown == "raymarch"          # a weight of 0: the raymarcher
-        assert min(view.halves.counts) >= REFINE_MIN_HALF_SAMPLES
+        step_until(lambda: judged)
+        assert view.shown == "raymarch"          # a weight of 0: the raymarcher
         assert len(judged) == 1
         weights[0] = 0.4
-        denoise_ms = []
-        while view.shown == "raymarch" and len(denoise_ms) < 400:
-            denoise_ms.append(s.step(CAP, True).denoise_ms)
+        step_until(lambda: view.shown != "raymarch")
         assert view.shown == "guided" and view.weight == 0.4 and view.blending
-        assert denoise_ms[-1] > 0.0
+        s.step(CAP, True)
         shown = s.shown_image("refine")
         filtered = s.denoise.images["refine"]
         d = np.frombuffer(filtered.texture.read(), np.float32).reshape(16, 24, 4)[..., :3]
@@ -345,15 +347,14 @@ def test_refine_blends_by_its_judgement_where_the_denoise_switch_is_on(ctx, monk
         assert "blended" in s.label("refine")
         weights[0] = 1.0
         count = len(judged)
-        for _ in range(400):
-            s.step(CAP, True)
-            if not view.blending:
-                break
+        step_until(lambda: not view.blending)
         assert view.shown == "guided" and view.weight == 1.0 and not view.blending
         assert len(judged) == count + 1          # judged no more once guided is alone
         for _ in range(20):
             s.step(CAP, True)
         assert len(judged) == count + 1
+        step_until(lambda: s.denoise.idle())
+        s.step(CAP, True)
         d = np.frombuffer(s.denoise.images["refine"].texture.read(),
                           np.float32).reshape(16, 24, 4)[..., :3]
         np.testing.assert_array_equal(s.shown_image("refine"), d)

@@ -94,6 +94,9 @@ class BenchConfig:
     # the viewer's Denoise switch in the replay (None: its default, on on a GPU); the errors are
     # then the shown (filtered) image's, and a frame's time adds the filtering's wall ms
     interact_denoise: bool | None = None
+    # the bake's slice takes the frame but one preview sample while every view restarts after
+    # it (RenderSession.bake_fills_frame, the viewer's); False: bake_budget_ms as before issue 56
+    interact_bake_fills_frame: bool = True
     # --preset movie (movie.py): a turntable raymarched over probes baked once, timed whole,
     # its error at a few frames against path-traced references, the path tracer's time beside
     movie_frames: int = 120

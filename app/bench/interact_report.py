@@ -107,6 +107,7 @@ def interact_section(data: dict, out: Path) -> list[str]:
             f"{r['final_rrmse']:.4f} | {r['frames']}"
             f"{'' if r['converged'] else ' (not converged)'} |")
     lines += goal_section(recs)
+    lines += longest_frames_section(recs)
     tails = [r for r in recs if r["event"] == "dispatch_tail"]
     if tails:
         lines += ["", "### The per-dispatch tail", "",
@@ -120,6 +121,42 @@ def interact_section(data: dict, out: Path) -> list[str]:
             lines.append(f"| {r['scene']} | {r['width']}x{r['height']} | {_probes(r)} | {r['method']} | "
                          f"{one:.3f} ms | {many:.3f} ms | {r['k']} | {saved} |")
     lines.append("")
+    return lines
+
+
+def longest_frames_section(recs: list[dict]) -> list[str]:
+    """Per event: its longest frame on the wall clock and the parts that took it (frame_parts:
+    [GPU ms or None, wall ms] by part; the largest four by wall), the filter's ms on its thread
+    that frame (off the frame), the largest wall-time gap between two points of the error
+    curve, and what measuring the error cost (outside the frames' time). Records made before
+    the frames had parts (issue 56) have none of this and are left out."""
+    runs = [r for r in recs if r.get("frame_parts") and r.get("frame_walls")]
+    if not runs:
+        return []
+    lines = ["", "### The longest frame of each event, by part", "",
+             "Each event's longest frame on the wall clock and its four largest parts, GPU ms / "
+             "wall ms (app/viewer/frame_parts.py: bake, samples, guide, readback, combine, "
+             "judgement, upload, blend; no window here, so no display, imgui or swap); the "
+             "filter's ms on its own thread for the results that landed in that frame (off the "
+             "frame); the error curve's largest gap on the wall clock; the error's measurements "
+             "(outside the frames' time, the filter's thread held meanwhile).", "",
+             "| scene | event | variant | longest frame (wall) | its parts | filter (thread) "
+             "| curve gap | measured |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+
+    def pair(gpu, wall) -> str:
+        return f"{'-' if gpu is None else f'{gpu:.1f}'} / {wall:.1f}"
+
+    for r in runs:
+        walls = r["frame_walls"]
+        i = max(range(len(walls)), key=walls.__getitem__)
+        parts = sorted(r["frame_parts"][i].items(), key=lambda kv: -kv[1][1])[:4]
+        named = ", ".join(f"{k} {pair(g, w)}" for k, (g, w) in parts) or "-"
+        filt = (r.get("frame_filter_ms") or [0.0] * len(walls))[i]
+        lines.append(f"| {r['scene']} | {r['event']} | {r['variant'] or '-'} | "
+                     f"{walls[i]:.1f} ms | {named} | {filt:.1f} ms | "
+                     f"{r.get('curve_wall_gap_ms_max', 0.0):.0f} ms | "
+                     f"{r.get('measure_points', 0)} points, {r.get('measure_wall_ms', 0.0):.0f} ms "
+                     f"(at most {r.get('measure_wall_ms_max', 0.0):.0f}) |")
     return lines
 
 

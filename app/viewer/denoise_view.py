@@ -1,20 +1,19 @@
 """The viewer's Denoise switch: each shown view of a noisy method (the path tracer, `probes`,
 `probes-only`, and `refine` once `guided` shows) through the denoiser (app/rendering/denoise/filter.py),
 with the guides Renderer.denoise_guides makes for the view's camera ("auto": the probes' image
-where the view has probes, else the albedo and normal at few samples).
+where the view has probes, else the albedo and normal at few samples; refine's probes guide is
+its own raymarched image, read back beside it).
 
-The filter runs on the newest accumulated image, not every frame: whenever the samples have
-doubled since the last filtered image (1, 2, 4, ...), and at least every INTERVAL_S while they
-grow. A view shows its raw image until its first filtered one, and again after any restart until
-the next. On the H200 a 1080p filter with its read-back and upload costs about 25 ms
-(bench/h200-denoise), so the doubling keeps its share of a 14 ms frame small after the first
-second. OIDN has no temporal mode: the filtered images of a still camera change as samples come
-(docs/denoising.md measures the flicker).
-
-The accumulation is read straight into the filter's colour, its tile means made on the GPU
-(app/rendering/denoise/kept_means.py), and the filter's output uploaded and given back those means by two
-GL passes into the RGBA32F texture the display shows: the host neither sums the images nor
-checks the output (kept_means.denoise_on_gl).
+No frame waits for the filter (issue 56). A view's filtered image is made in three steps over
+frames: its accumulation read back through a pixel buffer with a fence (app/gl/fence.py), the
+host copy taken on the first later frame that finds the fence signalled; the filter on its own
+thread (app/rendering/denoise/filter_worker.py; OIDN with its tile means kept on that thread); and the
+result uploaded on the frame that finds it done, if the view has not restarted since (else it is
+dropped). The display shows the newest finished filtered image of the current accumulation, and
+the raw image until the first. A new filtered image is started whenever the samples have doubled
+since the last one started (1, 2, 4, ...), and at least every INTERVAL_S while they grow, one at
+a time per view. OIDN has no temporal mode: the filtered images of a still camera change as
+samples come (docs/denoising.md measures the flicker).
 
 A `refine` view blending guided with the raymarcher's image (RefineView.blending: the weight its
 last judgement gave, app/rendering/refine/refine.py) shows (1 - w) r + w D, made on the GPU
@@ -22,16 +21,24 @@ last judgement gave, app/rendering/refine/refine.py) shows (1 - w) r + w D, made
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import moderngl
 
+from radiance_probes.gl.fence import ChunkedUpload, PendingRead, TransferBudget, staging_buffer
 from radiance_probes.methods import METHODS
 from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser
-from radiance_probes.rendering.denoise.kept_means import KeptMeans, denoise_on_gl
+from radiance_probes.rendering.denoise.filter_worker import FilterJob, FilterWorker
+from radiance_probes.rendering.denoise.kept_means import KeptMeans
 from radiance_probes.rendering.refine.refine import BlendPass
+from radiance_probes.viewer.frame_parts import FrameParts
 
 INTERVAL_S = 0.5
+# Bytes a frame copies between the host and GL for the switch and refine's judgements (fence.py
+# TransferBudget): a 1080p RGBA32F image is 33 MB, its read-back's host copy or its upload
+# several ms of a frame, so each is spread over a few frames.
+TRANSFER_BYTES_PER_FRAME = 16 << 20
 
 
 @dataclass
@@ -39,9 +46,25 @@ class _Filtered:
     texture: object
     generation: tuple      # (the accumulation's id, the session's restarts) it was made from
     samples: int           # samples of the image it filtered
-    at: float              # when (monotonic seconds)
+    at: float              # when it was started (monotonic seconds)
     blended: object = None   # refine's blend with the raymarcher's image, and what it was made of
     blend_key: tuple | None = None
+
+
+@dataclass
+class _InFlight:
+    """A filtered image under way: its read-backs (the colour; refine's probes guide), then the
+    filter's job on the thread."""
+    generation: tuple
+    samples: int
+    at: float
+    reads: list
+    signed: bool
+    albedo: object = None
+    normal: object = None
+    probe_guide: bool = False
+    filtering: bool = False
+    filter: tuple = (moderngl.NEAREST, moderngl.NEAREST)   # the view's, for the image shown
 
 
 class ViewDenoise:
@@ -49,15 +72,70 @@ class ViewDenoise:
         self.ctx = ctx
         self.enabled = enabled
         self.images: dict[str, _Filtered] = {}
+        self.inflight: dict[str, _InFlight] = {}
         self.note: str | None = None     # why it switched itself off (the library, the filter)
-        self.last_ms = 0.0               # wall ms of the last update's filtering
-        self.runs = 0                    # filtered images made (tests, the Stats panel)
+        self.last_ms = 0.0               # wall ms of the last update (the frame's share)
+        self.runs = 0                    # filtered images shown (tests, the Stats panel)
+        self.parts = FrameParts()        # the frame's parts (the session hands in its own)
+        self.filter_ms = 0.0             # the filter's ms on its thread, of results landed
         self.kept_means: KeptMeans | None = None   # the tile means' passes, made on first use
         # compiled with the session where the switch starts on, not at a view's first blend
         self.blend_pass: BlendPass | None = BlendPass(ctx) if enabled else None
+        self._worker: FilterWorker | None = None
+        self._staging: dict[tuple, moderngl.Buffer] = {}
+        self.budget = TransferBudget(TRANSFER_BYTES_PER_FRAME)   # the frame's host transfers
+        # a filtered image being uploaded in bands into a texture of its own, then shown:
+        # {name: (ChunkedUpload, _InFlight)}; and each view's spare texture for the next
+        self.landing: dict[str, tuple] = {}
+        self._spare: dict[str, moderngl.Texture] = {}
+
+    # ---- the filter's thread -------------------------------------------------------------------
+    def worker(self) -> FilterWorker | None:
+        """The filter's thread over shared_denoiser() (a new one where that changed); None, with
+        the switch off and its note, where the denoiser says it cannot run."""
+        denoiser = shared_denoiser()
+        failure = getattr(denoiser, "failure", None)
+        if failure is not None:
+            self.note, self.enabled = failure, False
+            self.release()
+            return None
+        if self._worker is None or self._worker.denoiser is not denoiser:
+            if self._worker is not None:
+                self._worker.close()
+            self._worker = FilterWorker(denoiser)
+        return self._worker
+
+    def warm(self, width: int, height: int) -> None:
+        """Readies the filter for images of this size on its thread (OIDN's first use there)."""
+        if self.enabled and width > 0 and height > 0:
+            worker = self.worker()
+            if worker is not None:
+                worker.warm(width, height, ("albedo",))
+
+    @contextmanager
+    def held(self):
+        """No filter job starts within the block (FilterWorker.hold)."""
+        worker = self._worker
+        if worker is not None:
+            worker.hold(True)
+        try:
+            yield
+        finally:
+            if worker is not None:
+                worker.hold(False)
+
+    def idle(self) -> bool:
+        """No filtered image under way (read-backs, the filter's thread)."""
+        return not self.inflight and (self._worker is None or self._worker.idle())
+
+    def drop_job(self, key: str) -> None:
+        """Forgets the filter's job and result under `key` (a refine judgement begun before a
+        restart)."""
+        if self._worker is not None:
+            self._worker.drop(key)
 
     def kept(self) -> KeptMeans:
-        """The tile means' passes (refine's judgement filters through them too)."""
+        """The tile means' passes (a still refine's judgement filters through them)."""
         if self.kept_means is None:
             self.kept_means = KeptMeans(self.ctx)
         return self.kept_means
@@ -66,6 +144,15 @@ class ViewDenoise:
         self.enabled = bool(on)
         if on:
             self.note = None
+            if self.blend_pass is None:
+                self.blend_pass = BlendPass(self.ctx)
+
+    def read(self, key: tuple, source) -> PendingRead:
+        """A read-back of `source` started into the staging buffer kept under `key`."""
+        nbytes = (source.size if isinstance(source, moderngl.Buffer)
+                  else source.size[0] * source.size[1] * source.components * 4)
+        buf = self._staging[key] = staging_buffer(self.ctx, self._staging.get(key), nbytes)
+        return PendingRead(self.ctx, source, buf)
 
     def _due(self, name: str, generation: tuple, samples: int, now: float) -> bool:
         old = self.images.get(name)
@@ -73,79 +160,163 @@ class ViewDenoise:
             return samples > 0
         return samples >= 2 * old.samples or (samples > old.samples and now - old.at >= INTERVAL_S)
 
+    # ---- a frame -------------------------------------------------------------------------------
     def update(self, session) -> float:
-        """Filters each view that is due; returns the wall ms it took."""
+        """For each view: lands a finished filtered image, hands finished read-backs to the
+        filter, and starts the read-back of the next image where one is due; never waits.
+        Returns the wall ms it took."""
         self.last_ms = 0.0
+        self.filter_ms = 0.0
         if not self.enabled:
             return 0.0
         start = time.perf_counter()
-        r = session.renderer
-        denoiser = shared_denoiser()
+        worker = self.worker()
+        if worker is None:
+            return 0.0
         for name, view in session.views.items():
             acc, shown = view.acc, view.shown
             generation = (id(acc), session.restarts)
             if acc is None or not METHODS[shown].noisy or acc.samples == 0:
                 self._forget(name)
                 continue
-            now = time.monotonic()
-            if not self._due(name, generation, acc.samples, now):
-                continue
-            has_probes = session.needs_probes(name) and r.probes_current()
-            guides = choose_guides("auto", acc.samples, has_probes)
-            albedo, normal, _ = r.denoise_guides(guides, camera=view.camera)
-            names = tuple(n for n, g in (("albedo", albedo), ("normal", normal)) if g is not None)
-            staged = denoiser.staging(acc.width, acc.height, names)
-            if staged is None:
-                self.note, self.enabled = denoiser.failure, False
-                self.release()
+            self._land(name, worker, generation)
+            if not self.enabled:
                 break
-            old = self.images.get(name)
-            texture = self._sized(None if old is None else old.texture, acc.texture)
-            d = denoise_on_gl(self.kept(), denoiser, acc.texture, staged, albedo, normal,
-                              METHODS[shown].signed, texture, finish=False)
-            if not d.denoised:
-                texture.release()
-                self.note, self.enabled = d.note, False
-                self.release()
-                break
-            blended = old.blended if old is not None else None
-            self.images[name] = _Filtered(texture, generation, acc.samples, now, blended)
-            self.runs += 1
+            self._upload(name, generation)
+            self._advance(name, worker, generation)
+            # one image under way a view: read back, filtered, uploaded, then the next
+            if (name not in self.inflight and name not in self.landing
+                    and self._due(name, generation, acc.samples, time.monotonic())):
+                self._start(name, session, view, generation)
         if self.enabled:
-            self._blend(session)
+            with self.parts.part("blend"):
+                self._blend(session)
         self.last_ms = 1e3 * (time.perf_counter() - start)
         return self.last_ms
 
+    def _land(self, name: str, worker: FilterWorker, generation: tuple) -> None:
+        """The view's finished filtered image uploaded, where it is of the current accumulation."""
+        result = worker.take(name)
+        if result is None:
+            return
+        flight = self.inflight.pop(name, None)
+        self.filter_ms += result.ms.get("filter_ms", 0.0) + result.ms.get("guide_ms", 0.0)
+        if result.rgba is None:
+            self.note, self.enabled = result.note, False
+            self.release()
+            return
+        if flight is None or flight.generation != generation:
+            return   # the view restarted while it was filtered: not an image of what it shows
+        h, w = result.rgba.shape[:2]
+        texture = self._spare[name] = self._sized(self._spare.get(name), (w, h))
+        texture.filter = flight.filter
+        self.landing[name] = (ChunkedUpload(texture, result.rgba), flight)
+
+    def _upload(self, name: str, generation: tuple) -> None:
+        """A band of the filtered image being uploaded; once whole, it is what the view shows
+        (the texture it replaces becomes the spare)."""
+        got = self.landing.get(name)
+        if got is None:
+            return
+        upload, flight = got
+        if flight.generation != generation:
+            del self.landing[name]
+            return
+        with self.parts.part("upload"):
+            whole = upload.step(self.budget)
+        if not whole:
+            return
+        del self.landing[name]
+        old = self.images.get(name)
+        self._spare.pop(name, None)
+        if old is not None:
+            self._spare[name] = old.texture
+        blended = old.blended if old is not None else None
+        self.images[name] = _Filtered(upload.texture, generation, flight.samples, flight.at,
+                                      blended)
+        self.runs += 1
+
+    def _advance(self, name: str, worker: FilterWorker, generation: tuple) -> None:
+        """An image whose read-backs are all in: its host copies handed to the filter."""
+        flight = self.inflight.get(name)
+        if flight is None or flight.filtering:
+            return
+        if flight.generation != generation:   # restarted before its read-back came
+            for r in flight.reads:
+                r.release()
+            del self.inflight[name]
+            return
+        if not all(r.ready() for r in flight.reads):
+            return
+        with self.parts.part("readback", gpu=False):
+            done = all(r.read_some(self.budget) for r in flight.reads)   # in order, in parts
+        if not done:
+            return
+        images = [r.out for r in flight.reads]
+        worker.submit(name, FilterJob(images[0], flight.albedo, flight.normal,
+                                      images[1] if flight.probe_guide else None, flight.signed,
+                                      tag=flight.samples))
+        flight.filtering = True
+
+    def _start(self, name: str, session, view, generation: tuple) -> None:
+        """The read-back of the view's image (and of refine's raymarched image, its probes
+        guide) started; other guides made now (Renderer.denoise_guides keeps them per camera)."""
+        r = session.renderer
+        acc = view.acc
+        has_probes = session.needs_probes(name) and r.probes_current()
+        guides = choose_guides("auto", acc.samples, has_probes)
+        ray = getattr(view, "ray", None)
+        probe_guide = guides == "probes" and ray is not None and ray.samples > 0
+        albedo = normal = None
+        if not probe_guide:
+            with self.parts.part("guide"):
+                albedo, normal, _ = r.denoise_guides(guides, camera=view.camera)
+        reads = [self.read((name, "colour"), acc.texture)]
+        if probe_guide:
+            reads.append(self.read((name, "guide"), ray.texture))
+        self.inflight[name] = _InFlight(generation, acc.samples, time.monotonic(), reads,
+                                        METHODS[view.shown].signed, albedo, normal, probe_guide,
+                                        filter=acc.texture.filter)
+
     def adopt(self, name: str, halves, restarts: int) -> None:
-        """refine's judgement filtered half A (refine.judged_blend): that image becomes the view's
-        filtered image (a GPU copy), counted as of the halves' whole sample count, so the view is
-        filtered again at the next doubling (or INTERVAL_S), not a second time in this frame."""
+        """refine's judgement filtered half A: that image becomes the view's filtered image (a GPU
+        copy), counted as of the halves' whole sample count, so the view is filtered again at
+        the next doubling (or INTERVAL_S), not at once."""
         combined = halves.combined
         old = self.images.get(name)
-        texture = self._sized(None if old is None else old.texture, combined.texture)
+        texture = self._sized(None if old is None else old.texture, combined.texture.size)
+        texture.filter = combined.texture.filter
         halves.copy_denoised_a(texture)
         blended = old.blended if old is not None else None
         self.images[name] = _Filtered(texture, (id(combined), restarts), combined.samples,
                                       time.monotonic(), blended)
 
-    def _sized(self, texture, like):
-        """`texture`, or where it is missing or not of `like`'s size (it is then released) a new
-        RGBA32F texture of that size and filter: the restore and blend passes store into it, the
-        display reads rgb."""
-        if texture is not None and texture.size == like.size:
+    def _sized(self, texture, size):
+        """`texture`, or where it is missing or not of `size` (it is then released) a new
+        RGBA32F texture of that size: the upload and the blend pass store into it, the display
+        reads rgb."""
+        if texture is not None and texture.size == tuple(size):
             return texture
         if texture is not None:
             texture.release()
-        texture = self.ctx.texture(like.size, 4, dtype="f4")
-        texture.filter = like.filter
-        return texture
+        return self.ctx.texture(tuple(size), 4, dtype="f4")
 
     def _forget(self, name: str) -> None:
+        self.landing.pop(name, None)
+        spare = self._spare.pop(name, None)
+        if spare is not None:
+            spare.release()
         got = self.images.pop(name, None)
         if got is not None:
             got.texture.release()
             if got.blended is not None:
                 got.blended.release()
+        flight = self.inflight.pop(name, None)
+        if flight is not None:
+            for r in flight.reads:
+                r.release()
+        if self._worker is not None:
+            self._worker.drop(name)
 
     def _blend(self, session) -> None:
         """Each blending refine view's (1 - w) r + w D, where its inputs have changed."""
@@ -155,10 +326,11 @@ class ViewDenoise:
                 continue
             if got.generation != (id(view.acc), session.restarts):
                 continue
-            key = (got.samples, got.at, view.weight, view.ray.samples)
+            key = (got.samples, got.at, id(got.texture), view.weight, view.ray.samples)
             if got.blend_key == key:
                 continue
-            got.blended = self._sized(got.blended, got.texture)
+            got.blended = self._sized(got.blended, got.texture.size)
+            got.blended.filter = got.texture.filter
             if self.blend_pass is None:
                 self.blend_pass = BlendPass(self.ctx)
             self.blend_pass.run(view.ray.texture, got.texture, got.blended, view.weight)
@@ -176,11 +348,21 @@ class ViewDenoise:
         return got.texture
 
     def release(self) -> None:
-        for name in list(self.images):
+        for name in list(self.images) + list(self.inflight) + list(self._spare):
             self._forget(name)
+        for buf in self._staging.values():
+            buf.release()
+        self._staging.clear()
         if self.blend_pass is not None:
             self.blend_pass.release()
             self.blend_pass = None
         if self.kept_means is not None:
             self.kept_means.release()
             self.kept_means = None
+
+    def close(self) -> None:
+        """release(), and the filter's thread ended."""
+        self.release()
+        if self._worker is not None:
+            self._worker.close()
+            self._worker = None

@@ -40,13 +40,15 @@ from radiance_probes.rendering.probes.bake import BakeProgress
 from radiance_probes.methods import METHODS
 from radiance_probes.rendering.refine.refine import (REFINE_HALF_SEED, REFINE_MIN_HALF_SAMPLES,  # noqa: F401 (tests)
                                 REFINE_RAYMARCH_FRAMES, HalfBuffers, RefineBlend,
-                                RefineEstimate, judged_blend)
+                                RefineEstimate)
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.budgets.sample_bands import TileCosts, fill_frame, tile_grid
 from radiance_probes.io.scene_file import Scene
 from radiance_probes.io.volume import Volume
 from radiance_probes.viewer.denoise_view import ViewDenoise
+from radiance_probes.viewer.frame_parts import FrameParts
 from radiance_probes.viewer.pacing import FramePacer
+from radiance_probes.viewer.refine_judgement import RefineCheck, advance_check, begin_check
 
 FRAME_HISTORY = 240
 MAX_SAMPLES_PER_FRAME = 64
@@ -121,6 +123,8 @@ class RefineView:
         self.switched_at: int | None = None   # guided's samples when it replaced the raymarcher
         self.frames = 0                 # frames stepped since the last restart
         self.shown_frames: list[str] = []   # what each of the first REFINE_HISTORY of them showed
+        self.check: RefineCheck | None = None   # a check (or judgement) under way over frames
+        self.staging: dict = {}         # its read-backs' buffers, by name (refine_judgement)
 
     @property
     def acc(self) -> Accumulation | None:
@@ -143,7 +147,16 @@ class RefineView:
     def guided_samples(self) -> int:
         return 0 if self.halves is None else self.halves.samples
 
+    def drop_check(self) -> None:
+        if self.check is not None:
+            self.check.release()
+            self.check = None
+
     def release(self) -> None:
+        self.drop_check()
+        for buf in self.staging.values():
+            buf.release()
+        self.staging.clear()
         if self.ray is not None:
             self.ray.release()
         if self.halves is not None:
@@ -160,8 +173,12 @@ class FrameTimes:
     samples: int = 0          # samples per pixel dispatched in the frame, over its views
     tiles: int = 0            # 8x8 tiles of samples split into bands (the wall clock's pacing),
     bands: int = 0            # and how many bands they were (sample_bands.py)
-    denoise_ms: float = 0.0   # wall ms the Denoise switch's filtering took (not GPU time), refine's
-    #                           denoised checks included
+    denoise_ms: float = 0.0   # wall ms the Denoise switch took in the frame (not GPU time): its
+    #                           read-backs' host copies, guides, uploads, blend passes, refine's
+    #                           checks and judgements (the filter itself runs on its own thread)
+    filter_ms: float = 0.0    # the filter's ms on its thread for the results landed in the frame
+    #                           (off the frame: not in total_ms)
+    parts: dict = None        # {part: [GPU ms or None, wall ms]} (app/viewer/frame_parts.py)
     clock: str = "gpu"        # what bake_ms and render_ms are: GPU time, or "wall" clock time
     frame_wall_ms: float | None = None   # the whole frame's wall time (its display and panels too)
 
@@ -227,7 +244,12 @@ class RenderSession:
         # Denoise: on by default on a GPU; on a CPU rasteriser the filter (OIDN's CPU device)
         # takes as long as several frames, so it waits to be switched on
         self.denoise = ViewDenoise(ctx, enabled=device == "gpu")
-        self._check_denoise_ms = 0.0   # wall ms of refine's denoised checks this frame
+        self.parts = FrameParts(ctx)      # the frame's parts, GPU and wall time
+        # the bake takes the frame but one preview sample while every view restarts after its
+        # slices (_bake_budget); the viewer and the interact replay turn it on
+        self.bake_fills_frame = False
+        self.denoise.parts = self.parts
+        self._refine_ms = 0.0   # wall ms of refine's checks and judgements this frame
         self.pacer = FramePacer(device == "software", ctx.info.get("GL_RENDERER", ""), clock)
         self._frame_began: float | None = None   # when the last working frame's step began
         if self.pacer.wall:
@@ -282,6 +304,7 @@ class RenderSession:
         size = (max(int(width), 1), max(int(height), 1))
         if size != self.size:
             self.size = size
+            self.denoise.warm(*size)   # OIDN's first use, on the filter's thread
             self.restart()
 
     def restart(self, methods=None, wait: bool = False) -> None:
@@ -344,6 +367,9 @@ class RenderSession:
         view.frames_since_check, view.checked_stage = 0, 0
         view.judged_stage, view.blend, view.weight = 0, None, 1.0
         view.frames, view.shown_frames = 0, []
+        if view.check is not None:   # a check of the images before: its results unwanted
+            view.drop_check()
+            self.denoise.drop_job(f"{view.method}:judge")
 
     def _drop(self, name: str) -> None:
         view = self.views.pop(name)
@@ -377,12 +403,18 @@ class RenderSession:
         probes restart after every slice, from the probes as they are then; a probe-lit view
         shows the raymarcher until the bake is done."""
         times = FrameTimes(clock=self.pacer.clock)
+        self.parts.gpu = not self.pacer.wall   # timestamps believed: the parts' GPU ms too
+        times.parts = self.parts.begin_frame()
+        self.denoise.budget.begin_frame()   # the frame's host transfers (fence.TransferBudget)
         r = self.renderer
         budget = self.pacer.work_budget_ms(self.frame_budget_ms)
         if want_probes and not r.probes_current():
             starting = not r.bake_started_for_scene()
             passes = None if starting else r.probe_grid.passes_done
-            times.bake_ms = r.bake_step(self.seed, budget_ms=min(self.bake_budget_ms, budget))
+            t = time.perf_counter()
+            times.bake_ms = r.bake_step(self.seed, budget_ms=self._bake_budget(budget))
+            self.parts.add("bake", 1e3 * (time.perf_counter() - t),
+                           None if self.pacer.wall else times.bake_ms)
             if starting:
                 self.bake_ms = 0.0
                 self.bake_generation += 1
@@ -401,6 +433,8 @@ class RenderSession:
                 and (not self._refine_done(v, max_samples) if isinstance(v, RefineView)
                      else v.acc.samples < max_samples)]
         share = max(budget - times.bake_ms, 0.0) / max(len(todo), 1)
+        self._refine_ms = 0.0
+        t_work = time.perf_counter()
         for view in todo:
             if isinstance(view, RefineView):
                 ms, n = self._step_refine(view, share, max_samples)
@@ -421,10 +455,33 @@ class RenderSession:
             del recent[:-RECENT_DISPATCHES]
             times.render_ms += ms
             times.samples += n
-        times.denoise_ms = self.denoise.update(self) + self._check_denoise_ms
-        self._check_denoise_ms = 0.0
+        # the samples' wall ms: the views' work less refine's combines and checks (their own parts)
+        self.parts.add("samples", 1e3 * (time.perf_counter() - t_work) - self._refine_ms,
+                       None if self.pacer.wall else times.render_ms)
+        times.denoise_ms = self.denoise.update(self) + self._refine_ms
+        times.filter_ms = self.denoise.filter_ms
         self.last = times
         return times
+
+    def _bake_budget(self, budget: float) -> float:
+        """The bake's slice of a frame whose work may take `budget`: bake_budget_ms; and where
+        `bake_fills_frame` is on and every view shown restarts after the slice (it reads the
+        probes: its samples beyond the first are thrown away a frame later), all of the frame
+        but one sample of each view's preview at its recent cost (issue 56: a load's bake ends
+        sooner, so guided starts sooner)."""
+        base = min(self.bake_budget_ms, budget)
+        views = [v for v in self.views.values() if v.acc is not None]
+        if not self.bake_fills_frame or not views or not all(
+                self.needs_probes(v.method) for v in views):
+            return base
+        keep = 0.0
+        for view in views:
+            recent = view.dispatch_ms.get("raymarch" if isinstance(view, RefineView)
+                                          else view.shown)
+            if not recent:
+                return base          # a preview not yet timed: the slice as ever
+            keep += statistics.median(ms / n for n, ms in recent)
+        return max(base, budget - keep)
 
     def banded(self, view: MethodView) -> bool:
         """Whether the view's samples may be split into bands over frames: paced by the
@@ -475,6 +532,7 @@ class RenderSession:
         """Nothing left for refine: probes current, guided at max_samples, and the raymarcher
         either replaced or at its last frame."""
         return (self.renderer.probes_current() and view.guided_samples >= max_samples
+                and view.check is None
                 and (view.shown == "guided"
                      or (view.ray.samples >= min(REFINE_RAYMARCH_FRAMES, max_samples)
                          and not self._check_pending(view))))
@@ -485,15 +543,17 @@ class RenderSession:
                 and view.frames_since_check > 0 and self.renderer.probes_current())
 
     def _step_refine(self, view: RefineView, budget_ms: float, max_samples: int) -> tuple[float, int]:
-        """One frame of refine within `budget_ms`: raymarched frames while the raymarcher is shown
-        and short of REFINE_RAYMARCH_FRAMES; `guided` samples once the probes are current (half the
-        budget each while both run; at least one sample each), split between the halves (the
-        emptier first), then the halves combined on the GPU and, at a check, their error read
-        (16 bytes) and the view switched to guided if its estimate is below the raymarcher's;
-        with the Denoise switch on, the blend judged instead (_judge, once a doubling), guided
-        shown from a weight above 0. The frame of a restart (any edit) always shows the
-        raymarcher: guided may take over from the next frame on. Returns GPU ms and samples per
-        pixel dispatched."""
+        """One frame of refine within `budget_ms`: first a step of the check under way
+        (_collect_refine: its sums, filter or judgement, whichever has come back; never a wait);
+        raymarched frames while the raymarcher is shown and short of REFINE_RAYMARCH_FRAMES;
+        `guided` samples once the probes are current (half the budget each while both run; at
+        least one sample each), split between the halves (the emptier first), then the halves
+        combined on the GPU and, at a check, their sums' read-back begun (refine_judgement: the
+        view switches to guided once they show its estimate below the raymarcher's); with the
+        Denoise switch on, the blend judged instead (once a 4x growth), guided shown from a
+        weight above 0. The frame of a restart (any edit) always shows the raymarcher: guided may
+        take over from a later frame on. Returns GPU ms and samples per pixel dispatched."""
+        self._collect_refine(view)
         r = self.renderer
         view.frames += 1
         ray_cap = min(REFINE_RAYMARCH_FRAMES, max_samples)
@@ -531,57 +591,74 @@ class RenderSession:
         if view.blending and not self.denoise.enabled:   # the switch went off: no blend to show
             view.shown, view.weight = "raymarch", 1.0
         with_ray = view.shown == "raymarch" or view.blending
+        # one check under way at a time: its sums come back on a later frame (refine_judgement)
+        check = check and view.check is None
         judgeable = (check and with_ray and view.frames > 1
                      and min(halves.counts) >= REFINE_MIN_HALF_SAMPLES)
         judge = judgeable and self._judge_due(view, stage)
-        # a judgement's half A written by the check's own combine, its sums read once
-        halves.combine(view.ray if with_ray else None, reduce=check, write_half_a=judge)
-        if check:
-            sums = halves.read_sums()
-            view.estimate = halves.estimate_from(sums, with_ray)
-            view.frames_since_check, view.checked_stage = 0, stage
-            est = view.estimate
-            if judgeable:
-                blend = self._judge(view, sums) if judge else None
-                if blend is not None:
-                    if blend.weight > 0.0 and view.shown == "raymarch":
-                        view.shown, view.switched_at = "guided", halves.samples
-                    if view.shown == "guided":   # (a weight may fall again: the blend follows)
-                        view.weight = blend.weight
-                elif view.shown == "raymarch" and est.guided < est.raymarch:   # (NaN: False)
-                    view.shown, view.weight = "guided", 1.0
-                    view.switched_at = halves.samples
+        t = time.perf_counter()
+        with self.parts.part("combine"):
+            # a judgement's half A written by the check's own combine, its sums read once
+            halves.combine(view.ray if with_ray else None, reduce=check, write_half_a=judge)
+            if check:
+                if judge:
+                    view.judged_stage = halves.samples.bit_length()
+                view.check = begin_check(self, view, with_ray, judgeable, judge, stage)
+                view.frames_since_check, view.checked_stage = 0, stage
+        self._refine_ms += 1e3 * (time.perf_counter() - t)
         self._note_shown(view)
         return ms_total + ms, n_total + n
+
+    def _collect_refine(self, view: RefineView) -> None:
+        """The check under way (refine_judgement.advance_check), one step, never waiting: its
+        sums, once in, give the estimate and (without a judgement) the raw switch; a judgement,
+        once done, the blend and the weight shown."""
+        check = view.check
+        if check is None:
+            return
+        t = time.perf_counter()
+        with self.parts.part("judgement", gpu=False):
+            state, value = advance_check(self, view, check)
+        if state == "sums":
+            view.estimate = view.halves.estimate_from(value, check.with_ray)
+            est = view.estimate
+            if check.judgeable and not check.judge and view.shown == "raymarch" \
+                    and est.guided < est.raymarch:   # (NaN: False)
+                view.shown, view.weight = "guided", 1.0
+                view.switched_at = view.halves.samples
+        elif state == "judged":
+            self._apply_judgement(view, value)
+        if check.stage == "done":
+            view.check = None
+        self._refine_ms += 1e3 * (time.perf_counter() - t)
 
     def _judge_due(self, view: RefineView, stage: int) -> bool:
         """Whether to judge the blend at this check: where the Denoise switch is on (the view then
         shows guided denoised), at the first check that may, then each time guided's samples
         have grown 4x (JUDGE_STAGES): each judgement is a filter run (40-50 ms at 1080p on the
-        H200 machine, bench/h200-interact-refine), and the weight moves slowly (0.48, 0.58,
-        0.68, 0.77 at 8 to 64 samples on bonsai): between judgements the last one's stands."""
+        H200 machine, bench/h200-interact-refine, now on the filter's thread), and the weight
+        moves slowly (0.48, 0.58, 0.68, 0.77 at 8 to 64 samples on bonsai): between judgements
+        the last one's stands."""
         return self.denoise.enabled and (view.judged_stage == 0
                                          or stage >= view.judged_stage + JUDGE_STAGES)
 
-    def _judge(self, view: RefineView, sums: tuple[float, float, float, int]) -> RefineBlend | None:
-        """The blend of the raymarcher's image and guided denoised, judged from the halves on the
-        GPU (refine.judged_blend: half A, which the check's combine wrote beside its `sums`,
-        filtered with the guides the Denoise switch gives the view; one 16-byte read-back);
-        None where the filter cannot run. Its wall time is the
-        frame's denoise_ms. Judging guided by its raw noise kept the raymarcher on screen for ever
-        after some bonsai edits at 1080p, and the first judgement of guided denoised (half A read
-        to the host, filtered there and summed in NumPy) made hitches of 200 to 440 ms
-        (bench/h200-interact-refine)."""
-        start = time.perf_counter()
-        view.judged_stage = view.halves.samples.bit_length()
-        blend = judged_blend(self.renderer, view.halves, view.ray, view.camera,
-                             self.denoise.kept(), sums=sums)
-        if blend is not None:
-            view.blend = blend
-            if blend.weight > 0.0:   # half A denoised stands for the view's until its next run
-                self.denoise.adopt(view.method, view.halves, self.restarts)
-        self._check_denoise_ms += 1e3 * (time.perf_counter() - start)   # the frame's denoise_ms
-        return blend
+    def _apply_judgement(self, view: RefineView, blend: RefineBlend | None) -> None:
+        """A judgement done (refine_judgement: half A filtered on the filter's thread, judged with
+        the raymarcher's image against half B of its check): guided shown from a weight above 0,
+        the weight following the judgement after; half A denoised stands for the view's
+        filtered image until its next one. None (the filter could not run): nothing changes.
+        Judging guided by its raw noise kept the raymarcher on screen for ever after some bonsai
+        edits at 1080p; judging in the frame (the filter, its read-back, the sums) made hitches
+        of 100 to 440 ms (bench/h200-interact-refine)."""
+        if blend is None:
+            return
+        view.blend = blend
+        if blend.weight > 0.0 and view.shown == "raymarch":
+            view.shown, view.switched_at = "guided", view.halves.samples
+        if view.shown == "guided":   # (a weight may fall again: the blend follows)
+            view.weight = blend.weight
+        if blend.weight > 0.0:
+            self.denoise.adopt(view.method, view.halves, self.restarts)
 
     @staticmethod
     def _note_shown(view: RefineView) -> None:
@@ -752,6 +829,7 @@ class RenderSession:
     def release(self) -> None:
         for name in list(self.views):
             self._drop(name)
-        self.denoise.release()
+        self.denoise.close()
+        self.parts.release()
         self.renderer.release()
 

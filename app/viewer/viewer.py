@@ -70,6 +70,7 @@ class Viewer:
         self.device = device
         # lab: LabOptions for tests (app/rendering/lab_options.py); the launch never sets it
         self.session = RenderSession(ctx, state.scene, volume, settings=settings, lab=lab)
+        self.session.bake_fills_frame = True   # a load's bake ends sooner (session._bake_budget)
         state.show_channels(self.session.volume.channel_count)
         self.widgets = WidgetRects()
         self.error_meter = ErrorMeter()
@@ -517,10 +518,12 @@ class Viewer:
         self.ctx.screen.use()
         self.ctx.viewport = (0, 0, *self.framebuffer_size)
         self.ctx.clear(*BACKGROUND, 1.0, depth=1.0)
+        t = time.perf_counter()
         self.timer.start()
         self._draw_picture()
         self.timer.stop()
         times.display_ms = self.timer.elapsed_ms
+        self.session.parts.add("display", 1e3 * (time.perf_counter() - t), times.display_ms)
         self.session.last = times
         self.session.record_frame(times)
         error = self.ctx.error
@@ -694,6 +697,7 @@ class Viewer:
             "probe_bytes": grid.gpu_bytes if grid is not None else 0,
             "bake_ms": session.bake_ms, "frame_ms": session.last.total_ms,
             "clock": session.pacer.clock, "frame_wall_ms": session.pacer.frame_ms,
+            "frame_parts": {k: list(v) for k, v in session.parts.last.items()},
             "rel_rmse": self.error_meter.value if s.display == "error" else None,
             "probe_pixels": self.probe_pixels() if s.probe_view != "off" else [],
             "probes_drawn": self.probes_drawn(),

@@ -124,13 +124,15 @@ class ViewerWindow:
         self._update_sizes()
         v.apply_input()
         v.render_frame()
-        imgui.backends.opengl3_new_frame()
-        imgui.backends.glfw_new_frame()
-        imgui.new_frame()
-        v.build_ui()
-        imgui.render()
-        self.ctx.screen.use()
-        imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
+        parts = v.session.parts   # the frame's trace (app/viewer/frame_parts.py)
+        with parts.part("imgui"):
+            imgui.backends.opengl3_new_frame()
+            imgui.backends.glfw_new_frame()
+            imgui.new_frame()
+            v.build_ui()
+            imgui.render()
+            self.ctx.screen.use()
+            imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
         if v.pending_screenshot:
             from radiance_probes.frontend.common import save_or_rescue
             path, v.pending_screenshot = v.pending_screenshot, None
@@ -140,7 +142,8 @@ class ViewerWindow:
                 v.state.error(error)
             else:
                 v.state.note(f"saved a screenshot to {saved}")
-        glfw.swap_buffers(self.window)
+        with parts.part("swap", gpu=False):
+            glfw.swap_buffers(self.window)
 
     def read_pixels(self) -> np.ndarray:
         """The back buffer as drawn so far, (H, W, 3) uint8, row 0 at the top. (glReadPixels

@@ -25,6 +25,7 @@ the host path.
 """
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -246,6 +247,8 @@ class Denoiser:
         self._oidn = None
         self._device = None
         self._filters: dict = {}           # (width, height, guides) -> (filter, buffers)
+        # one caller at a time: the viewer filters on a thread of its own (filter_worker.py)
+        self.lock = threading.RLock()
 
     # ---- the library and its device ------------------------------------------------------------
     def _load(self) -> bool:
@@ -349,6 +352,10 @@ class Denoiser:
             b.release()
 
     def staging(self, width: int, height: int, guides: tuple[str, ...] = ()) -> np.ndarray | None:
+        with self.lock:
+            return self._staging(width, height, guides)
+
+    def _staging(self, width: int, height: int, guides: tuple[str, ...] = ()) -> np.ndarray | None:
         """The colour's RGBA float32 (height, width, 4) in the filter's own memory, for a caller
         that reads GL straight into it (texture.read_into) and then passes it as `color`: no copy.
         None where the filter cannot run."""
@@ -362,6 +369,10 @@ class Denoiser:
             return None
 
     def warm(self, width: int, height: int, guides: tuple[str, ...] = ()) -> float:
+        with self.lock:
+            return self._warm(width, height, guides)
+
+    def _warm(self, width: int, height: int, guides: tuple[str, ...] = ()) -> float:
         """Makes the filter for this size and guides and runs it once on a black image, so that
         the next call costs what every later one does (the weights' load and the device's first
         run, about 0.1 s on an H200, happen here). Wall ms taken; 0 where the filter cannot
@@ -383,7 +394,11 @@ class Denoiser:
             return 0.0
         return 1e3 * (time.perf_counter() - t0)
 
-    def __call__(self, color: np.ndarray, albedo: np.ndarray | None = None,
+    def __call__(self, *args, **kwargs) -> "Denoised":
+        with self.lock:
+            return self._call(*args, **kwargs)
+
+    def _call(self, color: np.ndarray, albedo: np.ndarray | None = None,
                  normal: np.ndarray | None = None, copy: bool = True,
                  signed: bool = False, keep_means: bool = True, check_output: bool = True,
                  color_finite: bool = False) -> Denoised:

@@ -248,6 +248,10 @@ class HalfBuffers:
         self._judge = compute_program(ctx, "refine_halves.comp", {"STAGE": 3})
         self.judge_sums = ctx.buffer(reserve=16)
         self.reads = 0            # read-backs since the last reset (a test counts them)
+        self.reduced_counts: tuple[int, int] | None = None   # the counts the last sums are of
+        # half B as it was at a judgement's check (snapshot_b), judged against on a later frame
+        self._b_snapshot: list[Accumulation] | None = None
+        self._b_frames: list[moderngl.Framebuffer] = []
 
     @property
     def counts(self) -> tuple[int, int]:
@@ -263,6 +267,7 @@ class HalfBuffers:
             half.level0.reset()
         self.combined.reset()
         self.reads = 0   # counted per restart, as the session's frames are
+        self.reduced_counts = None
 
     @property
     def half_a(self) -> Accumulation:
@@ -321,6 +326,37 @@ class HalfBuffers:
             self.half_a.samples = n_a
         if reduce:
             self._reduce_partials(self.sums)
+            self.reduced_counts = (n_a, n_b)
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+
+    def snapshot_b(self) -> None:
+        """Half B's two levels copied on the GPU as they are now: a judgement begun at this
+        check judges against them (dispatch_judge(from_snapshot=True)) on whichever later frame
+        its filtered half A comes back, while half B grows on."""
+        if self._b_snapshot is None:
+            self._b_snapshot = [Accumulation(self.ctx, self.width, self.height) for _ in range(2)]
+            self._b_frames = [self.ctx.framebuffer(color_attachments=[a.texture])
+                              for a in self._b_snapshot]
+            self._b_sources = [self.ctx.framebuffer(color_attachments=[acc.texture])
+                               for acc in (self.halves[1].residual, self.halves[1].level0)]
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+        for target, source in zip(self._b_frames, self._b_sources):
+            self.ctx.copy_framebuffer(target, source)
+
+    def dispatch_judge(self, raymarched: Accumulation, from_snapshot: bool = False) -> None:
+        """STAGE 3 and its reduction into `judge_sums` (read it with a read-back of that buffer):
+        `denoised_a` and the raymarcher's image against half B (`from_snapshot`: half B as
+        snapshot_b copied it)."""
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+        b = self._b_snapshot if from_snapshot else (self.halves[1].residual,
+                                                    self.halves[1].level0)
+        b[0].texture.bind_to_image(2, read=True, write=False)
+        b[1].texture.bind_to_image(3, read=True, write=False)
+        raymarched.texture.bind_to_image(4, read=True, write=False)
+        self.denoised_a.bind_to_image(6, read=True, write=False)
+        self.partials.bind_to_storage_buffer(0)
+        self._judge.run(*self.groups)
+        self._reduce_partials(self.judge_sums)
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
 
     def _reduce_partials(self, into: moderngl.Buffer) -> None:
@@ -343,21 +379,21 @@ class HalfBuffers:
     def judge(self, raymarched: Accumulation) -> tuple[float, float, float, int]:
         """judge_sums on the GPU: `denoised_a` (half A filtered) and the raymarcher's image
         against half B, reduced to 16 bytes and read back."""
-        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
-        self.halves[1].residual.texture.bind_to_image(2, read=True, write=False)
-        self.halves[1].level0.texture.bind_to_image(3, read=True, write=False)
-        raymarched.texture.bind_to_image(4, read=True, write=False)
-        self.denoised_a.bind_to_image(6, read=True, write=False)
-        self.partials.bind_to_storage_buffer(0)
-        self._judge.run(*self.groups)
-        self._reduce_partials(self.judge_sums)
-        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+        self.dispatch_judge(raymarched)
         return self._read(self.judge_sums)
+
+    def sums_of(self, values) -> tuple[float, float, float, int]:
+        """A reduction's sums from its 16 bytes read back on a later frame (a read-back of
+        `sums` or `judge_sums`), with the count of values."""
+        self.reads += 1
+        x, y, z = (float(v) for v in list(values)[:3])
+        return x, y, z, 3 * self.width * self.height
 
     def estimate_from(self, sums: tuple[float, float, float, int],
                       with_raymarch: bool) -> RefineEstimate:
-        """The halves' error estimate from their reduction's sums (read_sums)."""
-        n_a, n_b = self.counts
+        """The halves' error estimate from their reduction's sums (read_sums), at the counts the
+        sums were reduced at."""
+        n_a, n_b = self.reduced_counts or self.counts
         return error_from_sums(sums, n_a, n_b, n_a + n_b, with_raymarch)
 
     def release(self) -> None:
@@ -365,7 +401,9 @@ class HalfBuffers:
             half.release()
         self.combined.release()
         for obj in (self._half_a, self._denoised_a, self._judge, self.partials, self.sums,
-                    self.judge_sums, self._combine, self._reduce, self._denoised_a_frame):
+                    self.judge_sums, self._combine, self._reduce, self._denoised_a_frame,
+                    *(self._b_snapshot or []), *self._b_frames,
+                    *getattr(self, "_b_sources", [])):
             if obj is not None:
                 obj.release()
 

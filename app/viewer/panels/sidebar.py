@@ -525,6 +525,13 @@ def stats_section(v) -> None:
         implot.end_plot()
     imgui.text_disabled(f"wall-clock time per frame: {session.pacer.reason}; the frames are paced "
                         "by it" if wall else "GPU time per frame from timestamp queries")
+    parts = session.parts.last   # the frame before, part by part (app/viewer/frame_parts.py)
+    if parts:
+        imgui.text_wrapped("last frame, GPU / wall ms: " + ", ".join(
+            f"{name} {'-' if gpu is None else f'{gpu:.1f}'} / {w:.1f}"
+            for name, (gpu, w) in sorted(parts.items(), key=lambda kv: -kv[1][1])))
+    if t.filter_ms:
+        imgui.text(f"denoise filter {t.filter_ms:.0f} ms on its own thread")
     if session.probe_grid is not None:
         imgui.text(f"bake {session.bake_ms:.1f} ms {'wall clock' if wall else 'GPU'}, probes "
                    f"{session.probe_grid.gpu_bytes / 2**20:.2f} MiB")

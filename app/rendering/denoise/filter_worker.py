@@ -1,0 +1,172 @@
+"""The denoiser off the frame: Open Image Denoise runs on a thread of its own over host arrays, so
+that no frame of the viewer waits for it (app/viewer/denoise_view.py, app/viewer/session.py's
+refine judgement). The GL context stays on the main thread: a frame hands in an image already
+read back (app/gl/fence.py: a pixel buffer and a fence, collected on a later frame) and takes the
+filtered image, as float32 RGBA ready to upload, on whichever later frame finds it done.
+
+One job runs at a time (the filter is the device's, one OIDN filter per size and guides); a job
+waiting for its turn is replaced by a newer one of the same key (the newest image is the one worth
+filtering), and a finished result is kept until its key's owner takes it. The filter is the host
+path (Denoiser with keep_means and check_output: the tile means kept and the output checked on this
+thread); a "probes" guide comes as the raymarched radiance and is scaled into an albedo here
+(radiance_as_albedo). OIDN's own first use (its device and weights: about 4 s on the H200 machine
+the first time) happens in `warm`, on the thread, at the viewer's start."""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from radiance_probes.rendering.denoise.filter import radiance_as_albedo
+
+
+@dataclass
+class FilterJob:
+    """An image to filter: `colour` (H, W, 3 or 4 float32, host), guides as host arrays (`albedo`
+    in [0, 1] and `normal`; or `probe_radiance`, the raymarched image over the probes, made the
+    albedo guide on the thread), `signed` (a residual that may dip below 0), and `tag`: what its
+    owner wants back with the result (the samples, the generation it was read at)."""
+    colour: np.ndarray
+    albedo: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    probe_radiance: np.ndarray | None = None
+    signed: bool = False
+    tag: object = None
+
+
+@dataclass
+class FilterResult:
+    """A finished job: `rgba` (H, W, 4 float32, alpha 1) or None where the filter could not run
+    (`note` says why), its tag, and wall ms on the thread (`ms`: guide, filter, copy)."""
+    rgba: np.ndarray | None
+    tag: object
+    note: str | None = None
+    device: str | None = None
+    ms: dict = field(default_factory=dict)
+    finished_at: float = 0.0
+
+
+class FilterWorker:
+    """A daemon thread running `denoiser` (a denoise.Denoiser or a stand-in with its call) on
+    submitted jobs. All of its methods return at once (`close` joins the thread)."""
+
+    def __init__(self, denoiser):
+        self.denoiser = denoiser
+        self._lock = threading.Condition()
+        self._queue: dict[str, FilterJob] = {}     # key -> the newest job not yet started
+        self._running: str | None = None
+        self._results: dict[str, FilterResult] = {}
+        self._warm: list[tuple] = []
+        self._stop = False
+        self._held = 0                              # hold() depth: no job starts meanwhile
+        self.runs = 0                               # jobs filtered (tests)
+        self._thread = threading.Thread(target=self._loop, name="denoise-filter", daemon=True)
+        self._thread.start()
+
+    # ---- the main thread -----------------------------------------------------------------------
+    def submit(self, key: str, job: FilterJob) -> None:
+        """Queues `job` under `key` (one of the same key still waiting is dropped)."""
+        with self._lock:
+            self._queue[key] = job
+            self._lock.notify()
+
+    def busy(self, key: str) -> bool:
+        """A job of `key` waits or runs (its result not yet taken counts too)."""
+        with self._lock:
+            return key in self._queue or self._running == key or key in self._results
+
+    def take(self, key: str) -> FilterResult | None:
+        """The finished result of `key`'s last job, once (None: none finished)."""
+        with self._lock:
+            return self._results.pop(key, None)
+
+    def drop(self, key: str) -> None:
+        """Forgets `key`'s waiting job and finished result (a running one finishes unseen)."""
+        with self._lock:
+            self._queue.pop(key, None)
+            self._results.pop(key, None)
+            if self._running == key:
+                self._discard = key
+
+    def warm(self, width: int, height: int, guides: tuple[str, ...] = ()) -> None:
+        """Makes the filter for this size and guides on the thread (Denoiser.warm), before any
+        job needs it."""
+        with self._lock:
+            self._warm.append((width, height, tuple(guides)))
+            self._lock.notify()
+
+    def hold(self, on: bool) -> None:
+        """While held, no job starts (one running finishes): a measurement outside the frames'
+        time (the interact bench's error) gives the filter no time of its own."""
+        with self._lock:
+            self._held = max(self._held + (1 if on else -1), 0)
+            self._lock.notify()
+
+    def idle(self) -> bool:
+        with self._lock:
+            return (not self._queue and self._running is None and not self._warm
+                    and not self._results)
+
+    def close(self) -> None:
+        with self._lock:
+            self._stop = True
+            self._queue.clear()
+            self._lock.notify()
+        self._thread.join(timeout=30.0)
+
+    # ---- the thread ----------------------------------------------------------------------------
+    _discard: str | None = None
+
+    def _loop(self) -> None:
+        while True:
+            with self._lock:
+                while not self._stop and (self._held or not (self._queue or self._warm)):
+                    self._lock.wait()
+                if self._stop:
+                    return
+                if self._warm:
+                    warm, key, job = self._warm.pop(0), None, None
+                else:
+                    warm = None
+                    key = next(iter(self._queue))
+                    job = self._queue.pop(key)
+                    self._running, self._discard = key, None
+            if warm is not None:
+                warmer = getattr(self.denoiser, "warm", None)
+                if warmer is not None:
+                    try:
+                        warmer(*warm)
+                    except Exception:   # a failing device says so at its first job
+                        pass
+                continue
+            result = self._filter(job)
+            with self._lock:
+                if self._discard != key:
+                    self._results[key] = result
+                self._running = self._discard = None
+                self.runs += 1
+
+    def _filter(self, job: FilterJob) -> FilterResult:
+        t0 = time.perf_counter()
+        try:
+            albedo = job.albedo
+            if job.probe_radiance is not None:
+                albedo = radiance_as_albedo(job.probe_radiance[..., :3])
+            t1 = time.perf_counter()
+            d = self.denoiser(job.colour, albedo, job.normal, copy=False, signed=job.signed)
+            t2 = time.perf_counter()
+            if not d.denoised:
+                return FilterResult(None, job.tag, d.note, None, finished_at=time.perf_counter())
+            h, w = d.image.shape[:2]
+            rgba = np.empty((h, w, 4), np.float32)
+            rgba[..., :3] = d.image
+            rgba[..., 3] = 1.0
+        except Exception as exc:   # the denoiser's own failures come back as notes
+            return FilterResult(None, job.tag, f"the denoiser failed ({exc}). Showing the image "
+                                "as rendered.", finished_at=time.perf_counter())
+        t3 = time.perf_counter()
+        return FilterResult(rgba, job.tag, None, d.device,
+                            {"guide_ms": 1e3 * (t1 - t0), "filter_ms": 1e3 * (t2 - t1),
+                             "copy_ms": 1e3 * (t3 - t2)}, finished_at=time.perf_counter())
