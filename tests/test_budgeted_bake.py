@@ -263,7 +263,7 @@ def test_the_interact_replay_runs_end_to_end(ctx, tmp_path):
 
 
 def test_the_viewer_session_bakes_in_slices_and_shows_probes_after_each(ctx):
-    from radiance_probes.viewer.session import RenderSession
+    from radiance_probes.viewer.frame.session import RenderSession
     s = RenderSession(ctx, parse_scene(SCENE))
     try:
         s.resize(24, 16)
@@ -302,7 +302,7 @@ def test_probe_methods_show_the_raymarcher_while_baking_then_their_own(ctx):
     to the image of a finished bake. The frame's budget left after the slice sets the samples.
     Paced by GPU time, as on a GPU (paced by the wall clock, as llvmpipe is, a sample may be cut
     into bands of rows: tests/test_sample_bands.py)."""
-    from radiance_probes.viewer.session import RenderSession
+    from radiance_probes.viewer.frame.session import RenderSession
     s = RenderSession(ctx, parse_scene(SCENE), clock="gpu")
     try:
         s.resize(24, 16)
@@ -344,7 +344,7 @@ def test_samples_per_frame_follow_the_recent_dispatches_cost_per_sample():
     """As many samples as fit in the budget at the median GPU ms per sample of the last
     RECENT_DISPATCHES dispatches: a dispatch that paid for a shader compile does not set the pace,
     and a change of cost (an edit) takes over within a few frames."""
-    from radiance_probes.viewer.session import RECENT_DISPATCHES, MethodView, RenderSession
+    from radiance_probes.viewer.frame.session import RECENT_DISPATCHES, MethodView, RenderSession
     view = MethodView("probes")
     per_frame = RenderSession.samples_per_frame
     assert per_frame(view, 6.0) == 1                                   # nothing timed yet

@@ -257,8 +257,8 @@ def test_the_viewers_denoise_switch(ctx, monkeypatch):
     shows a filtered image, made again when its samples double (not every frame), dropped at a
     restart until the next; refine's guided image too. A failing filter switches it off with
     the note and the raw image shows."""
-    from radiance_probes.viewer import denoise_view
-    from radiance_probes.viewer.session import RenderSession
+    from radiance_probes.viewer.frame import denoise_view
+    from radiance_probes.viewer.frame.session import RenderSession
     monkeypatch.setattr(denoise_view, "INTERVAL_S", 1e9)   # the doubling rule alone
     s = RenderSession(ctx, parse_scene({
         "volume": {"builtin": "cloud", "size": [12, 12, 12]}, "density_scale": 30.0,

@@ -1,7 +1,7 @@
 """A viewer frame never waits (issue 56): the filter on its own thread (app/rendering/denoise/filter_worker.py),
 read-backs through pixel buffers and fences collected on a later frame (app/gl/fence.py), refine's
-checks and judgements over frames (app/viewer/refine_judgement.py), and every part of a frame
-named in its trace (app/viewer/frame_parts.py). With a stand-in filter that takes 500 ms, every
+checks and judgements over frames (app/viewer/frame/refine_judgement.py), and every part of a frame
+named in its trace (app/viewer/frame/frame_parts.py). With a stand-in filter that takes 500 ms, every
 frame returns within its budget and the image shown is the newest finished one."""
 from __future__ import annotations
 
@@ -69,8 +69,8 @@ def _other_ms(wall: float, parts: dict) -> float:
 def _session(ctx, monkeypatch, stand_in, methods, max_samples, want_probes):
     """A session of `methods` with the stand-in behind its Denoise switch, switched on once a few
     frames have compiled the shaders (a compile is not the filter's)."""
-    from radiance_probes.viewer import denoise_view
-    from radiance_probes.viewer.session import RenderSession
+    from radiance_probes.viewer.frame import denoise_view
+    from radiance_probes.viewer.frame.session import RenderSession
     monkeypatch.setattr(denoise_view, "shared_denoiser", lambda: stand_in)
     monkeypatch.setattr(denoise_view, "INTERVAL_S", 0.0)   # a new image whenever samples grow
     s = RenderSession(ctx, parse_scene(SCENE), clock="wall")
@@ -149,7 +149,7 @@ def test_frames_never_wait_for_a_slow_filter_and_show_its_newest_image(ctx, monk
     budget (WALL_FRAME_MS; beyond its bake and samples, OTHER_LIMIT_MS) while the filter runs; filtered images land on later frames, each the
     newest finished (its run's number), and one of an accumulation that has restarted since is
     never shown."""
-    from radiance_probes.viewer.pacing import WALL_FRAME_MS
+    from radiance_probes.viewer.frame.pacing import WALL_FRAME_MS
     stand_in = SlowFilter()
     s = _session(ctx, monkeypatch, stand_in, ["pt"], 1 << 12, False)
     try:
@@ -192,7 +192,7 @@ def test_refine_judges_over_frames_and_the_trace_names_each_part(ctx, monkeypatc
     frames (no frame near the filter's time), a judgement lands, and the frames' traces name
     the bake, the samples, the combine, the judgement, the read-backs, the uploads and the
     blend, each [GPU ms or None, wall ms]."""
-    from radiance_probes.viewer.pacing import WALL_FRAME_MS
+    from radiance_probes.viewer.frame.pacing import WALL_FRAME_MS
     stand_in = SlowFilter()
     s = _session(ctx, monkeypatch, stand_in, ["refine"], 1 << 14, True)
     try:
@@ -223,7 +223,7 @@ def test_a_loads_bake_takes_the_frame_where_every_view_restarts_after_it(ctx, fi
     """bake_fills_frame (the viewer's): while every view reads the probes (each restarts after
     every slice, its samples past the first thrown away), the bake's slice gets the frame's
     budget less one preview sample; without it, bake_budget_ms."""
-    from radiance_probes.viewer.session import RenderSession
+    from radiance_probes.viewer.frame.session import RenderSession
     s = RenderSession(ctx, parse_scene(SCENE), clock="gpu")
     try:
         s.resize(24, 16)

@@ -247,7 +247,7 @@ def test_the_viewer_shows_the_gl_restored_image(ctx):
     pytest.importorskip("pyoidn", reason="the denoiser's library (pyoidn) is a dependency")
     from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser
     from radiance_probes.io.scene_file import parse_scene
-    from radiance_probes.viewer.session import RenderSession
+    from radiance_probes.viewer.frame.session import RenderSession
     s = RenderSession(ctx, parse_scene({
         "volume": {"builtin": "cloud", "size": [12, 12, 12]}, "density_scale": 30.0,
         "albedo": 0.9, "camera": {"width": 40, "height": 35}}))

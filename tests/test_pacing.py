@@ -1,4 +1,4 @@
-"""Frame pacing that trusts only what it can (app/viewer/pacing.py, app/viewer/session.py): a
+"""Frame pacing that trusts only what it can (app/viewer/frame/pacing.py, app/viewer/frame/session.py): a
 software renderer's frames are paced by the wall clock from the start, a GPU's by its timestamps
 until they stay far below the wall time of its frames, and then by the wall clock; a frame's work
 is what the frame's wall-time target leaves after the rest of the frame."""
@@ -8,9 +8,9 @@ import time
 
 from radiance_probes.gl.timer import WallTimer
 from radiance_probes.io.scene_file import parse_scene
-from radiance_probes.viewer.pacing import (DISTRUST_FRAMES, WALL_FRAME_MS, WALL_MIN_WORK_MS,
+from radiance_probes.viewer.frame.pacing import (DISTRUST_FRAMES, WALL_FRAME_MS, WALL_MIN_WORK_MS,
                                            FramePacer)
-from radiance_probes.viewer.session import MAX_SAMPLES_PER_FRAME, RenderSession
+from radiance_probes.viewer.frame.session import MAX_SAMPLES_PER_FRAME, RenderSession
 
 SCENE = {"volume": {"builtin": "cloud", "size": [16, 16, 16]}, "density_scale": 20.0,
          "camera": {"width": 32, "height": 32}}

@@ -1,6 +1,6 @@
 """The viewer's `refine` mode: the half-buffer error estimate (NumPy, on synthetic noise of known
 variance; and the GPU reduction against it), and the session showing the raymarcher at once after
-an edit and `guided` later (app/rendering/refine/refine.py, app/viewer/session.py)."""
+an edit and `guided` later (app/rendering/refine/refine.py, app/viewer/frame/session.py)."""
 from __future__ import annotations
 
 import math
@@ -151,7 +151,7 @@ def _frames_until_guided(s, limit=400) -> int:
 
 
 def test_refine_shows_the_raymarcher_at_once_then_guided_after_every_edit(ctx):
-    from radiance_probes.viewer.session import RefineView, RenderSession
+    from radiance_probes.viewer.frame.session import RefineView, RenderSession
     s = RenderSession(ctx, parse_scene(SCENE))
     try:
         s.resize(24, 16)
@@ -286,7 +286,7 @@ def test_blend_weight_snaps_to_either_image_near_the_ends():
 
 
 def test_refine_blends_by_its_judgement_where_the_denoise_switch_is_on(ctx, monkeypatch):
-    """With the Denoise switch on, checks judge the blend (app/viewer/refine_judgement.py: half A
+    """With the Denoise switch on, checks judge the blend (app/viewer/frame/refine_judgement.py: half A
     read back and filtered on the filter's thread, judged with the raymarcher's image against
     half B of its check, over frames) once per 4x growth of the samples, and guided takes over
     from the first weight above 0, blended with the raymarcher's image: the display is then
@@ -296,9 +296,9 @@ def test_refine_blends_by_its_judgement_where_the_denoise_switch_is_on(ctx, monk
     import time
 
     from radiance_probes.rendering.refine.refine import RefineBlend, RefineEstimate
-    from radiance_probes.viewer import refine_judgement
-    from radiance_probes.viewer import session as session_module
-    from radiance_probes.viewer.session import REFINE_MIN_HALF_SAMPLES, RenderSession
+    from radiance_probes.viewer.frame import refine_judgement
+    from radiance_probes.viewer.frame import session as session_module
+    from radiance_probes.viewer.frame.session import REFINE_MIN_HALF_SAMPLES, RenderSession
     monkeypatch.setattr(session_module.HalfBuffers, "estimate_from",
                         lambda self, sums, with_ray: RefineEstimate(1.0, 0.5, self.samples))
     weights, judged = [0.0], []

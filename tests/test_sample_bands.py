@@ -311,7 +311,7 @@ def test_the_session_paced_by_the_wall_clock_splits_samples_and_shows_whole_imag
     from dataclasses import replace
 
     from radiance_probes.io.scene_file import parse_scene
-    from radiance_probes.viewer.session import RenderSession
+    from radiance_probes.viewer.frame.session import RenderSession
     s = RenderSession(ctx, parse_scene(SCENE), seed=7)
     try:
         assert s.pacer.wall                               # llvmpipe

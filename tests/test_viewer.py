@@ -784,7 +784,7 @@ def test_refine_shows_the_raymarcher_at_once_after_an_edit_then_guided(display, 
         assert 0 < est["guided"] < 0.5 and st["reads"] < st["frames"]
         assert "guided 128 spp, est. error" in d["labels"]["refine"]
         assert d["samples"] == {"refine": 128}
-        # the frame before the dump, named part by part (app/viewer/frame_parts.py)
+        # the frame before the dump, named part by part (app/viewer/frame/frame_parts.py)
         assert {"display", "imgui", "swap"} <= set(d["frame_parts"])
         assert all(wall >= 0.0 for _, wall in d["frame_parts"].values())
     assert orbit["restarts"] > first["restarts"] and orbit["bakes_started"] == first["bakes_started"]

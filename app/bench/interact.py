@@ -1,5 +1,5 @@
 """`--preset interact`: a scripted viewer session replayed through the viewer's own loop
-(app/viewer/session.py RenderSession, without a window), per scene, image size and probe setting:
+(app/viewer/frame/session.py RenderSession, without a window), per scene, image size and probe setting:
 
     load; orbit the camera through N frames; drag a transfer-function opacity point; rotate the sun
     by 30 degrees; change the density scale; change the albedo; switch probes to the raymarcher.
@@ -125,7 +125,7 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
                         if hasattr(view, "blending") else []),
                       round(times.denoise_ms, 2)])
         # the filter's ms on its thread for what landed in the frame (off the frame), and each
-        # part's [GPU ms or None, wall ms] (app/viewer/frame_parts.py; GPU ms filled in at the
+        # part's [GPU ms or None, wall ms] (app/viewer/frame/frame_parts.py; GPU ms filled in at the
         # next frame)
         filter_ms.append(round(times.filter_ms, 2))
         parts.append(times.parts)
@@ -207,7 +207,7 @@ def dispatch_tail(r, method: str, k: int, seed: int = 99) -> dict:
 def interact_scene(renderer, name: str, config, results, out, device: str, reference_of) -> None:
     """`reference_of(renderer, key, config)`: the runner's cached path-traced reference of the
     renderer's current scene under `key` (refs/KEY.npy, reused from --ref-dir)."""
-    from radiance_probes.viewer.session import RenderSession
+    from radiance_probes.viewer.frame.session import RenderSession
     r = renderer
     start = r.scene
     session = RenderSession(r.ctx, start, renderer=r, clock="gpu")   # GPU and wall times apart

@@ -135,7 +135,7 @@ def longest_frames_section(recs: list[dict]) -> list[str]:
         return []
     lines = ["", "### The longest frame of each event, by part", "",
              "Each event's longest frame on the wall clock and its four largest parts, GPU ms / "
-             "wall ms (app/viewer/frame_parts.py: bake, samples, guide, readback, combine, "
+             "wall ms (app/viewer/frame/frame_parts.py: bake, samples, guide, readback, combine, "
              "judgement, upload, blend; no window here, so no display, imgui or swap); the "
              "filter's ms on its own thread for the results that landed in that frame (off the "
              "frame); the error curve's largest gap on the wall clock; the error's measurements "

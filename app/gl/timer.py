@@ -218,7 +218,7 @@ class SpanClock:
 class WallTimer(Timer):
     """The wall clock from start() to the end of the work between start() and stop() (a glFinish
     at each end, so that work queued before is not counted and work queued between is): the
-    viewer's timer where GPU timestamps cannot be believed (app/viewer/pacing.py). Holds the GPU
+    viewer's timer where GPU timestamps cannot be believed (app/viewer/frame/pacing.py). Holds the GPU
     timer it replaces, released with it."""
 
     def __init__(self, ctx, replaces=None):

@@ -124,7 +124,7 @@ class ViewerWindow:
         self._update_sizes()
         v.apply_input()
         v.render_frame()
-        parts = v.session.parts   # the frame's trace (app/viewer/frame_parts.py)
+        parts = v.session.parts   # the frame's trace (app/viewer/frame/frame_parts.py)
         with parts.part("imgui"):
             imgui.backends.opengl3_new_frame()
             imgui.backends.glfw_new_frame()

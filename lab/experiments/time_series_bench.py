@@ -7,7 +7,7 @@ with warm probes; the error after a step change stated against cold bakes.
 The series: the built-in cloud at SIZE^3 as uint8, moved one voxel along x a step (np.roll; the
 cloud is zero at the box's faces, so it slides through without a seam), written to OUT_DIR as
 series.npy [t, z, y, x] and shown through a scene with volume.axes "tzyx". Every frame runs the
-viewer's loop headless (app/viewer/session.py RenderSession.step with its GPU budgets: a bake
+viewer's loop headless (app/viewer/frame/session.py RenderSession.step with its GPU budgets: a bake
 slice, then raymarched samples), as the viewer's Time panel plays it.
 
 1. Playback: after an untimed pass over every step (each step normalised, uploaded and kept,
@@ -42,7 +42,7 @@ from radiance_probes.gl.context import create_headless_context, describe, is_sof
 from radiance_probes.rendering.methods.accumulation import Accumulation  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer  # noqa: E402
 from radiance_probes.io.scene_file import parse_scene  # noqa: E402
-from radiance_probes.viewer.session import RenderSession  # noqa: E402
+from radiance_probes.viewer.frame.session import RenderSession  # noqa: E402
 from radiance_probes.io.builtin_volumes import builtin_cloud  # noqa: E402
 
 

@@ -1,4 +1,4 @@
-"""GPU time per frame of the viewer's loop (app/viewer/session.py), which the interact benchmark
+"""GPU time per frame of the viewer's loop (app/viewer/frame/session.py), which the interact benchmark
 replays with the same numbers, per device class ("gpu", "software": llvmpipe)."""
 
 # A frame's bake slice and samples together: a 60 Hz frame less about 2.7 ms for the display pass

@@ -1,5 +1,5 @@
 """The denoiser off the frame: Open Image Denoise runs on a thread of its own over host arrays, so
-that no frame of the viewer waits for it (app/viewer/denoise_view.py, app/viewer/session.py's
+that no frame of the viewer waits for it (app/viewer/frame/denoise_view.py, app/viewer/frame/session.py's
 refine judgement). The GL context stays on the main thread: a frame hands in an image already
 read back (app/gl/fence.py: a pixel buffer and a fence, collected on a later frame) and takes the
 filtered image, as float32 RGBA ready to upload, on whichever later frame finds it done.

@@ -1,4 +1,4 @@
-"""The viewer's `refine` mode (app/viewer/session.py): `guided` accumulated as two independent
+"""The viewer's `refine` mode (app/viewer/frame/session.py): `guided` accumulated as two independent
 halves, their combined mean shown, and its error estimated from the two halves alone.
 
 The estimator (NumPy: `half_buffer_error`; GPU: glsl/refine_halves.comp, which gives the same
@@ -21,7 +21,7 @@ sqrt(mean((a - b)^2)) / (2 sqrt(mean(((a + b) / 2)^2))).
 The raymarcher's image r (biased, and independent of the halves) is judged against the same
 unbiased m: E[mean((r - m)^2)] = mean((r - t)^2) + mean(Var(m)), so its relative error is
 sqrt((mean((r - m)^2) - N^2) / T^2). `refine` shows the halves' mean once its estimated error is
-below that (app/viewer/session.py).
+below that (app/viewer/frame/session.py).
 
 The sums are reduced on the GPU (a workgroup's in shared memory, then one workgroup over the
 partials) and 16 bytes read back, only at the checks the session schedules (REFINE_CHECK_FRAMES):
@@ -197,7 +197,7 @@ def judged_blend(renderer, halves: "HalfBuffers", raymarched: Accumulation, came
     GPU), judged with the raymarcher's image against half B (STAGE 3: 16 bytes more), and
     the blend of the module's docstring. `sums`: the check's own, where its combine
     (reduce and write_half_a, with `raymarched`) has just run, so neither is done again. None
-    where the filter cannot run. The viewer (app/viewer/session.py) and a still image
+    where the filter cannot run. The viewer (app/viewer/frame/session.py) and a still image
     (render_refine) both judge through this."""
     n_a, n_b = halves.counts
     if min(n_a, n_b) <= 0:

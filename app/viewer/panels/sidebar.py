@@ -525,7 +525,7 @@ def stats_section(v) -> None:
         implot.end_plot()
     imgui.text_disabled(f"wall-clock time per frame: {session.pacer.reason}; the frames are paced "
                         "by it" if wall else "GPU time per frame from timestamp queries")
-    parts = session.parts.last   # the frame before, part by part (app/viewer/frame_parts.py)
+    parts = session.parts.last   # the frame before, part by part (app/viewer/frame/frame_parts.py)
     if parts:
         imgui.text_wrapped("last frame, GPU / wall ms: " + ", ".join(
             f"{name} {'-' if gpu is None else f'{gpu:.1f}'} / {w:.1f}"

@@ -1,4 +1,4 @@
-"""refine's checks and judgements over frames (app/viewer/session.py): nothing in a frame waits
+"""refine's checks and judgements over frames (app/viewer/frame/session.py): nothing in a frame waits
 for the halves' sums, the filter or the judgement's sums (issue 56).
 
 A check (RefineCheck) is begun on the frame whose combine reduced the halves' sums: their 16

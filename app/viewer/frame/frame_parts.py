@@ -10,7 +10,7 @@ the frame's `filter_ms`, off the frame.
 Each part is a pair [GPU ms, wall ms]. GPU ms come from timestamp queries around the part, read
 at the start of the next frame (their results are in by then, so reading them waits for nothing
 the frame did not already hand the GPU); None where no GPU time was taken (the host copies) or
-the part's timestamps cannot be believed (the wall-clock pacing, app/viewer/pacing.py)."""
+the part's timestamps cannot be believed (the wall-clock pacing, app/viewer/frame/pacing.py)."""
 from __future__ import annotations
 
 import time

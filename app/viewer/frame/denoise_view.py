@@ -32,7 +32,7 @@ from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoi
 from radiance_probes.rendering.denoise.filter_worker import FilterJob, FilterWorker
 from radiance_probes.rendering.denoise.kept_means import KeptMeans
 from radiance_probes.rendering.refine.refine import BlendPass
-from radiance_probes.viewer.frame_parts import FrameParts
+from radiance_probes.viewer.frame.frame_parts import FrameParts
 
 INTERVAL_S = 0.5
 # Bytes a frame copies between the host and GL for the switch and refine's judgements (fence.py

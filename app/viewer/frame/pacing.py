@@ -1,4 +1,4 @@
-"""Which clock paces the viewer's frames (app/viewer/session.py), and the work a frame may take.
+"""Which clock paces the viewer's frames (app/viewer/frame/session.py), and the work a frame may take.
 
 GPU timestamps pace a frame where they can be believed: the frame's work gets FRAME_BUDGET_MS of
 GPU time. Where they cannot, the wall clock does. That is a software renderer from the start (in

@@ -13,7 +13,7 @@ A frame's GPU time is budgeted as a whole (FRAME_BUDGET_MS): the bake slice firs
 samples per shown method as the rest of the frame holds by their measured cost, at least one.
 Where GPU timestamps cannot be believed (a software renderer; a GPU whose timestamps stay far
 below the wall clock) the renderer's timer becomes the wall clock and a frame's work gets what
-WALL_FRAME_MS leaves after the rest of the frame (app/viewer/pacing.py).
+WALL_FRAME_MS leaves after the rest of the frame (app/viewer/frame/pacing.py).
 
 `refine` (RefineView) is two renderers in one view: after any edit the raymarcher's image shows
 at once; once the probes are current, `guided` samples accumulate beside it in two independent
@@ -45,10 +45,10 @@ from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.budgets.sample_bands import TileCosts, fill_frame, tile_grid
 from radiance_probes.io.scene_file import Scene
 from radiance_probes.io.volume import Volume
-from radiance_probes.viewer.denoise_view import ViewDenoise
-from radiance_probes.viewer.frame_parts import FrameParts
-from radiance_probes.viewer.pacing import FramePacer
-from radiance_probes.viewer.refine_judgement import RefineCheck, advance_check, begin_check
+from radiance_probes.viewer.frame.denoise_view import ViewDenoise
+from radiance_probes.viewer.frame.frame_parts import FrameParts
+from radiance_probes.viewer.frame.pacing import FramePacer
+from radiance_probes.viewer.frame.refine_judgement import RefineCheck, advance_check, begin_check
 
 FRAME_HISTORY = 240
 MAX_SAMPLES_PER_FRAME = 64
@@ -178,7 +178,7 @@ class FrameTimes:
     #                           checks and judgements (the filter itself runs on its own thread)
     filter_ms: float = 0.0    # the filter's ms on its thread for the results landed in the frame
     #                           (off the frame: not in total_ms)
-    parts: dict = None        # {part: [GPU ms or None, wall ms]} (app/viewer/frame_parts.py)
+    parts: dict = None        # {part: [GPU ms or None, wall ms]} (app/viewer/frame/frame_parts.py)
     clock: str = "gpu"        # what bake_ms and render_ms are: GPU time, or "wall" clock time
     frame_wall_ms: float | None = None   # the whole frame's wall time (its display and panels too)
 
@@ -223,7 +223,7 @@ class RenderSession:
         """`renderer`: one to drive instead of a new one (the interact benchmark's replay);
         `settings`: the new one's RenderSettings (None: the defaults); `lab`: its LabOptions
         (tests and the bench only; None: the product's); `clock`: "gpu" or "wall" to pace by that
-        clock always (None: by the device, app/viewer/pacing.py)."""
+        clock always (None: by the device, app/viewer/frame/pacing.py)."""
         self.ctx = ctx
         self.renderer = (renderer if renderer is not None else
                          Renderer(ctx, scene, volume, settings=settings, lab=lab))
