@@ -344,7 +344,8 @@ def test_samples_per_frame_follow_the_recent_dispatches_cost_per_sample():
     """As many samples as fit in the budget at the median GPU ms per sample of the last
     RECENT_DISPATCHES dispatches: a dispatch that paid for a shader compile does not set the pace,
     and a change of cost (an edit) takes over within a few frames."""
-    from radiance_probes.viewer.frame.session import RECENT_DISPATCHES, MethodView, RenderSession
+    from radiance_probes.viewer.frame.session import RECENT_DISPATCHES, RenderSession
+    from radiance_probes.viewer.frame.views import MethodView
     view = MethodView("probes")
     per_frame = RenderSession.samples_per_frame
     assert per_frame(view, 6.0) == 1                                   # nothing timed yet

@@ -151,7 +151,8 @@ def _frames_until_guided(s, limit=400) -> int:
 
 
 def test_refine_shows_the_raymarcher_at_once_then_guided_after_every_edit(ctx):
-    from radiance_probes.viewer.frame.session import RefineView, RenderSession
+    from radiance_probes.viewer.frame.views import RefineView
+    from radiance_probes.viewer.frame.session import RenderSession
     s = RenderSession(ctx, parse_scene(SCENE))
     try:
         s.resize(24, 16)

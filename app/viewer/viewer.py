@@ -33,7 +33,8 @@ from radiance_probes.viewer import crop_handles
 from radiance_probes.viewer.probe_view import (BoxOutline, ProbeSpheres, describe_probe, probe_centres, probe_under,
                          slab_plane)
 from radiance_probes.viewer.recorder import MovieRecorder
-from radiance_probes.viewer.frame.session import FrameTimes, RenderSession
+from radiance_probes.viewer.frame.views import FrameTimes
+from radiance_probes.viewer.frame.session import RenderSession
 from radiance_probes.viewer.panels.slice_panel import SliceImages, SlicePanel
 from radiance_probes.viewer.state import ViewerState
 from radiance_probes.scene.transfer import opacity_points
