@@ -501,3 +501,17 @@ def test_the_warm_up_waits_for_a_gpus_clock_not_for_llvmpipes():
     assert cpu.calls == records.WARM_UP_DISPATCHES
     slow = _WarmUpRenderer("llvmpipe (LLVM 15.0.6, 256 bits)", ms=30.0)
     assert records.warm_up(slow, 16) == 60.0 and slow.calls == 2
+
+
+def test_the_replay_moves_an_area_light_only_where_one_is_on():
+    """interact.py's light_move: the first area light turned 30 degrees about the vertical axis
+    (its height and distance kept); a scene without one is not given the edit."""
+    import math
+    from radiance_probes.bench.interact import EDITS, edit, edits_for
+    from radiance_probes.io.scene_file import parse_scene
+    lit = parse_scene({"area_lights": [{"shape": "sphere", "position": [1.5, 1.0, 0.0], "size": 0.2}]})
+    assert edits_for(lit) == (*EDITS, "light_move")
+    assert edits_for(parse_scene({})) == EDITS
+    moved = edit(lit, "light_move").area_lights[0].position
+    assert moved[1] == 1.0 and math.isclose(math.hypot(moved[0], moved[2]), 1.5)
+    assert math.isclose(math.degrees(math.atan2(-moved[2], moved[0])), 30.0)

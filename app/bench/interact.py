@@ -40,6 +40,9 @@ CURVE_WALL_MS = 100.0
 # within 1 s of every event (report: interact_report.py)
 REFINE_GOAL = (0.02, 1000.0)
 EDITS = ("tf_drag", "sun_30deg", "density", "albedo")
+# and where the scene has an area light on: the first one moved 30 degrees about the volume's
+# vertical axis (a drag in the viewer), which rebuilds what depends on the lights
+LIGHT_EDITS = ("light_move",)
 
 
 def _rotate_y(v, degrees: float) -> tuple[float, float, float]:
@@ -78,7 +81,17 @@ def edit(scene, event: str):
         return scene.replace(density_scale=scene.density_scale * 1.3)
     if event == "albedo":
         return scene.replace(albedo=max(0.0, scene.albedo - 0.15))
+    if event == "light_move":
+        lights = list(scene.area_lights)
+        lights[0] = replace(lights[0], position=_rotate_y(lights[0].position, 30.0))
+        return scene.replace(area_lights=tuple(lights))
     raise ValueError(event)
+
+
+def edits_for(scene) -> tuple[str, ...]:
+    """The replay's edits of a scene: EDITS, and LIGHT_EDITS where an area light is on."""
+    lit = any(getattr(light, "enabled", True) for light in scene.area_lights)
+    return EDITS + (LIGHT_EDITS if lit else ())
 
 
 def time_to(curve: list[tuple[float, float]], target: float) -> float | None:
@@ -268,7 +281,7 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                 run = run_frames(session, method, config, reference, noise, seed=2, scenes=moves,
                                  orbit=True)
                 add(record(base, "orbit", method, None, run, orbit_frames=len(moves)))
-                for i, event in enumerate(EDITS):
+                for i, event in enumerate(edits_for(state)):
                     before, after = state, edit(state, event)
                     r.set_scene(after)
                     reference, noise = ref(event)

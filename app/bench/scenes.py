@@ -6,6 +6,9 @@ from radiance_probes.paths import ASSETS_DIR
 from radiance_probes.io.scene_file import Scene, load_scene, parse_scene
 
 DATASET_SCENES = ("fuel", "hydrogen", "foot", "bonsai")
+# Dataset scenes a preset names itself, not in the default sweeps: the chest CT with `ct_bone`
+# (surfaces) under a sphere light and a dim sun (assets/scenes/chest.json; the interact replays).
+LIT_DATASET_SCENES = ("chest",)
 
 # Optically thick, albedo 0.99: multiple scattering carries most of the light.
 THICK = {"volume": {"builtin": "cloud", "size": [96, 96, 96]}, "density_scale": 400.0,
@@ -109,13 +112,13 @@ def bench_scene(name: str, width: int, height: int) -> Scene | None:
     """The named scene at the given image size; None when its dataset is absent."""
     if name in BUILTIN_SCENES:
         scene = parse_scene(BUILTIN_SCENES[name])
-    elif name in DATASET_SCENES:
+    elif name in DATASET_SCENES or name in LIT_DATASET_SCENES:
         from radiance_probes.io.volume_files import _resolve
         scene = load_scene(ASSETS_DIR / "scenes" / f"{name}.json")
         if not _resolve(scene.volume.path, scene.base_dir).exists():   # a file or a TIFF/DICOM folder
             return None
     else:
         raise ValueError(f"unknown benchmark scene '{name}' (known: "
-                         f"{', '.join((*ALL_SCENES, *BATTERY_SCENES))})")
+                         f"{', '.join((*ALL_SCENES, *LIT_DATASET_SCENES, *BATTERY_SCENES))})")
     from dataclasses import replace
     return scene.replace(camera=replace(scene.camera, width=width, height=height))
