@@ -19,8 +19,9 @@ from ..gl.timer import GpuTimer
 from ..scene import Scene
 from ..volume import Volume
 from .accumulation import Accumulation, SumAccumulation
-from .cache_keys import (adaptive_planes_key, light_grid_key, opacity_gradient_grid_key,
-                         probe_bake_key, visible_region_key)
+from .area_light_grid import AREA_GRID_METHODS, AreaLightGrid, area_light_grid_max_side
+from .cache_keys import (adaptive_planes_key, area_light_grid_key, light_grid_key,
+                         opacity_gradient_grid_key, probe_bake_key, visible_region_key)
 from .bake_level import SPACING_LEVEL, BakeMedium, spacing_level
 from .limits import check_image_size
 from .pathtracer import PathTracer
@@ -168,6 +169,8 @@ class Renderer:
         # the raymarcher's opacity-gradient grid (hybrid scattering), made when first read
         self._gradient_grid: OpacityGradientGrid | None = None
         self.last_gradient_grid_ms = 0.0   # GPU ms of its last bake (0: it was current)
+        # the area lights' optical-depth grid (raymarch, probes-only), made when first read
+        self._area_grid: AreaLightGrid | None = None
         self._bake_medium: BakeMedium | None = None   # the coarse level, made when first needed
         self.baked_level = 0   # the bake level of the probes in hand (start_bake)
         self._probe_ms: dict[tuple, float] = {}   # measured GPU ms per probe walked, per layout
@@ -753,6 +756,8 @@ class Renderer:
             slot.key = slot.pending = None
         if self._gradient_grid is not None:
             self._gradient_grid.forget()
+        if self._area_grid is not None:
+            self._area_grid.forget()
 
     def probe_uniforms(self) -> dict:
         self.probe_grid.bind()
@@ -951,7 +956,34 @@ class Renderer:
         self.last_light_ms = light_ms
         if method == "raymarch":   # its opacity-gradient grid (last_gradient_grid_ms)
             self.bake_gradient_grid()
+        if method in AREA_GRID_METHODS and self.resources.area_lights_on:
+            self.bake_area_light_grid()   # their direct light (area_light_grid.py)
+            self._area_grid.bind()
+            extra = {**(extra or {}), **self._area_grid.uniforms()}
         return extra, light_ms
+
+    def bake_area_light_grid(self) -> float:
+        """Bakes the area lights' optical-depth grid (the raymarcher's and probes-only's direct
+        light from them) if stale; GPU ms (0 where it was current or no light is on)."""
+        if not self.resources.area_lights_on:
+            return 0.0
+        if self._area_grid is None:
+            self._area_grid = AreaLightGrid(self.ctx, area_light_grid_max_side(self._software))
+        res = self.resources
+        key = (res.volume_version, res.clip, area_light_grid_key(self.scene),
+               tuple(sorted(res.medium_defines().items())))
+        self.timer.start()
+        baked = self._area_grid.update(res, key)
+        self.timer.stop()
+        if not baked:
+            return 0.0
+        self._area_grid.cost_ms = self.timer.elapsed_ms
+        return self._area_grid.cost_ms
+
+    @property
+    def area_light_grid(self) -> AreaLightGrid | None:
+        """The area lights' grid, None before one was needed (its size, memory, builds)."""
+        return self._area_grid
 
     def _traced_pass(self, method: str, extra: dict | None) -> tuple[PathTracer, dict | None]:
         """The path-state pass of `method` (pt, the probe renderers, guided's level 1) and its
@@ -1200,6 +1232,8 @@ class Renderer:
                 slot.light.release()
         if self._gradient_grid is not None:
             self._gradient_grid.release()
+        if self._area_grid is not None:
+            self._area_grid.release()
         if self._bake_medium is not None:
             self._bake_medium.release()
         if self.probe_grid is not None:
