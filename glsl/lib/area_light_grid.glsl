@@ -62,32 +62,55 @@ float area_light_march(vec3 x, vec3 w, float t_end, int n)
 }
 
 #if !defined(AREA_LIGHT_GRID_BAKE)
-// The optical depth from x towards light i's centre: the grid's, but within one texel of where
-// that ray leaves the box (no texel on the light's side to interpolate from: a dense skin would
-// take a depth its points do not have, as the sun's grid once did) the march to the box (at most
-// 8 points of about the bake's step), as lib/light_grid.glsl does for the sun.
+// The optical depth from x towards light i's centre: the first AREA_LIGHT_NEAR_TEXELS texels of
+// the way marched (at most AREA_LIGHT_NEAR_POINTS midpoints of about the bake's step), the rest
+// read from the grid at the point that far along the ray, where the texels it interpolates all
+// lie beyond x (the trilinear stencil reaches sqrt(3) texels from its centre). So a point on the
+// lit side of a dense surface thinner than a texel (bone under a light, a shell's skin) takes
+// its own depth, not the blend of texels behind the surface, which darkened such skins as the
+// sun's grid once did (bench/h100-bias); where the box ends within that reach (the box's side
+// towards the light) the march goes to the box and no texel is read.
+#ifndef AREA_LIGHT_NEAR_POINTS
+#define AREA_LIGHT_NEAR_POINTS 4
+#endif
+const float AREA_LIGHT_NEAR_TEXELS = 2.0;
 float area_light_optical_depth(int i, vec3 x)
 {
     vec3 w = normalize(area_light_position[i] - x);
     float t0, t1;
     if (!box_intersect(x, w, t0, t1))
         return 0.0;
-    if (t1 < area_light_grid_texel)
-        return area_light_march(x + t0 * w, w, t1 - t0,
-                                clamp(int(ceil((t1 - t0) / area_light_grid_march_step)), 1, 8));
-    vec3 uvw = (x - area_light_grid_centre) / (2.0 * area_light_grid_half_extent) + 0.5;
+    float t_near = min(t1, AREA_LIGHT_NEAR_TEXELS * area_light_grid_texel);
+    if (!(t_near > t0))
+        return 0.0;
+    float tau = area_light_march(x + t0 * w, w, t_near - t0,
+                                 clamp(int(ceil((t_near - t0) / area_light_grid_march_step)), 1,
+                                       AREA_LIGHT_NEAR_POINTS));
+    if (t1 <= t_near)
+        return tau;
+    vec3 uvw = (x + t_near * w - area_light_grid_centre) / (2.0 * area_light_grid_half_extent) + 0.5;
     float depth = float(area_light_grid_size.z);
     uvw.z = (clamp(uvw.z * depth, 0.5, depth - 0.5) + float(i) * depth)
             / (depth * float(area_light_count));
-    return texture(area_light_transmittance, uvw).r;
+    return tau + texture(area_light_transmittance, uvw).r;
 }
 
-// The light at x from every light, per unit of the kernel: L_i Omega_i exp(-tau_i) and the
-// direction w_i (unit, towards the centre) for light i.
-vec3 area_light_direct(int i, vec3 x, out vec3 w)
+// Light i's direct light at x per unit of the kernel, L_i Omega_i exp(-tau_i), the direction w_i
+// (unit, towards the centre) and the solid angle Omega_i.
+vec3 area_light_direct(int i, vec3 x, out vec3 w, out float solid_angle)
 {
     w = normalize(area_light_position[i] - x);
-    return area_light_radiance[i]
-           * (area_light_solid_angle(i, x) * exp(-area_light_optical_depth(i, x)));
+    solid_angle = area_light_solid_angle(i, x);
+    return area_light_radiance[i] * (solid_angle * exp(-area_light_optical_depth(i, x)));
 }
 #endif
+
+// The anisotropy with which the phase function towards a light's centre stands in for its mean
+// over the light's directions: Henyey-Greenstein's g^l bands times the uniform cap's own, matched
+// at band 1, (1 + cos theta) / 2 = 1 - Omega / (4 pi) for a cap of solid angle Omega (a
+// rectangle taken as the cap of its solid angle). g itself for a small light; the mean's first
+// moment exact for a sphere (docs/design.md, Area lights, measures what the higher bands leave).
+float area_light_anisotropy(float g, float solid_angle)
+{
+    return g * (1.0 - solid_angle / (4.0 * PI));
+}

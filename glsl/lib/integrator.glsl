@@ -389,8 +389,15 @@ int path_flight(inout PathState p, inout int steps_left)
 #if defined(AREA_LIGHTS)
         for (int l = 0; l < area_light_count; ++l) {
             vec3 area_w;
-            vec3 area_le = area_light_direct(l, p.x, area_w);
-            p.radiance += p.throughput * area_le * path_event_kernel(p, area_w);
+            float area_omega;
+            vec3 area_le = area_light_direct(l, p.x, area_w, area_omega);
+            vec3 area_kernel = vec3(phase_hg(dot(area_w, p.w),
+                                             area_light_anisotropy(anisotropy, area_omega)));
+#if defined(HYBRID_SCATTERING)
+            if (p.status == PATH_ACTIVE_SURFACE)
+                area_kernel = path_event_kernel(p, area_w);
+#endif
+            p.radiance += p.throughput * area_le * area_kernel;
         }
 #endif
         return STEP_DONE;

@@ -32,8 +32,8 @@ uint hybrid_march_rng;
 // volume or behind it (in place of the environment); the light they shed after scattering comes
 // from the probes (the walks meet and sample the lights), and their direct single scattering from
 // their optical-depth grid (lib/area_light_grid.glsl): at each segment, per light, its radiance
-// times its exact solid angle and the phase function (or the surface's kernel, mixed as the sun's)
-// towards its centre, times the segment's weight of the light's optical depth at the segment's two
+// times its exact solid angle and the phase function (its anisotropy narrowed to the light's
+// cone: area_light_anisotropy; or the surface's kernel, mixed as the sun's) towards its centre, times the segment's weight of the light's optical depth at the segment's two
 // ends, as the sun's (segment_sun_weight; the end carried to the next segment).
 #if defined(AREA_LIGHTS)
 #include "lib/area_lights.glsl"
@@ -156,7 +156,9 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
             float area_weight = segment_sun_weight(sigma_t, dt, area_tau_start[l], area_tau_end);
             area_tau_start[l] = area_tau_end;
             vec3 area_w = normalize(area_light_position[l] - x);
-            vec3 area_kernel = vec3(phase_hg(dot(area_w, d), anisotropy));
+            float area_omega = area_light_solid_angle(l, x);
+            vec3 area_kernel = vec3(phase_hg(dot(area_w, d),
+                                             area_light_anisotropy(anisotropy, area_omega)));
 #if defined(HYBRID_SCATTERING)
             if (surface_share > 0.0)
                 area_kernel = mix(area_kernel, surface_kernel(area_surface_normal, -d, area_w,
@@ -164,7 +166,7 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
                                   vec3(surface_share));
 #endif
             area_direct += area_light_radiance[l]
-                           * (area_light_solid_angle(l, x) * area_weight) * area_kernel;
+                           * (area_omega * area_weight) * area_kernel;
         }
 #endif
 #if defined(HYBRID_SCATTERING)
