@@ -1071,6 +1071,8 @@ class Renderer:
             bake_ms += self.bake_light()
         if method == "raymarch":
             bake_ms += self.bake_gradient_grid()
+        if method in AREA_GRID_METHODS:
+            bake_ms += self.bake_area_light_grid()
         render_ms = 0.0
         chunk = max(samples_per_pass, 1)
         while acc.samples < spp:
