@@ -33,8 +33,9 @@ uint hybrid_march_rng;
 // from the probes (the walks meet and sample the lights), and their direct single scattering from
 // their optical-depth grid (lib/area_light_grid.glsl): at each segment, per light, its radiance
 // times its exact solid angle and the phase function (its anisotropy narrowed to the light's
-// cone: area_light_anisotropy; or the surface's kernel, mixed as the sun's) towards its centre, times the segment's weight of the light's optical depth at the segment's two
-// ends, as the sun's (segment_sun_weight; the end carried to the next segment).
+// cone: area_light_anisotropy; or the surface's kernel, mixed as the sun's) towards its centre,
+// times the segment's weight of the light's optical depth at the segment's two ends, as the
+// sun's (segment_sun_weight; the end carried to the next segment).
 #if defined(AREA_LIGHTS)
 #include "lib/area_lights.glsl"
 #include "lib/area_light_grid.glsl"
