@@ -25,12 +25,14 @@ LOCAL_SIZE = (8, 8, 4)   # area_light_transmittance.comp's work group
 # Texels per axis a light, at most (the volume's resolution up to that, never upsampled): each
 # texel marches its own ray across the box, a voxel a step, so a bake costs up to texels x the
 # volume's side in medium lookups (128^3 over a 256^3 volume: about 0.4 G), less where the
-# majorant grid skips empty space (the chest CT with ct_bone: 1.5x faster). The resolution sets
-# how sharp the shadows of small dense structures are: on llvmpipe, the chest CT with ct_bone
-# (256 x 133 x 256 voxels) at 40 x 40 pixels and 8^3 probes under a far small sphere light, the
-# raymarcher's rRMSE against the path tracer is 7.45 / 5.65 / 4.30% with 32 / 64 / 128 texels
-# along the longest axis, against 3.99% under the sun (its grid at the volume's 256). On a CPU
-# rasterizer fewer (a 32-side bake there takes 0.15 s, 128 2 s).
+# majorant grid skips empty space (the chest CT with ct_bone: 1.5x faster). With the near march
+# at a voxel's spacing (lib/area_light_grid.glsl) the resolution matters little where it was
+# measured: on llvmpipe, the chest CT with ct_bone (256 x 133 x 256 voxels) at 40 x 40 pixels and
+# 8^3 probes under a far small sphere light, the raymarcher's rRMSE against the path tracer is
+# 3.43 / 3.45 / 3.86% with 32 / 64 / 128 texels along the longest axis, against 3.99% under the
+# sun (its grid at the volume's 256); 128 on a GPU, as the sun's grid's least, for shadow detail
+# at 1080p that 40 x 40 pixels cannot show. On a CPU rasterizer fewer (a 32-side bake there takes
+# 0.06 s, 128 about 2 s).
 MAX_SIDE = 128
 SOFTWARE_MAX_SIDE = 32
 # The methods that read it (the others trace shadow rays towards the lights).

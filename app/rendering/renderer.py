@@ -298,6 +298,7 @@ class Renderer:
                 defines.pop("NO_CLIP_REGION", None)
         if self._lab.sun_shadow_rays != 1:
             defines = {**(defines or {}), "SUN_SHADOW_RAYS": self._lab.sun_shadow_rays}
+        defines = self._area_light_lab_defines(defines)
         if self._settings.shadow_tracking == "residual":
             defines = {**(defines or {}), "SHADOW_TRACKING_RESIDUAL": 1}
         key = (method, tuple(sorted((defines or {}).items())))
@@ -530,6 +531,7 @@ class Renderer:
         if guided_level0:
             defines["GUIDED_LEVEL0"] = 1
             stage = "compute"
+        defines = self._area_light_lab_defines(defines)
         # the opacity gradient read from its grid (hybrid scattering; not `guided`'s level 0,
         # whose paths keep the exact gradient), where the grid can be made
         grid = None if guided_level0 else self._gradient_grid_ready()
@@ -961,6 +963,13 @@ class Renderer:
             self._area_grid.bind()
             extra = {**(extra or {}), **self._area_grid.uniforms()}
         return extra, light_ms
+
+    def _area_light_lab_defines(self, defines: dict | None) -> dict | None:
+        """AREA_LIGHT_NEAR_POINTS where the lab asks for another count and a light is on."""
+        points = self._lab.area_light_near_points
+        if points == LabOptions().area_light_near_points or not self.resources.area_lights_on:
+            return defines
+        return {**(defines or {}), "AREA_LIGHT_NEAR_POINTS": points}
 
     def bake_area_light_grid(self) -> float:
         """Bakes the area lights' optical-depth grid (the raymarcher's and probes-only's direct

@@ -94,7 +94,8 @@ def optical_depth(volume, table, density_scale, lights, depth, layout, i, x, cli
                   near_points=NEAR_POINTS) -> float:
     """area_light_optical_depth: 0 where the ray towards light i's centre misses the box; the
     first NEAR_TEXELS texels (or to the box) marched in at most near_points points, plus the
-    grid's depth at the point that far along, where the box goes on beyond it."""
+    grid's depth at the point that far along, where the box goes on beyond it (near_points 0:
+    the grid's depth at x)."""
     size, half, _, step = layout
     x = np.asarray(x, np.float64)
     w = np.asarray(lights[i][1], np.float64) - x
@@ -103,8 +104,10 @@ def optical_depth(volume, table, density_scale, lights, depth, layout, i, x, cli
     if not hit[0]:
         return 0.0
     texel = float(np.max(2.0 * np.asarray(half) / np.asarray(size, np.float64)))
+    if near_points == 0:   # (the lab build: the grid alone)
+        return lookup(depth, i, layout, x)
     t0, t1 = float(t0[0]), float(t1[0])
-    t_near = min(t1, NEAR_TEXELS * texel)
+    t_near = min(t1, NEAR_TEXELS * texel, near_points * step)
     if not t_near > t0:
         return 0.0
     n = int(np.clip(np.ceil((t_near - t0) / step), 1, near_points))

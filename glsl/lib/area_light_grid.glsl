@@ -70,17 +70,32 @@ float area_light_march(vec3 x, vec3 w, float t_end, int n)
 // its own depth, not the blend of texels behind the surface, which darkened such skins as the
 // sun's grid once did (bench/h100-bias); where the box ends within that reach (the box's side
 // towards the light) the march goes to the box and no texel is read.
+// (AREA_LIGHT_NEAR_POINTS 0, a lab build, LabOptions.area_light_near_points: the grid's read at
+// x alone, no march.)
 #ifndef AREA_LIGHT_NEAR_POINTS
 #define AREA_LIGHT_NEAR_POINTS 4
 #endif
 const float AREA_LIGHT_NEAR_TEXELS = 2.0;
+
+// Light i's block of the grid read at x.
+float area_light_grid_read(int i, vec3 x)
+{
+    vec3 uvw = (x - area_light_grid_centre) / (2.0 * area_light_grid_half_extent) + 0.5;
+    float depth = float(area_light_grid_size.z);
+    uvw.z = (clamp(uvw.z * depth, 0.5, depth - 0.5) + float(i) * depth)
+            / (depth * float(area_light_count));
+    return texture(area_light_transmittance, uvw).r;
+}
+
 float area_light_optical_depth(int i, vec3 x)
 {
     vec3 w = normalize(area_light_position[i] - x);
     float t0, t1;
     if (!box_intersect(x, w, t0, t1))
         return 0.0;
-    float t_near = min(t1, AREA_LIGHT_NEAR_TEXELS * area_light_grid_texel);
+#if AREA_LIGHT_NEAR_POINTS > 0
+    float t_near = min(t1, min(AREA_LIGHT_NEAR_TEXELS * area_light_grid_texel,
+                               float(AREA_LIGHT_NEAR_POINTS) * area_light_grid_march_step));
     if (!(t_near > t0))
         return 0.0;
     float tau = area_light_march(x + t0 * w, w, t_near - t0,
@@ -88,11 +103,10 @@ float area_light_optical_depth(int i, vec3 x)
                                        AREA_LIGHT_NEAR_POINTS));
     if (t1 <= t_near)
         return tau;
-    vec3 uvw = (x + t_near * w - area_light_grid_centre) / (2.0 * area_light_grid_half_extent) + 0.5;
-    float depth = float(area_light_grid_size.z);
-    uvw.z = (clamp(uvw.z * depth, 0.5, depth - 0.5) + float(i) * depth)
-            / (depth * float(area_light_count));
-    return tau + texture(area_light_transmittance, uvw).r;
+    return tau + area_light_grid_read(i, x + t_near * w);
+#else
+    return area_light_grid_read(i, x);
+#endif
 }
 
 // Light i's direct light at x per unit of the kernel, L_i Omega_i exp(-tau_i), the direction w_i

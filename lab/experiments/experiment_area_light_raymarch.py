@@ -14,6 +14,7 @@ surfaces, the hybrid march).
 Run on the GPU (about 2 to 4 minutes at 1080p):
     python lab/experiments/experiment_area_light_raymarch.py OUT_DIR
         [--scenes chest_ct_bone,bonsai,foot] [--size 1920x1080] [--ref-spp 512] [--time-4k]
+        [--near-points 0,2,8]
 On llvmpipe, small: --size 48x48 --ref-spp 256 --probes 8 --scenes chest_ct_bone"""
 import argparse
 import json
@@ -27,6 +28,7 @@ sys.path.insert(0, ".")
 from radiance_probes.bench.scenes import bench_scene                          # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe     # noqa: E402
 from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse  # noqa
+from radiance_probes.rendering.lab_options import LabOptions                 # noqa: E402
 from radiance_probes.rendering.renderer import Renderer                      # noqa: E402
 from radiance_probes.scene import parse_scene                                # noqa: E402
 
@@ -40,6 +42,9 @@ parser.add_argument("--probe-spp", type=int, default=16, help="probes-only sampl
 parser.add_argument("--probes", type=int, default=0, help="probe grid N^3 (0: the scene's)")
 parser.add_argument("--lightings", default="sun,far,near,near-sun")
 parser.add_argument("--time-4k", action="store_true", help="also the raymarch frame at 3840x2160")
+parser.add_argument("--near-points", default="",
+                    help="comma list: the raymarcher again with each count of near-march points "
+                         "(LabOptions.area_light_near_points; 0: the grid alone), where a light is on")
 args = parser.parse_args()
 out = Path(args.out)
 out.mkdir(parents=True, exist_ok=True)
@@ -129,6 +134,17 @@ for name in args.scenes.split(","):
             row["area_light_grid"] = (None if grid is None or not s.area_lights else
                                       {"size": list(grid.size), "bake_ms": grid.cost_ms,
                                        "bytes": grid.gpu_bytes})
+            for points in (int(p) for p in args.near_points.split(",") if p and s.area_lights):
+                r.lab = LabOptions(area_light_near_points=points)
+                res = r.render("raymarch", spp=args.frames, seed=3)
+                e = rrmse(res.image, ref)
+                row[f"raymarch_near_points_{points}"] = {
+                    "mean_ratio": float(res.image.mean() / ref.mean()), "rrmse": e,
+                    "corrected_rrmse": corrected_rrmse(e, noise),
+                    "ms_per_sample": res.ms_per_sample}
+                print(f"  near points {points}: mean {res.image.mean() / ref.mean():.4f}x, rRMSE "
+                      f"{100 * e:.2f}%, {res.ms_per_sample:.2f} ms/frame", flush=True)
+            r.lab = LabOptions()
             if args.time_4k:
                 res = r.render("raymarch", spp=args.frames, seed=3, width=3840, height=2160)
                 row["raymarch_4k_ms_per_frame"] = res.ms_per_sample
