@@ -142,14 +142,23 @@ void main()
 """
 
 
-def test_the_direct_light_matches_the_twin(ctx):
+@pytest.mark.parametrize("max_side", [None, 4])
+def test_the_direct_light_matches_the_twin(ctx, max_side):
     """At points inside the box (some within a texel of the side towards a light, where the depth
     is marched): L Omega exp(-tau), the direction and tau, from the baked grid as the twin reads
-    it (the twin's trilinear filtering of the texture's own values)."""
+    it (the twin's trilinear filtering of the texture's own values). On the volume's own
+    resolution (texels of a voxel: the near march two texels long), and on 4 texels a side (the
+    near march 4 points a voxel apart, shorter than two texels)."""
+    from radiance_probes.rendering.area_light_grid import AreaLightGrid
     r = Renderer(ctx, _cloud())
+    coarse = None
     try:
         r.bake_area_light_grid()
         grid = r.area_light_grid
+        if max_side is not None:
+            coarse = grid = AreaLightGrid(ctx, max_side)
+            grid.update(r.resources, ("coarse",))
+            assert grid.size == (4, 4, 4)
         res = r.resources
         rng = np.random.default_rng(7)
         x = rng.uniform(-0.5, 0.5, (80, 3)) * res.volume.half_extent * 2
@@ -173,6 +182,8 @@ def test_the_direct_light_matches_the_twin(ctx):
                 np.testing.assert_allclose(
                     out[k, i, 7], twin.anisotropy(0.6, twin.solid_angle(lights[i], p)), rtol=1e-5)
     finally:
+        if coarse is not None:
+            coarse.release()
         r.release()
 
 
