@@ -209,13 +209,14 @@ def _rrmse(image, reference):
 
 
 def test_the_raymarcher_under_a_sphere_light_matches_the_path_tracer(ctx):
-    """The soft ball at 8^3 probes under the far sphere light: the raymarcher's mean within 3% of
+    """The soft ball at 12^3 probes under the far sphere light: the raymarcher's mean within 3% of
     the path tracer's, and its error against it at most 1.5x its error under the sun of the same
-    irradiance at the same probe settings (measured on llvmpipe: 0.982x the mean; 0.77x the
-    sun's error at 6^3 probes)."""
+    irradiance at the same probe settings (measured on llvmpipe: 0.988x the mean, the sun 0.991x;
+    4.66% rRMSE against the sun's 4.54%, 1.03x. At 8^3 probes 0.973x against 0.982x: the probes'
+    floor, the direct light 0.998x the path tracer's)."""
     errors = {}
     for kind in ("sun", "light"):
-        scene = _lit(kind, camera=SOFT_BALL_CAMERA, probes={"grid": 8, "samples": 512})
+        scene = _lit(kind, camera=SOFT_BALL_CAMERA, probes={"grid": 12, "samples": 512})
         reference, _ = _image(ctx, scene, "pt", 4096, seed=11)
         image, _ = _image(ctx, scene, "raymarch", 4)
         if kind == "light":
