@@ -3,8 +3,8 @@ its pdf against the NumPy twin (app/twins/area_lights.py); the pdf integrates to
 directions that meet a light; a small sphere light far away lights the volume as the sun of the
 same irradiance does (pt, probes); no light on compiles every pass as before; bad
 lights (a negative size, a light in the volume) are refused naming the field. (The raymarcher and
-probes-only take the lights' scattered light from the probes but not their direct single
-scattering: docs/design.md, Area lights.)"""
+probes-only take the lights' scattered light from the probes and their direct single scattering
+from an optical-depth grid per light: tests/test_area_light_grid.py.)"""
 from __future__ import annotations
 
 import numpy as np

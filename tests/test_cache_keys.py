@@ -77,6 +77,7 @@ def _keys(scene, settings) -> dict:
             "visible_region": ck.visible_region_key(scene),
             "light_grid": ck.light_grid_key(scene, settings),
             "opacity_gradient_grid": ck.opacity_gradient_grid_key(scene),
+            "area_light_grid": ck.area_light_grid_key(scene),
             "probe_bake": ck.probe_bake_key(scene, settings)}
 
 

@@ -228,7 +228,8 @@ def keys() -> dict[str, Key]:
             "against the volume: a light that reaches into it is refused). The path tracer samples "
             "them at every scattering event (next-event estimation, MIS against the phase "
             "function's or the BRDF's sampling) and sees them where a ray meets one; the probes' "
-            "walks too; the raymarcher's light from them comes through the probes alone.", {},
+            "walks too; the raymarcher and probes-only take their direct light from an "
+            "optical-depth grid per light and the rest from the probes.", {},
             default="none", values="a list of lights"),
         "area_lights[].shape": Key("sphere, or rectangle (one-sided: it emits towards its "
                                    "normal).", choice(AREA_LIGHT_SHAPES), default="required"),

@@ -22,7 +22,10 @@ SCENE_GROUPS: dict[str, tuple[str, ...]] = {
     # the sun's direction: the light grid marches along it
     "sun": ("light.direction",),
     # the light arriving (not the medium's optical depth): the probes hold it
-    "light": ("light.irradiance", "environment", "environment_map", "area_lights"),
+    "light": ("light.irradiance", "environment", "environment_map"),
+    # the area lights: the probes hold their light, and their optical-depth grid marches towards
+    # them
+    "area_lights": ("area_lights",),
     # how light scatters in the medium: the probes hold it
     "transport": ("albedo", "anisotropy", "max_bounces", "surface"),
     # the probe grid and what its bake stores
@@ -68,7 +71,9 @@ KEYS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "visible_region": (("medium",), ()),
     "light_grid": (("medium", "sun"), ("light_grid",)),
     "opacity_gradient_grid": (("medium",), ()),
-    "probe_bake": (("medium", "sun", "light", "transport", "probe_bake"), ("bake", "light_grid")),
+    "area_light_grid": (("medium", "area_lights"), ()),
+    "probe_bake": (("medium", "sun", "light", "area_lights", "transport", "probe_bake"),
+                   ("bake", "light_grid")),
 }
 
 
@@ -113,6 +118,13 @@ def light_grid_key(scene, settings) -> tuple:
     """The sun's light grid: the medium, the sun's direction, the grid's texels."""
     groups, setting_groups = KEYS["light_grid"]
     return (*scene_key(scene, *groups), *settings_key(settings, *setting_groups))
+
+
+def area_light_grid_key(scene) -> tuple:
+    """The area lights' optical-depth grid (area_light_grid.py): the medium and the enabled
+    lights (their strength and colour too: a slider's change re-bakes a grid it need not, one
+    march a texel)."""
+    return scene_key(scene, *KEYS["area_light_grid"][0])
 
 
 def walks_read_light_grid(settings) -> bool:

@@ -31,11 +31,20 @@ class LabOptions:
     # opacity_gradient_grid.py), for measuring the grid's bias and what it saves
     # (lab/experiments/experiment_hybrid_scattering.py, hybrid_raymarch_variants.py).
     opacity_gradient_grid: bool = True
+    # The midpoints the raymarcher and probes-only march over an area light's first two grid
+    # texels before reading its optical-depth grid (lib/area_light_grid.glsl
+    # AREA_LIGHT_NEAR_POINTS): 4, the product; 0 reads the grid alone, for timing the march
+    # against its bias (lab/experiments/experiment_area_light_raymarch.py --near-points).
+    area_light_near_points: int = 4
 
     def __post_init__(self):
         rays = self.sun_shadow_rays
         if isinstance(rays, bool) or not isinstance(rays, int) or rays < 1:
             raise ValueError(f"sun shadow rays: expected an integer >= 1, got {rays!r}")
+        points = self.area_light_near_points
+        if isinstance(points, bool) or not isinstance(points, int) or not 0 <= points <= 16:
+            raise ValueError(f"area light near points: expected an integer in 0..16, got "
+                             f"{points!r}")
         for name in ("mixed_levels", "environment_sampling", "opacity_gradient_grid"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")

@@ -19,16 +19,20 @@ from radiance_probes.gl.timer import GpuTimer
 from radiance_probes.io.scene_file import Scene
 from radiance_probes.io.volume import Volume
 from radiance_probes.rendering.methods.accumulation import Accumulation, SumAccumulation
-from radiance_probes.rendering.cache_keys import (adaptive_planes_key, light_grid_key, opacity_gradient_grid_key,
-                         probe_bake_key, visible_region_key)
+from radiance_probes.rendering.grids.area_light_grid import (AREA_GRID_METHODS, AreaLightGrid,
+                                                             area_light_grid_max_side)
+from radiance_probes.rendering.cache_keys import (adaptive_planes_key, area_light_grid_key, light_grid_key,
+                         opacity_gradient_grid_key, probe_bake_key, visible_region_key)
 from radiance_probes.rendering.probes.bake_level import SPACING_LEVEL, BakeMedium, spacing_level
 from radiance_probes.rendering.limits import check_image_size
 from radiance_probes.rendering.methods.pathtracer import PathTracer
-from radiance_probes.rendering.grids.light_transmittance import LightTransmittance, min_side_for_probes
+from radiance_probes.rendering.grids.light_transmittance import (LightTransmittance,
+                                                                 min_side_for_probes)
 from radiance_probes.rendering.grids.opacity_gradient_grid import OpacityGradientGrid
 from radiance_probes.rendering.probes.layout import (fitted_grid, resolve_channels, resolve_precision, resolve_sh_order,
                            sun_lobe_g)
-from radiance_probes.rendering.probes.planes import MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes, extinction_field, sun_field
+from radiance_probes.rendering.probes.planes import (MAX_FIELD_SIDE, MAX_SPACING, adaptive_planes,
+                                                     extinction_field, sun_field)
 from radiance_probes.rendering.probes.visible_region import VisibleRegionPass
 from radiance_probes.rendering.probes.bake import ProbeGrid
 from radiance_probes.rendering.budgets.dispatch_budget import dispatch_target_ms
@@ -168,6 +172,8 @@ class Renderer:
         # the raymarcher's opacity-gradient grid (hybrid scattering), made when first read
         self._gradient_grid: OpacityGradientGrid | None = None
         self.last_gradient_grid_ms = 0.0   # GPU ms of its last bake (0: it was current)
+        # the area lights' optical-depth grid (raymarch, probes-only), made when first read
+        self._area_grid: AreaLightGrid | None = None
         self._bake_medium: BakeMedium | None = None   # the coarse level, made when first needed
         self.baked_level = 0   # the bake level of the probes in hand (start_bake)
         self._probe_ms: dict[tuple, float] = {}   # measured GPU ms per probe walked, per layout
@@ -295,6 +301,7 @@ class Renderer:
                 defines.pop("NO_CLIP_REGION", None)
         if self._lab.sun_shadow_rays != 1:
             defines = {**(defines or {}), "SUN_SHADOW_RAYS": self._lab.sun_shadow_rays}
+        defines = self._area_light_lab_defines(defines)
         if self._settings.shadow_tracking == "residual":
             defines = {**(defines or {}), "SHADOW_TRACKING_RESIDUAL": 1}
         key = (method, tuple(sorted((defines or {}).items())))
@@ -527,6 +534,7 @@ class Renderer:
         if guided_level0:
             defines["GUIDED_LEVEL0"] = 1
             stage = "compute"
+        defines = self._area_light_lab_defines(defines)
         # the opacity gradient read from its grid (hybrid scattering; not `guided`'s level 0,
         # whose paths keep the exact gradient), where the grid can be made
         grid = None if guided_level0 else self._gradient_grid_ready()
@@ -753,6 +761,8 @@ class Renderer:
             slot.key = slot.pending = None
         if self._gradient_grid is not None:
             self._gradient_grid.forget()
+        if self._area_grid is not None:
+            self._area_grid.forget()
 
     def probe_uniforms(self) -> dict:
         self.probe_grid.bind()
@@ -951,7 +961,44 @@ class Renderer:
         self.last_light_ms = light_ms
         if method == "raymarch":   # its opacity-gradient grid (last_gradient_grid_ms)
             self.bake_gradient_grid()
+        if method in AREA_GRID_METHODS and self.resources.area_lights_on:
+            self.bake_area_light_grid()   # their direct light (area_light_grid.py)
+            self._area_grid.bind()
+            extra = {**(extra or {}), **self._area_grid.uniforms()}
         return extra, light_ms
+
+    def _area_light_lab_defines(self, defines: dict | None) -> dict | None:
+        """AREA_LIGHT_NEAR_POINTS where the lab asks for another count and a light is on."""
+        points = self._lab.area_light_near_points
+        if points == LabOptions().area_light_near_points or not self.resources.area_lights_on:
+            return defines
+        return {**(defines or {}), "AREA_LIGHT_NEAR_POINTS": points}
+
+    def bake_area_light_grid(self) -> float:
+        """Bakes the area lights' optical-depth grid (the raymarcher's and probes-only's direct
+        light from them) if stale; GPU ms (0 where it was current or no light is on)."""
+        if not self.resources.area_lights_on:
+            return 0.0
+        if self._area_grid is None:
+            self._area_grid = AreaLightGrid(self.ctx, area_light_grid_max_side(self._software))
+        res = self.resources
+        key = (res.volume_version, res.clip, area_light_grid_key(self.scene),
+               tuple(sorted(res.medium_defines().items())))
+        if key == self._area_grid.key:
+            return 0.0
+        self._area_grid.compile(res)   # (not in the bake's time)
+        self.timer.start()
+        baked = self._area_grid.update(res, key)
+        self.timer.stop()
+        if not baked:
+            return 0.0
+        self._area_grid.cost_ms = self.timer.elapsed_ms
+        return self._area_grid.cost_ms
+
+    @property
+    def area_light_grid(self) -> AreaLightGrid | None:
+        """The area lights' grid, None before one was needed (its size, memory, builds)."""
+        return self._area_grid
 
     def _traced_pass(self, method: str, extra: dict | None) -> tuple[PathTracer, dict | None]:
         """The path-state pass of `method` (pt, the probe renderers, guided's level 1) and its
@@ -1039,6 +1086,8 @@ class Renderer:
             bake_ms += self.bake_light()
         if method == "raymarch":
             bake_ms += self.bake_gradient_grid()
+        if method in AREA_GRID_METHODS:
+            bake_ms += self.bake_area_light_grid()
         render_ms = 0.0
         chunk = max(samples_per_pass, 1)
         while acc.samples < spp:
@@ -1200,6 +1249,8 @@ class Renderer:
                 slot.light.release()
         if self._gradient_grid is not None:
             self._gradient_grid.release()
+        if self._area_grid is not None:
+            self._area_grid.release()
         if self._bake_medium is not None:
             self._bake_medium.release()
         if self.probe_grid is not None:

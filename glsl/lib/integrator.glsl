@@ -46,6 +46,13 @@
 #if defined(AREA_LIGHTS)
 #include "lib/area_lights.glsl"
 #endif
+// probes-only (PROBE_LIGHTING 2) traces no shadow rays: at its gather event the lights' direct
+// light comes from their optical-depth grid (lib/area_light_grid.glsl), as the raymarcher's.
+#if defined(AREA_LIGHTS) && defined(PROBE_LIGHTING)
+#if PROBE_LIGHTING == 2
+#include "lib/area_light_grid.glsl"
+#endif
+#endif
 
 uniform int max_bounces;
 uniform float anisotropy;     // Henyey-Greenstein g
@@ -379,6 +386,20 @@ int path_flight(inout PathState p, inout int steps_left)
 #if PROBE_LIGHTING == 2
         p.radiance += p.throughput * sun_irradiance
                       * (probe_sun_transmittance * path_event_kernel(p, sun_direction));
+#if defined(AREA_LIGHTS)
+        for (int l = 0; l < area_light_count; ++l) {
+            vec3 area_w;
+            float area_omega;
+            vec3 area_le = area_light_direct(l, p.x, area_w, area_omega);
+            vec3 area_kernel = vec3(phase_hg(dot(area_w, p.w),
+                                             area_light_anisotropy(anisotropy, area_omega)));
+#if defined(HYBRID_SCATTERING)
+            if (p.status == PATH_ACTIVE_SURFACE)
+                area_kernel = path_event_kernel(p, area_w);
+#endif
+            p.radiance += p.throughput * area_le * area_kernel;
+        }
+#endif
         return STEP_DONE;
 #endif
     }

@@ -29,11 +29,16 @@
 uint hybrid_march_rng;
 #endif
 // AREA_LIGHTS (lib/area_lights.glsl): a light the camera ray meets is seen, in front of the
-// volume or behind it (in place of the environment); the light they shed reaches the march only
-// through the probes (the walks meet and sample the lights), smoothed by their SH, and not through
-// the light grid, which holds the sun alone.
+// volume or behind it (in place of the environment); the light they shed after scattering comes
+// from the probes (the walks meet and sample the lights), and their direct single scattering from
+// their optical-depth grid (lib/area_light_grid.glsl): at each segment, per light, its radiance
+// times its exact solid angle and the phase function (its anisotropy narrowed to the light's
+// cone: area_light_anisotropy; or the surface's kernel, mixed as the sun's) towards its centre,
+// times the segment's weight of the light's optical depth at the segment's two ends, as the
+// sun's (segment_sun_weight; the end carried to the next segment).
 #if defined(AREA_LIGHTS)
 #include "lib/area_lights.glsl"
+#include "lib/area_light_grid.glsl"
 #endif
 uniform float raymarch_step;            // world units
 uniform uint frame_index;               // keys the jitter; frames accumulate into a running mean
@@ -85,6 +90,11 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
     // colour and the probes; the sun's optical depth at its two ends, the end carried over to the
     // next segment (-1: not fetched, after a jump over empty space).
     float tau_start = -1.0;
+#if defined(AREA_LIGHTS)
+    float area_tau_start[AREA_LIGHTS_MAX];   // each light's, as tau_start
+    for (int l = 0; l < AREA_LIGHTS_MAX; ++l)
+        area_tau_start[l] = -1.0;
+#endif
     for (int i = 0; i < n && transmittance > 1e-6; ++i) {
         float t = t0 + (float(i) + jitter) * dt;
         vec3 x = origin + t * d;
@@ -95,6 +105,10 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
             CHECK_TRUE(last >= i, CHECK_SITE_MARCH_LOOP);   // never back
             i = last;
             tau_start = -1.0;
+#if defined(AREA_LIGHTS)
+            for (int l = 0; l < AREA_LIGHTS_MAX; ++l)
+                area_tau_start[l] = -1.0;
+#endif
             continue;
         }
         float opacity = 1.0 - exp(-sigma_t * dt);
@@ -109,8 +123,14 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
         vec3 sun_kernel = vec3(sun_phase);
         vec3 gradient = raymarch_opacity_gradient(x);
         float surface_share = surface_probability(gradient, surface_gradient_factor);
+#if defined(AREA_LIGHTS)
+        vec3 area_surface_normal = vec3(0.0);
+#endif
         if (surface_share > 0.0) {
             vec3 n = surface_normal(gradient, -d);
+#if defined(AREA_LIGHTS)
+            area_surface_normal = n;
+#endif
             inscattered = mix(inscattered, surface_probe_radiance(coeffs, n, -d, surface_specular),
                               surface_share);
             sun_kernel = mix(sun_kernel, surface_kernel(n, -d, sun_direction, surface_roughness,
@@ -126,12 +146,39 @@ vec3 raymarch_radiance(vec3 origin, vec3 d, float jitter)
         float tau_end = light_grid_optical_depth(origin + (t0 + float(i + 1) * dt) * d);
         float sun_weight = segment_sun_weight(sigma_t, dt, tau_start, tau_end);
         tau_start = tau_end;
+#if defined(AREA_LIGHTS)
+        vec3 area_direct = vec3(0.0);   // the lights' radiance x solid angle x kernel x weight
+        for (int l = 0; l < AREA_LIGHTS_MAX; ++l) {
+            if (l >= area_light_count)
+                break;
+            if (area_tau_start[l] < 0.0)
+                area_tau_start[l] = area_light_optical_depth(l, origin + (t0 + float(i) * dt) * d);
+            float area_tau_end = area_light_optical_depth(l, origin + (t0 + float(i + 1) * dt) * d);
+            float area_weight = segment_sun_weight(sigma_t, dt, area_tau_start[l], area_tau_end);
+            area_tau_start[l] = area_tau_end;
+            vec3 area_w = normalize(area_light_position[l] - x);
+            float area_omega = area_light_solid_angle(l, x);
+            vec3 area_kernel = vec3(phase_hg(dot(area_w, d),
+                                             area_light_anisotropy(anisotropy, area_omega)));
+#if defined(HYBRID_SCATTERING)
+            if (surface_share > 0.0)
+                area_kernel = mix(area_kernel, surface_kernel(area_surface_normal, -d, area_w,
+                                                              surface_roughness, surface_specular),
+                                  vec3(surface_share));
+#endif
+            area_direct += area_light_radiance[l]
+                           * (area_omega * area_weight) * area_kernel;
+        }
+#endif
 #if defined(HYBRID_SCATTERING)
         vec3 source = albedo * tf.rgb * (opacity * inscattered
                                          + sun_irradiance * (sun_weight * sun_kernel));
 #else
         vec3 source = albedo * tf.rgb * (opacity * inscattered
                                          + sun_irradiance * (sun_weight * sun_phase));
+#endif
+#if defined(AREA_LIGHTS)
+        source += albedo * tf.rgb * area_direct;
 #endif
         radiance += transmittance * scatter_allowed * source;
         transmittance *= 1.0 - opacity;
