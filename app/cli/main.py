@@ -71,7 +71,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from radiance_probes.bench.config import PRESETS
     from radiance_probes.bench.report import write_report
-    from radiance_probes.bench.scenes import ALL_SCENES, BATTERY_SCENES
+    from radiance_probes.bench.scenes import ALL_SCENES, BATTERY_SCENES, LIT_DATASET_SCENES
     out = Path(args.out)
     if args.merge:
         from radiance_probes.bench.report import merge
@@ -81,10 +81,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         config = PRESETS[args.preset]
         changes = {}
         if args.scenes:
-            unknown = [s for s in args.scenes if s not in (*ALL_SCENES, *BATTERY_SCENES)]
+            unknown = [s for s in args.scenes if s not in (*ALL_SCENES, *LIT_DATASET_SCENES, *BATTERY_SCENES)]
             if unknown:
                 raise SystemExit(f"error: unknown bench scene(s) {', '.join(unknown)} "
-                                 f"(known: {', '.join((*ALL_SCENES, *BATTERY_SCENES))})")
+                                 f"(known: {', '.join((*ALL_SCENES, *LIT_DATASET_SCENES, *BATTERY_SCENES))})")
             changes["scenes"] = tuple(args.scenes)
         if args.ref_spp:
             changes["ref_spp"] = args.ref_spp
