@@ -824,7 +824,8 @@ def render_to_files(args: argparse.Namespace) -> int:
     errors.append(err)
     print(f"device: {describe(ctx)}")
     cam = scene.camera
-    print(f"method: {result.method}  image: {cam.width}x{cam.height}  spp: {result.spp}")
+    word = METHODS[result.method].sample_word if result.method in METHODS else "spp"
+    print(f"method: {result.method}  image: {cam.width}x{cam.height}  {word}: {result.spp}")
     shown = result.stats.get("shown")   # a composite method's part shown (refine)
     if shown is not None:
         est = result.stats["refine_estimate"]

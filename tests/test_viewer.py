@@ -580,6 +580,23 @@ def test_cli_screenshot_starts_its_own_display(display, tmp_path):
     assert len(np.unique(picture.reshape(-1, 3), axis=0)) > 100  # volume and shaded spheres
 
 
+def test_cli_screenshot_after_too_few_frames_is_a_whole_image(display, tmp_path):
+    """Issue 55: `view ct.npy --method raymarch --screenshot out.png --frames N` on llvmpipe
+    saved the first frame 70% done (its bottom black) and said nothing. After one frame (which
+    does a band of one tile: it pays for the compile) the screenshot waits for the frame in
+    bands and says so in one line; the picture has no unrendered pixel."""
+    z, y, x = np.mgrid[:32, :32, :32]
+    hu = np.where(np.sqrt((x - 16) ** 2 + (y - 16) ** 2 + (z - 16) ** 2) < 13, 40, -1000)
+    np.save(tmp_path / "ct.npy", hu.astype(np.int16))
+    proc = view(["ct.npy", "--method", "raymarch", "--screenshot", "out.png", "--frames", "1",
+                 "--window", "640x400"], tmp_path, display)
+    lines = [line for line in proc.stderr.splitlines() if "whole image" in line]
+    assert len(lines) == 1 and "more frames" in lines[0] and "partial" not in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr and "wrote" in proc.stdout
+    picture = png(tmp_path / "out.png")[40:, 400:]
+    assert not (picture.max(axis=-1) < 8).any()   # the background's grey or the volume, never black
+
+
 def test_shader_error_is_shown_not_a_crash(display, tmp_path):
     glsl = tmp_path / "glsl"
     from radiance_probes.paths import GLSL_DIR
