@@ -58,7 +58,8 @@ def _library_warnings(seen: list):
         warnings.simplefilter("always")
         yield
     for w in caught:   # others' warnings (a garbage collection's, say) go on as they came
-        if f"{os.sep}pydicom{os.sep}" in str(w.filename):
+        if f"{os.sep}pydicom{os.sep}" in str(w.filename) or str(w.filename) == __file__:
+            # (pydicom's, attributed to its own line or, by its stacklevel, to the call here)
             seen.append(w)
         else:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
@@ -296,8 +297,12 @@ def list_series(path: str | Path) -> DicomListing:
     """The DICOM series under a folder (searched recursively) or named by a DICOMDIR."""
     p = Path(path)
     try:
-        with _library_warnings([]):   # (each is counted where it is read: none reaches stderr)
-            return _list_series(p)
+        stray: list = []   # (those of a file are counted with it; the DICOMDIR's here)
+        with _library_warnings(stray):
+            listing = _list_series(p)
+        if stray and p not in listing.irregular:
+            listing = replace(listing, irregular=(*listing.irregular, p))
+        return listing
     except VolumeError:
         raise
     except Exception as exc:  # pydicom converts values lazily: a mangled one raises on first use
