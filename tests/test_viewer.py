@@ -200,6 +200,39 @@ def test_sphere_mesh_faces_outwards_and_probe_centres_follow_the_spec():
     assert len(box_edges((0.5, 0.5, 0.5))) == 24
 
 
+def test_a_screenshot_still_partial_after_the_wait_says_so_in_one_line(capsys, monkeypatch):
+    """`view --screenshot --frames N`: where a view's first frame is still in bands when the wait
+    (SCREENSHOT_WAIT_S) runs out, one line says the image is partial and how to get a whole one;
+    where it had to wait, one line says how long. (The waiting itself: the Xvfb test below.)"""
+    from types import SimpleNamespace
+
+    from radiance_probes.viewer import launch
+
+    class Session:
+        views = {"raymarch": None}
+        whole = False
+
+        def shows_whole(self, method):
+            return self.whole
+
+        def part_done(self, method):
+            return 0.7
+    session = Session()
+    window = SimpleNamespace(viewer=SimpleNamespace(session=session), should_close=lambda: False,
+                             poll=lambda: None, frame=lambda: None)
+    monkeypatch.setattr(launch, "SCREENSHOT_WAIT_S", 0.0)
+    frames, waited = launch._wait_for_a_whole_image(window)
+    launch._say_whether_whole(window, "out.png", frames, waited)
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "out.png is partial" in err[0] and "70% done" in err[0], err
+    assert "--frames" in err[0] and "raymarch's first frame" in err[0]
+    session.whole = True
+    launch._say_whether_whole(window, "out.png", 12, 3.4)
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["view: note: 12 more frames (3.4 s) for a whole image: one sample takes "
+                   "several frames on this device"]
+
+
 def test_headless_commands_do_not_import_the_window_toolkit():
     code = ("import sys, radiance_probes.cli; radiance_probes.cli.build_parser(); "
             "print(any(m.split('.')[0] in ('glfw', 'imgui_bundle') for m in sys.modules))")
