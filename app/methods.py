@@ -37,6 +37,12 @@ class Method:
     def composite(self) -> bool:
         return bool(self.parts)
 
+    @property
+    def sample_word(self) -> str:
+        """What its samples are called in captions and reports: the raymarcher renders whole
+        frames ("frames"), the others samples per pixel ("spp")."""
+        return "spp" if self.noisy else "frames"
+
 
 REFERENCE = "pt"   # the exact image every other method's error is measured against
 

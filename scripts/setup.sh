@@ -40,7 +40,12 @@ stamp=.venv/.installed-$(sha1sum pyproject.toml | cut -c1-12)
 if [ ! -f "$stamp" ]; then
   echo "setup: installing the project into .venv" >&2
   .venv/bin/python -m pip install -q --upgrade pip >/dev/null
-  .venv/bin/python -m pip install -q -e '.[test]'
+  # setuptools' editable build says, in a box of asterisks, that a folder named like the package
+  # in the working directory could shadow it on import: information only (the package is app/, so
+  # none is), which pip 25 and later forward as a BuildBackendWarning. That one warning, matched
+  # by its first words in the build's own process, stays quiet; every other warning and error
+  # shows as before.
+  PYTHONWARNINGS="ignore:Editable installation" .venv/bin/python -m pip install -q -e '.[test]'
   rm -f .venv/.installed-*
   touch "$stamp"
 fi

@@ -288,3 +288,15 @@ def test_a_bad_value_is_one_line_naming_the_flag(argv, flag, capsys, no_gpu):
     rc, err = run(["render", *argv], capsys)
     assert rc == 2 and len(err.splitlines()) == 1, err
     assert flag in err, err
+
+
+def test_render_reports_the_raymarchers_frames_not_spp(tmp_path, capsys):
+    """Issue 55: `render --method raymarch` said "spp: 64"; the raymarcher renders frames."""
+    from radiance_probes.cli.main import main
+    np.save(tmp_path / "v.npy", np.arange(8 ** 3, dtype=np.float32).reshape(8, 8, 8))
+    assert main(["render", str(tmp_path / "v.npy"), "--method", "raymarch", "--spp", "2",
+                 "--width", "16", "--height", "16", "--out", str(tmp_path / "a.png")]) == 0
+    captured = capsys.readouterr()
+    out = captured.out + captured.err
+    assert "frames: 2" in out and "raymarch frames: 2/2" in out and "ms per frame" in out
+    assert "spp" not in out and "per pixel" not in out

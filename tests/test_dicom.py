@@ -203,3 +203,96 @@ def test_window_and_orientation_options(tmp_path, capsys):
     assert apply_options(scene, args).volume.window == (40.0, 400.0)
     with pytest.raises(argparse.ArgumentTypeError, match="LEVEL,WIDTH"):
         window_arg("wide")
+
+
+# ---- a folder as an export leaves it (issue 55) -------------------------------------------------
+
+def export_folder(root: Path) -> Path:
+    """80 files as a PACS export may leave them: a 58-slice series, a 10-slice one with a slice
+    cut short in its header, 3 files cut in their pixel data, 3 images whose pixel data is gone,
+    2 with a SeriesNumber pydicom warns of, and 4 that are not DICOM (a text file, an empty one,
+    bytes named .dcm, an HTML index)."""
+    write_dicom_series(root / "CT", np.arange(58 * 6 * 5, dtype=np.int16).reshape(58, 6, 5),
+                       uid="1.2.3.58", description="Axial")
+    second = write_dicom_series(root / "MR", np.ones((10, 4, 4), np.int16), uid="1.2.3.61",
+                                description="Small", seed=2)
+    cut = sorted(second.iterdir())[4]
+    cut.write_bytes(cut.read_bytes()[:300])
+    broken = root / "broken"
+    for k in range(6):
+        f = ct_slice(broken / f"B{k}", np.full((6, 5), k, np.int16), 100.0 + k, "1.2.3.62")
+        if k < 3:
+            f.write_bytes(f.read_bytes()[:-20])   # pixel data cut short
+        else:
+            ds = pydicom.dcmread(f)
+            del ds.PixelData
+            ds.save_as(f)
+    for k in range(2):   # a value pydicom reads with a warning: SeriesNumber "1A"
+        f = ct_slice(root / "odd" / f"O{k}", np.zeros((6, 5), np.int16), float(k), "1.2.3.63")
+        ds = pydicom.dcmread(f)
+        ds.add_new(0x00200011, "IS", None)
+        ds[0x00200011]._value = "1A"
+        ds.save_as(f)
+    (root / "README.TXT").write_text("exported")
+    (root / "empty.dcm").write_bytes(b"")
+    (root / "junk.dcm").write_bytes(bytes(range(256)) * 4)
+    (root / "INDEX.HTM").write_text("<html></html>")
+    assert sum(1 for f in root.rglob("*") if f.is_file()) == 80
+    return root
+
+
+def test_an_export_with_broken_files_lists_what_it_can_and_says_what_it_passed_over(tmp_path, capsys):
+    import warnings
+    from radiance_probes.cli.main import main
+    root = export_folder(tmp_path / "export")
+    with warnings.catch_warnings(record=True) as caught:   # none of pydicom's gets out
+        warnings.simplefilter("always")
+        listing = list_series(root)
+        assert main(["series", str(root)]) == 0
+        v = load(root)
+    assert not [w for w in caught if "pydicom" in w.filename]
+    assert sorted(s.uid for s in listing.series) == ["1.2.3.58", "1.2.3.61", "1.2.3.63"]
+    small = next(s for s in listing.series if s.uid == "1.2.3.61")
+    assert small.slices == 9 and "uneven slice spacing" in small.problem   # the slice it lost
+    captured = capsys.readouterr()
+    notes = [line for line in captured.err.splitlines() if line]
+    assert len(notes) == 1 and notes[0].startswith("note: export: passed over 11 files"), notes
+    for words in ("4 not DICOM", "3 cut short in the pixel data",
+                  "4 image files without pixel data",
+                  "2 files read despite header irregularities pydicom warned of (O0, O1)"):
+        assert words in notes[0], (words, notes[0])
+    assert "Warning" not in captured.err and "Traceback" not in captured.err
+    assert "3 DICOM series" in captured.out and "* " in captured.out
+    assert v.dicom_series.uid == "1.2.3.58" and v.dims == (5, 6, 58)
+    assert any("passed over 11 files" in n for n in v.notes)
+
+
+def test_a_folder_where_no_series_can_be_read_is_refused_saying_why(tmp_path):
+    root = tmp_path / "cut"
+    for k in range(3):
+        f = ct_slice(root / f"C{k}", np.zeros((6, 5), np.int16), float(k), "1.2.3.70")
+        f.write_bytes(f.read_bytes()[:-20])
+    (root / "notes.txt").write_text("hello")
+    with pytest.raises(VolumeError) as err:
+        list_series(root)
+    text = str(err.value)
+    assert "no DICOM series here can be read" in text and "cut short" in text and "C0" in text
+    assert "1 files not DICOM" in text and "\n" not in text
+
+
+def test_a_series_whose_pixels_cannot_be_decoded_gives_way_to_the_next(tmp_path, monkeypatch):
+    """Without --series, the largest series that cannot be decoded (here: a decoder that fails
+    for it) gives way to the next largest, with a note; named, it is refused."""
+    root = scanner_folder(tmp_path / "study")
+    real = pydicom.dataset.Dataset.pixel_array.fget
+
+    def fail_axial(ds):
+        if ds.SeriesInstanceUID == "1.2.3.10":
+            raise RuntimeError("no decoder for this transfer syntax")
+        return real(ds)
+    monkeypatch.setattr(pydicom.dataset.Dataset, "pixel_array", property(fail_axial))
+    v = load(root)
+    assert v.dicom_series.uid == "1.2.3.12"
+    assert any("1 larger series could not be read" in n and "no decoder" in n for n in v.notes)
+    with pytest.raises(VolumeError, match="cannot decode the pixel data"):
+        load(root, series="1.2.3.10")

@@ -372,3 +372,35 @@ def test_a_frame_makes_at_most_most_samples_whole_over_all_its_steps():
     device.add_groups(7)
     done = fill_frame(device, costs, 1000.0, 100000, most=64)
     assert done.samples <= 64 and device.groups_done == 0
+
+
+def test_a_bake_slice_never_lands_inside_a_banded_sample_that_reads_the_probes(ctx):
+    """Issue 55: the raymarcher's first frame in bands over a bake's slices read two states of
+    the probes (a seam in the image). Paced by the wall clock, the bake now waits while such a
+    sample is in bands and takes its turn between whole samples; both still finish."""
+    from radiance_probes.io.scene_file import parse_scene
+    from radiance_probes.viewer.frame.session import RenderSession
+    scene = parse_scene({**SCENE, "probes": {"grid": [4, 4, 4], "samples": 32}})
+    s = RenderSession(ctx, scene, seed=7)
+    try:
+        assert s.pacer.wall                               # llvmpipe
+        s.frame_budget_ms = s.bake_budget_ms = 1e-3       # one tile, one slice's least a frame
+        s.resize(24, 21)
+        s.set_methods(["raymarch"])
+        view = s.views["raymarch"]
+        slices_in_bands, whole_seen, frames = 0, 0, 0
+        while not (s.probes_ready() and view.acc.samples >= 2):
+            in_bands = view.acc.groups_done > 0
+            times = s.step(100, True)
+            s.record_frame(times)
+            slices_in_bands += in_bands and times.bake_ms > 0
+            whole_seen += s.shows_whole("raymarch")
+            frames += 1
+            assert frames < 600
+        assert slices_in_bands == 0
+        assert s.bake_passes_run > 1 and whole_seen > 0   # the slices and the frames took turns
+        # its image is exactly the raymarcher's whole frames over the finished probes
+        np.testing.assert_array_equal(view.acc.read_rgba(), _whole(s.renderer, "raymarch", 2))
+        assert s.label("raymarch") == "raymarch  2 frames"
+    finally:
+        s.release()

@@ -115,6 +115,30 @@ def test_unknown_field_is_named(path):
         parse_scene(_with(path, 1))
 
 
+@pytest.mark.parametrize("data, suggestion", [
+    ({"transfer_functon": {}}, "(did you mean transfer_function?)"),
+    ({"camera": {"fovy": 40}}, "(did you mean fov_y?)"),
+    ({"light": {"irradiance": 1, "dirction": [0, 1, 0]}}, "(did you mean direction?)"),
+    ({"volume": {"builtin": "cloud", "sise": [8, 8, 8]}}, "(did you mean size?)"),
+    ({"colour": 1}, None),   # nothing close: no guess
+])
+def test_a_typo_in_a_key_says_what_it_is_close_to(data, suggestion):
+    """Issue 55: a misspelt key listed the allowed keys, without the one meant."""
+    with pytest.raises(SceneError) as err:
+        parse_scene(data)
+    text = str(err.value)
+    assert "(allowed: " in text and "\n" not in text
+    assert (suggestion in text) if suggestion else "did you mean" not in text, text
+
+
+def test_an_api_option_with_a_typo_says_what_it_is_close_to():
+    import numpy as np
+
+    import radiance_probes as rp
+    with pytest.raises(SceneError, match=r"'colormpa' \(did you mean colormap\?\)"):
+        rp.render(np.ones((4, 4, 4)), colormpa="grey")
+
+
 def test_not_an_object():
     with pytest.raises(SceneError, match="scene"):
         parse_scene([1, 2])

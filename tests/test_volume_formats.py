@@ -155,14 +155,11 @@ def test_dicom_orders_along_the_normal_when_positions_descend(tmp_path):
 @pytest.mark.parametrize("case, message", [
     ("no images", "holds no DICOM images"),
     ("sizes", "slices of different sizes"),
-    ("truncated", "truncated"),
-    ("truncated pixels", "cannot decode the pixel data"),
     ("only text", "holds no DICOM files"),
     ("same position", "same position"),
     ("gap", "uneven slice spacing"),
     ("no spacing", "missing spacing"),
     ("empty", "holds no files"),
-    ("frames", "cannot read NumberOfFrames"),
     ("orientations", "3 different orientations"),
     ("gantry tilt", "step sideways"),
 ])
@@ -201,21 +198,6 @@ def test_dicom_bad_series(tmp_path, case, message):
         write_dicom_series(folder, data)
         ct_slice(folder / "zz", np.zeros((4, 6), np.int16), -40 + 3 * 2.5,
                  pydicom.dcmread(next(folder.iterdir())).SeriesInstanceUID)
-    elif case == "truncated":
-        write_dicom_series(folder, data)
-        f = sorted(folder.iterdir())[1]
-        f.write_bytes(f.read_bytes()[:300])
-    elif case == "truncated pixels":
-        write_dicom_series(folder, data)
-        f = sorted(folder.iterdir())[1]
-        f.write_bytes(f.read_bytes()[:-7])
-    elif case == "frames":   # a value pydicom reads but that is no number
-        write_dicom_series(folder, data)
-        f = sorted(folder.iterdir())[0]
-        ds = pydicom.dcmread(f)
-        ds.add_new(0x00280008, "IS", None)
-        ds[0x00280008]._value = "x"
-        ds.save_as(f)
     elif case == "same position":
         write_dicom_series(folder, data, dz=0.0)
     elif case == "gap":
@@ -234,6 +216,42 @@ def test_dicom_bad_series(tmp_path, case, message):
     assert "np." not in text and "float64" not in text, text   # plain numbers, no library reprs
     if case == "no spacing":   # the scene's own spacing makes the same series loadable
         assert load(folder, spacing=(1, 1, 1)).spacing == (1.0, 1.0, 1.0)
+
+
+@pytest.mark.parametrize("case, why", [
+    ("truncated", "image files without pixel data"),
+    ("truncated pixels", "cut short in the pixel data"),
+    ("frames", "with a header value that cannot be read"),
+])
+def test_dicom_broken_slice_is_passed_over_with_a_note(tmp_path, case, why):
+    """A file cut short or with a header value that is no number: passed over (issue 55: a
+    folder is read as an export leaves it), named in one note with why; the rest opens."""
+    folder = tmp_path / "bad"
+    data = np.zeros((4, 4, 5), np.int16)
+    data[:, 1, 1] = 100
+    write_dicom_series(folder, data)
+    by_z = sorted(folder.iterdir(), key=lambda f: float(pydicom.dcmread(f).ImagePositionPatient[2]))
+    middle, f = by_z[1], by_z[-1]   # the last slice: the three before it still make a volume
+    middle.write_bytes(middle.read_bytes()[:300])
+    with pytest.raises(VolumeError) as err:   # a slice missing: refused, the passed-over named
+        load(folder)
+    assert "uneven slice spacing" in str(err.value) and f"passed over: {middle.name}" in str(err.value)
+    middle.unlink()
+    if case == "truncated":
+        f.write_bytes(f.read_bytes()[:300])
+    elif case == "truncated pixels":
+        f.write_bytes(f.read_bytes()[:-7])
+    else:   # a value pydicom reads but that is no number
+        ds = pydicom.dcmread(f)
+        ds.add_new(0x00280008, "IS", None)
+        ds[0x00280008]._value = "x"
+        ds.save_as(f)
+    v = load(folder)
+    assert v.dims[2] == 2
+    notes = [n for n in v.notes if "passed over" in n]
+    assert len(notes) == 1 and f"1 {why} ({f.name}" in notes[0] and "\n" not in notes[0], v.notes
+    if case == "frames":
+        assert "cannot read NumberOfFrames ('x')" in notes[0]
 
 
 # ---- TIFF and NIfTI bad input --------------------------------------------------------------------

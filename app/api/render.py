@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 
 from radiance_probes.methods import METHODS as REGISTRY, NAMES
-from radiance_probes.io.scene_file import Scene, SceneError, load_scene, parse_scene, scene_to_dict
+from radiance_probes.io.scene_file import (Scene, SceneError, did_you_mean, load_scene, parse_scene,
+                                           scene_to_dict)
 from radiance_probes.scene.types import CameraSpec, VolumeError, VolumeSpec
 from radiance_probes.scene.flags import COLOUR_SOURCES
 from radiance_probes.scene.clinical_presets import opening_scene
@@ -77,8 +78,9 @@ def _merge(base: dict, options: dict) -> dict:
             else:
                 out[key] = value
         else:
-            raise SceneError(f"unknown option {key!r}: give a scene key ({', '.join(SCENE_KEYS)}) "
-                             f"or one of {', '.join(sorted(SHORTCUTS))}")
+            raise SceneError(f"unknown option {key!r}"
+                             f"{did_you_mean(key, [*SCENE_KEYS, *SHORTCUTS])}: give a scene key "
+                             f"({', '.join(SCENE_KEYS)}) or one of {', '.join(sorted(SHORTCUTS))}")
     return out
 
 

@@ -54,10 +54,9 @@ def cmd_series(args: argparse.Namespace) -> int:
         mark = "*" if s.number == default else " "
         print(f"{mark} {s.label()}")
         print(f"      SeriesInstanceUID {s.uid}")
-    if listing.skipped:
-        n = len(listing.skipped)
-        print(f"({n} file{'s' if n != 1 else ''} that {'are' if n != 1 else 'is'} not DICOM "
-              "passed over)")
+    note = listing.skip_note()
+    if note:
+        print(f"note: {note}", file=sys.stderr)
     print("* opens by default (the largest that makes a volume); open another with --series N or "
           "--series UID" if default is not None else "none of them makes one volume")
     return 0

@@ -790,7 +790,9 @@ def render_to_files(args: argparse.Namespace) -> int:
     else:
         result = renderer.render(args.method, spp=args.spp, seed=args.seed,
                                  samples_per_pass=args.samples_per_pass,
-                                 progress=progress_printer(f"{args.method} samples"),
+                                 progress=progress_printer(
+                                     f"{args.method} "
+                                     f"{'frames' if not METHODS[args.method].noisy else 'samples'}"),
                                  bake_progress=on_bake_pass,
                                  denoise=getattr(args, "denoise", False),
                                  denoise_guides=getattr(args, "denoise_guides", "auto"))
@@ -824,7 +826,8 @@ def render_to_files(args: argparse.Namespace) -> int:
     errors.append(err)
     print(f"device: {describe(ctx)}")
     cam = scene.camera
-    print(f"method: {result.method}  image: {cam.width}x{cam.height}  spp: {result.spp}")
+    word = METHODS[result.method].sample_word if result.method in METHODS else "spp"
+    print(f"method: {result.method}  image: {cam.width}x{cam.height}  {word}: {result.spp}")
     shown = result.stats.get("shown")   # a composite method's part shown (refine)
     if shown is not None:
         est = result.stats["refine_estimate"]
@@ -870,8 +873,8 @@ def render_to_files(args: argparse.Namespace) -> int:
         print(f"note: raymarch step {renderer.effective_raymarch_step_voxels:.3g} voxels, not the "
               f"default {renderer.raymarch_step_voxels:g}: the shader takes at most 8192 steps "
               "across this volume's box")
-    print(f"render GPU time: {result.render_ms:.1f} ms  ({result.ms_per_sample:.3f} ms per sample "
-          "per pixel of the whole image)")
+    per = ("frame" if word == "frames" else "sample per pixel") + " of the whole image"
+    print(f"render GPU time: {result.render_ms:.1f} ms  ({result.ms_per_sample:.3f} ms per {per})")
     if result.stats.get("truncated_paths") or result.stats.get("nonfinite_samples"):
         print(f"warning: {result.stats['truncated_paths']} paths ran out of their step budget and "
               f"{result.stats['nonfinite_samples']} samples were not finite; both were left out",

@@ -9,13 +9,20 @@ PlaneOrientationSequence, PixelMeasuresSequence, PixelValueTransformationSequenc
 each from the per-frame item or else the shared one), an RT dose grid by its GridFrameOffsetVector
 (offsets along the normal from ImagePositionPatient), its values scaled by DoseGridScaling (Gy).
 
-Headers are read first without pixel data (listing a tree costs a header per file); only the chosen
-series' pixels are decoded. Every problem ends in one :class:`VolumeError` naming the folder or file
+Headers are read first without pixel data (listing a tree costs a header per file; the pixel data's
+length is checked against the file's, not read); only the chosen series' pixels are decoded. A
+folder is read as an export leaves it: files that are not DICOM, unreadable, truncated, images
+without pixel data or with headers that cannot be read are passed over, counted in one note that
+names the first few (DicomListing.skip_note), and pydicom's warnings about what it read anyway
+(a VR it guessed, a value it fixed) are counted there too, never printed; only a folder where no
+series can be read is refused. Every refusal is one :class:`VolumeError` naming the folder or file
 and the problem in plain words; numbers in messages are formatted, never library reprs.
 """
 from __future__ import annotations
 
 import os
+import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -41,6 +48,26 @@ NAMED_SKIPPED = 3
 
 def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
+
+
+@contextmanager
+def _library_warnings(seen: list):
+    """pydicom's warnings while reading (a VR it had to guess, a value it fixed) go to `seen`,
+    not to stderr: the listing counts the files they came from."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    for w in caught:   # others' warnings (a garbage collection's, say) go on as they came
+        if f"{os.sep}pydicom{os.sep}" in str(w.filename) or str(w.filename) == __file__:
+            # (pydicom's, attributed to its own line or, by its stacklevel, to the call here)
+            seen.append(w)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+
+
+def _names(paths, total: int) -> str:
+    names = ", ".join(Path(f).name for f in list(paths)[:NAMED_SKIPPED])
+    return names + (", ..." if total > NAMED_SKIPPED else "")
 
 
 def _g(values) -> str:
@@ -114,6 +141,43 @@ class DicomListing:
     series: tuple[DicomSeries, ...]
     skipped: tuple[Path, ...] = ()   # files that are not DICOM
     other: int = 0                   # DICOM files without images (reports, presentation states)
+    # DICOM files passed over: (file, why in a few words: unreadable, cut short, an image without
+    # pixel data, a header value that cannot be read; the library's or our words on it, or "")
+    broken: tuple[tuple[Path, str, str], ...] = ()
+    irregular: tuple[Path, ...] = ()  # files pydicom read with a warning (read all the same)
+
+    def broken_said(self) -> str:
+        """For a refusal: the DICOM files passed over (a slice the series misses may be one)."""
+        if not self.broken:
+            return ""
+        n = len(self.broken)
+        return (f" ({n} DICOM file{'s' if n != 1 else ''} here passed over: "
+                f"{_names([f for f, _, _ in self.broken], n)}; `radiance-probes series "
+                f"{self.where}` says why)")
+
+    def skip_note(self) -> str | None:
+        """One line: the files passed over, counted by why, the first few named, and the files
+        read with a warning of pydicom's; None where every file was read cleanly."""
+        parts = []
+        if self.skipped:
+            parts.append(f"{len(self.skipped)} not DICOM ({_names(self.skipped, len(self.skipped))})")
+        whys: dict[str, list] = {}
+        for f, why, detail in self.broken:
+            whys.setdefault(why, []).append((f, detail))
+        for why, got in whys.items():
+            first = got[0][1]
+            parts.append(f"{len(got)} {why} ({_names([f for f, _ in got], len(got))}"
+                         f"{f'; the first: {first}' if first else ''})")
+        if not parts and not self.irregular:
+            return None
+        n = len(self.skipped) + len(self.broken)
+        text = (f"{self.where.name}: passed over {n} file{'s' if n != 1 else ''}: "
+                f"{'; '.join(parts)}" if n else f"{self.where.name}:")
+        if self.irregular:
+            k = len(self.irregular)
+            text += (f"{'; ' if n else ' '}{k} file{'s' if k != 1 else ''} read despite header "
+                     f"irregularities pydicom warned of ({_names(self.irregular, k)})")
+        return text
 
     def find(self, wanted: str | int) -> DicomSeries:
         """The series a scene names: its number in the listing or its SeriesInstanceUID."""
@@ -132,13 +196,18 @@ class DicomListing:
         if not usable and len(self.series) == 1:
             one = self.series[0]
             raise VolumeError(f"{self.where}: its DICOM series does not make one volume: "
-                              f"{one.problem} ({replace(one, problem=None).label()})")
+                              f"{one.problem} ({replace(one, problem=None).label()})"
+                              + self.broken_said())
         if not usable:
             raise VolumeError(f"{self.where}: none of its {len(self.series)} DICOM series makes "
-                              f"one volume: {self.summary()}")
-        # series with patient geometry before single images without it (radiographs)
-        return max(usable, key=lambda s: (s.orientation is not None, s.voxels, s.slices,
-                                          -s.number))
+                              f"one volume: {self.summary()}" + self.broken_said())
+        return self.by_size()[0]
+
+    def by_size(self) -> list[DicomSeries]:
+        """The series that make one volume, the one largest() names first: series with patient
+        geometry before single images without it (radiographs), then by voxels."""
+        return sorted((s for s in self.series if s.problem is None), reverse=True,
+                      key=lambda s: (s.orientation is not None, s.voxels, s.slices, -s.number))
 
     def summary(self) -> str:
         return "; ".join(s.label() for s in self.series)
@@ -167,10 +236,33 @@ def frames_in(p: Path) -> int:
     """A DICOM file's NumberOfFrames (1 where it has none); 0 where it is not readable DICOM."""
     import pydicom
     try:
-        ds = pydicom.dcmread(str(p), stop_before_pixels=True)
+        with _library_warnings([]):
+            ds = pydicom.dcmread(str(p), stop_before_pixels=True)
         return _frame_count(ds, p)
     except Exception:
         return 0
+
+
+PIXEL_DATA_TAG = 0x7FE00010
+UNDEFINED_LENGTH = 0xFFFFFFFF
+DEFLATED = "1.2.840.10008.1.2.1.99"   # Deflated Explicit VR Little Endian
+# The header values a listing reads of each file (beyond its geometry)
+LISTED = ("SeriesNumber", "SeriesDescription", "Modality", "Rows", "Columns", "PixelSpacing",
+          "SliceThickness", "SpacingBetweenSlices", "RescaleSlope", "RescaleIntercept")
+
+
+def _read_header(f: Path):
+    """A file's data set with its pixel data left unread (values over 1 KiB are deferred), and
+    whether that pixel data ends past the file's end (a file cut short)."""
+    import pydicom
+    ds = pydicom.dcmread(str(f), defer_size=1024)
+    raw = ds._dict.get(PIXEL_DATA_TAG)   # (pydicom's element before conversion: where it lies)
+    tell, length = getattr(raw, "value_tell", None), getattr(raw, "length", None)
+    meta = getattr(ds, "file_meta", None)
+    deflated = str(meta.get("TransferSyntaxUID", "") if meta else "") == DEFLATED
+    cut = (tell is not None and length not in (None, UNDEFINED_LENGTH) and not deflated
+           and tell + length > f.stat().st_size)   # (a deflated file's offsets are inflated ones)
+    return ds, cut
 
 
 def _tree_files(folder: Path) -> list[Path]:
@@ -205,7 +297,12 @@ def list_series(path: str | Path) -> DicomListing:
     """The DICOM series under a folder (searched recursively) or named by a DICOMDIR."""
     p = Path(path)
     try:
-        return _list_series(p)
+        stray: list = []   # (those of a file are counted with it; the DICOMDIR's here)
+        with _library_warnings(stray):
+            listing = _list_series(p)
+        if stray and p not in listing.irregular:
+            listing = replace(listing, irregular=(*listing.irregular, p))
+        return listing
     except VolumeError:
         raise
     except Exception as exc:  # pydicom converts values lazily: a mangled one raises on first use
@@ -213,7 +310,6 @@ def list_series(path: str | Path) -> DicomListing:
 
 
 def _list_series(p: Path) -> DicomListing:
-    import pydicom
     from pydicom.errors import InvalidDicomError
 
     if not p.exists():
@@ -225,30 +321,57 @@ def _list_series(p: Path) -> DicomListing:
         raise VolumeError(f"{p}: the folder holds no files (expected DICOM images, or a folder of "
                           "TIFF slices)")
     groups: dict[str, list] = {}
-    skipped, other = [], 0
+    skipped, broken, irregular, other = [], [], [], 0
     for f in files:
+        seen: list = []
         try:
-            ds = pydicom.dcmread(str(f), stop_before_pixels=True)
+            with _library_warnings(seen):
+                ds, cut = _read_header(f)
         except InvalidDicomError:
             skipped.append(f)
             continue
-        except Exception as exc:
-            raise VolumeError(f"{f}: cannot read DICOM ({_one_line(exc)})") from None
+        except Exception as exc:   # cut inside its header, or a header pydicom cannot parse
+            broken.append((f, "unreadable", _one_line(exc)[:80]))
+            continue
+        if cut:
+            broken.append((f, "cut short in the pixel data", ""))
+            continue
         if not _is_image(ds):
             meta = getattr(ds, "file_meta", None)
             sop = ds.get("SOPClassUID") or (meta.get("MediaStorageSOPClassUID") if meta else None)
             if len(ds) == 0 or "Image Storage" in str(getattr(sop, "name", "") or ""):
-                raise VolumeError(f"{f}: an image without pixel data (a truncated file?)")
+                broken.append((f, "image files without pixel data", ""))
+                continue
             other += 1   # a report or presentation state beside the images
             continue
-        uid = str(ds.get("SeriesInstanceUID", "") or "(no SeriesInstanceUID)")
-        groups.setdefault(uid, []).append((f, ds))
+        if "PixelData" not in ds and not any(k in ds for k in ("FloatPixelData",
+                                                               "DoubleFloatPixelData")):
+            broken.append((f, "image files without pixel data", ""))
+            continue
+        try:
+            with _library_warnings(seen):   # (values are converted as they are first read)
+                got = _slices_of(f, ds)
+                uid = str(ds.get("SeriesInstanceUID", "") or "(no SeriesInstanceUID)")
+                for keyword in LISTED:   # read here, so a value pydicom warns of is this file's
+                    ds.get(keyword)
+        except VolumeError as exc:   # a header value that cannot be read (NumberOfFrames: "x")
+            broken.append((f, "with a header value that cannot be read", _header_problem(exc, f)))
+            continue
+        finally:
+            if seen and (not irregular or irregular[-1] != f):
+                irregular.append(f)
+        groups.setdefault(uid, []).append((f, ds, got))
     if not groups:
+        if broken:
+            f, why, detail = broken[0]
+            raise VolumeError(f"{p}: no DICOM series here can be read ({len(broken)} DICOM "
+                              f"file{'s' if len(broken) != 1 else ''} passed over, the first "
+                              f"{f.name}: {why}{f': {detail}' if detail else ''}"
+                              + (f"; {len(skipped)} files not DICOM" if skipped else "") + ")")
         if other:
             raise VolumeError(f"{p}: holds no DICOM images ({other} DICOM files, none an image)")
-        names = ", ".join(f.name for f in skipped[:NAMED_SKIPPED])
         raise VolumeError(f"{p}: holds no DICOM files ({len(skipped)} files, none of them DICOM: "
-                          f"{names}{', ...' if len(skipped) > NAMED_SKIPPED else ''})")
+                          f"{_names(skipped, len(skipped))})")
 
     def order(item):
         uid, members = item
@@ -257,9 +380,40 @@ def _list_series(p: Path) -> DicomListing:
         return (int(number) if number.lstrip("-").isdigit() else 1 << 30, number,
                 str(ds.get("SeriesDescription", "") or ""), uid)
 
-    series = tuple(_series(k + 1, uid, members)
-                   for k, (uid, members) in enumerate(sorted(groups.items(), key=order)))
-    return DicomListing(p, series, tuple(skipped), other)
+    seen: list = []
+    with _library_warnings(seen):
+        ordered = sorted(groups.items(), key=order)
+    if seen:
+        irregular.append(ordered[0][1][0][0])
+    series = []
+    for k, (uid, members) in enumerate(ordered):
+        seen = []
+        with _library_warnings(seen):
+            series.append(_series_or_why(k + 1, uid, members))
+        if seen and not any(f in irregular for f, _, _ in members):
+            irregular.append(members[0][0])
+    series = tuple(series)
+    return DicomListing(p, series, tuple(skipped), other, tuple(broken), tuple(irregular))
+
+
+def _series_or_why(number: int, uid: str, members: list) -> DicomSeries:
+    """_series, or where a header value of its files cannot be read (pydicom converts values
+    lazily: a mangled one raises at first use), the series listed with that as its problem."""
+    try:
+        return _series(number, uid, members)
+    except Exception as exc:
+        why = _one_line(exc) if isinstance(exc, VolumeError) else (
+            f"a header value cannot be read ({_one_line(exc)[:80]})")
+        return DicomSeries(number, uid, "", "", "", 0, 0,
+                           tuple(f for f, _, _ in members), problem=why)
+
+
+def _header_problem(exc: VolumeError, f: Path) -> str:
+    """A header refusal's words without the file's path (the note names the file)."""
+    text = str(exc)
+    for prefix in (f"{f}, ", f"{f}: "):
+        text = text.replace(prefix, "", 1) if text.startswith(str(f)) else text
+    return text[:80]
 
 
 @dataclass(frozen=True)
@@ -374,8 +528,7 @@ def _series(number: int, uid: str, members: list) -> DicomSeries:
     slices: list[_Slice] = []
     kinds = set()
     problem = None
-    for f, ds in members:
-        got, kind, why = _slices_of(f, ds)
+    for f, ds, (got, kind, why) in members:
         slices += got
         kinds.add(kind)
         problem = problem or why
@@ -383,7 +536,7 @@ def _series(number: int, uid: str, members: list) -> DicomSeries:
 
     def entry(problem=None, ordered=None, positions=(), orientation=None):
         ordered = ordered if ordered is not None else (
-            slices or [_Slice(f, None, None, None) for f, _ in members])
+            slices or [_Slice(f, None, None, None) for f, _, _ in members])
         multi = any(sl.frame is not None for sl in ordered)
         first = ordered[0]
         return DicomSeries(files=tuple(sl.file for sl in ordered), problem=problem,
@@ -397,7 +550,7 @@ def _series(number: int, uid: str, members: list) -> DicomSeries:
 
     if problem:
         return entry(problem)
-    sizes = {(int(ds.get("Columns", 0) or 0), int(ds.get("Rows", 0) or 0)) for _, ds in members}
+    sizes = {(int(ds.get("Columns", 0) or 0), int(ds.get("Rows", 0) or 0)) for _, ds, _ in members}
     if len(sizes) > 1:
         a, b = sorted(sizes)[:2]
         return entry(f"slices of different sizes ({a[0]} x {a[1]} and {b[0]} x {b[1]}, columns x "
@@ -477,28 +630,43 @@ def read_dicom(path: str | Path, need_spacing: bool, wanted: str | int | None = 
     chosen = listing.largest() if wanted is None else listing.find(wanted)
     if chosen.problem:
         raise VolumeError(f"{p}: series {chosen.number} does not make one volume: "
-                          f"{chosen.problem}")
-    where = (str(p) if len(listing.series) == 1 else
-             f"{p}, series {chosen.label()}")
-    try:
-        data, spacing = _read_pixels(chosen, need_spacing, where)
-    except VolumeError:
-        raise
-    except Exception as exc:
-        raise VolumeError(f"{where}: cannot read the DICOM series ({_one_line(exc)})") from None
+                          f"{chosen.problem}" + listing.broken_said())
+    # Without a series named, a series whose pixels cannot be read (a compression no installed
+    # decoder reads, a slice cut short) gives way to the next largest, said in a note.
+    candidates = [chosen] if wanted is not None else listing.by_size()
+    failed: list[str] = []
+    seen: list = []
+    for chosen in candidates:
+        where = (str(p) if len(listing.series) == 1 else
+                 f"{p}, series {chosen.label()}")
+        try:
+            with _library_warnings(seen):
+                data, spacing = _read_pixels(chosen, need_spacing, where)
+            break
+        except VolumeError as exc:
+            failed.append(str(exc))
+        except Exception as exc:
+            failed.append(f"{where}: cannot read the DICOM series ({_one_line(exc)})")
+    else:
+        more = len(failed) - 1
+        raise VolumeError(failed[0] + (f" (and none of the {more} other series that make a "
+                                       f"volume could be read either)" if more else "")) from None
     notes = []
+    if failed:
+        notes.append(f"{p.name}: {len(failed)} larger series could not be read, so this one "
+                     f"opened; the first: {failed[0]}")
     if len(listing.series) > 1:
         others = "; ".join(s.label(reason=False) for s in listing.series if s is not chosen)
         how = "the largest that makes a volume" if wanted is None else "as the scene names"
         notes.append(f"{p.name} holds {len(listing.series)} DICOM series; opened {how}: "
                      f"{chosen.label()}. The others: {others}. Open another with --series N "
                      f"({with_flag('volume.series')}); `radiance-probes series {p}` lists them all")
-    if listing.skipped:
-        names = ", ".join(f.name for f in listing.skipped[:NAMED_SKIPPED])
-        n = len(listing.skipped)
-        notes.append(f"{p.name}: passed over {n} file{'s' if n != 1 else ''} that "
-                     f"{'are' if n != 1 else 'is'} not DICOM "
-                     f"({names}{', ...' if len(listing.skipped) > NAMED_SKIPPED else ''})")
+    skip = listing.skip_note()
+    if skip:
+        notes.append(skip)
+    if seen:
+        notes.append(f"{p.name}: pydicom warned {len(seen)} time{'s' if len(seen) != 1 else ''} "
+                     "while decoding the pixels (read all the same)")
     direction = None
     if chosen.orientation is not None:
         iop = np.array(chosen.orientation)

@@ -82,8 +82,20 @@ def _vector(value: Any, name: str, n: int, **limits: Any) -> tuple:
 
 def _choice(value: Any, name: str, choices: tuple[str, ...]) -> str:
     if not isinstance(value, str) or value.lower() not in choices:
-        raise SceneError(f"{name}: expected one of {', '.join(choices)}, got {value!r}")
+        raise SceneError(f"{name}: expected one of {', '.join(choices)}, got {value!r}"
+                         f"{did_you_mean(value, choices)}")
     return value.lower()
+
+
+def did_you_mean(word: Any, choices) -> str:
+    """' (did you mean X?)' where a choice is close to the word (difflib's ratio 0.6 and up,
+    case aside), else ''."""
+    import difflib
+    if not isinstance(word, str):
+        return ""
+    lowered = {str(c).lower(): str(c) for c in choices}
+    close = difflib.get_close_matches(word.lower(), list(lowered), n=1, cutoff=0.6)
+    return f" (did you mean {lowered[close[0]]}?)" if close else ""
 
 
 def _object(value: Any, name: str, allowed: set[str]) -> Mapping[str, Any]:
@@ -92,7 +104,9 @@ def _object(value: Any, name: str, allowed: set[str]) -> Mapping[str, Any]:
     unknown = sorted(set(value) - allowed)
     if unknown:
         where = f"{name}." if name else ""
-        raise SceneError(f"unknown field {where}{unknown[0]} (allowed: {', '.join(sorted(allowed))})")
+        raise SceneError(f"unknown field {where}{unknown[0]}"
+                         f"{did_you_mean(unknown[0], allowed - {'$schema'})} "
+                         f"(allowed: {', '.join(sorted(allowed))})")
     return value
 
 

@@ -268,9 +268,10 @@ def keys() -> dict[str, Key]:
         "camera": Key("A pinhole camera.", {}),
         "camera.eye": Key("Where the camera is (world units; the volume's box is centred at the "
                           "origin, its longest side 1). Where the scene leaves the view at its "
-                          "default and the box does not fit the image (a tall image, a long "
-                          "box), the eye moves back along its direction until the whole box is "
-                          "in view.", vector(3)),
+                          "default and the box's bounding sphere does not fit the image (a tall "
+                          "image, a long box), the eye moves back along its direction until it "
+                          "does, so the whole box stays in view from any direction at that "
+                          "distance (an orbit).", vector(3)),
         "camera.target": Key("The point it looks at (not the eye).", vector(3)),
         "camera.up": Key("Up on the image (not along the view).", vector(3)),
         "camera.fov_y": Key("Vertical field of view, degrees.", number(0.0, 179.0, lo_open=True)),

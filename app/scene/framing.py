@@ -1,19 +1,21 @@
-"""The default camera framed to the volume's box: a scene that leaves the camera at its default
+"""The default camera framed to the volume: a scene that leaves the camera at its default
 (CameraSpec's eye, target, up and field of view) sees the whole box, whatever its proportions,
-at the camera's field of view and the image's aspect. The eye moves back along its default
-direction only as far as the box needs, with a margin (a box that fits already keeps the default
-eye: the images of such scenes stay as they were)."""
+at the camera's field of view and the image's aspect, from any direction at that distance: the
+eye moves back along its default direction until the box's bounding sphere fits the image, with
+a margin, so an orbit about the target (Renderer.orbit, the viewer's drag), which keeps the
+distance, never cuts the box (issue 55: a box framed for the default direction alone touched the
+image's edges at azimuths 120 and 240). A sphere that fits already keeps the default eye."""
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 
 import numpy as np
 
 from radiance_probes.scene.types import CameraSpec, Scene
 
-# The box's corners stay this fraction of the half field of view inside the image's edges.
+# The box's bounding sphere stays this fraction of the half field of view (its tangent) inside the
+# image's nearer edges.
 MARGIN = 0.03
 
 
@@ -28,39 +30,27 @@ def is_default_view(camera: CameraSpec) -> bool:
     return scale >= 1.0 - 1e-9 and bool(np.allclose(eye, scale * home, rtol=0, atol=1e-9))
 
 
-def framing_distance(half_extent, eye, target, up, fov_y: float, aspect: float,
-                     margin: float = MARGIN) -> float:
-    """The least distance from the target, along the eye's direction, at which every corner of the
-    box (centred at the origin, `half_extent` along x, y, z) lies inside the view: within the
-    vertical field of view and the horizontal one the aspect (width / height) gives."""
-    eye, target, up = (np.asarray(v, np.float64) for v in (eye, target, up))
-    back = (eye - target) / np.linalg.norm(eye - target)
-    forward = -back
-    right = np.cross(forward, up)
-    right /= np.linalg.norm(right)
-    true_up = np.cross(right, forward)
-    tan_y = math.tan(math.radians(fov_y) / 2) * (1.0 - margin)
-    tan_x = tan_y * aspect
-    h = np.asarray(half_extent, np.float64)
-    need = 0.0
-    for signs in itertools.product((-1.0, 1.0), repeat=3):
-        corner = np.array(signs) * h - target
-        # at distance d the corner lies d + corner.forward in front of the eye
-        depth = float(corner @ forward)
-        need = max(need, abs(float(corner @ true_up)) / tan_y - depth,
-                   abs(float(corner @ right)) / tan_x - depth)
-    return need
+def sphere_distance(radius: float, fov_y: float, aspect: float, margin: float = MARGIN) -> float:
+    """The least distance from a sphere's centre at which it fits a view whose centre it is on:
+    its silhouette's half angle, asin(radius / distance), within the narrower half field of view
+    (the vertical one, or the horizontal one the aspect gives), that less `margin` of its
+    tangent."""
+    tan_half = math.tan(math.radians(fov_y) / 2) * min(1.0, aspect) * (1.0 - margin)
+    return float(radius) * math.hypot(1.0, tan_half) / tan_half
 
 
 def framed_camera(camera: CameraSpec, half_extent, aspect: float | None = None) -> CameraSpec:
-    """The camera with its eye moved back along its direction until the box fits (never closer
-    than it is); the image's aspect from the camera's size unless given (the viewer's view)."""
+    """The camera with its eye moved back along its direction until the box's bounding sphere
+    (about the box's centre, the origin, which the default view's target is) fits the image with
+    MARGIN, so the box fits from every direction at that distance (never closer than it is); the
+    image's aspect from the camera's size unless given (the viewer's view)."""
     aspect = aspect if aspect is not None else camera.width / camera.height
     eye, target = np.asarray(camera.eye, np.float64), np.asarray(camera.target, np.float64)
     distance = float(np.linalg.norm(eye - target))
-    if framing_distance(half_extent, eye, target, camera.up, camera.fov_y, aspect, 0.0) <= distance:
-        return camera       # every corner in the image already
-    need = framing_distance(half_extent, eye, target, camera.up, camera.fov_y, aspect)
+    radius = float(np.linalg.norm(np.asarray(half_extent, np.float64)))
+    need = sphere_distance(radius, camera.fov_y, aspect)
+    if need <= distance:
+        return camera       # the sphere in the image already
     new_eye = target + (eye - target) * (need / distance)
     return dataclasses.replace(camera, eye=tuple(float(v) for v in new_eye))
 

@@ -151,9 +151,11 @@ def _run_window(args: argparse.Namespace, scene: Scene, volume, steps, scripted:
         if args.frames:  # the screenshot's frame is the last of them
             ScriptRunner(window, Path.cwd()).frame(args.frames - (1 if args.screenshot else 0))
         if args.screenshot:
+            frames, waited = _wait_for_a_whole_image(window)
             window.viewer.request_screenshot(args.screenshot)
             window.poll()
             window.frame()
+            _say_whether_whole(window, args.screenshot, frames, waited)
             _, saved, error = window.viewer.last_screenshot
             if error:   # written elsewhere (or lost): said once, as the command's error
                 state.errors.remove(error)
@@ -173,6 +175,48 @@ def _run_window(args: argparse.Namespace, scene: Scene, volume, steps, scripted:
     finally:
         window.close()
     return rc
+
+
+# `--screenshot` after `--frames N`: frames go on while a view's first sample is still in bands
+# (a software renderer's sample takes several frames), at most this long; past it the image is
+# saved as it is, and a line says it is partial.
+SCREENSHOT_WAIT_S = 120.0
+
+
+def _partial_views(window) -> list[str]:
+    """The views whose display shows no whole image yet (all, before a first frame)."""
+    session = window.viewer.session
+    if not session.views:
+        return ["(no frame yet)"]
+    return [m for m in session.views if not session.shows_whole(m)]
+
+
+def _wait_for_a_whole_image(window) -> tuple[int, float]:
+    """Frames until every view shows a whole image (RenderSession.shows_whole) or
+    SCREENSHOT_WAIT_S have passed: how many, and their seconds."""
+    import time
+    start, frames = time.perf_counter(), 0
+    while (_partial_views(window) and time.perf_counter() - start < SCREENSHOT_WAIT_S
+           and not window.should_close()):
+        window.poll()
+        window.frame()
+        frames += 1
+    return frames, time.perf_counter() - start
+
+
+def _say_whether_whole(window, out: str, frames: int, waited: float) -> None:
+    """One line on stderr where the screenshot had to wait for a whole image, or is partial."""
+    session = window.viewer.session
+    left = _partial_views(window)
+    if left:
+        parts = ", ".join(f"{m}'s first {'frame' if m == 'raymarch' else 'sample'} "
+                          f"{100 * session.part_done(m):.0f}% done" for m in left)
+        print(f"view: warning: {out} is partial ({parts}, {frames} frames and {waited:.0f} s "
+              f"past --frames); a larger --frames, a smaller --window or --render-scale gives a "
+              f"whole image", file=sys.stderr)
+    elif frames:
+        print(f"view: note: {frames} more frames ({waited:.1f} s) for a whole image: one sample "
+              f"takes several frames on this device", file=sys.stderr)
 
 
 def headless_fallback(args: argparse.Namespace, reason: str) -> int:

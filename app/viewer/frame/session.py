@@ -13,7 +13,9 @@ A frame's GPU time is budgeted as a whole (FRAME_BUDGET_MS): the bake slice firs
 samples per shown method as the rest of the frame holds by their measured cost, at least one.
 Where GPU timestamps cannot be believed (a software renderer; a GPU whose timestamps stay far
 below the wall clock) the renderer's timer becomes the wall clock and a frame's work gets what
-WALL_FRAME_MS leaves after the rest of the frame (app/viewer/frame/pacing.py).
+WALL_FRAME_MS leaves after the rest of the frame (app/viewer/frame/pacing.py); a sample longer than
+that goes in bands over frames, and the bake and a banded view that reads the probes take turns
+(BAKE_TURN_RATIO), so no sample mixes two states of the probes.
 
 `refine` (RefineView) is two renderers in one view: after any edit the raymarcher's image shows
 at once; once the probes are current, `guided` samples accumulate beside it in two independent
@@ -71,6 +73,12 @@ REFINE_CHECK_FRAMES = 16
 # refine judges its blend when guided's samples have grown 2^JUDGE_STAGES times since the last
 # judgement (_judge_due).
 JUDGE_STAGES = 2
+# Paced by the wall clock, a bake slice never lands inside a banded sample of a view that reads the
+# probes (its bands would read two states of the probes: the seam of issue 55); the bake and such
+# a view take turns instead, the bake this many times the wall time of the view's last whole
+# sample before the next begins: the share of a frame the budgets give each (50 ms of 65).
+BAKE_TURN_RATIO = BAKE_BUDGET_MS["software"] / (FRAME_BUDGET_MS["software"]
+                                                - BAKE_BUDGET_MS["software"])
 
 
 class RenderSession:
@@ -109,6 +117,7 @@ class RenderSession:
         self._refine_ms = 0.0   # wall ms of refine's checks and judgements this frame
         self.pacer = FramePacer(device == "software", ctx.info.get("GL_RENDERER", ""), clock)
         self._frame_began: float | None = None   # when the last working frame's step began
+        self._bake_turn_ms = 0.0   # wall ms of bake slices before a banded probe view's next sample
         if self.pacer.wall:
             self._use_wall_clock()
 
@@ -180,8 +189,8 @@ class RenderSession:
         (restart_pending: step() begins the view again once it is whole), with its own camera
         and the probes as they come: otherwise a drag, which moves the camera every frame, or a
         bake, which restarts the views that read probes every frame, would never see a sample
-        of the picture whole. (The bands of such a sample may read the probes of different
-        slices: a preview of probes still baking either way.)"""
+        of the picture whole. (A bake slice itself waits for a banded sample that reads the
+        probes, step(): the bands of one sample read one state of the probes.)"""
         if self.size == (0, 0):
             return
         if isinstance(view, RefineView):
@@ -265,7 +274,9 @@ class RenderSession:
         self.denoise.budget.begin_frame()   # the frame's host transfers (fence.TransferBudget)
         r = self.renderer
         budget = self.pacer.work_budget_ms(self.frame_budget_ms)
-        if want_probes and not r.probes_current():
+        baking = want_probes and not r.probes_current()
+        if baking and not any(self._reads_probes_in_bands(v) and v.acc.groups_done
+                              for v in self.views.values()):   # (else the bake waits its turn)
             starting = not r.bake_started_for_scene()
             passes = None if starting else r.probe_grid.passes_done
             t = time.perf_counter()
@@ -274,8 +285,10 @@ class RenderSession:
                            None if self.pacer.wall else times.bake_ms)
             if starting:
                 self.bake_ms = 0.0
+                self._bake_turn_ms = 0.0   # a first preview of the new bake soon
                 self.bake_generation += 1
             self.bake_ms += times.bake_ms
+            self._bake_turn_ms -= times.bake_ms
             self.bake_passes_run += 1
             if r.probe_grid.passes_done not in (0, passes):   # a pass ended: its progress
                 self.bake_report = r.probe_grid.progress_report()
@@ -288,7 +301,8 @@ class RenderSession:
         todo = [v for v in self.views.values() if v.acc is not None
                 and not (r.needs_probes(v.shown) and r.probe_grid is None)   # nothing to read yet
                 and (not self._refine_done(v, max_samples) if isinstance(v, RefineView)
-                     else v.acc.samples < max_samples)]
+                     else v.acc.samples < max_samples)
+                and not (baking and self._waits_for_bake(v))]
         share = max(budget - times.bake_ms, 0.0) / max(len(todo), 1)
         self._refine_ms = 0.0
         t_work = time.perf_counter()
@@ -300,6 +314,10 @@ class RenderSession:
                 continue
             if self.banded(view):
                 ms, n, tiles, bands = self._add_paced(view, share, max_samples)
+                if (baking and n and view.acc.groups_done == 0
+                        and self._reads_probes_in_bands(view)):   # whole: the bake's turn
+                    whole_ms = view.tile_costs[view.shown].sample_ms() or 0.0
+                    self._bake_turn_ms = BAKE_TURN_RATIO * whole_ms
                 times.render_ms += ms
                 times.samples += n
                 times.tiles += tiles
@@ -339,6 +357,35 @@ class RenderSession:
                 return base          # a preview not yet timed: the slice as ever
             keep += statistics.median(ms / n for n, ms in recent)
         return max(base, budget - keep)
+
+    def _reads_probes_in_bands(self, view) -> bool:
+        """A view whose samples go in bands over frames and read the probes."""
+        return (not isinstance(view, RefineView) and view.acc is not None and self.banded(view)
+                and self.renderer.needs_probes(view.shown))
+
+    def _waits_for_bake(self, view) -> bool:
+        """While the probes bake: a banded view that reads them and has a whole image to show
+        begins its next sample only once the bake has had its turn (BAKE_TURN_RATIO)."""
+        return (self._bake_turn_ms > 0.0 and self._reads_probes_in_bands(view)
+                and view.acc.groups_done == 0 and view.held is not None)
+
+    def shows_whole(self, method: str) -> bool:
+        """Whether the display shows a whole image of the view: the last whole image while a
+        first sample is in bands, or an accumulation with a sample at least (every pixel a
+        mean of whole samples; a sample in bands adds one to some pixels' means). False while
+        the view's first sample is part done and it has no whole image before it."""
+        view = self.views.get(method)
+        if view is None or isinstance(view, RefineView):
+            return view is None or view.acc is not None   # refine's samples are whole
+        return view.acc is not None and (view.shows_held or view.acc.samples > 0)
+
+    def part_done(self, method: str) -> float:
+        """The fraction of the sample in bands of a view (0 where none is)."""
+        view = self.views.get(method)
+        acc = None if view is None or isinstance(view, RefineView) else view.acc
+        if acc is None or not acc.groups_done:
+            return 0.0
+        return acc.groups_done / math.prod(tile_grid(acc.width, acc.height))
 
     def banded(self, view: MethodView) -> bool:
         """Whether the view's samples may be split into bands over frames: paced by the
@@ -602,12 +649,15 @@ class RenderSession:
         shown = method if view is None else view.shown
         extra = "" if shown == method else f" (bake {self._bake_percent()}%: {shown} meanwhile)"
         acc = None if view is None else view.acc
+        word = METHODS[shown].sample_word   # the raymarcher's samples are frames
         if acc is not None and acc.groups_done:   # a sample in bands over frames
             total = math.prod(tile_grid(acc.width, acc.height))
-            part = f"{100 * acc.groups_done // total}% of sample {acc.samples + 1}"
+            part = (f"{100 * acc.groups_done // total}% of "
+                    f"{'frame' if word == 'frames' else 'sample'} {acc.samples + 1}")
             extra += (f" ({part}; the last whole image meanwhile)" if view.shows_held
                       else f" ({part})")
-        return f"{method}  {self.samples(method)} spp{extra}"
+        n = self.samples(method)
+        return f"{method}  {n} {'frame' if (word, n) == ('frames', 1) else word}{extra}"
 
     def _refine_label(self, view: RefineView) -> str:
         """refine's caption: what it shows, and the errors estimated from guided's halves."""
