@@ -284,6 +284,9 @@ class RenderEngine:
         authkey = secrets.token_bytes(16)
         listener = Listener(address, "AF_UNIX", authkey=authkey)
         env = {**os.environ, "RADIANCE_PROBES_NAPARI_KEY": authkey.hex()}
+        # Mesa's llvmpipe (no GPU) renders on every core unless told: one is left to napari's
+        # own drawing and event loop (a GPU driver ignores the variable)
+        env.setdefault("LP_NUM_THREADS", str(max(1, (os.cpu_count() or 2) - 1)))
         code = ("from radiance_probes.napari_plugin.engine import worker_entry; "
                 f"worker_entry({address!r}, {gl_backend!r})")
         self._process = subprocess.Popen([sys.executable, "-c", code], env=env,

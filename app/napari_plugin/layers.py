@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera_map import Placement, right_handed
+from .camera_map import Placement, napari_camera, right_handed
 
 TRANSFER_ROWS = 64            # rows of each layer's transfer function
 MAX_CHANNELS = 4              # SPEC.md: a volume has up to 4 channels
@@ -150,7 +150,7 @@ def layer_scene(viewer, layers=None) -> LayerScene:
     placement = Placement(tuple(int(n) for n in arrays[0].shape),
                           tuple(float(s) for s in first.scale[-3:]),
                           tuple(float(t) for t in first.translate[-3:]),
-                          right_handed(viewer.camera.orientation))
+                          right_handed(napari_camera(viewer).orientation))
     looks = []
     for layer in layers:
         lo, hi = (float(v) for v in layer.contrast_limits)

@@ -23,7 +23,7 @@ from .. import controls as C
 from ..clinical_presets import CLINICAL_PRESETS
 from ..methods import VIEWER_METHODS
 from ..scene_types import LightSpec, Scene
-from .camera_map import camera_from_viewer
+from .camera_map import camera_from_viewer, napari_camera
 from .engine import Frame, RenderEngine, Request
 from .layers import LayerProblem, layer_scene
 from .overlay import CanvasOverlay, OverlayError, canvas_size
@@ -164,7 +164,7 @@ class GlobalIlluminationWidget(QWidget):
 
     # ---- napari's events -----------------------------------------------------------------------
     def _connect_viewer(self) -> None:
-        cam = self.viewer.camera.events
+        cam = napari_camera(self.viewer).events
         for name in ("center", "zoom", "angles", "perspective"):
             getattr(cam, name).connect(self._camera_moved)
         self.viewer.dims.events.ndisplay.connect(self._layers_changed)
