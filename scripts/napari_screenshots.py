@@ -25,7 +25,8 @@ def wait_done(app, widget, timeout: float) -> None:
     raise SystemExit(f"no image within {timeout:.0f} s: {widget.message}")
 
 
-def shoot(sample: str, out: Path, samples: int, preset: str | None, angles, method: str) -> None:
+def shoot(sample: str, out: Path, samples: int, preset: str | None, angles, method: str,
+          exposure: float = 1.0) -> None:
     import napari
     from qtpy.QtWidgets import QApplication
     viewer = napari.Viewer(show=True)
@@ -38,6 +39,8 @@ def shoot(sample: str, out: Path, samples: int, preset: str | None, angles, meth
     widget.method.setCurrentText(method)
     widget.samples.setValue(samples)
     widget.render_scale.setValue(0.5)
+    widget.denoise.setChecked(True)
+    widget.exposure.setValue(exposure)
     if preset:
         widget.preset.setCurrentText(preset)
     app = QApplication.instance()
@@ -58,6 +61,7 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="screenshots")
     p.add_argument("--samples", type=int, default=16)
+    p.add_argument("--cells-only", action="store_true", help="only the cells screenshot")
     args = p.parse_args()
     if not os.environ.get("DISPLAY"):
         from radiance_probes.viewer.xvfb import Xvfb
@@ -67,8 +71,10 @@ def main() -> None:
     os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
     out = Path(args.out)
     out.mkdir(exist_ok=True)
-    shoot("ct_head", out / "napari-ct.png", args.samples, "ct_bone", (10, -35, 80), "pt")
-    shoot("cells", out / "napari-cells.png", args.samples, None, (5, 30, 60), "pt")
+    if not args.cells_only:
+        shoot("ct_head", out / "napari-ct.png", args.samples, "ct_bone", (10, -35, 80), "pt",
+              exposure=1.5)
+    shoot("cells", out / "napari-cells.png", args.samples, None, (5, 30, 60), "pt", exposure=2.5)
 
 
 if __name__ == "__main__":

@@ -51,6 +51,6 @@ def cells(size: int = 80, seed: int = 3) -> list:
     return [(to_u16(nuclei + noise[0]), {"name": "nuclei", "colormap": "cyan",
                                          "contrast_limits": (300.0, 3200.0),
                                          "blending": "additive"}, "image"),
-            (to_u16(membranes + noise[1]), {"name": "membranes", "colormap": "magenta",
+            (to_u16(membranes + noise[1]), {"name": "membranes", "colormap": "magenta", "opacity": 0.12,
                                             "contrast_limits": (300.0, 3200.0),
                                             "blending": "additive"}, "image")]
