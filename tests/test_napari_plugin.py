@@ -134,6 +134,11 @@ def test_plugin_image_matches_render_of_the_same_array(fresh, tmp_path):
         scene = widget.save_scene(str(tmp_path / "scene.json"))
         again = radiance_probes.render(str(scene), "raymarch", 2, seed=0)
         assert rrmse(again.linear, expected.linear) < 0.01
+        # a turntable through `animate`, in a process of its own (two frames here)
+        movie = widget.record_turntable(str(tmp_path / "turn.mp4"), frames=2)
+        assert movie.wait(300) == 0, movie.stderr.read()
+        wait_for(lambda: widget._movie is None, 30)
+        assert "Turntable written" in widget.message and (tmp_path / "turn.mp4").stat().st_size > 0
         assert widget.save_image(str(tmp_path / "shot.png")).stat().st_size > 0
         assert widget.save_image(str(tmp_path / "shot.exr")).stat().st_size > 0
         assert widget.save_image(str(tmp_path / "shot.tif")) is None and widget.problem

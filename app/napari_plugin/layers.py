@@ -93,13 +93,11 @@ def _check_layer(layer, viewer) -> None:
 def _layer_array(layer, viewer) -> np.ndarray:
     data = layer.data
     if layer.ndim > 3:   # sliced where napari's sliders are
-        step = viewer.dims.current_step
         lead = layer.ndim - 3
         world_axes = range(viewer.dims.ndim - layer.ndim, viewer.dims.ndim - 3)
         index = tuple(int(np.clip(round((viewer.dims.point[a] - layer.translate[i])
                                         / layer.scale[i]), 0, layer.data.shape[i] - 1))
                       for i, a in zip(range(lead), world_axes))
-        del step
         data = data[index]
     size = int(np.prod(data.shape))
     if size > MAX_VOXELS:

@@ -392,6 +392,10 @@ class GlobalIlluminationWidget(QWidget):
         argv = [sys.executable, "-m", "radiance_probes", "animate", str(scene), "--turntable",
                 "360", "--frames", str(int(frames)), "--out", str(Path(path).resolve()),
                 "--method", method]
+        if Path(path).suffix.lower() == ".mp4":   # H.264 in yuv420p: even sizes, one pixel more
+            cam = json.loads(scene.read_text())["camera"]
+            argv += ["--width", str(cam["width"] + cam["width"] % 2),
+                     "--height", str(cam["height"] + cam["height"] % 2)]
         self._movie = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                        text=True)
         self._movie_path = Path(path)
