@@ -327,6 +327,7 @@ def test_camera_move_rerenders_without_blocking_the_event_loop(fresh):
         while widget._engine.busy():
             process(0.01)
         busy_s = time.perf_counter() - busy_from
+        wait_for(lambda: done(widget), 30)   # the last frame crosses to Qt's thread
         timer.stop()
         assert set_ms < 100, set_ms
         frame = widget.last_frame

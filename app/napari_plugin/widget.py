@@ -74,6 +74,7 @@ class GlobalIlluminationWidget(QWidget):
         self._shown_serial = 0
         self.last_frame: Frame | None = None
         self.message = ""
+        self.problem = False              # the status line names a problem
         self.live = False
         self._overlay: CanvasOverlay | None = None
         self._movie: subprocess.Popen | None = None
@@ -268,6 +269,8 @@ class GlobalIlluminationWidget(QWidget):
             self._say("Starting the renderer (a GL context, the shaders and the probes)...")
         self._request = request
         self._engine.submit(request)
+        if self.problem:   # the problem is gone: say what happens instead
+            self._say(f"Rendering {', '.join(self._layer_scene().names)}...")
 
     @staticmethod
     def _check_options(request: Request) -> None:
