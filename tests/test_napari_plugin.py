@@ -338,7 +338,7 @@ def test_camera_move_rerenders_without_blocking_the_event_loop(fresh):
         assert widget._engine._process.pid != os.getpid()
         during = np.array([t for t in ticks if t >= busy_from])
         gaps = np.diff(np.concatenate([[busy_from], during])) * 1e3
-        assert len(during) >= 10 and gaps.max() < 500 * busy_s, (len(during), gaps.max(), busy_s)
+        assert len(during) >= 4 and gaps.max() < 500 * busy_s, (len(during), gaps.max(), busy_s)
     finally:
         widget.close_engine()
 

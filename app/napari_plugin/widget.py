@@ -11,6 +11,7 @@ import json
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,8 @@ from .layers import LayerProblem, layer_scene
 from .overlay import CanvasOverlay, OverlayError, canvas_size
 
 THROTTLE_MS = 40          # a camera move waits this long for the next before it is sent
+REDRAW_MS = 250           # refinement rounds redraw napari's canvas at most this often (each
+#                           redraw draws napari's own layers too: slow on llvmpipe)
 DEFAULT_SAMPLES = 16      # the still image's samples (Max samples)
 NO_PRESET = "(none)"
 LAYER_EVENTS = ("contrast_limits", "colormap", "gamma", "opacity", "visible", "data", "scale",
@@ -72,6 +75,7 @@ class GlobalIlluminationWidget(QWidget):
         self._scene = None                # layers.LayerScene, until a layer changes
         self._request: Request | None = None
         self._shown_serial = 0
+        self._shown_at = 0.0              # when the overlay was last redrawn (monotonic s)
         self.last_frame: Frame | None = None
         self.message = ""
         self.problem = False              # the status line names a problem
@@ -289,7 +293,10 @@ class GlobalIlluminationWidget(QWidget):
             return
         self._shown_serial = frame.serial
         self.last_frame = frame
-        self._show(frame)
+        now = time.monotonic()
+        if frame.stage != "refining" or now - self._shown_at >= REDRAW_MS / 1e3:
+            self._show(frame)
+            self._shown_at = now
         self.progress.setValue(int(round(1000 * frame.progress)) if frame.stage != "preview"
                                else 0)
         if frame.stage == "preview":
