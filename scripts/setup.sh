@@ -1,13 +1,18 @@
 #!/usr/bin/env bash
 # Sets up what the project needs on a fresh Debian/Ubuntu machine, then does nothing on later runs:
 #  - system packages: Mesa's EGL and llvmpipe (headless OpenGL 4.3), GLX and Xvfb (the viewer's
-#    window tests), installed through apt-get when run as root, else named in a message;
+#    window tests), Qt's X11 libraries (napari's, for the plugin's tests), installed through
+#    apt-get when run as root, else named in a message;
 #  - a virtual environment .venv with the project and its test dependencies.
 # Usage: bash scripts/setup.sh      (from anywhere; paths are relative to the checkout)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-PACKAGES=(libegl1 libegl-mesa0 libgl1-mesa-dri libglx-mesa0 libgl1 libopengl0 libosmesa6 xvfb xauth)
+PACKAGES=(libegl1 libegl-mesa0 libgl1-mesa-dri libglx-mesa0 libgl1 libopengl0 libosmesa6 xvfb xauth
+          # Qt's xcb platform, for the napari plugin's tests (napari under Xvfb)
+          libxcb-cursor0 libxcb-icccm4 libxcb-keysyms1 libxcb-image0 libxcb-randr0
+          libxcb-render-util0 libxcb-shape0 libxcb-xkb1 libxkbcommon-x11-0
+          libdbus-1-3 libfontconfig1)
 missing=()
 if command -v dpkg-query >/dev/null 2>&1; then
   for p in "${PACKAGES[@]}"; do

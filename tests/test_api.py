@@ -263,6 +263,13 @@ def test_arrays_of_channels_and_time_steps_name_their_axes():
     alone = rp.render(np.ascontiguousarray(b), window=None, **SMALL, spp=1, colors=green,
                       value_range=[float(b.min()), float(b.max())])
     np.testing.assert_allclose(only_b.linear, alone.linear, rtol=1e-5, atol=1e-6)
+    # a camera given with the render keeps the array's channels (its scene names no file: parsed
+    # again it named the built-in cloud, whose one channel refused channels[1])
+    camera = {"eye": [0.4, 0.3, 2.0], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y": 40.0,
+              "width": 24, "height": 20}
+    moved = rp.render(both, axes="czyx", probes=SMALL["probes"], spp=1, camera=camera)
+    placed = rp.render(both, axes="czyx", probes=SMALL["probes"], spp=1, **camera)
+    np.testing.assert_allclose(moved.linear, placed.linear, rtol=1e-5, atol=1e-6)
     step = rp.render(both, axes="tzyx", time=1, window=None, **SMALL, spp=1, colors=green,
                      value_range=[float(b.min()), float(b.max())])
     # (a time series' probes cover the whole box: the same as fit "box" for one volume)

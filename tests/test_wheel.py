@@ -50,6 +50,12 @@ def test_the_wheel_holds_one_package_with_its_shaders_and_scenes(wheel):
         rel = init.relative_to(ROOT / "app").as_posix()
         assert f"radiance_probes/{rel}" in names, rel
     assert not [n for n in names if "__pycache__" in n]
+    # the napari plugin's manifest, and the entry point napari finds it by
+    assert "radiance_probes/napari_plugin/napari.yaml" in names
+    entry = next(n for n in names if n.endswith(".dist-info/entry_points.txt"))
+    points = zipfile.ZipFile(wheel).read(entry).decode()
+    assert "[napari.manifest]" in points
+    assert "radiance-probes = radiance_probes.napari_plugin:napari.yaml" in points
 
 
 def test_no_module_imports_the_folder_name_app():

@@ -225,7 +225,10 @@ def _camera(scene: Scene, camera: Any) -> Scene:
     if not isinstance(camera, dict):
         raise SceneError(f"camera: expected a dict of camera keys or a CameraSpec, got "
                          f"{type(camera).__name__}")
-    return parse_scene(_merge(scene_to_dict(scene), {"camera": camera}), base_dir=scene.base_dir)
+    # the volume's spec kept as it is: an array's scene names no file, and parsing its dict again
+    # would name the built-in cloud (whose one channel then fails an array's channels)
+    parsed = parse_scene(_merge(scene_to_dict(scene), {"camera": camera}), base_dir=scene.base_dir)
+    return parsed.replace(volume=scene.volume)
 
 
 class Renderer:

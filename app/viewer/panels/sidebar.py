@@ -9,6 +9,7 @@ import numpy as np
 from imgui_bundle import ImVec2, imgui, implot
 
 from radiance_probes.rendering.renderer import MAX_GATHER_EVENT, RAYMARCH_STAGES
+from radiance_probes.frontend import controls as C
 from radiance_probes.methods import METHODS as REGISTRY, REFERENCE, VIEWER_METHODS as METHODS
 from radiance_probes.io.scene_file import (ORIENTATIONS, PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS,
                      PROBE_LAYOUTS, PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS)
@@ -130,16 +131,17 @@ def render_section(v) -> None:
     ui.note("Volume box")
     if changed:
         state.show_box = value
-    changed, value = imgui.slider_float("Exposure", state.exposure, 0.05, 20.0, "%.2f",
+    changed, value = imgui.slider_float(C.EXPOSURE.label, state.exposure, C.EXPOSURE.lo, C.EXPOSURE.hi, "%.2f",
                                         imgui.SliderFlags_.logarithmic)
     ui.note("Exposure")
     if changed:
         state.exposure = value
-    changed, value = imgui.slider_int("Max samples", state.max_samples, 1, 65536, "%d",
+    changed, value = imgui.slider_int(C.MAX_SAMPLES.label, state.max_samples, C.MAX_SAMPLES.lo, C.MAX_SAMPLES.hi, "%d",
                                       imgui.SliderFlags_.logarithmic)
     if changed:
         state.max_samples = max(1, value)
-    changed, value = imgui.slider_float("Render scale", state.render_scale, 0.125, 1.0, "%.3f")
+    changed, value = imgui.slider_float(C.RENDER_SCALE.label, state.render_scale, C.RENDER_SCALE.lo,
+                                        C.RENDER_SCALE.hi, "%.3f")
     if changed:
         state.render_scale = value
     r = v.session.renderer
@@ -277,15 +279,15 @@ def light_section(v) -> None:
     state, ui = v.state, v.widgets
     light = state.scene.light
     az, el = angles_from_direction(light.direction)
-    changed_az, az = imgui.slider_float("Sun azimuth", az, -180.0, 180.0, "%.0f deg")
+    changed_az, az = imgui.slider_float(C.SUN_AZIMUTH.label, az, C.SUN_AZIMUTH.lo, C.SUN_AZIMUTH.hi, "%.0f deg")
     ui.note("Sun azimuth")
-    changed_el, el = imgui.slider_float("Sun elevation", el, -89.0, 89.0, "%.0f deg")
+    changed_el, el = imgui.slider_float(C.SUN_ELEVATION.label, el, C.SUN_ELEVATION.lo, C.SUN_ELEVATION.hi, "%.0f deg")
     ui.note("Sun elevation")
     if changed_az or changed_el:
         state.set_light_angles(az, el)
     d = state.scene.light.direction
     imgui.text_disabled(f"towards the sun: ({d[0]:.2f}, {d[1]:.2f}, {d[2]:.2f})")
-    _colour_strength(v, "Sun", state.scene.light.irradiance, 100.0,
+    _colour_strength(v, "Sun", state.scene.light.irradiance, C.SUN_STRENGTH.hi,
                      lambda rgb: state.edit(light=replace(state.scene.light, irradiance=rgb)))
     area_light_section(v)
     environment_section(v)
@@ -341,7 +343,7 @@ def environment_section(v) -> None:
     state, ui = v.state, v.widgets
     env = state.scene.environment_map
     if env is None:
-        _colour_strength(v, "Environment", state.scene.environment, 10.0,
+        _colour_strength(v, "Environment", state.scene.environment, C.ENVIRONMENT_STRENGTH.hi,
                          lambda rgb: state.edit(environment=rgb))
     else:
         imgui.text(f"Environment map: {Path(env.path).name}")
@@ -389,7 +391,8 @@ def probes_section(v) -> None:
     if changed:
         v.probe_axes_locked = same
     if v.probe_axes_locked:
-        changed, n = imgui.slider_int("Probes per axis", spec.grid[0], 1, 64)
+        changed, n = imgui.slider_int(C.PROBES_PER_AXIS.label, spec.grid[0], C.PROBES_PER_AXIS.lo,
+                                     C.PROBES_PER_AXIS.hi)
         ui.note("Probes per axis")
         if changed:
             state.set_probe_grid((n, n, n))
@@ -398,7 +401,7 @@ def probes_section(v) -> None:
         ui.note("Probes x, y, z")
         if changed:
             state.set_probe_grid(tuple(grid))
-    changed, n = imgui.slider_int("Walks per probe", spec.samples, 1, 16384, "%d", imgui.SliderFlags_.logarithmic)
+    changed, n = imgui.slider_int(C.WALKS_PER_PROBE.label, spec.samples, C.WALKS_PER_PROBE.lo, C.WALKS_PER_PROBE.hi, "%d", imgui.SliderFlags_.logarithmic)
     ui.note("Walks per probe")
     if changed:
         state.set_probes(samples=max(1, n))

@@ -181,17 +181,17 @@ def medium_sliders(v) -> None:
 def surface_sliders(v) -> None:
     """The surfaces inside the volume (the scene's surface; glsl/lib/hybrid_scattering.glsl):
     gradient factor k (0: the phase function alone), roughness and a grey specular colour."""
-    from radiance_probes.scene.types import MAX_GRADIENT_FACTOR, MIN_ROUGHNESS
+    from radiance_probes.frontend import controls as C
     state, ui = v.state, v.widgets
     surface = state.scene.surface
-    changed, value = imgui.slider_float("Surface k", surface.gradient_factor, 0.0,
-                                        min(100.0, MAX_GRADIENT_FACTOR), "%.3f",
+    changed, value = imgui.slider_float(C.SURFACE_K.label, surface.gradient_factor, C.SURFACE_K.lo,
+                                        C.SURFACE_K.hi, "%.3f",
                                         imgui.SliderFlags_.logarithmic)
     ui.note("Surface k")
     if changed:
         state.edit(surface=replace(surface, gradient_factor=max(float(value), 0.0)))
     if surface.gradient_factor > 0.0:
-        changed, value = imgui.slider_float("Roughness", surface.roughness, MIN_ROUGHNESS, 1.0)
+        changed, value = imgui.slider_float(C.ROUGHNESS.label, surface.roughness, C.ROUGHNESS.lo, C.ROUGHNESS.hi)
         ui.note("Roughness")
         if changed:
             state.edit(surface=replace(surface, roughness=float(value)))
