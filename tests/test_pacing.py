@@ -109,3 +109,12 @@ def test_the_wall_timer_counts_the_work_between_its_ends(ctx):
     timer.stop()
     assert 19.0 <= timer.elapsed_ms < 200.0
     timer.release()
+
+
+def test_a_frames_samples_are_paced_by_the_slow_end_of_recent_dispatches():
+    """session.paced_ms_per_sample: one slow outlier (a shader compile) does not set the pace,
+    but the frame is planned for the slower of the rest, not their median."""
+    from radiance_probes.viewer.frame.session import paced_ms_per_sample
+    assert paced_ms_per_sample([7.0, 7.5, 17.0, 16.0, 300.0]) == 17.0
+    assert paced_ms_per_sample([5.0, 9.0]) == 9.0
+    assert paced_ms_per_sample([4.0]) == 4.0

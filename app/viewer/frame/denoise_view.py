@@ -37,8 +37,10 @@ from radiance_probes.viewer.frame.frame_parts import FrameParts
 INTERVAL_S = 0.5
 # Bytes a frame copies between the host and GL for the switch and refine's judgements (fence.py
 # TransferBudget): a 1080p RGBA32F image is 33 MB, its read-back's host copy or its upload
-# several ms of a frame, so each is spread over a few frames.
-TRANSFER_BYTES_PER_FRAME = 16 << 20
+# several ms of a frame, so each is spread over a few frames. On the H200 an upload of 16 MB took
+# 12.4 ms of a frame's wall time (bench/h200-interact-refine-56/before-pacing: the longest frames
+# were a guided dispatch and such a band), so a frame moves 8 MB.
+TRANSFER_BYTES_PER_FRAME = 8 << 20
 
 
 @dataclass
