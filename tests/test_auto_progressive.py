@@ -8,9 +8,9 @@ import pytest
 
 from radiance_probes.rendering.metrics import rrmse
 from radiance_probes.rendering.refine.auto_progressive import (RAYMARCH_FRAMES, Halves, auto_render,
-                                                        denoised_aim, estimate_denoised,
-                                                        estimate_image, estimate_pt,
-                                                        should_judge_denoised)
+                                                               denoised_aim, estimate_denoised,
+                                                               estimate_image, estimate_pt,
+                                                               should_judge_denoised)
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.io.scene_file import parse_scene
 

@@ -211,7 +211,8 @@ def test_light_grid_size_and_layout():
     """Texels over the box follow the volume and the probe grid; the sheared layout keeps the box's
     texel spacing and widens the two other axes by the sun's shear."""
     from radiance_probes.scene.light_grid_layout import light_grid_layout
-    from radiance_probes.rendering.grids.light_transmittance import light_grid_size, min_side_for_probes
+    from radiance_probes.rendering.grids.light_transmittance import (light_grid_size,
+                                                                     min_side_for_probes)
     assert light_grid_size((64, 64, 64)) == (128, 128, 128)
     assert light_grid_size((256, 256, 100)) == (256, 256, 100)
     assert light_grid_size((1024, 512, 8)) == (512, 512, 8)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from radiance_probes.bench.config import BenchConfig
-from radiance_probes.rendering.metrics import corrected_floor, corrected_rrmse, flip, reference_noise, rrmse
+from radiance_probes.rendering.metrics import (corrected_floor, corrected_rrmse, flip,
+                                               reference_noise, rrmse)
 from radiance_probes.bench.report import pareto, time_to_error, write_report
 
 REQUIRED = ("scene", "method", "probe_grid", "probe_samples", "spp", "bake_ms", "frame_ms",

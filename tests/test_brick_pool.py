@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from radiance_probes.gl.brick_pool import BrickPool
-from radiance_probes.twins.brick_pool import (CONSTANT, bricked_sample, bricked_voxel, constant_bricks, pack,
-                                  slot_grid)
+from radiance_probes.twins.brick_pool import (CONSTANT, bricked_sample, bricked_voxel,
+                                              constant_bricks, pack, slot_grid)
 from radiance_probes.twins.medium import trilinear
 from glsl_harness import run_kernel
 

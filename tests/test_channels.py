@@ -15,8 +15,10 @@ from radiance_probes.gl.textures import TransferTable, volume_texture
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.scene.types import ChannelSpec, SceneError, TransferFunctionSpec, VolumeError
-from radiance_probes.twins.majorant_grid import channel_density_ranges, macrocell_counts, majorant_grid
-from radiance_probes.twins.medium import albedo_at, classified_at, density_at, mixed_transfer_at, sigma_t_at
+from radiance_probes.twins.majorant_grid import (channel_density_ranges, macrocell_counts,
+                                                 majorant_grid)
+from radiance_probes.twins.medium import (albedo_at, classified_at, density_at, mixed_transfer_at,
+                                          sigma_t_at)
 from radiance_probes.twins.visible_region import visible_region
 from radiance_probes.io.volume import Volume
 from radiance_probes.io.load import load_scene_volume

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from radiance_probes.scene.clinical_presets import (CLINICAL_PRESETS, check_hounsfield, expand,
-                                              hounsfield_problem, opening_scene)
+                                                    hounsfield_problem, opening_scene)
 from radiance_probes.frontend.common import OptionError, apply_options, scene_from_arg
-from radiance_probes.io.scene_file import SceneError, TransferFunctionSpec, parse_scene, scene_to_dict
+from radiance_probes.io.scene_file import (SceneError, TransferFunctionSpec, parse_scene,
+                                           scene_to_dict)
 from radiance_probes.scene.transfer import lookup, transfer_table
 from radiance_probes.io.volume import VolumeError
 from radiance_probes.io.load import load_scene_volume

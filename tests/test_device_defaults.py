@@ -5,7 +5,8 @@ from __future__ import annotations
 import json
 
 from radiance_probes.io.scene_file import parse_scene
-from radiance_probes.rendering.budgets.device_defaults import PROBES, RENDER_SCALE, probes_named, with_device_probes
+from radiance_probes.rendering.budgets.device_defaults import (PROBES, RENDER_SCALE, probes_named,
+                                                               with_device_probes)
 
 
 def test_probes_named_by_option_scene_file_or_bundled_scene(tmp_path):

@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from radiance_probes.twins.directions import fibonacci_direction, fibonacci_directions, random_rotation
+from radiance_probes.twins.directions import (fibonacci_direction, fibonacci_directions,
+                                              random_rotation)
 from radiance_probes.twins.sh import sh_project_function, sh_project_samples
 from glsl_harness import run_kernel
 

@@ -20,7 +20,8 @@ import pytest
 
 from radiance_probes.io.environment_map import load_environment_map, read_environment_map
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.rendering.resources import ENVIRONMENT_CDF_UNIT, ENVIRONMENT_MAP_UNIT, environment_textures
+from radiance_probes.rendering.resources import (ENVIRONMENT_CDF_UNIT, ENVIRONMENT_MAP_UNIT,
+                                                 environment_textures)
 from radiance_probes.io.scene_file import EnvironmentMapSpec, SceneError, parse_scene
 from radiance_probes.twins import environment_map as tw
 from glsl_harness import run_kernel

@@ -12,7 +12,8 @@ from radiance_probes.rendering.probes.bake import band_factors, probe_unit, SH_W
 from radiance_probes.rendering.probes.layout import TEXTURES_FOR_ORDER
 from radiance_probes.twins.guided_direction_control import direction_control
 from radiance_probes.twins.phase import phase_hg
-from radiance_probes.twins.sh import SH_WINDOW_HANN, SH_WINDOW_LANCZOS, SH_WINDOW_NONE, sphere_quadrature
+from radiance_probes.twins.sh import (SH_WINDOW_HANN, SH_WINDOW_LANCZOS, SH_WINDOW_NONE,
+                                      sphere_quadrature)
 from glsl_harness import PROBE_FETCH_KERNEL, probe_texel_centres, probe_textures, run_kernel
 
 CONTROL_KERNEL = """

@@ -56,7 +56,8 @@ from radiance_probes.gl.shaders import compute_program, set_uniforms
 from radiance_probes.twins.medium import box_intersect
 from radiance_probes.rendering.probes.layout import resolve_sh_order
 from radiance_probes.twins.phase import phase_hg
-from radiance_probes.rendering.renderer import Renderer, RenderResult
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.rendering.still_images import RenderResult
 from radiance_probes.io.scene_file import Scene, parse_scene
 from radiance_probes.scene.transfer import transfer_table
 from radiance_probes.io.volume import Volume

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.denoise.filter import (KEEP_MEANS_BLOCK, _block_means, _make_usable,
-                                               keep_block_means)
+                                                      keep_block_means)
 from radiance_probes.rendering.denoise.kept_means import KeptMeans, tile_grid
 
 SIZES = [(75, 53), (64, 96)]   # (width, height): neither a multiple of 32 nor of 8; both

@@ -13,8 +13,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from radiance_probes.twins.majorant_grid import (MAJORANT_SAFETY, density_range_grid, macrocell_counts, majorant_grid,
-                          voxel_ranges)
+from radiance_probes.twins.majorant_grid import (MAJORANT_SAFETY, density_range_grid,
+                                                 macrocell_counts, majorant_grid, voxel_ranges)
 from radiance_probes.twins.medium import density_at, sigma_t_at
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.rendering.resources import SceneResources

@@ -9,7 +9,7 @@ import time
 from radiance_probes.gl.timer import WallTimer
 from radiance_probes.io.scene_file import parse_scene
 from radiance_probes.viewer.frame.pacing import (DISTRUST_FRAMES, WALL_FRAME_MS, WALL_MIN_WORK_MS,
-                                           FramePacer)
+                                                 FramePacer)
 from radiance_probes.viewer.frame.session import MAX_SAMPLES_PER_FRAME, RenderSession
 
 SCENE = {"volume": {"builtin": "cloud", "size": [16, 16, 16]}, "density_scale": 20.0,

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from radiance_probes.twins.medium import sigma_t_at
-from radiance_probes.rendering.probes.layout import (AUTO_BAND_WEIGHT, AUTO_MAX_ORDER, AUTO_WALKS_PER_HIGH_BAND,
-                                     GREY_TEXTURES_FOR_ORDER,
-                                     TEXTURES_FOR_ORDER,
-                                     colour_channel, fitted_grid, resolve_sh_order,
-                                     unpack_coefficients, visible_region)
+from radiance_probes.rendering.probes.layout import (AUTO_BAND_WEIGHT, AUTO_MAX_ORDER,
+                                                     AUTO_WALKS_PER_HIGH_BAND,
+                                                     GREY_TEXTURES_FOR_ORDER, TEXTURES_FOR_ORDER,
+                                                     colour_channel, fitted_grid, resolve_sh_order,
+                                                     unpack_coefficients, visible_region)
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.io.scene_file import SceneError, parse_scene
 from radiance_probes.scene.transfer import transfer_table

@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.probes.planes import (MAX_SPACING, MIN_SPACING, adaptive_planes,
-                                     planes_from_density, probe_density)
+                                                     planes_from_density, probe_density)
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.io.scene_file import SceneError, parse_scene
-from radiance_probes.twins.probe_warp import (WARP_COLUMNS, probe_fractions, texture_trilinear, uniform_planes,
-                                  warp_exact, warp_lookup, warp_table)
+from radiance_probes.twins.probe_warp import (WARP_COLUMNS, probe_fractions, texture_trilinear,
+                                              uniform_planes, warp_exact, warp_lookup, warp_table)
 from radiance_probes.viewer.probe_view import probe_centres
 from glsl_harness import PROBE_FETCH_KERNEL, run_kernel
 

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.metrics import rrmse
-from radiance_probes.rendering.refine.refine import (BLEND_SNAP, BlendPass, HalfBuffers, blend_from_sums,
-                                              blend_images, error_from_sums, half_buffer_error,
-                                              half_buffer_sums, judge_sums)
+from radiance_probes.rendering.refine.refine import (BLEND_SNAP, BlendPass, HalfBuffers,
+                                                     blend_from_sums, blend_images, error_from_sums,
+                                                     half_buffer_error, half_buffer_sums,
+                                                     judge_sums)
 from radiance_probes.io.scene_file import parse_scene
 
 SHAPE = (48, 64, 3)

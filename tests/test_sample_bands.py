@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from radiance_probes.rendering.budgets.sample_bands import (UNTIMED_ABOVE_FACTOR, UNTIMED_FACTOR,
-                                                    FrameWork, TileCosts, fill_frame, next_work,
-                                                    tile_rects)
+                                                            FrameWork, TileCosts, fill_frame,
+                                                            next_work, tile_rects)
 
 
 class FakeClock:

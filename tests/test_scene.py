@@ -7,8 +7,8 @@ import re
 import numpy as np
 import pytest
 
-from radiance_probes.io.scene_file import (CameraSpec, LightSpec, Scene, SceneError, default_scene, load_scene,
-                       parse_scene, scene_to_dict)
+from radiance_probes.io.scene_file import (CameraSpec, LightSpec, Scene, SceneError, default_scene,
+                                           load_scene, parse_scene, scene_to_dict)
 
 # SPEC.md's example scene.
 FULL = {

@@ -12,7 +12,8 @@ import jsonschema
 import pytest
 
 from radiance_probes.io.scene_file import SceneError, load_scene, parse_scene
-from radiance_probes.io.scene_schema import TABLE_END, TABLE_START, key_table, scene_schema, schema_text
+from radiance_probes.io.scene_schema import (TABLE_END, TABLE_START, key_table, scene_schema,
+                                             schema_text)
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA_FILE = ROOT / "docs" / "scene.schema.json"

@@ -3,9 +3,10 @@ import pytest
 
 from radiance_probes.twins.directions import fibonacci_directions
 from radiance_probes.twins.phase import phase_hg
-from radiance_probes.twins.sh import (SH_WINDOW_HANN, SH_WINDOW_LANCZOS, SH_WINDOW_NONE, sh_band_factors, sh_basis,
-                    sh_clamp_nonnegative, sh_evaluate, sh_evaluate_convolved, sh_project_function,
-                    sh_project_samples, sphere_quadrature)
+from radiance_probes.twins.sh import (SH_WINDOW_HANN, SH_WINDOW_LANCZOS, SH_WINDOW_NONE,
+                                      sh_band_factors, sh_basis, sh_clamp_nonnegative, sh_evaluate,
+                                      sh_evaluate_convolved, sh_project_function,
+                                      sh_project_samples, sphere_quadrature)
 from glsl_harness import run_kernel
 
 WINDOWS = [SH_WINDOW_NONE, SH_WINDOW_HANN, SH_WINDOW_LANCZOS]

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from radiance_probes.io.scene_file import TransferFunctionSpec, parse_scene
-from radiance_probes.scene.transfer import ALIASES, COLORMAPS, colormap_rgb, lookup, opacity_curve, transfer_table
+from radiance_probes.scene.transfer import (ALIASES, COLORMAPS, colormap_rgb, lookup, opacity_curve,
+                                            transfer_table)
 
 
 @pytest.mark.parametrize("n", [2, 7, 256, 1000])

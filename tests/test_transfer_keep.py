@@ -9,10 +9,13 @@ import pytest
 
 from radiance_probes.cli.main import main
 from radiance_probes.frontend.colorbar import data_ticks, draw_colorbar
-from radiance_probes.io.scene_file import (SceneError, TransferFunctionSpec, load_scene, load_transfer_function,
-                       parse_scene, parse_transfer_function, save_transfer_function, scene_to_dict)
+from radiance_probes.io.scene_file import (SceneError, TransferFunctionSpec, load_scene,
+                                           load_transfer_function, parse_scene,
+                                           parse_transfer_function, save_transfer_function,
+                                           scene_to_dict)
 from radiance_probes.scene.transfer import colormap_rgb, transfer_table
-from radiance_probes.scene.transfer_presets import colour_points_from, histogram_peaks, opacity_presets, peak_opacity
+from radiance_probes.scene.transfer_presets import (colour_points_from, histogram_peaks,
+                                                    opacity_presets, peak_opacity)
 from radiance_probes.io.volume import Volume
 
 TFS = [

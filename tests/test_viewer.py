@@ -17,9 +17,10 @@ from radiance_probes.twins.camera import camera_frame
 from radiance_probes.io.scene_file import CameraSpec, load_scene, parse_scene
 from radiance_probes.twins.sh import sh_evaluate
 from radiance_probes.viewer import layout, orbit
-from radiance_probes.viewer.probe_view import RADIUS_PER_SPACING, box_edges, probe_centres, uv_sphere
-from radiance_probes.viewer.state import (ViewerState, add_point, angles_from_direction, direction_from_angles,
-                              move_point, remove_point)
+from radiance_probes.viewer.probe_view import (RADIUS_PER_SPACING, box_edges, probe_centres,
+                                               uv_sphere)
+from radiance_probes.viewer.state import (ViewerState, add_point, angles_from_direction,
+                                          direction_from_angles, move_point, remove_point)
 from viewer_harness import dump, png, srgb8, view, view_pixels, write_script
 from radiance_probes.rendering.probes.layout import TEXTURES_FOR_ORDER
 from radiance_probes.scene.transfer import transfer_table

@@ -8,7 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from radiance_probes.io.scene_file import CameraSpec, load_scene, load_transfer_function, parse_scene
+from radiance_probes.io.scene_file import (CameraSpec, load_scene, load_transfer_function,
+                                           parse_scene)
 from radiance_probes.viewer.crop_handles import dragged, drag_start, handles, plane_polygon
 from radiance_probes.viewer.history import SceneHistory
 from radiance_probes.viewer.state import ViewerState

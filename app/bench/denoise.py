@@ -39,8 +39,8 @@ from radiance_probes.frontend.imageio import save_png
 from radiance_probes.methods import METHODS
 from radiance_probes.rendering.denoise.filter import QUALITIES, shared_denoiser
 from radiance_probes.rendering.denoise.kept_means import KeptMeans, denoise_on_gl
-from radiance_probes.bench.records import (error_of, floor, header as _header, log, make_record, ms_text as _ms,
-                      progressive)
+from radiance_probes.bench.records import (error_of, floor, header as _header, log, make_record,
+                                           ms_text as _ms, progressive)
 
 NOISY = ("pt", "probes", "guided")
 COST_SIZES = ((512, 512), (1920, 1080), (3840, 2160))

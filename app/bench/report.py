@@ -9,8 +9,9 @@ from collections import defaultdict
 from pathlib import Path
 
 from radiance_probes.methods import ACCUMULATED
-from radiance_probes.bench.records import (caveat, error_of, floor, header as _header, ms_text as _ms,  # noqa: F401
-                      reference_noise_of as _noise, run_pixels as _pixels, speed_checks)
+from radiance_probes.bench.records import (caveat, error_of, floor, header as _header,
+                                           ms_text as _ms, reference_noise_of as _noise,
+                                           run_pixels as _pixels, speed_checks)  # noqa: F401
 
 METHOD_ORDER = ACCUMULATED   # the registry's order (app/methods.py)
 COLOURS = {"pt": "#222222", "probes": "#1f77b4", "probes-only": "#2ca02c", "raymarch": "#d62728",

@@ -7,9 +7,10 @@ import argparse
 import sys
 
 from radiance_probes.methods import METHODS as REGISTRY
-from radiance_probes.frontend.common import (OptionError, add_colorbar_options, add_scene_edit_options,
-                       add_volume_options, apply_options, check_clip, grid_arg, positive_float,
-                       positive_int, scene_from_arg)
+from radiance_probes.frontend.common import (OptionError, add_colorbar_options,
+                                             add_scene_edit_options, add_volume_options,
+                                             apply_options, check_clip, grid_arg, positive_float,
+                                             positive_int, scene_from_arg)
 
 DEFAULT_FRAMES = 120
 DEFAULT_SPP = 16
@@ -90,7 +91,8 @@ def run_animate(args: argparse.Namespace) -> int:
     from radiance_probes.io.environment_map import load_scene_environment
     from radiance_probes.frontend.common import DEFAULT_RAYMARCH_STEP
     from radiance_probes.gl.context import create_headless_context, describe, is_software
-    from radiance_probes.movie.frames import frame_count_note, movie_cameras, render_movie, series_steps
+    from radiance_probes.movie.frames import (frame_count_note, movie_cameras, render_movie,
+                                              series_steps)
     from radiance_probes.movie.writer import MovieError, MovieWriter, check_movie_output
     from radiance_probes.frontend.progress import ProgressBar
     from radiance_probes.rendering.limits import check_image_size

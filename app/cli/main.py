@@ -5,17 +5,17 @@ import argparse
 import sys
 from pathlib import Path
 
-from radiance_probes.frontend.common import (ArgumentParser, OptionError, add_colorbar_options, add_scene_edit_options,
-                       memory_size,
-                       add_volume_options, fraction, grid_arg, positive_float, positive_int,
-                       render_to_files)
+from radiance_probes.frontend.common import (ArgumentParser, OptionError, add_colorbar_options,
+                                             add_scene_edit_options, memory_size,
+                                             add_volume_options, fraction, grid_arg, positive_float,
+                                             positive_int, render_to_files)
 from radiance_probes.methods import VIEWER_METHODS
 from radiance_probes.io.scene_file import PROBE_PRECISIONS, SceneError
 
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    from radiance_probes.viewer.launch import run_view  # imports glfw and imgui only when a window may open
+    from radiance_probes.viewer.launch import (run_view)  # imports glfw and imgui only when a window may open
     return run_view(args)
 
 

@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from radiance_probes.methods import METHODS
-from radiance_probes.io.scene_file import (Scene, SceneError, TransferFunctionSpec, default_scene, load_scene, parse_scene,
-                    scene_to_dict, transfer_to_dict)
+from radiance_probes.io.scene_file import (Scene, SceneError, TransferFunctionSpec, default_scene,
+                                           load_scene, parse_scene, scene_to_dict, transfer_to_dict)
 
 MAX_SPP = (1 << 31) - 1        # samples per pixel reach the shaders as a 32-bit uniform
 MAX_WINDOW_SIDE = 16384
@@ -778,7 +778,7 @@ def render_to_files(args: argparse.Namespace) -> int:
 
     if auto is not None:
         from radiance_probes.rendering.refine.auto_progressive import auto_render
-        from radiance_probes.rendering.renderer import RenderResult
+        from radiance_probes.rendering.still_images import RenderResult
         got = auto_render(renderer, auto, seed=args.seed,
                           progress=lambda m: print(f"auto: {m}", file=sys.stderr, flush=True),
                           denoise=getattr(args, "denoise", False))

@@ -9,7 +9,8 @@ import time
 import moderngl
 import numpy as np
 
-from radiance_probes.io.brick_layout import APRON, CONSTANTS_WIDTH, FREE_SLOT, brick_counts, slot_bytes, slot_origin, slot_side, texel_bytes
+from radiance_probes.io.brick_layout import (APRON, CONSTANTS_WIDTH, FREE_SLOT, brick_counts,
+                                             slot_bytes, slot_origin, slot_side, texel_bytes)
 from radiance_probes.scene.types import VolumeError
 from radiance_probes.twins.brick_pool import Packed
 

@@ -13,7 +13,7 @@ from typing import Mapping
 
 import moderngl
 
-from radiance_probes.gl.sources import ShaderError, set_source_reader, shader_source  # noqa: F401 (re-exported)
+from radiance_probes.gl.sources import (ShaderError, set_source_reader, shader_source)  # noqa: F401 (re-exported)
 from radiance_probes.gl.context import is_software
 from radiance_probes.gl.dispatch_log import active_log
 from radiance_probes.gl.textures import transfer_buffer_bindable

@@ -16,16 +16,18 @@ from typing import Any, Mapping
 from radiance_probes.methods import VIEWER_METHODS
 from radiance_probes.scene.flags import flag_for, with_flag
 from radiance_probes.scene.types import (AXIS_LETTERS, CROP_UNITS, MAX_CHANNELS, ChannelSpec,
-                          channel_transfer_function, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
-                          MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
-                          PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
-                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS,
-                          VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
-                          ClipPlaneSpec, CropSpec, EnvironmentMapSpec, LightSpec, ProbeSpec, Scene,
-                          SceneError, SurfaceSpec, TransferFunctionSpec, ViewerSpec, VolumeSpec,
-                          scene_to_dict, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS, AREA_LIGHT_SHAPES,
-                          MAX_AREA_LIGHTS, AreaLightSpec,
-                          transfer_to_dict, window_range)
+                                         channel_transfer_function, MAX_BOUNCES_LIMIT,
+                                         MAX_IMAGE_SIDE, MAX_PROBE_AXIS, MAX_PROBE_SAMPLES,
+                                         MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
+                                         PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS,
+                                         PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS,
+                                         VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec,
+                                         CameraSpec, ClipPlaneSpec, CropSpec, EnvironmentMapSpec,
+                                         LightSpec, ProbeSpec, Scene, SceneError, SurfaceSpec,
+                                         TransferFunctionSpec, ViewerSpec, VolumeSpec,
+                                         scene_to_dict, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS,
+                                         AREA_LIGHT_SHAPES, MAX_AREA_LIGHTS, AreaLightSpec,
+                                         transfer_to_dict, window_range)
 from radiance_probes.scene.clinical_presets import (CLINICAL_PRESETS, expand as expand_clinical,
                                                     preset as clinical_preset)
 from radiance_probes.scene.transfer import COLORMAPS

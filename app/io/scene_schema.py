@@ -20,15 +20,17 @@ from dataclasses import dataclass
 from typing import Any
 
 from radiance_probes.methods import VIEWER_METHODS
-from radiance_probes.scene.types import (AXIS_LETTERS, CHANNEL_COLOURS, CROP_UNITS, MAX_CHANNELS, MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
-                          MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS, PROBE_FITS,
-                          PROBE_INDICATORS, PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
-                          SH_ORDERS, SH_WINDOWS, VIEWER_DISPLAYS,
-                          VIEWER_PROBE_VIEWS, WINDOW_PRESETS, BookmarkSpec, CameraSpec,
-                          ChannelSpec, ClipPlaneSpec, CropSpec, LightSpec, ProbeSpec, Scene,
-                          SurfaceSpec, MAX_GRADIENT_FACTOR, MIN_ROUGHNESS, AREA_LIGHT_SHAPES,
-                          MAX_AREA_LIGHTS, AreaLightSpec,
-                          TransferFunctionSpec, ViewerSpec, VolumeSpec)
+from radiance_probes.scene.types import (AXIS_LETTERS, CHANNEL_COLOURS, CROP_UNITS, MAX_CHANNELS,
+                                         MAX_BOUNCES_LIMIT, MAX_IMAGE_SIDE, MAX_PROBE_AXIS,
+                                         MAX_PROBE_SAMPLES, MAX_TRANSFER_ROWS, ORIENTATIONS,
+                                         PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS,
+                                         PROBE_LAYOUTS, PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS,
+                                         VIEWER_DISPLAYS, VIEWER_PROBE_VIEWS, WINDOW_PRESETS,
+                                         BookmarkSpec, CameraSpec, ChannelSpec, ClipPlaneSpec,
+                                         CropSpec, LightSpec, ProbeSpec, Scene, SurfaceSpec,
+                                         MAX_GRADIENT_FACTOR, MIN_ROUGHNESS, AREA_LIGHT_SHAPES,
+                                         MAX_AREA_LIGHTS, AreaLightSpec, TransferFunctionSpec,
+                                         ViewerSpec, VolumeSpec)
 
 SCHEMA_ID = "https://radiance-probes.invalid/scene.schema.json"
 # Scene fields that are not JSON keys: where relative paths are looked up, and the environment map

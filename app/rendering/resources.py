@@ -10,7 +10,8 @@ import moderngl
 import numpy as np
 
 from radiance_probes.scene.area_lights import area_light_uniforms, check_area_lights
-from radiance_probes.scene.channels import ChannelTables, channel_uniforms, effective_channels, volume_inputs
+from radiance_probes.scene.channels import (ChannelTables, channel_uniforms, effective_channels,
+                                            volume_inputs)
 from radiance_probes.scene.clip_region import ClipRegion, clip_region, region_uniforms
 from radiance_probes.io.environment_map import EnvironmentMap, load_scene_environment
 from radiance_probes.gl.brick_pool import BrickPool

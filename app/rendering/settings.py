@@ -15,9 +15,12 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, fields, replace
 
-from radiance_probes.rendering.grids.light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE, MIN_SIDE as LIGHT_MIN_SIDE,
-                                  PRECISION as LIGHT_PRECISION, PRECISIONS as LIGHT_PRECISIONS,
-                                  SEGMENT_TARGET_INVOCATIONS, SOFTWARE_MIN_SIDE)
+from radiance_probes.rendering.grids.light_transmittance import (MAX_SIDE as LIGHT_MAX_SIDE,
+                                                                 MIN_SIDE as LIGHT_MIN_SIDE,
+                                                                 PRECISION as LIGHT_PRECISION,
+                                                                 PRECISIONS as LIGHT_PRECISIONS,
+                                                                 SEGMENT_TARGET_INVOCATIONS,
+                                                                 SOFTWARE_MIN_SIDE)
 
 from radiance_probes.rendering.probes.bake_level import check_bake_level
 from radiance_probes.rendering.probes.bake import SHADOW_TRACKINGS, WALK_SUN_MODES

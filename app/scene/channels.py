@@ -13,8 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from radiance_probes.scene.flags import with_flag
-from radiance_probes.scene.types import (MAX_CHANNELS, ChannelSpec, Scene, SceneError, TransferFunctionSpec,
-                          VolumeError, channel_transfer_function)
+from radiance_probes.scene.types import (MAX_CHANNELS, ChannelSpec, Scene, SceneError,
+                                         TransferFunctionSpec, VolumeError,
+                                         channel_transfer_function)
 from radiance_probes.scene.transfer import transfer_table
 
 

@@ -14,7 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radiance_probes.io.brick_layout import APRON, CONSTANT, CONSTANTS_WIDTH, DEFAULT_BRICK_SIZE, FREE_SLOT, LEVEL_SHIFT, REDIRECT, brick_counts, constant_bricks, constant_values, level_tables, slot_grid, slot_origin, slot_side
+from radiance_probes.io.brick_layout import (APRON, CONSTANT, CONSTANTS_WIDTH, DEFAULT_BRICK_SIZE,
+                                             FREE_SLOT, LEVEL_SHIFT, REDIRECT, brick_counts,
+                                             constant_bricks, constant_values, level_tables,
+                                             slot_grid, slot_origin, slot_side)
 from radiance_probes.twins.medium import trilinear
 
 def brick_block(data: np.ndarray, b, brick: int) -> np.ndarray:

@@ -7,10 +7,11 @@ import os
 import sys
 from pathlib import Path
 
-from radiance_probes.frontend.common import (SCENE_KEY_DESTS, apply_options, check_output, render_defaults,
-                        render_to_files, scene_from_arg)
+from radiance_probes.frontend.common import (SCENE_KEY_DESTS, apply_options, check_output,
+                                             render_defaults, render_to_files, scene_from_arg)
 from radiance_probes.io.scene_file import Scene
-from radiance_probes.rendering.budgets.device_defaults import RENDER_SCALE, probes_named, with_device_probes
+from radiance_probes.rendering.budgets.device_defaults import (RENDER_SCALE, probes_named,
+                                                               with_device_probes)
 from radiance_probes.viewer.files import bundled_scene_for
 from radiance_probes.viewer.state import ViewerState
 from radiance_probes.viewer.xvfb import Xvfb, XvfbError, has_display

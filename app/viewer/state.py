@@ -6,7 +6,8 @@ import math
 from dataclasses import dataclass, field, replace
 
 from radiance_probes.methods import METHODS as REGISTRY, REFERENCE, VIEWER_METHODS as METHODS
-from radiance_probes.io.scene_file import BookmarkSpec, CameraSpec, ClipPlaneSpec, CropSpec, Scene, ViewerSpec
+from radiance_probes.io.scene_file import (BookmarkSpec, CameraSpec, ClipPlaneSpec, CropSpec, Scene,
+                                           ViewerSpec)
 from radiance_probes.viewer.history import SceneHistory
 
 DISPLAY_MODES = ("image", "split", "error")   # one method; two side by side; error heat map

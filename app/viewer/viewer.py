@@ -30,8 +30,8 @@ from radiance_probes.viewer.display import BACKGROUND, DisplayPass, ErrorMeter
 from radiance_probes.viewer.opening import VolumeLoading
 from radiance_probes.viewer.files import FileDialogs, builtin_scene, datasets, scene_for_path
 from radiance_probes.viewer import crop_handles
-from radiance_probes.viewer.probe_view import (BoxOutline, ProbeSpheres, describe_probe, probe_centres, probe_under,
-                         slab_plane)
+from radiance_probes.viewer.probe_view import (BoxOutline, ProbeSpheres, describe_probe,
+                                               probe_centres, probe_under, slab_plane)
 from radiance_probes.viewer.recorder import MovieRecorder
 from radiance_probes.viewer.frame.views import FrameTimes
 from radiance_probes.viewer.frame.session import RenderSession

@@ -27,10 +27,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / ".pkg"))
 from radiance_probes.bench.scenes import bench_scene                      # noqa: E402
 from radiance_probes.gl.context import create_headless_context           # noqa: E402
-from radiance_probes.rendering.denoise.filter import radiance_as_albedo, shared_denoiser  # noqa: E402
+from radiance_probes.rendering.denoise.filter import (radiance_as_albedo, shared_denoiser)  # noqa: E402
 from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
 from radiance_probes.rendering.refine.refine import (blend_from_sums, blend_images,  # noqa: E402
-                                              half_buffer_sums, judge_sums)
+                                                     half_buffer_sums, judge_sums)
 from radiance_probes.rendering.renderer import Renderer                  # noqa: E402
 
 

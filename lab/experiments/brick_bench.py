@@ -450,7 +450,8 @@ def _progressive(ctx, records, scene, settings, cap):
     writes bricks for up to OPEN_WRITE_BUDGET_S and draws the preview's raymarched frame (the
     viewer's frame: begin, one sample, waited for, nothing read back); then the store's own first
     frame. Times from opening."""
-    from radiance_probes.rendering.levels.progressive_open import OPEN_WRITE_BUDGET_S, ProgressiveOpen
+    from radiance_probes.rendering.levels.progressive_open import (OPEN_WRITE_BUDGET_S,
+                                                                   ProgressiveOpen)
     from radiance_probes.io.load import zarr_preview
 
     def frame(r, seed, bake=False):

@@ -23,8 +23,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from radiance_probes.bench.scenes import bench_scene                      # noqa: E402
 from radiance_probes.gl.context import create_headless_context           # noqa: E402
-from radiance_probes.rendering.denoise.filter import (KEEP_MEANS_BLOCK, KEEP_MEANS_CELL,  # noqa: E402
-                                               _block_means, _cell_field, shared_denoiser)
+from radiance_probes.rendering.denoise.filter import (KEEP_MEANS_BLOCK, KEEP_MEANS_CELL,
+                                                      _block_means, _cell_field, shared_denoiser)  # noqa: E402
 from radiance_probes.rendering.metrics import corrected_rrmse, reference_noise, rrmse  # noqa: E402
 from radiance_probes.rendering.renderer import Renderer                  # noqa: E402
 

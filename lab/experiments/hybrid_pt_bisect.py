@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bake_variants import child_rows, keep_rows   # noqa: E402  (a fresh interpreter, its RESULT lines)
+from bake_variants import (child_rows, keep_rows)  # noqa: E402  (a fresh interpreter, its RESULT lines)
 
 CHILD = r'''
 import importlib, json, os, sys

@@ -46,7 +46,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bake_variants import child_rows, edited_tree, keep_rows   # noqa: E402  (the same copies, other edits)
+from bake_variants import (child_rows, edited_tree, keep_rows)  # noqa: E402  (the same copies, other edits)
 # the line of lib/raymarch.glsl that reads the gradient (lib/opacity_gradient_grid.glsl)
 GRADIENT_READ = "vec3 gradient = raymarch_opacity_gradient(x);"
 EDITS = {

@@ -25,10 +25,9 @@ import numpy as np
 from PIL import Image
 
 sys.path.insert(0, ".")
-from radiance_probes.rendering.metrics import (corrected_rrmse, flip, reference_noise,   # noqa: E402
-                                              rrmse)
+from radiance_probes.rendering.metrics import (corrected_rrmse, flip, reference_noise, rrmse)  # noqa: E402
 from radiance_probes.bench.records import error_of, floor                          # noqa: E402
-from radiance_probes.bench.report import equal_time, load as load_results, main_records   # noqa: E402
+from radiance_probes.bench.report import (equal_time, load as load_results, main_records)  # noqa: E402
 from radiance_probes.bench.scenes import bench_scene                                 # noqa: E402
 from radiance_probes.gl.context import create_headless_context, describe             # noqa: E402
 from radiance_probes.rendering.renderer import Renderer                                 # noqa: E402

@@ -36,7 +36,8 @@ def device_slowdown(renderer) -> float:
     if not is_software(ctx):
         return 1.0
     if ctx not in _slowdown:
-        from radiance_probes.rendering.budgets.ceiling import SPEED_CHECK_RAYS, SPEED_CHECK_STEPS, measure_ceiling
+        from radiance_probes.rendering.budgets.ceiling import (SPEED_CHECK_RAYS, SPEED_CHECK_STEPS,
+                                                               measure_ceiling)
         ms = measure_ceiling(renderer, CALIBRATION_RAYS, SPEED_CHECK_STEPS, repeats=1)["ms"]
         _slowdown[ctx] = max(1.0, ms * (SPEED_CHECK_RAYS / CALIBRATION_RAYS) / H100_SPEED_CHECK_MS)
     return _slowdown[ctx]

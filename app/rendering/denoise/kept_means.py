@@ -18,7 +18,8 @@ import moderngl
 import numpy as np
 
 from radiance_probes.gl.shaders import compute_program, set_uniforms
-from radiance_probes.rendering.denoise.filter import KEEP_MEANS_BLOCK, KEEP_MEANS_CELL, Denoised, _block_means, _make_usable
+from radiance_probes.rendering.denoise.filter import (KEEP_MEANS_BLOCK, KEEP_MEANS_CELL, Denoised,
+                                                      _block_means, _make_usable)
 
 # The texture unit the passes read their image from (no other pass binds it: the others bind
 # their own units before each dispatch, and these stay untouched).

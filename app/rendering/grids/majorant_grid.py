@@ -16,8 +16,8 @@ from radiance_probes.gl.shaders import ComputeProgram, compute_program, set_unif
 from radiance_probes.gl.textures import TransferTable
 from radiance_probes.scene.channels import channel_uniforms
 from radiance_probes.twins.majorant_grid import (MAJORANT_SAFETY, brick_density_range_grid,
-                                   channel_density_ranges, density_range_grid,
-                                   macrocell_counts, majorant_bound)
+                                                 channel_density_ranges, density_range_grid,
+                                                 macrocell_counts, majorant_bound)
 from radiance_probes.io.volume import Volume
 
 # Texture units: 0 volume, 1 transfer function (and its storage buffer, binding 8), 2..8 probes, 9 light transmittance (raymarcher).

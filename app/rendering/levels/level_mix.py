@@ -24,7 +24,8 @@ import numpy as np
 
 from dataclasses import dataclass
 
-from radiance_probes.io.brick_layout import CONSTANT, REDIRECT, UNMAPPED, around, brick_counts, bricks_reached, constant_values, slot_bytes, slot_side
+from radiance_probes.io.brick_layout import (CONSTANT, REDIRECT, UNMAPPED, around, brick_counts,
+                                             bricks_reached, constant_values, slot_bytes, slot_side)
 from radiance_probes.io.bricks import PoolPlan
 from radiance_probes.twins.camera import camera_frame
 from radiance_probes.twins.majorant_grid import brick_density_range_grid

@@ -12,8 +12,10 @@ import numpy as np
 
 from radiance_probes.twins.majorant_grid import macrocell_counts
 from radiance_probes.rendering.levels.level_mix import mixed_density_ranges, mixed_plan
-from radiance_probes.io.brick_layout import DEFAULT_BRICK_SIZE, brick_counts, slot_bytes, slot_grid, texel_bytes
-from radiance_probes.io.brick_sources import ArraySource, box_filtered, source_box_filtered, source_whole
+from radiance_probes.io.brick_layout import (DEFAULT_BRICK_SIZE, brick_counts, slot_bytes,
+                                             slot_grid, texel_bytes)
+from radiance_probes.io.brick_sources import (ArraySource, box_filtered, source_box_filtered,
+                                              source_whole)
 from radiance_probes.io.bricks import BrickStore, LazyData, PoolPlan, refuse_cap_below_brick
 from radiance_probes.io.level_bound import bound_level, varying_bricks
 from radiance_probes.gl.brick_pool import upload_plan

@@ -20,7 +20,7 @@ import numpy as np
 
 from radiance_probes.scene.types import SH_ORDERS
 from radiance_probes.twins.sh import sh_count
-from radiance_probes.twins.visible_region import visible_region  # noqa: F401  (the NumPy twin; the renderer's is on the GPU)
+from radiance_probes.twins.visible_region import (visible_region)  # noqa: F401  (the NumPy twin; the renderer's is on the GPU)
 
 SUN_CHANNEL = 27            # the colour packing's channel of the sun's transmittance
 # "auto" keeps band l while |g|^l >= this: the phase convolution scales band l by g^l, so a band

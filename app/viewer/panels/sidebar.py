@@ -11,12 +11,14 @@ from imgui_bundle import ImVec2, imgui, implot
 from radiance_probes.rendering.renderer import MAX_GATHER_EVENT, RAYMARCH_STAGES
 from radiance_probes.frontend import controls as C
 from radiance_probes.methods import METHODS as REGISTRY, REFERENCE, VIEWER_METHODS as METHODS
-from radiance_probes.io.scene_file import (ORIENTATIONS, PROBE_FITS, PROBE_INDICATORS, PROBE_INTERPOLATIONS,
-                     PROBE_LAYOUTS, PROBE_PRECISIONS, SH_ORDERS, SH_WINDOWS)
+from radiance_probes.io.scene_file import (ORIENTATIONS, PROBE_FITS, PROBE_INDICATORS,
+                                           PROBE_INTERPOLATIONS, PROBE_LAYOUTS, PROBE_PRECISIONS,
+                                           SH_ORDERS, SH_WINDOWS)
 from radiance_probes.io.builtin_volumes import BUILTIN_VOLUMES
 from radiance_probes.viewer.layout import SIDEBAR_WIDTH
 from radiance_probes.viewer.overlays import shortcut_table
-from radiance_probes.viewer.state import DISPLAY_MODES, PROBE_VIEWS, angles_from_direction, colour_and_strength, scaled
+from radiance_probes.viewer.state import (DISPLAY_MODES, PROBE_VIEWS, angles_from_direction,
+                                          colour_and_strength, scaled)
 from radiance_probes.viewer.panels.crop_panel import crop_section
 from radiance_probes.viewer.panels.movie_panel import movie_section
 from radiance_probes.viewer.panels.time_panel import time_section

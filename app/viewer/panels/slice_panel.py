@@ -20,11 +20,12 @@ from radiance_probes.gl.shaders import render_program, set_uniforms
 from radiance_probes.viewer import orbit
 from radiance_probes.viewer.crop_handles import kept_box
 from radiance_probes.viewer.overlays import CROP_COLOUR, PLANE_COLOUR
-from radiance_probes.viewer.slice_view import (AXES, AXIS_COLOURS, SLICE_COLOURS, SLICE_VIEWS, column_width,
-                         crop_rect, describe_voxel, edge_labels, fit_rect, image_shape,
-                         pixel_voxel, plane_extent, plane_segment, slice_boxes, slice_coord,
-                         slice_image, slice_indices, slice_name, slice_outline, slice_rgba,
-                         slice_world_points, voxel_centre, world_pixels)
+from radiance_probes.viewer.slice_view import (AXES, AXIS_COLOURS, SLICE_COLOURS, SLICE_VIEWS,
+                                               column_width, crop_rect, describe_voxel, edge_labels,
+                                               fit_rect, image_shape, pixel_voxel, plane_extent,
+                                               plane_segment, slice_boxes, slice_coord, slice_image,
+                                               slice_indices, slice_name, slice_outline, slice_rgba,
+                                               slice_world_points, voxel_centre, world_pixels)
 
 CAPTION_PIXELS = 20.0          # the caption above a slice and the value line below it
 BOX_GAP = 3.0                  # between a slice's box and its neighbours

@@ -10,7 +10,7 @@ from dataclasses import replace
 
 from imgui_bundle import ImVec2, imgui, implot
 
-from radiance_probes.frontend.colorbar import data_ticks as data_ticks  # noqa: F401 (the panels import it from here)
+from radiance_probes.frontend.colorbar import (data_ticks as data_ticks)  # noqa: F401 (the panels import it from here)
 from radiance_probes.io.scene_file import SceneError, load_transfer_function, save_transfer_function
 from radiance_probes.scene.types import WINDOW_PRESETS
 from radiance_probes.scene.transfer import ALIASES, COLORMAPS
