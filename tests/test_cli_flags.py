@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from radiance_probes.cli.main import build_parser, main
-from radiance_probes.frontend.common import apply_options, scene_from_arg, set_value
+from radiance_probes.frontend.scene_options import apply_options, scene_from_arg
+from radiance_probes.frontend.option_types import set_value
 from radiance_probes.scene.flags import FLAGS, flag_for, with_flag
 from radiance_probes.io.load import load_scene_volume
 
@@ -133,12 +134,12 @@ def test_the_walk_finds_a_message_that_names_a_key_without_its_flag():
 
 
 def test_every_message_that_names_a_scene_key_names_the_flag_that_sets_it():
-    """Over every module the command line reaches (the viewer's own labels and the bench's
+    """Over every module the command line reaches (the viewer's and the napari plugin's own labels and the bench's
     reports aside: neither is read at a command line)."""
     bad = []
     for path in sorted(APP.rglob("*.py")):
         rel = path.relative_to(APP).as_posix()
-        if rel.startswith(("bench/", "viewer/")) or rel in ("io/scene_schema.py", "scene/flags.py"):
+        if rel.startswith(("bench/", "viewer/", "napari_plugin/")) or rel in ("io/scene_schema.py", "scene/flags.py"):
             continue
         bad += [f"app/{rel}:{line}: {text!r}" for line, text in unflagged_messages(path.read_text())]
     assert not bad, "messages naming a scene key but no flag:\n" + "\n".join(bad)

@@ -11,7 +11,8 @@ import pytest
 
 from radiance_probes.scene.clinical_presets import (CLINICAL_PRESETS, check_hounsfield, expand,
                                                     hounsfield_problem, opening_scene)
-from radiance_probes.frontend.common import OptionError, apply_options, scene_from_arg
+from radiance_probes.frontend.option_types import OptionError
+from radiance_probes.frontend.scene_options import apply_options, scene_from_arg
 from radiance_probes.io.scene_file import (SceneError, TransferFunctionSpec, parse_scene,
                                            scene_to_dict)
 from radiance_probes.scene.transfer import lookup, transfer_table

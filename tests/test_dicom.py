@@ -193,7 +193,8 @@ def test_render_takes_series_and_says_what_it_opened(tmp_path, capsys):
 def test_window_and_orientation_options(tmp_path, capsys):
     """--data-window (a preset or LEVEL,WIDTH) and --orientation reach the scene as its keys would."""
     import argparse
-    from radiance_probes.frontend.common import apply_options, scene_from_arg, window_arg
+    from radiance_probes.frontend.scene_options import apply_options, scene_from_arg
+    from radiance_probes.frontend.option_types import window_arg
     scene = scene_from_arg(str(tmp_path))
     args = argparse.Namespace(data_window=window_arg("bone"), orientation="patient", series=2)
     out = apply_options(scene, args)

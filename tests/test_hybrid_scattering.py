@@ -563,8 +563,8 @@ def test_furnace_under_a_constant_map_with_surfaces(ctx, tmp_path):
 
 def test_the_surface_option_merges_into_the_scene():
     import argparse
-    from radiance_probes.frontend.common import (OptionError, apply_options, scene_from_arg,
-                                                 surface_arg)
+    from radiance_probes.frontend.option_types import OptionError, surface_arg
+    from radiance_probes.frontend.scene_options import apply_options, scene_from_arg
     scene = scene_from_arg(None)
     out = apply_options(scene, argparse.Namespace(surface=surface_arg("2,0.3,0.1")))
     assert (out.surface.gradient_factor, out.surface.roughness, out.surface.specular) == (

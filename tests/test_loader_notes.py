@@ -11,7 +11,7 @@ import tifffile
 import zarr
 
 from radiance_probes.cli.main import build_parser, main
-from radiance_probes.frontend.common import apply_options, scene_from_arg
+from radiance_probes.frontend.scene_options import apply_options, scene_from_arg
 from radiance_probes.io.scene_file import SceneError, VolumeSpec, parse_scene
 from radiance_probes.io.volume import VolumeError
 from radiance_probes.io.load import load_scene_volume, load_volume

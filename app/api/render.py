@@ -213,7 +213,7 @@ def build_scene(data: Any = None, scene: Any = None, options: dict | None = None
 def check_clip(scene: Scene, volume: Volume) -> None:
     """A crop beyond the volume, or one that keeps nothing, is refused before any GPU work (as the
     command line does): an empty image is never meant."""
-    from radiance_probes.frontend.common import check_clip as check
+    from radiance_probes.frontend.scene_options import check_clip as check
     check(scene, volume)
 
 

@@ -7,10 +7,11 @@ import argparse
 import sys
 
 from radiance_probes.methods import METHODS as REGISTRY
-from radiance_probes.frontend.common import (OptionError, add_colorbar_options,
-                                             add_scene_edit_options, add_volume_options,
-                                             apply_options, check_clip, grid_arg, positive_float,
-                                             positive_int, scene_from_arg)
+from radiance_probes.frontend.option_types import (OptionError, grid_arg, positive_float,
+                                                   positive_int)
+from radiance_probes.frontend.scene_options import (add_colorbar_options, add_scene_edit_options,
+                                                    add_volume_options, apply_options, check_clip,
+                                                    scene_from_arg)
 
 DEFAULT_FRAMES = 120
 DEFAULT_SPP = 16
@@ -89,7 +90,7 @@ def add_animate_parser(sub, func) -> argparse.ArgumentParser:
 def run_animate(args: argparse.Namespace) -> int:
     from radiance_probes.frontend.colorbar import scene_colorbar_overlay
     from radiance_probes.io.environment_map import load_scene_environment
-    from radiance_probes.frontend.common import DEFAULT_RAYMARCH_STEP
+    from radiance_probes.frontend.option_types import DEFAULT_RAYMARCH_STEP
     from radiance_probes.gl.context import create_headless_context, describe, is_software
     from radiance_probes.movie.frames import (frame_count_note, movie_cameras, render_movie,
                                               series_steps)

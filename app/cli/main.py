@@ -5,10 +5,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from radiance_probes.frontend.common import (ArgumentParser, OptionError, add_colorbar_options,
-                                             add_scene_edit_options, memory_size,
-                                             add_volume_options, fraction, grid_arg, positive_float,
-                                             positive_int, render_to_files)
+from radiance_probes.frontend.option_types import (ArgumentParser, OptionError, memory_size,
+                                                   fraction, grid_arg, positive_float, positive_int)
+from radiance_probes.frontend.scene_options import (add_colorbar_options, add_scene_edit_options,
+                                                    add_volume_options)
+from radiance_probes.frontend.render_files import render_to_files
 from radiance_probes.methods import VIEWER_METHODS
 from radiance_probes.io.scene_file import PROBE_PRECISIONS, SceneError
 

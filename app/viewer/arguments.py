@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import argparse
 
-from radiance_probes.frontend.common import (add_scene_edit_options, add_volume_options, grid_arg,
-                                             memory_size, positive_float, positive_int,
-                                             render_scale, window_size)
+from radiance_probes.frontend.scene_options import add_scene_edit_options, add_volume_options
+from radiance_probes.frontend.option_types import (grid_arg, memory_size, positive_float,
+                                                   positive_int, render_scale, window_size)
 from radiance_probes.methods import VIEWER_METHODS as METHODS
 from radiance_probes.io.scene_file import PROBE_PRECISIONS
 

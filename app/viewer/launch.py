@@ -7,8 +7,8 @@ import os
 import sys
 from pathlib import Path
 
-from radiance_probes.frontend.common import (SCENE_KEY_DESTS, apply_options, check_output,
-                                             render_defaults, render_to_files, scene_from_arg)
+from radiance_probes.frontend.scene_options import SCENE_KEY_DESTS, apply_options, scene_from_arg
+from radiance_probes.frontend.render_files import check_output, render_defaults, render_to_files
 from radiance_probes.io.scene_file import Scene
 from radiance_probes.rendering.budgets.device_defaults import (RENDER_SCALE, probes_named,
                                                                with_device_probes)

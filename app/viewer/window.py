@@ -134,7 +134,7 @@ class ViewerWindow:
             self.ctx.screen.use()
             imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
         if v.pending_screenshot:
-            from radiance_probes.frontend.common import save_or_rescue
+            from radiance_probes.frontend.render_files import save_or_rescue
             path, v.pending_screenshot = v.pending_screenshot, None
             saved, error = save_or_rescue(lambda p: self.save_screenshot(p), path, "screenshot")
             v.last_screenshot = (path, saved, error)
