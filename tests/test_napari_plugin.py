@@ -17,11 +17,36 @@ ROOT = Path(__file__).resolve().parents[1]
 CANVAS = (300, 240)      # napari's window is sized so its canvas is small (llvmpipe)
 
 
+def _release_current_egl_context() -> None:
+    """No EGL context current on this thread: the suite's session context (conftest.py makes it
+    current for every test) would take the GL calls of napari's GLX context (libglvnd dispatches
+    by the current context), and vispy's first query then fails."""
+    import ctypes
+    try:
+        egl = ctypes.CDLL("libEGL.so.1")
+    except OSError:
+        return
+    egl.eglGetCurrentContext.restype = ctypes.c_void_p
+    egl.eglGetCurrentDisplay.restype = ctypes.c_void_p
+    egl.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+    if egl.eglGetCurrentContext():
+        egl.eglMakeCurrent(egl.eglGetCurrentDisplay(), None, None, None)
+
+
+@pytest.fixture(autouse=True)
+def _no_egl_context_current():
+    """After conftest's per-test fixture has made the session context current (autouse fixtures
+    of a test module run after conftest's)."""
+    _release_current_egl_context()
+    yield
+
+
 @pytest.fixture(scope="module")
 def napari_env(display):
     """napari's Qt on the session's Xvfb (GLX through llvmpipe): Qt's offscreen platform has no
     OpenGL for vispy."""
     old = {k: os.environ.get(k) for k in ("DISPLAY", "QT_QPA_PLATFORM")}
+    _release_current_egl_context()   # (the module's fixtures run before the tests' own)
     os.environ["DISPLAY"] = display
     os.environ["QT_QPA_PLATFORM"] = "xcb"
     yield display
