@@ -189,7 +189,10 @@ def test_animate_plays_the_series_one_bake_a_step(tmp_path, capsys):
 def test_time_series_bench_quick(tmp_path):
     """lab/experiments/time_series_bench.py --quick (the GPU run's code at llvmpipe's size): playback
     timed over every step kept, and the error after a step change, warm and cold, falling to 0
-    once the new step's bake ends (a warm bake ends at the cold bake's probes)."""
+    once the new step's bake ends (a warm bake ends at the cold bake's probes). Paced by the wall
+    clock (llvmpipe), the bake takes turns with the raymarcher's banded samples (issue 55: no
+    sample reads two states of the probes), so the warm bake ends between 48 and 96 frames after
+    the change where it ended within 24 before."""
     import importlib.util
     import json
     from conftest import ROOT
@@ -206,7 +209,7 @@ def test_time_series_bench_quick(tmp_path):
     for variant in ("warm", "cold"):
         errors = rec["after_step_change"][variant]
         assert errors["1"]["mean"] > 1e-3            # the new step's bake has only begun
-        assert errors["24"]["max"] < 1e-6            # ended: the cold bake's probes exactly
+        assert errors["96"]["max"] < 1e-6            # ended: the cold bake's probes exactly
         assert np.isfinite(rec["while_playing"][variant]["mean"])
     assert rec["bake_noise_rrmse"] > 0
     assert "fps" in (tmp_path / "out" / "report.md").read_text()

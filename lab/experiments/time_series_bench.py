@@ -61,7 +61,7 @@ class Settings:
 
 
 QUICK = Settings(steps=6, size=24, width=64, height=48, probes=(8, 128), loops=2,
-                 check_steps=(2, 5), frames_after=(1, 2, 24), ref_frames=4)
+                 check_steps=(2, 5), frames_after=(1, 2, 96), ref_frames=4)
 
 
 def write_series(path: Path, steps: int, size: int) -> Path:
