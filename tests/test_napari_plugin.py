@@ -89,6 +89,17 @@ def wait_for(predicate, timeout: float = 240.0) -> None:
         process(0.02)
 
 
+def render_to_end(widget, samples: int, scale: float, method: str | None = None) -> None:
+    """The widget's render, started and waited for to its last sample, with no problem shown."""
+    if method is not None:
+        widget.method.setCurrentText(method)
+    widget.samples.setValue(samples)
+    widget.render_scale.setValue(scale)
+    widget.start()
+    wait_for(lambda: done(widget))
+    assert not widget.problem, widget.message
+
+
 def smooth_volume(shape=(20, 24, 28), seed=1) -> np.ndarray:
     rng = np.random.default_rng(seed)
     z, y, x = np.meshgrid(*(np.linspace(-1, 1, n) for n in shape), indexing="ij")
@@ -137,12 +148,7 @@ def test_plugin_image_matches_render_of_the_same_array(fresh, tmp_path):
     cam(viewer).zoom = cam(viewer).zoom * 1.1
     widget = make_widget(viewer)
     try:
-        widget.method.setCurrentText("raymarch")
-        widget.samples.setValue(2)
-        widget.render_scale.setValue(0.25)
-        widget.start()
-        wait_for(lambda: done(widget))
-        assert not widget.problem, widget.message
+        render_to_end(widget, 2, 0.25, "raymarch")
         frame = widget.last_frame
         request = widget._request
         # the camera and window it maps to, from napari's model as it stands
@@ -182,11 +188,7 @@ def test_visible_layers_become_channels_rendered_as_render_does(fresh):
     cam(viewer).angles = (5, 20, 40)
     widget = make_widget(viewer)
     try:
-        widget.samples.setValue(1)
-        widget.render_scale.setValue(0.2)
-        widget.start()
-        wait_for(lambda: done(widget))
-        assert not widget.problem, widget.message
+        render_to_end(widget, 1, 0.2)
         request = widget._request
         channels = request.options["channels"]
         assert [c["name"] for c in channels] == ["a", "b"]          # the hidden layer is not
@@ -331,12 +333,7 @@ def test_camera_move_rerenders_without_blocking_the_event_loop(fresh):
     viewer.add_image(smooth_volume((24, 24, 24)), contrast_limits=(100, 900))
     widget = make_widget(viewer)
     try:
-        widget.method.setCurrentText("pt")
-        widget.samples.setValue(6)
-        widget.render_scale.setValue(0.5)
-        widget.start()
-        wait_for(lambda: done(widget))
-        assert not widget.problem, widget.message
+        render_to_end(widget, 6, 0.5, "pt")
         first = widget._engine.latest
         first_camera = widget._request.camera
         ticks: list[float] = []

@@ -28,6 +28,7 @@ from radiance_probes.frontend.imageio import save_png
 from radiance_probes.scene.transfer import opacity_points, rgba_with_opacity
 from radiance_probes.rendering.budgets.ceiling import speed_check_ms
 from radiance_probes.rendering.metrics import corrected_rrmse, rrmse
+from radiance_probes.scene.area_lights import enabled_lights
 from radiance_probes.bench.records import log as _log
 
 TARGETS = (0.10, 0.05, 0.03, 0.02)
@@ -90,8 +91,7 @@ def edit(scene, event: str):
 
 def edits_for(scene) -> tuple[str, ...]:
     """The replay's edits of a scene: EDITS, and LIGHT_EDITS where an area light is on."""
-    lit = any(getattr(light, "enabled", True) for light in scene.area_lights)
-    return EDITS + (LIGHT_EDITS if lit else ())
+    return EDITS + (LIGHT_EDITS if enabled_lights(scene) else ())
 
 
 def time_to(curve: list[tuple[float, float]], target: float) -> float | None:
