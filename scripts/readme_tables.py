@@ -188,15 +188,17 @@ def refine(records: str = REFINE_RECORDS) -> str:
     p99 frame over its edits (GPU, wall) and the wall time to 2% of each event."""
     data = _load(records)
     recs = [r for r in data["records"] if r.get("mode") == "interact" and r["method"] == "refine"]
-    out = ["| scene | p99 frame, GPU (wall) | to 2%, wall: load | to 2%, wall: edits |",
-           "| --- | --- | --- | --- |"]
+    out = ["| scene | p99 frame, GPU (wall) | to 2%, wall: load | to 2%, wall: edits "
+           "| flicker against raw pt |", "| --- | --- | --- | --- | --- |"]
 
     def wall(r):
         x = r.get("wall_ms_to_2pct")
         return "not reached" if x is None else _ms(x)
 
     for scene in sorted({r["scene"] for r in recs}, key=lambda s: (s != "bonsai", s)):
-        rows = [r for r in recs if r["scene"] == scene]
+        rows = [r for r in recs if r["scene"] == scene and r["event"] != "flicker"]
+        flick = next((r for r in recs if r["scene"] == scene and r["event"] == "flicker"), None)
+        ratio = None if flick is None else flick.get("flicker_ratio")
         p99 = [r["frame_ms_p99"] for r in rows]
         wall99 = [r["frame_wall_ms_p99"] for r in rows]
         load = next((r for r in rows if r["event"] == "load"), None)
@@ -206,7 +208,8 @@ def refine(records: str = REFINE_RECORDS) -> str:
         if spans and len(spans) < len(edits):
             reached += f" ({len(edits) - len(spans)} of {len(edits)} not reached)"
         out.append(f"| {scene} | {min(p99):.0f}-{max(p99):.0f} ms ({min(wall99):.0f}-{max(wall99):.0f} ms) "
-                   f"| {wall(load) if load else '-'} | {reached} |")
+                   f"| {wall(load) if load else '-'} | {reached} | "
+                   f"{'-' if ratio is None else f'{ratio:.2f}x'} |")
     return "\n".join(out) + "\n"
 
 

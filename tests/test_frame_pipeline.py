@@ -275,6 +275,7 @@ def test_transfers_are_spread_over_frames_and_arrive_whole(ctx):
         if upload.step(budget):
             break
     assert steps == 6
+    assert upload._staging is None   # its pixel buffer released once whole
     got = np.frombuffer(target.read(), np.float32).reshape(16, 24, 4)
     np.testing.assert_array_equal(got, image[::-1])
     texture.release()

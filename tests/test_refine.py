@@ -217,7 +217,7 @@ def test_interact_quick_preset_replays_refine(ctx, tmp_path):
     path = run_bench(preset.scaled(scenes=("anisotropic",), interact_methods=("refine",),
                                    interact_sizes=((32, 24),)), tmp_path)
     data = json.loads(path.read_text())
-    recs = [r for r in data["records"] if r["method"] == "refine"]
+    recs = [r for r in data["records"] if r["method"] == "refine" and r["event"] != "flicker"]
     assert [(r["event"], r["variant"]) for r in recs] == [
         ("load", None), ("orbit", None),
         *[(e, v) for e in ("tf_drag", "sun_30deg", "density", "albedo") for v in ("warm", "cold")]]
@@ -239,9 +239,24 @@ def test_interact_quick_preset_replays_refine(ctx, tmp_path):
     # cloud the raymarcher over 8^3 probes is far off; guided at 32x24 gets below it after 8 of
     # the 10 events)
     assert took_over >= len(recs) // 2, took_over
+    # the flicker on a still camera: refine's window of frames, and the raw path tracer's from
+    # the same wall time, whose accumulating image changes every frame
+    flick = [r for r in data["records"] if r["event"] == "flicker"]
+    assert len(flick) == 1 and flick[0]["method"] == "refine"
+    f, p = flick[0]["flicker"], flick[0]["flicker_pt"]
+    assert f["frames"] == p["frames"] == preset.interact_flicker_frames
+    if p["stopped"]:   # at 32x24 the path tracer may reach the viewer's 1024 spp first
+        assert p["change_mean"] == 0.0
+    else:
+        assert p["from_wall_ms"] >= f["from_wall_ms"]
+        assert p["frames_changed"] == p["frames"] and p["change_mean"] > 0.0
+    assert 0.0 <= f["change_mean"] <= f["change_max"] and np.isfinite(f["error"])
+    if p["change_mean"] > 0.0:
+        assert flick[0]["flicker_ratio"] == pytest.approx(f["change_mean"] / p["change_mean"])
     text = write_report(path).read_text()
     assert "Within 2% within 1 s of every event" in text
     assert "| anisotropic | 32x24 | 8^3x128 | refine | 10 |" in text
+    assert "### Flicker on a still camera" in text and "| anisotropic | refine |" in text
 
 
 @pytest.mark.parametrize("n_a, n_b, scale, bias", [(8, 8, 0.5, 0.05), (4, 12, 1.0, 0.1),

@@ -172,6 +172,79 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
             "trace": trace, "measure_ms": measure_ms, "filter_ms": filter_ms, "parts": parts}
 
 
+def still_flicker(session, method: str, config, reference, noise: float, seed: int,
+                  from_wall_ms: float | None = None) -> dict:
+    """How much a view's shown image changes from frame to frame on a still camera once it is
+    good (issue 56): frames from a restart with the viewer's sample limit (ViewerState's), until
+    (from_wall_ms None) its error first reaches REFINE_GOAL's, or it stops; else until that much
+    wall time of frames. Then the next config.interact_flicker_frames frames, each shown image
+    against the one before: the RMS of the change over the reference's RMS (rRMSE's scale).
+    Returns the wall ms the window began at, whether the view had stopped by then (its sample
+    limit reached: nothing changes after), its frames, the change's mean and largest, and the
+    error at the window's start."""
+    import dataclasses
+
+    from radiance_probes.viewer.state import ViewerState
+    s = session
+    limit = next(f.default for f in dataclasses.fields(ViewerState) if f.name == "max_samples")
+    needs = s.needs_probes(method)
+    s.seed = seed
+    s.set_methods([method])
+    s.restart()
+    wall, last_check, error, stopped = 0.0, -1e9, None, False
+    # (to a wall time: as many frames as it takes, unless the view stops first)
+    for _ in range(config.interact_max_frames if from_wall_ms is None else 1 << 20):
+        start = time.perf_counter()
+        s.step(limit, needs)
+        wall += 1e3 * (time.perf_counter() - start)
+        if from_wall_ms is not None:
+            stopped = s.finished(limit, needs)
+            if wall >= from_wall_ms or stopped:
+                break
+            continue
+        if s.finished(limit, needs):
+            stopped = True
+            break
+        if wall - last_check >= CURVE_WALL_MS:   # (outside the frames' wall time)
+            with s.denoise.held():
+                error = corrected_rrmse(rrmse(s.shown_image(method), reference), noise)
+            last_check = wall
+            if error <= REFINE_GOAL[0]:
+                break
+    with s.denoise.held():
+        before = s.shown_image(method)
+    if error is None:
+        error = corrected_rrmse(rrmse(before, reference), noise)
+    scale = float(np.sqrt(np.mean(np.asarray(reference, np.float64) ** 2)))
+    changes = []
+    for _ in range(config.interact_flicker_frames):
+        s.step(limit, needs)
+        with s.denoise.held():
+            now = s.shown_image(method)
+        diff = now.astype(np.float64) - before
+        changes.append(float(np.sqrt(np.mean(diff * diff))) / scale)
+        before = now
+    return {"from_wall_ms": wall, "stopped": stopped, "frames": len(changes), "error": error,
+            "change_mean": float(np.mean(changes)), "change_max": float(max(changes)),
+            "frames_changed": int(sum(c > 0.0 for c in changes))}
+
+
+def flicker_record(base: dict, session, method: str, config, reference, noise: float) -> dict:
+    """refine's frame-to-frame change on a still camera once within 2% (still_flicker), against
+    the raw path tracer's (the Denoise switch off) from the same wall time after its restart."""
+    shown = still_flicker(session, method, config, reference, noise, seed=21)
+    on = session.denoise.enabled
+    session.denoise.set_enabled(False)
+    try:
+        pt = still_flicker(session, "pt", config, reference, noise, seed=21,
+                           from_wall_ms=shown["from_wall_ms"])
+    finally:
+        session.denoise.set_enabled(on)
+    ratio = shown["change_mean"] / pt["change_mean"] if pt["change_mean"] > 0 else None
+    return dict(base, event="flicker", method=method, variant=None, flicker=shown, flicker_pt=pt,
+                flicker_ratio=ratio)
+
+
 def record(base: dict, event: str, method: str, variant, run: dict, **extra) -> dict:
     frames, walls, curve = run["frames"], run["walls"], run["curve"]
     rec = dict(base, event=event, method=method, variant=variant,
@@ -230,7 +303,8 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
     if config.interact_denoise is not None:
         session.denoise.set_enabled(config.interact_denoise)
     for width, height in config.interact_sizes:
-        size_cfg = config.scaled(width=width, height=height, ref_spp=config.interact_ref_spp)
+        ref_spp = dict(config.interact_ref_spp_by_scene).get(name, config.interact_ref_spp)
+        size_cfg = config.scaled(width=width, height=height, ref_spp=ref_spp)
         session.resize(width, height)
         tag = f"{name}_{width}x{height}"
         refs: dict = {}
@@ -295,6 +369,15 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                         add(record(base, event, method, variant, run))
                     state = after
                 save_png(out / "images" / f"{tag}_{grid}_{method}_final.png", session.image(method))
+                if method == "refine" and config.interact_flicker_frames:
+                    rec = flicker_record(base, session, method, config, reference, noise)
+                    rec["speed_check_ms"] = speed_check_ms(r, config.speed_check_rays)
+                    results.add(rec)
+                    f, p = rec["flicker"], rec["flicker_pt"]
+                    _log(f"  {tag} flicker {method}: {f['change_mean']:.5f} a frame from "
+                         f"{f['from_wall_ms']:.0f} ms (error {f['error']:.4f}), raw pt "
+                         f"{p['change_mean']:.5f} (error {p['error']:.4f}): ratio "
+                         f"{rec['flicker_ratio']}")
             r.configure(bake_warm=True)
             # switch probes -> raymarcher: the same state, so the albedo reference serves
             run = run_frames(session, "raymarch", config, reference, noise, seed=9)

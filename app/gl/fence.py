@@ -162,11 +162,17 @@ class TransferBudget:
 
 class ChunkedUpload:
     """An image (H, W, C float32) written into `texture` in bands of rows over frames, as
-    `budget` allows (`step`: True once whole)."""
+    `budget` allows (`step`: True once whole). Each band goes through a pixel buffer of its own
+    (orphaned before each write: no wait for the last band's copy): the host copy into it is a
+    memcpy, and the texture's copy from it runs on the GPU. Written straight from host memory
+    (glTexSubImage2D from client memory) an 8 MB band took 3.5-6.5 ms of a frame's wall time on
+    the H200 and up to 15 ms on the chest CT's frames (bench/h200-interact-refine-56: `upload`),
+    against 1.5 ms for the read-backs' host copies of the same size."""
 
     def __init__(self, texture: moderngl.Texture, image: np.ndarray):
         self.texture, self.image = texture, np.ascontiguousarray(image)
         self.rows = 0
+        self._staging: moderngl.Buffer | None = None
 
     def step(self, budget: TransferBudget) -> bool:
         height, width = self.image.shape[:2]
@@ -175,9 +181,24 @@ class ChunkedUpload:
         n = want // row_bytes
         if n:
             band = self.image[self.rows:self.rows + n]
-            self.texture.write(band, viewport=(0, self.rows, width, n))
+            if self._staging is None or self._staging.size < band.nbytes:
+                if self._staging is not None:
+                    self._staging.release()
+                self._staging = self.texture.ctx.buffer(reserve=band.nbytes)
+            else:
+                self._staging.orphan()
+            self._staging.write(band)
+            self.texture.write(self._staging, viewport=(0, self.rows, width, n))
             self.rows += n
-        return self.rows >= height
+        if self.rows >= height:
+            self.release()
+            return True
+        return False
+
+    def release(self) -> None:
+        if self._staging is not None:
+            self._staging.release()
+            self._staging = None
 
 
 def staging_buffer(ctx: moderngl.Context, kept: moderngl.Buffer | None,

@@ -16,6 +16,7 @@ from radiance_probes.gl.timer import GpuTimer
 from radiance_probes.io.scene_file import Scene
 from radiance_probes.io.volume import Volume
 from radiance_probes.rendering.methods.accumulation import Accumulation, SumAccumulation
+from radiance_probes.rendering.methods.guided_level0 import level0_groups_due
 from radiance_probes.rendering.grids.area_light_grid import AREA_GRID_METHODS, AreaLightGrid
 from radiance_probes.rendering.probes.bake_level import BakeMedium
 from radiance_probes.rendering.limits import check_image_size
@@ -364,27 +365,16 @@ class Renderer(ProbeStage, GridStage, StillImages):
         return (REGISTRY[method].needs_light_grid
                 or self._settings.shadow_tracking == "residual")
 
-    def add_samples(self, n: int = 1) -> float:
+    def add_samples(self, n: int = 1, level0_bands: bool = False) -> float:
         """Adds n samples per pixel to the accumulation begun by begin(); returns GPU ms.
-        Probe methods use the probes as they are now (bake them first for a final image)."""
+        Probe methods use the probes as they are now (bake them first for a final image).
+        `level0_bands` (guided): level 0's next frame in bands spread over level 1's samples
+        (app/rendering/methods/guided_level0.py: the viewer's frames), not whole when due."""
         method, acc = self.method, self._acc
         extra, _ = self._sample_inputs(method)
         level0_ms = 0.0
         if method == "guided":
-            # level 0's frames, guided_level0_ratio of them per sample of level 1 (at least one
-            # whenever level 1 has more samples than level 0 has frames times the ratio)
-            acc0 = self._acc0
-            want = math.ceil((acc.samples + n) * self._settings.guided_level0_ratio)
-            frames = max(0, want - acc0.samples)
-            if frames:
-                self.timer.start()
-                self.raymarcher(guided_level0=True).run(
-                    self.resources, self.camera, acc0, frames, self.seed ^ 0x5bd1e995,
-                    self.raymarch_step_voxels * 2 * self.resources.march_step,
-                    {**extra, **self._light.uniforms(),
-                     "guided_level0_budget": GUIDED_LEVEL0_BUDGET})
-                self.timer.stop()
-                level0_ms = self.timer.elapsed_ms
+            level0_ms = self._advance_level0(acc.samples + n, extra, level0_bands)
             extra = {**extra, **self._light.uniforms()}
         if method == "raymarch":
             marcher = self.raymarcher()
@@ -423,6 +413,40 @@ class Renderer(ProbeStage, GridStage, StillImages):
             total += ms
             n -= k
         return total + level0_ms
+
+    def _advance_level0(self, samples: int, extra: dict, bands: bool) -> float:
+        """guided's level 0 brought to what level 1 at `samples` samples needs
+        (guided_level0.level0_groups_due): whole frames in one run, a frame in progress in work
+        groups. Returns the timer's ms."""
+        acc0 = self._acc0
+        total = math.prod(tile_grid(acc0.width, acc0.height))
+        due = level0_groups_due(samples, self._settings.guided_level0_ratio, total, bands)
+        have = acc0.samples * total + acc0.groups_done
+        if due <= have:
+            return 0.0
+        marcher = self.raymarcher(guided_level0=True)
+        step = self.raymarch_step_voxels * 2 * self.resources.march_step
+        uniforms = {**extra, **self._light.uniforms(),
+                    "guided_level0_budget": GUIDED_LEVEL0_BUDGET}
+        seed = self.seed ^ 0x5bd1e995
+        self.timer.start()
+        while have < due:
+            first = acc0.groups_done
+            if first == 0 and due - have >= total:   # whole frames
+                frames = (due - have) // total
+                marcher.run(self.resources, self.camera, acc0, frames, seed, step, uniforms)
+                have += frames * total
+                continue
+            end = min(total, first + (due - have))
+            marcher.run_groups(self.resources, self.camera, acc0, (first, end), seed, step,
+                               uniforms)
+            have += end - first
+            if end >= total:
+                acc0.samples, acc0.groups_done = acc0.samples + 1, 0
+            else:
+                acc0.groups_done = end
+        self.timer.stop()
+        return self.timer.elapsed_ms
 
     def _sample_inputs(self, method: str) -> tuple[dict | None, float]:
         """What a sample of `method` reads besides the scene: the probes' uniforms (methods

@@ -223,6 +223,7 @@ class ViewDenoise:
         upload, flight = got
         if flight.generation != generation:
             del self.landing[name]
+            upload.release()
             return
         with self.parts.part("upload"):
             whole = upload.step(self.budget)
@@ -304,7 +305,9 @@ class ViewDenoise:
         return self.ctx.texture(tuple(size), 4, dtype="f4")
 
     def _forget(self, name: str) -> None:
-        self.landing.pop(name, None)
+        landing = self.landing.pop(name, None)
+        if landing is not None:
+            landing[0].release()
         spare = self._spare.pop(name, None)
         if spare is not None:
             spare.release()

@@ -50,7 +50,8 @@ class RefineCheck:
     frames: int = 0                   # frames it has been under way
 
     def release(self) -> None:
-        for r in (self.sums_read, self.half_a_read, self.ray_read, self.judge_read):
+        for r in (self.sums_read, self.half_a_read, self.ray_read, self.judge_read,
+                  self.upload):
             if r is not None:
                 r.release()
 

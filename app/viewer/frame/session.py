@@ -128,6 +128,7 @@ class RenderSession:
         self.pacer = FramePacer(device == "software", ctx.info.get("GL_RENDERER", ""), clock)
         self._frame_began: float | None = None   # when the last working frame's step began
         self._bake_turn_ms = 0.0   # wall ms of bake slices before a banded probe view's next sample
+        self._baked_this_frame = False   # step(): this frame ran a bake slice
         if self.pacer.wall:
             self._use_wall_clock()
 
@@ -285,12 +286,14 @@ class RenderSession:
         r = self.renderer
         budget = self.pacer.work_budget_ms(self.frame_budget_ms)
         baking = want_probes and not r.probes_current()
+        self._baked_this_frame = False
         if baking and not any(self._reads_probes_in_bands(v) and v.acc.groups_done
                               for v in self.views.values()):   # (else the bake waits its turn)
             starting = not r.bake_started_for_scene()
             passes = None if starting else r.probe_grid.passes_done
             t = time.perf_counter()
             times.bake_ms = r.bake_step(self.seed, budget_ms=self._bake_budget(budget))
+            self._baked_this_frame = True
             self.parts.add("bake", 1e3 * (time.perf_counter() - t),
                            None if self.pacer.wall else times.bake_ms)
             if starting:
@@ -472,7 +475,10 @@ class RenderSession:
         view.frames += 1
         ray_cap = min(REFINE_RAYMARCH_FRAMES, max_samples)
         ray_todo = (view.shown == "raymarch" or view.blending) and view.ray.samples < ray_cap
-        guided_todo = r.probes_current() and view.guided_samples < max_samples
+        # (not in a frame that ran a bake slice: guided's first sample pays a whole level-0
+        # frame, 20 ms at 1080p on the H200, which on top of the slice made the frame's longest)
+        guided_todo = (r.probes_current() and view.guided_samples < max_samples
+                       and not self._baked_this_frame)
         share = budget_ms / 2 if ray_todo and guided_todo else budget_ms
         ms_total, n_total = 0.0, 0
         if ray_todo:
@@ -589,11 +595,13 @@ class RenderSession:
         """n samples of `method` into accumulations the Renderer borrows for the call (acc0:
         guided's level 0; slot: the path states of refine's half)."""
         with self.renderer.lend(acc, method, camera, seed, level0=acc0, slot=slot) as r:
-            return r.add_samples(n)
+            return r.add_samples(n, level0_bands=True)
 
     def _add_samples(self, view: MethodView, n: int) -> float:
+        """n samples into the view (guided's level 0 in bands over them, as in refine: no frame
+        pays a whole level-0 frame but a view's first, app/rendering/methods/guided_level0.py)."""
         with self.renderer.lend(view.acc, view.shown, view.camera, self.seed) as r:
-            return r.add_samples(n)
+            return r.add_samples(n, level0_bands=True)
 
     def record_frame(self, times: FrameTimes) -> None:
         """A frame drawn: its times kept for the Stats panel, and (where it did work, and so did
