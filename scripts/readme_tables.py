@@ -5,7 +5,7 @@ records (bench/*/results.json or results.json.gz).
     python scripts/readme_tables.py interact [--records bench/h100-interact]
     python scripts/readme_tables.py headline [--records bench/h100]
     python scripts/readme_tables.py denoise [--records bench/h200-denoise]
-    python scripts/readme_tables.py refine [--records bench/h200-interact-refine-56/after]
+    python scripts/readme_tables.py refine [--records bench/h200-interact-refine-56/level0-bands]
     python scripts/readme_tables.py --write      # rewrite every generated block in place
     python scripts/readme_tables.py --check      # exit 1 where a block is stale
 
@@ -30,7 +30,12 @@ RECORDS = "bench/h100"
 PREVIOUS = "bench/archive/h100-v12"
 INTERACT_RECORDS = "bench/h100-interact"
 DENOISE_RECORDS = "bench/h200-denoise"
-REFINE_RECORDS = "bench/h200-interact-refine-56/after"
+# a scene's replay from the first of these folders that holds it (bonsai at the 16 MB transfers a
+# frame now used; the foot and the chest at 8 MB), its flicker likewise from FLICKER_RECORDS
+REFINE_RECORDS = ("bench/h200-interact-refine-56/transfers-16mb",
+                  "bench/h200-interact-refine-56/level0-bands")
+FLICKER_RECORDS = ("bench/h200-interact-refine-56/flicker",
+                   "bench/h200-interact-refine-56/level0-bands")
 # The files holding generated blocks, and the blocks each holds.
 GENERATED = {"README.md": ("denoise",), "docs/benchmarks.md": ("speed", "interact", "refine"),
              "docs/denoising.md": ("denoise",)}
@@ -183,11 +188,19 @@ def interact(records: str = INTERACT_RECORDS, method: str = "raymarch", width: i
     return "\n".join(out) + "\n"
 
 
-def refine(records: str = REFINE_RECORDS) -> str:
+def refine(records=REFINE_RECORDS, flicker=FLICKER_RECORDS) -> str:
     """The viewer's refine with Denoise at 1920x1080 (the interact-refine replay): per scene, the
-    p99 frame over its edits (GPU, wall) and the wall time to 2% of each event."""
-    data = _load(records)
-    recs = [r for r in data["records"] if r.get("mode") == "interact" and r["method"] == "refine"]
+    p99 frame over its events (GPU, wall), the wall time to 2% of each event, and refine's
+    flicker on a still camera against the raw path tracer's (interact.flicker_record). A scene's
+    rows come from the first folder of `records` that holds its replay; its flicker from the
+    first of `flicker` that holds one."""
+    def interact_records(folders):
+        folders = [folders] if isinstance(folders, str) else list(folders)
+        return [[r for r in _load(f)["records"] if r.get("mode") == "interact"
+                 and r["method"] == "refine"] for f in folders]
+
+    runs = interact_records(records)
+    flicks = interact_records(flicker)
     out = ["| scene | p99 frame, GPU (wall) | to 2%, wall: load | to 2%, wall: edits "
            "| flicker against raw pt |", "| --- | --- | --- | --- | --- |"]
 
@@ -195,9 +208,12 @@ def refine(records: str = REFINE_RECORDS) -> str:
         x = r.get("wall_ms_to_2pct")
         return "not reached" if x is None else _ms(x)
 
-    for scene in sorted({r["scene"] for r in recs}, key=lambda s: (s != "bonsai", s)):
-        rows = [r for r in recs if r["scene"] == scene and r["event"] != "flicker"]
-        flick = next((r for r in recs if r["scene"] == scene and r["event"] == "flicker"), None)
+    scenes = {r["scene"] for recs in runs for r in recs if r["event"] != "flicker"}
+    for scene in sorted(scenes, key=lambda s: (s != "bonsai", s)):
+        rows = next(rs for recs in runs
+                    if (rs := [r for r in recs if r["scene"] == scene and r["event"] != "flicker"]))
+        flick = next((r for recs in flicks for r in recs
+                      if r["scene"] == scene and r["event"] == "flicker"), None)
         ratio = None if flick is None else flick.get("flicker_ratio")
         p99 = [r["frame_ms_p99"] for r in rows]
         wall99 = [r["frame_wall_ms_p99"] for r in rows]

@@ -151,6 +151,32 @@ def _frames_until_guided(s, limit=400) -> int:
                          f"{s.refine_state()}")
 
 
+def test_guided_never_starts_in_a_frame_that_baked_and_its_level0_goes_in_bands(ctx):
+    """A frame that ran a bake slice adds no guided sample (its first pays a whole level-0
+    frame); the first guided frame comes after the bake's last; and guided's level 0 is
+    advanced in bands over its samples (a frame in progress seen between whole ones)."""
+    from radiance_probes.viewer.frame.session import RenderSession
+    s = RenderSession(ctx, parse_scene(SCENE))
+    try:
+        s.resize(24, 16)
+        s.set_methods(["refine"])
+        view = s.views["refine"]
+        baked_frames, partial = 0, False
+        for _ in range(200):
+            before = view.guided_samples
+            times = s.step(MAX_SAMPLES, True)
+            if s._baked_this_frame:
+                baked_frames += 1
+                assert view.guided_samples == before, "guided sampled in a frame that baked"
+            partial |= any(h.level0.groups_done > 0 for h in view.halves.halves)
+            if view.guided_samples >= 16:
+                break
+        assert baked_frames >= 1 and view.guided_samples >= 16
+        assert partial, "guided's level 0 was never in bands"
+    finally:
+        s.release()
+
+
 def test_refine_shows_the_raymarcher_at_once_then_guided_after_every_edit(ctx):
     from radiance_probes.viewer.frame.views import RefineView
     from radiance_probes.viewer.frame.session import RenderSession

@@ -92,6 +92,9 @@ class BenchConfig:
     interact_ref_spp: int = 1024                     # reference per event state (two halves)
     interact_tail_k: int = 8                         # samples per dispatch against 1
     interact_flicker_frames: int = 24                # refine's still-camera flicker window (0: none)
+    # the replay's parts to run (None: all): "load" (with orbit and the edits), "flicker",
+    # "raymarch_switch" (with the dispatch tail)
+    interact_events: tuple | None = None
     # reference samples per event state by scene, beside interact_ref_spp (a noisy scene's own)
     interact_ref_spp_by_scene: tuple = ()
     # the viewer's Denoise switch in the replay (None: its default, on on a GPU); the errors are
@@ -175,6 +178,13 @@ PRESETS = {
                                    ref_samples_per_pass=64, interact_sizes=((1920, 1080),),
                                    interact_probes=((128, 64),), interact_methods=("refine",),
                                    interact_ref_spp_by_scene=(("bonsai", 2048), ("chest", 4096))),
+    # its flicker measurement alone, on the loaded scene (interact.still_flicker)
+    "interact-refine-flicker": BenchConfig(mode="interact", scenes=("bonsai", "foot", "chest"),
+                                           ref_samples_per_pass=64, interact_sizes=((1920, 1080),),
+                                           interact_probes=((128, 64),), interact_methods=("refine",),
+                                           interact_ref_spp_by_scene=(("bonsai", 2048),
+                                                                      ("chest", 4096)),
+                                           interact_events=("flicker",)),
     # the raymarcher, the image shown while anything moves, at 3840x2160: its frames' p99 in every
     # event (the goal: at most 16 ms)
     "interact-raymarch-4k": BenchConfig(mode="interact", scenes=("bonsai", "foot", "chest"),

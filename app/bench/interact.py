@@ -176,8 +176,8 @@ def still_flicker(session, method: str, config, reference, noise: float, seed: i
                   from_wall_ms: float | None = None) -> dict:
     """How much a view's shown image changes from frame to frame on a still camera once it is
     good (issue 56): frames from a restart with the viewer's sample limit (ViewerState's), until
-    (from_wall_ms None) its error first reaches REFINE_GOAL's, or it stops; else until that much
-    wall time of frames. Then the next config.interact_flicker_frames frames, each shown image
+    (from_wall_ms None) its error first reaches REFINE_GOAL's with its own estimator shown
+    (refine: guided, not the raymarcher), or it stops; else until that much wall time of frames. Then the next config.interact_flicker_frames frames, each shown image
     against the one before: the RMS of the change over the reference's RMS (rRMSE's scale).
     Returns the wall ms the window began at, whether the view had stopped by then (its sample
     limit reached: nothing changes after), its frames, the change's mean and largest, and the
@@ -209,7 +209,8 @@ def still_flicker(session, method: str, config, reference, noise: float, seed: i
             with s.denoise.held():
                 error = corrected_rrmse(rrmse(s.shown_image(method), reference), noise)
             last_check = wall
-            if error <= REFINE_GOAL[0]:
+            # refine: once guided shows (its raymarcher's frames stop after 16 and hold still)
+            if error <= REFINE_GOAL[0] and getattr(s.views[method], "shown", method) != "raymarch":
                 break
     with s.denoise.held():
         before = s.shown_image(method)
@@ -327,6 +328,20 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                  f"{rec['frame_ms_p99']:.2f} ms (wall {rec['frame_wall_ms_p99']:.1f}), final rRMSE "
                  f"{rec['final_rrmse']:.4f}, ms to {shown}")
 
+        def want(event: str) -> bool:
+            return config.interact_events is None or event in config.interact_events
+
+        def flicker(base, method, reference, noise):
+            if method != "refine" or not config.interact_flicker_frames or not want("flicker"):
+                return
+            rec = flicker_record(base, session, method, config, reference, noise)
+            rec["speed_check_ms"] = speed_check_ms(r, config.speed_check_rays)
+            results.add(rec)
+            f, p = rec["flicker"], rec["flicker_pt"]
+            _log(f"  {tag} flicker {method}: {f['change_mean']:.5f} a frame from "
+                 f"{f['from_wall_ms']:.0f} ms (error {f['error']:.4f}), raw pt "
+                 f"{p['change_mean']:.5f} (error {p['error']:.4f}): ratio {rec['flicker_ratio']}")
+
         for grid, walks in config.interact_probes:
             probes = replace(start.probes, grid=(grid, grid, grid), samples=walks)
             scene = start.replace(probes=probes,
@@ -337,6 +352,12 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                     "denoise": session.denoise.enabled,
                     "frame_budget_ms": config.interact_frame_budget_ms}
             for method in config.interact_methods:
+                if not want("load"):   # (the flicker alone: on the loaded scene)
+                    r.set_scene(scene)
+                    session.set_scene(scene)
+                    reference, noise = ref("load")
+                    flicker(base, method, reference, noise)
+                    continue
                 # load: nothing baked yet
                 r.set_scene(scene)
                 reference, noise = ref("load")
@@ -369,15 +390,9 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                         add(record(base, event, method, variant, run))
                     state = after
                 save_png(out / "images" / f"{tag}_{grid}_{method}_final.png", session.image(method))
-                if method == "refine" and config.interact_flicker_frames:
-                    rec = flicker_record(base, session, method, config, reference, noise)
-                    rec["speed_check_ms"] = speed_check_ms(r, config.speed_check_rays)
-                    results.add(rec)
-                    f, p = rec["flicker"], rec["flicker_pt"]
-                    _log(f"  {tag} flicker {method}: {f['change_mean']:.5f} a frame from "
-                         f"{f['from_wall_ms']:.0f} ms (error {f['error']:.4f}), raw pt "
-                         f"{p['change_mean']:.5f} (error {p['error']:.4f}): ratio "
-                         f"{rec['flicker_ratio']}")
+                flicker(base, method, reference, noise)   # on the last edit's state
+            if not want("raymarch_switch"):
+                continue
             r.configure(bake_warm=True)
             # switch probes -> raymarcher: the same state, so the albedo reference serves
             run = run_frames(session, "raymarch", config, reference, noise, seed=9)

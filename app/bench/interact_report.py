@@ -137,8 +137,9 @@ def flicker_section(recs: list[dict]) -> list[str]:
     if not runs:
         return []
     lines = ["", "### Flicker on a still camera", "",
-             "From a restart of the load's state (its probes baked), frames until the view's "
-             "error first reaches 2% (or it stops), then the next frames: each shown image "
+             "From a restart of the replay's last state (the last edit's; or the loaded scene "
+             "where the flicker runs alone), frames until the view's error first reaches 2% with "
+             "guided shown (or it stops), then the next frames: each shown image "
              "against the one before, the RMS of the change over the reference's RMS, averaged "
              "over the frames. The raw path tracer (the Denoise switch off) is measured the same "
              "way over the same number of frames from the same wall time since its restart.", "",

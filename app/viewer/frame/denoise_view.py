@@ -37,10 +37,13 @@ from radiance_probes.viewer.frame.frame_parts import FrameParts
 INTERVAL_S = 0.5
 # Bytes a frame copies between the host and GL for the switch and refine's judgements (fence.py
 # TransferBudget): a 1080p RGBA32F image is 33 MB, its read-back's host copy or its upload
-# several ms of a frame, so each is spread over a few frames. On the H200 an upload of 16 MB took
-# 12.4 ms of a frame's wall time (bench/h200-interact-refine-56/before-pacing: the longest frames
-# were a guided dispatch and such a band), so a frame moves 8 MB.
-TRANSFER_BYTES_PER_FRAME = 8 << 20
+# several ms of a frame, so each is spread over a few frames. On the H200 an upload of 16 MB from
+# host memory took 12.4 ms of a frame's wall time (bench/h200-interact-refine-56/before-pacing);
+# through a pixel buffer (ChunkedUpload) 8 MB takes 2.5 ms (median; 1.4 ms a read-back's 8 MB),
+# and at 16 MB a frame a judgement's transfers take half the frames: bonsai's edits reached 2% in
+# 0.29-0.96 s of wall time against 0.29-1.12 s at 8 MB, p99 frames 22.5-24.9 ms of wall time
+# against 22.3-23.5 (bench/h200-interact-refine-56/transfers-16mb, level0-bands).
+TRANSFER_BYTES_PER_FRAME = 16 << 20
 
 
 @dataclass
