@@ -175,18 +175,16 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
 def still_flicker(session, method: str, config, reference, noise: float, seed: int,
                   from_wall_ms: float | None = None) -> dict:
     """How much a view's shown image changes from frame to frame on a still camera once it is
-    good (issue 56): frames from a restart with the viewer's sample limit (ViewerState's), until
-    (from_wall_ms None) its error first reaches REFINE_GOAL's with its own estimator shown
-    (refine: guided, not the raymarcher), or it stops; else until that much wall time of frames. Then the next config.interact_flicker_frames frames, each shown image
-    against the one before: the RMS of the change over the reference's RMS (rRMSE's scale).
+    good (issue 56): frames from a restart with the viewer's sample limit (state.MAX_SAMPLES),
+    until (from_wall_ms None) its error first reaches REFINE_GOAL's with its own estimator shown
+    (refine: guided, not the raymarcher), or it stops; else until that much wall time of frames.
+    Then the next config.interact_flicker_frames frames, each shown image against the one
+    before: the RMS of the change over the reference's RMS (rRMSE's scale).
     Returns the wall ms the window began at, whether the view had stopped by then (its sample
     limit reached: nothing changes after), its frames, the change's mean and largest, and the
     error at the window's start."""
-    import dataclasses
-
-    from radiance_probes.viewer.state import ViewerState
+    from radiance_probes.viewer.state import MAX_SAMPLES as limit
     s = session
-    limit = next(f.default for f in dataclasses.fields(ViewerState) if f.name == "max_samples")
     needs = s.needs_probes(method)
     s.seed = seed
     s.set_methods([method])
@@ -197,15 +195,11 @@ def still_flicker(session, method: str, config, reference, noise: float, seed: i
         start = time.perf_counter()
         s.step(limit, needs)
         wall += 1e3 * (time.perf_counter() - start)
-        if from_wall_ms is not None:
-            stopped = s.finished(limit, needs)
-            if wall >= from_wall_ms or stopped:
-                break
-            continue
-        if s.finished(limit, needs):
-            stopped = True
+        stopped = s.finished(limit, needs)
+        if stopped or (from_wall_ms is not None and wall >= from_wall_ms):
             break
-        if wall - last_check >= CURVE_WALL_MS:   # (outside the frames' wall time)
+        # the error, measured outside the frames' wall time
+        if from_wall_ms is None and wall - last_check >= CURVE_WALL_MS:
             with s.denoise.held():
                 error = corrected_rrmse(rrmse(s.shown_image(method), reference), noise)
             last_check = wall

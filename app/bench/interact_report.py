@@ -79,8 +79,8 @@ def interact_section(data: dict, out: Path) -> list[str]:
              "since the event (the orbit: since its last move) and, in brackets, wall-clock time of "
              "whole frames (the edit's CPU work included: what a person feels); errors are rRMSE "
              "corrected for the noise of a path-traced reference of the state after the event "
-             f"({cfg.get('interact_ref_spp')} spp{_by_scene(cfg)}). Warm: the bake starts from the previous "
-             "probes; cold: from nothing (both end at the same probes).", "",
+             f"({cfg.get('interact_ref_spp')} spp{_by_scene(cfg)}). Warm: the bake starts from "
+             "the previous probes; cold: from nothing (both end at the same probes).", "",
              "![error against time since each event](interact.png)", "",
              "| scene | size | probes | event | method | bake | first frame | p50 | p99 | to 10% "
              "| to 5% | to 3% | to 2% | final rRMSE | frames |",

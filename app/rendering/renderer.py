@@ -441,10 +441,7 @@ class Renderer(ProbeStage, GridStage, StillImages):
             marcher.run_groups(self.resources, self.camera, acc0, (first, end), seed, step,
                                uniforms)
             have += end - first
-            if end >= total:
-                acc0.samples, acc0.groups_done = acc0.samples + 1, 0
-            else:
-                acc0.groups_done = end
+            acc0.groups_marched(end, total)
         self.timer.stop()
         return self.timer.elapsed_ms
 
@@ -517,10 +514,7 @@ class Renderer(ProbeStage, GridStage, StillImages):
             tracer.run_groups(self.resources, self.camera, acc, (first, end), acc.samples + 1,
                               self.seed, extra)
         self.timer.stop()
-        if end >= total:
-            acc.samples, acc.groups_done = acc.samples + 1, 0
-        else:
-            acc.groups_done = end
+        acc.groups_marched(end, total)
         return self.timer.elapsed_ms
 
     def image(self) -> np.ndarray:

@@ -14,6 +14,7 @@ DISPLAY_MODES = ("image", "split", "error")   # one method; two side by side; er
 PROBE_VIEWS = ("off", "over", "alone")        # probe spheres: none, over the volume, alone
 PROBE_AXIS_STEPS = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128)
 MAX_MESSAGES = 8
+MAX_SAMPLES = 1024   # samples per pixel an accumulation stops at (the viewer's default)
 
 
 @dataclass
@@ -34,7 +35,7 @@ class ViewerState:
     slice_colours: str = "window"
     slice_point: tuple[float, float, float] = (0.0, 0.0, 0.0)
     exposure: float = 1.0
-    max_samples: int = 1024                # accumulation stops here (per pixel)
+    max_samples: int = MAX_SAMPLES         # accumulation stops here (per pixel)
     render_scale: float = 1.0              # render pixels per window pixel
     heat_max: float = 1.0                  # per-pixel relative error at the top of the heat map
     show_ui: bool = True

@@ -6,8 +6,8 @@ cache, ~/.cache/nvidia/GLCache, filled by the first):
 
     python3 lab/experiments/compile_cache.py foot; python3 lab/experiments/compile_cache.py foot
 
-It prints the wall seconds of each first use at 1920x1080 (or `NAME W H`) (the context; a bake; the raymarcher's
-first frames; guided's first sample, its level 0 and the halves' passes) and one line of JSON."""
+It prints one line of JSON: the wall seconds of each first use at 1920x1080 (or `NAME W H`): the
+context, a bake, the raymarcher's first frames, guided's first sample (its level 0 and level 1)."""
 from __future__ import annotations
 
 import json

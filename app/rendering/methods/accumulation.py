@@ -26,6 +26,14 @@ class Accumulation:
         self.samples = 0
         self.groups_done = 0
 
+    def groups_marched(self, end: int, total: int) -> None:
+        """The sample in progress has its work groups [0, end) done (of `total`): at `total` it
+        is whole (samples grows by one, groups_done is 0 again), else groups_done is `end`."""
+        if end >= total:
+            self.samples, self.groups_done = self.samples + 1, 0
+        else:
+            self.groups_done = end
+
     def bind_image(self, unit: int = 0, read: bool = True) -> None:
         self.texture.bind_to_image(unit, read=read, write=True)
 
