@@ -341,3 +341,24 @@ def test_a_signed_image_keeps_its_negative_values_and_its_mean(cpu_denoiser):
     assert clamped.min() >= 0.0
     assert abs(signed.mean() - noisy.mean()) < 1e-3 * np.abs(noisy).mean() + 1e-4
     assert rmse(signed, clean) < 0.7 * rmse(noisy, clean)
+
+
+def test_pyoidn_is_imported_without_torch(tmp_path, monkeypatch):
+    """pyoidn's own `import torch` (tensor interop the project never uses, seconds of import on
+    the filter's thread) fails while the project imports it; torch stays importable after."""
+    (tmp_path / "pyoidn").mkdir()
+    (tmp_path / "pyoidn" / "__init__.py").write_text(
+        "try:\n    import torch\n    TORCH_AVAILABLE = True\nexcept ImportError:\n"
+        "    TORCH_AVAILABLE = False\n")
+    (tmp_path / "torch.py").write_text("IMPORTED = True\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for name in ("pyoidn", "torch"):
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    fake = denoise_module._import_pyoidn()
+    assert fake.__file__.startswith(str(tmp_path))
+    assert fake.TORCH_AVAILABLE is False
+    assert "torch" not in sys.modules
+    import torch   # noqa: F401 (the stand-in: still importable once pyoidn is in)
+    assert sys.modules["torch"].IMPORTED
+    monkeypatch.delitem(sys.modules, "torch")
+    monkeypatch.delitem(sys.modules, "pyoidn")

@@ -244,3 +244,57 @@ class WallTimer(Timer):
         if self.replaces is not None:
             self.replaces.release()
             self.replaces = None
+
+
+class DeferredSpans:
+    """GPU spans of a frame whose timestamps are read once, at the frame's end, instead of after
+    each dispatch (issue 56: on the H200 at 1080p a refine frame waited 4 to 6 times for its
+    timers, and its 4.5-5 ms of host work ran while the GPU stood idle, so its wall time was its
+    GPU time plus all of that; lab/experiments/frame_host_profile.py). A caller that needs a span's
+    ms at once gets its own estimate back (`stop`); `resolve()` waits for the GPU once, reads every
+    span, runs each span's `on_done(ms)` (what the estimate was made from learns the measured
+    time) and returns, per tag, (measured ms, estimated ms), so that the caller corrects what it
+    summed from the estimates. Spans are GpuTimers (llvmpipe's flush included), kept for reuse."""
+
+    def __init__(self, ctx):
+        self._ctx = ctx
+        self._free: list[GpuTimer] = []
+        self._open: list[tuple[GpuTimer, object, float, object]] = []   # timer, tag, estimate, on_done
+        self.tag: object = None    # the tag of spans begun from now on (the caller's)
+
+    def start(self) -> GpuTimer:
+        timer = self._free.pop() if self._free else GpuTimer(self._ctx)
+        timer.start()
+        return timer
+
+    def stop(self, timer: GpuTimer, estimate_ms: float, on_done=None, tag=None) -> float:
+        """Ends the span begun by `start` and returns `estimate_ms` (its time is read later).
+        `tag`: the span's own (a span inside another's, not to be summed with it), else self.tag."""
+        timer.stop()
+        self._open.append((timer, self.tag if tag is None else tag, float(estimate_ms), on_done))
+        return float(estimate_ms)
+
+    @property
+    def pending(self) -> int:
+        return len(self._open)
+
+    def resolve(self) -> dict:
+        """{tag: (measured ms, estimated ms)} over the spans since the last resolve (waits for
+        the newest span's end: the GPU has then done all of them)."""
+        out: dict = {}
+        spans, self._open = self._open, []
+        for timer, tag, estimate, on_done in spans:
+            ms = timer.elapsed_ms
+            if on_done is not None:
+                on_done(ms)
+            measured, estimated = out.get(tag, (0.0, 0.0))
+            out[tag] = (measured + ms, estimated + estimate)
+            self._free.append(timer)
+        return out
+
+    def release(self) -> None:
+        for timer, *_ in self._open:
+            timer.release()
+        for timer in self._free:
+            timer.release()
+        self._open, self._free = [], []

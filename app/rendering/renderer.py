@@ -97,6 +97,9 @@ class Renderer(ProbeStage, GridStage, StillImages):
         self.baked_level = 0   # the bake level of the probes in hand (start_bake)
         self._probe_ms: dict[tuple, float] = {}   # measured GPU ms per probe walked, per layout
         self._sample_ms: dict[tuple, float] = {}  # GPU ms per sample of a path-state pass, per size
+        # the viewer's frame: spans read at its end (gl/timer.DeferredSpans; RenderSession.step),
+        # each timed block returning its estimate meanwhile; None: every block read as it ends
+        self.deferred = None
         self.last_slice_ms = 0.0
         self._layer_ms: dict[tuple, float] = {}     # GPU ms per light-grid slab of rays, per size
         self.method = "pt"
@@ -380,7 +383,10 @@ class Renderer(ProbeStage, GridStage, StillImages):
             marcher = self.raymarcher()
             step = self.raymarch_step_voxels * 2 * self.resources.march_step
             uniforms = {**extra, **self._light.uniforms()}
-            self.timer.start()
+            # (ms per sample learned from calls of whole samples alone, which only are deferred)
+            key, count, whole = ("raymarch", acc.width, acc.height), n, not acc.groups_done
+            per_sample = self._sample_ms.get(key)
+            span = self._span_start(per_sample is not None and whole)
             if acc.groups_done:   # a frame part marched in bands (add_groups): the rest first
                 marcher.run_groups(self.resources, self.camera, acc,
                                    (acc.groups_done, math.prod(tile_grid(acc.width, acc.height))),
@@ -388,8 +394,11 @@ class Renderer(ProbeStage, GridStage, StillImages):
                 acc.samples, acc.groups_done, n = acc.samples + 1, 0, n - 1
             if n > 0:
                 marcher.run(self.resources, self.camera, acc, n, self.seed, step, uniforms)
-            self.timer.stop()
-            return self.timer.elapsed_ms
+
+            def learn(ms):
+                if whole and count > 0:
+                    self._sample_ms[key] = ms / count
+            return self._span_stop(span, (per_sample or 0.0) * count, learn)
         tracer, extra = self._traced_pass(method, extra)
         # Cut into dispatches of at most the device's target (dispatch_budget.py) by the GPU ms
         # per sample this pass took at this size last time: several samples a dispatch where they
@@ -405,14 +414,31 @@ class Renderer(ProbeStage, GridStage, StillImages):
             else:
                 bands = max(1, math.ceil(per_sample / target))
                 k = 1 if bands > 1 else max(1, min(n, int(target / max(per_sample, 1e-9))))
-            self.timer.start()
+            span = self._span_start(per_sample is not None)
             tracer.run(self.resources, self.camera, acc, acc.samples + k, self.seed, extra, bands)
-            self.timer.stop()
-            ms = self.timer.elapsed_ms
-            self._sample_ms[key] = ms / k
-            total += ms
+            total += self._span_stop(span, (per_sample or 0.0) * k,
+                                     lambda ms, k=k: self._sample_ms.__setitem__(key, ms / k))
             n -= k
         return total + level0_ms
+
+    def _span_start(self, estimable: bool):
+        """Begins a timed block: a deferred span where the viewer's frame defers its timers
+        (self.deferred) and the block's time can be estimated, else the renderer's own timer."""
+        if self.deferred is not None and self.deferred.tag is not None and estimable:
+            return self.deferred.start()
+        self.timer.start()
+        return None
+
+    def _span_stop(self, span, estimate_ms: float, on_done=None) -> float:
+        """Ends the block begun by _span_start: its estimate (a deferred span, read at the
+        frame's end, when on_done learns its time), or its time read now (one wait)."""
+        if span is not None:
+            return self.deferred.stop(span, estimate_ms, on_done)
+        self.timer.stop()
+        ms = self.timer.elapsed_ms
+        if on_done is not None:
+            on_done(ms)
+        return ms
 
     def _advance_level0(self, samples: int, extra: dict, bands: bool) -> float:
         """guided's level 0 brought to what level 1 at `samples` samples needs
@@ -429,7 +455,10 @@ class Renderer(ProbeStage, GridStage, StillImages):
         uniforms = {**extra, **self._light.uniforms(),
                     "guided_level0_budget": GUIDED_LEVEL0_BUDGET}
         seed = self.seed ^ 0x5bd1e995
-        self.timer.start()
+        key = ("level0", acc0.width, acc0.height)
+        per_group = self._sample_ms.get(key)
+        groups = due - have
+        span = self._span_start(per_group is not None)
         while have < due:
             first = acc0.groups_done
             if first == 0 and due - have >= total:   # whole frames
@@ -442,8 +471,8 @@ class Renderer(ProbeStage, GridStage, StillImages):
                                uniforms)
             have += end - first
             acc0.groups_marched(end, total)
-        self.timer.stop()
-        return self.timer.elapsed_ms
+        return self._span_stop(span, (per_group or 0.0) * groups,
+                               lambda ms: self._sample_ms.__setitem__(key, ms / groups))
 
     def _sample_inputs(self, method: str) -> tuple[dict | None, float]:
         """What a sample of `method` reads besides the scene: the probes' uniforms (methods

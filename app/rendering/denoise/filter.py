@@ -257,7 +257,7 @@ class Denoiser:
         if self.failure is not None:
             return False
         try:
-            import pyoidn
+            pyoidn = _import_pyoidn()
         except Exception as exc:   # ImportError, or its native library failing to load
             self.failure = (f"the denoiser is not available ({type(exc).__name__}: {exc}); "
                             f"{INSTALL_HINT} to use it. Showing the image as rendered.")
@@ -517,6 +517,25 @@ class Denoiser:
 
 
 _shared: dict = {}
+
+
+def _import_pyoidn():
+    """pyoidn, imported without PyTorch: its utils module imports torch wherever it is installed
+    (for tensor interop this project never uses). That import takes seconds of the interpreter
+    (on the H200 machine it ran on the filter's thread during a load's first frames, holding the
+    GIL from the frames: lab/experiments/frame_host_profile.py) and much memory. Where torch is
+    already imported, pyoidn sees it as it is."""
+    import sys
+    if "pyoidn" in sys.modules or "torch" in sys.modules:
+        import pyoidn
+        return pyoidn
+    sys.modules["torch"] = None        # `import torch` raises ImportError meanwhile
+    try:
+        import pyoidn
+    finally:
+        if sys.modules.get("torch", False) is None:
+            del sys.modules["torch"]
+    return pyoidn
 
 
 def shared_denoiser(device: str = "auto", quality: str = "high") -> Denoiser:

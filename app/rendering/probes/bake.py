@@ -258,6 +258,9 @@ class ProbeGrid:
         self._chunk_walks: int = FIRST_CHUNK_WALKS
         self._chunk_ms: float | None = None
         self._chunk_timer = GpuTimer(ctx)
+        # the viewer's frame (gl/timer.DeferredSpans, set by ProbeStage.bake_step): a timed
+        # chunk is read at the frame's end, the next frame's chunks sized by it
+        self.deferred = None
         self.dispatches = 0
         self.passes_done = 0
         self.next_probe = 0        # the next probe to walk in the current pass
@@ -426,7 +429,11 @@ class ProbeGrid:
             set_uniforms(self.project_program, {"first_probe": first})
             groups = (n * directions + 63) // 64
             with section("walks"):
-                if timed:
+                span = None
+                if (timed and self.deferred is not None and self.deferred.tag is not None
+                        and self._chunk_ms is not None):
+                    span = self.deferred.start()
+                elif timed:
                     self._chunk_timer.start()
                 self._run_walks(walk_program, groups)
                 if self.correction_program is not None and self.sun_correction > 0.0:
@@ -435,10 +442,12 @@ class ProbeGrid:
                     self.correction_program.run(groups)
                     self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
                     self.dispatches += 1
-                if timed:
+                if span is not None:
+                    self.deferred.stop(span, 0.0, lambda ms, w=n * directions:
+                                       self._learn_chunk(w, ms), tag="bake chunk")
+                elif timed:
                     self._chunk_timer.stop()
-                    self._chunk_walks = n * directions
-                    self._chunk_ms = self._chunk_timer.elapsed_ms
+                    self._learn_chunk(n * directions, self._chunk_timer.elapsed_ms)
             with section("project"):
                 self.project_program.run(n)
                 self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT
@@ -472,6 +481,9 @@ class ProbeGrid:
                 self.dispatches += 2
         self.next_probe = 0
         self.passes_done += 1
+
+    def _learn_chunk(self, walks: int, ms: float) -> None:
+        self._chunk_walks, self._chunk_ms = walks, ms
 
     def _chunk(self, left: int, directions: int) -> tuple[int, bool]:
         """Probes the next walk dispatch takes (of `left` still to walk in this call) and whether

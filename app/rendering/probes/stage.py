@@ -302,8 +302,8 @@ class ProbeStage:
             light_ms = 0.0
         light = self.walk_light() if grid.needs_light else None
         resources = self.bake_resources()
-        self.timer.start()
         if budget_ms is None:
+            self.timer.start()
             grid.bake_pass(resources, light=light)
             self.timer.stop()
             ms = self.timer.elapsed_ms
@@ -313,13 +313,18 @@ class ProbeStage:
             per_probe = self._probe_ms.get(key)
             probes = (min(FIRST_SLICE_PROBES, grid.count) if per_probe is None
                       else max(1, int(left / max(per_probe, 1e-9))))
-            ran = grid.bake_probes(resources, probes, light=light)
-            self.timer.stop()
-            ms = self.timer.elapsed_ms
-            if ran:
-                seen = ms / ran
-                # (the first slice of a bake also runs the sun's pass)
-                self._probe_ms[key] = _slice_estimate(per_probe, seen)
+            # the viewer's frame: a slice sized by the estimate is read at the frame's end
+            span = self._span_start(per_probe is not None)
+            grid.deferred = self.deferred
+            try:
+                ran = grid.bake_probes(resources, probes, light=light)
+            finally:
+                grid.deferred = None
+
+            def learn(ms, ran=ran, per_probe=per_probe):
+                if ran:   # (the first slice of a bake also runs the sun's pass)
+                    self._probe_ms[key] = _slice_estimate(per_probe, ms / ran)
+            ms = self._span_stop(span, (per_probe or 0.0) * ran, learn)
         self.last_slice_ms = light_ms + ms
         return light_ms + ms
 

@@ -3,8 +3,9 @@ over budget then says why. The parts: "bake" (the bake's slice), "samples" (ever
 samples), "guide" (denoise guides made on the GL side), "readback" (host copies of read-backs
 found finished), "combine" (refine's halves combined, a check begun), "judgement" (a check's
 step: sums read, half A handed to the filter, the judge pass), "upload" (a filtered image
-uploaded), "blend" (refine's blend pass), "display" (the picture drawn), and in the window
-"imgui" (the panels built and drawn) and "swap". The filter runs on its own thread: its ms are
+uploaded), "blend" (refine's blend pass), "wait" (the frame's one wait for its GPU work, where
+its timers are read at its end: gl/timer.DeferredSpans), "display" (the picture drawn), and in the
+window "imgui" (the panels built and drawn) and "swap". The filter runs on its own thread: its ms are
 the frame's `filter_ms`, off the frame.
 
 Each part is a pair [GPU ms, wall ms]. GPU ms come from timestamp queries around the part, read
@@ -19,7 +20,7 @@ from contextlib import contextmanager
 from radiance_probes.gl.timer import GpuTimer
 
 PARTS = ("bake", "samples", "guide", "readback", "combine", "judgement", "upload", "blend",
-         "display", "imgui", "swap")
+         "wait", "display", "imgui", "swap")
 
 
 class FrameParts:

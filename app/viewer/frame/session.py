@@ -33,7 +33,7 @@ import moderngl
 import numpy as np
 
 from radiance_probes.gl.context import is_software
-from radiance_probes.gl.timer import WallTimer
+from radiance_probes.gl.timer import DeferredSpans, WallTimer
 from radiance_probes.rendering.budgets.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from radiance_probes.rendering.probes.bake import BakeProgress
 from radiance_probes.methods import METHODS
@@ -129,6 +129,9 @@ class RenderSession:
         self._frame_began: float | None = None   # when the last working frame's step began
         self._bake_turn_ms = 0.0   # wall ms of bake slices before a banded probe view's next sample
         self._baked_this_frame = False   # step(): this frame ran a bake slice
+        # the frame's timed blocks read once at its end (DeferredSpans; by the GPU's clock only)
+        self._spans = DeferredSpans(ctx)
+        self._span_notes: list[tuple[object, list]] = []   # (tag, dispatch_ms entry) to correct
         if self.pacer.wall:
             self._use_wall_clock()
 
@@ -280,6 +283,49 @@ class RenderSession:
         probes restart after every slice, from the probes as they are then; a probe-lit view
         shows the raymarcher until the bake is done."""
         times = FrameTimes(clock=self.pacer.clock)
+        try:
+            self.renderer.deferred = None if self.pacer.wall else self._spans
+            self._step(times, max_samples, want_probes)
+        finally:
+            self.renderer.deferred = None
+        self._resolve_spans(times)
+        self.last = times
+        return times
+
+    def _resolve_spans(self, times: FrameTimes) -> None:
+        """The frame's deferred spans read (the one wait of the frame, for the GPU to finish its
+        work), and what was summed from their estimates corrected by their measured ms: the
+        frame's bake and render ms, their parts' GPU ms, and each dispatch's entry in the
+        pacing's history."""
+        notes, self._span_notes = self._span_notes, []
+        if not self._spans.pending:
+            return
+        t = time.perf_counter()
+        got = self._spans.resolve()
+        self.parts.add("wait", 1e3 * (time.perf_counter() - t))
+        for tag, (measured, estimated) in got.items():
+            d = measured - estimated
+            if tag == "bake":
+                times.bake_ms += d
+                self.bake_ms += d
+                self._bake_turn_ms -= d
+                part = times.parts.get("bake")
+            elif isinstance(tag, tuple) and tag[0] == "samples":
+                times.render_ms += d
+                part = times.parts.get("samples")
+            else:
+                continue
+            if part is not None and part[0] is not None:
+                part[0] += d
+        for tag, entry in notes:
+            measured, estimated = got.get(tag, (0.0, 0.0))
+            entry[1] += measured - estimated
+
+    def _tag(self, tag) -> None:
+        """Spans begun from now on are summed under `tag` ("bake", ("samples", k))."""
+        self._spans.tag = tag
+
+    def _step(self, times: FrameTimes, max_samples: int, want_probes: bool) -> None:
         self.parts.gpu = not self.pacer.wall   # timestamps believed: the parts' GPU ms too
         times.parts = self.parts.begin_frame()
         self.denoise.budget.begin_frame()   # the frame's host transfers (fence.TransferBudget)
@@ -292,7 +338,9 @@ class RenderSession:
             starting = not r.bake_started_for_scene()
             passes = None if starting else r.probe_grid.passes_done
             t = time.perf_counter()
+            self._tag("bake")
             times.bake_ms = r.bake_step(self.seed, budget_ms=self._bake_budget(budget))
+            self._tag(None)
             self._baked_this_frame = True
             self.parts.add("bake", 1e3 * (time.perf_counter() - t),
                            None if self.pacer.wall else times.bake_ms)
@@ -337,10 +385,10 @@ class RenderSession:
                 times.bands += bands
                 continue
             n = min(self.samples_per_frame(view, share), max_samples - view.acc.samples)
+            tag = self._sample_tag()
             ms = self._add_samples(view, n)
-            recent = view.dispatch_ms.setdefault(view.shown, [])
-            recent.append((n, ms))
-            del recent[:-RECENT_DISPATCHES]
+            self._tag(None)
+            self._note_dispatch(view, view.shown, n, ms, tag)
             times.render_ms += ms
             times.samples += n
         # the samples' wall ms: the views' work less refine's combines and checks (their own parts)
@@ -348,8 +396,6 @@ class RenderSession:
                        None if self.pacer.wall else times.render_ms)
         times.denoise_ms = self.denoise.update(self) + self._refine_ms
         times.filter_ms = self.denoise.filter_ms
-        self.last = times
-        return times
 
     def _bake_budget(self, budget: float) -> float:
         """The bake's slice of a frame whose work may take `budget`: bake_budget_ms; and where
@@ -483,21 +529,25 @@ class RenderSession:
         ms_total, n_total = 0.0, 0
         if ray_todo:
             n = min(self.samples_per_frame(view, share, "raymarch"), ray_cap - view.ray.samples)
+            tag = self._sample_tag()
             ms = self._lend(view.ray, None, "raymarch", view.camera, self.seed, 0, n)
-            self._note_dispatch(view, "raymarch", n, ms)
+            self._tag(None)
+            self._note_dispatch(view, "raymarch", n, ms, tag)
             ms_total, n_total = ms_total + ms, n_total + n
         halves = view.halves
         n, ms = 0, 0.0
         if guided_todo:
             n = min(self.samples_per_frame(view, share, "guided"), max_samples - halves.samples)
             first = halves.next_half()
+            tag = self._sample_tag()
             for index, k in ((first, (n + 1) // 2), (1 - first, n // 2)):
                 if k:
                     half = halves.halves[index]
                     seed = self.seed ^ (REFINE_HALF_SEED if index else 0)
                     ms += self._lend(half.residual, half.level0, "guided", view.camera, seed,
                                      index, k)
-            self._note_dispatch(view, "guided", n, ms)
+            self._tag(None)
+            self._note_dispatch(view, "guided", n, ms, tag)
             view.frames_since_check += 1
             stage = halves.samples.bit_length()
             check = (stage != view.checked_stage or view.frames_since_check >= REFINE_CHECK_FRAMES
@@ -585,11 +635,22 @@ class RenderSession:
         if len(view.shown_frames) < REFINE_HISTORY:
             view.shown_frames.append(view.shown)
 
-    @staticmethod
-    def _note_dispatch(view, shown: str, n: int, ms: float) -> None:
+    def _sample_tag(self) -> tuple:
+        """A tag of its own for the spans of the dispatch about to be made (_note_dispatch
+        corrects its entry by them at the frame's end)."""
+        tag = ("samples", len(self._span_notes), id(self))
+        self._tag(tag)
+        return tag
+
+    def _note_dispatch(self, view, shown: str, n: int, ms: float, tag=None) -> None:
+        """n samples of `shown` took `ms` (an estimate where its spans are deferred: `tag`'s
+        measured ms replace it at the frame's end)."""
         recent = view.dispatch_ms.setdefault(shown, [])
-        recent.append((n, ms))
+        entry = [n, ms]
+        recent.append(entry)
         del recent[:-RECENT_DISPATCHES]
+        if tag is not None:
+            self._span_notes.append((tag, entry))
 
     def _lend(self, acc, acc0, method: str, camera, seed: int, slot: int, n: int) -> float:
         """n samples of `method` into accumulations the Renderer borrows for the call (acc0:

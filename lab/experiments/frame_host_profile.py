@@ -1,0 +1,116 @@
+"""Where a viewer frame's wall time goes beyond its GPU time (issue 56: refine's frames on the
+H200 at 1080p take 3-8 ms of wall time more than their GPU time; the edit's first frame 20-35 ms
+of host work for 6-10 ms of GPU).
+
+    python3 lab/experiments/frame_host_profile.py [SCENE [W H]]
+
+(PROFILE_SYNC=1: every timed block read as it ends, as before the frame's deferred spans;
+PROFILE_GRID=N: N^3 probes, for a try on llvmpipe.)
+
+Builds the interact-refine replay's session (RenderSession, Denoise on, 128^3 x 64 probes),
+bakes, then runs refine through three phases: a still camera after load, an orbit of 30 frames,
+and a transfer-function drag (warm re-bake). Per phase it prints one JSON line: the frames' mean
+and p99 wall ms, mean GPU ms (the session's timestamps), the mean ms a frame spent waiting in
+blocking timestamp reads (gl/timer._span_ms), the host ms (wall less those waits), and the top
+functions by own time (cProfile) of the phase."""
+from __future__ import annotations
+
+import cProfile
+import json
+import os
+import pstats
+import sys
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from radiance_probes.bench.config import PRESETS
+from radiance_probes.bench.interact import drag_opacity, orbit
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.gl import timer as gl_timer
+from radiance_probes.gl.context import create_headless_context
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.viewer.frame.session import RenderSession
+
+WAIT = {"ms": 0.0}
+_span = gl_timer._span_ms
+
+
+def _timed_span(gl, start, end):
+    t = time.perf_counter()
+    try:
+        return _span(gl, start, end)
+    finally:
+        WAIT["ms"] += 1e3 * (time.perf_counter() - t)
+
+
+gl_timer._span_ms = _timed_span
+
+if os.environ.get("PROFILE_SYNC"):   # the frame's timers read as each block ends (before issue 56's
+    RenderSession._tag = lambda self, tag: None   # deferred spans): nothing is tagged, so none defers
+
+
+def phase(session, label: str, frames: int, scenes=None, top: int = 18) -> None:
+    walls, gpus, waits = [], [], []
+    prof = cProfile.Profile()
+    scenes = list(scenes or [])
+    for f in range(frames):
+        WAIT["ms"] = 0.0
+        t = time.perf_counter()
+        prof.enable()
+        if f < len(scenes):
+            session.set_scene(scenes[f])
+        times = session.step(256, True)
+        prof.disable()
+        walls.append(1e3 * (time.perf_counter() - t))
+        gpus.append(times.total_ms)
+        waits.append(WAIT["ms"])
+    stats = pstats.Stats(prof)
+    rows = sorted(stats.stats.items(), key=lambda kv: -kv[1][2])[:top]
+    cumulative = sorted(((fn, st) for fn, st in stats.stats.items() if "radiance_probes" in fn[0]
+                         or "/app/" in fn[0]), key=lambda kv: -kv[1][3])[:2 * top]
+    w, g, q = map(np.asarray, (walls, gpus, waits))
+    print(json.dumps({
+        "phase": label, "frames": frames,
+        "wall_mean": round(float(w.mean()), 2), "wall_p99": round(float(np.percentile(w, 99)), 2),
+        "first_wall": round(float(w[0]), 2), "first_gpu": round(float(g[0]), 2),
+        "first_wait": round(float(q[0]), 2),
+        "gpu_mean": round(float(g.mean()), 2), "wait_mean": round(float(q.mean()), 2),
+        "host_mean": round(float((w - q).mean()), 2),
+        "own_ms_per_frame": [[f"{fn[0].split('/')[-1]}:{fn[1]}:{fn[2]}",
+                              round(1e3 * st[2] / frames, 3), st[1]] for fn, st in rows],
+        "cumulative_ms_per_frame": [[f"{fn[0].split('/')[-1]}:{fn[1]}:{fn[2]}",
+                                     round(1e3 * st[3] / frames, 3)] for fn, st in cumulative]}),
+        flush=True)
+
+
+def main(name: str = "chest", width: int = 1920, height: int = 1080) -> None:
+    cfg = PRESETS["interact-refine"]
+    ctx = create_headless_context()
+    scene = bench_scene(name, width, height)
+    grid = int(os.environ.get("PROFILE_GRID", 128))   # (a small grid for a try on llvmpipe)
+    scene = scene.replace(probes=replace(scene.probes, grid=(grid, grid, grid), samples=64))
+    r = Renderer(ctx, scene)
+    session = RenderSession(ctx, scene, renderer=r, clock="gpu")
+    session.bake_budget_ms = cfg.interact_bake_budget_ms
+    session.bake_fills_frame = cfg.interact_bake_fills_frame
+    session.frame_budget_ms = cfg.interact_frame_budget_ms
+    session.denoise.set_enabled(True)
+    session.resize(width, height)
+    r.bake(seed=1)
+    session.set_methods(["refine"])
+    session.restart()
+    phase(session, "still", 60)
+    moves = [orbit(scene, 60.0 * (i + 1) / 30) for i in range(30)]
+    phase(session, "orbit", 30, moves)
+    phase(session, "orbit_after", 30)
+    state = moves[-1]
+    r.configure(bake_warm=True)
+    phase(session, "tf_drag", 60, [drag_opacity(state)])
+    session.set_methods([])
+    r.release()
+
+
+if __name__ == "__main__":
+    main(*(sys.argv[1:2] or ["chest"]), *map(int, sys.argv[2:4]))
