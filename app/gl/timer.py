@@ -34,6 +34,7 @@ def _lib():
             lib.glGetQueryObjectui64v.argtypes = [ctypes.c_uint, ctypes.c_uint,
                                                   ctypes.POINTER(ctypes.c_uint64)]
             lib.glBindFramebuffer.argtypes = [ctypes.c_uint, ctypes.c_uint]
+            lib.glFlush.argtypes = []
             _gl = lib
             break
         else:
@@ -258,6 +259,7 @@ class DeferredSpans:
 
     def __init__(self, ctx):
         self._ctx = ctx
+        self._gl = _lib()
         self._free: list[GpuTimer] = []
         self._open: list[tuple[GpuTimer, object, float, object]] = []   # timer, tag, estimate, on_done
         self.tag: object = None    # the tag of spans begun from now on (the caller's)
@@ -272,6 +274,11 @@ class DeferredSpans:
         `tag`: the span's own (a span inside another's, not to be summed with it), else self.tag."""
         timer.stop()
         self._open.append((timer, self.tag if tag is None else tag, float(estimate_ms), on_done))
+        # the span's work handed to the GPU now: a driver holds commands in its buffer until a
+        # flush, and with no wait after the span nothing else would send them (on the H200 the
+        # deferred frame's GPU started at its end-of-frame wait, its host work not overlapped)
+        if self._gl is not None:
+            self._gl.glFlush()
         return float(estimate_ms)
 
     @property
