@@ -30,12 +30,11 @@ RECORDS = "bench/h100"
 PREVIOUS = "bench/archive/h100-v12"
 INTERACT_RECORDS = "bench/h100-interact"
 DENOISE_RECORDS = "bench/h200-denoise"
-# a scene's replay from the first of these folders that holds it (bonsai at the 16 MB transfers a
-# frame now used; the foot and the chest at 8 MB), its flicker likewise from FLICKER_RECORDS
-REFINE_RECORDS = ("bench/h200-interact-refine-56/transfers-16mb",
-                  "bench/h200-interact-refine-56/level0-bands")
-FLICKER_RECORDS = ("bench/h200-interact-refine-56/flicker",
-                   "bench/h200-interact-refine-56/level0-bands")
+# a scene's replay from the first of these folders that holds it (the code now: a frame's timers
+# read at its end, 16 MB of transfers a frame), its flicker likewise from FLICKER_RECORDS
+REFINE_RECORDS = ("bench/h200-interact-refine-56/deferred-spans/bonsai-foot",
+                  "bench/h200-interact-refine-56/deferred-spans/chest")
+FLICKER_RECORDS = REFINE_RECORDS
 # The files holding generated blocks, and the blocks each holds.
 GENERATED = {"README.md": ("denoise",), "docs/benchmarks.md": ("speed", "interact", "refine"),
              "docs/denoising.md": ("denoise",)}

@@ -34,6 +34,7 @@ import numpy as np
 
 from radiance_probes.gl.context import is_software
 from radiance_probes.gl.timer import DeferredSpans, WallTimer
+from radiance_probes.viewer.frame.frame_spans import resolve_frame_spans
 from radiance_probes.rendering.budgets.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from radiance_probes.rendering.probes.bake import BakeProgress
 from radiance_probes.methods import METHODS
@@ -288,38 +289,9 @@ class RenderSession:
             self._step(times, max_samples, want_probes)
         finally:
             self.renderer.deferred = None
-        self._resolve_spans(times)
+        resolve_frame_spans(self, times)
         self.last = times
         return times
-
-    def _resolve_spans(self, times: FrameTimes) -> None:
-        """The frame's deferred spans read (the one wait of the frame, for the GPU to finish its
-        work), and what was summed from their estimates corrected by their measured ms: the
-        frame's bake and render ms, their parts' GPU ms, and each dispatch's entry in the
-        pacing's history."""
-        notes, self._span_notes = self._span_notes, []
-        if not self._spans.pending:
-            return
-        t = time.perf_counter()
-        got = self._spans.resolve()
-        self.parts.add("wait", 1e3 * (time.perf_counter() - t))
-        for tag, (measured, estimated) in got.items():
-            d = measured - estimated
-            if tag == "bake":
-                times.bake_ms += d
-                self.bake_ms += d
-                self._bake_turn_ms -= d
-                part = times.parts.get("bake")
-            elif isinstance(tag, tuple) and tag[0] == "samples":
-                times.render_ms += d
-                part = times.parts.get("samples")
-            else:
-                continue
-            if part is not None and part[0] is not None:
-                part[0] += d
-        for tag, entry in notes:
-            measured, estimated = got.get(tag, (0.0, 0.0))
-            entry[1] += measured - estimated
 
     def _tag(self, tag) -> None:
         """Spans begun from now on are summed under `tag` ("bake", ("samples", k))."""
