@@ -358,7 +358,10 @@ def test_pyoidn_is_imported_without_torch(tmp_path, monkeypatch):
     assert fake.__file__.startswith(str(tmp_path))
     assert fake.TORCH_AVAILABLE is False
     assert "torch" not in sys.modules
-    import torch   # noqa: F401 (the stand-in: still importable once pyoidn is in)
-    assert sys.modules["torch"].IMPORTED
-    monkeypatch.delitem(sys.modules, "torch")
-    monkeypatch.delitem(sys.modules, "pyoidn")
+    try:
+        import torch   # noqa: F401 (the stand-in: still importable once pyoidn is in)
+        assert sys.modules["torch"].IMPORTED
+    finally:
+        # the stand-ins out of sys.modules (monkeypatch puts back what was there before)
+        sys.modules.pop("torch", None)
+        sys.modules.pop("pyoidn", None)
