@@ -61,7 +61,7 @@ def test_a_frame_by_the_gpu_clock_waits_for_no_timer_until_its_end(ctx, monkeypa
     """After frames that learned each block's cost, a frame reads none of the renderer's timers
     (every block deferred); its render ms and the pacing's last entry are the measured ones
     (DeferredSpans.resolve's), not the estimates."""
-    from radiance_probes.viewer.frame import session as session_module
+    from radiance_probes.viewer.frame import frame_spans as spans_module
     from radiance_probes.viewer.frame.session import RenderSession
     s = RenderSession(ctx, parse_scene(SCENE), clock="gpu")
     s.resize(32, 24)
@@ -95,7 +95,7 @@ def test_a_frame_by_the_gpu_clock_waits_for_no_timer_until_its_end(ctx, monkeypa
         assert "wait" in times.parts
         resolved.clear()
     r.timer = counting.timer
-    assert session_module.DeferredSpans is DeferredSpans
+    assert spans_module.DeferredSpans is DeferredSpans   # (the class the spy patched)
 
 
 def test_the_wall_clock_defers_nothing(ctx):
@@ -106,4 +106,4 @@ def test_the_wall_clock_defers_nothing(ctx):
     s.set_methods(["pt"])
     for _ in range(4):
         s.step(512, False)
-        assert s._spans.pending == 0 and s.renderer.deferred is None
+        assert s.frame_spans.spans.pending == 0 and s.renderer.deferred is None

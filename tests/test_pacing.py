@@ -82,7 +82,7 @@ def test_the_session_stops_believing_lying_timestamps_and_paces_by_the_wall_cloc
         s.pacer = FramePacer(False, "a GPU")                  # as a GPU would start
         s.renderer.timer.release()
         s.renderer.timer = LyingTimer()
-        s._spans = LyingSpans(ctx)   # (a frame's timers read at its end: the same timestamps)
+        s.frame_spans.spans = LyingSpans(ctx)   # (a frame's timers read at its end: the same timestamps)
         s.resize(32, 32)
         s.set_methods(["pt"])
         believed = []

@@ -21,6 +21,7 @@ import os
 import pstats
 import sys
 import time
+from contextlib import contextmanager
 from dataclasses import replace
 
 import numpy as np
@@ -31,6 +32,7 @@ from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl import timer as gl_timer
 from radiance_probes.gl.context import create_headless_context
 from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.viewer.frame.frame_spans import FrameSpans
 from radiance_probes.viewer.frame.session import RenderSession
 
 WAIT = {"ms": 0.0}
@@ -48,7 +50,10 @@ def _timed_span(gl, start, end):
 gl_timer._span_ms = _timed_span
 
 if os.environ.get("PROFILE_SYNC"):   # the frame's timers read as each block ends (before issue 56's
-    RenderSession._tag = lambda self, tag: None   # deferred spans): nothing is tagged, so none defers
+    @contextmanager                  # deferred spans): nothing is tagged, so none defers
+    def _untagged(self, tag):
+        yield tag
+    FrameSpans.tagged = _untagged
 
 
 def phase(session, label: str, frames: int, scenes=None, top: int = 18) -> None:

@@ -33,8 +33,8 @@ import moderngl
 import numpy as np
 
 from radiance_probes.gl.context import is_software
-from radiance_probes.gl.timer import DeferredSpans, WallTimer
-from radiance_probes.viewer.frame.frame_spans import resolve_frame_spans
+from radiance_probes.gl.timer import WallTimer
+from radiance_probes.viewer.frame.frame_spans import FrameSpans
 from radiance_probes.rendering.budgets.frame_budget import BAKE_BUDGET_MS, FRAME_BUDGET_MS
 from radiance_probes.rendering.probes.bake import BakeProgress
 from radiance_probes.methods import METHODS
@@ -131,8 +131,7 @@ class RenderSession:
         self._bake_turn_ms = 0.0   # wall ms of bake slices before a banded probe view's next sample
         self._baked_this_frame = False   # step(): this frame ran a bake slice
         # the frame's timed blocks read once at its end (DeferredSpans; by the GPU's clock only)
-        self._spans = DeferredSpans(ctx)
-        self._span_notes: list[tuple[object, list]] = []   # (tag, dispatch_ms entry) to correct
+        self.frame_spans = FrameSpans(ctx)
         if self.pacer.wall:
             self._use_wall_clock()
 
@@ -285,17 +284,15 @@ class RenderSession:
         shows the raymarcher until the bake is done."""
         times = FrameTimes(clock=self.pacer.clock)
         try:
-            self.renderer.deferred = None if self.pacer.wall else self._spans
+            self.renderer.deferred = None if self.pacer.wall else self.frame_spans.spans
             self._step(times, max_samples, want_probes)
         finally:
             self.renderer.deferred = None
-        resolve_frame_spans(self, times)
+        bake = self.frame_spans.resolve(times, self.parts)
+        self.bake_ms += bake
+        self._bake_turn_ms -= bake
         self.last = times
         return times
-
-    def _tag(self, tag) -> None:
-        """Spans begun from now on are summed under `tag` ("bake", ("samples", k))."""
-        self._spans.tag = tag
 
     def _step(self, times: FrameTimes, max_samples: int, want_probes: bool) -> None:
         self.parts.gpu = not self.pacer.wall   # timestamps believed: the parts' GPU ms too
@@ -310,9 +307,8 @@ class RenderSession:
             starting = not r.bake_started_for_scene()
             passes = None if starting else r.probe_grid.passes_done
             t = time.perf_counter()
-            self._tag("bake")
-            times.bake_ms = r.bake_step(self.seed, budget_ms=self._bake_budget(budget))
-            self._tag(None)
+            with self.frame_spans.tagged("bake"):
+                times.bake_ms = r.bake_step(self.seed, budget_ms=self._bake_budget(budget))
             self._baked_this_frame = True
             self.parts.add("bake", 1e3 * (time.perf_counter() - t),
                            None if self.pacer.wall else times.bake_ms)
@@ -357,9 +353,8 @@ class RenderSession:
                 times.bands += bands
                 continue
             n = min(self.samples_per_frame(view, share), max_samples - view.acc.samples)
-            tag = self._sample_tag()
-            ms = self._add_samples(view, n)
-            self._tag(None)
+            with self.frame_spans.tagged(self.frame_spans.sample_tag()) as tag:
+                ms = self._add_samples(view, n)
             self._note_dispatch(view, view.shown, n, ms, tag)
             times.render_ms += ms
             times.samples += n
@@ -501,9 +496,8 @@ class RenderSession:
         ms_total, n_total = 0.0, 0
         if ray_todo:
             n = min(self.samples_per_frame(view, share, "raymarch"), ray_cap - view.ray.samples)
-            tag = self._sample_tag()
-            ms = self._lend(view.ray, None, "raymarch", view.camera, self.seed, 0, n)
-            self._tag(None)
+            with self.frame_spans.tagged(self.frame_spans.sample_tag()) as tag:
+                ms = self._lend(view.ray, None, "raymarch", view.camera, self.seed, 0, n)
             self._note_dispatch(view, "raymarch", n, ms, tag)
             ms_total, n_total = ms_total + ms, n_total + n
         halves = view.halves
@@ -511,14 +505,13 @@ class RenderSession:
         if guided_todo:
             n = min(self.samples_per_frame(view, share, "guided"), max_samples - halves.samples)
             first = halves.next_half()
-            tag = self._sample_tag()
-            for index, k in ((first, (n + 1) // 2), (1 - first, n // 2)):
-                if k:
-                    half = halves.halves[index]
-                    seed = self.seed ^ (REFINE_HALF_SEED if index else 0)
-                    ms += self._lend(half.residual, half.level0, "guided", view.camera, seed,
-                                     index, k)
-            self._tag(None)
+            with self.frame_spans.tagged(self.frame_spans.sample_tag()) as tag:
+                for index, k in ((first, (n + 1) // 2), (1 - first, n // 2)):
+                    if k:
+                        half = halves.halves[index]
+                        seed = self.seed ^ (REFINE_HALF_SEED if index else 0)
+                        ms += self._lend(half.residual, half.level0, "guided", view.camera,
+                                         seed, index, k)
             self._note_dispatch(view, "guided", n, ms, tag)
             view.frames_since_check += 1
             stage = halves.samples.bit_length()
@@ -607,13 +600,6 @@ class RenderSession:
         if len(view.shown_frames) < REFINE_HISTORY:
             view.shown_frames.append(view.shown)
 
-    def _sample_tag(self) -> tuple:
-        """A tag of its own for the spans of the dispatch about to be made (_note_dispatch
-        corrects its entry by them at the frame's end)."""
-        tag = ("samples", len(self._span_notes), id(self))
-        self._tag(tag)
-        return tag
-
     def _note_dispatch(self, view, shown: str, n: int, ms: float, tag=None) -> None:
         """n samples of `shown` took `ms` (an estimate where its spans are deferred: `tag`'s
         measured ms replace it at the frame's end)."""
@@ -622,7 +608,7 @@ class RenderSession:
         recent.append(entry)
         del recent[:-RECENT_DISPATCHES]
         if tag is not None:
-            self._span_notes.append((tag, entry))
+            self.frame_spans.watch(tag, entry)
 
     def _lend(self, acc, acc0, method: str, camera, seed: int, slot: int, n: int) -> float:
         """n samples of `method` into accumulations the Renderer borrows for the call (acc0:
