@@ -62,8 +62,9 @@ OTHER_LIMIT_MS = 60.0
 
 
 def _other_ms(wall: float, parts: dict) -> float:
-    """A frame's wall ms less its bake slice and samples (its parts' wall ms)."""
-    return wall - sum(parts.get(k, [None, 0.0])[1] for k in ("bake", "samples"))
+    """A frame's wall ms less its bake slice, the compiles of what reads the probes once baked
+    (prepare) and its samples (its parts' wall ms)."""
+    return wall - sum(parts.get(k, [None, 0.0])[1] for k in ("bake", "prepare", "samples"))
 
 
 def _session(ctx, monkeypatch, stand_in, methods, max_samples, want_probes):

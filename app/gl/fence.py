@@ -169,9 +169,14 @@ class ChunkedUpload:
     the H200 and up to 15 ms on the chest CT's frames (bench/h200-interact-refine-56: `upload`),
     against 1.5 ms for the read-backs' host copies of the same size."""
 
-    def __init__(self, texture: moderngl.Texture, image: np.ndarray):
+    def __init__(self, texture: moderngl.Texture, image: np.ndarray,
+                 staging: moderngl.Buffer | None = None):
+        """`staging`: a pixel buffer lent for the bands (kept by the caller, made once: a new
+        one's first write costs the driver's allocation, 12 ms on the H200 for 16 MB); a band
+        larger than it goes through one of the upload's own."""
         self.texture, self.image = texture, np.ascontiguousarray(image)
         self.rows = 0
+        self._lent = staging
         self._staging: moderngl.Buffer | None = None
 
     def step(self, budget: TransferBudget) -> bool:
@@ -181,19 +186,28 @@ class ChunkedUpload:
         n = want // row_bytes
         if n:
             band = self.image[self.rows:self.rows + n]
-            if self._staging is None or self._staging.size < band.nbytes:
-                if self._staging is not None:
-                    self._staging.release()
-                self._staging = self.texture.ctx.buffer(reserve=band.nbytes)
-            else:
-                self._staging.orphan()
-            self._staging.write(band)
-            self.texture.write(self._staging, viewport=(0, self.rows, width, n))
+            staging = self._buffer_for(band.nbytes)
+            staging.write(band)
+            self.texture.write(staging, viewport=(0, self.rows, width, n))
             self.rows += n
         if self.rows >= height:
             self.release()
             return True
         return False
+
+    def _buffer_for(self, nbytes: int) -> moderngl.Buffer:
+        """The pixel buffer for a band of `nbytes`: the lent one where it holds it, else the
+        upload's own; orphaned where it was written before."""
+        if self._lent is not None and self._lent.size >= nbytes:
+            self._lent.orphan()
+            return self._lent
+        if self._staging is None or self._staging.size < nbytes:
+            if self._staging is not None:
+                self._staging.release()
+            self._staging = self.texture.ctx.buffer(reserve=nbytes)
+        else:
+            self._staging.orphan()
+        return self._staging
 
     def release(self) -> None:
         if self._staging is not None:

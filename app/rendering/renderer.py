@@ -228,6 +228,31 @@ class Renderer(ProbeStage, GridStage, StillImages):
         return self._passes[key]
 
 
+    def prepare(self, method: str, width: int, height: int, slots: tuple[int, ...] = (0,)) -> None:
+        """Compiles the programs a sample of `method` at width x height will run and gives its
+        path states (one set per slot: refine's halves) their memory, so that its first sample
+        pays for neither. The viewer calls it in the frame its bake begins, where the probes'
+        layout is first known (issue 56: on the H200 `guided`'s first frame in a load spent 40 ms
+        on compiles from the driver's shader cache and 17 ms in its first dispatch, and 6 s on
+        compiles with the cache empty, lab/experiments/frame_host_profile.py). Nothing where a
+        method that reads probes has no probe grid yet."""
+        if self.needs_probes(method) and self.probe_grid is None:
+            return
+        if method == "raymarch":
+            self.raymarcher()
+            return
+        if method == "guided":
+            self.raymarcher(guided_level0=True)
+        defines = (self._read_defines(self.probe_grid.defines())
+                   if REGISTRY[method].needs_probes else None)
+        kept = self.pass_slot
+        try:
+            for slot in slots:
+                self.pass_slot = slot
+                self.pass_for(method, defines).allocate(width, height)
+        finally:
+            self.pass_slot = kept
+
     @property
     def pathtracer(self) -> PathTracer:
         return self.pass_for("pt")

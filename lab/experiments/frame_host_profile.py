@@ -12,7 +12,11 @@ bakes, then runs refine through three phases: a still camera after load, an orbi
 and a transfer-function drag (warm re-bake). Per phase it prints one JSON line: the frames' mean
 and p99 wall ms, mean GPU ms (the session's timestamps), the mean ms a frame spent waiting in
 blocking timestamp reads (gl/timer._span_ms), the host ms (wall less those waits), and the top
-functions by own time (cProfile) of the phase."""
+functions by own time (cProfile) of the phase.
+
+PROFILE_LOAD=1: instead, the replay's load (the path tracer's programs used first, as the
+reference does; then no probes at all and refine's frames from nothing): one JSON line per frame
+over PROFILE_SLOW_MS (default 25) of wall time with its own profile, then the phase's line."""
 from __future__ import annotations
 
 import cProfile
@@ -90,6 +94,55 @@ def phase(session, label: str, frames: int, scenes=None, top: int = 18) -> None:
         flush=True)
 
 
+def _callers(stats, fn, depth: int = 8) -> list[str]:
+    """The chain of largest callers (by time) above `fn`: where the frame's top cost came from."""
+    chain = []
+    for _ in range(depth):
+        callers = stats.stats.get(fn, (0, 0, 0, 0, {}))[4]
+        if not callers:
+            break
+        fn = max(callers, key=lambda c: callers[c][3] if len(callers[c]) > 3 else 0)
+        chain.append(f"{fn[0]}:{fn[1]}:{fn[2]}")
+    return chain
+
+
+def load_phase(session, frames: int = 120, top: int = 14) -> None:
+    """The load's frames one by one, each profiled on its own; the slow ones printed."""
+    slow = float(os.environ.get("PROFILE_SLOW_MS", 25))
+    walls = []
+    for f in range(frames):
+        WAIT["ms"] = 0.0
+        prof = cProfile.Profile()
+        t = time.perf_counter()
+        prof.enable()
+        times = session.step(256, True)
+        prof.disable()
+        wall = 1e3 * (time.perf_counter() - t)
+        walls.append(wall)
+        if wall <= slow:
+            continue
+        stats = pstats.Stats(prof)
+        own = sorted(stats.stats.items(), key=lambda kv: -kv[1][2])[:top]
+        cumulative = sorted(((fn, st) for fn, st in stats.stats.items()
+                             if "radiance_probes" in fn[0] or "/app/" in fn[0]),
+                            key=lambda kv: -kv[1][3])[:2 * top]
+        print(json.dumps({
+            "frame": f, "wall": round(wall, 2), "gpu": round(times.total_ms, 2),
+            "wait": round(WAIT["ms"], 2), "shown": session.views["refine"].shown,
+            "parts": {k: [None if g is None else round(g, 2), round(w, 2)]
+                      for k, (g, w) in times.parts.items()},
+            "own": [[f"{fn[0].split('/')[-1]}:{fn[1]}:{fn[2]}", round(1e3 * st[2], 2), st[1]]
+                    for fn, st in own],
+            "cumulative": [[f"{fn[0].split('/')[-1]}:{fn[1]}:{fn[2]}", round(1e3 * st[3], 2)]
+                           for fn, st in cumulative],
+            "top_callers": _callers(stats, own[0][0])}), flush=True)
+    w = np.asarray(walls)
+    print(json.dumps({"phase": "load", "frames": frames, "over_33": int((w > 33).sum()),
+                      "wall_p99": round(float(np.percentile(w, 99)), 2),
+                      "slowest": [[int(i), round(float(w[i]), 1)] for i in np.argsort(-w)[:8]]}),
+          flush=True)
+
+
 def main(name: str = "chest", width: int = 1920, height: int = 1080) -> None:
     cfg = PRESETS["interact-refine"]
     ctx = create_headless_context()
@@ -103,6 +156,19 @@ def main(name: str = "chest", width: int = 1920, height: int = 1080) -> None:
     session.frame_budget_ms = cfg.interact_frame_budget_ms
     session.denoise.set_enabled(True)
     session.resize(width, height)
+    if os.environ.get("PROFILE_LOAD"):
+        r.begin("pt", seed=1)           # the reference's programs, as in the replay
+        r.add_samples(1)
+        r.invalidate()
+        if r.probe_grid is not None:
+            r.probe_grid.release()
+            r.probe_grid = None
+        session.set_methods(["refine"])
+        session.restart()
+        load_phase(session)
+        session.set_methods([])
+        r.release()
+        return
     r.bake(seed=1)
     session.set_methods(["refine"])
     session.restart()

@@ -7,6 +7,7 @@ import moderngl
 
 from radiance_probes.twins.camera import CameraFrame
 from radiance_probes.gl.context import loop_budget, loop_budget_unbounded
+from radiance_probes.gl.memory import touch
 from radiance_probes.gl.shaders import compute_program, set_uniforms
 from radiance_probes.rendering.methods.accumulation import Accumulation
 from radiance_probes.rendering.resources import SceneResources
@@ -61,10 +62,20 @@ class PathTracer:
             if acc.samples != 0:
                 raise RuntimeError("the path states were reallocated in the middle of an "
                                    "accumulation")
-            if self.states is not None:
-                self.states.release()
-            self.states = self.ctx.buffer(reserve=size)
+            self.allocate(acc.width, acc.height)
         return self.states
+
+    def allocate(self, width: int, height: int) -> None:
+        """The path states for images of this size, made now and touched (gl/memory.touch), so
+        that the driver gives them memory here and not in the first dispatch
+        (Renderer.prepare). Kept where they already have that size."""
+        size = width * height * self.state_bytes
+        if self.states is not None and self.states.size == size:
+            return
+        if self.states is not None:
+            self.states.release()
+        self.states = self.ctx.buffer(reserve=size)
+        touch(self.ctx, self.states)
 
     def dispatch(self, resources: SceneResources, camera: CameraFrame, acc: Accumulation,
                  target_samples: int, seed: int = 0, extra_uniforms: dict | None = None,

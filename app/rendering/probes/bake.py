@@ -23,6 +23,7 @@ import moderngl
 import numpy as np
 
 from radiance_probes.gl.context import UNBOUNDED_LOOP_BUDGET, loop_budget, loop_budget_unbounded
+from radiance_probes.gl.memory import touch
 from radiance_probes.gl.profiler import GpuProfile
 from radiance_probes.gl.shaders import compute_program, set_uniforms
 from radiance_probes.gl.timer import GpuTimer
@@ -219,6 +220,8 @@ class ProbeGrid:
         self._partial_sums = None
         # lib/probe_noise.glsl: the variance sum, the probe count, then each probe's passes
         self.noise = ctx.buffer(reserve=8 + 4 * self.count)
+        # their memory now, in the frame the bake begins, not in its first walks' dispatch
+        touch(ctx, self.walk_states, self.walk_radiance, self.accums, self.noise)
         defines = {"PROBE_IMAGE_FORMAT": precision, "PROBE_IMAGE_LIMIT": PROBE_IMAGE_LIMIT,
                    **self.defines()}
         tracking = {"SHADOW_TRACKING_RESIDUAL": 1} if shadow_tracking == "residual" else {}

@@ -236,9 +236,14 @@ class HalfBuffers:
         self.halves = [SumAccumulation(Accumulation(ctx, width, height),
                                        Accumulation(ctx, width, height)) for _ in range(2)]
         self.combined = Accumulation(ctx, width, height)
-        self._half_a: Accumulation | None = None        # half A alone and its filtered image,
-        self._denoised_a: moderngl.Texture | None = None   # made on the first judgement
-        self._denoised_a_frame: moderngl.Framebuffer | None = None
+        # half A alone and its filtered image, and half B's snapshot: made with the view and
+        # cleared, so that the driver gives them memory now (made at the first judgement, they
+        # cost that frame 36-45 ms of host work on the H200 at 1080p: issue 56)
+        self._half_a = Accumulation(ctx, width, height)
+        self._half_a.reset()
+        self._denoised_a = ctx.texture((width, height), 4, dtype="f4")
+        self._denoised_a_frame = ctx.framebuffer(color_attachments=[self._denoised_a])
+        self._denoised_a_frame.clear()
         self.groups = groups(width, height, (GROUP_SIDE, GROUP_SIDE))
         self.partials = ctx.buffer(reserve=16 * self.groups[0] * self.groups[1])
         self.sums = ctx.buffer(reserve=16)
@@ -250,8 +255,12 @@ class HalfBuffers:
         self.reads = 0            # read-backs since the last reset (a test counts them)
         self.reduced_counts: tuple[int, int] | None = None   # the counts the last sums are of
         # half B as it was at a judgement's check (snapshot_b), judged against on a later frame
-        self._b_snapshot: list[Accumulation] | None = None
-        self._b_frames: list[moderngl.Framebuffer] = []
+        self._b_snapshot = [Accumulation(self.ctx, self.width, self.height) for _ in range(2)]
+        for a in self._b_snapshot:
+            a.reset()
+        self._b_frames = [ctx.framebuffer(color_attachments=[a.texture]) for a in self._b_snapshot]
+        self._b_sources = [ctx.framebuffer(color_attachments=[acc.texture])
+                           for acc in (self.halves[1].residual, self.halves[1].level0)]
 
     @property
     def counts(self) -> tuple[int, int]:
@@ -333,12 +342,6 @@ class HalfBuffers:
         """Half B's two levels copied on the GPU as they are now: a judgement begun at this
         check judges against them (dispatch_judge(from_snapshot=True)) on whichever later frame
         its filtered half A comes back, while half B grows on."""
-        if self._b_snapshot is None:
-            self._b_snapshot = [Accumulation(self.ctx, self.width, self.height) for _ in range(2)]
-            self._b_frames = [self.ctx.framebuffer(color_attachments=[a.texture])
-                              for a in self._b_snapshot]
-            self._b_sources = [self.ctx.framebuffer(color_attachments=[acc.texture])
-                               for acc in (self.halves[1].residual, self.halves[1].level0)]
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
         for target, source in zip(self._b_frames, self._b_sources):
             self.ctx.copy_framebuffer(target, source)
@@ -402,8 +405,7 @@ class HalfBuffers:
         self.combined.release()
         for obj in (self._half_a, self._denoised_a, self._judge, self.partials, self.sums,
                     self.judge_sums, self._combine, self._reduce, self._denoised_a_frame,
-                    *(self._b_snapshot or []), *self._b_frames,
-                    *getattr(self, "_b_sources", [])):
+                    *self._b_snapshot, *self._b_frames, *self._b_sources):
             if obj is not None:
                 obj.release()
 

@@ -56,6 +56,9 @@ class _Filtered:
     blend_key: tuple | None = None
 
 
+FRESH_TEXTURES = 3   # a view's filtered image, its spare and its blend (refine)
+
+
 @dataclass
 class _InFlight:
     """A filtered image under way: its read-backs (the colour; refine's probes guide), then the
@@ -93,6 +96,11 @@ class ViewDenoise:
         # {name: (ChunkedUpload, _InFlight)}; and each view's spare texture for the next
         self.landing: dict[str, tuple] = {}
         self._spare: dict[str, moderngl.Texture] = {}
+        # made at warm(), before any frame needs them, and touched so that the driver gives
+        # them memory then: the uploads' pixel buffer and RGBA32F textures of the view's size
+        # (made at their first use, they cost a load's frames 26 and 45 ms on the H200 at 1080p)
+        self.upload_buffer: moderngl.Buffer | None = None
+        self._fresh: list[moderngl.Texture] = []
 
     # ---- the filter's thread -------------------------------------------------------------------
     def worker(self) -> FilterWorker | None:
@@ -116,6 +124,22 @@ class ViewDenoise:
             worker = self.worker()
             if worker is not None:
                 worker.warm(width, height, ("albedo",))
+            self._stock(width, height)
+
+    def _stock(self, width: int, height: int) -> None:
+        """FRESH_TEXTURES touched textures of this size, and the uploads' pixel buffer."""
+        for texture in self._fresh:
+            texture.release()
+        self._fresh = []
+        for _ in range(FRESH_TEXTURES):
+            texture = self.ctx.texture((width, height), 4, dtype="f4")
+            frame = self.ctx.framebuffer(color_attachments=[texture])
+            frame.clear()
+            frame.release()
+            self._fresh.append(texture)
+        if self.upload_buffer is None:
+            self.upload_buffer = self.ctx.buffer(reserve=TRANSFER_BYTES_PER_FRAME)
+            self.upload_buffer.write(bytes(TRANSFER_BYTES_PER_FRAME))
 
     @contextmanager
     def held(self):
@@ -215,7 +239,7 @@ class ViewDenoise:
         h, w = result.rgba.shape[:2]
         texture = self._spare[name] = self._sized(self._spare.get(name), (w, h))
         texture.filter = flight.filter
-        self.landing[name] = (ChunkedUpload(texture, result.rgba), flight)
+        self.landing[name] = (ChunkedUpload(texture, result.rgba, self.upload_buffer), flight)
 
     def _upload(self, name: str, generation: tuple) -> None:
         """A band of the filtered image being uploaded; once whole, it is what the view shows
@@ -305,6 +329,10 @@ class ViewDenoise:
             return texture
         if texture is not None:
             texture.release()
+        fresh = next((t for t in self._fresh if t.size == tuple(size)), None)
+        if fresh is not None:
+            self._fresh.remove(fresh)
+            return fresh
         return self.ctx.texture(tuple(size), 4, dtype="f4")
 
     def _forget(self, name: str) -> None:
@@ -361,6 +389,9 @@ class ViewDenoise:
         for buf in self._staging.values():
             buf.release()
         self._staging.clear()
+        for texture in self._fresh:
+            texture.release()
+        self._fresh = []
         if self.blend_pass is not None:
             self.blend_pass.release()
             self.blend_pass = None
@@ -369,8 +400,12 @@ class ViewDenoise:
             self.kept_means = None
 
     def close(self) -> None:
-        """release(), and the filter's thread ended."""
+        """release(), the uploads' pixel buffer (a check's upload may hold it until then) and
+        the filter's thread ended."""
         self.release()
+        if self.upload_buffer is not None:
+            self.upload_buffer.release()
+            self.upload_buffer = None
         if self._worker is not None:
             self._worker.close()
             self._worker = None

@@ -1,7 +1,8 @@
 """What each part of a viewer frame took, by name, in GPU and in wall time (issue 56): a frame
-over budget then says why. The parts: "bake" (the bake's slice), "samples" (every view's
-samples), "guide" (denoise guides made on the GL side), "readback" (host copies of read-backs
-found finished), "combine" (refine's halves combined, a check begun), "judgement" (a check's
+over budget then says why. The parts: "bake" (the bake's slice), "prepare" (in the frame a bake
+begins: the programs and path states of what will read its probes, Renderer.prepare), "samples"
+(every view's samples), "guide" (denoise guides made on the GL side), "readback" (host copies of
+read-backs found finished), "combine" (refine's halves combined, a check begun), "judgement" (a check's
 step: sums read, half A handed to the filter, the judge pass), "upload" (a filtered image
 uploaded), "blend" (refine's blend pass), "wait" (the frame's one wait for its GPU work, where
 its timers are read at its end: gl/timer.DeferredSpans), "display" (the picture drawn), and in the
@@ -19,7 +20,7 @@ from contextlib import contextmanager
 
 from radiance_probes.gl.timer import GpuTimer
 
-PARTS = ("bake", "samples", "guide", "readback", "combine", "judgement", "upload", "blend",
+PARTS = ("bake", "prepare", "samples", "guide", "readback", "combine", "judgement", "upload", "blend",
          "wait", "display", "imgui", "swap")
 
 

@@ -65,6 +65,17 @@ def _read(session, view, key: str, source) -> PendingRead:
     return PendingRead(session.ctx, source, buf)
 
 
+def prepare_staging(session, view) -> None:
+    """The view's read-back buffers for its halves' size made now and read once, so that the
+    driver gives them their host memory here and not at the first check (issue 56: that
+    frame's first host copy took 15.6 ms on the H200 at 1080p)."""
+    halves = view.halves
+    image = halves.width * halves.height * 16   # RGBA32F
+    for key, nbytes in (("sums", halves.sums.size), ("half_a", image), ("ray", image)):
+        buf = view.staging[key] = staging_buffer(session.ctx, view.staging.get(key), nbytes)
+        buf.read(size=4)
+
+
 def begin_check(session, view, with_ray: bool, judgeable: bool, judge: bool,
                 stage_bits: int) -> RefineCheck:
     """The check of the combine just dispatched (its reduction in halves.sums): read-backs
@@ -127,7 +138,7 @@ def advance_check(session, view, check: RefineCheck):
             check.stage = "done"
             return "judged", None
         denoise.filter_ms += result.ms.get("filter_ms", 0.0) + result.ms.get("guide_ms", 0.0)
-        check.upload = ChunkedUpload(halves.denoised_a, result.rgba)
+        check.upload = ChunkedUpload(halves.denoised_a, result.rgba, denoise.upload_buffer)
         check.stage = "upload"
     if check.stage == "upload":
         with denoise.parts.part("upload"):

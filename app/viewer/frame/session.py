@@ -48,7 +48,8 @@ from radiance_probes.io.volume import Volume
 from radiance_probes.viewer.frame.denoise_view import ViewDenoise
 from radiance_probes.viewer.frame.frame_parts import FrameParts
 from radiance_probes.viewer.frame.pacing import FramePacer
-from radiance_probes.viewer.frame.refine_judgement import advance_check, begin_check
+from radiance_probes.viewer.frame.refine_judgement import (advance_check, begin_check,
+                                                           prepare_staging)
 from radiance_probes.viewer.frame.views import (RECENT_DISPATCHES, FrameTimes, MethodView, REFINE,
                                                 REFINE_HISTORY, RefineView, _PacedView)
 
@@ -239,6 +240,7 @@ class RenderSession:
             if view.halves is not None:
                 view.halves.release()
             view.halves = HalfBuffers(self.ctx, w, h)
+            prepare_staging(self, view)
         view.halves.reset()
         for acc in (view.ray, view.halves.combined):
             acc.texture.filter = (self.filter, self.filter)
@@ -316,6 +318,12 @@ class RenderSession:
                 self.bake_ms = 0.0
                 self._bake_turn_ms = 0.0   # a first preview of the new bake soon
                 self.bake_generation += 1
+                with self.parts.part("prepare", gpu=False):   # (the probes' layout now known)
+                    for view in self.views.values():   # what runs once they are baked
+                        if isinstance(view, RefineView):
+                            r.prepare("guided", *self.size, slots=(0, 1))
+                        elif self.needs_probes(view.method):
+                            r.prepare(view.method, *self.size)
             self.bake_ms += times.bake_ms
             self._bake_turn_ms -= times.bake_ms
             self.bake_passes_run += 1

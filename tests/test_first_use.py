@@ -1,0 +1,105 @@
+"""What a view will run once its probes are baked is made in the frame its bake begins, not in the
+frame it first runs (issue 56: on the H200 a load's later frames paid 40 ms of shader compiles from
+the driver's cache, 6 s with the cache empty, and 17-45 ms for the driver's first allocations of
+path states, refine's halves and the uploads' buffers): Renderer.prepare, the touched buffers
+(gl/memory.touch) and the uploads' lent pixel buffer (gl/fence.ChunkedUpload)."""
+from __future__ import annotations
+
+import numpy as np
+
+from radiance_probes.gl.fence import ChunkedUpload, TransferBudget
+from radiance_probes.io.scene_file import parse_scene
+
+SCENE = {"volume": {"builtin": "cloud", "size": [12, 12, 12]}, "density_scale": 30.0,
+         "albedo": 0.9, "camera": {"width": 24, "height": 16},
+         "probes": {"grid": [2, 2, 2], "samples": 32, "fit": "box"}}
+
+
+def _guided_passes(renderer):
+    return {key: p for key, p in renderer._passes.items() if key[0] == "guided"}
+
+
+def test_the_frame_a_bake_begins_in_makes_guided_for_both_halves(ctx):
+    """refine's first frame of a load (no probes yet): that frame compiles guided's pass and gives
+    both halves' path states their memory, at the view's size; the frames after it that run
+    guided make no new pass."""
+    from radiance_probes.viewer.frame.session import RenderSession
+    s = RenderSession(ctx, parse_scene(SCENE), clock="wall")
+    try:
+        s.resize(24, 16)
+        s.set_methods(["refine"])
+        r = s.renderer
+        assert not _guided_passes(r)
+        times = s.step(64, True)
+        assert "prepare" in times.parts and times.parts["prepare"][1] > 0.0
+        made = _guided_passes(r)
+        assert len(made) == 2                               # slot 0 and slot 1
+        for tracer in made.values():
+            assert tracer.states is not None
+            assert tracer.states.size == 24 * 16 * tracer.state_bytes
+        assert any(("GUIDED_LEVEL0", 1) in key[1] for key in r._raymarchers)   # level 0's
+        view = s.views["refine"]
+        for _ in range(200):
+            s.step(64, True)
+            if view.guided_samples > 0:
+                break
+        assert view.guided_samples > 0, s.refine_state()
+        assert _guided_passes(r).keys() == made.keys()      # nothing new was compiled
+        assert all(_guided_passes(r)[k] is made[k] for k in made)
+    finally:
+        s.release()
+
+
+def test_prepare_without_probes_does_nothing_and_is_kept_on_a_second_call(ctx):
+    from radiance_probes.rendering.renderer import Renderer
+    r = Renderer(ctx, parse_scene(SCENE))
+    try:
+        r.prepare("guided", 24, 16, slots=(0, 1))
+        assert not _guided_passes(r)          # no probe grid: its layout is not known yet
+        r.prepare("pt", 24, 16)
+        tracer = r.pass_for("pt")
+        states = tracer.states
+        assert states is not None and states.size == 24 * 16 * tracer.state_bytes
+        r.prepare("pt", 24, 16)
+        assert tracer.states is states        # the same size: kept
+        r.prepare("pt", 12, 8)
+        assert tracer.states.size == 12 * 8 * tracer.state_bytes
+    finally:
+        r.release()
+
+
+def test_an_upload_through_a_lent_pixel_buffer_writes_the_image_and_keeps_the_buffer(ctx):
+    """Bands of an image through one lent buffer (orphaned before each band): the texture holds
+    the image, and the buffer is the caller's after the upload (not released)."""
+    h, w = 16, 24
+    image = np.random.default_rng(3).random((h, w, 4)).astype(np.float32)
+    texture = ctx.texture((w, h), 4, dtype="f4")
+    lent = ctx.buffer(reserve=5 * w * 16)          # 5 rows a band at most
+    upload = ChunkedUpload(texture, image, lent)
+    budget = TransferBudget(5 * w * 16)
+    bands = 0
+    while True:
+        budget.begin_frame()
+        bands += 1
+        if upload.step(budget):
+            break
+    assert bands == 4                               # 16 rows, 5 a band
+    got = np.frombuffer(texture.read(), np.float32).reshape(h, w, 4)
+    np.testing.assert_array_equal(got, image)
+    lent.write(bytes(16))                           # still the caller's to use
+    texture.release()
+    lent.release()
+
+
+def test_an_upload_band_larger_than_the_lent_buffer_goes_through_its_own(ctx):
+    h, w = 8, 12
+    image = np.arange(h * w * 4, dtype=np.float32).reshape(h, w, 4)
+    texture = ctx.texture((w, h), 4, dtype="f4")
+    lent = ctx.buffer(reserve=16)                   # smaller than one row
+    upload = ChunkedUpload(texture, image, lent)
+    budget = TransferBudget(1 << 20)
+    assert upload.step(budget)
+    got = np.frombuffer(texture.read(), np.float32).reshape(h, w, 4)
+    np.testing.assert_array_equal(got, image)
+    texture.release()
+    lent.release()
