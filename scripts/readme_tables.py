@@ -30,10 +30,11 @@ RECORDS = "bench/h100"
 PREVIOUS = "bench/archive/h100-v12"
 INTERACT_RECORDS = "bench/h100-interact"
 DENOISE_RECORDS = "bench/h200-denoise"
-# a scene's replay from the first of these folders that holds it (the code now: a frame's timers
-# read at its end, 16 MB of transfers a frame), its flicker likewise from FLICKER_RECORDS
-REFINE_RECORDS = ("bench/h200-interact-refine-56/deferred-spans/bonsai-foot",
-                  "bench/h200-interact-refine-56/deferred-spans/chest")
+# a scene's replay from the first of these folders that holds it (the code now: first uses in a
+# load's first frame, a frame's timers read at its end, 16 MB of transfers a frame), its flicker
+# likewise from FLICKER_RECORDS
+REFINE_RECORDS = ("bench/h200-interact-refine-56/first-use/bonsai-foot",
+                  "bench/h200-interact-refine-56/first-use/chest")
 FLICKER_RECORDS = REFINE_RECORDS
 # The files holding generated blocks, and the blocks each holds.
 GENERATED = {"README.md": ("denoise",), "docs/benchmarks.md": ("speed", "interact", "refine"),
