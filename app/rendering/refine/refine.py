@@ -236,13 +236,14 @@ class HalfBuffers:
         self.halves = [SumAccumulation(Accumulation(ctx, width, height),
                                        Accumulation(ctx, width, height)) for _ in range(2)]
         self.combined = Accumulation(ctx, width, height)
-        # half A alone and its filtered image, and half B's snapshot: made with the view and
-        # cleared, so that the driver gives them memory now (made at the first judgement, they
-        # cost that frame 36-45 ms of host work on the H200 at 1080p: issue 56)
-        self._half_a = Accumulation(ctx, width, height)
-        self._half_a.reset()
-        self._denoised_a = ctx.texture((width, height), 4, dtype="f4")
-        self._denoised_a_frame = ctx.framebuffer(color_attachments=[self._denoised_a])
+        # half A's image alone (combine(write_half_a=True) writes it, for the denoiser), half A
+        # through the denoiser (RGBA32F, judged_blend's) and half B's snapshot: made with the
+        # view and cleared, so that the driver gives them memory now (made at the first
+        # judgement, they cost that frame 36-45 ms of host work on the H200 at 1080p: issue 56)
+        self.half_a = Accumulation(ctx, width, height)
+        self.half_a.reset()
+        self.denoised_a = ctx.texture((width, height), 4, dtype="f4")
+        self._denoised_a_frame = ctx.framebuffer(color_attachments=[self.denoised_a])
         self._denoised_a_frame.clear()
         self.groups = groups(width, height, (GROUP_SIDE, GROUP_SIDE))
         self.partials = ctx.buffer(reserve=16 * self.groups[0] * self.groups[1])
@@ -278,20 +279,6 @@ class HalfBuffers:
         self.reads = 0   # counted per restart, as the session's frames are
         self.reduced_counts = None
 
-    @property
-    def half_a(self) -> Accumulation:
-        """Half A's image alone (combine(write_half_a=True) writes it), for the denoiser."""
-        if self._half_a is None:
-            self._half_a = Accumulation(self.ctx, self.width, self.height)
-        return self._half_a
-
-    @property
-    def denoised_a(self) -> moderngl.Texture:
-        """Half A through the denoiser (RGBA32F, judged_blend's)."""
-        if self._denoised_a is None:
-            self._denoised_a = self.ctx.texture((self.width, self.height), 4, dtype="f4")
-        return self._denoised_a
-
     def next_half(self) -> int:
         """The half the next batch of samples goes to: the one with fewer (A on a tie)."""
         a, b = self.counts
@@ -299,8 +286,6 @@ class HalfBuffers:
 
     def copy_denoised_a(self, texture: moderngl.Texture) -> None:
         """`denoised_a` copied into `texture` (RGBA32F of its size) on the GPU."""
-        if self._denoised_a_frame is None:
-            self._denoised_a_frame = self.ctx.framebuffer(color_attachments=[self.denoised_a])
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
         # framebuffer to framebuffer (a blit keeps RGBA32F; a copy into a texture went through
         # 8 bits a channel)
@@ -403,11 +388,10 @@ class HalfBuffers:
         for half in self.halves:
             half.release()
         self.combined.release()
-        for obj in (self._half_a, self._denoised_a, self._judge, self.partials, self.sums,
+        for obj in (self.half_a, self.denoised_a, self._judge, self.partials, self.sums,
                     self.judge_sums, self._combine, self._reduce, self._denoised_a_frame,
                     *self._b_snapshot, *self._b_frames, *self._b_sources):
-            if obj is not None:
-                obj.release()
+            obj.release()
 
 
 @dataclass
