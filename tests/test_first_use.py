@@ -2,12 +2,10 @@
 frame it first runs (issue 56: on the H200 a load's later frames paid 40 ms of shader compiles from
 the driver's cache, 6 s with the cache empty, and 17-45 ms for the driver's first allocations of
 path states, refine's halves and the uploads' buffers): Renderer.prepare, the touched buffers
-(gl/memory.touch) and the uploads' lent pixel buffer (gl/fence.ChunkedUpload)."""
+(gl/memory.touch); the uploads' lent pixel buffer is tested with the other transfers
+(tests/test_frame_pipeline.py)."""
 from __future__ import annotations
 
-import numpy as np
-
-from radiance_probes.gl.fence import ChunkedUpload, TransferBudget
 from radiance_probes.io.scene_file import parse_scene
 
 SCENE = {"volume": {"builtin": "cloud", "size": [12, 12, 12]}, "density_scale": 30.0,
@@ -66,40 +64,3 @@ def test_prepare_without_probes_does_nothing_and_is_kept_on_a_second_call(ctx):
         assert tracer.states.size == 12 * 8 * tracer.state_bytes
     finally:
         r.release()
-
-
-def test_an_upload_through_a_lent_pixel_buffer_writes_the_image_and_keeps_the_buffer(ctx):
-    """Bands of an image through one lent buffer (orphaned before each band): the texture holds
-    the image, and the buffer is the caller's after the upload (not released)."""
-    h, w = 16, 24
-    image = np.random.default_rng(3).random((h, w, 4)).astype(np.float32)
-    texture = ctx.texture((w, h), 4, dtype="f4")
-    lent = ctx.buffer(reserve=5 * w * 16)          # 5 rows a band at most
-    upload = ChunkedUpload(texture, image, lent)
-    budget = TransferBudget(5 * w * 16)
-    bands = 0
-    while True:
-        budget.begin_frame()
-        bands += 1
-        if upload.step(budget):
-            break
-    assert bands == 4                               # 16 rows, 5 a band
-    got = np.frombuffer(texture.read(), np.float32).reshape(h, w, 4)
-    np.testing.assert_array_equal(got, image)
-    lent.write(bytes(16))                           # still the caller's to use
-    texture.release()
-    lent.release()
-
-
-def test_an_upload_band_larger_than_the_lent_buffer_goes_through_its_own(ctx):
-    h, w = 8, 12
-    image = np.arange(h * w * 4, dtype=np.float32).reshape(h, w, 4)
-    texture = ctx.texture((w, h), 4, dtype="f4")
-    lent = ctx.buffer(reserve=16)                   # smaller than one row
-    upload = ChunkedUpload(texture, image, lent)
-    budget = TransferBudget(1 << 20)
-    assert upload.step(budget)
-    got = np.frombuffer(texture.read(), np.float32).reshape(h, w, 4)
-    np.testing.assert_array_equal(got, image)
-    texture.release()
-    lent.release()

@@ -241,6 +241,16 @@ def test_a_loads_bake_takes_the_frame_where_every_view_restarts_after_it(ctx, fi
         s.release()
 
 
+def _frames_to_upload(upload, budget) -> int:
+    """Frames of `budget` an upload (fence.ChunkedUpload) takes to be whole."""
+    frames = 0
+    while True:
+        budget.begin_frame()
+        frames += 1
+        if upload.step(budget):
+            return frames
+
+
 def test_transfers_are_spread_over_frames_and_arrive_whole(ctx):
     """A read-back's host copy and an upload in parts (fence.TransferBudget): each frame moves
     at most its budget (rounded to whole units, one unit at least), and the image that arrives is
@@ -268,19 +278,44 @@ def test_transfers_are_spread_over_frames_and_arrive_whole(ctx):
     np.testing.assert_array_equal(read.out, image)
     target = ctx.texture((24, 16), 4, dtype="f4")
     upload = ChunkedUpload(target, image[::-1].copy())
-    budget = TransferBudget(3 * 24 * 16)     # three rows a frame
-    steps = 0
-    while True:
-        budget.begin_frame()
-        steps += 1
-        if upload.step(budget):
-            break
-    assert steps == 6
+    assert _frames_to_upload(upload, TransferBudget(3 * 24 * 16)) == 6   # three rows a frame
     assert upload._staging is None   # its pixel buffer released once whole
     got = np.frombuffer(target.read(), np.float32).reshape(16, 24, 4)
     np.testing.assert_array_equal(got, image[::-1])
     texture.release()
     target.release()
+
+
+def test_an_upload_through_a_lent_pixel_buffer_writes_the_image_and_keeps_the_buffer(ctx):
+    """Bands of an image through one lent buffer (orphaned before each band): the texture holds
+    the image, and the buffer is the caller's after the upload (not released)."""
+    from radiance_probes.gl.fence import ChunkedUpload, TransferBudget
+    h, w = 16, 24
+    image = np.random.default_rng(3).random((h, w, 4)).astype(np.float32)
+    texture = ctx.texture((w, h), 4, dtype="f4")
+    lent = ctx.buffer(reserve=5 * w * 16)          # 5 rows a band at most
+    upload = ChunkedUpload(texture, image, lent)
+    assert _frames_to_upload(upload, TransferBudget(5 * w * 16)) == 4   # 16 rows, 5 a band
+    got = np.frombuffer(texture.read(), np.float32).reshape(h, w, 4)
+    np.testing.assert_array_equal(got, image)
+    lent.write(bytes(16))                           # still the caller's to use
+    texture.release()
+    lent.release()
+
+
+def test_an_upload_band_larger_than_the_lent_buffer_goes_through_its_own(ctx):
+    from radiance_probes.gl.fence import ChunkedUpload, TransferBudget
+    h, w = 8, 12
+    image = np.arange(h * w * 4, dtype=np.float32).reshape(h, w, 4)
+    texture = ctx.texture((w, h), 4, dtype="f4")
+    lent = ctx.buffer(reserve=16)                   # smaller than one row
+    upload = ChunkedUpload(texture, image, lent)
+    budget = TransferBudget(1 << 20)
+    assert upload.step(budget)
+    got = np.frombuffer(texture.read(), np.float32).reshape(h, w, 4)
+    np.testing.assert_array_equal(got, image)
+    texture.release()
+    lent.release()
 
 
 def test_a_filtered_image_lands_whole_under_a_small_transfer_budget(ctx, monkeypatch):
