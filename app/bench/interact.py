@@ -27,6 +27,7 @@ import numpy as np
 from radiance_probes.frontend.imageio import save_png
 from radiance_probes.scene.transfer import opacity_points, rgba_with_opacity
 from radiance_probes.rendering.budgets.ceiling import speed_check_ms
+from radiance_probes.rendering.image_error import ImageError
 from radiance_probes.rendering.metrics import corrected_rrmse, rrmse
 from radiance_probes.scene.area_lights import enabled_lights
 from radiance_probes.bench.records import log as _log
@@ -34,8 +35,10 @@ from radiance_probes.bench.records import log as _log
 TARGETS = (0.10, 0.05, 0.03, 0.02)
 # The error curve has a point at least every CURVE_WALL_MS of the frames' wall time (issue 56),
 # besides the first frames and a log-spaced set: a time to 2% read, not guessed. Measuring (the
-# shown image read back, its error against the reference) is outside the frames' wall time and
-# is recorded apart (measure_wall_ms); the filter's thread is held meanwhile (no job starts).
+# shown image's error against the reference, on the GPU: shown_error) is outside the frames' wall
+# time and is recorded apart (measure_wall_ms); the filter's thread is held meanwhile (no job
+# starts). Read back to the host instead, a 4K point kept the GPU idle for 0.5 s and the replay
+# then ran at the H200's idle clock (bench/h200-raymarch-4k).
 CURVE_WALL_MS = 100.0
 # `refine` (the viewer's raymarcher, then `guided`) is judged by this: within 2% of the reference
 # within 1 s of every event (report: interact_report.py)
@@ -99,11 +102,24 @@ def time_to(curve: list[tuple[float, float]], target: float) -> float | None:
     return next((t for t, e in curve if e <= target), None)
 
 
+def shown_error(session, method: str, reference, noise: float, meter=None) -> float:
+    """The rRMSE of the image a view shows against `reference`, corrected for the reference's
+    noise, with the filter's thread held: on the GPU where `meter` (image_error.ImageError) is
+    given and the view shows one texture, else read back and compared on the host."""
+    with session.denoise.held():
+        view = session.views.get(method)
+        if meter is not None and view is not None and hasattr(view.acc, "texture"):
+            meter.set_reference(reference)
+            return corrected_rrmse(meter.rrmse(session.texture(method)), noise)
+        return corrected_rrmse(rrmse(session.shown_image(method), reference), noise)
+
+
 def run_frames(session, method: str, config, reference, noise: float, seed: int,
-               scenes: list | None = None, orbit: bool = False) -> dict:
+               scenes: list | None = None, orbit: bool = False, meter=None) -> dict:
     """Frames as the viewer makes them until convergence (or interact_max_frames). `scenes`: the
     event, one scene per frame from the first (the orbit's moves, or the edited scene), each set
-    inside its frame's wall time. Timed from the event (the orbit: from its last move)."""
+    inside its frame's wall time. Timed from the event (the orbit: from its last move). `meter`:
+    the error measured on the GPU (shown_error)."""
     s = session
     r = s.renderer
     needs = s.needs_probes(method)
@@ -157,8 +173,7 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
         if (after in checks or gap_due or converged
                 or f == lead + config.interact_max_frames - 1):
             m0 = time.perf_counter()
-            with s.denoise.held():
-                error = corrected_rrmse(rrmse(s.shown_image(method), reference), noise)
+            error = shown_error(s, method, reference, noise, meter)
             measure_ms.append(1e3 * (time.perf_counter() - m0))
             curve.append((t, wall_t, error))
             last_point = wall_t
@@ -173,7 +188,7 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
 
 
 def still_flicker(session, method: str, config, reference, noise: float, seed: int,
-                  from_wall_ms: float | None = None) -> dict:
+                  from_wall_ms: float | None = None, meter=None) -> dict:
     """How much a view's shown image changes from frame to frame on a still camera once it is
     good (issue 56): frames from a restart with the viewer's sample limit (state.MAX_SAMPLES),
     until (from_wall_ms None) its error first reaches REFINE_GOAL's with its own estimator shown
@@ -200,8 +215,7 @@ def still_flicker(session, method: str, config, reference, noise: float, seed: i
             break
         # the error, measured outside the frames' wall time
         if from_wall_ms is None and wall - last_check >= CURVE_WALL_MS:
-            with s.denoise.held():
-                error = corrected_rrmse(rrmse(s.shown_image(method), reference), noise)
+            error = shown_error(s, method, reference, noise, meter)
             last_check = wall
             # refine: once guided shows (its raymarcher's frames stop after 16 and hold still)
             if error <= REFINE_GOAL[0] and getattr(s.views[method], "shown", method) != "raymarch":
@@ -224,10 +238,11 @@ def still_flicker(session, method: str, config, reference, noise: float, seed: i
             "frames_changed": int(sum(c > 0.0 for c in changes))}
 
 
-def flicker_record(base: dict, session, method: str, config, reference, noise: float) -> dict:
+def flicker_record(base: dict, session, method: str, config, reference, noise: float,
+                   meter=None) -> dict:
     """refine's frame-to-frame change on a still camera once within 2% (still_flicker), against
     the raw path tracer's (the Denoise switch off) from the same wall time after its restart."""
-    shown = still_flicker(session, method, config, reference, noise, seed=21)
+    shown = still_flicker(session, method, config, reference, noise, seed=21, meter=meter)
     on = session.denoise.enabled
     session.denoise.set_enabled(False)
     try:
@@ -295,6 +310,7 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
     session.bake_budget_ms = config.interact_bake_budget_ms
     session.bake_fills_frame = config.interact_bake_fills_frame   # as the viewer's
     session.frame_budget_ms = config.interact_frame_budget_ms
+    meter = ImageError(r.ctx)   # the error curve's points measured on the GPU (shown_error)
     if config.interact_denoise is not None:
         session.denoise.set_enabled(config.interact_denoise)
     for width, height in config.interact_sizes:
@@ -328,7 +344,7 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
         def flicker(base, method, reference, noise):
             if method != "refine" or not config.interact_flicker_frames or not want("flicker"):
                 return
-            rec = flicker_record(base, session, method, config, reference, noise)
+            rec = flicker_record(base, session, method, config, reference, noise, meter)
             rec["speed_check_ms"] = speed_check_ms(r, config.speed_check_rays)
             results.add(rec)
             f, p = rec["flicker"], rec["flicker_pt"]
@@ -360,7 +376,8 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                     r.probe_grid.release()
                     r.probe_grid = None
                 add(record(base, "load", method, None,
-                           run_frames(session, method, config, reference, noise, seed=1)))
+                           run_frames(session, method, config, reference, noise, seed=1,
+                                      meter=meter)))
                 # orbit: camera moves never re-bake
                 moves = [orbit(scene, 60.0 * (i + 1) / config.interact_orbit_frames)
                          for i in range(config.interact_orbit_frames)]
@@ -368,7 +385,7 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                 r.set_scene(state)
                 reference, noise = ref("orbit")
                 run = run_frames(session, method, config, reference, noise, seed=2, scenes=moves,
-                                 orbit=True)
+                                 orbit=True, meter=meter)
                 add(record(base, "orbit", method, None, run, orbit_frames=len(moves)))
                 for i, event in enumerate(edits_for(state)):
                     before, after = state, edit(state, event)
@@ -380,7 +397,7 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                         r.bake(seed=100 + i)        # the state before the edit, finished (untimed)
                         r.configure(bake_warm=variant == "warm")
                         run = run_frames(session, method, config, reference, noise, seed=3 + i,
-                                         scenes=[after])
+                                         scenes=[after], meter=meter)
                         add(record(base, event, method, variant, run))
                     state = after
                 save_png(out / "images" / f"{tag}_{grid}_{method}_final.png", session.image(method))
@@ -389,7 +406,7 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                 continue
             r.configure(bake_warm=True)
             # switch probes -> raymarcher: the same state, so the albedo reference serves
-            run = run_frames(session, "raymarch", config, reference, noise, seed=9)
+            run = run_frames(session, "raymarch", config, reference, noise, seed=9, meter=meter)
             add(record(base, "raymarch_switch", "raymarch", None, run))
             # one sample's dispatch of the raymarcher is what a camera move costs
             for method in ("raymarch", "probes", "pt"):
@@ -398,4 +415,5 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
                 _log(f"  {tag} dispatch tail {method}: {tail['ms_per_sample_1']:.3f} ms/sample at "
                      f"1, {tail['ms_per_sample_k']:.3f} at {tail['k']} per dispatch")
     session.set_methods([])
+    meter.release()
     r.set_scene(start)
