@@ -516,3 +516,20 @@ def test_the_replay_moves_an_area_light_only_where_one_is_on():
     moved = edit(lit, "light_move").area_lights[0].position
     assert moved[1] == 1.0 and math.isclose(math.hypot(moved[0], moved[2]), 1.5)
     assert math.isclose(math.degrees(math.atan2(-moved[2], moved[0])), 30.0)
+
+
+def test_the_replay_raises_a_gpus_clock_before_each_event_not_llvmpipes(ctx, monkeypatch):
+    """interact.warm_clock: nothing on a CPU rasteriser; on a GPU, GPU work for CLOCK_WARM_S of
+    wall time (the frames of an event then start at the working clock)."""
+    from radiance_probes.bench import interact
+    from radiance_probes.gl import context
+    from radiance_probes.io.scene_file import parse_scene
+    from radiance_probes.rendering.renderer import Renderer
+    r = Renderer(ctx, parse_scene({"volume": {"builtin": "cloud", "size": [8, 8, 8]}}))
+    try:
+        assert interact.warm_clock(r, 256) == 0.0
+        monkeypatch.setattr(context, "is_software", lambda ctx: False)
+        monkeypatch.setattr(interact, "CLOCK_WARM_S", 0.05)
+        assert interact.warm_clock(r, 256) >= 50.0
+    finally:
+        r.release()
