@@ -158,6 +158,8 @@ def run_frames(session, method: str, config, reference, noise: float, seed: int,
         k = int(k * 1.4) + 1
     converged = False
     measure_ms, last_point, filter_ms, parts = [], None, [], []
+    if meter is not None:
+        meter.set_reference(reference)   # its upload before the frames, not after the first
     warm_ms = warm_clock(r, config.speed_check_rays)
     for f in range(lead + config.interact_max_frames):
         start = time.perf_counter()
