@@ -6,6 +6,7 @@ records (bench/*/results.json or results.json.gz).
     python scripts/readme_tables.py headline [--records bench/h100]
     python scripts/readme_tables.py denoise [--records bench/h200-denoise]
     python scripts/readme_tables.py refine [--records bench/h200-interact-refine-56/level0-bands]
+    python scripts/readme_tables.py raymarch4k [--records bench/h200-raymarch-4k]
     python scripts/readme_tables.py --write      # rewrite every generated block in place
     python scripts/readme_tables.py --check      # exit 1 where a block is stale
 
@@ -36,8 +37,10 @@ DENOISE_RECORDS = "bench/h200-denoise"
 REFINE_RECORDS = ("bench/h200-interact-refine-56/first-use/bonsai-foot",
                   "bench/h200-interact-refine-56/first-use/chest")
 FLICKER_RECORDS = REFINE_RECORDS
+RAYMARCH_4K_RECORDS = "bench/h200-raymarch-4k"
 # The files holding generated blocks, and the blocks each holds.
-GENERATED = {"README.md": ("denoise",), "docs/benchmarks.md": ("speed", "interact", "refine"),
+GENERATED = {"README.md": ("denoise",),
+             "docs/benchmarks.md": ("speed", "interact", "refine", "raymarch4k"),
              "docs/denoising.md": ("denoise",)}
 
 # issue 11's targets: 5% and 2% on every scene, bonsai's 2% and the foot's 1% within 500 ms
@@ -229,8 +232,35 @@ def refine(records=REFINE_RECORDS, flicker=FLICKER_RECORDS) -> str:
     return "\n".join(out) + "\n"
 
 
+def raymarch4k(records: str = RAYMARCH_4K_RECORDS) -> str:
+    """The raymarcher at 3840x2160 (the interact-raymarch-4k replay): per scene, the range over
+    its events (load excluded) of the frames' p50 and p99, GPU ms (wall ms), the event whose p99
+    is largest, and the load: its first frame's wall time and its p99."""
+    recs = [r for r in _load(records)["records"] if r.get("mode") == "interact"
+            and r["method"] == "raymarch" and r["width"] == 3840]
+    out = ["| scene | frame p50, GPU (wall) | frame p99, GPU (wall) | largest p99 | load: first "
+           "frame, wall; p99 GPU (wall) |", "| --- | --- | --- | --- | --- |"]
+
+    def span(rows, key):
+        xs = [r[key] for r in rows]
+        return f"{min(xs):.1f}-{max(xs):.1f}"
+
+    for scene in sorted({r["scene"] for r in recs}, key=lambda s: (s != "bonsai", s)):
+        rows = [r for r in recs if r["scene"] == scene and r["event"] != "load"]
+        load = next((r for r in recs if r["scene"] == scene and r["event"] == "load"), None)
+        worst = max(rows, key=lambda r: r["frame_ms_p99"])
+        name = worst["event"] + (f" ({worst['variant']})" if worst.get("variant") else "")
+        loaded = "-" if load is None else (
+            f"{_ms(load['first_frame_wall_ms'])}; {load['frame_ms_p99']:.1f} "
+            f"({load['frame_wall_ms_p99']:.1f}) ms")
+        out.append(f"| {scene} | {span(rows, 'frame_ms_p50')} ({span(rows, 'frame_wall_ms_p50')}) ms "
+                   f"| {span(rows, 'frame_ms_p99')} ({span(rows, 'frame_wall_ms_p99')}) ms "
+                   f"| {name}: {worst['frame_ms_p99']:.1f} ms | {loaded} |")
+    return "\n".join(out) + "\n"
+
+
 TABLES = {"speed": speed, "interact": interact, "headline": headline, "denoise": denoise,
-          "refine": refine}
+          "refine": refine, "raymarch4k": raymarch4k}
 
 
 def block_pattern(name: str) -> re.Pattern:
@@ -292,6 +322,8 @@ def main() -> int:
         print(denoise(args.records or DENOISE_RECORDS), end="")
     elif args.table == "refine":
         print(refine(args.records or REFINE_RECORDS), end="")
+    elif args.table == "raymarch4k":
+        print(raymarch4k(args.records or RAYMARCH_4K_RECORDS), end="")
     else:
         parser.error("name a table, or --write / --check")
     return 0

@@ -5,7 +5,8 @@ of host work for 6-10 ms of GPU).
     python3 lab/experiments/frame_host_profile.py [SCENE [W H]]
 
 (PROFILE_SYNC=1: every timed block read as it ends, as before the frame's deferred spans;
-PROFILE_GRID=N: N^3 probes, for a try on llvmpipe.)
+PROFILE_GRID=N: N^3 probes, for a try on llvmpipe; PROFILE_METHOD=raymarch: the raymarcher's
+frames instead of refine's, as the 4K replay shows them.)
 
 Builds the interact-refine replay's session (RenderSession, Denoise on, 128^3 x 64 probes),
 bakes, then runs refine through three phases: a still camera after load, an orbit of 30 frames,
@@ -40,6 +41,7 @@ from radiance_probes.viewer.frame.frame_spans import FrameSpans
 from radiance_probes.viewer.frame.session import RenderSession
 
 WAIT = {"ms": 0.0}
+METHOD = os.environ.get("PROFILE_METHOD", "refine")
 _span = gl_timer._span_ms
 
 
@@ -70,7 +72,7 @@ def phase(session, label: str, frames: int, scenes=None, top: int = 18) -> None:
         prof.enable()
         if f < len(scenes):
             session.set_scene(scenes[f])
-        times = session.step(256, True)
+        times = session.step(256 if METHOD == "refine" else 1 << 20, True)
         prof.disable()
         walls.append(1e3 * (time.perf_counter() - t))
         gpus.append(times.total_ms)
@@ -128,7 +130,7 @@ def load_phase(session, frames: int = 120, top: int = 14) -> None:
                             key=lambda kv: -kv[1][3])[:2 * top]
         print(json.dumps({
             "frame": f, "wall": round(wall, 2), "gpu": round(times.total_ms, 2),
-            "wait": round(WAIT["ms"], 2), "shown": session.views["refine"].shown,
+            "wait": round(WAIT["ms"], 2), "shown": session.views[METHOD].shown,
             "parts": {k: [None if g is None else round(g, 2), round(w, 2)]
                       for k, (g, w) in times.parts.items()},
             "own": [[f"{fn[0].split('/')[-1]}:{fn[1]}:{fn[2]}", round(1e3 * st[2], 2), st[1]]
@@ -163,14 +165,14 @@ def main(name: str = "chest", width: int = 1920, height: int = 1080) -> None:
         if r.probe_grid is not None:
             r.probe_grid.release()
             r.probe_grid = None
-        session.set_methods(["refine"])
+        session.set_methods([METHOD])
         session.restart()
         load_phase(session)
         session.set_methods([])
         r.release()
         return
     r.bake(seed=1)
-    session.set_methods(["refine"])
+    session.set_methods([METHOD])
     session.restart()
     phase(session, "still", 60)
     moves = [orbit(scene, 60.0 * (i + 1) / 30) for i in range(30)]
