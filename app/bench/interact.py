@@ -46,7 +46,7 @@ CURVE_WALL_MS = 100.0
 REFINE_GOAL = (0.02, 1000.0)
 # Wall seconds of GPU work before each event's frames (warm_clock). After the replay's host work
 # (a 4K reference's noise, a PNG) the H200 sat at its idle 345 of 1980 MHz, and an event's first
-# 5-10 frames (about 250 ms) ran up to 5.7x slower (bench/h200-raymarch-4k/gpu-error).
+# 5-10 frames (about 250 ms) ran up to 5.7x slower (bench/h200-raymarch-4k/README.md).
 CLOCK_WARM_S = 0.5
 EDITS = ("tf_drag", "sun_30deg", "density", "albedo")
 # and where the scene has an area light on: the first one moved 30 degrees about the volume's
