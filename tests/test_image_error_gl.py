@@ -54,6 +54,10 @@ def test_reference_changes_and_zero_error(ctx, meter):
 def test_refusals(ctx, meter):
     with pytest.raises(ValueError, match="black"):
         meter.set_reference(np.zeros((4, 4, 3), np.float32))
+    nan = np.ones((4, 4, 3), np.float32)
+    nan[1, 2, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        meter.set_reference(nan)
     with pytest.raises(ValueError, match="expected"):
         meter.set_reference(np.ones((4, 4), np.float32))
     meter.set_reference(np.ones((4, 4, 3), np.float32))

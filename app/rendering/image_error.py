@@ -42,6 +42,8 @@ class ImageError:
         if ref.ndim != 3 or ref.shape[2] != 3:
             raise ValueError(f"reference of shape {ref.shape}: expected (height, width, 3)")
         height, width = ref.shape[:2]
+        if not np.isfinite(ref).all():   # (refused before as black: its float64 sum was NaN)
+            raise ValueError("the reference image holds NaN or infinite values")
         if not np.any(ref):   # (no float64 copy: at 4K that took 150 ms of host time)
             raise ValueError("the reference image is black: relative RMSE is undefined")
         if self._reference is None or self._reference.size != (width, height):
