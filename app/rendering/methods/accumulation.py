@@ -5,6 +5,8 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from radiance_probes.rendering.image_ops import clear_image, copy_image
+
 
 class Accumulation:
     def __init__(self, ctx: moderngl.Context, width: int, height: int):
@@ -12,9 +14,9 @@ class Accumulation:
         self.width, self.height = width, height
         self.texture = ctx.texture((width, height), 4, dtype="f4")
         self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        # cleared (and copied, snapshot) on the GPU: writing zeros from the host was a 33 MB upload
-        # per restart at 1080p, and the viewer restarts after every bake slice
-        self._framebuffer = ctx.framebuffer(color_attachments=[self.texture])
+        # cleared (and copied, snapshot) on the GPU (rendering/image_ops.py): writing zeros from
+        # the host was a 33 MB upload per restart at 1080p, and the viewer restarts after every
+        # bake slice
         self.samples = 0  # samples per pixel asked for so far (whole samples: every row's)
         # work groups (tiles of 8 x 8 pixels, raster order) [0, groups_done) of sample
         # samples + 1 are done (Renderer.add_groups: a sample split into bands over frames); 0
@@ -22,7 +24,7 @@ class Accumulation:
         self.groups_done = 0
 
     def reset(self) -> None:
-        self._framebuffer.clear(0.0, 0.0, 0.0, 0.0)
+        clear_image(self.texture)
         self.samples = 0
         self.groups_done = 0
 
@@ -42,9 +44,7 @@ class Accumulation:
         benchmark keeps one per snapshot of a timed run and reads them after the run, so the GPU
         is not left idle mid-run while the host reads an image back and measures it."""
         copy = Accumulation(self.ctx, self.width, self.height)
-        # the passes wrote this accumulation through image stores: make them visible to the copy
-        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
-        self.ctx.copy_framebuffer(copy._framebuffer, self._framebuffer)
+        copy_image(self.texture, copy.texture)
         copy.samples, copy.groups_done = self.samples, self.groups_done
         return copy
 
@@ -58,7 +58,6 @@ class Accumulation:
         return self.read_rgba()[..., :3].copy()
 
     def release(self) -> None:
-        self._framebuffer.release()
         self.texture.release()
 
 

@@ -50,6 +50,7 @@ import moderngl
 import numpy as np
 
 from radiance_probes.gl.shaders import compute_program, set_uniforms
+from radiance_probes.rendering.image_ops import clear_image, copy_image
 from radiance_probes.methods import METHODS
 from radiance_probes.rendering.methods.accumulation import Accumulation, SumAccumulation
 from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser
@@ -243,8 +244,7 @@ class HalfBuffers:
         self.half_a = Accumulation(ctx, width, height)
         self.half_a.reset()
         self.denoised_a = ctx.texture((width, height), 4, dtype="f4")
-        self._denoised_a_frame = ctx.framebuffer(color_attachments=[self.denoised_a])
-        self._denoised_a_frame.clear()
+        clear_image(self.denoised_a)
         self.groups = groups(width, height, (GROUP_SIDE, GROUP_SIDE))
         self.partials = ctx.buffer(reserve=16 * self.groups[0] * self.groups[1])
         self.sums = ctx.buffer(reserve=16)
@@ -259,9 +259,6 @@ class HalfBuffers:
         self._b_snapshot = [Accumulation(self.ctx, self.width, self.height) for _ in range(2)]
         for a in self._b_snapshot:
             a.reset()
-        self._b_frames = [ctx.framebuffer(color_attachments=[a.texture]) for a in self._b_snapshot]
-        self._b_sources = [ctx.framebuffer(color_attachments=[acc.texture])
-                           for acc in (self.halves[1].residual, self.halves[1].level0)]
 
     @property
     def counts(self) -> tuple[int, int]:
@@ -286,12 +283,7 @@ class HalfBuffers:
 
     def copy_denoised_a(self, texture: moderngl.Texture) -> None:
         """`denoised_a` copied into `texture` (RGBA32F of its size) on the GPU."""
-        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
-        # framebuffer to framebuffer (a blit keeps RGBA32F; a copy into a texture went through
-        # 8 bits a channel)
-        target = self.ctx.framebuffer(color_attachments=[texture])
-        self.ctx.copy_framebuffer(target, self._denoised_a_frame)
-        target.release()
+        copy_image(self.denoised_a, texture)
 
     def combine(self, raymarched: Accumulation | None = None, reduce: bool = False,
                 write_half_a: bool = False) -> None:
@@ -327,9 +319,9 @@ class HalfBuffers:
         """Half B's two levels copied on the GPU as they are now: a judgement begun at this
         check judges against them (dispatch_judge(from_snapshot=True)) on whichever later frame
         its filtered half A comes back, while half B grows on."""
-        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
-        for target, source in zip(self._b_frames, self._b_sources):
-            self.ctx.copy_framebuffer(target, source)
+        for target, source in zip(self._b_snapshot, (self.halves[1].residual,
+                                                     self.halves[1].level0)):
+            copy_image(source.texture, target.texture)
 
     def dispatch_judge(self, raymarched: Accumulation, from_snapshot: bool = False) -> None:
         """STAGE 3 and its reduction into `judge_sums` (read it with a read-back of that buffer):
@@ -389,8 +381,7 @@ class HalfBuffers:
             half.release()
         self.combined.release()
         for obj in (self.half_a, self.denoised_a, self._judge, self.partials, self.sums,
-                    self.judge_sums, self._combine, self._reduce, self._denoised_a_frame,
-                    *self._b_snapshot, *self._b_frames, *self._b_sources):
+                    self.judge_sums, self._combine, self._reduce, *self._b_snapshot):
             obj.release()
 
 

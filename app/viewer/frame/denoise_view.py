@@ -31,6 +31,7 @@ from radiance_probes.methods import METHODS
 from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser
 from radiance_probes.rendering.denoise.filter_worker import FilterJob, FilterWorker
 from radiance_probes.rendering.denoise.kept_means import KeptMeans
+from radiance_probes.rendering.image_ops import clear_image
 from radiance_probes.rendering.refine.refine import BlendPass
 from radiance_probes.viewer.frame.frame_parts import FrameParts
 
@@ -133,9 +134,7 @@ class ViewDenoise:
         self._fresh = []
         for _ in range(FRESH_TEXTURES):
             texture = self.ctx.texture((width, height), 4, dtype="f4")
-            frame = self.ctx.framebuffer(color_attachments=[texture])
-            frame.clear()
-            frame.release()
+            clear_image(texture)
             self._fresh.append(texture)
         if self.upload_buffer is None:
             self.upload_buffer = self.ctx.buffer(reserve=TRANSFER_BYTES_PER_FRAME)
