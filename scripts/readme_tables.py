@@ -31,11 +31,11 @@ RECORDS = "bench/h100"
 PREVIOUS = "bench/archive/h100-v12"
 INTERACT_RECORDS = "bench/h100-interact"
 DENOISE_RECORDS = "bench/h200-denoise"
-# a scene's replay from the first of these folders that holds it (the code now: first uses in a
-# load's first frame, a frame's timers read at its end, 16 MB of transfers a frame), its flicker
-# likewise from FLICKER_RECORDS
-REFINE_RECORDS = ("bench/h200-interact-refine-56/first-use/bonsai-foot",
-                  "bench/h200-interact-refine-56/first-use/chest")
+# a scene's replay from the first of these folders that holds it (the code now: accumulations
+# cleared and copied by compute passes, the error curve measured on the GPU with no pause of the
+# replay), its flicker likewise from FLICKER_RECORDS
+REFINE_RECORDS = ("bench/h200-interact-refine-56/compute-clear/bonsai-foot",
+                  "bench/h200-interact-refine-56/compute-clear/chest")
 FLICKER_RECORDS = REFINE_RECORDS
 RAYMARCH_4K_RECORDS = "bench/h200-raymarch-4k"
 # The files holding generated blocks, and the blocks each holds.

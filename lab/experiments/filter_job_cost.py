@@ -1,0 +1,119 @@
+"""Where a filter job's time goes on the filter's thread, alone and beside the viewer's frames
+(issue 56: in the interact-refine replay on the H200 at 1920x1080, once the error curve stopped
+pausing the replay for 90 ms a point, an event's filter jobs took 115-215 ms of the thread's wall
+time each and 2-3 landed in an event, against 6-9 before).
+
+    python3 lab/experiments/filter_job_cost.py OUT.jsonl [SCENE [W H]]
+
+`alone`: the viewer's shared denoiser (auto device, high quality) on a W x H RGBA image with
+albedo and normal guides, REPEATS (8) times after a warm call, signed (a residual with negative
+pixels: two filter runs) and not; per call the Denoised's own ms (prepare, filter, check, means)
+and its wall ms. `beside_frames`: refine's frames (the replay's RenderSession: 128^3 x 64 probes
+baked, Denoise on) for 300 frames on a still camera from a restart, each denoiser call on the
+filter's thread recorded the same way, with the frames' wall ms meanwhile. One JSON line a phase.
+PROFILE_GRID=N: N^3 probes (for a try on llvmpipe)."""
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import sys
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from radiance_probes.bench.config import PRESETS
+from radiance_probes.bench.scenes import bench_scene
+from radiance_probes.gl.context import create_headless_context
+from radiance_probes.rendering.denoise import filter as filter_module
+from radiance_probes.rendering.renderer import Renderer
+from radiance_probes.viewer.frame.session import RenderSession
+
+CALLS: list[dict] = []
+_call = filter_module.Denoiser._call
+
+
+def _recorded(self, *args, **kwargs):
+    t = time.perf_counter()
+    d = _call(self, *args, **kwargs)
+    CALLS.append({"wall": 1e3 * (time.perf_counter() - t), "signed": d.signed,
+                  "device": d.device, **{k: round(v, 2) for k, v in d.ms.items()}})
+    return d
+
+
+filter_module.Denoiser._call = _recorded
+
+
+def _summary(calls: list[dict]) -> dict:
+    keys = sorted({k for c in calls for k in c if k not in ("signed", "device")})
+    return {"calls": len(calls), "device": calls[0]["device"] if calls else None,
+            "signed": sum(1 for c in calls if c["signed"]),
+            **{f"{k}_median": round(statistics.median(c.get(k, 0.0) for c in calls), 2)
+               for k in keys},
+            "wall_max": round(max((c["wall"] for c in calls), default=0.0), 2)}
+
+
+def alone(out, width: int, height: int, repeats: int = 8) -> None:
+    rng = np.random.default_rng(1)
+    colour = rng.gamma(1.5, 0.3, (height, width, 4)).astype(np.float32)
+    residual = (colour - 0.45).astype(np.float32)      # a signed estimate: negatives in it
+    albedo = rng.random((height, width, 3), np.float32)
+    normal = rng.normal(size=(height, width, 3)).astype(np.float32)
+    normal /= np.linalg.norm(normal, axis=2, keepdims=True)
+    denoiser = filter_module.shared_denoiser()
+    for signed, image in ((False, colour), (True, residual)):
+        denoiser(image, albedo, normal, copy=False, signed=signed)   # warm: OIDN's first use
+        CALLS.clear()
+        for _ in range(repeats):
+            denoiser(image.copy(), albedo, normal, copy=False, signed=signed)
+        out.write(json.dumps({"phase": "alone", "signed_input": signed, "width": width,
+                              "height": height, **_summary(CALLS)}) + "\n")
+        out.flush()
+
+
+def beside_frames(out, name: str, width: int, height: int, frames: int = 300) -> None:
+    cfg = PRESETS["interact-refine"]
+    ctx = create_headless_context()
+    scene = bench_scene(name, width, height)
+    grid = int(os.environ.get("PROFILE_GRID", 128))
+    scene = scene.replace(probes=replace(scene.probes, grid=(grid, grid, grid), samples=64))
+    r = Renderer(ctx, scene)
+    session = RenderSession(ctx, scene, renderer=r, clock="gpu")
+    session.bake_budget_ms = cfg.interact_bake_budget_ms
+    session.bake_fills_frame = cfg.interact_bake_fills_frame
+    session.frame_budget_ms = cfg.interact_frame_budget_ms
+    session.denoise.set_enabled(True)
+    session.resize(width, height)
+    r.bake(seed=1)
+    session.set_methods(["refine"])
+    session.restart()
+    CALLS.clear()
+    walls, gpus, started = [], [], time.perf_counter()
+    for _ in range(frames):
+        t = time.perf_counter()
+        times = session.step(4096, True)
+        walls.append(1e3 * (time.perf_counter() - t))
+        gpus.append(times.total_ms)
+    span = 1e3 * (time.perf_counter() - started)
+    w = np.asarray(walls)
+    out.write(json.dumps({"phase": "beside_frames", "scene": name, "width": width,
+                          "height": height, "frames": frames, "span_ms": round(span, 1),
+                          "frame_wall_mean": round(float(w.mean()), 2),
+                          "frame_gpu_mean": round(float(np.mean(gpus)), 2),
+                          "samples": session.views["refine"].acc.samples,
+                          **_summary(CALLS),
+                          "per_call": CALLS[:40]}) + "\n")
+    out.flush()
+    session.set_methods([])
+    r.release()
+
+
+def main(path: str, name: str = "bonsai", width: int = 1920, height: int = 1080) -> None:
+    with open(path, "w") as out:
+        alone(out, width, height)
+        beside_frames(out, name, width, height)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], *(sys.argv[2:3] or ["bonsai"]), *map(int, sys.argv[3:5]))
