@@ -8,10 +8,14 @@ time each and 2-3 landed in an event, against 6-9 before).
 `alone`: the viewer's shared denoiser (auto device, high quality) on a W x H RGBA image with
 albedo and normal guides, REPEATS (8) times after a warm call, signed (a residual with negative
 pixels: two filter runs) and not; per call the Denoised's own ms (prepare, filter, check, means)
-and its wall ms. `beside_frames`: refine's frames (the replay's RenderSession: 128^3 x 64 probes
+its wall ms and the thread's CPU ms (time.thread_time: beside the wall ms, what the
+thread waited). `beside_frames`: refine's frames (the replay's RenderSession: 128^3 x 64 probes
 baked, Denoise on) for 300 frames on a still camera from a restart, each denoiser call on the
 filter's thread recorded the same way, with the frames' wall ms meanwhile. One JSON line a phase.
-PROFILE_GRID=N: N^3 probes (for a try on llvmpipe)."""
+PROFILE_GRID=N: N^3 probes (for a try on llvmpipe). SWITCH_MS=X: the interpreter's switch interval
+(sys.setswitchinterval) set to X ms first (Python's default 5 ms): how long a thread that wants
+the GIL back waits for one that holds it.
+PHASES=alone,beside_frames: the phases to run."""
 from __future__ import annotations
 
 import json
@@ -35,9 +39,10 @@ _call = filter_module.Denoiser._call
 
 
 def _recorded(self, *args, **kwargs):
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), time.thread_time()
     d = _call(self, *args, **kwargs)
-    CALLS.append({"wall": 1e3 * (time.perf_counter() - t), "signed": d.signed,
+    CALLS.append({"wall": 1e3 * (time.perf_counter() - t),
+                  "thread_cpu": 1e3 * (time.thread_time() - cpu), "signed": d.signed,
                   "device": d.device, **{k: round(v, 2) for k, v in d.ms.items()}})
     return d
 
@@ -110,9 +115,15 @@ def beside_frames(out, name: str, width: int, height: int, frames: int = 300) ->
 
 
 def main(path: str, name: str = "bonsai", width: int = 1920, height: int = 1080) -> None:
+    if os.environ.get("SWITCH_MS"):
+        sys.setswitchinterval(float(os.environ["SWITCH_MS"]) / 1e3)
+    phases = os.environ.get("PHASES", "alone,beside_frames").split(",")
     with open(path, "w") as out:
-        alone(out, width, height)
-        beside_frames(out, name, width, height)
+        out.write(json.dumps({"switch_interval_ms": 1e3 * sys.getswitchinterval()}) + "\n")
+        if "alone" in phases:
+            alone(out, width, height)
+        if "beside_frames" in phases:
+            beside_frames(out, name, width, height)
 
 
 if __name__ == "__main__":
