@@ -8,7 +8,7 @@ time each and 2-3 landed in an event, against 6-9 before).
 `alone`: the viewer's shared denoiser (auto device, high quality) on a W x H RGBA image with
 albedo and normal guides, REPEATS (8) times after a warm call, signed (a residual with negative
 pixels: two filter runs) and not; per call the Denoised's own ms (prepare, filter, check, means)
-its wall ms and the thread's CPU ms (time.thread_time: beside the wall ms, what the
+its wall ms, the thread's CPU ms and the calls' own profile (functions by own time), (time.thread_time: beside the wall ms, what the
 thread waited). `beside_frames`: refine's frames (the replay's RenderSession: 128^3 x 64 probes
 baked, Denoise on) for 300 frames on a still camera from a restart, each denoiser call on the
 filter's thread recorded the same way, with the frames' wall ms meanwhile. One JSON line a phase.
@@ -18,8 +18,10 @@ the GIL back waits for one that holds it.
 PHASES=alone,beside_frames: the phases to run."""
 from __future__ import annotations
 
+import cProfile
 import json
 import os
+import pstats
 import statistics
 import sys
 import time
@@ -35,12 +37,17 @@ from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.viewer.frame.session import RenderSession
 
 CALLS: list[dict] = []
+PROFILE = {"p": cProfile.Profile()}   # the calls' own profile (on whichever thread makes them)
 _call = filter_module.Denoiser._call
 
 
 def _recorded(self, *args, **kwargs):
     t, cpu = time.perf_counter(), time.thread_time()
-    d = _call(self, *args, **kwargs)
+    PROFILE["p"].enable()
+    try:
+        d = _call(self, *args, **kwargs)
+    finally:
+        PROFILE["p"].disable()
     CALLS.append({"wall": 1e3 * (time.perf_counter() - t),
                   "thread_cpu": 1e3 * (time.thread_time() - cpu), "signed": d.signed,
                   "device": d.device, **{k: round(v, 2) for k, v in d.ms.items()}})
@@ -50,13 +57,24 @@ def _recorded(self, *args, **kwargs):
 filter_module.Denoiser._call = _recorded
 
 
+def _top(n: int = 12) -> list:
+    """The calls' functions by own time (ms per call), then the profile starts anew."""
+    stats = pstats.Stats(PROFILE["p"])
+    calls = max(len(CALLS), 1)
+    rows = sorted(stats.stats.items(), key=lambda kv: -kv[1][2])[:n]
+    PROFILE["p"] = cProfile.Profile()
+    return [[f"{fn[0].split('/')[-1]}:{fn[1]}:{fn[2]}", round(1e3 * st[2] / calls, 2), st[1]]
+            for fn, st in rows]
+
+
 def _summary(calls: list[dict]) -> dict:
     keys = sorted({k for c in calls for k in c if k not in ("signed", "device")})
     return {"calls": len(calls), "device": calls[0]["device"] if calls else None,
             "signed": sum(1 for c in calls if c["signed"]),
             **{f"{k}_median": round(statistics.median(c.get(k, 0.0) for c in calls), 2)
                for k in keys},
-            "wall_max": round(max((c["wall"] for c in calls), default=0.0), 2)}
+            "wall_max": round(max((c["wall"] for c in calls), default=0.0), 2),
+            "own_ms_per_call": _top()}
 
 
 def alone(out, width: int, height: int, repeats: int = 8) -> None:
@@ -70,6 +88,7 @@ def alone(out, width: int, height: int, repeats: int = 8) -> None:
     for signed, image in ((False, colour), (True, residual)):
         denoiser(image, albedo, normal, copy=False, signed=signed)   # warm: OIDN's first use
         CALLS.clear()
+        PROFILE["p"] = cProfile.Profile()
         for _ in range(repeats):
             denoiser(image.copy(), albedo, normal, copy=False, signed=signed)
         out.write(json.dumps({"phase": "alone", "signed_input": signed, "width": width,
@@ -94,6 +113,7 @@ def beside_frames(out, name: str, width: int, height: int, frames: int = 300) ->
     session.set_methods(["refine"])
     session.restart()
     CALLS.clear()
+    PROFILE["p"] = cProfile.Profile()
     walls, gpus, started = [], [], time.perf_counter()
     for _ in range(frames):
         t = time.perf_counter()
