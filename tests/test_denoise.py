@@ -365,3 +365,20 @@ def test_pyoidn_is_imported_without_torch(tmp_path, monkeypatch):
         # the stand-ins out of sys.modules (monkeypatch puts back what was there before)
         sys.modules.pop("torch", None)
         sys.modules.pop("pyoidn", None)
+
+
+@pytest.mark.parametrize("signed", [False, True])
+def test_an_rgba_colour_filters_as_its_rgb_whatever_its_alpha(cpu_denoiser, signed):
+    """An RGBA colour (the viewer's accumulations: alpha the sample count) is copied whole into
+    the filter's buffer; its alpha, even NaN or infinite, changes nothing in the image, the
+    means kept or the checks."""
+    _, noisy = _clean_and_noisy(seed=3, size=40)
+    if signed:
+        noisy = noisy - 0.6 * noisy.mean()
+    alpha = np.full(noisy.shape[:2] + (1,), 64.0, np.float32)
+    alpha[3, 5], alpha[7, 1], alpha[0, 0] = np.nan, np.inf, 3e38
+    rgba = np.ascontiguousarray(np.concatenate([noisy, alpha], axis=2))
+    a = cpu_denoiser(noisy, signed=signed).image.copy()
+    b = cpu_denoiser(rgba, signed=signed).image.copy()
+    np.testing.assert_array_equal(a, b)
+    assert np.isfinite(b).all()
