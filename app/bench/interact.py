@@ -325,16 +325,24 @@ def dispatch_tail(r, method: str, k: int, seed: int = 99) -> dict:
             "k": k}
 
 
-def interact_scene(renderer, name: str, config, results, out, device: str, reference_of) -> None:
-    """`reference_of(renderer, key, config)`: the runner's cached path-traced reference of the
-    renderer's current scene under `key` (refs/KEY.npy, reused from --ref-dir)."""
+def replay_session(renderer, config):
+    """The replay's RenderSession over `renderer` and its scene, GPU and wall times apart, with
+    `config`'s bake and frame budgets (the viewer's); the lab's frame profiles build theirs here
+    too, so that they profile the frames the replay times."""
     from radiance_probes.viewer.frame.session import RenderSession
-    r = renderer
-    start = r.scene
-    session = RenderSession(r.ctx, start, renderer=r, clock="gpu")   # GPU and wall times apart
+    session = RenderSession(renderer.ctx, renderer.scene, renderer=renderer, clock="gpu")
     session.bake_budget_ms = config.interact_bake_budget_ms
     session.bake_fills_frame = config.interact_bake_fills_frame   # as the viewer's
     session.frame_budget_ms = config.interact_frame_budget_ms
+    return session
+
+
+def interact_scene(renderer, name: str, config, results, out, device: str, reference_of) -> None:
+    """`reference_of(renderer, key, config)`: the runner's cached path-traced reference of the
+    renderer's current scene under `key` (refs/KEY.npy, reused from --ref-dir)."""
+    r = renderer
+    start = r.scene
+    session = replay_session(r, config)
     meter = ImageError(r.ctx)   # the error curve's points measured on the GPU (shown_error)
     if config.interact_denoise is not None:
         session.denoise.set_enabled(config.interact_denoise)

@@ -24,9 +24,10 @@ _programs: "weakref.WeakKeyDictionary[moderngl.Context, dict[str, ComputeProgram
     weakref.WeakKeyDictionary()
 
 
-def uses_compute(ctx: moderngl.Context) -> bool:
-    """Whether this device clears and copies images with compute passes (see the module's text)."""
-    return not is_software(ctx)
+def uses_compute(ctx: moderngl.Context, compute: bool | None = None) -> bool:
+    """Whether images are cleared and copied with compute passes: `compute` where given (a
+    caller forcing the way), else this device's way (see the module's text)."""
+    return (not is_software(ctx)) if compute is None else compute
 
 
 def _pass(ctx: moderngl.Context, kind: str) -> ComputeProgram:
@@ -55,7 +56,7 @@ def clear_image(texture: moderngl.Texture, compute: bool | None = None) -> None:
     """Zeroes an RGBA32F texture (`compute`: force the way; None: this device's)."""
     ctx = texture.ctx
     _check_rgba32f(texture, "clear_image")
-    if compute if compute is not None else uses_compute(ctx):
+    if uses_compute(ctx, compute):
         texture.bind_to_image(TARGET_UNIT, read=False, write=True)
         _run(ctx, _pass(ctx, "clear"), texture.size)
         return
@@ -74,7 +75,7 @@ def copy_image(source: moderngl.Texture, target: moderngl.Texture,
     if source.size != target.size:
         raise ValueError(f"copy_image: source {source.size[0]}x{source.size[1]} and target "
                          f"{target.size[0]}x{target.size[1]} differ in size")
-    if compute if compute is not None else uses_compute(ctx):
+    if uses_compute(ctx, compute):
         source.bind_to_image(SOURCE_UNIT, read=True, write=False)
         target.bind_to_image(TARGET_UNIT, read=False, write=True)
         _run(ctx, _pass(ctx, "copy"), source.size)

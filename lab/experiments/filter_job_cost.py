@@ -30,11 +30,11 @@ from dataclasses import replace
 import numpy as np
 
 from radiance_probes.bench.config import PRESETS
+from radiance_probes.bench.interact import replay_session
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context
 from radiance_probes.rendering.denoise import filter as filter_module
 from radiance_probes.rendering.renderer import Renderer
-from radiance_probes.viewer.frame.session import RenderSession
 
 CALLS: list[dict] = []
 PROFILE = {"p": cProfile.Profile()}   # the calls' own profile (on whichever thread makes them)
@@ -103,10 +103,7 @@ def beside_frames(out, name: str, width: int, height: int, frames: int = 300) ->
     grid = int(os.environ.get("PROFILE_GRID", 128))
     scene = scene.replace(probes=replace(scene.probes, grid=(grid, grid, grid), samples=64))
     r = Renderer(ctx, scene)
-    session = RenderSession(ctx, scene, renderer=r, clock="gpu")
-    session.bake_budget_ms = cfg.interact_bake_budget_ms
-    session.bake_fills_frame = cfg.interact_bake_fills_frame
-    session.frame_budget_ms = cfg.interact_frame_budget_ms
+    session = replay_session(r, cfg)
     session.denoise.set_enabled(True)
     session.resize(width, height)
     r.bake(seed=1)

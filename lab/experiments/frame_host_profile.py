@@ -32,13 +32,12 @@ from dataclasses import replace
 import numpy as np
 
 from radiance_probes.bench.config import PRESETS
-from radiance_probes.bench.interact import drag_opacity, orbit
+from radiance_probes.bench.interact import drag_opacity, orbit, replay_session
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl import timer as gl_timer
 from radiance_probes.gl.context import create_headless_context
 from radiance_probes.rendering.renderer import Renderer
 from radiance_probes.viewer.frame.frame_spans import FrameSpans
-from radiance_probes.viewer.frame.session import RenderSession
 
 WAIT = {"ms": 0.0}
 METHOD = os.environ.get("PROFILE_METHOD", "refine")
@@ -152,10 +151,7 @@ def main(name: str = "chest", width: int = 1920, height: int = 1080) -> None:
     grid = int(os.environ.get("PROFILE_GRID", 128))   # (a small grid for a try on llvmpipe)
     scene = scene.replace(probes=replace(scene.probes, grid=(grid, grid, grid), samples=64))
     r = Renderer(ctx, scene)
-    session = RenderSession(ctx, scene, renderer=r, clock="gpu")
-    session.bake_budget_ms = cfg.interact_bake_budget_ms
-    session.bake_fills_frame = cfg.interact_bake_fills_frame
-    session.frame_budget_ms = cfg.interact_frame_budget_ms
+    session = replay_session(r, cfg)
     session.denoise.set_enabled(True)
     session.resize(width, height)
     if os.environ.get("PROFILE_LOAD"):
