@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import builtins
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -382,3 +383,131 @@ def test_an_rgba_colour_filters_as_its_rgb_whatever_its_alpha(cpu_denoiser, sign
     b = cpu_denoiser(rgba, signed=signed).image.copy()
     np.testing.assert_array_equal(a, b)
     assert np.isfinite(b).all()
+
+
+def test_a_signed_image_is_its_two_parts_filtered_apart(cpu_denoiser):
+    """A signed image is filtered as its positive and its negative part, each by a filter of
+    its own (the negative part written straight into its colour): the result is the two
+    parts filtered alone, their difference; the caller's colour is left as it was."""
+    _, noisy = _clean_and_noisy(seed=5, size=48)
+    noisy = noisy - 0.7 * noisy.mean()
+    given = noisy.copy()
+    pos = cpu_denoiser(np.maximum(noisy, 0.0), keep_means=False).image.copy()
+    neg = cpu_denoiser(np.maximum(-noisy, 0.0), keep_means=False).image.copy()
+    d = cpu_denoiser(noisy, signed=True, keep_means=False)
+    assert d.signed and d.denoised
+    np.testing.assert_allclose(d.image, pos - neg, rtol=1e-5, atol=1e-6)
+    np.testing.assert_array_equal(noisy, given)
+    # an image with no negative pixel is one run, not signed
+    assert not cpu_denoiser(np.abs(noisy), signed=True).signed
+
+
+def test_a_guide_written_in_place_is_the_guide_given(cpu_denoiser):
+    """guide_staging's memory, written and passed as the guide, filters as the same guide
+    given as an array of its own; written anew, the new one is read, not the last."""
+    clean, noisy = _clean_and_noisy(seed=6, size=40)
+    albedo = np.clip(clean / clean.max(), 0.0, 1.0)
+    h, w = noisy.shape[:2]
+    a = cpu_denoiser(noisy, albedo).image.copy()
+    view = cpu_denoiser.guide_staging(w, h, ("albedo",), "albedo")
+    assert view.shape == (h, w, 3) and view.dtype == np.float32
+    view[...] = albedo
+    np.testing.assert_array_equal(cpu_denoiser(noisy, view).image, a)
+    view[...] = 0.2 * albedo[::-1]
+    b = cpu_denoiser(noisy, view).image.copy()
+    c = cpu_denoiser(noisy, (0.2 * albedo[::-1]).copy()).image.copy()
+    np.testing.assert_array_equal(b, c)
+    assert np.abs(b - a).max() > 1e-3
+    with pytest.raises(ValueError, match="normal"):
+        cpu_denoiser.guide_staging(w, h, ("albedo",), "normal")
+
+
+def test_tile_means_given_are_kept_as_its_own(cpu_denoiser):
+    """raw_means (a GPU pass's, vec4 a tile) give the image _block_means would: the same
+    result; a non-finite mean makes the colour usable and the means made again; a wrong shape
+    is refused, naming it, and the denoiser stays usable."""
+    from radiance_probes.rendering.denoise.filter import KEEP_MEANS_BLOCK, _block_means
+    _, noisy = _clean_and_noisy(seed=7, size=70)
+    means = _block_means(noisy, KEEP_MEANS_BLOCK)
+    gpu_like = np.concatenate([means, np.zeros(means.shape[:2] + (1,))], axis=2)
+    a = cpu_denoiser(noisy).image.copy()
+    b = cpu_denoiser(noisy, raw_means=gpu_like.astype(np.float32)).image.copy()
+    np.testing.assert_allclose(b, a, rtol=1e-5, atol=1e-6)
+    broken = noisy.copy()
+    broken[3, 4, 1] = np.nan
+    bad = gpu_like.copy()
+    bad[0, 0, 1] = np.nan
+    c = cpu_denoiser(broken, raw_means=bad).image.copy()
+    d = cpu_denoiser(broken).image.copy()
+    np.testing.assert_array_equal(c, d)
+    assert np.isfinite(c).all()
+    with pytest.raises(ValueError, match="raw_means"):
+        cpu_denoiser(noisy, raw_means=gpu_like[1:])
+    assert cpu_denoiser.failure is None and cpu_denoiser(noisy).denoised
+
+
+def test_radiance_as_albedo_into_a_buffer_of_its_own():
+    """radiance_as_albedo's `out` holds what it returns without one, NaN, infinite and
+    negative values as 0, from an RGBA image as from its RGB; a wrong `out` is refused."""
+    from radiance_probes.rendering.denoise.filter import radiance_as_albedo
+    rng = np.random.default_rng(8)
+    image = rng.gamma(2.0, 0.5, (30, 20, 4)).astype(np.float32)
+    image[1, 2, 0], image[3, 3, 2], image[5, 1, 1], image[0, 0, 3] = np.nan, np.inf, -2.0, np.nan
+    want = radiance_as_albedo(image[..., :3].copy())
+    out = np.full((30, 20, 3), 7.0, np.float32)
+    got = radiance_as_albedo(image, out=out)
+    assert got is out
+    np.testing.assert_array_equal(out, want)
+    assert out.min() >= 0.0 and out.max() <= 1.0 and out[1, 2, 0] == 0.0 and out[3, 3, 2] == 0.0
+    # the scale is the quantile of the largest channel of the image made usable
+    usable = sanitize(image[..., :3])
+    scale = np.quantile(usable.max(axis=2), denoise_module.ALBEDO_SCALE_QUANTILE)
+    np.testing.assert_allclose(want, np.clip(usable / scale, 0, 1), rtol=1e-6)
+    with pytest.raises(ValueError, match="out"):
+        radiance_as_albedo(image, out=np.zeros((30, 20, 4), np.float32))
+
+
+def test_the_filter_thread_writes_the_probes_guide_in_place(cpu_denoiser):
+    """A job with the raymarched image as its guide: the thread writes the guide into the
+    denoiser's memory; the image is the one the guide given as an array gives."""
+    from radiance_probes.rendering.denoise.filter import radiance_as_albedo
+    from radiance_probes.rendering.denoise.filter_worker import FilterJob, FilterWorker
+    clean, noisy = _clean_and_noisy(seed=9, size=36)
+    ray = np.concatenate([clean, np.ones(clean.shape[:2] + (1,), np.float32)], axis=2)
+    want = cpu_denoiser(noisy, radiance_as_albedo(ray.copy()), copy=True).image
+    worker = FilterWorker(cpu_denoiser)
+    try:
+        worker.submit("v", FilterJob(noisy, probe_radiance=ray, tag=1))
+        result = None
+        for _ in range(500):
+            result = worker.take("v")
+            if result is not None:
+                break
+            time.sleep(0.01)
+        assert result is not None and result.rgba is not None
+        np.testing.assert_array_equal(result.rgba[..., :3], want)
+        assert (result.rgba[..., 3] == 1.0).all()
+    finally:
+        worker.close()
+
+
+@pytest.mark.parametrize("case", ["finite", "nan", "inf", "-inf", "negative", "float64"])
+def test_radiance_as_albedo_is_the_sanitized_images_scaled(case):
+    """Whichever way radiance_as_albedo goes (a finite float32 image divided as it is; else
+    made usable first), the guide is the sanitized image over the quantile of its largest
+    channel, clipped to [0, 1]: bit for bit what dividing the sanitized copy gives."""
+    from radiance_probes.rendering.denoise.filter import radiance_as_albedo
+    rng = np.random.default_rng(11)
+    image = rng.gamma(2.0, 0.5, (25, 31, 3)).astype(np.float32)
+    image[2, 3, 1] = {"finite": 1.0, "nan": np.nan, "inf": np.inf, "-inf": -np.inf,
+                      "negative": -3.0, "float64": 2.0}[case]
+    image[4, 4] = -1.0
+    if case == "float64":
+        image = image.astype(np.float64)
+    usable = sanitize(image)
+    peak = usable.max(axis=2)
+    want = np.clip(usable / np.float32(np.quantile(peak, denoise_module.ALBEDO_SCALE_QUANTILE)),
+                   0.0, 1.0)
+    got = radiance_as_albedo(image)
+    assert got.dtype == np.float32 and got.shape == image.shape
+    np.testing.assert_array_equal(got, want.astype(np.float32))

@@ -336,3 +336,107 @@ def test_a_filtered_image_lands_whole_under_a_small_transfer_budget(ctx, monkeyp
         assert np.all(shown == shown.flat[0]) and shown.flat[0] >= 1
     finally:
         s.release()
+
+
+class MeansRecorder(SlowFilter):
+    """A stand-in that keeps each call's colour and the tile means it was handed."""
+
+    def __init__(self):
+        super().__init__(delay=0.0)
+        self.seen = []
+
+    def __call__(self, colour, albedo=None, normal=None, copy=True, signed=False, **kw):
+        means = kw.get("raw_means")
+        self.seen.append((np.array(colour, np.float32), None if means is None else means.copy()))
+        return super().__call__(colour, albedo, normal, copy, signed, **kw)
+
+
+@pytest.mark.parametrize("method", ["pt", "refine"])
+def test_the_filter_is_handed_its_colours_tile_means_made_on_the_gpu(ctx, monkeypatch, method):
+    """Every filter job of the viewer (a view's image; refine's judgement of half A) carries the
+    tile means of its colour, made by glsl/tile_means.comp over the texture read back: they are
+    the host's _block_means of the image the thread receives (partial edge tiles too)."""
+    from radiance_probes.rendering.denoise.filter import KEEP_MEANS_BLOCK, _block_means
+    stand_in = MeansRecorder()
+    s = _session(ctx, monkeypatch, stand_in, [method], 1 << 12, method == "refine")
+    try:
+        s.resize(70, 40)      # 3 x 2 tiles of 32, the last of each row and column partial
+        end = time.monotonic() + 60
+        while len(stand_in.seen) < 3 and time.monotonic() < end:
+            s.step(1 << 12, method == "refine")
+            time.sleep(0.005)
+        assert len(stand_in.seen) >= 3
+        for colour, means in stand_in.seen:
+            assert colour.shape[:2] == (40, 70) and means is not None
+            want = _block_means(colour[..., :3], KEEP_MEANS_BLOCK)
+            assert means.shape == want.shape == (2, 3, 3)
+            np.testing.assert_allclose(means, want, rtol=2e-5, atol=1e-7)
+    finally:
+        s.release()
+
+
+def test_host_arrays_are_handed_out_in_turn_and_made_anew_for_a_new_shape():
+    """HostArrays: two arrays a key in turn (a third read-back writes the first again), keys
+    apart, a new shape new arrays; PendingRead refuses an `out` that is not its shape."""
+    from radiance_probes.gl.fence import HostArrays
+    host = HostArrays(2)
+    a, b = host.next("k", (4, 3, 4)), host.next("k", (4, 3, 4))
+    assert a is not b and host.next("k", (4, 3, 4)) is a and host.next("k", (4, 3, 4)) is b
+    assert host.next("other", (4, 3, 4)) is not a
+    c = host.next("k", (2, 2, 4))
+    assert c.shape == (2, 2, 4) and c.dtype == np.float32 and c is not a and c is not b
+    with pytest.raises(ValueError, match="count"):
+        HostArrays(0)
+
+
+def test_a_read_back_fills_the_host_array_it_is_given(ctx):
+    """A read-back copies into the kept array it is handed (no array of its own), and refuses
+    one of another shape, naming both."""
+    from radiance_probes.gl.fence import PendingRead, TransferBudget
+    texture = ctx.texture((5, 3), 4, dtype="f4")
+    data = np.arange(60, dtype=np.float32).reshape(3, 5, 4)
+    texture.write(data.tobytes())
+    read = PendingRead(ctx, texture, ctx.buffer(reserve=data.nbytes))
+    kept = np.zeros((3, 5, 4), np.float32)
+    read.out = kept
+    while not read.ready():
+        pass
+    assert read.read_some(TransferBudget(1 << 20))
+    assert read.out is kept
+    np.testing.assert_array_equal(kept, data)
+    wrong = PendingRead(ctx, texture, ctx.buffer(reserve=data.nbytes))
+    wrong.out = np.zeros((5, 3, 4), np.float32)
+    while not wrong.ready():
+        pass
+    with pytest.raises(ValueError, match=r"\(5, 3, 4\).*\(3, 5, 4\)"):
+        wrong.read_some(TransferBudget(1 << 20))
+
+
+def test_a_recycled_result_array_is_written_by_a_later_job_only():
+    """FilterWorker.recycle: a result's array given back is the next result's (no new one), an
+    array still held is never reused, and one of another size is not kept."""
+    from radiance_probes.rendering.denoise.filter_worker import FilterJob, FilterWorker
+    worker = FilterWorker(SlowFilter(delay=0.0))
+
+    def run(tag, shape=(4, 6, 4)):
+        worker.submit("v", FilterJob(np.ones(shape, np.float32), tag=tag))
+        end = time.monotonic() + 10
+        while time.monotonic() < end:
+            got = worker.take("v")
+            if got is not None:
+                return got
+            time.sleep(0.005)
+        raise AssertionError("no result")
+    try:
+        first = run(1)
+        second = run(2)
+        assert second.rgba is not first.rgba                 # first still held
+        assert (first.rgba[..., 0] == 1.0).all()             # and untouched
+        worker.recycle(first.rgba)
+        third = run(3)
+        assert third.rgba is first.rgba and (third.rgba[..., 0] == 3.0).all()
+        worker.recycle(second.rgba)
+        other = run(4, (2, 2, 4))
+        assert other.rgba is not second.rgba and other.rgba.shape == (2, 2, 4)
+    finally:
+        worker.close()

@@ -118,10 +118,14 @@ class PendingRead:
 
     def read_some(self, budget: "TransferBudget") -> bool:
         """The host copy in parts: as many bytes as `budget` has left this frame (into `out`,
-        made on the first call); True once the whole copy is made. The fence must have
-        signalled (ready())."""
+        made on the first call where the caller did not set it: a float32 array of `shape`,
+        HostArrays.next); True once the whole copy is made. The fence must have signalled
+        (ready())."""
         if self.out is None:
             self.out = np.empty(self.shape, np.float32)
+        elif self.out.shape != self.shape or self.out.dtype != np.float32:
+            raise ValueError(f"read_some: out is {self.out.shape} {self.out.dtype}, the read-back "
+                             f"{self.shape} float32")
         want = budget.take(self.nbytes - self.copied)
         if want:
             self.staging.read_into(self.out, size=want, offset=self.copied,
@@ -134,6 +138,39 @@ class PendingRead:
 
     def release(self) -> None:
         self.fence.release()
+
+
+class HostArrays:
+    """The host arrays read-backs copy into (PendingRead.out), kept and handed out in turn,
+    `count` a key: a 1080p RGBA32F image made anew for every read-back is 33 MB of fresh pages,
+    each first written on the frame that copies into it, and dropped again later. Reused, the
+    host copies write memory that is already mapped. An array handed out is written again only
+    `count` read-backs of its key later: a caller holds at most count - 1 of its key's arrays
+    (the viewer's filter jobs: one image under way a key, the one before it at most still read
+    by a job that was dropped)."""
+
+    def __init__(self, count: int = 2):
+        if count < 1:
+            raise ValueError(f"HostArrays: count must be at least 1, got {count}")
+        self.count = count
+        self._kept: dict = {}        # key -> (arrays, the next one's index)
+
+    def next(self, key, shape: tuple) -> np.ndarray:
+        """The next float32 array of `shape` for `key` (new ones until `count` are kept; all
+        made anew where the shape changed)."""
+        arrays, turn = self._kept.get(key, ([], 0))
+        if arrays and arrays[0].shape != tuple(shape):
+            arrays, turn = [], 0
+        if len(arrays) < self.count:
+            arrays.append(np.empty(shape, np.float32))
+            out = arrays[-1]
+        else:
+            out = arrays[turn % self.count]
+        self._kept[key] = (arrays, turn + 1)
+        return out
+
+    def clear(self) -> None:
+        self._kept.clear()
 
 
 class TransferBudget:

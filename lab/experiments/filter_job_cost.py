@@ -15,13 +15,17 @@ filter's thread recorded the same way, with the frames' wall ms meanwhile. One J
 PROFILE_GRID=N: N^3 probes (for a try on llvmpipe). SWITCH_MS=X: the interpreter's switch interval
 (sys.setswitchinterval) set to X ms first (Python's default 5 ms): how long a thread that wants
 the GIL back waits for one that holds it.
-PHASES=alone,beside_frames: the phases to run."""
+PHASES=alone,beside_frames: the phases to run. PROFILE=0: the calls not profiled (cProfile's own
+cost out of their times). Each call and each whole job (FilterWorker._filter: the guide, the
+call, the result's copy) also records the thread's user and system ms and minor page faults
+(getrusage of the thread), and beside_frames the main thread's over the frames."""
 from __future__ import annotations
 
 import cProfile
 import json
 import os
 import pstats
+import resource
 import statistics
 import sys
 import time
@@ -34,6 +38,7 @@ from radiance_probes.bench.interact import replay_session
 from radiance_probes.bench.scenes import bench_scene
 from radiance_probes.gl.context import create_headless_context
 from radiance_probes.rendering.denoise import filter as filter_module
+from radiance_probes.rendering.denoise import filter_worker
 from radiance_probes.rendering.renderer import Renderer
 
 CALLS: list[dict] = []
@@ -41,24 +46,54 @@ PROFILE = {"p": cProfile.Profile()}   # the calls' own profile (on whichever thr
 _call = filter_module.Denoiser._call
 
 
+def _usage() -> tuple[float, float, int]:
+    """The calling thread's (user ms, system ms, minor page faults) so far."""
+    u = resource.getrusage(resource.RUSAGE_THREAD)
+    return 1e3 * u.ru_utime, 1e3 * u.ru_stime, u.ru_minflt
+
+
 def _recorded(self, *args, **kwargs):
-    t, cpu = time.perf_counter(), time.thread_time()
-    PROFILE["p"].enable()
+    t, cpu, use = time.perf_counter(), time.thread_time(), _usage()
+    if os.environ.get("PROFILE", "1") == "1":
+        PROFILE["p"].enable()
     try:
         d = _call(self, *args, **kwargs)
     finally:
         PROFILE["p"].disable()
+    after = _usage()
     CALLS.append({"wall": 1e3 * (time.perf_counter() - t),
                   "thread_cpu": 1e3 * (time.thread_time() - cpu), "signed": d.signed,
+                  "user_ms": round(after[0] - use[0], 1), "system_ms": round(after[1] - use[1], 1),
+                  "page_faults": after[2] - use[2],
                   "device": d.device, **{k: round(v, 2) for k, v in d.ms.items()}})
     return d
 
 
 filter_module.Denoiser._call = _recorded
+JOBS: list[dict] = []      # the filter thread's whole jobs (FilterWorker._filter)
+_job = filter_worker.FilterWorker._filter
+
+
+def _job_recorded(self, job):
+    t, use = time.perf_counter(), _usage()
+    result = _job(self, job)
+    after = _usage()
+    JOBS.append({"wall": round(1e3 * (time.perf_counter() - t), 2), "signed": job.signed,
+                 "gpu_means": getattr(job, "raw_means", None) is not None,
+                 "probe_guide": job.probe_radiance is not None,
+                 "user_ms": round(after[0] - use[0], 1), "system_ms": round(after[1] - use[1], 1),
+                 "page_faults": after[2] - use[2],
+                 **{k: round(v, 2) for k, v in result.ms.items()}})
+    return result
+
+
+filter_worker.FilterWorker._filter = _job_recorded
 
 
 def _top(n: int = 12) -> list:
     """The calls' functions by own time (ms per call), then the profile starts anew."""
+    if os.environ.get("PROFILE", "1") != "1":
+        return []
     stats = pstats.Stats(PROFILE["p"])
     calls = max(len(CALLS), 1)
     rows = sorted(stats.stats.items(), key=lambda kv: -kv[1][2])[:n]
@@ -110,21 +145,31 @@ def beside_frames(out, name: str, width: int, height: int, frames: int = 300) ->
     session.set_methods(["refine"])
     session.restart()
     CALLS.clear()
+    JOBS.clear()
     PROFILE["p"] = cProfile.Profile()
     walls, gpus, started = [], [], time.perf_counter()
+    main_before = _usage()
     for _ in range(frames):
         t = time.perf_counter()
         times = session.step(4096, True)
         walls.append(1e3 * (time.perf_counter() - t))
         gpus.append(times.total_ms)
     span = 1e3 * (time.perf_counter() - started)
+    main_after = _usage()
     w = np.asarray(walls)
+    jobs = {"jobs": len(JOBS), **{f"job_{k}_median": round(statistics.median(j[k] for j in JOBS), 2)
+                                  for k in ("wall", "guide_ms", "filter_ms", "copy_ms", "user_ms",
+                                            "system_ms", "page_faults") if JOBS},
+            "main_thread": {"user_ms": round(main_after[0] - main_before[0], 1),
+                            "system_ms": round(main_after[1] - main_before[1], 1),
+                            "page_faults": main_after[2] - main_before[2]},
+            "per_job": JOBS[:40]}
     out.write(json.dumps({"phase": "beside_frames", "scene": name, "width": width,
                           "height": height, "frames": frames, "span_ms": round(span, 1),
                           "frame_wall_mean": round(float(w.mean()), 2),
                           "frame_gpu_mean": round(float(np.mean(gpus)), 2),
                           "samples": session.views["refine"].acc.samples,
-                          **_summary(CALLS),
+                          **_summary(CALLS), **jobs,
                           "per_call": CALLS[:40]}) + "\n")
     out.flush()
     session.set_methods([])

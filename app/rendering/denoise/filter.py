@@ -205,21 +205,42 @@ def keep_block_means(raw_means: np.ndarray, filtered: np.ndarray, block: int = K
                  _cell_field(add, h, w, block, cell), cell)
 
 
-def radiance_as_albedo(image: np.ndarray) -> np.ndarray:
+def radiance_as_albedo(image: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """A noise-free radiance image (the raymarched probes) as an albedo guide: divided by one
     scale, the ALBEDO_SCALE_QUANTILE quantile of each pixel's largest channel, and clipped to
     [0, 1] (OIDN's range for an albedo). One scale keeps the ratios between pixels, which is
-    what the filter reads from a guide; the brightest half percent clip."""
-    image = sanitize(image)
+    what the filter reads from a guide; the brightest half percent clip. NaN, infinite and
+    negative values count as 0. `out`: an (H, W, 3) float32 array to write it into (the
+    filter's own guide memory, Denoiser.guide_staging): then the only new array is the largest
+    channel's (the quantile partitions it in place)."""
+    image = np.asarray(image)[..., :3]
+    if out is None:
+        out = np.empty(image.shape, np.float32)
+    elif out.shape != image.shape or out.dtype != np.float32:
+        raise ValueError(f"radiance_as_albedo: out is {out.shape} {out.dtype}, the image "
+                         f"{image.shape}")
     # the largest channel by two maximums, and the scaling in place: max over a last axis of 3
     # and a new array for image / scale took 0.14 s of 0.18 at 1080p (a hitch whenever the
-    # viewer's probes change); the same values
+    # viewer's probes change); the quantile partitions that array in place (it is ours)
+    source = image
     peak = np.maximum(np.maximum(image[..., 0], image[..., 1]), image[..., 2])
-    scale = float(np.quantile(peak, ALBEDO_SCALE_QUANTILE)) if peak.size else 0.0
+    if image.dtype != np.float32 or not np.isfinite(peak.sum(dtype=np.float64)):
+        # a NaN or +inf (the peak holds every one: a -inf channel is below the others, and
+        # comes out 0 either way): the image made usable first, as sanitize makes it
+        np.copyto(out, image, casting="same_kind")
+        out[~np.isfinite(out)] = 0.0
+        np.maximum(out, 0.0, out=out)
+        source = out
+        peak = np.maximum(np.maximum(out[..., 0], out[..., 1]), out[..., 2])
+    np.maximum(peak, 0.0, out=peak)
+    scale = (float(np.quantile(peak, ALBEDO_SCALE_QUANTILE, overwrite_input=True))
+             if peak.size else 0.0)
     if not scale > 0.0:
-        return np.zeros_like(image)
-    np.divide(image, scale, out=image)
-    return np.clip(image, 0.0, 1.0, out=image)
+        out[...] = 0.0
+        return out
+    # negative values divide to below 0 and clip to 0: what their making usable gives
+    np.divide(source, scale, out=out)
+    return np.clip(out, 0.0, 1.0, out=out)
 
 
 def _check_image(name: str, image: np.ndarray, shape: tuple | None = None) -> None:
@@ -298,10 +319,14 @@ class Denoiser:
     # ---- the filter ----------------------------------------------------------------------------
     # The colour and the output live in pinned host memory that OIDN's device reads and writes
     # directly (OIDN_STORAGE_HOST): the caller reads GL straight into the colour (staging()), and
-    # the result is read where the filter wrote it. The guides live on the device, uploaded when a
-    # different array is given (they change with the camera, not with every frame). Measured on an
-    # H200 (lab/denoise_io.py, docs/experiments.md): a copy through pageable memory there moved
-    # about 1 GB/s, and was most of a 512^2 frame's 12 ms around a 1.1 ms filter.
+    # the result is read where the filter wrote it. The guides live there too: a different array
+    # is copied in (clipped to its range) once, and a caller that makes a new guide for every
+    # image (refine's probes guide, from each raymarched image) writes it in place
+    # (guide_staging). Measured on an H200 (lab/denoise_io.py, docs/experiments.md): a copy
+    # through pageable memory there moved about 1 GB/s, and was most of a 512^2 frame's 12 ms
+    # around a 1.1 ms filter; a 1080p guide's upload from pageable memory was most of the 60-80 ms
+    # a refine filter job's `prepare` took beyond its colour's copy
+    # (bench/h200-interact-refine-56/filter-job).
     def _filter_for(self, width: int, height: int, guides: tuple[str, ...]):
         key = (width, height, guides)
         if key in self._filters:
@@ -313,11 +338,25 @@ class Denoiser:
         pixels = width * height
         host = oidn.OIDN_STORAGE_HOST if self.device == "cuda" else None
         buffers = {"color": self._buffer(pixels * 16, host), "output": self._buffer(pixels * 12, host)}
+        for name in guides:
+            buffers[name] = self._buffer(pixels * 12, host)
+        self._set_up(flt, buffers, guides, width, height)
+        entry = {"filter": flt, "buffers": buffers,
+                 "color": self._view(buffers["color"]).reshape(height, width, 4),
+                 "output": self._view(buffers["output"]).reshape(height, width, 3),
+                 "guide_views": {name: self._view(buffers[name]).reshape(height, width, 3)
+                                 for name in guides},
+                 "guides": {}, "negative": None}
+        self._filters[key] = entry
+        return entry
+
+    def _set_up(self, flt, buffers: dict, guides: tuple[str, ...], width: int,
+                height: int) -> None:
+        oidn = self._oidn
         flt.set_image("color", buffers["color"], oidn.OIDN_FORMAT_FLOAT3, width, height, 0, 16,
                       width * 16)
         flt.set_image("output", buffers["output"], oidn.OIDN_FORMAT_FLOAT3, width, height)
         for name in guides:
-            buffers[name] = self._buffer(pixels * 12, None)
             flt.set_image(name, buffers[name], oidn.OIDN_FORMAT_FLOAT3, width, height)
         flt.set_bool("hdr", True)
         flt.set_bool("cleanAux", True)    # the guides are noise-free (no prefiltering)
@@ -325,11 +364,25 @@ class Denoiser:
                          "fast": oidn.OIDN_QUALITY_FAST}[self.quality])
         flt.commit()
         self._raise_error("filter setup")
-        views = {name: self._view(buffers[name]) for name in ("color", "output")}
-        entry = {"filter": flt, "buffers": buffers, "color": views["color"].reshape(height, width, 4),
-                 "output": views["output"].reshape(height, width, 3), "guides": {}}
-        self._filters[key] = entry
-        return entry
+
+    def _negative_for(self, entry, width: int, height: int, guides: tuple[str, ...]):
+        """A signed image's negative part's filter, beside `entry`'s: a colour and an output
+        buffer of its own and the same guides, so that the part is written straight into its
+        colour (one pass) and both outputs are read once, into their difference. Made at the
+        first signed image of the size (or warm's `signed`): a second filter's device memory."""
+        if entry["negative"] is not None:
+            return entry["negative"]
+        oidn = self._oidn
+        flt = oidn.Filter(self._device, oidn.OIDN_FILTER_TYPE_RT)
+        pixels = width * height
+        host = oidn.OIDN_STORAGE_HOST if self.device == "cuda" else None
+        own = {"color": self._buffer(pixels * 16, host), "output": self._buffer(pixels * 12, host)}
+        self._set_up(flt, {**own, **{n: entry["buffers"][n] for n in guides}}, guides, width,
+                     height)
+        entry["negative"] = {"filter": flt, "buffers": own,
+                             "color": self._view(own["color"]).reshape(height, width, 4),
+                             "output": self._view(own["output"]).reshape(height, width, 3)}
+        return entry["negative"]
 
     def _buffer(self, nbytes: int, storage):
         return (self._oidn.Buffer(self._device, nbytes) if storage is None else
@@ -347,6 +400,8 @@ class Denoiser:
 
     @staticmethod
     def _release_filter(entry) -> None:
+        if entry.get("negative") is not None:
+            Denoiser._release_filter(entry["negative"])
         entry["filter"].release()
         for b in entry["buffers"].values():
             b.release()
@@ -368,26 +423,53 @@ class Denoiser:
             self.close()
             return None
 
-    def warm(self, width: int, height: int, guides: tuple[str, ...] = ()) -> float:
+    def guide_staging(self, width: int, height: int, guides: tuple[str, ...],
+                      name: str) -> np.ndarray | None:
         with self.lock:
-            return self._warm(width, height, guides)
+            return self._guide_staging(width, height, guides, name)
 
-    def _warm(self, width: int, height: int, guides: tuple[str, ...] = ()) -> float:
+    def _guide_staging(self, width: int, height: int, guides: tuple[str, ...],
+                       name: str) -> np.ndarray | None:
+        """Guide `name`'s (height, width, 3) float32 in the filter's own memory (the filter for
+        this size and `guides`), for a caller that writes a new guide for each image into it and
+        passes it as that guide: no copy. It is taken as written: the caller makes it finite and
+        in the guide's range (radiance_as_albedo's `out`). None where the filter cannot run."""
+        if name not in guides:
+            raise ValueError(f"guide_staging: {name!r} is not one of the guides {guides}")
+        if not self._load():
+            return None
+        try:
+            return self._filter_for(width, height, tuple(guides))["guide_views"][name]
+        except Exception as exc:
+            self.failure = f"the denoiser failed ({exc}). Showing the image as rendered."
+            self.close()
+            return None
+
+    def warm(self, width: int, height: int, guides: tuple[str, ...] = (),
+             signed: bool = False) -> float:
+        with self.lock:
+            return self._warm(width, height, guides, signed)
+
+    def _warm(self, width: int, height: int, guides: tuple[str, ...] = (),
+              signed: bool = False) -> float:
         """Makes the filter for this size and guides and runs it once on a black image, so that
         the next call costs what every later one does (the weights' load and the device's first
-        run, about 0.1 s on an H200, happen here). Wall ms taken; 0 where the filter cannot
-        run (its note is in `failure`)."""
+        run, about 0.1 s on an H200, happen here); with `signed` the negative part's filter as
+        well. Wall ms taken; 0 where the filter cannot run (its note is in `failure`)."""
         if not self._load():
             return 0.0
         t0 = time.perf_counter()
         try:
             entry = self._filter_for(width, height, tuple(guides))
             entry["color"][...] = 0.0
-            for name in guides:   # black guides until a caller gives its own (then uploaded)
-                zeros = np.zeros((height, width, 3), np.float32)
-                entry["buffers"][name].write(0, zeros.nbytes, zeros)
+            for name in guides:   # black guides until a caller gives its own (then copied in)
+                entry["guide_views"][name][...] = 0.0
                 entry["guides"].pop(name, None)
             self._execute(entry)
+            if signed:
+                negative = self._negative_for(entry, width, height, tuple(guides))
+                negative["color"][...] = 0.0
+                self._execute(negative)
         except Exception as exc:
             self.failure = f"the denoiser failed ({exc}). Showing the image as rendered."
             self.close()
@@ -401,7 +483,7 @@ class Denoiser:
     def _call(self, color: np.ndarray, albedo: np.ndarray | None = None,
                  normal: np.ndarray | None = None, copy: bool = True,
                  signed: bool = False, keep_means: bool = True, check_output: bool = True,
-                 color_finite: bool = False) -> Denoised:
+                 color_finite: bool = False, raw_means: np.ndarray | None = None) -> Denoised:
         """The denoised colour (H, W, 3) of `color` (H, W, 3 or 4: RGB, or RGBA whose alpha is
         ignored), guided by the noise-free `albedo` (in [0, 1]) and `normal` (in [-1, 1]) where
         given (a normal needs an albedo: OIDN's rule). Negative, NaN and infinite colours are
@@ -417,7 +499,10 @@ class Denoiser:
         `keep_means` the image is the filter's output buffer itself (a caller that uploads it and
         restores the means on the GPU, kept_means.KeptMeans.restore, checks it there).
         `color_finite`: the caller has found the colour finite (KeptMeans.raw_means), so without
-        `keep_means` no pass looks for non-finite values. Where the filter cannot run: the raw
+        `keep_means` no pass looks for non-finite values. `raw_means`: the colour's tile means
+        (tiles down, across, 3 or more; _block_means' or glsl/tile_means.comp's) made by the
+        caller, kept as keep_means keeps its own (where one is not finite, the colour is made
+        usable and the means made again here). Where the filter cannot run: the raw
         colour, made finite (and, unless signed, non-negative), with a note."""
         color = np.asarray(color)
         if color.ndim != 3 or color.shape[2] not in (3, 4) or min(color.shape[:2]) == 0:
@@ -429,6 +514,13 @@ class Denoiser:
         for name, image in (("albedo", albedo), ("normal", normal)):
             if image is not None:
                 _check_image(name, np.asarray(image), (height, width, 3))
+        if raw_means is not None:
+            raw_means = np.asarray(raw_means)
+            tiles = (-(-height // KEEP_MEANS_BLOCK), -(-width // KEEP_MEANS_BLOCK))
+            if raw_means.ndim != 3 or raw_means.shape[:2] != tiles or raw_means.shape[2] < 3:
+                raise ValueError(f"denoise: raw_means must be (tiles down, across, 3 or 4) = "
+                                 f"{tiles} for a {width}x{height} image, got {raw_means.shape}")
+            raw_means = raw_means[..., :3]
         if not self._load():
             return Denoised(sanitize(color[..., :3]), None, self.failure)
         guides = {n: g for n, g in (("albedo", albedo), ("normal", normal)) if g is not None}
@@ -446,15 +538,20 @@ class Denoiser:
                 else:
                     staged[..., :3] = color[..., :3]
             for name, guide in guides.items():
-                if entry["guides"].get(name) is not guide:   # a new guide: upload it once
+                view = entry["guide_views"][name]
+                if np.shares_memory(guide, view):   # written in place (guide_staging)
+                    entry["guides"][name] = guide
+                elif entry["guides"].get(name) is not guide:   # a new guide: copied in once
                     low = -1.0 if name == "normal" else 0.0
-                    g = np.nan_to_num(np.asarray(guide, np.float32), nan=0.0, posinf=1.0,
-                                      neginf=low)
-                    g = np.ascontiguousarray(np.clip(g, low, 1.0))
-                    entry["buffers"][name].write(0, g.nbytes, g)
+                    np.clip(np.asarray(guide), low, 1.0, out=view)   # infinities to the range
+                    if not np.isfinite(view.sum(dtype=np.float32)):
+                        np.nan_to_num(view, copy=False, nan=0.0)
                     entry["guides"][name] = guide
             t_means = time.perf_counter()
-            raw_means = _block_means(staged[..., :3], KEEP_MEANS_BLOCK) if keep_means else None
+            if raw_means is not None:   # the caller's (a GPU pass over the same image)
+                keep_means = True
+            elif keep_means:
+                raw_means = _block_means(staged[..., :3], KEEP_MEANS_BLOCK)
             raw_means_ms = 1e3 * (time.perf_counter() - t_means) if keep_means else 0.0
             keep_ms = 0.0
             # a non-finite pixel makes its tile's mean non-finite, so the means (where kept) find
@@ -467,26 +564,30 @@ class Denoiser:
                     raw_means = _block_means(staged[..., :3], KEEP_MEANS_BLOCK)
             negative = None
             if signed and staged[..., :3].min() < 0.0:
-                negative = np.maximum(-staged[..., :3], 0.0)
+                # the negative part written straight into its own filter's colour (OIDN takes
+                # the negative values of each part as 0)
+                negative = self._negative_for(entry, width, height, tuple(guides))
+                np.negative(staged, out=negative["color"])
             t1 = time.perf_counter()
             self._execute(entry)
             if negative is not None:
-                positive = entry["output"].copy()
-                staged[..., :3] = negative
-                self._execute(entry)
-                np.subtract(positive, entry["output"], out=entry["output"])
+                self._execute(negative)
             t2 = time.perf_counter()
             out = entry["output"]
-            if raw_means is not None or copy:
+            if raw_means is not None or copy or negative is not None:
                 # one read of the filter's output buffer (host memory the device writes: reading
                 # it is slow, and keeping the means reads and writes it three times) into memory
-                # of our own; handed out where `copy` asks, made anew next call
+                # of our own, for a signed image the two parts' difference; handed out where
+                # `copy` asks, made anew next call
                 scratch = entry.pop("scratch", None) if copy else entry.get("scratch")
                 if scratch is None:
                     scratch = np.empty_like(out)
                     if not copy:
                         entry["scratch"] = scratch
-                np.copyto(scratch, out)
+                if negative is not None:
+                    np.subtract(out, negative["output"], out=scratch)
+                else:
+                    np.copyto(scratch, out)
                 out = scratch
             if check_output and not _all_finite(out):   # (never seen) a filter's overflow
                 _make_usable(out)

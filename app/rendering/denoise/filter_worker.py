@@ -13,6 +13,7 @@ thread); a "probes" guide comes as the raymarched radiance and is scaled into an
 the first time) happens in `warm`, on the thread, at the viewer's start."""
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from dataclasses import dataclass, field
@@ -22,18 +23,24 @@ import numpy as np
 from radiance_probes.rendering.denoise.filter import radiance_as_albedo
 
 
+FREE_KEPT = 3   # results' arrays kept for reuse (FilterWorker.recycle)
+
+
 @dataclass
 class FilterJob:
     """An image to filter: `colour` (H, W, 3 or 4 float32, host), guides as host arrays (`albedo`
     in [0, 1] and `normal`; or `probe_radiance`, the raymarched image over the probes, made the
-    albedo guide on the thread), `signed` (a residual that may dip below 0), and `tag`: what its
-    owner wants back with the result (the samples, the generation it was read at)."""
+    albedo guide on the thread, written into the filter's own guide memory), `signed` (a
+    residual that may dip below 0), `tag`: what its owner wants back with the result (the
+    samples, the generation it was read at), and `raw_means`: the colour's tile means where the
+    owner made them on the GPU (glsl/tile_means.comp; else the thread makes them)."""
     colour: np.ndarray
     albedo: np.ndarray | None = None
     normal: np.ndarray | None = None
     probe_radiance: np.ndarray | None = None
     signed: bool = False
     tag: object = None
+    raw_means: np.ndarray | None = None
 
 
 @dataclass
@@ -62,6 +69,7 @@ class FilterWorker:
         self._stop = False
         self._held = 0                              # hold() depth: no job starts meanwhile
         self.runs = 0                               # jobs filtered (tests)
+        self._free: list[np.ndarray] = []           # results' arrays given back (recycle)
         self._thread = threading.Thread(target=self._loop, name="denoise-filter", daemon=True)
         self._thread.start()
 
@@ -90,11 +98,12 @@ class FilterWorker:
             if self._running == key:
                 self._discard = key
 
-    def warm(self, width: int, height: int, guides: tuple[str, ...] = ()) -> None:
-        """Makes the filter for this size and guides on the thread (Denoiser.warm), before any
-        job needs it."""
+    def warm(self, width: int, height: int, guides: tuple[str, ...] = (),
+             signed: bool = False) -> None:
+        """Makes the filter for this size and guides (with `signed`, the negative part's too) on
+        the thread (Denoiser.warm), before any job needs it."""
         with self._lock:
-            self._warm.append((width, height, tuple(guides)))
+            self._warm.append((width, height, tuple(guides), signed))
             self._lock.notify()
 
     def hold(self, on: bool) -> None:
@@ -103,6 +112,24 @@ class FilterWorker:
         with self._lock:
             self._held = max(self._held + (1 if on else -1), 0)
             self._lock.notify()
+
+    def recycle(self, rgba: np.ndarray) -> None:
+        """Gives back a result's `rgba` its owner is done with (uploaded), for a later result
+        to be written into: a 1080p one made anew for each result is 33 MB of fresh pages on the
+        thread. The owner must not read it after; at most FREE_KEPT are kept."""
+        if rgba is None or rgba.dtype != np.float32 or rgba.ndim != 3 or rgba.shape[2] != 4:
+            return
+        with self._lock:
+            if len(self._free) < FREE_KEPT and not any(a is rgba for a in self._free):
+                self._free.append(rgba)
+
+    def _rgba(self, height: int, width: int) -> np.ndarray:
+        with self._lock:
+            for i, a in enumerate(self._free):
+                if a.shape == (height, width, 4):
+                    return self._free.pop(i)
+            self._free = [a for a in self._free if a.shape[:2] == (height, width)]
+        return np.empty((height, width, 4), np.float32)
 
     def idle(self) -> bool:
         with self._lock:
@@ -137,7 +164,8 @@ class FilterWorker:
                 warmer = getattr(self.denoiser, "warm", None)
                 if warmer is not None:
                     try:
-                        warmer(*warm)
+                        width, height, guides, signed = warm
+                        warmer(width, height, guides, **({"signed": True} if signed else {}))
                     except Exception:   # a failing device says so at its first job
                         pass
                 continue
@@ -150,17 +178,29 @@ class FilterWorker:
 
     def _filter(self, job: FilterJob) -> FilterResult:
         t0 = time.perf_counter()
+        staging = getattr(self.denoiser, "guide_staging", None)
+        in_place = job.probe_radiance is not None and staging is not None
+        # a guide written into the denoiser's memory: its lock (re-entrant) over the write and
+        # the call, so that no other caller's image of the size comes between them
+        with self.denoiser.lock if in_place else contextlib.nullcontext():
+            return self._filter_held(job, t0, staging if in_place else None)
+
+    def _filter_held(self, job: FilterJob, t0: float, staging) -> FilterResult:
         try:
             albedo = job.albedo
             if job.probe_radiance is not None:
-                albedo = radiance_as_albedo(job.probe_radiance[..., :3])
+                h, w = job.probe_radiance.shape[:2]
+                names = ("albedo",) if job.normal is None else ("albedo", "normal")
+                out = None if staging is None else staging(w, h, names, "albedo")
+                albedo = radiance_as_albedo(job.probe_radiance, out=out)
             t1 = time.perf_counter()
-            d = self.denoiser(job.colour, albedo, job.normal, copy=False, signed=job.signed)
+            d = self.denoiser(job.colour, albedo, job.normal, copy=False, signed=job.signed,
+                              **({} if job.raw_means is None else {"raw_means": job.raw_means}))
             t2 = time.perf_counter()
             if not d.denoised:
                 return FilterResult(None, job.tag, d.note, None, finished_at=time.perf_counter())
             h, w = d.image.shape[:2]
-            rgba = np.empty((h, w, 4), np.float32)
+            rgba = self._rgba(h, w)
             rgba[..., :3] = d.image
             rgba[..., 3] = 1.0
         except Exception as exc:   # the denoiser's own failures come back as notes

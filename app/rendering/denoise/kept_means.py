@@ -96,6 +96,19 @@ class KeptMeans:
                                         "signed_radiance": int(signed)})
         self._means_pass.run(*tile_grid(*texture.size))
 
+    def dispatch_means_into(self, texture: moderngl.Texture, out: moderngl.Buffer) -> None:
+        """The tile means of `texture` as read (a non-finite pixel makes its tile's mean
+        non-finite) into `out` (a buffer of at least 16 bytes a tile: tiles down, across, vec4),
+        for a caller that reads them back itself (the viewer's filter jobs: FilterJob.raw_means,
+        read back beside the image through a fence)."""
+        tiles = tile_grid(*texture.size)
+        if out.size < 16 * tiles[0] * tiles[1]:
+            raise ValueError(f"dispatch_means_into: {out.size} bytes for {tiles[0]}x{tiles[1]} "
+                             "tiles of 16")
+        self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
+        self._tile_means(texture, out, usable_only=False, signed=False)
+        self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
+
     def dispatch_raw_means(self, texture: moderngl.Texture, signed: bool) -> None:
         """Starts the raw image's tile means pass over `texture` (read them with read_raw_means).
         Dispatched before the colour's read-back, whose wait for the GL work covers this pass

@@ -26,11 +26,12 @@ from dataclasses import dataclass
 
 import moderngl
 
-from radiance_probes.gl.fence import ChunkedUpload, PendingRead, TransferBudget, staging_buffer
+from radiance_probes.gl.fence import (ChunkedUpload, HostArrays, PendingRead, TransferBudget,
+                                      staging_buffer)
 from radiance_probes.methods import METHODS
 from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser
 from radiance_probes.rendering.denoise.filter_worker import FilterJob, FilterWorker
-from radiance_probes.rendering.denoise.kept_means import KeptMeans
+from radiance_probes.rendering.denoise.kept_means import KeptMeans, tile_grid
 from radiance_probes.rendering.image_ops import clear_image
 from radiance_probes.rendering.refine.refine import BlendPass
 from radiance_probes.viewer.frame.frame_parts import FrameParts
@@ -45,6 +46,21 @@ INTERVAL_S = 0.5
 # 0.29-0.96 s of wall time against 0.29-1.12 s at 8 MB, p99 frames 22.5-24.9 ms of wall time
 # against 22.3-23.5 (bench/h200-interact-refine-56/transfers-16mb, level0-bands).
 TRANSFER_BYTES_PER_FRAME = 16 << 20
+
+
+def tiles_of(width: int, height: int) -> int:
+    across, down = tile_grid(width, height)
+    return across * down
+
+
+def tile_means_of(means: PendingRead | None, image):
+    """A tile means read-back's values as (tiles down, across, 3), for an image of `image`'s
+    shape; None where there is none."""
+    if means is None:
+        return None
+    height, width = image.shape[:2]
+    across, down = tile_grid(width, height)
+    return means.out[:4 * across * down].reshape(down, across, 4)[..., :3]
 
 
 @dataclass
@@ -72,6 +88,7 @@ class _InFlight:
     albedo: object = None
     normal: object = None
     probe_guide: bool = False
+    means: PendingRead | None = None   # the colour's tile means (glsl/tile_means.comp)
     filtering: bool = False
     filter: tuple = (moderngl.NEAREST, moderngl.NEAREST)   # the view's, for the image shown
 
@@ -92,6 +109,8 @@ class ViewDenoise:
         self.blend_pass: BlendPass | None = BlendPass(ctx) if enabled else None
         self._worker: FilterWorker | None = None
         self._staging: dict[tuple, moderngl.Buffer] = {}
+        self._means_gpu: dict[tuple, moderngl.Buffer] = {}   # means_on_gpu's buffers
+        self.host = HostArrays()   # the read-backs' host copies, reused
         self.budget = TransferBudget(TRANSFER_BYTES_PER_FRAME)   # the frame's host transfers
         # a filtered image being uploaded in bands into a texture of its own, then shown:
         # {name: (ChunkedUpload, _InFlight)}; and each view's spare texture for the next
@@ -124,8 +143,10 @@ class ViewDenoise:
         if self.enabled and width > 0 and height > 0:
             worker = self.worker()
             if worker is not None:
-                worker.warm(width, height, ("albedo",))
+                # refine's guided is signed: its negative part's filter made now too
+                worker.warm(width, height, ("albedo",), signed=True)
             self._stock(width, height)
+            self.kept()   # its passes compiled now, not at the first filtered image
 
     def _stock(self, width: int, height: int) -> None:
         """FRESH_TEXTURES touched textures of this size, and the uploads' pixel buffer."""
@@ -175,12 +196,23 @@ class ViewDenoise:
             if self.blend_pass is None:
                 self.blend_pass = BlendPass(self.ctx)
 
+    def means_on_gpu(self, key: tuple, texture) -> moderngl.Buffer:
+        """The tile means of `texture` dispatched into a GL buffer kept under `key` (for a
+        read-back beside the image: FilterJob.raw_means), so that the filter's thread neither
+        sums the image nor looks for non-finite pixels (a non-finite mean says there is one)."""
+        nbytes = 16 * tiles_of(*texture.size)
+        buf = self._means_gpu[key] = staging_buffer(self.ctx, self._means_gpu.get(key), nbytes)
+        self.kept().dispatch_means_into(texture, buf)
+        return buf
+
     def read(self, key: tuple, source) -> PendingRead:
         """A read-back of `source` started into the staging buffer kept under `key`."""
         nbytes = (source.size if isinstance(source, moderngl.Buffer)
                   else source.size[0] * source.size[1] * source.components * 4)
         buf = self._staging[key] = staging_buffer(self.ctx, self._staging.get(key), nbytes)
-        return PendingRead(self.ctx, source, buf)
+        read = PendingRead(self.ctx, source, buf)
+        read.out = self.host.next(key, read.shape)
+        return read
 
     def _due(self, name: str, generation: tuple, samples: int, now: float) -> bool:
         old = self.images.get(name)
@@ -234,6 +266,7 @@ class ViewDenoise:
             self.release()
             return
         if flight is None or flight.generation != generation:
+            worker.recycle(result.rgba)
             return   # the view restarted while it was filtered: not an image of what it shows
         h, w = result.rgba.shape[:2]
         texture = self._spare[name] = self._sized(self._spare.get(name), (w, h))
@@ -255,6 +288,8 @@ class ViewDenoise:
             whole = upload.step(self.budget)
         if not whole:
             return
+        if self._worker is not None:
+            self._worker.recycle(upload.image)
         del self.landing[name]
         old = self.images.get(name)
         self._spare.pop(name, None)
@@ -270,21 +305,23 @@ class ViewDenoise:
         flight = self.inflight.get(name)
         if flight is None or flight.filtering:
             return
+        reads = flight.reads + ([flight.means] if flight.means is not None else [])
         if flight.generation != generation:   # restarted before its read-back came
-            for r in flight.reads:
+            for r in reads:
                 r.release()
             del self.inflight[name]
             return
-        if not all(r.ready() for r in flight.reads):
+        if not all(r.ready() for r in reads):
             return
         with self.parts.part("readback", gpu=False):
-            done = all(r.read_some(self.budget) for r in flight.reads)   # in order, in parts
+            done = all(r.read_some(self.budget) for r in reads)   # in order, in parts
         if not done:
             return
         images = [r.out for r in flight.reads]
         worker.submit(name, FilterJob(images[0], flight.albedo, flight.normal,
                                       images[1] if flight.probe_guide else None, flight.signed,
-                                      tag=flight.samples))
+                                      tag=flight.samples,
+                                      raw_means=tile_means_of(flight.means, images[0])))
         flight.filtering = True
 
     def _start(self, name: str, session, view, generation: tuple) -> None:
@@ -300,12 +337,14 @@ class ViewDenoise:
         if not probe_guide:
             with self.parts.part("guide"):
                 albedo, normal, _ = r.denoise_guides(guides, camera=view.camera)
+        # the tile means first, so that the colour's fence covers their pass too
+        means = self.read((name, "means"), self.means_on_gpu((name, "means"), acc.texture))
         reads = [self.read((name, "colour"), acc.texture)]
         if probe_guide:
             reads.append(self.read((name, "guide"), ray.texture))
         self.inflight[name] = _InFlight(generation, acc.samples, time.monotonic(), reads,
                                         METHODS[view.shown].signed, albedo, normal, probe_guide,
-                                        filter=acc.texture.filter)
+                                        means, filter=acc.texture.filter)
 
     def adopt(self, name: str, halves, restarts: int) -> None:
         """refine's judgement filtered half A: that image becomes the view's filtered image (a GPU
@@ -348,7 +387,7 @@ class ViewDenoise:
                 got.blended.release()
         flight = self.inflight.pop(name, None)
         if flight is not None:
-            for r in flight.reads:
+            for r in flight.reads + ([flight.means] if flight.means is not None else []):
                 r.release()
         if self._worker is not None:
             self._worker.drop(name)
@@ -385,9 +424,11 @@ class ViewDenoise:
     def release(self) -> None:
         for name in list(self.images) + list(self.inflight) + list(self._spare):
             self._forget(name)
-        for buf in self._staging.values():
+        for buf in (*self._staging.values(), *self._means_gpu.values()):
             buf.release()
         self._staging.clear()
+        self._means_gpu.clear()
+        self.host.clear()
         for texture in self._fresh:
             texture.release()
         self._fresh = []

@@ -26,6 +26,7 @@ from radiance_probes.methods import METHODS
 from radiance_probes.rendering.denoise.filter import choose_guides
 from radiance_probes.rendering.denoise.filter_worker import FilterJob
 from radiance_probes.rendering.refine.refine import blend_from_sums
+from radiance_probes.viewer.frame.denoise_view import tile_means_of, tiles_of
 
 
 @dataclass
@@ -41,6 +42,7 @@ class RefineCheck:
     judge: bool
     stage_bits: int
     half_a_read: PendingRead | None = None
+    means_read: PendingRead | None = None   # half A's tile means (glsl/tile_means.comp)
     ray_read: PendingRead | None = None
     guides: tuple = (None, None)      # (albedo, normal) host guides where not the probes'
     stage: str = "sums"
@@ -50,8 +52,8 @@ class RefineCheck:
     frames: int = 0                   # frames it has been under way
 
     def release(self) -> None:
-        for r in (self.sums_read, self.half_a_read, self.ray_read, self.judge_read,
-                  self.upload):
+        for r in (self.sums_read, self.half_a_read, self.means_read, self.ray_read,
+                  self.judge_read, self.upload):
             if r is not None:
                 r.release()
 
@@ -62,7 +64,9 @@ def _read(session, view, key: str, source) -> PendingRead:
     nbytes = (source.size if isinstance(source, moderngl.Buffer)
               else source.size[0] * source.size[1] * source.components * 4)
     buf = view.staging[key] = staging_buffer(session.ctx, view.staging.get(key), nbytes)
-    return PendingRead(session.ctx, source, buf)
+    read = PendingRead(session.ctx, source, buf)
+    read.out = view.host.next(key, read.shape)
+    return read
 
 
 def prepare_staging(session, view) -> None:
@@ -86,7 +90,13 @@ def begin_check(session, view, with_ray: bool, judgeable: bool, judge: bool,
                         judge, stage_bits)
     if judge:
         halves.snapshot_b()
-        check.half_a_read = _read(session, view, "half_a", halves.half_a.texture)
+        texture = halves.half_a.texture
+        # its tile means first, so that half A's fence covers their pass too
+        means = view.staging["means_gpu"] = staging_buffer(
+            session.ctx, view.staging.get("means_gpu"), 16 * tiles_of(*texture.size))
+        session.denoise.kept().dispatch_means_into(texture, means)
+        check.means_read = _read(session, view, "means", means)
+        check.half_a_read = _read(session, view, "half_a", texture)
         r = session.renderer
         names = choose_guides("auto", check.counts[0], r.probes_shown())
         if names == "probes":
@@ -106,7 +116,8 @@ def advance_check(session, view, check: RefineCheck):
     halves, denoise = view.halves, session.denoise
     key = f"{view.method}:judge"
     if check.stage == "sums":
-        reads = [r for r in (check.sums_read, check.half_a_read, check.ray_read) if r is not None]
+        reads = [r for r in (check.sums_read, check.half_a_read, check.means_read, check.ray_read)
+                 if r is not None]
         if not all(r.ready() for r in reads):
             return "pending", None
         with denoise.parts.part("readback", gpu=False):   # in parts over frames
@@ -124,7 +135,8 @@ def advance_check(session, view, check: RefineCheck):
         half_a = check.half_a_read.out
         ray = check.ray_read.out if check.ray_read is not None else None
         albedo, normal = check.guides
-        worker.submit(key, FilterJob(half_a, albedo, normal, ray, METHODS["guided"].signed))
+        worker.submit(key, FilterJob(half_a, albedo, normal, ray, METHODS["guided"].signed,
+                                     raw_means=tile_means_of(check.means_read, half_a)))
         check.stage = "filter"
         return "sums", check.sums
     if check.stage == "filter":
@@ -145,6 +157,9 @@ def advance_check(session, view, check: RefineCheck):
             whole = check.upload.step(denoise.budget)
         if not whole:
             return "pending", None
+        worker = denoise.worker()
+        if worker is not None:
+            worker.recycle(check.upload.image)
         with denoise.parts.part("judgement"):
             halves.dispatch_judge(view.ray, from_snapshot=True)
         check.judge_read = _read(session, view, "judge", halves.judge_sums)

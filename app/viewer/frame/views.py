@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from radiance_probes.gl.fence import HostArrays
 from radiance_probes.rendering.methods.accumulation import Accumulation
 from radiance_probes.rendering.refine.refine import HalfBuffers, RefineBlend, RefineEstimate
 from radiance_probes.viewer.frame.refine_judgement import RefineCheck
@@ -74,6 +75,7 @@ class RefineView:
         self.shown_frames: list[str] = []   # what each of the first REFINE_HISTORY of them showed
         self.check: RefineCheck | None = None   # a check (or judgement) under way over frames
         self.staging: dict = {}         # its read-backs' buffers, by name (refine_judgement)
+        self.host = HostArrays()        # their host copies, reused
 
     @property
     def acc(self) -> Accumulation | None:
@@ -106,6 +108,7 @@ class RefineView:
         for buf in self.staging.values():
             buf.release()
         self.staging.clear()
+        self.host.clear()
         if self.ray is not None:
             self.ray.release()
         if self.halves is not None:
