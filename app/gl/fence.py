@@ -252,6 +252,18 @@ class ChunkedUpload:
             self._staging = None
 
 
+def start_read(ctx: moderngl.Context, source, buffers: dict, host: HostArrays,
+               key) -> PendingRead:
+    """A read-back of `source` (a Texture or a Buffer) through the staging buffer kept in
+    `buffers` under `key` (made or grown as needed), into the next of `host`'s arrays for it."""
+    nbytes = (source.size if isinstance(source, moderngl.Buffer)
+              else source.size[0] * source.size[1] * source.components * 4)
+    buf = buffers[key] = staging_buffer(ctx, buffers.get(key), nbytes)
+    read = PendingRead(ctx, source, buf)
+    read.out = host.next(key, read.shape)
+    return read
+
+
 def staging_buffer(ctx: moderngl.Context, kept: moderngl.Buffer | None,
                    nbytes: int) -> moderngl.Buffer:
     """`kept` where it holds `nbytes`, else a new buffer of that size (`kept` released)."""

@@ -333,55 +333,48 @@ class Denoiser:
             return self._filters[key]
         for old_key in [k for k in self._filters if k[:2] != (width, height)]:
             self._release_filter(self._filters.pop(old_key))   # one size at a time (a resize)
+        host = self._oidn.OIDN_STORAGE_HOST if self.device == "cuda" else None
+        guide_buffers = {name: self._buffer(width * height * 12, host) for name in guides}
+        entry = self._make_filter(width, height, guides, guide_buffers)
+        entry["buffers"].update(guide_buffers)    # released with the entry
+        views = {name: self._view(b).reshape(height, width, 3) for name, b in guide_buffers.items()}
+        entry.update(guide_views=views, guides={}, negative=None)
+        self._filters[key] = entry
+        return entry
+
+    def _make_filter(self, width: int, height: int, guides: tuple[str, ...],
+                     guide_buffers: dict) -> dict:
+        """An RT filter with a colour and an output buffer of its own (on CUDA in pinned host
+        memory) reading `guide_buffers`: {"filter", "buffers" (its own), "color" (H, W, 4 view),
+        "output" (H, W, 3 view)}."""
         oidn = self._oidn
         flt = oidn.Filter(self._device, oidn.OIDN_FILTER_TYPE_RT)
         pixels = width * height
         host = oidn.OIDN_STORAGE_HOST if self.device == "cuda" else None
-        buffers = {"color": self._buffer(pixels * 16, host), "output": self._buffer(pixels * 12, host)}
-        for name in guides:
-            buffers[name] = self._buffer(pixels * 12, host)
-        self._set_up(flt, buffers, guides, width, height)
-        entry = {"filter": flt, "buffers": buffers,
-                 "color": self._view(buffers["color"]).reshape(height, width, 4),
-                 "output": self._view(buffers["output"]).reshape(height, width, 3),
-                 "guide_views": {name: self._view(buffers[name]).reshape(height, width, 3)
-                                 for name in guides},
-                 "guides": {}, "negative": None}
-        self._filters[key] = entry
-        return entry
-
-    def _set_up(self, flt, buffers: dict, guides: tuple[str, ...], width: int,
-                height: int) -> None:
-        oidn = self._oidn
-        flt.set_image("color", buffers["color"], oidn.OIDN_FORMAT_FLOAT3, width, height, 0, 16,
+        own = {"color": self._buffer(pixels * 16, host), "output": self._buffer(pixels * 12, host)}
+        flt.set_image("color", own["color"], oidn.OIDN_FORMAT_FLOAT3, width, height, 0, 16,
                       width * 16)
-        flt.set_image("output", buffers["output"], oidn.OIDN_FORMAT_FLOAT3, width, height)
+        flt.set_image("output", own["output"], oidn.OIDN_FORMAT_FLOAT3, width, height)
         for name in guides:
-            flt.set_image(name, buffers[name], oidn.OIDN_FORMAT_FLOAT3, width, height)
+            flt.set_image(name, guide_buffers[name], oidn.OIDN_FORMAT_FLOAT3, width, height)
         flt.set_bool("hdr", True)
         flt.set_bool("cleanAux", True)    # the guides are noise-free (no prefiltering)
         flt.set_quality({"high": oidn.OIDN_QUALITY_HIGH, "balanced": oidn.OIDN_QUALITY_BALANCED,
                          "fast": oidn.OIDN_QUALITY_FAST}[self.quality])
         flt.commit()
         self._raise_error("filter setup")
+        return {"filter": flt, "buffers": own,
+                "color": self._view(own["color"]).reshape(height, width, 4),
+                "output": self._view(own["output"]).reshape(height, width, 3)}
 
     def _negative_for(self, entry, width: int, height: int, guides: tuple[str, ...]):
         """A signed image's negative part's filter, beside `entry`'s: a colour and an output
         buffer of its own and the same guides, so that the part is written straight into its
         colour (one pass) and both outputs are read once, into their difference. Made at the
         first signed image of the size (or warm's `signed`): a second filter's device memory."""
-        if entry["negative"] is not None:
-            return entry["negative"]
-        oidn = self._oidn
-        flt = oidn.Filter(self._device, oidn.OIDN_FILTER_TYPE_RT)
-        pixels = width * height
-        host = oidn.OIDN_STORAGE_HOST if self.device == "cuda" else None
-        own = {"color": self._buffer(pixels * 16, host), "output": self._buffer(pixels * 12, host)}
-        self._set_up(flt, {**own, **{n: entry["buffers"][n] for n in guides}}, guides, width,
-                     height)
-        entry["negative"] = {"filter": flt, "buffers": own,
-                             "color": self._view(own["color"]).reshape(height, width, 4),
-                             "output": self._view(own["output"]).reshape(height, width, 3)}
+        if entry["negative"] is None:
+            entry["negative"] = self._make_filter(
+                width, height, guides, {n: entry["buffers"][n] for n in guides})
         return entry["negative"]
 
     def _buffer(self, nbytes: int, storage):

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import moderngl
 
 from radiance_probes.gl.fence import (ChunkedUpload, HostArrays, PendingRead, TransferBudget,
-                                      staging_buffer)
+                                      staging_buffer, start_read)
 from radiance_probes.methods import METHODS
 from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser
 from radiance_probes.rendering.denoise.filter_worker import FilterJob, FilterWorker
@@ -46,11 +46,6 @@ INTERVAL_S = 0.5
 # 0.29-0.96 s of wall time against 0.29-1.12 s at 8 MB, p99 frames 22.5-24.9 ms of wall time
 # against 22.3-23.5 (bench/h200-interact-refine-56/transfers-16mb, level0-bands).
 TRANSFER_BYTES_PER_FRAME = 16 << 20
-
-
-def tiles_of(width: int, height: int) -> int:
-    across, down = tile_grid(width, height)
-    return across * down
 
 
 def tile_means_of(means: PendingRead | None, image):
@@ -91,6 +86,11 @@ class _InFlight:
     means: PendingRead | None = None   # the colour's tile means (glsl/tile_means.comp)
     filtering: bool = False
     filter: tuple = (moderngl.NEAREST, moderngl.NEAREST)   # the view's, for the image shown
+
+    @property
+    def transfers(self) -> list:
+        """Its read-backs, the tile means' included."""
+        return self.reads + ([self.means] if self.means is not None else [])
 
 
 class ViewDenoise:
@@ -200,19 +200,15 @@ class ViewDenoise:
         """The tile means of `texture` dispatched into a GL buffer kept under `key` (for a
         read-back beside the image: FilterJob.raw_means), so that the filter's thread neither
         sums the image nor looks for non-finite pixels (a non-finite mean says there is one)."""
-        nbytes = 16 * tiles_of(*texture.size)
-        buf = self._means_gpu[key] = staging_buffer(self.ctx, self._means_gpu.get(key), nbytes)
+        across, down = tile_grid(*texture.size)
+        kept = self._means_gpu.get(key)
+        buf = self._means_gpu[key] = staging_buffer(self.ctx, kept, 16 * across * down)
         self.kept().dispatch_means_into(texture, buf)
         return buf
 
     def read(self, key: tuple, source) -> PendingRead:
         """A read-back of `source` started into the staging buffer kept under `key`."""
-        nbytes = (source.size if isinstance(source, moderngl.Buffer)
-                  else source.size[0] * source.size[1] * source.components * 4)
-        buf = self._staging[key] = staging_buffer(self.ctx, self._staging.get(key), nbytes)
-        read = PendingRead(self.ctx, source, buf)
-        read.out = self.host.next(key, read.shape)
-        return read
+        return start_read(self.ctx, source, self._staging, self.host, key)
 
     def _due(self, name: str, generation: tuple, samples: int, now: float) -> bool:
         old = self.images.get(name)
@@ -305,7 +301,7 @@ class ViewDenoise:
         flight = self.inflight.get(name)
         if flight is None or flight.filtering:
             return
-        reads = flight.reads + ([flight.means] if flight.means is not None else [])
+        reads = flight.transfers
         if flight.generation != generation:   # restarted before its read-back came
             for r in reads:
                 r.release()
@@ -387,7 +383,7 @@ class ViewDenoise:
                 got.blended.release()
         flight = self.inflight.pop(name, None)
         if flight is not None:
-            for r in flight.reads + ([flight.means] if flight.means is not None else []):
+            for r in flight.transfers:
                 r.release()
         if self._worker is not None:
             self._worker.drop(name)

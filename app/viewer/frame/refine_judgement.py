@@ -19,14 +19,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import moderngl
-
-from radiance_probes.gl.fence import ChunkedUpload, PendingRead, staging_buffer
+from radiance_probes.gl.fence import ChunkedUpload, PendingRead, staging_buffer, start_read
 from radiance_probes.methods import METHODS
 from radiance_probes.rendering.denoise.filter import choose_guides
 from radiance_probes.rendering.denoise.filter_worker import FilterJob
 from radiance_probes.rendering.refine.refine import blend_from_sums
-from radiance_probes.viewer.frame.denoise_view import tile_means_of, tiles_of
+from radiance_probes.viewer.frame.denoise_view import tile_means_of
 
 
 @dataclass
@@ -61,12 +59,7 @@ class RefineCheck:
 def _read(session, view, key: str, source) -> PendingRead:
     """A read-back of `source` into the view's own staging buffer `key` (RefineView.staging:
     released with the view, whatever the Denoise switch does meanwhile)."""
-    nbytes = (source.size if isinstance(source, moderngl.Buffer)
-              else source.size[0] * source.size[1] * source.components * 4)
-    buf = view.staging[key] = staging_buffer(session.ctx, view.staging.get(key), nbytes)
-    read = PendingRead(session.ctx, source, buf)
-    read.out = view.host.next(key, read.shape)
-    return read
+    return start_read(session.ctx, source, view.staging, view.host, key)
 
 
 def prepare_staging(session, view) -> None:
@@ -92,9 +85,7 @@ def begin_check(session, view, with_ray: bool, judgeable: bool, judge: bool,
         halves.snapshot_b()
         texture = halves.half_a.texture
         # its tile means first, so that half A's fence covers their pass too
-        means = view.staging["means_gpu"] = staging_buffer(
-            session.ctx, view.staging.get("means_gpu"), 16 * tiles_of(*texture.size))
-        session.denoise.kept().dispatch_means_into(texture, means)
+        means = session.denoise.means_on_gpu((view.method, "judge_means"), texture)
         check.means_read = _read(session, view, "means", means)
         check.half_a_read = _read(session, view, "half_a", texture)
         r = session.renderer
