@@ -468,25 +468,29 @@ def test_radiance_as_albedo_into_a_buffer_of_its_own():
 
 
 def test_the_filter_thread_writes_the_probes_guide_in_place(cpu_denoiser):
-    """A job with the raymarched image as its guide: the thread writes the guide into the
-    denoiser's memory; the image is the one the guide given as an array gives."""
-    from radiance_probes.rendering.denoise.filter import radiance_as_albedo
+    """A job with the probes guide made on the GPU (packed, flat): the thread copies it into the
+    denoiser's memory; the image is the one the guide given as an array gives, the means to give
+    back the colour's, and the output as the filter left it (no means kept on the thread)."""
+    from radiance_probes.rendering.denoise.filter import KEEP_MEANS_BLOCK, _block_means
     from radiance_probes.rendering.denoise.filter_worker import FilterJob, FilterWorker
+    from radiance_probes.twins.probe_albedo_guide import albedo_guide
     clean, noisy = _clean_and_noisy(seed=9, size=36)
-    ray = np.concatenate([clean, np.ones(clean.shape[:2] + (1,), np.float32)], axis=2)
-    want = cpu_denoiser(noisy, radiance_as_albedo(ray.copy()), copy=True).image
+    guide = albedo_guide(clean, denoise_module.ALBEDO_SCALE_QUANTILE)
+    want = cpu_denoiser(noisy, guide.copy(), copy=True, keep_means=False).image
     worker = FilterWorker(cpu_denoiser)
     try:
-        worker.submit("v", FilterJob(noisy, probe_radiance=ray, tag=1))
+        worker.submit("v", FilterJob(noisy, probe_albedo=guide.ravel().copy(), tag=1))
         result = None
         for _ in range(500):
             result = worker.take("v")
             if result is not None:
                 break
             time.sleep(0.01)
-        assert result is not None and result.rgba is not None
-        np.testing.assert_array_equal(result.rgba[..., :3], want)
-        assert (result.rgba[..., 3] == 1.0).all()
+        assert result is not None and result.rgb is not None
+        np.testing.assert_array_equal(result.rgb, want)
+        np.testing.assert_allclose(result.raw_means, _block_means(noisy, KEEP_MEANS_BLOCK),
+                                   rtol=1e-6)
+        assert not result.signed
     finally:
         worker.close()
 
@@ -511,3 +515,20 @@ def test_radiance_as_albedo_is_the_sanitized_images_scaled(case):
     got = radiance_as_albedo(image)
     assert got.dtype == np.float32 and got.shape == image.shape
     np.testing.assert_array_equal(got, want.astype(np.float32))
+
+
+@pytest.mark.parametrize("signed", [False, True])
+def test_a_result_written_into_the_callers_array_is_the_copied_result(cpu_denoiser, signed):
+    """Denoiser(out=): the result written into the caller's array (for a signed image the two
+    parts' difference) is the image a copying call returns, bit for bit; an array of the wrong
+    shape or type is refused by name."""
+    clean, noisy = _clean_and_noisy(seed=21, size=40)
+    colour = noisy - 0.3 * clean if signed else noisy
+    want = cpu_denoiser(colour, signed=signed, copy=True, keep_means=False).image
+    out = np.full(colour.shape[:2] + (3,), 9.0, np.float32)
+    got = cpu_denoiser(colour, signed=signed, copy=False, keep_means=False, check_output=False,
+                       out=out)
+    assert got.image is out and got.signed == (signed and colour.min() < 0)
+    np.testing.assert_array_equal(out, want)
+    with pytest.raises(ValueError, match="out must be"):
+        cpu_denoiser(colour, out=np.zeros(colour.shape[:2] + (4,), np.float32))

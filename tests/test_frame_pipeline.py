@@ -67,11 +67,25 @@ def _other_ms(wall: float, parts: dict) -> float:
     return wall - sum(parts.get(k, [None, 0.0])[1] for k in ("bake", "prepare", "samples"))
 
 
-def _session(ctx, monkeypatch, stand_in, methods, max_samples, want_probes):
+def _as_filtered(kept, filtered, raw_means, out, signed):
+    """KeptMeans.restore_given's stand-in for the tests that read a run's number off the image
+    shown: the filter's output as it came (alpha 1), no means given back."""
+    w, h = filtered.size
+    rgb = np.frombuffer(filtered.read(), np.float32).reshape(h, w, 3)
+    rgba = np.concatenate([rgb, np.ones((h, w, 1), np.float32)], axis=2)
+    out.write(rgba.tobytes())
+
+
+def _session(ctx, monkeypatch, stand_in, methods, max_samples, want_probes, restore=False):
     """A session of `methods` with the stand-in behind its Denoise switch, switched on once a few
-    frames have compiled the shaders (a compile is not the filter's)."""
+    frames have compiled the shaders (a compile is not the filter's). `restore` False: the
+    filtered images are shown as the stand-in made them (_as_filtered), so that each names its
+    run; True: given back their raw tile means on the GPU, as the viewer shows them."""
+    from radiance_probes.rendering.denoise.kept_means import KeptMeans
     from radiance_probes.viewer.frame import denoise_view
     from radiance_probes.viewer.frame.session import RenderSession
+    if not restore:
+        monkeypatch.setattr(KeptMeans, "restore_given", _as_filtered)
     monkeypatch.setattr(denoise_view, "shared_denoiser", lambda: stand_in)
     monkeypatch.setattr(denoise_view, "INTERVAL_S", 0.0)   # a new image whenever samples grow
     s = RenderSession(ctx, parse_scene(SCENE), clock="wall")
@@ -108,7 +122,9 @@ def test_the_filters_thread_returns_at_once_and_keeps_the_newest_job():
             time.sleep(0.01)
         assert [r.tag for r in results] == [1, 3]
         assert stand_in.started == [1.0, 3.0]          # job 2 never ran
-        assert results[1].rgba.shape == (4, 6, 4) and (results[1].rgba[..., 3] == 1).all()
+        assert results[1].rgb.shape == (4, 6, 3) and (results[1].rgb == 2.0).all()
+        # the means to give back on the GPU: the colour's own, made here (none were given)
+        np.testing.assert_allclose(results[1].raw_means, np.full((1, 1, 3), 3.0))
         assert results[1].ms["filter_ms"] >= 1e3 * SLOW_S * 0.9
         assert worker.take("v") is None and worker.idle()
     finally:
@@ -338,17 +354,18 @@ def test_a_filtered_image_lands_whole_under_a_small_transfer_budget(ctx, monkeyp
         s.release()
 
 
-class MeansRecorder(SlowFilter):
-    """A stand-in that keeps each call's colour and the tile means it was handed."""
+def _record_jobs(monkeypatch) -> list:
+    """Each job the viewer submits, as (its colour, its tile means), copied at submit."""
+    from radiance_probes.rendering.denoise.filter_worker import FilterWorker
+    seen = []
+    submit = FilterWorker.submit
 
-    def __init__(self):
-        super().__init__(delay=0.0)
-        self.seen = []
-
-    def __call__(self, colour, albedo=None, normal=None, copy=True, signed=False, **kw):
-        means = kw.get("raw_means")
-        self.seen.append((np.array(colour, np.float32), None if means is None else means.copy()))
-        return super().__call__(colour, albedo, normal, copy, signed, **kw)
+    def recorded(self, key, job):
+        seen.append((np.array(job.colour, np.float32),
+                     None if job.raw_means is None else np.array(job.raw_means)))
+        submit(self, key, job)
+    monkeypatch.setattr(FilterWorker, "submit", recorded)
+    return seen
 
 
 @pytest.mark.parametrize("method", ["pt", "refine"])
@@ -357,20 +374,55 @@ def test_the_filter_is_handed_its_colours_tile_means_made_on_the_gpu(ctx, monkey
     tile means of its colour, made by glsl/tile_means.comp over the texture read back: they are
     the host's _block_means of the image the thread receives (partial edge tiles too)."""
     from radiance_probes.rendering.denoise.filter import KEEP_MEANS_BLOCK, _block_means
-    stand_in = MeansRecorder()
-    s = _session(ctx, monkeypatch, stand_in, [method], 1 << 12, method == "refine")
+    seen = _record_jobs(monkeypatch)
+    s = _session(ctx, monkeypatch, SlowFilter(delay=0.0), [method], 1 << 12, method == "refine")
     try:
         s.resize(70, 40)      # 3 x 2 tiles of 32, the last of each row and column partial
         end = time.monotonic() + 60
-        while len(stand_in.seen) < 3 and time.monotonic() < end:
+        while len(seen) < 3 and time.monotonic() < end:
             s.step(1 << 12, method == "refine")
             time.sleep(0.005)
-        assert len(stand_in.seen) >= 3
-        for colour, means in stand_in.seen:
+        assert len(seen) >= 3
+        for colour, means in seen:
             assert colour.shape[:2] == (40, 70) and means is not None
             want = _block_means(colour[..., :3], KEEP_MEANS_BLOCK)
             assert means.shape == want.shape == (2, 3, 3)
             np.testing.assert_allclose(means, want, rtol=2e-5, atol=1e-7)
+    finally:
+        s.release()
+
+
+def test_the_image_shown_is_the_filters_given_back_its_raw_means_on_the_gpu(ctx, monkeypatch):
+    """The viewer's filtered image (no stand-in for the restore): the filter's output given back
+    the tile means of the colour it filtered, as the host's keep_block_means gives them, made
+    usable (KeptMeans.restore_given on the filter's raw output: no means kept on the thread)."""
+    from radiance_probes.rendering.denoise.filter import (KEEP_MEANS_BLOCK, _block_means,
+                                                          _make_usable, keep_block_means)
+    seen = []
+
+    class ColourRecorder(SlowFilter):
+        def __call__(self, colour, *args, **kw):
+            seen.append((np.array(colour, np.float32), None))   # run len(seen): full of it
+            return super().__call__(colour, *args, **kw)
+    stand_in = ColourRecorder(delay=0.0)
+    s = _session(ctx, monkeypatch, stand_in, ["pt"], 64, False, restore=True)
+    try:
+        s.resize(70, 40)
+        end = time.monotonic() + 30
+        while s.denoise.runs == 0 and time.monotonic() < end:
+            s.step(64, False)
+            time.sleep(0.002)
+        assert s.denoise.runs >= 1
+        shown = s.shown_image("pt")
+        wants = []
+        for n, (colour, _) in enumerate(seen, start=1):   # run n's image was full of n
+            want = np.full((40, 70, 3), float(n), np.float32)
+            keep_block_means(_block_means(colour[..., :3], KEEP_MEANS_BLOCK), want)
+            _make_usable(want)
+            wants.append(want)
+        errors = [float(np.abs(shown - w).max()) for w in wants]
+        assert min(errors) < 1e-4 * max(1.0, float(shown.max())), errors
+        assert not np.all(shown == shown.flat[0])   # not the stand-in's image as it came
     finally:
         s.release()
 
@@ -430,13 +482,13 @@ def test_a_recycled_result_array_is_written_by_a_later_job_only():
     try:
         first = run(1)
         second = run(2)
-        assert second.rgba is not first.rgba                 # first still held
-        assert (first.rgba[..., 0] == 1.0).all()             # and untouched
-        worker.recycle(first.rgba)
+        assert second.rgb is not first.rgb                 # first still held
+        assert (first.rgb[..., 0] == 1.0).all()             # and untouched
+        worker.recycle(first.rgb)
         third = run(3)
-        assert third.rgba is first.rgba and (third.rgba[..., 0] == 3.0).all()
-        worker.recycle(second.rgba)
-        other = run(4, (2, 2, 4))
-        assert other.rgba is not second.rgba and other.rgba.shape == (2, 2, 4)
+        assert third.rgb is first.rgb and (third.rgb[..., 0] == 3.0).all()
+        worker.recycle(second.rgb)
+        other = run(4, (2, 2, 3))
+        assert other.rgb is not second.rgb and other.rgb.shape == (2, 2, 3)
     finally:
         worker.close()

@@ -80,7 +80,7 @@ def _job_recorded(self, job):
     after = _usage()
     JOBS.append({"wall": round(1e3 * (time.perf_counter() - t), 2), "signed": job.signed,
                  "gpu_means": getattr(job, "raw_means", None) is not None,
-                 "probe_guide": job.probe_radiance is not None,
+                 "probe_guide": job.probe_albedo is not None,
                  "user_ms": round(after[0] - use[0], 1), "system_ms": round(after[1] - use[1], 1),
                  "page_faults": after[2] - use[2],
                  **{k: round(v, 2) for k, v in result.ms.items()}})

@@ -476,7 +476,8 @@ class Denoiser:
     def _call(self, color: np.ndarray, albedo: np.ndarray | None = None,
                  normal: np.ndarray | None = None, copy: bool = True,
                  signed: bool = False, keep_means: bool = True, check_output: bool = True,
-                 color_finite: bool = False, raw_means: np.ndarray | None = None) -> Denoised:
+                 color_finite: bool = False, raw_means: np.ndarray | None = None,
+                 out: np.ndarray | None = None) -> Denoised:
         """The denoised colour (H, W, 3) of `color` (H, W, 3 or 4: RGB, or RGBA whose alpha is
         ignored), guided by the noise-free `albedo` (in [0, 1]) and `normal` (in [-1, 1]) where
         given (a normal needs an albedo: OIDN's rule). Negative, NaN and infinite colours are
@@ -495,8 +496,11 @@ class Denoiser:
         `keep_means` no pass looks for non-finite values. `raw_means`: the colour's tile means
         (tiles down, across, 3 or more; _block_means' or glsl/tile_means.comp's) made by the
         caller, kept as keep_means keeps its own (where one is not finite, the colour is made
-        usable and the means made again here). Where the filter cannot run: the raw
-        colour, made finite (and, unless signed, non-negative), with a note."""
+        usable and the means made again here). `out`: an (H, W, 3) float32 array of the
+        caller's that the result is written into (one read of the filter's output buffer, for a
+        signed image its two parts' difference), then returned as the image. Where the filter
+        cannot run: the raw colour, made finite (and, unless signed, non-negative), with a
+        note."""
         color = np.asarray(color)
         if color.ndim != 3 or color.shape[2] not in (3, 4) or min(color.shape[:2]) == 0:
             raise ValueError(f"denoise: the colour image must be (height, width, 3), got "
@@ -514,6 +518,10 @@ class Denoiser:
                 raise ValueError(f"denoise: raw_means must be (tiles down, across, 3 or 4) = "
                                  f"{tiles} for a {width}x{height} image, got {raw_means.shape}")
             raw_means = raw_means[..., :3]
+        if out is not None and (out.shape != (height, width, 3) or out.dtype != np.float32
+                                or not out.flags.c_contiguous):
+            raise ValueError(f"denoise: out must be a C-contiguous ({height}, {width}, 3) float32 "
+                             f"array, got {out.shape} {out.dtype}")
         if not self._load():
             return Denoised(sanitize(color[..., :3]), None, self.failure)
         guides = {n: g for n, g in (("albedo", albedo), ("normal", normal)) if g is not None}
@@ -566,8 +574,14 @@ class Denoiser:
             if negative is not None:
                 self._execute(negative)
             t2 = time.perf_counter()
-            out = entry["output"]
-            if raw_means is not None or copy or negative is not None:
+            given, out = out, entry["output"]
+            if given is not None:   # the caller's array: the one read of the output
+                if negative is not None:
+                    np.subtract(out, negative["output"], out=given)
+                else:
+                    np.copyto(given, out)
+                out = given
+            elif raw_means is not None or copy or negative is not None:
                 # one read of the filter's output buffer (host memory the device writes: reading
                 # it is slow, and keeping the means reads and writes it three times) into memory
                 # of our own, for a signed image the two parts' difference; handed out where

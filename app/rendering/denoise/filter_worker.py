@@ -6,11 +6,16 @@ filtered image, as float32 RGBA ready to upload, on whichever later frame finds 
 
 One job runs at a time (the filter is the device's, one OIDN filter per size and guides); a job
 waiting for its turn is replaced by a newer one of the same key (the newest image is the one worth
-filtering), and a finished result is kept until its key's owner takes it. The filter is the host
-path (Denoiser with keep_means and check_output: the tile means kept and the output checked on this
-thread); a "probes" guide comes as the raymarched radiance and is scaled into an albedo here
-(radiance_as_albedo). OIDN's own first use (its device and weights: about 4 s on the H200 machine
-the first time) happens in `warm`, on the thread, at the viewer's start."""
+filtering), and a finished result is kept until its key's owner takes it. The thread does as
+little as it can beside the filter: the colour's tile means come made on the GPU
+(glsl/tile_means.comp), a "probes" guide comes made on the GPU too (probe_guide.py) and is
+copied into the filter's own guide memory, and the result is the filter's RGB output in an array
+of the thread's, without the means given back: its owner uploads it and gives them back on the
+GPU (KeptMeans.restore_given, which checks the output as well). On the H200 the host passes these
+replaced (the guide's NumPy passes, the means kept, the copy into RGBA) took 130-230 ms of a
+173-310 ms job beside the frames (bench/h200-interact-refine-56/host-passes). OIDN's own first
+use (its device and weights: about 4 s on the H200 machine the first time) happens in `warm`, on
+the thread, at the viewer's start."""
 from __future__ import annotations
 
 import contextlib
@@ -20,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from radiance_probes.rendering.denoise.filter import radiance_as_albedo
+from radiance_probes.rendering.denoise.filter import KEEP_MEANS_BLOCK, _block_means, _make_usable
 
 
 FREE_KEPT = 3   # results' arrays kept for reuse (FilterWorker.recycle)
@@ -29,15 +34,16 @@ FREE_KEPT = 3   # results' arrays kept for reuse (FilterWorker.recycle)
 @dataclass
 class FilterJob:
     """An image to filter: `colour` (H, W, 3 or 4 float32, host), guides as host arrays (`albedo`
-    in [0, 1] and `normal`; or `probe_radiance`, the raymarched image over the probes, made the
-    albedo guide on the thread, written into the filter's own guide memory), `signed` (a
-    residual that may dip below 0), `tag`: what its owner wants back with the result (the
-    samples, the generation it was read at), and `raw_means`: the colour's tile means where the
-    owner made them on the GPU (glsl/tile_means.comp; else the thread makes them)."""
+    in [0, 1] and `normal`; or `probe_albedo`, the probes guide made on the GPU, ProbeAlbedoGuide:
+    H x W x 3 float32 values in [0, 1] in any shape, copied into the filter's own guide memory
+    on the thread), `signed` (a residual that may dip below 0), `tag`: what its owner wants back
+    with the result (the samples, the generation it was read at), and `raw_means`: the colour's
+    tile means where the owner made them on the GPU (glsl/tile_means.comp; else, or where one is
+    not finite, the thread makes them from the colour made usable)."""
     colour: np.ndarray
     albedo: np.ndarray | None = None
     normal: np.ndarray | None = None
-    probe_radiance: np.ndarray | None = None
+    probe_albedo: np.ndarray | None = None
     signed: bool = False
     tag: object = None
     raw_means: np.ndarray | None = None
@@ -45,14 +51,19 @@ class FilterJob:
 
 @dataclass
 class FilterResult:
-    """A finished job: `rgba` (H, W, 4 float32, alpha 1) or None where the filter could not run
-    (`note` says why), its tag, and wall ms on the thread (`ms`: guide, filter, copy)."""
-    rgba: np.ndarray | None
+    """A finished job: `rgb` (H, W, 3 float32, the filter's output as it came: not yet given back
+    the raw means nor checked) or None where the filter could not run (`note` says why), its
+    tag, `raw_means` (tiles down, across, 3: what KeptMeans.restore_given gives back to it),
+    `signed` (filtered as a signed image: restore it so), and wall ms on the thread (`ms`: guide,
+    filter, copy)."""
+    rgb: np.ndarray | None
     tag: object
     note: str | None = None
     device: str | None = None
     ms: dict = field(default_factory=dict)
     finished_at: float = 0.0
+    raw_means: np.ndarray | None = None
+    signed: bool = False
 
 
 class FilterWorker:
@@ -113,23 +124,24 @@ class FilterWorker:
             self._held = max(self._held + (1 if on else -1), 0)
             self._lock.notify()
 
-    def recycle(self, rgba: np.ndarray) -> None:
-        """Gives back a result's `rgba` its owner is done with (uploaded), for a later result
-        to be written into: a 1080p one made anew for each result is 33 MB of fresh pages on the
+    def recycle(self, rgb: np.ndarray) -> None:
+        """Gives back a result's `rgb` its owner is done with (uploaded), for a later result
+        to be written into: a 1080p one made anew for each result is 25 MB of fresh pages on the
         thread. The owner must not read it after; at most FREE_KEPT are kept."""
-        if rgba is None or rgba.dtype != np.float32 or rgba.ndim != 3 or rgba.shape[2] != 4:
+        if (rgb is None or rgb.dtype != np.float32 or rgb.ndim != 3 or rgb.shape[2] != 3
+                or not rgb.flags.c_contiguous):
             return
         with self._lock:
-            if len(self._free) < FREE_KEPT and not any(a is rgba for a in self._free):
-                self._free.append(rgba)
+            if len(self._free) < FREE_KEPT and not any(a is rgb for a in self._free):
+                self._free.append(rgb)
 
-    def _rgba(self, height: int, width: int) -> np.ndarray:
+    def _rgb(self, height: int, width: int) -> np.ndarray:
         with self._lock:
             for i, a in enumerate(self._free):
-                if a.shape == (height, width, 4):
+                if a.shape == (height, width, 3):
                     return self._free.pop(i)
             self._free = [a for a in self._free if a.shape[:2] == (height, width)]
-        return np.empty((height, width, 4), np.float32)
+        return np.empty((height, width, 3), np.float32)
 
     def idle(self) -> bool:
         with self._lock:
@@ -179,34 +191,56 @@ class FilterWorker:
     def _filter(self, job: FilterJob) -> FilterResult:
         t0 = time.perf_counter()
         staging = getattr(self.denoiser, "guide_staging", None)
-        in_place = job.probe_radiance is not None and staging is not None
+        in_place = job.probe_albedo is not None and staging is not None
         # a guide written into the denoiser's memory: its lock (re-entrant) over the write and
         # the call, so that no other caller's image of the size comes between them
         with self.denoiser.lock if in_place else contextlib.nullcontext():
             return self._filter_held(job, t0, staging if in_place else None)
 
+    @staticmethod
+    def _means(job: FilterJob) -> tuple[np.ndarray, np.ndarray]:
+        """(colour, its tile means): the job's own where its means are finite; else (none made
+        on the GPU, or a non-finite pixel) the colour made usable (a copy: NaN and infinities 0,
+        unless signed negatives 0, as Denoiser makes it) and the means of that."""
+        means = job.raw_means
+        if means is not None:
+            means = np.asarray(means, np.float32)[..., :3]
+            if np.isfinite(means).all():
+                return job.colour, means
+        colour = np.array(job.colour, np.float32)
+        if job.signed:
+            np.nan_to_num(colour, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+        else:
+            _make_usable(colour)
+        return colour, _block_means(colour[..., :3], KEEP_MEANS_BLOCK).astype(np.float32)
+
     def _filter_held(self, job: FilterJob, t0: float, staging) -> FilterResult:
         try:
+            colour, means = self._means(job)
+            h, w = colour.shape[:2]
             albedo = job.albedo
-            if job.probe_radiance is not None:
-                h, w = job.probe_radiance.shape[:2]
+            if job.probe_albedo is not None:
+                albedo = np.asarray(job.probe_albedo, np.float32).reshape(h, w, 3)
                 names = ("albedo",) if job.normal is None else ("albedo", "normal")
                 out = None if staging is None else staging(w, h, names, "albedo")
-                albedo = radiance_as_albedo(job.probe_radiance, out=out)
+                if out is not None:   # made on the GPU in [0, 1]: one copy, no clip
+                    np.copyto(out, albedo)
+                    albedo = out
             t1 = time.perf_counter()
-            d = self.denoiser(job.colour, albedo, job.normal, copy=False, signed=job.signed,
-                              **({} if job.raw_means is None else {"raw_means": job.raw_means}))
+            rgb = self._rgb(h, w)
+            d = self.denoiser(colour, albedo, job.normal, copy=False, signed=job.signed,
+                              keep_means=False, check_output=False, color_finite=True, out=rgb)
             t2 = time.perf_counter()
             if not d.denoised:
+                self.recycle(rgb)
                 return FilterResult(None, job.tag, d.note, None, finished_at=time.perf_counter())
-            h, w = d.image.shape[:2]
-            rgba = self._rgba(h, w)
-            rgba[..., :3] = d.image
-            rgba[..., 3] = 1.0
+            if d.image is not rgb:   # a stand-in's own array
+                np.copyto(rgb, np.asarray(d.image, np.float32)[..., :3])
         except Exception as exc:   # the denoiser's own failures come back as notes
             return FilterResult(None, job.tag, f"the denoiser failed ({exc}). Showing the image "
                                 "as rendered.", finished_at=time.perf_counter())
         t3 = time.perf_counter()
-        return FilterResult(rgba, job.tag, None, d.device,
+        return FilterResult(rgb, job.tag, None, d.device,
                             {"guide_ms": 1e3 * (t1 - t0), "filter_ms": 1e3 * (t2 - t1),
-                             "copy_ms": 1e3 * (t3 - t2)}, finished_at=time.perf_counter())
+                             "copy_ms": 1e3 * (t3 - t2)}, finished_at=time.perf_counter(),
+                            raw_means=means, signed=bool(d.signed))

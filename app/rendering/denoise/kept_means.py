@@ -175,6 +175,25 @@ class KeptMeans:
                                 | moderngl.TEXTURE_UPDATE_BARRIER_BIT
                                 | moderngl.SHADER_IMAGE_ACCESS_BARRIER_BIT)
 
+    def restore_given(self, filtered: moderngl.Texture, raw_means: np.ndarray,
+                      out: moderngl.Texture, signed: bool) -> None:
+        """restore with the raw means given (tiles down, across, 3: a filter job's,
+        FilterResult.raw_means) instead of those of the last raw_means pass: written into the raw
+        means' buffer first (130 KB at 1080p), so that any number of images under way each
+        restore with their own."""
+        width, height = filtered.size
+        tiles = tile_grid(width, height)
+        means = np.asarray(raw_means, np.float32)
+        if means.shape[:2] != (tiles[1], tiles[0]) or means.ndim != 3 or means.shape[2] < 3:
+            raise ValueError(f"restore_given: raw means of {means.shape} for a {width}x{height} "
+                             f"image ({tiles[1]}, {tiles[0]}, 3)")
+        self._buffers(width, height)
+        rows = np.zeros((tiles[1], tiles[0], 4), np.float32)
+        rows[..., :3] = means[..., :3]
+        self._raw.write(rows)
+        self._raw_of = (width, height)
+        self.restore(filtered, out, signed)
+
     def release(self) -> None:
         for obj in (self._raw, self._own, self._filtered, self._result):
             if obj is not None:

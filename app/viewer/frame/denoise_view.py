@@ -7,9 +7,10 @@ its own raymarched image, read back beside it).
 No frame waits for the filter (issue 56). A view's filtered image is made in three steps over
 frames: its accumulation read back through a pixel buffer with a fence (app/gl/fence.py), the
 host copy taken on the first later frame that finds the fence signalled; the filter on its own
-thread (app/rendering/denoise/filter_worker.py; OIDN with its tile means kept on that thread); and the
-result uploaded on the frame that finds it done, if the view has not restarted since (else it is
-dropped). The display shows the newest finished filtered image of the current accumulation, and
+thread (app/rendering/denoise/filter_worker.py: OIDN alone, the colour's tile means and refine's probes
+guide made on the GPU beside the read-back); and the filter's output uploaded on the frame that
+finds it done, if the view has not restarted since (else it is dropped), and given back the raw
+tile means on the GPU (KeptMeans.restore_given). The display shows the newest finished filtered image of the current accumulation, and
 the raw image until the first. A new filtered image is started whenever the samples have doubled
 since the last one started (1, 2, 4, ...), and at least every INTERVAL_S while they grow, one at
 a time per view. OIDN has no temporal mode: the filtered images of a still camera change as
@@ -32,6 +33,7 @@ from radiance_probes.methods import METHODS
 from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser
 from radiance_probes.rendering.denoise.filter_worker import FilterJob, FilterWorker
 from radiance_probes.rendering.denoise.kept_means import KeptMeans, tile_grid
+from radiance_probes.rendering.denoise.probe_guide import ProbeAlbedoGuide
 from radiance_probes.rendering.image_ops import clear_image
 from radiance_probes.rendering.refine.refine import BlendPass
 from radiance_probes.viewer.frame.frame_parts import FrameParts
@@ -69,6 +71,7 @@ class _Filtered:
 
 
 FRESH_TEXTURES = 3   # a view's filtered image, its spare and its blend (refine)
+FRESH_RGB_TEXTURES = 2   # the filter's outputs going up (a view's, a judgement's)
 
 
 @dataclass
@@ -105,6 +108,7 @@ class ViewDenoise:
         self.parts = FrameParts()        # the frame's parts (the session hands in its own)
         self.filter_ms = 0.0             # the filter's ms on its thread, of results landed
         self.kept_means: KeptMeans | None = None   # the tile means' passes, made on first use
+        self.probe_guide: ProbeAlbedoGuide | None = None   # refine's probes guide's passes
         # compiled with the session where the switch starts on, not at a view's first blend
         self.blend_pass: BlendPass | None = BlendPass(ctx) if enabled else None
         self._worker: FilterWorker | None = None
@@ -113,7 +117,8 @@ class ViewDenoise:
         self.host = HostArrays()   # the read-backs' host copies, reused
         self.budget = TransferBudget(TRANSFER_BYTES_PER_FRAME)   # the frame's host transfers
         # a filtered image being uploaded in bands into a texture of its own, then shown:
-        # {name: (ChunkedUpload, _InFlight)}; and each view's spare texture for the next
+        # {name: (ChunkedUpload into an RGB32F texture, _InFlight, the RGBA32F texture it is
+        # restored into, FilterResult)}; and each view's spare texture for the next
         self.landing: dict[str, tuple] = {}
         self._spare: dict[str, moderngl.Texture] = {}
         # made at warm(), before any frame needs them, and touched so that the driver gives
@@ -121,6 +126,7 @@ class ViewDenoise:
         # (made at their first use, they cost a load's frames 26 and 45 ms on the H200 at 1080p)
         self.upload_buffer: moderngl.Buffer | None = None
         self._fresh: list[moderngl.Texture] = []
+        self._rgb_free: list[moderngl.Texture] = []   # RGB32F: uploads' targets not in use
 
     # ---- the filter's thread -------------------------------------------------------------------
     def worker(self) -> FilterWorker | None:
@@ -147,6 +153,7 @@ class ViewDenoise:
                 worker.warm(width, height, ("albedo",), signed=True)
             self._stock(width, height)
             self.kept()   # its passes compiled now, not at the first filtered image
+            self.albedo_guide()
 
     def _stock(self, width: int, height: int) -> None:
         """FRESH_TEXTURES touched textures of this size, and the uploads' pixel buffer."""
@@ -157,6 +164,13 @@ class ViewDenoise:
             texture = self.ctx.texture((width, height), 4, dtype="f4")
             clear_image(texture)
             self._fresh.append(texture)
+        for texture in self._rgb_free:
+            texture.release()
+        self._rgb_free = []
+        for _ in range(FRESH_RGB_TEXTURES):
+            texture = self.rgb_texture((width, height))
+            texture.write(bytes(12 * width * height))
+            self._rgb_free.append(texture)
         if self.upload_buffer is None:
             self.upload_buffer = self.ctx.buffer(reserve=TRANSFER_BYTES_PER_FRAME)
             self.upload_buffer.write(bytes(TRANSFER_BYTES_PER_FRAME))
@@ -195,6 +209,41 @@ class ViewDenoise:
             self.note = None
             if self.blend_pass is None:
                 self.blend_pass = BlendPass(self.ctx)
+            # the passes a filtered image takes, compiled at the switch, not in its first frames
+            self.kept()
+            self.albedo_guide()
+
+    def albedo_guide(self) -> ProbeAlbedoGuide:
+        """refine's probes guide's passes (made on first use)."""
+        if self.probe_guide is None:
+            self.probe_guide = ProbeAlbedoGuide(self.ctx)
+        return self.probe_guide
+
+    def rgb_texture(self, size) -> moderngl.Texture:
+        """An RGB32F texture of `size` for a filter's output to go up into (one not in use, or
+        a new one); give it back with give_rgb_texture once restored."""
+        size = tuple(size)
+        for i, texture in enumerate(self._rgb_free):
+            if texture.size == size:
+                return self._rgb_free.pop(i)
+        texture = self.ctx.texture(size, 3, dtype="f4")
+        texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        return texture
+
+    def give_rgb_texture(self, texture: moderngl.Texture) -> None:
+        if len(self._rgb_free) < FRESH_RGB_TEXTURES:
+            self._rgb_free.append(texture)
+        else:
+            texture.release()
+
+    def restore_result(self, upload: ChunkedUpload, result, out: moderngl.Texture) -> None:
+        """A filter's output, now whole in `upload`'s RGB32F texture, given back its raw tile
+        means into `out` (RGBA32F; checked finite and, unless signed, non-negative there), its
+        texture and host array given back for the next."""
+        self.kept().restore_given(upload.texture, result.raw_means, out, result.signed)
+        self.give_rgb_texture(upload.texture)
+        if self._worker is not None:
+            self._worker.recycle(upload.image)
 
     def means_on_gpu(self, key: tuple, texture) -> moderngl.Buffer:
         """The tile means of `texture` dispatched into a GL buffer kept under `key` (for a
@@ -257,17 +306,18 @@ class ViewDenoise:
             return
         flight = self.inflight.pop(name, None)
         self.filter_ms += result.ms.get("filter_ms", 0.0) + result.ms.get("guide_ms", 0.0)
-        if result.rgba is None:
+        if result.rgb is None:
             self.note, self.enabled = result.note, False
             self.release()
             return
         if flight is None or flight.generation != generation:
-            worker.recycle(result.rgba)
+            worker.recycle(result.rgb)
             return   # the view restarted while it was filtered: not an image of what it shows
-        h, w = result.rgba.shape[:2]
+        h, w = result.rgb.shape[:2]
         texture = self._spare[name] = self._sized(self._spare.get(name), (w, h))
         texture.filter = flight.filter
-        self.landing[name] = (ChunkedUpload(texture, result.rgba, self.upload_buffer), flight)
+        upload = ChunkedUpload(self.rgb_texture((w, h)), result.rgb, self.upload_buffer)
+        self.landing[name] = (upload, flight, texture, result)
 
     def _upload(self, name: str, generation: tuple) -> None:
         """A band of the filtered image being uploaded; once whole, it is what the view shows
@@ -275,24 +325,25 @@ class ViewDenoise:
         got = self.landing.get(name)
         if got is None:
             return
-        upload, flight = got
+        upload, flight, texture, result = got
         if flight.generation != generation:
             del self.landing[name]
             upload.release()
+            self.give_rgb_texture(upload.texture)
             return
         with self.parts.part("upload"):
             whole = upload.step(self.budget)
+            if whole:
+                self.restore_result(upload, result, texture)
         if not whole:
             return
-        if self._worker is not None:
-            self._worker.recycle(upload.image)
         del self.landing[name]
         old = self.images.get(name)
         self._spare.pop(name, None)
         if old is not None:
             self._spare[name] = old.texture
         blended = old.blended if old is not None else None
-        self.images[name] = _Filtered(upload.texture, generation, flight.samples, flight.at,
+        self.images[name] = _Filtered(texture, generation, flight.samples, flight.at,
                                       blended)
         self.runs += 1
 
@@ -315,8 +366,8 @@ class ViewDenoise:
             return
         images = [r.out for r in flight.reads]
         worker.submit(name, FilterJob(images[0], flight.albedo, flight.normal,
-                                      images[1] if flight.probe_guide else None, flight.signed,
-                                      tag=flight.samples,
+                                      probe_albedo=images[1] if flight.probe_guide else None,
+                                      signed=flight.signed, tag=flight.samples,
                                       raw_means=tile_means_of(flight.means, images[0])))
         flight.filtering = True
 
@@ -336,8 +387,10 @@ class ViewDenoise:
         # the tile means first, so that the colour's fence covers their pass too
         means = self.read((name, "means"), self.means_on_gpu((name, "means"), acc.texture))
         reads = [self.read((name, "colour"), acc.texture)]
-        if probe_guide:
-            reads.append(self.read((name, "guide"), ray.texture))
+        if probe_guide:   # made on the GPU, read back packed beside the colour
+            with self.parts.part("guide"):
+                guide = self.albedo_guide().dispatch((name, "guide"), ray.texture)
+            reads.append(self.read((name, "guide"), guide))
         self.inflight[name] = _InFlight(generation, acc.samples, time.monotonic(), reads,
                                         METHODS[view.shown].signed, albedo, normal, probe_guide,
                                         means, filter=acc.texture.filter)
@@ -373,6 +426,7 @@ class ViewDenoise:
         landing = self.landing.pop(name, None)
         if landing is not None:
             landing[0].release()
+            self.give_rgb_texture(landing[0].texture)
         spare = self._spare.pop(name, None)
         if spare is not None:
             spare.release()
@@ -425,9 +479,12 @@ class ViewDenoise:
         self._staging.clear()
         self._means_gpu.clear()
         self.host.clear()
-        for texture in self._fresh:
+        for texture in (*self._fresh, *self._rgb_free):
             texture.release()
-        self._fresh = []
+        self._fresh, self._rgb_free = [], []
+        if self.probe_guide is not None:
+            self.probe_guide.release()
+            self.probe_guide = None
         if self.blend_pass is not None:
             self.blend_pass.release()
             self.blend_pass = None

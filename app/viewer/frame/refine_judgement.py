@@ -6,9 +6,10 @@ bytes are copied into a buffer of the view's and fenced (app/gl/fence.py), and t
 them (the estimate, the raw switch) on the first later frame that finds the fence signalled.
 Where the check judges the blend (the Denoise switch on), the same frame's combine wrote half A
 alone and half B is copied as it is (HalfBuffers.snapshot_b); half A and the raymarcher's image
-(the probes guide) are read back beside the sums. Then, over later frames: half A filtered on the
-filter's thread (app/rendering/denoise/filter_worker.py); on the frame its result is found, uploaded
-into `denoised_a` and judged with the raymarcher's image against the snapshot of half B (STAGE 3,
+(the probes guide, made the albedo guide on the GPU: probe_guide.py) are read back beside the sums.
+Then, over later frames: half A filtered on the filter's thread (app/rendering/denoise/filter_worker.py);
+on the frame its result is found, uploaded and given back its tile means into `denoised_a`
+(ViewDenoise.restore_result) and judged with the raymarcher's image against the snapshot of half B (STAGE 3,
 whose sums are read back the same way); and on the frame those come, the blend
 (refine.blend_from_sums) of the counts and sums of the check. The judgement is as
 refine.judged_blend's (a still image's), but against half B of the check's frame, the raymarcher's
@@ -23,6 +24,7 @@ from radiance_probes.gl.fence import ChunkedUpload, PendingRead, staging_buffer,
 from radiance_probes.methods import METHODS
 from radiance_probes.rendering.denoise.filter import choose_guides
 from radiance_probes.rendering.denoise.filter_worker import FilterJob
+from radiance_probes.rendering.denoise.probe_guide import guide_bytes
 from radiance_probes.rendering.refine.refine import blend_from_sums
 from radiance_probes.viewer.frame.denoise_view import tile_means_of
 
@@ -41,12 +43,13 @@ class RefineCheck:
     stage_bits: int
     half_a_read: PendingRead | None = None
     means_read: PendingRead | None = None   # half A's tile means (glsl/tile_means.comp)
-    ray_read: PendingRead | None = None
+    ray_read: PendingRead | None = None   # the probes guide (ProbeAlbedoGuide), packed
     guides: tuple = (None, None)      # (albedo, normal) host guides where not the probes'
     stage: str = "sums"
     sums: tuple | None = None
     judge_read: PendingRead | None = None
-    upload: ChunkedUpload | None = None   # the filtered half A going up into denoised_a
+    upload: ChunkedUpload | None = None   # the filtered half A going up (then into denoised_a)
+    result: object = None                 # its FilterResult (the raw means to give back)
     frames: int = 0                   # frames it has been under way
 
     def release(self) -> None:
@@ -54,6 +57,9 @@ class RefineCheck:
                   self.judge_read, self.upload):
             if r is not None:
                 r.release()
+        if self.upload is not None:   # dropped while going up: its texture is its own now
+            self.upload.texture.release()
+            self.upload = None
 
 
 def _read(session, view, key: str, source) -> PendingRead:
@@ -68,7 +74,8 @@ def prepare_staging(session, view) -> None:
     frame's first host copy took 15.6 ms on the H200 at 1080p)."""
     halves = view.halves
     image = halves.width * halves.height * 16   # RGBA32F
-    for key, nbytes in (("sums", halves.sums.size), ("half_a", image), ("ray", image)):
+    guide = guide_bytes(halves.width, halves.height)
+    for key, nbytes in (("sums", halves.sums.size), ("half_a", image), ("ray", guide)):
         buf = view.staging[key] = staging_buffer(session.ctx, view.staging.get(key), nbytes)
         buf.read(size=4)
 
@@ -91,7 +98,10 @@ def begin_check(session, view, with_ray: bool, judgeable: bool, judge: bool,
         r = session.renderer
         names = choose_guides("auto", check.counts[0], r.probes_shown())
         if names == "probes":
-            check.ray_read = _read(session, view, "ray", view.ray.texture)
+            with session.denoise.parts.part("guide"):
+                guide = session.denoise.albedo_guide().dispatch((view.method, "judge_guide"),
+                                                                view.ray.texture)
+            check.ray_read = _read(session, view, "ray", guide)
         else:
             albedo, normal, _ = r.denoise_guides(names, camera=view.camera)
             check.guides = (albedo, normal)
@@ -126,7 +136,8 @@ def advance_check(session, view, check: RefineCheck):
         half_a = check.half_a_read.out
         ray = check.ray_read.out if check.ray_read is not None else None
         albedo, normal = check.guides
-        worker.submit(key, FilterJob(half_a, albedo, normal, ray, METHODS["guided"].signed,
+        worker.submit(key, FilterJob(half_a, albedo, normal, probe_albedo=ray,
+                                     signed=METHODS["guided"].signed,
                                      raw_means=tile_means_of(check.means_read, half_a)))
         check.stage = "filter"
         return "sums", check.sums
@@ -135,22 +146,25 @@ def advance_check(session, view, check: RefineCheck):
         result = None if worker is None else worker.take(key)
         if worker is not None and result is None:
             return "pending", None
-        if result is None or result.rgba is None:
+        if result is None or result.rgb is None:
             if result is not None:
                 denoise.note, denoise.enabled = result.note, False
             check.stage = "done"
             return "judged", None
         denoise.filter_ms += result.ms.get("filter_ms", 0.0) + result.ms.get("guide_ms", 0.0)
-        check.upload = ChunkedUpload(halves.denoised_a, result.rgba, denoise.upload_buffer)
+        h, w = result.rgb.shape[:2]
+        check.upload = ChunkedUpload(denoise.rgb_texture((w, h)), result.rgb,
+                                     denoise.upload_buffer)
+        check.result = result
         check.stage = "upload"
     if check.stage == "upload":
         with denoise.parts.part("upload"):
             whole = check.upload.step(denoise.budget)
+            if whole:
+                denoise.restore_result(check.upload, check.result, halves.denoised_a)
         if not whole:
             return "pending", None
-        worker = denoise.worker()
-        if worker is not None:
-            worker.recycle(check.upload.image)
+        check.upload, check.result = None, None
         with denoise.parts.part("judgement"):
             halves.dispatch_judge(view.ray, from_snapshot=True)
         check.judge_read = _read(session, view, "judge", halves.judge_sums)
