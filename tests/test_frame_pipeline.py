@@ -167,14 +167,17 @@ def test_frames_never_wait_for_a_slow_filter_and_show_its_newest_image(ctx, monk
     newest finished (its run's number), and one of an accumulation that has restarted since is
     never shown."""
     from radiance_probes.viewer.frame.pacing import WALL_FRAME_MS
+    # never reached within the test (on an H200 a 24 x 16 view took 4096 samples within two
+    # runs, after which no new image is due and the runs shown stop at 2)
+    MANY_SAMPLES = 1 << 24
     stand_in = SlowFilter()
-    s = _session(ctx, monkeypatch, stand_in, ["pt"], 1 << 12, False)
+    s = _session(ctx, monkeypatch, stand_in, ["pt"], MANY_SAMPLES, False)
     try:
         walls, landed, others = [], [], []
         end = time.monotonic() + 20
         while len(set(landed)) < 3 and time.monotonic() < end:
             t0 = time.perf_counter()
-            times = s.step(1 << 12, False)
+            times = s.step(MANY_SAMPLES, False)
             walls.append(1e3 * (time.perf_counter() - t0))
             others.append(_other_ms(walls[-1], times.parts))
             if s.denoise.runs:
@@ -195,7 +198,7 @@ def test_frames_never_wait_for_a_slow_filter_and_show_its_newest_image(ctx, monk
         s.restart()
         view = s.views["pt"]
         while stand_in.calls == runs:          # the old run finishes; a new one starts
-            s.step(1 << 12, False)
+            s.step(MANY_SAMPLES, False)
             assert s.denoise.texture("pt", view, s.restarts) is None
             time.sleep(0.01)
         assert s.denoise.texture("pt", view, s.restarts) is None or int(
