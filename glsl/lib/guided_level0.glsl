@@ -134,6 +134,11 @@ vec3 guided_level0_radiance(vec3 origin, vec3 d, inout uint rng)
     int steps = guided_level0_budget;
     bool ok = true;
     vec3 radiance = vec3(0.0);
+    // Each segment's tracking pieces and its one scored point go through one call site each
+    // (residual_track, guided_predicted_source): inlined at every call, four tracking calls and
+    // two source fetches made this pass take 2.4-3.2 s to compile on the H200 with the driver's
+    // cache empty (lab/experiments/compile_pragmas.py). The random numbers are drawn in the order
+    // they were, and each score is weighted by the transmittance estimate where it was scored.
     for (int i = 0; i < n && ok && w != 0.0; ++i) {
         float ta = t0 + float(i) * dt;
         float tb = ta + dt;
@@ -142,21 +147,26 @@ vec3 guided_level0_radiance(vec3 origin, vec3 d, inout uint rng)
         vec4 tf = classified_at(x);
         float sigma_i = density_scale * tf.a;
         float m = guided_segment_majorant(origin + ta * d, origin + tb * d);
+        // up to two pieces tracked with control sigma_c: [ta, t_mid] then [t_mid, t_end]
+        float sigma_c = sigma_i, t_mid = tb, t_end = tb;
+        int pieces = 1;
+        bool score_after_first = false;   // thin: the point at t, scored between the pieces
+        bool scored = false;              // thick: a collision found by the flight
+        vec3 score_x = x, score_rgb = tf.rgb;
+        float score_weight = 0.0;         // transmittance estimate times its own factor
+        bool roulette = true;             // (not after an empty stretch, as before)
         if (m <= 0.0 && sigma_i <= 0.0) {
             // Empty here: jump to the last sample before this macrocell's exit, as the raymarcher
             // does, tracking everything in between (exact: any medium there still counts).
             int last = empty_space_last_index(origin, d, t, i, t0, dt, jitter);
-            ok = residual_track(origin, d, ta, t0 + float(last + 1) * dt, 0.0, tau_c, w, rng,
-                                steps);
+            sigma_c = 0.0;
+            t_mid = t0 + float(last + 1) * dt;
             i = last;
-            continue;
-        }
-        if (m * dt <= 1.0) {
-            ok = residual_track(origin, d, ta, t, sigma_i, tau_c, w, rng, steps);
-            if (ok && sigma_i > 0.0)
-                radiance += (exp(-tau_c) * w) * (sigma_i * dt) * albedo * tf.rgb
-                            * guided_predicted_source(x, d, sun_phase);
-            ok = ok && residual_track(origin, d, t, tb, sigma_i, tau_c, w, rng, steps);
+            roulette = false;
+        } else if (m * dt <= 1.0) {
+            t_mid = t;
+            pieces = 2;
+            score_after_first = sigma_i > 0.0;
         } else {
             float s = ta;
             for (; steps > 0; --steps) {
@@ -166,14 +176,28 @@ vec3 guided_level0_radiance(vec3 origin, vec3 d, inout uint rng)
                 vec3 xs = origin + s * d;
                 vec4 ts = classified_at(xs);
                 if (rng_next(rng) * majorant < density_scale * ts.a) {
-                    radiance += (exp(-tau_c) * w) * albedo * ts.rgb
-                                * guided_predicted_source(xs, d, sun_phase);
+                    scored = true;
+                    score_x = xs;
+                    score_rgb = ts.rgb;
+                    score_weight = exp(-tau_c) * w;
                     break;
                 }
             }
-            ok = steps > 0 && residual_track(origin, d, ta, tb, sigma_i, tau_c, w, rng, steps);
+            ok = steps > 0;
         }
-        if (ok)
+        for (int piece = 0; piece < pieces && ok; ++piece) {
+            float a = piece == 0 ? ta : t_mid;
+            float b = piece == 0 ? t_mid : t_end;
+            ok = residual_track(origin, d, a, b, sigma_c, tau_c, w, rng, steps);
+            if (ok && piece == 0 && score_after_first) {
+                scored = true;
+                score_weight = (exp(-tau_c) * w) * (sigma_i * dt);
+            }
+        }
+        if (scored)
+            radiance += score_weight * albedo * score_rgb
+                        * guided_predicted_source(score_x, d, sun_phase);
+        if (ok && roulette)
             level0_roulette(tau_c, w, rng);
     }
     if (!ok) {
