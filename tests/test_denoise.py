@@ -532,3 +532,20 @@ def test_a_result_written_into_the_callers_array_is_the_copied_result(cpu_denois
     np.testing.assert_array_equal(out, want)
     with pytest.raises(ValueError, match="out must be"):
         cpu_denoiser(colour, out=np.zeros(colour.shape[:2] + (4,), np.float32))
+
+
+def test_a_signed_colour_told_it_has_no_negative_value_is_filtered_once(cpu_denoiser):
+    """has_negative: the caller's word (the tile means' least values) replaces the host's look
+    for a negative pixel: told True, a signed image is filtered as its two parts (the same image
+    as when the denoiser looks); told False on a non-negative image, once (the same image too)."""
+    clean, noisy = _clean_and_noisy(seed=23, size=40)
+    signed = noisy - 0.3 * clean
+    looked = cpu_denoiser(signed, signed=True, copy=True, keep_means=False)
+    told = cpu_denoiser(signed, signed=True, copy=True, keep_means=False, has_negative=True)
+    assert looked.signed and told.signed
+    np.testing.assert_array_equal(told.image, looked.image)
+    positive = cpu_denoiser(noisy, signed=True, copy=True, keep_means=False, has_negative=False)
+    assert not positive.signed
+    np.testing.assert_array_equal(positive.image,
+                                  cpu_denoiser(noisy, copy=True, keep_means=False).image)
+

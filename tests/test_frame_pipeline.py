@@ -389,8 +389,15 @@ def test_the_filter_is_handed_its_colours_tile_means_made_on_the_gpu(ctx, monkey
         for colour, means in seen:
             assert colour.shape[:2] == (40, 70) and means is not None
             want = _block_means(colour[..., :3], KEEP_MEANS_BLOCK)
-            assert means.shape == want.shape == (2, 3, 3)
-            np.testing.assert_allclose(means, want, rtol=2e-5, atol=1e-7)
+            assert means.shape == (2, 3, 4) and want.shape == (2, 3, 3)
+            np.testing.assert_allclose(means[..., :3], want, rtol=2e-5, atol=1e-7)
+            # the fourth: each tile's least component (a signed colour's negative part told)
+            starts = np.arange(0, 70, KEEP_MEANS_BLOCK), np.arange(0, 40, KEEP_MEANS_BLOCK)
+            least = np.minimum.reduceat(np.minimum.reduceat(colour[..., :3].min(axis=2),
+                                                            starts[0], axis=1), starts[1], axis=0)
+            np.testing.assert_array_equal(means[..., 3], least)
+        if method == "refine":   # guided's residual: some tile of some job dips below 0
+            assert any(means[..., 3].min() < 0 for _, means in seen)
     finally:
         s.release()
 

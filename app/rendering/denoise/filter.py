@@ -477,7 +477,7 @@ class Denoiser:
                  normal: np.ndarray | None = None, copy: bool = True,
                  signed: bool = False, keep_means: bool = True, check_output: bool = True,
                  color_finite: bool = False, raw_means: np.ndarray | None = None,
-                 out: np.ndarray | None = None) -> Denoised:
+                 out: np.ndarray | None = None, has_negative: bool | None = None) -> Denoised:
         """The denoised colour (H, W, 3) of `color` (H, W, 3 or 4: RGB, or RGBA whose alpha is
         ignored), guided by the noise-free `albedo` (in [0, 1]) and `normal` (in [-1, 1]) where
         given (a normal needs an albedo: OIDN's rule). Negative, NaN and infinite colours are
@@ -498,7 +498,9 @@ class Denoiser:
         caller, kept as keep_means keeps its own (where one is not finite, the colour is made
         usable and the means made again here). `out`: an (H, W, 3) float32 array of the
         caller's that the result is written into (one read of the filter's output buffer, for a
-        signed image its two parts' difference), then returned as the image. Where the filter
+        signed image its two parts' difference), then returned as the image. `has_negative`:
+        whether a signed colour holds a negative value, where the caller knows (the least value
+        glsl/tile_means.comp gives each tile); None: a pass over the colour looks. Where the filter
         cannot run: the raw colour, made finite (and, unless signed, non-negative), with a
         note."""
         color = np.asarray(color)
@@ -564,7 +566,8 @@ class Denoiser:
                 if raw_means is not None:
                     raw_means = _block_means(staged[..., :3], KEEP_MEANS_BLOCK)
             negative = None
-            if signed and staged[..., :3].min() < 0.0:
+            if signed and (staged[..., :3].min() < 0.0 if has_negative is None
+                           else has_negative):
                 # the negative part written straight into its own filter's colour (OIDN takes
                 # the negative values of each part as 0)
                 negative = self._negative_for(entry, width, height, tuple(guides))

@@ -38,8 +38,10 @@ class FilterJob:
     H x W x 3 float32 values in [0, 1] in any shape, copied into the filter's own guide memory
     on the thread), `signed` (a residual that may dip below 0), `tag`: what its owner wants back
     with the result (the samples, the generation it was read at), and `raw_means`: the colour's
-    tile means where the owner made them on the GPU (glsl/tile_means.comp; else, or where one is
-    not finite, the thread makes them from the colour made usable)."""
+    tile means where the owner made them on the GPU (glsl/tile_means.comp: tiles down, across,
+    4, the fourth each tile's least value, which tells a signed colour's negative part without a
+    host pass; else, or where one is not finite, the thread makes them from the colour made
+    usable)."""
     colour: np.ndarray
     albedo: np.ndarray | None = None
     normal: np.ndarray | None = None
@@ -198,25 +200,28 @@ class FilterWorker:
             return self._filter_held(job, t0, staging if in_place else None)
 
     @staticmethod
-    def _means(job: FilterJob) -> tuple[np.ndarray, np.ndarray]:
-        """(colour, its tile means): the job's own where its means are finite; else (none made
-        on the GPU, or a non-finite pixel) the colour made usable (a copy: NaN and infinities 0,
-        unless signed negatives 0, as Denoiser makes it) and the means of that."""
+    def _means(job: FilterJob) -> tuple[np.ndarray, np.ndarray, bool | None]:
+        """(colour, its tile means, whether it has a negative value where the means say: their
+        fourth component, each tile's least, else None): the job's own where its means are
+        finite; else (none made on the GPU, or a non-finite pixel) the colour made usable (a
+        copy: NaN and infinities 0, unless signed negatives 0, as Denoiser makes it) and the
+        means of that."""
         means = job.raw_means
         if means is not None:
-            means = np.asarray(means, np.float32)[..., :3]
-            if np.isfinite(means).all():
-                return job.colour, means
+            means = np.asarray(means, np.float32)
+            if np.isfinite(means[..., :3]).all():
+                negative = bool(means[..., 3].min() < 0.0) if means.shape[2] >= 4 else None
+                return job.colour, means[..., :3], negative
         colour = np.array(job.colour, np.float32)
         if job.signed:
             np.nan_to_num(colour, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
         else:
             _make_usable(colour)
-        return colour, _block_means(colour[..., :3], KEEP_MEANS_BLOCK).astype(np.float32)
+        return colour, _block_means(colour[..., :3], KEEP_MEANS_BLOCK).astype(np.float32), None
 
     def _filter_held(self, job: FilterJob, t0: float, staging) -> FilterResult:
         try:
-            colour, means = self._means(job)
+            colour, means, negative = self._means(job)
             h, w = colour.shape[:2]
             albedo = job.albedo
             if job.probe_albedo is not None:
@@ -229,7 +234,8 @@ class FilterWorker:
             t1 = time.perf_counter()
             rgb = self._rgb(h, w)
             d = self.denoiser(colour, albedo, job.normal, copy=False, signed=job.signed,
-                              keep_means=False, check_output=False, color_finite=True, out=rgb)
+                              keep_means=False, check_output=False, color_finite=True, out=rgb,
+                              has_negative=negative)
             t2 = time.perf_counter()
             if not d.denoised:
                 self.recycle(rgb)

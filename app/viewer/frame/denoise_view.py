@@ -51,13 +51,14 @@ TRANSFER_BYTES_PER_FRAME = 16 << 20
 
 
 def tile_means_of(means: PendingRead | None, image):
-    """A tile means read-back's values as (tiles down, across, 3), for an image of `image`'s
-    shape; None where there is none."""
+    """A tile means read-back's values as (tiles down, across, 4: the means, then each tile's
+    least component, glsl/tile_means.comp), for an image of `image`'s shape; None where there
+    is none."""
     if means is None:
         return None
     height, width = image.shape[:2]
     across, down = tile_grid(width, height)
-    return means.out[:4 * across * down].reshape(down, across, 4)[..., :3]
+    return means.out[:4 * across * down].reshape(down, across, 4)
 
 
 @dataclass
