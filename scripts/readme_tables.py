@@ -34,7 +34,7 @@ DENOISE_RECORDS = "bench/h200-denoise"
 # a scene's replay from the first of these folders that holds it (the code now: accumulations
 # cleared and copied by compute passes, the error curve measured on the GPU with no pause of the
 # replay), its flicker likewise from FLICKER_RECORDS
-REFINE_RECORDS = ("bench/h200-interact-refine-56/gpu-guide/bonsai-foot",
+REFINE_RECORDS = ("bench/h200-interact-refine-56/level0-one-call/bonsai-foot",
                   "bench/h200-interact-refine-56/gpu-guide/chest")
 FLICKER_RECORDS = REFINE_RECORDS
 RAYMARCH_4K_RECORDS = "bench/h200-raymarch-4k"

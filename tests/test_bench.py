@@ -533,3 +533,22 @@ def test_the_replay_raises_a_gpus_clock_before_each_event_not_llvmpipes(ctx, mon
         assert interact.warm_clock(r, 256) >= 50.0
     finally:
         r.release()
+
+
+def test_a_denoised_replay_refuses_to_run_without_the_denoiser(monkeypatch):
+    """interact.require_denoiser: with the Denoise switch on and a denoiser that cannot run, the
+    replay stops with the denoiser's own reason, not records of raw images taken as denoised;
+    with it off (or left as the viewer's) nothing is asked."""
+    from types import SimpleNamespace
+
+    from radiance_probes.bench import interact
+    from radiance_probes.viewer.frame import denoise_view
+
+    class Missing:
+        available = False
+        failure = "the denoiser is not available (ImportError: no pyoidn)"
+    monkeypatch.setattr(denoise_view, "shared_denoiser", lambda: Missing())
+    with pytest.raises(RuntimeError, match="Denoise switch on.*no pyoidn"):
+        interact.require_denoiser(SimpleNamespace(interact_denoise=True))
+    interact.require_denoiser(SimpleNamespace(interact_denoise=False))
+    interact.require_denoiser(SimpleNamespace(interact_denoise=None))

@@ -337,6 +337,20 @@ def replay_session(renderer, config):
     return session
 
 
+def require_denoiser(config) -> None:
+    """A replay with the Denoise switch on refuses to run where the denoiser cannot: the viewer
+    would switch Denoise off at its first filtered image and the records, taken as denoised,
+    would hold raw images (an H200 run of the chest whose machine lacked OIDN gave refine's
+    raw guided as its Denoise-on figures)."""
+    if not config.interact_denoise:
+        return
+    from radiance_probes.viewer.frame import denoise_view
+    denoiser = denoise_view.shared_denoiser()
+    if not denoiser.available:
+        raise RuntimeError("this replay has the Denoise switch on, but the denoiser cannot run: "
+                           f"{denoiser.failure}")
+
+
 def interact_scene(renderer, name: str, config, results, out, device: str, reference_of) -> None:
     """`reference_of(renderer, key, config)`: the runner's cached path-traced reference of the
     renderer's current scene under `key` (refs/KEY.npy, reused from --ref-dir)."""
@@ -344,6 +358,7 @@ def interact_scene(renderer, name: str, config, results, out, device: str, refer
     start = r.scene
     session = replay_session(r, config)
     meter = ImageError(r.ctx)   # the error curve's points measured on the GPU (shown_error)
+    require_denoiser(config)
     if config.interact_denoise is not None:
         session.denoise.set_enabled(config.interact_denoise)
     for width, height in config.interact_sizes:
