@@ -426,7 +426,8 @@ class Denoiser:
         """Guide `name`'s (height, width, 3) float32 in the filter's own memory (the filter for
         this size and `guides`), for a caller that writes a new guide for each image into it and
         passes it as that guide: no copy. It is taken as written: the caller makes it finite and
-        in the guide's range (radiance_as_albedo's `out`). None where the filter cannot run."""
+        in the guide's range (the filter's thread copies the probes guide made on the GPU into
+        it, probe_guide.py). None where the filter cannot run."""
         if name not in guides:
             raise ValueError(f"guide_staging: {name!r} is not one of the guides {guides}")
         if not self._load():

@@ -2,7 +2,7 @@
 that no frame of the viewer waits for it (app/viewer/frame/denoise_view.py, app/viewer/frame/session.py's
 refine judgement). The GL context stays on the main thread: a frame hands in an image already
 read back (app/gl/fence.py: a pixel buffer and a fence, collected on a later frame) and takes the
-filtered image, as float32 RGBA ready to upload, on whichever later frame finds it done.
+filter's RGB output, ready to upload, on whichever later frame finds it done.
 
 One job runs at a time (the filter is the device's, one OIDN filter per size and guides); a job
 waiting for its turn is replaced by a newer one of the same key (the newest image is the one worth

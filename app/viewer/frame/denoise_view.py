@@ -242,6 +242,12 @@ class ViewDenoise:
         means into `out` (RGBA32F; checked finite and, unless signed, non-negative there), its
         texture and host array given back for the next."""
         self.kept().restore_given(upload.texture, result.raw_means, out, result.signed)
+        self._give_back(upload)
+
+    def _give_back(self, upload: ChunkedUpload) -> None:
+        """A filter output's upload done with (restored, or dropped by a restart): its RGB32F
+        texture and its host array given back for the next."""
+        upload.release()
         self.give_rgb_texture(upload.texture)
         if self._worker is not None:
             self._worker.recycle(upload.image)
@@ -329,8 +335,7 @@ class ViewDenoise:
         upload, flight, texture, result = got
         if flight.generation != generation:
             del self.landing[name]
-            upload.release()
-            self.give_rgb_texture(upload.texture)
+            self._give_back(upload)
             return
         with self.parts.part("upload"):
             whole = upload.step(self.budget)
@@ -426,8 +431,7 @@ class ViewDenoise:
     def _forget(self, name: str) -> None:
         landing = self.landing.pop(name, None)
         if landing is not None:
-            landing[0].release()
-            self.give_rgb_texture(landing[0].texture)
+            self._give_back(landing[0])
         spare = self._spare.pop(name, None)
         if spare is not None:
             spare.release()
