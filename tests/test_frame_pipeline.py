@@ -76,7 +76,8 @@ def _as_filtered(kept, filtered, raw_means, out, signed):
     out.write(rgba.tobytes())
 
 
-def _session(ctx, monkeypatch, stand_in, methods, max_samples, want_probes, restore=False):
+def _session(ctx, monkeypatch, stand_in, methods, max_samples, want_probes, restore=False,
+             mix=1.0):
     """A session of `methods` with the stand-in behind its Denoise switch, switched on once a few
     frames have compiled the shaders (a compile is not the filter's). `restore` False: the
     filtered images are shown as the stand-in made them (_as_filtered), so that each names its
@@ -88,6 +89,7 @@ def _session(ctx, monkeypatch, stand_in, methods, max_samples, want_probes, rest
         monkeypatch.setattr(KeptMeans, "restore_given", _as_filtered)
     monkeypatch.setattr(denoise_view, "shared_denoiser", lambda: stand_in)
     monkeypatch.setattr(denoise_view, "INTERVAL_S", 0.0)   # a new image whenever samples grow
+    monkeypatch.setattr(denoise_view, "STILL_MIX", mix)    # 1: each landing shown as it came
     s = RenderSession(ctx, parse_scene(SCENE), clock="wall")
     s.resize(24, 16)
     s.set_methods(methods)
@@ -203,6 +205,47 @@ def test_frames_never_wait_for_a_slow_filter_and_show_its_newest_image(ctx, monk
             time.sleep(0.01)
         assert s.denoise.texture("pt", view, s.restarts) is None or int(
             s.shown_image("pt").flat[0]) > runs
+    finally:
+        s.release()
+
+
+def test_a_still_views_image_less_than_a_doubling_on_is_mixed_with_the_one_shown(ctx, monkeypatch):
+    """STILL_MIX: a filtered image that lands less than a doubling of the samples after the one
+    shown (the same accumulation) is shown as STILL_MIX of it and the rest the image shown
+    before; a doubling's image, and the first after a restart, as it came."""
+    from radiance_probes.viewer.frame import denoise_view
+    mix = 0.25
+    stand_in = SlowFilter(delay=0.05)
+    s = _session(ctx, monkeypatch, stand_in, ["pt"], 1 << 24, False, mix=mix)
+    try:
+        seen = {"mixed": 0, "replaced": 0}
+        prev = None          # (samples, value) of the image shown
+        runs = 0
+        restarted = False
+        end = time.monotonic() + 60
+        while (min(seen.values()) < 2 or not restarted) and time.monotonic() < end:
+            s.step(1 << 24, False)
+            if s.denoise.runs == runs:
+                continue
+            runs = s.denoise.runs
+            got = s.denoise.images["pt"]
+            shown = s.shown_image("pt")
+            assert np.all(shown == shown.flat[0])
+            value, n = float(shown.flat[0]), stand_in.calls   # the run that landed: the last
+            if prev is not None and got.samples < 2 * prev[0]:
+                assert value == pytest.approx(mix * n + (1 - mix) * prev[1], rel=1e-6)
+                seen["mixed"] += 1
+            else:
+                assert value == n
+                seen["replaced"] += 1
+            prev = (got.samples, value)
+            if min(seen.values()) >= 2 and not restarted:
+                s.restart()           # the next image is of a new accumulation: not mixed
+                restarted, prev = True, None
+        assert min(seen.values()) >= 2 and restarted, seen
+        assert len({id(t) for t in (s.denoise.images["pt"].texture, s.denoise._spare["pt"],
+                                    s.denoise._mix["pt"])}) == 3
+        assert denoise_view.STILL_MIX == mix
     finally:
         s.release()
 

@@ -14,7 +14,10 @@ tile means on the GPU (KeptMeans.restore_given). The display shows the newest fi
 the raw image until the first. A new filtered image is started whenever the samples have doubled
 since the last one started (1, 2, 4, ...), and at least every INTERVAL_S while they grow, one at
 a time per view. OIDN has no temporal mode: the filtered images of a still camera change as
-samples come (docs/denoising.md measures the flicker).
+samples come (docs/denoising.md measures the flicker). So an image that lands less than a doubling
+after the one shown (the INTERVAL_S images of a still view, where the accumulation has converged
+enough that a doubling takes longer) is shown mixed with it, STILL_MIX of the new (on the GPU,
+refine.BlendPass); a doubling's image replaces it.
 
 A `refine` view blending guided with the raymarcher's image (RefineView.blending: the weight its
 last judgement gave, app/rendering/refine/refine.py) shows (1 - w) r + w D, made on the GPU
@@ -48,6 +51,14 @@ INTERVAL_S = 0.5
 # 0.29-0.96 s of wall time against 0.29-1.12 s at 8 MB, p99 frames 22.5-24.9 ms of wall time
 # against 22.3-23.5 (bench/h200-interact-refine-56/transfers-16mb, level0-bands).
 TRANSFER_BYTES_PER_FRAME = 16 << 20
+# The new image's weight where a filtered image lands less than a doubling of the samples after
+# the one shown (the same accumulation): the shown image is then STILL_MIX new + (1 - STILL_MIX)
+# the one before, itself such a mix. Each filtered image's residual noise is partly new (the
+# filter answers a few more samples with a different pattern): replacing the image moves it by
+# that whole difference, the flicker a person sees on a still camera; the mix moves it by half of
+# it and averages the patterns. Its cost: the image shown lags behind the newest by that half,
+# an image of at least half its samples. 1: no mix (each landing replaces).
+STILL_MIX = 0.5
 
 
 def tile_means_of(means: PendingRead | None, image):
@@ -71,7 +82,7 @@ class _Filtered:
     blend_key: tuple | None = None
 
 
-FRESH_TEXTURES = 3   # a view's filtered image, its spare and its blend (refine)
+FRESH_TEXTURES = 4   # a view's filtered image, its spare, its still mix's and its blend (refine)
 FRESH_RGB_TEXTURES = 2   # the filter's outputs going up (a view's, a judgement's)
 
 
@@ -122,6 +133,7 @@ class ViewDenoise:
         # restored into, FilterResult)}; and each view's spare texture for the next
         self.landing: dict[str, tuple] = {}
         self._spare: dict[str, moderngl.Texture] = {}
+        self._mix: dict[str, moderngl.Texture] = {}   # each view's next still mix's target
         # made at warm(), before any frame needs them, and touched so that the driver gives
         # them memory then: the uploads' pixel buffer and RGBA32F textures of the view's size
         # (made at their first use, they cost a load's frames 26 and 45 ms on the H200 at 1080p)
@@ -346,10 +358,22 @@ class ViewDenoise:
         del self.landing[name]
         old = self.images.get(name)
         self._spare.pop(name, None)
-        if old is not None:
+        shown = texture
+        if (old is not None and STILL_MIX < 1.0 and old.generation == generation
+                and flight.samples < 2 * old.samples and old.texture.size == texture.size):
+            # a still view's image less than a doubling on: mixed with the one shown
+            with self.parts.part("upload"):
+                shown = self._sized(self._mix.pop(name, None), texture.size)
+                shown.filter = texture.filter
+                if self.blend_pass is None:
+                    self.blend_pass = BlendPass(self.ctx)
+                self.blend_pass.run(old.texture, texture, shown, STILL_MIX)
+            self._spare[name] = texture
+            self._mix[name] = old.texture
+        elif old is not None:
             self._spare[name] = old.texture
         blended = old.blended if old is not None else None
-        self.images[name] = _Filtered(texture, generation, flight.samples, flight.at,
+        self.images[name] = _Filtered(shown, generation, flight.samples, flight.at,
                                       blended)
         self.runs += 1
 
@@ -432,9 +456,10 @@ class ViewDenoise:
         landing = self.landing.pop(name, None)
         if landing is not None:
             self._give_back(landing[0])
-        spare = self._spare.pop(name, None)
-        if spare is not None:
-            spare.release()
+        for kept in (self._spare, self._mix):
+            spare = kept.pop(name, None)
+            if spare is not None:
+                spare.release()
         got = self.images.pop(name, None)
         if got is not None:
             got.texture.release()
@@ -477,7 +502,7 @@ class ViewDenoise:
         return got.texture
 
     def release(self) -> None:
-        for name in list(self.images) + list(self.inflight) + list(self._spare):
+        for name in list(self.images) + list(self.inflight) + list(self._spare) + list(self._mix):
             self._forget(name)
         for buf in (*self._staging.values(), *self._means_gpu.values()):
             buf.release()
