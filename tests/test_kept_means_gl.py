@@ -239,12 +239,16 @@ def test_renderer_denoise_restores_on_gl_as_the_host_path_does(ctx):
         r.release()
 
 
-def test_the_viewer_shows_the_gl_restored_image(ctx):
+def test_the_viewer_shows_the_gl_restored_image(ctx, monkeypatch):
     """The viewer's Denoise switch filters on its own thread (the host path: the means kept
     there, app/rendering/filter_worker.py) and uploads the result into the RGBA32F texture it
-    shows: that image is what the host path makes of the same accumulation."""
+    shows: that image is what the host path makes of the same accumulation. STILL_MIX 1 (each
+    landing shown as it came): the mix of a landing with the one shown is
+    tests/test_frame_pipeline.py's."""
     import time
     pytest.importorskip("pyoidn", reason="the denoiser's library (pyoidn) is a dependency")
+    from radiance_probes.viewer.frame import denoise_view
+    monkeypatch.setattr(denoise_view, "STILL_MIX", 1.0)
     from radiance_probes.rendering.denoise.filter import choose_guides, shared_denoiser
     from radiance_probes.io.scene_file import parse_scene
     from radiance_probes.viewer.frame.session import RenderSession
