@@ -5,7 +5,7 @@ records (bench/*/results.json or results.json.gz).
     python scripts/readme_tables.py interact [--records bench/h100-interact]
     python scripts/readme_tables.py headline [--records bench/h100]
     python scripts/readme_tables.py denoise [--records bench/h200-denoise]
-    python scripts/readme_tables.py refine [--records bench/h200-interact-refine-56/level0-bands]
+    python scripts/readme_tables.py refine [--records bench/h200-interact-refine-56/still-mix]
     python scripts/readme_tables.py raymarch4k [--records bench/h200-raymarch-4k]
     python scripts/readme_tables.py --write      # rewrite every generated block in place
     python scripts/readme_tables.py --check      # exit 1 where a block is stale
@@ -34,8 +34,7 @@ DENOISE_RECORDS = "bench/h200-denoise"
 # a scene's replay from the first of these folders that holds it (the code now: accumulations
 # cleared and copied by compute passes, the error curve measured on the GPU with no pause of the
 # replay), its flicker likewise from FLICKER_RECORDS
-REFINE_RECORDS = ("bench/h200-interact-refine-56/level0-one-call/bonsai-foot",
-                  "bench/h200-interact-refine-56/gpu-guide/chest")
+REFINE_RECORDS = ("bench/h200-interact-refine-56/still-mix",)
 FLICKER_RECORDS = REFINE_RECORDS
 RAYMARCH_4K_RECORDS = "bench/h200-raymarch-4k"
 # The files holding generated blocks, and the blocks each holds.
