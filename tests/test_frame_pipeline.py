@@ -143,12 +143,20 @@ def test_a_read_back_not_ready_is_not_waited_on(ctx, monkeypatch):
     monkeypatch.setattr(fence_module.PendingRead.__init__, "__defaults__", (StuckFence,))
     s = _session(ctx, monkeypatch, stand_in, ["pt"], 64, False)
     try:
-        for _ in range(5):
+        # frames until the read-back is in flight (with the shader cache empty, the first
+        # frames' compiles may put it off), then four more
+        for _ in range(50):
+            s.step(64, False)
+            if "pt" in s.denoise.inflight:
+                break
+        flight = s.denoise.inflight["pt"]
+        polls = flight.reads[0].polls
+        for _ in range(4):
             t0 = time.perf_counter()
             s.step(64, False)
             assert time.perf_counter() - t0 < 1.0
-        flight = s.denoise.inflight["pt"]
-        assert not flight.filtering and flight.reads[0].polls >= 4
+        assert s.denoise.inflight["pt"] is flight
+        assert not flight.filtering and flight.reads[0].polls >= polls + 4
         assert stand_in.calls == 0 and s.denoise.runs == 0
         StuckFence.open = True
         s.step(64, False)
@@ -250,12 +258,10 @@ def test_a_still_views_image_less_than_a_doubling_on_is_mixed_with_the_one_shown
         s.release()
 
 
-def test_refine_judges_over_frames_and_the_trace_names_each_part(ctx, monkeypatch):
-    """refine with the Denoise switch on and a 500 ms filter: its checks and judgements go on over
-    frames (no frame near the filter's time), a judgement lands, and the frames' traces name
-    the bake, the samples, the combine, the judgement, the read-backs, the uploads and the
-    blend, each [GPU ms or None, wall ms]."""
-    from radiance_probes.viewer.frame.pacing import WALL_FRAME_MS
+def _refine_until_judged(ctx, monkeypatch) -> tuple:
+    """A refine session (a 500 ms filter) stepped from an edit that re-bakes until a judgement
+    lands and a read-back and an upload were seen: its view, the part names, each frame's wall ms
+    and its wall ms less bake, prepare and samples."""
     stand_in = SlowFilter()
     s = _session(ctx, monkeypatch, stand_in, ["refine"], 1 << 14, True)
     try:
@@ -272,13 +278,26 @@ def test_refine_judges_over_frames_and_the_trace_names_each_part(ctx, monkeypatc
             names |= set(times.parts)
             for gpu, wall in times.parts.values():
                 assert wall >= 0.0 and (gpu is None or gpu >= 0.0)
-        assert view.blend is not None, s.refine_state()
-        assert {"bake", "samples", "combine", "judgement", "readback", "upload",
-                "blend"} <= names, names
-        assert max(others) < OTHER_LIMIT_MS, max(others)
-        assert np.median(walls) < WALL_FRAME_MS
+        return view.blend is not None, s.refine_state(), names, walls, others
     finally:
         s.release()
+
+
+def test_refine_judges_over_frames_and_the_trace_names_each_part(ctx, monkeypatch):
+    """refine with the Denoise switch on and a 500 ms filter: its checks and judgements go on over
+    frames (no frame near the filter's time), a judgement lands, and the frames' traces name
+    the bake, the samples, the combine, the judgement, the read-backs, the uploads and the
+    blend, each [GPU ms or None, wall ms]. Measured on a second session: llvmpipe compiles a
+    program's code at its first dispatch, and with Mesa's shader cache empty (this file run
+    alone on a new machine) the first combine, guide and judgement cost 40-130 ms each there."""
+    from radiance_probes.viewer.frame.pacing import WALL_FRAME_MS
+    _refine_until_judged(ctx, monkeypatch)          # the driver's compiles
+    judged, state, names, walls, others = _refine_until_judged(ctx, monkeypatch)
+    assert judged, state
+    assert {"bake", "samples", "combine", "judgement", "readback", "upload",
+            "blend"} <= names, names
+    assert max(others) < OTHER_LIMIT_MS, max(others)
+    assert np.median(walls) < WALL_FRAME_MS
 
 
 @pytest.mark.parametrize("fills", [False, True])
@@ -401,14 +420,14 @@ def test_a_filtered_image_lands_whole_under_a_small_transfer_budget(ctx, monkeyp
 
 
 def _record_jobs(monkeypatch) -> list:
-    """Each job the viewer submits, as (its colour, its tile means), copied at submit."""
+    """Each job the viewer submits, as (its colour, its tile means, signed), copied at submit."""
     from radiance_probes.rendering.denoise.filter_worker import FilterWorker
     seen = []
     submit = FilterWorker.submit
 
     def recorded(self, key, job):
         seen.append((np.array(job.colour, np.float32),
-                     None if job.raw_means is None else np.array(job.raw_means)))
+                     None if job.raw_means is None else np.array(job.raw_means), job.signed))
         submit(self, key, job)
     monkeypatch.setattr(FilterWorker, "submit", recorded)
     return seen
@@ -425,11 +444,14 @@ def test_the_filter_is_handed_its_colours_tile_means_made_on_the_gpu(ctx, monkey
     try:
         s.resize(70, 40)      # 3 x 2 tiles of 32, the last of each row and column partial
         end = time.monotonic() + 60
-        while len(seen) < 3 and time.monotonic() < end:
+        # refine: until a signed job (guided's residual) is among them, whichever comes first
+        want_signed = method == "refine"
+        while (len(seen) < 3 or (want_signed and not any(sg for *_, sg in seen))) \
+                and time.monotonic() < end:
             s.step(1 << 12, method == "refine")
             time.sleep(0.005)
         assert len(seen) >= 3
-        for colour, means in seen:
+        for colour, means, _ in seen:
             assert colour.shape[:2] == (40, 70) and means is not None
             want = _block_means(colour[..., :3], KEEP_MEANS_BLOCK)
             assert means.shape == (2, 3, 4) and want.shape == (2, 3, 3)
@@ -439,8 +461,11 @@ def test_the_filter_is_handed_its_colours_tile_means_made_on_the_gpu(ctx, monkey
             least = np.minimum.reduceat(np.minimum.reduceat(colour[..., :3].min(axis=2),
                                                             starts[0], axis=1), starts[1], axis=0)
             np.testing.assert_array_equal(means[..., 3], least)
-        if method == "refine":   # guided's residual: some tile of some job dips below 0
-            assert any(means[..., 3].min() < 0 for _, means in seen)
+        # refine hands guided's residual as signed; whether one of its tiles dips below 0 here
+        # depends on how many samples the first jobs caught (the CI machine's jobs came later,
+        # at more samples, and none did): the least value's negatives are
+        # test_kept_means_gl's test_the_viewers_tile_means_carry_each_tiles_least_value
+        assert any(sg for *_, sg in seen) == (method == "refine")
     finally:
         s.release()
 

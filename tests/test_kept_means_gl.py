@@ -105,6 +105,38 @@ def test_tile_means_match_their_numpy_twin(ctx, kept, size):
         rgb.release()
 
 
+@pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
+def test_the_viewers_tile_means_carry_each_tiles_least_value(ctx, kept, size):
+    """dispatch_means_into (the viewer's filter jobs' raw means): each tile's mean and, fourth,
+    its least component, which tells a signed colour's negative part; partial tiles too."""
+    w, h = size
+    raw, _ = _raw_and_filtered(w, h, signed=True)
+    assert raw[..., :3].min() < 0
+    tex = _texture(ctx, raw)
+    tiles = tile_grid(w, h)
+    out = ctx.buffer(reserve=16 * tiles[0] * tiles[1])
+    try:
+        kept.dispatch_means_into(tex, out)
+        got = np.frombuffer(out.read(), np.float32).reshape(tiles[1], tiles[0], 4)
+    finally:
+        tex.release()
+        out.release()
+    np.testing.assert_allclose(got[..., :3], _block_means(raw[..., :3], KEEP_MEANS_BLOCK),
+                               rtol=2e-5, atol=2e-6)
+    starts = np.arange(0, w, KEEP_MEANS_BLOCK), np.arange(0, h, KEEP_MEANS_BLOCK)
+    least = np.minimum.reduceat(np.minimum.reduceat(raw[..., :3].min(axis=2), starts[0], axis=1),
+                                starts[1], axis=0)
+    np.testing.assert_array_equal(got[..., 3], least)
+    assert (least < 0).any()
+    tex, small = _texture(ctx, raw), ctx.buffer(reserve=16)
+    try:
+        with pytest.raises(ValueError, match="bytes for"):
+            kept.dispatch_means_into(tex, small)
+    finally:
+        tex.release()
+        small.release()
+
+
 @pytest.mark.parametrize("signed", [False, True], ids=["unsigned", "signed"])
 @pytest.mark.parametrize("size", SIZES, ids=lambda s: f"{s[0]}x{s[1]}")
 def test_restore_matches_keep_block_means(ctx, kept, size, signed):
